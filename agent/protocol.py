@@ -32,7 +32,19 @@ MAX_STEP = 50.0  # metres: the longest single walk command accepted
 HEAD_YAW_LIMIT = math.radians(119.5)
 DIGEST_HEX_LEN = 64
 
-PHASES = ("start", "search", "localise", "exchange", "agree", "plan", "wait", "move", "hold", "done", "failed")
+PHASES = (
+    "start",
+    "search",
+    "localise",
+    "exchange",
+    "agree",
+    "plan",
+    "wait",
+    "move",
+    "hold",
+    "done",
+    "failed",
+)
 
 # --------------------------------------------------------------------------- keys
 
@@ -144,7 +156,9 @@ def _bool(name: str) -> Callable[[Any], bool]:
     return check
 
 
-def _str(name: str, max_len: int = MAX_TEXT, choices: tuple[str, ...] | None = None) -> Callable[[Any], str]:
+def _str(
+    name: str, max_len: int = MAX_TEXT, choices: tuple[str, ...] | None = None
+) -> Callable[[Any], str]:
     def check(v: Any) -> str:
         if not isinstance(v, str):
             raise ProtocolError(f"{name}: expected str, got {type(v).__name__}")
@@ -157,7 +171,9 @@ def _str(name: str, max_len: int = MAX_TEXT, choices: tuple[str, ...] | None = N
     return check
 
 
-def _hex(name: str, length: int = DIGEST_HEX_LEN, allow_empty: bool = False) -> Callable[[Any], str]:
+def _hex(
+    name: str, length: int = DIGEST_HEX_LEN, allow_empty: bool = False
+) -> Callable[[Any], str]:
     def check(v: Any) -> str:
         if not isinstance(v, str):
             raise ProtocolError(f"{name}: expected hex str, got {type(v).__name__}")

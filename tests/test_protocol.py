@@ -10,14 +10,31 @@ import pytest
 from agent import protocol as p
 
 SAMPLES: list[p.Message] = [
-    p.NeighborRecordMsg(sender=2, round=0, neighbours=((0.5, 1.0), (-0.7, 0.2)), orientations=(0.1, 3.0), confidences=(0.9, 0.7)),
+    p.NeighborRecordMsg(
+        sender=2,
+        round=0,
+        neighbours=((0.5, 1.0), (-0.7, 0.2)),
+        orientations=(0.1, 3.0),
+        confidences=(0.9, 0.7),
+    ),
     p.NeighborRecordMsg(sender=0, round=3, neighbours=()),
     p.DigestMsg(sender=1, round=0, digest="a" * 64, members=(0, 1, 2)),
-    p.StatusMsg(sender=1, phase="move", progress=0.5, detail="wave 1", plan_digest="0" * 64, wave=1, t_sim=12.5, bytes_sent=900),
+    p.StatusMsg(
+        sender=1,
+        phase="move",
+        progress=0.5,
+        detail="wave 1",
+        plan_digest="0" * 64,
+        wave=1,
+        t_sim=12.5,
+        bytes_sent=900,
+    ),
     p.RegisterRequest(),
     p.RegisterReply(robot_id=4),
     p.CameraRequest(yaw=0.3),
-    p.CameraReply(robot_id=1, yaw=-1.0, t_sim=3.0, width=640, height=480, encoding="png", data=b"\x89PNG..."),
+    p.CameraReply(
+        robot_id=1, yaw=-1.0, t_sim=3.0, width=640, height=480, encoding="png", data=b"\x89PNG..."
+    ),
     p.WalkRequest(distance=0.2),
     p.TurnRequest(angle=-0.26),
     p.CommandReply(robot_id=1, status="done", t_sim=4.0),
@@ -58,11 +75,42 @@ def _raw(**obj: object) -> bytes:
         (_raw(v=1, t="registered", robot_id=True), "expected int"),
         (_raw(v=1, t="record", sender=1, round=0, neighbours=[[0.0]]), "list of 2"),
         (_raw(v=1, t="record", sender=1, round=0, neighbours=[[0.0, 1.0]] * 65), "at most"),
-        (_raw(v=1, t="record", sender=1, round=0, neighbours=[[0.0, 1.0]], confidences=[0.5, 0.5]), "2 values for 1"),
+        (
+            _raw(
+                v=1, t="record", sender=1, round=0, neighbours=[[0.0, 1.0]], confidences=[0.5, 0.5]
+            ),
+            "2 values for 1",
+        ),
         (_raw(v=1, t="digest", sender=1, round=0, digest="xyz", members=[]), "hex"),
         (_raw(v=1, t="status", sender=1, phase="dancing"), "not one of"),
-        (_raw(v=1, t="image", robot_id=1, yaw=0.0, t_sim=0.0, width=1, height=1, encoding="png", data="s"), "expected bytes"),
-        (_raw(v=1, t="image", robot_id=1, yaw=3.0, t_sim=0.0, width=1, height=1, encoding="png", data=b""), "outside"),
+        (
+            _raw(
+                v=1,
+                t="image",
+                robot_id=1,
+                yaw=0.0,
+                t_sim=0.0,
+                width=1,
+                height=1,
+                encoding="png",
+                data="s",
+            ),
+            "expected bytes",
+        ),
+        (
+            _raw(
+                v=1,
+                t="image",
+                robot_id=1,
+                yaw=3.0,
+                t_sim=0.0,
+                width=1,
+                height=1,
+                encoding="png",
+                data=b"",
+            ),
+            "outside",
+        ),
     ],
 )
 def test_rejections_carry_a_reason(payload: bytes, reason: str) -> None:
