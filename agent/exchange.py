@@ -1,0 +1,301 @@
+"""Exchange and agreement of neighbour records (NAO paper 4.1.2, DESIGN.md §1 steps 3–4).
+
+The paper exchanges each robot's record ``{i, N_i, (x_ij, y_ij)}`` once over WiFi and
+assumes nothing is lost. Here every agent re-publishes until the fleet provably holds
+the same record set, and moves only then:
+
+* **Membership** is the set of live agents (liveliness tokens, fed in by the caller);
+  with ``fleet_size`` it must reach exactly that size, without it the set must stay
+  unchanged for ``settle`` seconds.
+* Each agent publishes its **record** and a **digest** of the records it holds
+  (``DigestMsg.members`` = the ids whose records are covered, so a digest doubles as an
+  acknowledgement of whose records the sender holds).
+* **Agreed** when the agent holds a record from every member, the members are exactly
+  the live set, and every member's latest digest equals its own (same digest, same
+  members). Then all of them hold bit-identical inputs and compute the same plan.
+* **Failed** (a safe stop, never a move on an unshared plan) when a member leaves
+  before agreement, the live set exceeds ``fleet_size``, or ``timeout`` expires; the
+  reason names who is missing.
+
+Re-publishing (what :meth:`Agreement.due` returns): the record while some live member's
+digest does not list this agent; the digest while some member's digest differs from
+ours, and after agreement until every member has reported a post-agreement phase.
+Intervals back off exponentially from ``backoff_min`` to ``backoff_max`` and reset when
+something new arrives. Pure: the caller passes the time and does the I/O.
+
+Tie-breaks: a record with a higher ``round`` replaces an older one; for the same round
+the latest received wins (re-publications are identical). Digests are over the
+records sorted by sender id.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+
+from agent.protocol import DigestMsg, NeighborRecordMsg, encode
+
+DigestFn = Callable[[Sequence[NeighborRecordMsg]], str]
+
+#: Phases an agent reports only after it has agreed (acknowledges our digest).
+POST_AGREE_PHASES = frozenset({"plan", "wait", "move", "hold", "done"})
+
+
+def canonical_digest(records: Sequence[NeighborRecordMsg]) -> str:
+    """SHA-256 over the msgpack wire form of the records sorted by sender id.
+
+    The wire form is exactly what was exchanged, so equal digests mean bit-identical
+    planning inputs on every agent.
+    """
+    h = hashlib.sha256()
+    for rec in sorted(records, key=lambda r: r.sender):
+        data = encode(rec)
+        h.update(len(data).to_bytes(4, "big"))
+        h.update(data)
+    return h.hexdigest()
+
+
+@dataclass(frozen=True)
+class Decision:
+    """The state of the agreement: ``wait``, ``agreed`` or ``failed`` (with ``reason``)."""
+
+    kind: str
+    reason: str = ""
+    digest: str = ""
+    members: tuple[int, ...] = ()
+    records: tuple[NeighborRecordMsg, ...] = ()
+
+
+class _Backoff:
+    def __init__(self, lo: float, hi: float) -> None:
+        self.lo, self.hi = lo, hi
+        self.interval = lo
+        self.next_at = -math.inf  # due at once
+
+    def reset(self, now: float) -> None:
+        self.interval = self.lo
+        self.next_at = min(self.next_at, now)
+
+    def due(self, now: float) -> bool:
+        return now >= self.next_at
+
+    def fired(self, now: float) -> None:
+        self.next_at = now + self.interval
+        self.interval = min(self.hi, self.interval * 2.0)
+
+
+class Agreement:
+    """The agreement state machine of one agent (see the module docstring)."""
+
+    def __init__(
+        self,
+        self_id: int,
+        own_record: NeighborRecordMsg,
+        now: float,
+        fleet_size: int | None = None,
+        timeout: float = 60.0,
+        settle: float = 2.0,
+        backoff_min: float = 0.25,
+        backoff_max: float = 4.0,
+        digest_fn: DigestFn = canonical_digest,
+    ) -> None:
+        if own_record.sender != self_id:
+            raise ValueError(f"own record is from {own_record.sender}, this agent is {self_id}")
+        if fleet_size is not None and fleet_size < 1:
+            raise ValueError(f"fleet size must be >= 1, got {fleet_size}")
+        for name, v in (("timeout", timeout), ("settle", settle), ("now", now)):
+            if not math.isfinite(v) or (name != "now" and v < 0.0):
+                raise ValueError(f"{name} must be finite and >= 0, got {v}")
+        if not (0.0 < backoff_min <= backoff_max and math.isfinite(backoff_max)):
+            raise ValueError(
+                f"need 0 < backoff_min <= backoff_max, got {backoff_min}, {backoff_max}"
+            )
+        self.self_id = self_id
+        self.fleet_size = fleet_size
+        self.timeout = timeout
+        self.settle = settle
+        self.started = now
+        self.digest_fn = digest_fn
+        self.live: set[int] = {self_id}
+        self.left: set[int] = set()
+        self.records: dict[int, NeighborRecordMsg] = {self_id: own_record}
+        self.digests: dict[int, DigestMsg] = {}
+        self.peer_agreed: set[int] = set()
+        self.rejected: list[str] = []
+        self.membership_changed = now
+        self._record_tx = _Backoff(backoff_min, backoff_max)
+        self._digest_tx = _Backoff(backoff_min, backoff_max)
+        self._final: Decision | None = None
+        self._digest_cache: tuple[tuple[int, ...], str] | None = None
+
+    # ----------------------------------------------------------------- inputs
+
+    def member_joined(self, robot_id: int, now: float) -> None:
+        if robot_id in self.live:
+            return
+        self.live.add(robot_id)
+        self.left.discard(robot_id)
+        self.membership_changed = now
+        # A newcomer has seen none of our earlier publications (no history).
+        self._record_tx.reset(now)
+        self._digest_tx.reset(now)
+
+    def member_left(self, robot_id: int, now: float) -> None:
+        if robot_id == self.self_id or robot_id not in self.live:
+            return
+        self.live.discard(robot_id)
+        self.left.add(robot_id)
+        self.membership_changed = now
+
+    def on_record(self, msg: NeighborRecordMsg, now: float) -> bool:
+        """Take a record; True when it changed the set held."""
+        if msg.sender == self.self_id:
+            return False  # our own echo (or an impostor): ours is authoritative
+        old = self.records.get(msg.sender)
+        if old is not None and (old.round > msg.round or old == msg):
+            return False
+        self.records[msg.sender] = msg
+        self._digest_cache = None
+        self._digest_tx.reset(now)
+        return True
+
+    def on_digest(self, msg: DigestMsg, now: float) -> None:
+        if msg.sender == self.self_id:
+            return
+        old = self.digests.get(msg.sender)
+        self.digests[msg.sender] = msg
+        if old is None or (old.digest, old.members) != (msg.digest, msg.members):
+            if self.self_id not in msg.members:
+                self._record_tx.reset(now)
+            if msg.digest != self.digest()[1]:
+                self._digest_tx.reset(now)
+
+    def on_peer_phase(self, robot_id: int, phase: str) -> None:
+        """A member's status: a post-agreement phase acknowledges our digest."""
+        if phase in POST_AGREE_PHASES:
+            self.peer_agreed.add(robot_id)
+
+    # ----------------------------------------------------------------- state
+
+    def held_members(self) -> tuple[int, ...]:
+        """Ids of the live members whose records we hold, sorted."""
+        return tuple(sorted(i for i in self.records if i in self.live))
+
+    def digest(self) -> tuple[tuple[int, ...], str]:
+        """(members covered, digest) of the live members' records we hold."""
+        members = self.held_members()
+        if self._digest_cache is None or self._digest_cache[0] != members:
+            recs = [self.records[i] for i in members]
+            self._digest_cache = (members, self.digest_fn(recs))
+        return self._digest_cache
+
+    def digest_msg(self, round_: int = 0) -> DigestMsg:
+        members, digest = self.digest()
+        return DigestMsg(sender=self.self_id, round=round_, digest=digest, members=members)
+
+    def missing_records(self) -> list[int]:
+        return sorted(i for i in self.live if i not in self.records)
+
+    def disagreeing(self) -> list[int]:
+        """Live members whose latest digest is absent or differs from ours."""
+        members, digest = self.digest()
+        out = []
+        for i in sorted(self.live - {self.self_id}):
+            d = self.digests.get(i)
+            if d is None or d.digest != digest or d.members != members:
+                out.append(i)
+        return out
+
+    def decide(self, now: float) -> Decision:
+        """Wait, agreed or failed. Agreed and failed are final."""
+        if self._final is not None:
+            return self._final
+        if self.left:
+            return self._fail(
+                f"member(s) {sorted(self.left)} left before agreement; "
+                "not moving on a plan they may not share"
+            )
+        n = len(self.live)
+        if self.fleet_size is not None and n > self.fleet_size:
+            return self._fail(
+                f"{n} members alive {sorted(self.live)}, more than the fleet size {self.fleet_size}"
+            )
+        missing = self.missing_records()
+        disagree = self.disagreeing()
+        size_ok = n == self.fleet_size if self.fleet_size is not None else n >= 1
+        settled = self.fleet_size is not None or now - self.membership_changed >= self.settle
+        if size_ok and settled and not missing and not disagree:
+            members, digest = self.digest()
+            self._final = Decision(
+                "agreed",
+                f"{len(members)} members agree on digest {digest[:12]}",
+                digest,
+                members,
+                tuple(self.records[i] for i in members),
+            )
+            self._digest_tx.reset(now)  # tell the others once more, promptly
+            return self._final
+        if now - self.started > self.timeout:
+            parts = [f"no agreement after {self.timeout:g} s"]
+            if self.fleet_size is not None and n != self.fleet_size:
+                parts.append(f"{n} of {self.fleet_size} members alive {sorted(self.live)}")
+            if missing:
+                parts.append(f"no record from {missing}")
+            if disagree:
+                parts.append(f"digest differs or missing from {disagree}")
+            return self._fail("; ".join(parts))
+        return Decision("wait", self._wait_reason(missing, disagree))
+
+    def _wait_reason(self, missing: list[int], disagree: list[int]) -> str:
+        if self.fleet_size is not None and len(self.live) < self.fleet_size:
+            return f"{len(self.live)} of {self.fleet_size} members"
+        if missing:
+            return f"waiting for records from {missing}"
+        if disagree:
+            return f"waiting for matching digests from {disagree}"
+        return "waiting for membership to settle"
+
+    def _fail(self, reason: str) -> Decision:
+        self._final = Decision("failed", reason)
+        return self._final
+
+    @property
+    def agreed(self) -> bool:
+        return self._final is not None and self._final.kind == "agreed"
+
+    # ----------------------------------------------------------------- output
+
+    def due(self, now: float) -> list[str]:
+        """What to (re-)publish now: a subset of ``["record", "digest"]`` in that order.
+
+        The caller publishes and then calls :meth:`sent` with the same list.
+        """
+        out: list[str] = []
+        if self._final is not None and self._final.kind == "failed":
+            return out
+        others = self.live - {self.self_id}
+        if self.agreed:
+            if (others - self.peer_agreed) and self._digest_tx.due(now):
+                out.append("digest")
+            return out
+        unacked = [i for i in others if self.self_id not in self._members_of(i)]
+        if (unacked or not others) and self._record_tx.due(now):
+            out.append("record")
+        if (self.disagreeing() or not others) and self._digest_tx.due(now):
+            out.append("digest")
+        return out
+
+    def sent(self, what: Iterable[str], now: float) -> None:
+        for w in what:
+            if w == "record":
+                self._record_tx.fired(now)
+            elif w == "digest":
+                self._digest_tx.fired(now)
+            else:
+                raise ValueError(f"unknown publication {w!r}")
+
+    def _members_of(self, robot_id: int) -> tuple[int, ...]:
+        d = self.digests.get(robot_id)
+        return () if d is None else d.members

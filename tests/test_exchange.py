@@ -1,0 +1,270 @@
+"""The agreement state machine (agent/exchange.py): every branch, with an in-memory bus."""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable
+
+import pytest
+
+from agent.exchange import Agreement, canonical_digest
+from agent.protocol import DigestMsg, NeighborRecordMsg
+
+Drop = Callable[[str, int, int, float], bool]
+
+
+def rec(i: int, round_: int = 0) -> NeighborRecordMsg:
+    return NeighborRecordMsg(sender=i, round=round_, neighbours=((0.1 * i, 1.0 + i),))
+
+
+class Net:
+    """Agents exchanging over a perfect broadcast medium, with a drop rule."""
+
+    def __init__(
+        self, ids: list[int], fleet_size: int | None = 3, drop: Drop | None = None, **kw: float
+    ) -> None:
+        self.t = 0.0
+        self.kw = kw
+        self.fleet = fleet_size
+        self.drop = drop or (lambda kind, src, dst, t: False)
+        self.agents: dict[int, Agreement] = {}
+        self.sent: dict[int, int] = {}
+        for i in ids:
+            self.add(i)
+
+    def add(self, i: int) -> None:
+        a = Agreement(i, rec(i), self.t, fleet_size=self.fleet, **self.kw)  # type: ignore[arg-type]
+        for j, other in self.agents.items():
+            other.member_joined(i, self.t)
+            a.member_joined(j, self.t)
+        self.agents[i] = a
+        self.sent[i] = 0
+
+    def kill(self, i: int) -> None:
+        del self.agents[i]
+        for other in self.agents.values():
+            other.member_left(i, self.t)
+
+    def step(self, dt: float = 0.05) -> None:
+        self.t += dt
+        for i, a in list(self.agents.items()):
+            due = a.due(self.t)
+            for what in due:
+                self.sent[i] += 1
+                for j, b in self.agents.items():
+                    if j == i or self.drop(what, i, j, self.t):
+                        continue
+                    if what == "record":
+                        b.on_record(a.records[i], self.t)
+                    else:
+                        b.on_digest(a.digest_msg(), self.t)
+            a.sent(due, self.t)
+            d = a.decide(self.t)
+            if d.kind == "agreed":
+                for b in self.agents.values():
+                    b.on_peer_phase(i, "plan")
+
+    def run(self, until: float) -> None:
+        while self.t < until:
+            self.step()
+
+
+def test_three_agents_agree_on_one_digest() -> None:
+    net = Net([0, 1, 2])
+    net.run(3.0)
+    ds = [a.decide(net.t) for a in net.agents.values()]
+    assert all(d.kind == "agreed" for d in ds), ds
+    assert len({d.digest for d in ds}) == 1
+    assert ds[0].members == (0, 1, 2)
+    assert ds[0].digest == canonical_digest([rec(2), rec(0), rec(1)])
+    assert [r.sender for r in ds[0].records] == [0, 1, 2]
+
+
+def test_publications_stop_after_everyone_agreed() -> None:
+    net = Net([0, 1, 2])
+    net.run(3.0)
+    before = dict(net.sent)
+    net.run(30.0)
+    assert net.sent == before
+    assert all(n <= 6 for n in before.values()), before
+
+
+def test_lost_record_is_resent_until_agreement() -> None:
+    # every record from 2 to 0 is lost for the first 3 s
+    net = Net(
+        [0, 1, 2], drop=lambda kind, s, d, t: kind == "record" and s == 2 and d == 0 and t < 3.0
+    )
+    net.run(2.9)
+    assert net.agents[0].decide(net.t).kind == "wait"
+    assert net.agents[0].missing_records() == [2]
+    assert net.agents[1].decide(net.t).kind == "wait"  # 0's digest lacks 2: nobody moves
+    net.run(12.0)
+    ds = [a.decide(net.t) for a in net.agents.values()]
+    assert all(d.kind == "agreed" for d in ds)
+    assert len({d.digest for d in ds}) == 1
+
+
+def test_lost_digests_delay_but_do_not_break_agreement() -> None:
+    net = Net([0, 1, 2], drop=lambda kind, s, d, t: kind == "digest" and t < 2.0)
+    net.run(1.9)
+    assert all(a.decide(net.t).kind == "wait" for a in net.agents.values())
+    net.run(10.0)
+    assert all(a.decide(net.t).kind == "agreed" for a in net.agents.values())
+
+
+def test_late_joiner_is_waited_for_and_included() -> None:
+    net = Net([0, 1])
+    net.run(5.0)
+    d0 = net.agents[0].decide(net.t)
+    assert d0.kind == "wait" and "2 of 3" in d0.reason
+    net.add(2)
+    net.run(9.0)
+    ds = [a.decide(net.t) for a in net.agents.values()]
+    assert all(d.kind == "agreed" for d in ds)
+    assert {d.members for d in ds} == {(0, 1, 2)}
+
+
+def test_member_that_dies_before_agreement_fails_everyone_safely() -> None:
+    net = Net([0, 1, 2], drop=lambda kind, s, d, t: s == 2)  # 2 is mute, then dies
+    net.run(1.0)
+    net.kill(2)
+    net.step()
+    for a in net.agents.values():
+        d = a.decide(net.t)
+        assert d.kind == "failed"
+        assert "[2] left" in d.reason
+        assert a.due(net.t + 100) == []
+
+
+def test_timeout_names_who_is_missing() -> None:
+    net = Net([0, 1], timeout=5.0)
+    net.run(6.0)
+    d = net.agents[0].decide(net.t)
+    assert d.kind == "failed"
+    assert "no agreement after 5 s" in d.reason and "2 of 3" in d.reason
+
+
+def test_timeout_names_missing_record_and_digest() -> None:
+    net = Net([0, 1], fleet_size=2, timeout=2.0, drop=lambda kind, s, d, t: s == 1)
+    net.run(3.0)
+    d = net.agents[0].decide(net.t)
+    assert d.kind == "failed"
+    assert "no record from [1]" in d.reason and "from [1]" in d.reason
+
+
+def test_more_members_than_fleet_size_fails() -> None:
+    net = Net([0, 1, 2], fleet_size=2)
+    net.step()
+    d = net.agents[0].decide(net.t)
+    assert d.kind == "failed" and "more than the fleet size 2" in d.reason
+
+
+def test_without_fleet_size_membership_must_settle() -> None:
+    net = Net([0, 1], fleet_size=None, settle=2.0)
+    net.run(1.0)
+    assert net.agents[0].decide(net.t).kind == "wait"
+    assert "settle" in net.agents[0].decide(net.t).reason
+    net.run(4.0)
+    assert all(a.decide(net.t).kind == "agreed" for a in net.agents.values())
+
+
+def test_agreed_and_failed_are_final() -> None:
+    net = Net([0, 1], fleet_size=2)
+    net.run(3.0)
+    a = net.agents[0]
+    assert a.decide(net.t).kind == "agreed"
+    a.member_left(1, net.t)
+    assert a.decide(net.t).kind == "agreed"
+
+
+def test_after_agreement_digest_is_resent_until_peers_ack() -> None:
+    a = Agreement(0, rec(0), 0.0, fleet_size=2)
+    a.member_joined(1, 0.0)
+    a.on_record(rec(1), 0.0)
+    members, digest = a.digest()
+    a.on_digest(DigestMsg(sender=1, round=0, digest=digest, members=members), 0.0)
+    assert a.decide(0.0).kind == "agreed"
+    assert a.due(0.1) == ["digest"]
+    a.sent(["digest"], 0.1)
+    assert a.due(0.2) == []  # backing off
+    assert a.due(0.4) == ["digest"]
+    a.on_peer_phase(1, "agree")
+    assert a.due(10.0) == ["digest"]
+    a.on_peer_phase(1, "move")
+    assert a.due(20.0) == []
+
+
+def test_record_is_resent_only_while_unacknowledged() -> None:
+    a = Agreement(0, rec(0), 0.0, fleet_size=3)
+    a.member_joined(1, 0.0)
+    assert a.due(0.0) == ["record", "digest"]
+    a.sent(["record", "digest"], 0.0)
+    # peer 1 acknowledges holding record 0
+    a.on_digest(DigestMsg(sender=1, round=0, digest="0" * 64, members=(0, 1)), 0.1)
+    a.on_record(rec(1), 0.1)
+    assert "record" not in a.due(5.0)
+
+
+def test_backoff_doubles_and_caps() -> None:
+    a = Agreement(0, rec(0), 0.0, fleet_size=2, backoff_min=0.25, backoff_max=1.0)
+    times = []
+    t = 0.0
+    while t < 5.0:
+        due = a.due(t)
+        if "record" in due:
+            times.append(round(t, 2))
+        a.sent(due, t)
+        t = round(t + 0.05, 2)
+    gaps = [round(b - a_, 2) for a_, b in itertools.pairwise(times)]
+    assert gaps[:3] == [0.25, 0.5, 1.0]
+    assert all(g == 1.0 for g in gaps[3:])
+
+
+def test_newer_round_replaces_older_and_echo_is_ignored() -> None:
+    a = Agreement(0, rec(0), 0.0)
+    assert a.on_record(rec(1, 1), 0.0)
+    assert not a.on_record(rec(1, 0), 0.0)  # older round
+    assert not a.on_record(rec(1, 1), 0.0)  # duplicate
+    assert a.records[1].round == 1
+    assert a.on_record(rec(1, 2), 0.0)
+    impostor = NeighborRecordMsg(sender=0, round=5, neighbours=())
+    assert not a.on_record(impostor, 0.0)
+    assert a.records[0] == rec(0)
+
+
+def test_records_of_non_members_are_held_but_not_digested() -> None:
+    a = Agreement(0, rec(0), 0.0, fleet_size=2)
+    a.on_record(rec(1), 0.0)
+    assert a.held_members() == (0,)
+    a.member_joined(1, 0.0)
+    assert a.held_members() == (0, 1)
+
+
+def test_digest_is_order_independent_and_content_sensitive() -> None:
+    assert canonical_digest([rec(0), rec(1)]) == canonical_digest([rec(1), rec(0)])
+    assert canonical_digest([rec(0), rec(1)]) != canonical_digest([rec(0), rec(1, 1)])
+    assert len(canonical_digest([])) == 64
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"self_id": 1}, "own record is from 0"),
+        ({"fleet_size": 0}, "fleet size"),
+        ({"timeout": -1.0}, "timeout"),
+        ({"settle": float("nan")}, "settle"),
+        ({"backoff_min": 0.0}, "backoff"),
+        ({"backoff_min": 2.0, "backoff_max": 1.0}, "backoff"),
+    ],
+)
+def test_bad_construction(kwargs: dict[str, float], match: str) -> None:
+    args: dict[str, object] = {"self_id": 0, "own_record": rec(0), "now": 0.0}
+    args.update(kwargs)
+    with pytest.raises(ValueError, match=match):
+        Agreement(**args)  # type: ignore[arg-type]
+
+
+def test_sent_rejects_unknown_publication() -> None:
+    a = Agreement(0, rec(0), 0.0)
+    with pytest.raises(ValueError, match="unknown publication"):
+        a.sent(["status"], 0.0)
