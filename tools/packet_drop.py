@@ -19,6 +19,10 @@ through a router (gossip) also open direct links to each other on ephemeral port
 ``--port 7447`` rule only hits the links to the router, so to make a host lossy as a
 whole (what ``tools.eval_loss`` does) give no port.
 
+``--exempt ADDR`` (repeatable) spares the traffic to and from one peer address: in the
+project's loss evaluation the world host is exempt, because on a real NAO the camera and
+the legs are on board and only the robot-to-robot exchange crosses WiFi.
+
 By default the tool acts inside ``--netns NAME``. Acting on the caller's own network
 namespace needs ``--here`` as a guard, because a lossy host namespace breaks everything
 else on the machine.
@@ -34,11 +38,13 @@ Examples::
 from __future__ import annotations
 
 import argparse
+import ipaddress
 import json
 import os
 import shutil
 import subprocess
 import sys
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 
 CHAINS = {"in": ("NAO_DROP_IN", "INPUT"), "out": ("NAO_DROP_OUT", "OUTPUT")}
@@ -73,6 +79,13 @@ def _check_loss(loss: float) -> float:
     if not 0.0 <= float(loss) <= 1.0:
         raise ValueError(f"loss {loss} outside [0, 1] (it is a probability, not a percent)")
     return float(loss)
+
+
+def _check_addr(addr: str) -> str:
+    try:
+        return str(ipaddress.ip_network(addr, strict=False))
+    except ValueError:
+        raise ValueError(f"exempt address {addr!r} is not an IPv4 address or network") from None
 
 
 def _check_port(port: int | None) -> int | None:
@@ -128,16 +141,28 @@ class Dropper:
         return self._ipt("-n", "-L", chain, check=False).returncode == 0
 
     # ------------------------------------------------------------------ operations
-    def install(self, loss: float, direction: str = "both", port: int | None = None) -> None:
-        """Drop each packet with probability ``loss`` in ``direction``; replaces earlier rules."""
+    def install(
+        self,
+        loss: float,
+        direction: str = "both",
+        port: int | None = None,
+        exempt: Sequence[str] = (),
+    ) -> None:
+        """Drop each packet with probability ``loss`` in ``direction``; replaces earlier rules.
+
+        Packets from (in) or to (out) an address in ``exempt`` are never dropped.
+        """
         p = _check_loss(loss)
         dirs = _directions(direction)
         _check_port(port)
+        spared = [_check_addr(a) for a in exempt]
         self.preflight()
         self.clear()
         for d in dirs:
             chain, parent = CHAINS[d]
             self._ipt("-N", chain)
+            for addr in spared:
+                self._ipt("-A", chain, "-s" if d == "in" else "-d", addr, "-j", "RETURN")
             if p > 0.0:
                 stat = ["-m", "statistic", "--mode", "random", "--probability", f"{p:.6f}"]
                 tag = ["-m", "comment", "--comment", COMMENT]
@@ -203,6 +228,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--loss", type=float, help="drop probability in [0, 1] per direction")
     ap.add_argument("--direction", default="both", choices=DIRECTIONS)
     ap.add_argument("--port", type=int, help="only TCP/UDP packets from or to this port")
+    ap.add_argument(
+        "--exempt", action="append", default=[], help="never drop traffic with this address"
+    )
     ap.add_argument("--clear", action="store_true", help="remove the rules")
     ap.add_argument("--show", action="store_true", help="print rules and packet counters")
     ap.add_argument("--json", action="store_true", help="with --show: print JSON")
@@ -227,8 +255,10 @@ def main(argv: list[str] | None = None) -> int:
                 for r in rows:
                     print(f"{r.direction:3s} {r.packets:10d} pkts {r.bytes:12d} bytes  {r.rule}")
         else:
-            dropper.install(args.loss, args.direction, args.port)
+            dropper.install(args.loss, args.direction, args.port, args.exempt)
             scope = f"port {args.port} (tcp+udp)" if args.port else "all packets"
+            if args.exempt:
+                scope += f" except {', '.join(args.exempt)}"
             print(f"installed loss {args.loss:g} direction {args.direction} on {scope} in {where}")
     except (PacketDropError, ValueError) as exc:
         print(f"packet_drop: {exc}", file=sys.stderr)

@@ -48,6 +48,11 @@ def test_bad_port() -> None:
         Dropper("x").install(0.1, port=70000)
 
 
+def test_bad_exempt_address() -> None:
+    with pytest.raises(ValueError, match="exempt address"):
+        Dropper("x").install(0.1, exempt=["router"])
+
+
 def test_cli_needs_exactly_one_action(capsys: pytest.CaptureFixture[str]) -> None:
     assert packet_drop.main(["--netns", "x"]) == 2
     assert packet_drop.main(["--netns", "x", "--clear", "--show"]) == 2
@@ -135,6 +140,26 @@ def test_loss_one_drops_everything_and_counts(host: str) -> None:
     )
     assert proc.returncode == 0, proc.stderr
     assert d.dropped_packets() == 5
+
+
+@needs_root
+@pytest.mark.netns
+def test_exempt_address_is_never_dropped(host: str) -> None:
+    d = Dropper(host)
+    d.install(1.0, direction="out", exempt=["10.77.0.1"])
+    script = (
+        "import socket\ns = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)\n"
+        "for dst in ['10.77.0.1'] * 4 + ['10.77.0.9'] * 3:\n"
+        "    try:\n        s.sendto(b'x', (dst, 9))\n"
+        "    except OSError:\n        pass\n"
+    )
+    proc = subprocess.run(
+        netns.netns_cmd(host, ["python3", "-c", script]), capture_output=True, timeout=30
+    )
+    assert proc.returncode == 0, proc.stderr
+    # only the three datagrams to the non-exempt address were dropped
+    assert d.dropped_packets() == 3
+    assert "-d 10.77.0.1/32 -j RETURN" in _iptables_s(host)
 
 
 @needs_root

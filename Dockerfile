@@ -1,0 +1,35 @@
+# nao-formation: one image for the router, the world and the agents (DESIGN.md §5).
+#   docker compose build                      # from python:3.11-slim
+#   docker-compose build --build-arg BASE_IMAGE=localhost/nao-base:bookworm   # local base
+# The base needs python3 with the venv module (Debian bookworm or python:3.11-slim).
+ARG BASE_IMAGE=python:3.11-slim
+FROM ${BASE_IMAGE}
+
+ENV PYTHONUNBUFFERED=1 \
+    PYTHONDONTWRITEBYTECODE=1 \
+    PIP_NO_CACHE_DIR=1 \
+    PIP_DISABLE_PIP_VERSION_CHECK=1 \
+    VIRTUAL_ENV=/opt/venv \
+    PATH=/opt/venv/bin:$PATH \
+    MPLBACKEND=Agg
+
+RUN python3 -m venv /opt/venv
+WORKDIR /app
+
+# Dependencies first, in their own layer: editing the code does not reinstall numpy & co.
+COPY pyproject.toml README.md ./
+RUN mkdir -p agent sim tools \
+    && touch agent/__init__.py sim/__init__.py tools/__init__.py \
+    && pip install . \
+    && pip uninstall -y nao-formation \
+    && rm -rf agent sim tools build *.egg-info
+
+# The project itself.
+COPY agent ./agent
+COPY sim ./sim
+COPY tools ./tools
+RUN pip install --no-deps . && rm -rf build *.egg-info \
+    && python -c "import zenoh, numpy, scipy, cv2, msgpack, pybullet, agent.protocol"
+
+# No default role: docker-compose.yml sets the command of each service.
+CMD ["python", "-m", "tools.router", "--listen", "tcp/0.0.0.0:7447"]
