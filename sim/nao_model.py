@@ -1,0 +1,137 @@
+"""A NAO-like body built from primitives (DESIGN.md §4; NAO paper §3.1, Fig. 3).
+
+Sized to the NAO H25: 0.573 m tall, 0.275-0.28 m wide (shoulder to shoulder covers),
+about 0.16 m deep at the feet (the paper's 0.311 m depth includes the arms held forward;
+standing "StandZero" with arms down, the body is shallower). White/grey body; the orange
+parts the detector uses are the **head cap** (a band round the top of the head plus the
+back of the head) and the two **shoulder covers**. A front or back view therefore shows
+3 orange blobs, a side view 2 (the far shoulder hides behind the near one and the torso),
+and the look changes with the orientation as in Fig. 3: the head blob is a thin band from
+the front and a tall patch from the back, the shoulders slide together and overlap as the
+robot turns.
+
+Body frame: x forward, y left, z up, origin on the floor between the feet. The head is a
+link on a revolute joint about z (the head yaw), so a robot that looks sideways is seen
+with its head turned (Fig. 3(e)). Colours are chosen so that only the orange parts fall
+in the detector's HSV range (H 2-10, S >= 170, V >= 50, OpenCV scale) under the default
+light; every other colour of the model is white, grey or near-black.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import pybullet as pb
+
+HEIGHT = 0.573
+WIDTH = 0.28
+NECK_Z = 0.455  # head yaw joint height
+CAMERA_Z = 0.50  # forehead camera height above the floor
+CAMERA_FORWARD = 0.062  # forehead camera in front of the head yaw axis
+FOOTPRINT_RADIUS = 0.155  # contact radius of the body (half the 0.311 m depth)
+
+ORANGE = (1.0, 0.22, 0.0, 1.0)  # HSV hue 13° -> OpenCV H 6.5, S 255
+WHITE = (0.93, 0.93, 0.94, 1.0)
+GREY = (0.55, 0.56, 0.6, 1.0)
+DARK = (0.12, 0.12, 0.14, 1.0)
+
+
+@dataclass(frozen=True)
+class Part:
+    """A box ``half`` extents at ``pos`` in the body (or head) frame, colour ``rgba``."""
+
+    name: str
+    half: tuple[float, float, float]
+    pos: tuple[float, float, float]
+    rgba: tuple[float, float, float, float]
+
+
+# Fixed to the torso (body frame).
+BODY_PARTS: tuple[Part, ...] = (
+    Part("foot_l", (0.080, 0.045, 0.015), (0.020, 0.055, 0.015), GREY),
+    Part("foot_r", (0.080, 0.045, 0.015), (0.020, -0.055, 0.015), GREY),
+    Part("shin_l", (0.035, 0.035, 0.070), (0.000, 0.055, 0.100), WHITE),
+    Part("shin_r", (0.035, 0.035, 0.070), (0.000, -0.055, 0.100), WHITE),
+    Part("thigh_l", (0.040, 0.040, 0.060), (0.000, 0.055, 0.230), WHITE),
+    Part("thigh_r", (0.040, 0.040, 0.060), (0.000, -0.055, 0.230), WHITE),
+    Part("pelvis", (0.050, 0.090, 0.020), (0.000, 0.000, 0.300), GREY),
+    Part("torso", (0.055, 0.080, 0.070), (0.000, 0.000, 0.385), WHITE),
+    Part("chest", (0.004, 0.050, 0.035), (0.056, 0.000, 0.395), GREY),
+    Part("neck", (0.020, 0.020, 0.010), (0.000, 0.000, 0.460), GREY),
+    Part("shoulder_l", (0.040, 0.030, 0.030), (0.000, 0.110, 0.430), ORANGE),
+    Part("shoulder_r", (0.040, 0.030, 0.030), (0.000, -0.110, 0.430), ORANGE),
+    Part("arm_l", (0.030, 0.025, 0.050), (0.000, 0.110, 0.350), WHITE),
+    Part("arm_r", (0.030, 0.025, 0.050), (0.000, -0.110, 0.350), WHITE),
+    Part("hand_l", (0.028, 0.022, 0.050), (0.010, 0.110, 0.250), GREY),
+    Part("hand_r", (0.028, 0.022, 0.050), (0.010, -0.110, 0.250), GREY),
+)
+
+# On the head link (head frame: origin on the yaw axis at NECK_Z).
+HEAD_PARTS: tuple[Part, ...] = (
+    Part("head", (0.058, 0.064, 0.055), (0.000, 0.000, 0.060), WHITE),
+    Part("face", (0.003, 0.048, 0.022), (0.059, 0.000, 0.050), DARK),
+    Part("cap", (0.061, 0.067, 0.016), (0.000, 0.000, 0.102), ORANGE),
+    Part("cap_back", (0.006, 0.058, 0.036), (-0.058, 0.000, 0.062), ORANGE),
+)
+
+
+class NaoBodyFactory:
+    """Creates NAO multibodies in one PyBullet client, sharing the visual shapes."""
+
+    def __init__(self, client: int) -> None:
+        self._client = client
+        self._body_shapes = [self._shape(p) for p in BODY_PARTS]
+        self._head_root = pb.createVisualShape(
+            pb.GEOM_BOX,
+            halfExtents=HEAD_PARTS[0].half,
+            rgbaColor=HEAD_PARTS[0].rgba,
+            specularColor=(0.0, 0.0, 0.0),
+            visualFramePosition=HEAD_PARTS[0].pos,
+            physicsClientId=client,
+        )
+        self._head_shapes = [self._shape(p) for p in HEAD_PARTS[1:]]
+
+    def _shape(self, part: Part) -> int:
+        return int(
+            pb.createVisualShape(
+                pb.GEOM_BOX,
+                halfExtents=part.half,
+                rgbaColor=part.rgba,
+                specularColor=(0.0, 0.0, 0.0),
+                physicsClientId=self._client,
+            )
+        )
+
+    def create(self, x: float, y: float, heading: float) -> int:
+        """A new NAO standing at (x, y) facing ``heading``; returns the body id.
+
+        Link 0 is the head (revolute about z, :data:`HEAD_JOINT`); the other links are
+        fixed parts.
+        """
+        vis = [self._head_root, *self._head_shapes, *self._body_shapes]
+        pos = [(0.0, 0.0, NECK_Z)] + [p.pos for p in HEAD_PARTS[1:]] + [p.pos for p in BODY_PARTS]
+        parents = [0] + [1] * (len(HEAD_PARTS) - 1) + [0] * len(BODY_PARTS)
+        joints = [pb.JOINT_REVOLUTE] + [pb.JOINT_FIXED] * (len(vis) - 1)
+        k = len(vis)
+        body = pb.createMultiBody(
+            baseMass=0.0,
+            baseCollisionShapeIndex=-1,
+            baseVisualShapeIndex=-1,
+            basePosition=(x, y, 0.0),
+            baseOrientation=pb.getQuaternionFromEuler((0.0, 0.0, heading)),
+            linkMasses=[0.0] * k,
+            linkCollisionShapeIndices=[-1] * k,
+            linkVisualShapeIndices=vis,
+            linkPositions=pos,
+            linkOrientations=[(0.0, 0.0, 0.0, 1.0)] * k,
+            linkInertialFramePositions=[(0.0, 0.0, 0.0)] * k,
+            linkInertialFrameOrientations=[(0.0, 0.0, 0.0, 1.0)] * k,
+            linkParentIndices=parents,
+            linkJointTypes=joints,
+            linkJointAxis=[(0.0, 0.0, 1.0)] * k,
+            physicsClientId=self._client,
+        )
+        return int(body)
+
+
+HEAD_JOINT = 0

@@ -1,0 +1,321 @@
+"""The simulated room and its robots (issue 3; DESIGN.md §4).
+
+PyBullet in DIRECT mode (GUI opt-in) holds a square room whose floor and four walls are
+each one textured quad with a rich, seeded texture (rectangles, discs, lines and
+text-like marks in many colours) so that feature matching -- the visual compass of the
+NAO paper §3.3 -- has plenty to hold on to; optional static obstacles (grey cylinders),
+optional orange lookalike clutter and a light whose strength and direction vary for the
+detector's hard cases. No wall or floor colour falls in (or near) the detector's orange
+range: hues near orange are desaturated, and every texture is checked with
+``cv2.inRange`` before use.
+
+Robots are kinematic NAO bodies (:mod:`sim.nao_model`); their poses are held here and
+moved by :mod:`sim.locomotion`. Rendering costs no sim time. :class:`World` is the
+in-process API; :mod:`sim.server` puts it on the bus.
+"""
+
+from __future__ import annotations
+
+import math
+import tempfile
+from pathlib import Path
+from types import TracebackType
+
+import cv2
+import numpy as np
+import pybullet as pb
+
+from sim import camera
+from sim.nao_model import HEAD_JOINT, NaoBodyFactory
+from sim.scenarios import Scenario
+
+TEXELS_PER_M = 256
+# The detector's orange (OpenCV HSV) widened by a margin: no room texel may fall in it.
+GUARD_LO = (0, 110, 40)
+GUARD_HI = (16, 255, 255)
+OBSTACLE_HEIGHT = 0.6
+TILE = 1.0  # metres: edge of the triangles the floor and walls are cut into
+
+
+def _safe_colour(rng: np.random.Generator) -> tuple[int, int, int]:
+    """A random BGR colour far from the detector's orange.
+
+    Saturated colours take hues in OpenCV H [22, 160] (yellow-green round to magenta);
+    reds, oranges and pinks (H < 22 or > 160) are kept pale (S <= 90).
+    """
+    h = int(rng.integers(0, 180))
+    v = int(rng.integers(30, 256))
+    s = int(rng.integers(60, 256)) if 22 <= h <= 160 else int(rng.integers(0, 91))
+    hsv = np.array([[[h, s, v]]], dtype=np.uint8)
+    b, g, r = cv2.cvtColor(hsv, cv2.COLOR_HSV2BGR)[0, 0]
+    return int(b), int(g), int(r)
+
+
+def make_texture(rng: np.random.Generator, width: int, height: int) -> np.ndarray:
+    """A seeded BGR texture rich in corners and blobs, with no orange texel."""
+    base = np.array(_safe_colour(rng), dtype=np.float64) * 0.4 + 110.0
+    img = np.empty((height, width, 3), dtype=np.uint8)
+    img[:] = np.clip(base, 0, 255).astype(np.uint8)
+    area = width * height
+    for _ in range(area // 2500):
+        kind = int(rng.integers(0, 5))
+        col = _safe_colour(rng)
+        x, y = int(rng.integers(0, width)), int(rng.integers(0, height))
+        size = int(rng.integers(8, 90))
+        if kind == 0:
+            cv2.rectangle(img, (x, y), (x + size, y + int(rng.integers(8, 90))), col, -1)
+        elif kind == 1:
+            cv2.circle(img, (x, y), size // 2, col, -1)
+        elif kind == 2:
+            x2, y2 = x + int(rng.integers(-120, 120)), y + int(rng.integers(-120, 120))
+            cv2.line(img, (x, y), (x2, y2), col, int(rng.integers(2, 8)))
+        elif kind == 3:
+            text = "".join(chr(int(c)) for c in rng.integers(65, 91, size=int(rng.integers(2, 7))))
+            cv2.putText(img, text, (x, y), cv2.FONT_HERSHEY_SIMPLEX, size / 40.0, col, 2)
+        else:
+            pts = rng.integers(-size, size, size=(int(rng.integers(3, 6)), 2)) + np.array([x, y])
+            cv2.fillPoly(img, [pts.astype(np.int32)], col)
+    # Belt and braces: desaturate anything that still lands near the orange range.
+    hsv = cv2.cvtColor(img, cv2.COLOR_BGR2HSV)
+    bad = cv2.inRange(hsv, GUARD_LO, GUARD_HI) > 0
+    bad |= cv2.inRange(hsv, (170, 110, 40), (180, 255, 255)) > 0
+    if bad.any():
+        grey = img[bad].mean(axis=1, keepdims=True)
+        img[bad] = np.clip(grey, 0, 255).astype(np.uint8)
+    return img
+
+
+def light_direction(azimuth: float, elevation: float) -> tuple[float, float, float]:
+    return (
+        math.cos(elevation) * math.cos(azimuth),
+        math.cos(elevation) * math.sin(azimuth),
+        math.sin(elevation),
+    )
+
+
+class World:
+    """A room with NAOs; poses, head yaws, the sim clock, and their forehead cameras.
+
+    ``noise`` switches the seeded motion noise of :mod:`sim.locomotion` on or off.
+    """
+
+    def __init__(self, scenario: Scenario, *, gui: bool = False, noise: bool = True) -> None:
+        self.scenario = scenario
+        self.noise = noise
+        self.t_sim = 0.0
+        self._client = int(pb.connect(pb.GUI if gui else pb.DIRECT))
+        if self._client < 0:
+            raise RuntimeError("cannot connect to PyBullet")
+        self._closed = False
+        try:
+            self._build()
+        except Exception:
+            self.close()
+            raise
+
+    # ------------------------------------------------------------------ building
+
+    def _build(self) -> None:
+        sc = self.scenario
+        cid = self._client
+        pb.resetSimulation(physicsClientId=cid)
+        if pb.getConnectionInfo(cid).get("connectionMethod") == pb.GUI:
+            pb.configureDebugVisualizer(pb.COV_ENABLE_GUI, 0, physicsClientId=cid)
+        # Near things first: TinyRenderer then skips shading wall texels hidden by them.
+        factory = NaoBodyFactory(cid)
+        self._bodies: dict[int, int] = {}
+        self._poses: dict[int, tuple[float, float, float]] = {}
+        self._head: dict[int, float] = {}
+        for r in sorted(sc.robots, key=lambda r: r.id):
+            self._bodies[r.id] = factory.create(r.x, r.y, r.heading)
+            self._poses[r.id] = (float(r.x), float(r.y), _wrap(float(r.heading)))
+            self._head[r.id] = 0.0
+        rng = np.random.default_rng([sc.seed, 0x5EED])
+        half = sc.room
+        wall_h = 1.0 + 0.9 * half
+        with tempfile.TemporaryDirectory(prefix="nao-sim-") as tmp:
+            # Floor: z = 0, seen from above.
+            self._quad(
+                Path(tmp) / "floor.png",
+                [(-half, -half, 0.0), (half, -half, 0.0), (half, half, 0.0), (-half, half, 0.0)],
+                (0.0, 0.0, 1.0),
+                make_texture(rng, int(2 * half * 160), int(2 * half * 160)),
+            )
+            corners = [(-half, -half), (half, -half), (half, half), (-half, half)]
+            for i in range(4):
+                (x0, y0), (x1, y1) = corners[i], corners[(i + 1) % 4]
+                # Inward normal: rotate the wall direction by +90° (counter-clockwise room).
+                dx, dy = (x1 - x0) / (2 * half), (y1 - y0) / (2 * half)
+                tex = make_texture(rng, int(2 * half * TEXELS_PER_M), int(wall_h * TEXELS_PER_M))
+                self._quad(
+                    Path(tmp) / f"wall{i}.png",
+                    [(x0, y0, 0.0), (x1, y1, 0.0), (x1, y1, wall_h), (x0, y0, wall_h)],
+                    (-dy, dx, 0.0),
+                    tex,
+                    flip=True,  # wound to face into the room
+                )
+        for ob in sc.obstacles:
+            vis = pb.createVisualShape(
+                pb.GEOM_CYLINDER,
+                radius=ob.radius,
+                length=OBSTACLE_HEIGHT,
+                rgbaColor=(0.45, 0.47, 0.5, 1.0),
+                specularColor=(0.0, 0.0, 0.0),
+                physicsClientId=cid,
+            )
+            pb.createMultiBody(
+                baseVisualShapeIndex=vis,
+                basePosition=(ob.x, ob.y, OBSTACLE_HEIGHT / 2),
+                physicsClientId=cid,
+            )
+        for cl in sc.clutter:
+            vis = pb.createVisualShape(
+                pb.GEOM_BOX,
+                halfExtents=(cl.size / 2,) * 3,
+                rgbaColor=(1.0, 0.25, 0.0, 1.0),
+                specularColor=(0.0, 0.0, 0.0),
+                physicsClientId=cid,
+            )
+            pb.createMultiBody(
+                baseVisualShapeIndex=vis, basePosition=(cl.x, cl.y, cl.z), physicsClientId=cid
+            )
+        self.robot_ids: tuple[int, ...] = tuple(sorted(self._bodies))
+        li = sc.light
+        self._light_dir = light_direction(li.azimuth, li.elevation)
+        self._light_intensity = li.intensity
+
+    def _quad(
+        self,
+        path: Path,
+        verts: list[tuple[float, float, float]],
+        normal: tuple[float, float, float],
+        texture: np.ndarray,
+        flip: bool = False,
+    ) -> None:
+        """One textured quad (corners ``verts`` counter-clockwise as seen from the side
+        it faces; ``flip`` reverses that), cut into tiles of about TILE metres.
+
+        TinyRenderer walks the screen bounding box of every triangle, so a few huge
+        triangles cost a full-screen pass each; small tiles keep a render fast.
+        """
+        cid = self._client
+        cv2.imwrite(str(path), texture)
+        tex_id = pb.loadTexture(str(path), physicsClientId=cid)
+        p0, p1, _, p3 = (np.array(v, dtype=np.float64) for v in verts)
+        eu, ev = p1 - p0, p3 - p0
+        nu = max(1, math.ceil(float(np.linalg.norm(eu)) / TILE))
+        nv = max(1, math.ceil(float(np.linalg.norm(ev)) / TILE))
+        vs: list[list[float]] = []
+        uvs: list[tuple[float, float]] = []
+        for j in range(nv + 1):
+            for i in range(nu + 1):
+                a, b = i / nu, j / nv
+                vs.append((p0 + a * eu + b * ev).tolist())
+                uvs.append((a, b))
+        idx: list[int] = []
+        for j in range(nv):
+            for i in range(nu):
+                k = j * (nu + 1) + i
+                q = (k, k + 1, k + nu + 2, k, k + nu + 2, k + nu + 1)
+                idx.extend((q[0], q[2], q[1], q[3], q[5], q[4]) if flip else q)
+        vis = pb.createVisualShape(
+            pb.GEOM_MESH,
+            vertices=vs,
+            indices=idx,
+            uvs=uvs,
+            normals=[normal] * len(vs),
+            rgbaColor=(1.0, 1.0, 1.0, 1.0),
+            specularColor=(0.0, 0.0, 0.0),
+            physicsClientId=cid,
+        )
+        body = pb.createMultiBody(baseVisualShapeIndex=vis, physicsClientId=cid)
+        pb.changeVisualShape(body, -1, textureUniqueId=tex_id, physicsClientId=cid)
+
+    # ------------------------------------------------------------------ state
+
+    def _check(self, robot_id: int) -> int:
+        if robot_id not in self._bodies:
+            raise ValueError(f"unknown robot {robot_id!r}; robots are {list(self.robot_ids)}")
+        return robot_id
+
+    def pose(self, robot_id: int) -> tuple[float, float, float]:
+        """Ground-truth (x, y, heading) of a robot; heading wrapped to [-pi, pi)."""
+        return self._poses[self._check(robot_id)]
+
+    def poses(self) -> dict[int, tuple[float, float, float]]:
+        return dict(self._poses)
+
+    def head_yaw(self, robot_id: int) -> float:
+        return self._head[self._check(robot_id)]
+
+    def set_pose(self, robot_id: int, x: float, y: float, heading: float) -> None:
+        """Teleport a robot (tools and tests)."""
+        self._check(robot_id)
+        for v in (x, y, heading):
+            if not math.isfinite(v):
+                raise ValueError(f"pose value {v} is not finite")
+        self._poses[robot_id] = (float(x), float(y), _wrap(float(heading)))
+        pb.resetBasePositionAndOrientation(
+            self._bodies[robot_id],
+            (x, y, 0.0),
+            pb.getQuaternionFromEuler((0.0, 0.0, heading)),
+            physicsClientId=self._client,
+        )
+
+    def set_head_yaw(self, robot_id: int, yaw: float) -> None:
+        """Turn a robot's head (±119.5°; outside is a ``ValueError``)."""
+        self._check(robot_id)
+        y = camera.check_yaw(yaw)
+        self._head[robot_id] = y
+        pb.resetJointState(self._bodies[robot_id], HEAD_JOINT, y, physicsClientId=self._client)
+
+    def render(self, robot_id: int, head_yaw: float) -> np.ndarray:
+        """What ``robot_id``'s forehead camera sees with its head at ``head_yaw`` (rad).
+
+        The robot's head stays at that yaw afterwards (others see it turned). The
+        observer's own body is not drawn. Returns (480, 640, 3) uint8 BGR.
+        """
+        self._check(robot_id)
+        self.set_head_yaw(robot_id, head_yaw)
+        x, y, th = self._poses[robot_id]
+        body = self._bodies[robot_id]
+        cid = self._client
+        # Hide the observer's own body (under the floor) while its camera renders.
+        pb.resetBasePositionAndOrientation(body, (x, y, -5.0), (0, 0, 0, 1), physicsClientId=cid)
+        try:
+            return camera.render(
+                cid,
+                x,
+                y,
+                th,
+                self._head[robot_id],
+                light_direction=self._light_dir,
+                light_intensity=self._light_intensity,
+            )
+        finally:
+            pb.resetBasePositionAndOrientation(
+                body, (x, y, 0.0), pb.getQuaternionFromEuler((0.0, 0.0, th)), physicsClientId=cid
+            )
+
+    # ------------------------------------------------------------------ lifetime
+
+    def close(self) -> None:
+        if not self._closed:
+            self._closed = True
+            pb.disconnect(physicsClientId=self._client)
+
+    def __enter__(self) -> World:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+
+def _wrap(a: float) -> float:
+    """Angle wrapped to [-pi, pi)."""
+    return (a + math.pi) % (2 * math.pi) - math.pi
