@@ -1,0 +1,132 @@
+"""``python -m agent``: one identical agent process per NAO (DESIGN.md §1–3).
+
+    python -m agent --id N|auto [--fleet-size N] [--connect EP]... [--listen EP]...
+                    [--no-multicast-scouting] [--mode peer|client] [--d-e 0.8]
+                    [--phi-e-deg 30] [--timeout S]
+
+Exit status: 0 when the robot holds its place in the pyramid, 1 on a safe stop
+(failed agreement, planning or motion; the reason is logged and published), 2 on a
+usage error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+import sys
+
+from agent.protocol import MAX_ROBOT_ID
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(prog="python -m agent", description=__doc__.split("\n\n")[0])
+    p.add_argument("--id", required=True, help="robot id, or 'auto' to claim one from the world")
+    p.add_argument("--fleet-size", type=int, default=None, help="require exactly N members")
+    p.add_argument(
+        "--connect", action="append", default=[], metavar="EP", help="zenoh endpoint to connect to"
+    )
+    p.add_argument(
+        "--listen", action="append", default=[], metavar="EP", help="zenoh endpoint to listen on"
+    )
+    p.add_argument(
+        "--no-multicast-scouting", action="store_true", help="disable multicast scouting"
+    )
+    p.add_argument("--mode", choices=("peer", "client"), default="peer", help="zenoh session mode")
+    p.add_argument("--d-e", type=float, default=0.8, help="expected parent-child distance (m)")
+    p.add_argument(
+        "--phi-e-deg", type=float, default=30.0, help="expected parent-child angle (deg)"
+    )
+    p.add_argument(
+        "--timeout", type=float, default=120.0, help="agreement timeout after the search (s)"
+    )
+    p.add_argument(
+        "--wave-timeout", type=float, default=600.0, help="wait limit for earlier waves (s)"
+    )
+    p.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
+    args = p.parse_args(argv)
+    if args.id != "auto":
+        try:
+            rid = int(args.id)
+        except ValueError:
+            p.error(f"--id must be an integer or 'auto', got {args.id!r}")
+        if not 0 <= rid <= MAX_ROBOT_ID:
+            p.error(f"--id {rid} outside [0, {MAX_ROBOT_ID}]")
+    if args.fleet_size is not None and args.fleet_size < 1:
+        p.error("--fleet-size must be >= 1")
+    if not (math.isfinite(args.d_e) and args.d_e > 0):
+        p.error("--d-e must be > 0")
+    if not 0 < args.phi_e_deg < 90:
+        p.error("--phi-e-deg must be in (0, 90)")
+    if not (math.isfinite(args.timeout) and args.timeout > 0):
+        p.error("--timeout must be > 0")
+    return args
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    logging.basicConfig(
+        level=args.log_level,
+        format="%(asctime)s agent[%(process)d] %(levelname)s %(name)s: %(message)s",
+        stream=sys.stderr,
+    )
+    log = logging.getLogger("agent")
+    # Imported here so that `--help` and usage errors need no zenoh session.
+    from agent.bus import Bus, BusConfig
+    from agent.robot import Robot, RobotError, register
+    from agent.runner import AgentConfig, Runner, load_formation, load_perception
+
+    try:
+        cfg = BusConfig(
+            connect=tuple(args.connect),
+            listen=tuple(args.listen),
+            multicast_scouting=not args.no_multicast_scouting,
+            mode=args.mode,
+        )
+    except ValueError as exc:
+        print(f"python -m agent: {exc}", file=sys.stderr)
+        return 2
+    with Bus(cfg) as bus:
+        if args.id == "auto":
+            try:
+                rid = register(bus, -1, timeout=30.0)
+            except RobotError as exc:
+                log.error("%s", exc)
+                return 1
+            log.info("claimed robot %d", rid)
+        else:
+            rid = int(args.id)
+        perception = load_perception()
+        formation = load_formation()
+        runner = Runner(
+            bus,
+            Robot(bus, rid),
+            AgentConfig(
+                robot_id=rid,
+                fleet_size=args.fleet_size,
+                d_e=args.d_e,
+                phi_e=math.radians(args.phi_e_deg),
+                timeout=args.timeout,
+                wave_timeout=args.wave_timeout,
+            ),
+            perception=perception,
+            formation=formation,
+        )
+        code = runner.run()
+        st = bus.stats
+        log.info(
+            "robot %d exit %d: published %d B (%s), compass %d/%d failed",
+            rid,
+            code,
+            st.total_published,
+            ", ".join(
+                f"{k} {v} B/{st.published_count[k]}" for k, v in sorted(st.published_bytes.items())
+            ),
+            runner.compass_failures,
+            runner.compass_uses,
+        )
+        return code
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,234 @@
+"""The agent's Zenoh session (DESIGN.md §3): the only module of ``agent/`` that imports zenoh.
+
+Peer mode by default with multicast scouting (the one-machine demo); ``connect`` /
+``listen`` endpoints, ``no_multicast_scouting`` and ``mode`` mirror zenoh's own example
+flags for separate hosts, containers and routers. Every payload is an
+``agent.protocol`` message; what fails to decode is dropped with a logged reason and
+counted, never raised into the caller's loop.
+
+Callbacks only hand samples to thread-safe queues (zenoh must not be called, and
+nothing may block, inside a callback); the caller drains them with :meth:`Bus.drain`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import logging
+import queue
+import threading
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import Any, TypeVar
+
+import zenoh
+
+from agent.protocol import ErrorReply, Message, ProtocolError, decode, encode, id_from_key
+
+log = logging.getLogger("agent.bus")
+
+M = TypeVar("M", bound=Message)
+
+
+class BusError(RuntimeError):
+    """A query that got no usable reply (timeout, error reply, undecodable reply)."""
+
+
+@dataclass(frozen=True)
+class BusConfig:
+    """How to join the network; the defaults suit peers on one machine."""
+
+    connect: tuple[str, ...] = ()
+    listen: tuple[str, ...] = ()
+    multicast_scouting: bool = True
+    mode: str = "peer"
+
+    def __post_init__(self) -> None:
+        if self.mode not in ("peer", "client", "router"):
+            raise ValueError(f"mode must be peer, client or router, got {self.mode!r}")
+        for ep in (*self.connect, *self.listen):
+            if "/" not in ep:
+                raise ValueError(
+                    f"endpoint {ep!r} is not of the form proto/address, e.g. tcp/127.0.0.1:7447"
+                )
+        if self.mode == "client" and not self.connect and not self.multicast_scouting:
+            raise ValueError(
+                "client mode without --connect needs multicast scouting to find a router"
+            )
+
+    def to_zenoh(self) -> zenoh.Config:
+        cfg = zenoh.Config()
+        cfg.insert_json5("mode", json.dumps(self.mode))
+        if self.connect:
+            cfg.insert_json5("connect/endpoints", json.dumps(list(self.connect)))
+        if self.listen:
+            cfg.insert_json5("listen/endpoints", json.dumps(list(self.listen)))
+        cfg.insert_json5("scouting/multicast/enabled", json.dumps(self.multicast_scouting))
+        return cfg
+
+
+@dataclass(frozen=True)
+class Event:
+    """One thing that arrived: a decoded message on ``key``, or a liveliness change."""
+
+    kind: str  # "msg" | "alive" | "gone"
+    key: str
+    msg: Any = None
+    robot_id: int = -1
+
+
+@dataclass
+class Stats:
+    published_bytes: Counter[str] = field(default_factory=Counter)
+    published_count: Counter[str] = field(default_factory=Counter)
+    query_bytes: int = 0
+    rejected: int = 0
+
+    @property
+    def total_published(self) -> int:
+        return sum(self.published_bytes.values())
+
+
+class Bus:
+    """A zenoh session with message-level publish, subscribe, query and liveliness."""
+
+    def __init__(self, config: BusConfig | None = None) -> None:
+        self.config = config or BusConfig()
+        self.session = zenoh.open(self.config.to_zenoh())
+        self.events: queue.Queue[Event] = queue.Queue()
+        self.stats = Stats()
+        self._keep: list[Any] = []  # subscribers, tokens, publishers: keep them alive
+        self._publishers: dict[str, Any] = {}
+        self._lock = threading.Lock()
+        self._closed = False
+
+    # ----------------------------------------------------------------- lifecycle
+
+    def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        for obj in reversed(self._keep):
+            with contextlib.suppress(Exception):
+                obj.undeclare()
+        self._keep.clear()
+        self._publishers.clear()
+        with contextlib.suppress(Exception):
+            self.session.close()
+
+    def __enter__(self) -> Bus:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ----------------------------------------------------------------- pub/sub
+
+    def publish(self, key: str, msg: Message, category: str = "") -> int:
+        """Publish ``msg`` on ``key`` (reliable); returns the payload size in bytes."""
+        data = encode(msg)
+        pub = self._publishers.get(key)
+        if pub is None:
+            pub = self.session.declare_publisher(key, reliability=zenoh.Reliability.RELIABLE)
+            self._publishers[key] = pub
+            self._keep.append(pub)
+        pub.put(data)
+        cat = category or msg.TAG
+        with self._lock:
+            self.stats.published_bytes[cat] += len(data)
+            self.stats.published_count[cat] += 1
+        return len(data)
+
+    def subscribe(self, key_expr: str) -> None:
+        """Decoded messages on ``key_expr`` arrive as ``Event("msg", key, msg)``."""
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            self._enqueue_sample(str(sample.key_expr), sample.payload.to_bytes())
+
+        self._keep.append(self.session.declare_subscriber(key_expr, on_sample))
+
+    def _enqueue_sample(self, key: str, data: bytes) -> None:
+        try:
+            msg = decode(data)
+        except ProtocolError as exc:
+            with self._lock:
+                self.stats.rejected += 1
+            log.warning("rejected message on %s: %s", key, exc)
+            return
+        self.events.put(Event("msg", key, msg))
+
+    # ----------------------------------------------------------------- liveliness
+
+    def declare_alive(self, key: str) -> None:
+        self._keep.append(self.session.liveliness().declare_token(key))
+
+    def watch_alive(self, key_expr: str) -> None:
+        """Liveliness of ``key_expr`` (with history) as ``alive`` / ``gone`` events."""
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            key = str(sample.key_expr)
+            try:
+                rid = id_from_key(key)
+            except ProtocolError as exc:
+                log.warning("ignored liveliness token %s: %s", key, exc)
+                return
+            kind = "alive" if sample.kind == zenoh.SampleKind.PUT else "gone"
+            self.events.put(Event(kind, key, robot_id=rid))
+
+        self._keep.append(
+            self.session.liveliness().declare_subscriber(key_expr, on_sample, history=True)
+        )
+
+    # ----------------------------------------------------------------- events
+
+    def drain(self, timeout: float = 0.0) -> list[Event]:
+        """Every event queued now; waits up to ``timeout`` s for the first one."""
+        out: list[Event] = []
+        try:
+            out.append(
+                self.events.get(timeout=timeout) if timeout > 0 else self.events.get_nowait()
+            )
+        except queue.Empty:
+            return out
+        while True:
+            try:
+                out.append(self.events.get_nowait())
+            except queue.Empty:
+                return out
+
+    # ----------------------------------------------------------------- queries
+
+    def query(self, key: str, msg: Message, expect: type[M], timeout: float = 10.0) -> M:
+        """Send ``msg`` to the queryable on ``key`` and return its reply of type ``expect``.
+
+        Raises :class:`BusError` with the reason on timeout, an ``ErrorReply`` or a reply
+        that does not decode.
+        """
+        data = encode(msg)
+        with self._lock:
+            self.stats.query_bytes += len(data)
+        replies = self.session.get(key, payload=data, timeout=timeout)
+        errors: list[str] = []
+        for reply in replies:
+            if reply.ok is None:
+                err = reply.err
+                errors.append(
+                    f"error reply: {bytes(err.payload.to_bytes())[:200]!r}"
+                    if err
+                    else "empty reply"
+                )
+                continue
+            raw = reply.ok.payload.to_bytes()
+            try:
+                out = decode(raw)
+            except ProtocolError as exc:
+                errors.append(f"undecodable reply: {exc}")
+                continue
+            if isinstance(out, ErrorReply):
+                raise BusError(f"{key}: {out.reason}")
+            if not isinstance(out, expect):
+                errors.append(f"unexpected reply {type(out).__name__}")
+                continue
+            return out
+        why = "; ".join(errors) if errors else f"no reply within {timeout:g} s"
+        raise BusError(f"{key}: {why}")

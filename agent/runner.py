@@ -1,0 +1,601 @@
+"""The phase machine of one agent (DESIGN.md §1; NAO paper 5.2.2 (iii) steps 1–7).
+
+SEARCH   sweep the head over [-119.5°, 119.5°] at θ = 0, turn to θ = 180° with the
+         rotation control, sweep again (5.2.2 (iii) step 2).
+LOCALISE detections → fixed frame (eqs. 7–8) with the compass-estimated heading,
+         merged across images.
+EXCHANGE/AGREE publish the record, collect every member's, move only once every live
+         member published the same digest (agent/exchange.py).
+PLAN     formation core on the agreed records (4.1.2–4.2): identical on every agent.
+WAIT     for every robot of earlier waves to hold (leader first, 5.2.2 step 7).
+MOVE     rotation control to face the goal, distance control in 20 cm steps with the
+         heading corrected after each (4.2, 5.2.2), then turn to the pyramid axis.
+HOLD     report and stay until the fleet holds.
+
+Heading belief: the agent's heading in its fixed frame starts at pi/2 (every robot
+faces north at the start, 4.1.1) and changes only by visual-compass measurements of its
+own turns and steps (eq. 2), or, when the compass fails, by the turn it commanded.
+Position belief: (0, 0) in the fixed frame at the start, dead-reckoned from the
+commanded steps along the believed heading. Agents never read ground truth.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from agent.bus import Bus, Event
+from agent.control import (
+    PAPER_GAINS,
+    STEP_GAINS,
+    PidGains,
+    RotationControl,
+    advance,
+    next_leg,
+    wrap_pi,
+)
+from agent.exchange import Agreement, Decision
+from agent.protocol import (
+    HEAD_YAW_LIMIT,
+    KEY_ALIVE_ALL,
+    KEY_DIGEST_ALL,
+    KEY_RECORD_ALL,
+    KEY_STATUS_ALL,
+    DigestMsg,
+    NeighborRecordMsg,
+    StatusMsg,
+    key_alive,
+    key_digest,
+    key_record,
+    key_status,
+)
+from agent.robot import Frame, Robot, RobotError
+
+log = logging.getLogger("agent.runner")
+
+NORTH = math.pi / 2
+SEARCH_YAWS = tuple(np.linspace(-HEAD_YAW_LIMIT, HEAD_YAW_LIMIT, 7).tolist())
+STATUS_MIN_INTERVAL = 1.0  # s between progress statuses of the same phase
+HEARTBEAT = 2.0  # s between statuses while waiting
+
+
+class AgentFailure(RuntimeError):
+    """A reason to stop safely (status ``failed``); the text is the reason."""
+
+
+@dataclass(frozen=True)
+class AgentConfig:
+    robot_id: int
+    fleet_size: int | None = None
+    d_e: float = 0.8
+    phi_e: float = math.radians(30.0)
+    timeout: float = 120.0  # s from the end of the search to agreement
+    wave_timeout: float = 600.0  # s to wait for earlier waves, and for the fleet to hold
+    settle: float = 3.0  # s of unchanged membership when no fleet size is given
+    search_yaws: tuple[float, ...] = SEARCH_YAWS
+    rotation_tolerance: float = math.radians(2.0)
+
+    def __post_init__(self) -> None:
+        if self.fleet_size is not None and self.fleet_size < 1:
+            raise ValueError(f"fleet size must be >= 1, got {self.fleet_size}")
+        if not (math.isfinite(self.d_e) and self.d_e > 0.0):
+            raise ValueError(f"d_e must be > 0 m, got {self.d_e}")
+        if not (math.isfinite(self.phi_e) and 0.0 < self.phi_e < math.pi / 2):
+            raise ValueError(f"phi_e must be in (0°, 90°), got {math.degrees(self.phi_e)}°")
+        for name in ("timeout", "wave_timeout", "settle"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0.0):
+                raise ValueError(f"{name} must be finite and >= 0, got {v}")
+        for y in self.search_yaws:
+            if abs(y) > HEAD_YAW_LIMIT + 1e-9:
+                raise ValueError(f"search yaw {math.degrees(y):.1f}° outside ±119.5°")
+
+
+@dataclass
+class Peer:
+    alive: bool = False
+    phase: str = ""
+    wave: int = -1
+    plan_digest: str = ""
+    seen_alive: bool = False
+
+
+@dataclass
+class Timeline:
+    """Wall and sim time at each phase start (for the report)."""
+
+    marks: list[tuple[str, float, float]] = field(default_factory=list)
+
+    def mark(self, phase: str, t_sim: float) -> None:
+        self.marks.append((phase, time.monotonic(), t_sim))
+
+
+class Runner:
+    """Drives one robot through the phases; :meth:`run` returns the exit code."""
+
+    def __init__(
+        self,
+        bus: Bus,
+        robot: Robot,
+        config: AgentConfig,
+        perception: Any = None,
+        formation: Any = None,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        if robot.robot_id != config.robot_id:
+            raise ValueError(f"robot {robot.robot_id} driven with config for {config.robot_id}")
+        self.bus = bus
+        self.robot = robot
+        self.cfg = config
+        self.me = config.robot_id
+        self.clock = clock
+        self.perception = perception
+        self.formation = formation
+        self.heading = NORTH
+        self.position = np.zeros(2)
+        self.phase = "start"
+        self.peers: dict[int, Peer] = {}
+        self.early_records: dict[int, NeighborRecordMsg] = {}
+        self.early_digests: dict[int, DigestMsg] = {}
+        self.agreement: Agreement | None = None
+        self.plan: Any = None
+        self.plan_digest = ""
+        self.wave = -1
+        self.record_round = 0
+        self.timeline = Timeline()
+        self._last_status = -math.inf
+        self._last_frame: Frame | None = None
+        self.compass_failures = 0
+        self.compass_uses = 0
+
+    # ================================================================= plumbing
+
+    def start_bus(self) -> None:
+        for key in (KEY_RECORD_ALL, KEY_DIGEST_ALL, KEY_STATUS_ALL):
+            self.bus.subscribe(key)
+        self.bus.watch_alive(KEY_ALIVE_ALL)
+        self.bus.declare_alive(key_alive(self.me))
+
+    def status(
+        self,
+        phase: str,
+        progress: float = 0.0,
+        detail: str = "",
+        error: str = "",
+        force: bool = False,
+    ) -> None:
+        now = self.clock()
+        changed = phase != self.phase
+        if changed:
+            self.timeline.mark(phase, self.robot.t_sim)
+        self.phase = phase
+        if not (changed or force or now - self._last_status >= STATUS_MIN_INTERVAL):
+            return
+        self._last_status = now
+        msg = StatusMsg(
+            sender=self.me,
+            phase=phase,
+            progress=min(1.0, max(0.0, progress)),
+            detail=detail[:500],
+            plan_digest=self.plan_digest,
+            wave=self.wave,
+            error=error[:500],
+            t_sim=self.robot.t_sim,
+            bytes_sent=self.bus.stats.total_published,
+        )
+        self.bus.publish(key_status(self.me), msg, "status")
+
+    def pump(self, timeout: float = 0.0) -> None:
+        """Handle what arrived; (re-)publish what the agreement says is due."""
+        for ev in self.bus.drain(timeout):
+            self._handle(ev)
+        agr = self.agreement
+        if agr is not None:
+            now = self.clock()
+            due = agr.due(now)
+            for what in due:
+                if what == "record":
+                    self.bus.publish(key_record(self.me), agr.records[self.me], "record")
+                else:
+                    self.bus.publish(
+                        key_digest(self.me), agr.digest_msg(self.record_round), "digest"
+                    )
+            agr.sent(due, now)
+
+    def _handle(self, ev: Event) -> None:
+        now = self.clock()
+        agr = self.agreement
+        if ev.kind in ("alive", "gone"):
+            peer = self.peers.setdefault(ev.robot_id, Peer())
+            peer.alive = ev.kind == "alive"
+            peer.seen_alive = peer.seen_alive or peer.alive
+            if agr is not None and ev.robot_id != self.me:
+                if peer.alive:
+                    agr.member_joined(ev.robot_id, now)
+                else:
+                    agr.member_left(ev.robot_id, now)
+            return
+        msg = ev.msg
+        if isinstance(msg, NeighborRecordMsg):
+            if agr is not None:
+                agr.on_record(msg, now)
+            elif msg.sender != self.me:
+                old = self.early_records.get(msg.sender)
+                if old is None or old.round <= msg.round:
+                    self.early_records[msg.sender] = msg
+        elif isinstance(msg, DigestMsg):
+            if agr is not None:
+                agr.on_digest(msg, now)
+            elif msg.sender != self.me:
+                self.early_digests[msg.sender] = msg
+        elif isinstance(msg, StatusMsg):
+            if msg.sender == self.me:
+                return
+            peer = self.peers.setdefault(msg.sender, Peer())
+            peer.phase, peer.wave, peer.plan_digest = msg.phase, msg.wave, msg.plan_digest
+            if agr is not None:
+                agr.on_peer_phase(msg.sender, msg.phase)
+
+    # ================================================================= motion
+
+    def look(self, yaw: float = 0.0) -> Frame:
+        frame = self.robot.camera(yaw)
+        self.pump()
+        return frame
+
+    def rotate(self, angle: float, gains: PidGains = PAPER_GAINS, label: str = "") -> None:
+        """Turn the body by ``angle`` (rad, + CCW) with the rotation control (5.2.2 (1))."""
+        rc = RotationControl(angle, gains=gains, tolerance=self.cfg.rotation_tolerance)
+        before = self._last_frame if self._last_frame is not None else self.look(0.0)
+        while not (rc.done or rc.exhausted):
+            u = rc.next_step()
+            rep = self.robot.turn(u)
+            self.pump()
+            after = self.look(0.0)
+            measured = self._compass(before, after, u)
+            rc.record(measured)
+            self.heading = wrap_pi(self.heading + measured)
+            before = after
+            if label:
+                self.status(self.phase, detail=f"{label}: {math.degrees(rc.error):+.1f}° to go")
+            if rep.status == "contact":
+                log.warning("contact while turning")
+        self._last_frame = before
+
+    def _compass(self, before: Frame, after: Frame, commanded: float) -> float:
+        """The rotation between two head-yaw-0 frames; the command when the compass fails."""
+        if self.perception is None:
+            return commanded
+        res = self.perception.compass.measure(before.image, after.image)
+        self.compass_uses += 1
+        if not getattr(res, "ok", False):
+            self.compass_failures += 1
+            return commanded
+        dtheta = float(res.dtheta)
+        # A measurement far from the command is more likely a mismatch than a fall.
+        if abs(dtheta - commanded) > max(math.radians(10.0), 0.6 * abs(commanded)):
+            self.compass_failures += 1
+            return commanded
+        return dtheta
+
+    def walk_to(self, goal: np.ndarray, progress: Callable[[float], None]) -> None:
+        """Distance control to ``goal`` (fixed frame, m) from the dead-reckoned position."""
+        total = float(np.hypot(*(goal - self.position))) or 1.0
+        for _ in range(200):
+            leg = next_leg(self.position, self.heading, goal)
+            if leg is None:
+                return
+            if abs(leg.turn) > self.cfg.rotation_tolerance:
+                self.rotate(
+                    leg.turn, STEP_GAINS if abs(leg.turn) < math.radians(15) else PAPER_GAINS
+                )
+            before = self._last_frame if self._last_frame is not None else self.look(0.0)
+            h0 = self.heading
+            rep = self.robot.walk(leg.walk)
+            self.pump()
+            after = self.look(0.0)
+            drift = self._compass(before, after, 0.0)
+            self.heading = wrap_pi(self.heading + drift)
+            self._last_frame = after
+            self.position = advance(self.position, h0, self.heading, leg.walk)
+            progress(1.0 - max(0.0, leg.remaining - leg.walk) / total)
+            if rep.status == "contact":
+                raise AgentFailure(
+                    f"contact while walking at believed {self.position.round(2).tolist()}"
+                )
+        raise AgentFailure("distance control did not converge in 200 steps")
+
+    # ================================================================= phases
+
+    def search(self) -> list[Any]:
+        """Sweeps at θ = 0 and θ = 180° (5.2.2 (iii)); returns fixed-frame sightings."""
+        self.status("search", 0.0, "sweep at θ = 0°")
+        n = 2 * len(self.cfg.search_yaws)
+        sightings: list[Any] = []
+        done = 0
+        for sweep in range(2):
+            if sweep == 1:
+                self.rotate(math.pi, PAPER_GAINS, "turn to θ = 180°")
+            for yaw in self.cfg.search_yaws:
+                frame = self.look(yaw)
+                if abs(yaw) < 1e-9:
+                    self._last_frame = frame
+                if self.perception is not None:
+                    dets = self.perception.detector.detect(frame.image, yaw)
+                    sightings.append(self.perception.to_fixed(dets, self.heading))
+                done += 1
+                self.status(
+                    "search", done / n, f"θ = {180 * sweep}°, head {math.degrees(yaw):+.0f}°"
+                )
+            if sweep == 0:
+                # the last image of the sweep was not at yaw 0: refresh the compass reference
+                self._last_frame = self.look(0.0)
+        return sightings
+
+    def localise(self, sightings: list[Any]) -> NeighborRecordMsg:
+        self.status("localise", 0.0)
+        if self.perception is None:
+            raise AgentFailure("no perception available")
+        pts, ori, conf = self.perception.merge(sightings)
+        rec = NeighborRecordMsg(
+            sender=self.me,
+            round=self.record_round,
+            neighbours=tuple((float(x), float(y)) for x, y in pts),
+            orientations=tuple(float(o) for o in ori),
+            confidences=tuple(float(c) for c in conf),
+        )
+        self.status("localise", 1.0, f"{len(pts)} neighbours")
+        return rec
+
+    def agree(self, record: NeighborRecordMsg) -> Decision:
+        now = self.clock()
+        agr = Agreement(
+            self.me,
+            record,
+            now,
+            fleet_size=self.cfg.fleet_size,
+            timeout=self.cfg.timeout,
+            settle=self.cfg.settle,
+        )
+        for rid, peer in sorted(self.peers.items()):
+            if rid != self.me and peer.alive:
+                agr.member_joined(rid, now)
+            elif rid != self.me and peer.seen_alive:
+                agr.member_left(rid, now)
+        for msg in self.early_records.values():
+            agr.on_record(msg, now)
+        for dmsg in self.early_digests.values():
+            agr.on_digest(dmsg, now)
+        for rid, peer in self.peers.items():
+            agr.on_peer_phase(rid, peer.phase)
+        self.agreement = agr
+        self.status("exchange", 0.0, "publishing record")
+        while True:
+            self.pump(0.05)
+            d = agr.decide(self.clock())
+            if d.kind != "wait":
+                return d
+            n = max(1, len(agr.live))
+            held = len(agr.held_members())
+            agreeing = n - len(agr.disagreeing())
+            phase = "exchange" if agr.missing_records() else "agree"
+            self.status(phase, (held + agreeing) / (2 * n), d.reason)
+
+    def make_plan(self, decision: Decision) -> Any:
+        self.status("plan", 0.0, decision.reason)
+        if self.formation is None:
+            raise AgentFailure("no formation core available")
+        try:
+            plan = self.formation.plan(decision.records, self.cfg.d_e, self.cfg.phi_e)
+        except ValueError as exc:
+            raise AgentFailure(f"planning failed on the agreed records: {exc}") from None
+        self.plan = plan
+        self.plan_digest = str(plan.digest)
+        rp = plan.robot(self.me)
+        self.wave = int(rp.wave)
+        self.status("plan", 1.0, f"wave {self.wave}, leader {plan.leader}", force=True)
+        return plan
+
+    def wait_for_earlier_waves(self) -> None:
+        plan = self.plan
+        earlier = sorted(i for i in self.formation.members(plan) if plan.robot(i).wave < self.wave)
+        deadline = self.clock() + self.cfg.wave_timeout
+        while True:
+            self.pump(0.1)
+            pending = []
+            for i in earlier:
+                peer = self.peers.get(i, Peer())
+                if peer.phase in ("hold", "done"):
+                    continue
+                if peer.seen_alive and not peer.alive:
+                    raise AgentFailure(
+                        f"robot {i} of wave {plan.robot(i).wave} left before holding"
+                    )
+                if peer.phase == "failed":
+                    raise AgentFailure(f"robot {i} of wave {plan.robot(i).wave} failed")
+                pending.append(i)
+            if not pending:
+                return
+            if self.clock() > deadline:
+                raise AgentFailure(f"robots {pending} of earlier waves did not hold in time")
+            self.status("wait", 0.0, f"waiting for wave(s) of {pending}")
+
+    def move(self) -> None:
+        plan = self.plan
+        goals, final_heading = self.formation.goals(plan, self.me)
+        self.status("move", 0.0, f"{len(goals)} leg(s)")
+        n = len(goals)
+        for k, goal in enumerate(goals):
+
+            def progress(p: float, k: int = k) -> None:
+                self.status("move", (k + p) / n, f"leg {k + 1}/{n}")
+
+            self.walk_to(goal, progress)
+        self.rotate(wrap_pi(final_heading - self.heading), PAPER_GAINS, "turn to pyramid axis")
+
+    def hold(self) -> None:
+        self.status("hold", 1.0, f"believed {self.position.round(2).tolist()}", force=True)
+        members = self.agreement.held_members() if self.agreement else ()
+        deadline = self.clock() + self.cfg.wave_timeout
+        while self.clock() < deadline:
+            self.pump(0.2)
+            others = [i for i in members if i != self.me]
+            waiting = [
+                i
+                for i in others
+                if self.peers.get(i, Peer()).phase not in ("hold", "done", "failed")
+                and self.peers.get(i, Peer()).alive
+            ]
+            if not waiting and (self.agreement is None or not self.agreement.due(self.clock())):
+                break
+            if self.clock() - self._last_status >= HEARTBEAT:
+                self.status("hold", 1.0, f"waiting for {waiting} to hold", force=True)
+        self.status("done", 1.0, "formation held", force=True)
+
+    # ================================================================= main
+
+    def run(self) -> int:
+        try:
+            self.start_bus()
+            self.status("start", 0.0, "joined", force=True)
+            sightings = self.search()
+            record = self.localise(sightings)
+            decision = self.agree(record)
+            if decision.kind != "agreed":
+                raise AgentFailure(decision.reason)
+            self.make_plan(decision)
+            self.wait_for_earlier_waves()
+            self.move()
+            self.hold()
+            return 0
+        except (AgentFailure, RobotError, ValueError) as exc:
+            log.error("robot %d failed: %s", self.me, exc)
+            self.status("failed", 0.0, error=str(exc), force=True)
+            # let the failure status and any pending digest reach the others
+            end = self.clock() + 1.0
+            while self.clock() < end:
+                self.pump(0.1)
+            return 1
+
+
+# ===================================================================== adapters
+# The runner talks to perception and the formation core through these two small
+# adapters, so the phase machine stays independent of their exact signatures.
+
+
+class PerceptionAdapter:
+    """Detector, fixed-frame conversion, merging and visual compass (agent/perception)."""
+
+    def __init__(self) -> None:
+        from agent.perception.compass import VisualCompass
+        from agent.perception.detector import Detector
+
+        self.detector = Detector()
+        self.compass = VisualCompass()
+
+    @staticmethod
+    def to_fixed(dets: list[Any], heading: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(points (k, 2) in the fixed frame, confidences (k,), orientations (k,))."""
+        from agent.perception.localise import to_fixed_frame
+
+        pts = to_fixed_frame(dets, heading)
+        conf = np.array([float(d.confidence) for d in dets], dtype=np.float64)
+        ori = np.array([float(d.orientation) for d in dets], dtype=np.float64)
+        return pts.reshape(-1, 2), conf, ori
+
+    @staticmethod
+    def merge(
+        sightings: list[tuple[np.ndarray, np.ndarray, np.ndarray]],
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """One entry per neighbour; orientation and confidence of its best sighting."""
+        from agent.perception.localise import cluster_sightings, merge_sightings
+
+        if not sightings:
+            return np.zeros((0, 2)), np.zeros(0), np.zeros(0)
+        pts = np.concatenate([s[0] for s in sightings]).reshape(-1, 2)
+        conf = np.concatenate([s[1] for s in sightings])
+        ori = np.concatenate([s[2] for s in sightings])
+        if pts.shape[0] == 0:
+            return np.zeros((0, 2)), np.zeros(0), np.zeros(0)
+        merged = merge_sightings(pts, conf)
+        labels = cluster_sightings(pts, conf, 0.25)
+        m = merged.shape[0]
+        best_conf = np.zeros(m)
+        best_ori = np.zeros(m)
+        for lab in range(m):
+            idx = np.flatnonzero(labels == lab)
+            # seed = most confident sighting, ties by input order (cluster_sightings' rule)
+            k = idx[np.argmax(conf[idx])]
+            best_conf[lab], best_ori[lab] = conf[k], ori[k]
+        return merged, best_ori, best_conf
+
+
+def load_perception() -> PerceptionAdapter:
+    return PerceptionAdapter()
+
+
+class FormationAdapter:
+    """The formation core (agent/formation): agreed wire records → plan → my goals.
+
+    ``Plan`` is in the common frame (the fixed frame of ``Plan.frame_robot``); since all
+    fixed frames are parallel (4.1.1), a point p of the common frame is p - start in
+    this robot's fixed frame, where start is this robot's position in the plan.
+    """
+
+    def __init__(self) -> None:
+        import importlib
+
+        self.core = importlib.import_module("agent.formation")
+
+    def records(self, msgs: tuple[NeighborRecordMsg, ...]) -> list[Any]:
+        out = []
+        for m in msgs:
+            k = len(m.neighbours)
+            out.append(
+                self.core.NeighborRecord(
+                    robot_id=m.sender,
+                    neighbours=np.array(m.neighbours, dtype=np.float64).reshape(k, 2),
+                    orientations=np.array(m.orientations)
+                    if len(m.orientations) == k and k
+                    else None,
+                    confidences=np.array(m.confidences) if len(m.confidences) == k and k else None,
+                )
+            )
+        return out
+
+    def plan(self, msgs: tuple[NeighborRecordMsg, ...], d_e: float, phi_e: float) -> Any:
+        params = self.core.PlanParams(d_e=d_e, phi_e=phi_e)
+        return self.core.plan_from_records(self.records(msgs), params)
+
+    @staticmethod
+    def members(plan: Any) -> list[int]:
+        return sorted(int(i) for w in plan.waves for i in w)
+
+    @staticmethod
+    def axis_angle(plan: Any) -> float:
+        """The pyramid orientation (rad, CCW from +x) in the common frame."""
+        ax = plan.axis
+        if np.ndim(ax) == 0:
+            return float(ax)
+        v = np.asarray(ax, dtype=np.float64).reshape(2)
+        return math.atan2(float(v[1]), float(v[0]))
+
+    def goals(self, plan: Any, me: int) -> tuple[list[np.ndarray], float]:
+        """Waypoints (fixed frame of this robot, excluding the start) and the final heading."""
+        rp = plan.robot(me)
+        start = np.asarray(rp.start, dtype=np.float64).reshape(2)
+        pts = [np.asarray(w, dtype=np.float64).reshape(2) for w in rp.waypoints()]
+        goals = [p - start for p in pts if float(np.hypot(*(p - start))) > 1e-9]
+        if not goals:
+            goals = [np.asarray(rp.target, dtype=np.float64).reshape(2) - start]
+        return goals, self.axis_angle(plan)
+
+
+def load_formation() -> FormationAdapter:
+    return FormationAdapter()
