@@ -1,0 +1,142 @@
+"""The distance model d = a / r_g + b and its D-base (NAO paper 3.2.3 eq. 6, 5.2.1, Table 1).
+
+One coefficient pair (a, b) per M-base mask, fitted by least squares (scipy) on the
+samples (1/r_g, d) of the NAO placed at 20 distances in [0.5, 1.45] m. The distance is
+measured from the observer's optical centre to the observed NAO's body centre; the
+detector turns it into a body-relative position.
+
+File format (versioned): ``dbase.json`` with a, b, R², RMSE and sample count per mask,
+the digest of the M-base it belongs to and the parameters that made it.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy.optimize import curve_fit
+
+from agent.perception.mbase import DATA_DIR
+
+DBASE_VERSION = 1
+
+
+def _model(inv_rg: np.ndarray, a: float, b: float) -> np.ndarray:
+    return a * inv_rg + b
+
+
+@dataclass(frozen=True)
+class Fit:
+    """One D-base entry: eq. 6 coefficients and the quality of the fit."""
+
+    a: float
+    b: float
+    r2: float
+    rmse: float
+    n: int
+
+
+def fit_distance_model(scales: np.ndarray, distances: np.ndarray) -> Fit:
+    """Fit d = a / r_g + b (eq. 6) to samples; needs >= 3 samples with distinct r_g."""
+    rg = np.asarray(scales, dtype=np.float64).reshape(-1)
+    d = np.asarray(distances, dtype=np.float64).reshape(-1)
+    if rg.shape != d.shape:
+        raise ValueError(f"scales and distances differ in length: {rg.size} vs {d.size}")
+    if rg.size < 3:
+        raise ValueError(f"need at least 3 samples to fit eq. 6, got {rg.size}")
+    if not (np.all(np.isfinite(rg)) and np.all(np.isfinite(d))) or np.any(rg <= 0):
+        raise ValueError("scales must be finite and > 0, distances finite")
+    x = 1.0 / rg
+    if np.ptp(x) <= 1e-9:
+        raise ValueError("all scales are equal: eq. 6 is not identifiable")
+    popt, _ = curve_fit(_model, x, d, p0=(0.6, 0.0))
+    a, b = float(popt[0]), float(popt[1])
+    res = d - _model(x, a, b)
+    ss_res = float(np.sum(res**2))
+    ss_tot = float(np.sum((d - d.mean()) ** 2))
+    r2 = 1.0 - ss_res / ss_tot if ss_tot > 0 else 1.0
+    return Fit(a=a, b=b, r2=r2, rmse=float(np.sqrt(ss_res / d.size)), n=int(d.size))
+
+
+@dataclass
+class DBase:
+    """Per-mask (a, b) pairs; ``fits[k]`` belongs to M-base mask k (None: not calibrated)."""
+
+    fits: list[Fit | None]
+    mbase_digest: str
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if not self.fits or all(f is None for f in self.fits):
+            raise ValueError("a D-base needs at least one fitted mask")
+        good = [f for f in self.fits if f is not None]
+        self._fallback = Fit(
+            a=float(np.median([f.a for f in good])),
+            b=float(np.median([f.b for f in good])),
+            r2=float("nan"),
+            rmse=float("nan"),
+            n=0,
+        )
+
+    def __len__(self) -> int:
+        return len(self.fits)
+
+    def coefficients(self, k: int) -> Fit:
+        """The fit of mask k; a mask without its own fit gets the median (a, b)."""
+        if not 0 <= k < len(self.fits):
+            raise ValueError(f"mask index {k} outside [0, {len(self.fits)})")
+        f = self.fits[k]
+        return self._fallback if f is None else f
+
+    def distance(self, k: int, scale: float) -> float:
+        """Eq. 6: d = a / r_g + b with mask k's coefficients."""
+        if not np.isfinite(scale) or scale <= 0:
+            raise ValueError(f"scale r_g must be finite and > 0, got {scale}")
+        f = self.coefficients(k)
+        return f.a / scale + f.b
+
+    def save(self, directory: Path, stem: str = "dbase") -> Path:
+        directory.mkdir(parents=True, exist_ok=True)
+        doc = dict(self.meta)
+        doc.update(
+            {
+                "version": DBASE_VERSION,
+                "mbase_digest": self.mbase_digest,
+                "fits": [
+                    None
+                    if f is None
+                    else {
+                        "a": round(f.a, 6),
+                        "b": round(f.b, 6),
+                        "r2": round(f.r2, 6),
+                        "rmse": round(f.rmse, 6),
+                        "n": f.n,
+                    }
+                    for f in self.fits
+                ],
+            }
+        )
+        path = directory / f"{stem}.json"
+        path.write_text(json.dumps(doc, indent=1, sort_keys=True) + "\n")
+        return path
+
+    @classmethod
+    def load(cls, directory: Path | None = None, stem: str = "dbase") -> DBase:
+        directory = DATA_DIR if directory is None else Path(directory)
+        path = directory / f"{stem}.json"
+        if not path.is_file():
+            raise ValueError(f"no D-base at {path}: run python -m tools.calibrate_dbase")
+        doc = json.loads(path.read_text())
+        if doc.get("version") != DBASE_VERSION:
+            raise ValueError(f"D-base version {doc.get('version')} != {DBASE_VERSION}")
+        fits: list[Fit | None] = [
+            None
+            if f is None
+            else Fit(float(f["a"]), float(f["b"]), float(f["r2"]), float(f["rmse"]), int(f["n"]))
+            for f in doc["fits"]
+        ]
+        meta = {k: v for k, v in doc.items() if k not in ("fits", "mbase_digest")}
+        return cls(fits=fits, mbase_digest=str(doc["mbase_digest"]), meta=meta)

@@ -1,0 +1,139 @@
+"""The integrated image-processing method of the NAO paper, section 3: image → neighbours.
+
+Segmentation (3.1.1) → cylindrical resampling (camera.py) → tuples → recognition by the
+M-base (Algorithm 1) → distance by the D-base (eq. 6) → bearing by the angle model
+(eq. 3: head yaw) plus the detection's offset from the image centre. The distance and
+bearing of a :class:`Detection` are of the neighbour's body centre relative to the
+observer's body centre, in the observer's body frame (x forward, bearing +left), so the
+camera's offset from the neck axis is accounted for.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from agent.perception.camera import CameraModel
+from agent.perception.dbase import DBase
+from agent.perception.mbase import MBase
+from agent.perception.recognition import LAMBDA_TH, recognise
+from agent.perception.segmentation import check_image, extract_tuples, orange_mask
+
+HEAD_YAW_LIMIT = math.radians(119.5)
+TWO_PI = 2.0 * math.pi
+
+
+@dataclass(frozen=True)
+class Detection:
+    """One recognised neighbour.
+
+    ``distance`` (m, eq. 6 through the D-base of the matched mask) and ``bearing`` (rad,
+    +left, body frame: head yaw + pixel offset) locate its body centre from the observer's
+    body centre. ``orientation`` is the matched mask's relative orientation re-expressed
+    against the camera axis (common.md), ``scale`` is r_g, ``box`` (x, y, w, h) is in the
+    input image's pixels, ``side`` marks a side-posture (2-tuple) match.
+    """
+
+    distance: float
+    bearing: float
+    confidence: float
+    orientation: float
+    scale: float
+    box: tuple[int, int, int, int]
+    side: bool
+
+
+class Detector:
+    """Recognises NAOs in forehead-camera images (thread-compatible, no state per call)."""
+
+    def __init__(
+        self,
+        mbase: MBase | None = None,
+        dbase: DBase | None = None,
+        camera: CameraModel | None = None,
+        threshold: float = LAMBDA_TH,
+    ) -> None:
+        self.mbase = MBase.load() if mbase is None else mbase
+        self.dbase = DBase.load() if dbase is None else dbase
+        self.camera = CameraModel() if camera is None else camera
+        if len(self.dbase) != len(self.mbase):
+            raise ValueError(
+                f"D-base has {len(self.dbase)} entries, M-base {len(self.mbase)} masks"
+            )
+        if self.dbase.mbase_digest != self.mbase.digest():
+            raise ValueError("the D-base was calibrated for another M-base (digest mismatch)")
+        if not 0.0 < threshold <= 1.0:
+            raise ValueError(f"threshold must be in (0, 1], got {threshold}")
+        self.threshold = threshold
+        self._map_x, self._map_y = self.camera.cylindrical_maps()
+        cam = self.camera
+        self.horizon_row = cam.cy + cam.fy * math.tan(cam.pitch)
+
+    def cylindrical(self, mask: np.ndarray) -> np.ndarray:
+        """Resample a perspective binary mask to the cylindrical image (nearest pixel)."""
+        return cv2.remap(mask, self._map_x, self._map_y, cv2.INTER_NEAREST)
+
+    def _check(self, image_bgr: object, head_yaw: float) -> np.ndarray:
+        img = check_image(image_bgr)
+        if img.shape[:2] != (self.camera.height, self.camera.width):
+            raise ValueError(
+                f"image is {img.shape[1]}x{img.shape[0]}, the camera model expects "
+                f"{self.camera.width}x{self.camera.height}"
+            )
+        if not isinstance(head_yaw, int | float) or not math.isfinite(head_yaw):
+            raise ValueError(f"head yaw must be a finite number, got {head_yaw!r}")
+        if abs(head_yaw) > HEAD_YAW_LIMIT + 1e-9:
+            raise ValueError(f"head yaw {math.degrees(head_yaw):.1f}° outside ±119.5°")
+        return img
+
+    def detect(self, image_bgr: np.ndarray, head_yaw: float) -> list[Detection]:
+        """All NAOs in one BGR image taken at ``head_yaw``; sorted by bearing (left first)."""
+        img = self._check(image_bgr, head_yaw)
+        mask = orange_mask(img)
+        if not mask.any():
+            return []
+        cyl = self.cylindrical(mask)
+        labels, tuples = extract_tuples(cyl)
+        matches = recognise(labels, tuples, self.mbase, self.horizon_row, self.threshold)
+        cam = self.camera
+        out = []
+        for m in matches:
+            x, _y, w, _h = m.box
+            col = x + w / 2.0 + m.scale * float(self.mbase.centre_offset[m.mask])
+            beta = cam.cyl_bearing(col)
+            d_cam = self.dbase.distance(m.mask, m.scale)
+            ox, oy = cam.body_offset(head_yaw)
+            px = ox + d_cam * math.cos(head_yaw + beta)
+            py = oy + d_cam * math.sin(head_yaw + beta)
+            orient = (float(self.mbase.orientation[m.mask]) + beta) % TWO_PI
+            out.append(
+                Detection(
+                    distance=math.hypot(px, py),
+                    bearing=math.atan2(py, px),
+                    confidence=m.confidence,
+                    orientation=orient,
+                    scale=m.scale,
+                    box=self._perspective_box(m.box),
+                    side=bool(self.mbase.side[m.mask] or self.mbase.n_tuples[m.mask] == 2),
+                )
+            )
+        out.sort(key=lambda d: (-d.bearing, d.distance))
+        return out
+
+    def _perspective_box(self, box: tuple[int, int, int, int]) -> tuple[int, int, int, int]:
+        """Map a cylindrical-image box back to the input image's pixels."""
+        cam = self.camera
+        x, y, w, h = box
+        us = np.array([x, x + w], dtype=np.float64)
+        xs = np.tan((us - cam.cx) / cam.fx)
+        u = cam.cx + cam.fx * xs
+        scale = np.sqrt(1.0 + xs**2)
+        v = np.array([[cam.cy + (yy - cam.cy) * s for s in scale] for yy in (y, y + h)])
+        x0, x1 = math.floor(u.min()), math.ceil(u.max())
+        y0, y1 = math.floor(v.min()), math.ceil(v.max())
+        x0, y0 = max(0, x0), max(0, y0)
+        x1, y1 = min(cam.width, x1), min(cam.height, y1)
+        return x0, y0, max(1, x1 - x0), max(1, y1 - y0)
