@@ -26,6 +26,7 @@ import numpy as np
 import pybullet as pb
 
 from sim import camera
+from sim.locomotion import Locomotion, NoiseModel, Obstacle
 from sim.nao_model import HEAD_JOINT, NaoBodyFactory
 from sim.scenarios import Scenario
 
@@ -96,13 +97,13 @@ def light_direction(azimuth: float, elevation: float) -> tuple[float, float, flo
 class World:
     """A room with NAOs; poses, head yaws, the sim clock, and their forehead cameras.
 
-    ``noise`` switches the seeded motion noise of :mod:`sim.locomotion` on or off.
+    ``noise`` switches the seeded motion noise of :mod:`sim.locomotion` on or off;
+    ``world.locomotion`` runs walk/turn commands (``walk``, ``turn``, ``step``).
     """
 
     def __init__(self, scenario: Scenario, *, gui: bool = False, noise: bool = True) -> None:
         self.scenario = scenario
         self.noise = noise
-        self.t_sim = 0.0
         self._client = int(pb.connect(pb.GUI if gui else pb.DIRECT))
         if self._client < 0:
             raise RuntimeError("cannot connect to PyBullet")
@@ -183,6 +184,18 @@ class World:
         li = sc.light
         self._light_dir = light_direction(li.azimuth, li.elevation)
         self._light_intensity = li.intensity
+        self.locomotion = Locomotion(
+            self,
+            seed=sc.seed,
+            noise=NoiseModel() if self.noise else NoiseModel.none(),
+            obstacles=tuple(Obstacle(o.x, o.y, o.radius) for o in sc.obstacles),
+            room=sc.room,
+        )
+
+    @property
+    def t_sim(self) -> float:
+        """Sim time (s): advanced only by :meth:`Locomotion.step`; rendering costs none."""
+        return self.locomotion.t_sim
 
     def _quad(
         self,
