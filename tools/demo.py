@@ -1,0 +1,696 @@
+"""``python -m tools.demo``: the world and N agents as separate processes, end to end.
+
+    python -m tools.demo --robots 3 --seed 1 [--json FILE] [--out DIR]
+    python -m tools.demo --robots 3 --seed 1 --batch 20 [--out DIR]   (seeds 1..20)
+
+Starts ``python -m sim`` and N ``python -m agent`` processes (peers over loopback
+TCP, no multicast so that concurrent runs never mix), shows one live status line per
+agent, and when the agents have finished prints the result table from ground truth:
+per child–parent pair of the pyramid the distance and the angle off the pyramid's
+backward axis, r_d = (d - d_e)/d_e and r_φ = (φ - φ_e)/φ_e (NAO paper 5.1.1);
+collisions; wall and sim time per phase; bytes each agent published; whether every
+agent computed the same plan digest. Writes ``DIR/result.json``, a Fig. 16/24-like
+``DIR/formation.png`` (starts, walked paths, final pyramid, ids) and ``DIR/run.mcap``
+(truth, statuses, records, digests, contacts; replay with ``python -m tools.replay``).
+
+Success (exit 0): every agent exited 0, identical plan digests, zero contacts, and
+every pair within |r_d| <= 12.5 % and |r_φ| <= 30 %.
+
+This tool is an evaluator: it reads ground truth (``world/truth/**``); agents never do.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import math
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections import defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+
+from agent.bus import Bus, BusConfig
+from agent.protocol import (
+    KEY_ALIVE_ALL,
+    KEY_DIGEST_ALL,
+    KEY_RECORD_ALL,
+    KEY_STATUS_ALL,
+    KEY_WORLD_TRUTH_ALL,
+    ContactMsg,
+    DigestMsg,
+    NeighborRecordMsg,
+    StatusMsg,
+    TruthPosesMsg,
+    encode,
+    id_from_key,
+)
+
+R_D_MAX = 0.125
+R_PHI_MAX = 0.30
+PHASE_ORDER = (
+    "start",
+    "search",
+    "localise",
+    "exchange",
+    "agree",
+    "plan",
+    "wait",
+    "move",
+    "hold",
+    "done",
+)
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+# ===================================================================== recording
+
+
+class Recorder:
+    """MCAP file of everything the demo saw: one channel per topic, msgpack wire payloads.
+
+    Why MCAP: a single indexed, self-describing file that the ``mcap`` package (already
+    a dependency) reads back without a viewer, and Foxglove opens directly.
+    """
+
+    def __init__(self, path: Path) -> None:
+        from mcap.writer import Writer
+
+        self._f = path.open("wb")
+        self._w = Writer(self._f)
+        self._w.start(profile="", library="nao-formation tools.demo")
+        self._schema = self._w.register_schema(
+            name="agent.protocol", encoding="", data=b"msgpack map, see agent/protocol.py"
+        )
+        self._channels: dict[str, int] = {}
+        self._lock = threading.Lock()
+        self.count = 0
+
+    def write(self, topic: str, data: bytes, t_ns: int | None = None) -> None:
+        t = time.time_ns() if t_ns is None else t_ns
+        with self._lock:
+            ch = self._channels.get(topic)
+            if ch is None:
+                ch = self._w.register_channel(topic, "msgpack", self._schema)
+                self._channels[topic] = ch
+            self._w.add_message(ch, log_time=t, data=data, publish_time=t, sequence=self.count)
+            self.count += 1
+
+    def close(self) -> None:
+        with self._lock:
+            self._w.finish()
+            self._f.close()
+
+
+# ===================================================================== processes
+
+
+@dataclass
+class Proc:
+    name: str
+    popen: subprocess.Popen[bytes]
+    log: IO[bytes]
+    lines: list[str] = field(default_factory=list)
+
+
+def start_world(robots: int, seed: int, endpoint: str, out: Path, extra: list[str]) -> Proc:
+    cmd = [
+        sys.executable, "-m", "sim", "--robots", str(robots), "--seed", str(seed),
+        "--listen", endpoint, "--no-multicast-scouting", *extra,
+    ]  # fmt: skip
+    log = (out / "world.log").open("wb")
+    p = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=log)
+    proc = Proc("world", p, log)
+
+    def pump() -> None:
+        assert p.stdout is not None
+        for raw in p.stdout:
+            log.write(raw)
+            proc.lines.append(raw.decode(errors="replace").strip())
+
+    threading.Thread(target=pump, daemon=True).start()
+    return proc
+
+
+def start_agent(rid: int, robots: int, endpoint: str, out: Path, args: argparse.Namespace) -> Proc:
+    cmd = [
+        sys.executable, "-m", "agent", "--id", str(rid), "--fleet-size", str(robots),
+        "--connect", endpoint, "--no-multicast-scouting",
+        "--d-e", str(args.d_e), "--phi-e-deg", str(args.phi_e_deg), "--timeout", str(args.agree_timeout),
+    ]  # fmt: skip
+    log = (out / f"agent-{rid}.log").open("wb")
+    p = subprocess.Popen(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT)
+    return Proc(f"agent {rid}", p, log)
+
+
+def stop(proc: Proc, grace: float = 5.0) -> None:
+    p = proc.popen
+    if p.poll() is None:
+        p.send_signal(signal.SIGINT)
+        try:
+            p.wait(grace)
+        except subprocess.TimeoutExpired:
+            p.terminate()
+            try:
+                p.wait(grace)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+    with contextlib.suppress(Exception):
+        proc.log.close()
+
+
+# ===================================================================== observation
+
+
+@dataclass
+class AgentView:
+    phase: str = "-"
+    progress: float = 0.0
+    detail: str = ""
+    error: str = ""
+    plan_digest: str = ""
+    wave: int = -1
+    t_sim: float = 0.0
+    phase_wall: dict[str, float] = field(default_factory=dict)
+    phase_sim: dict[str, float] = field(default_factory=dict)
+    bytes_by_kind: dict[str, int] = field(default_factory=lambda: defaultdict(int))
+    count_by_kind: dict[str, int] = field(default_factory=lambda: defaultdict(int))
+    exit_code: int | None = None
+
+
+@dataclass
+class Observer:
+    t0: float
+    agents: dict[int, AgentView] = field(default_factory=dict)
+    truth: list[tuple[float, dict[int, tuple[float, float, float]]]] = field(default_factory=list)
+    contacts: list[tuple[float, int, int]] = field(default_factory=list)
+    truth_contacts: int = 0
+    records: dict[int, NeighborRecordMsg] = field(default_factory=dict)
+    digests: dict[int, DigestMsg] = field(default_factory=dict)
+
+    def take(self, key: str, msg: Any, rec: Recorder | None) -> None:
+        if rec is not None:
+            rec.write(key, encode(msg))
+        now = time.monotonic() - self.t0
+        if isinstance(msg, TruthPosesMsg):
+            self.truth.append((msg.t_sim, {p[0]: (p[1], p[2], p[3]) for p in msg.poses}))
+            self.truth_contacts = max(self.truth_contacts, msg.contacts)
+            return
+        if isinstance(msg, ContactMsg):
+            self.contacts.append((msg.t_sim, msg.a, msg.b))
+            return
+        try:
+            sender = id_from_key(key)
+        except ValueError:
+            return
+        view = self.agents.setdefault(sender, AgentView())
+        kind = key.rsplit("/", 1)[-1]
+        view.bytes_by_kind[kind] += len(encode(msg))
+        view.count_by_kind[kind] += 1
+        if isinstance(msg, StatusMsg):
+            if msg.phase not in view.phase_wall:
+                view.phase_wall[msg.phase] = now
+                view.phase_sim[msg.phase] = msg.t_sim
+            view.phase, view.progress, view.detail = msg.phase, msg.progress, msg.detail
+            view.error, view.plan_digest, view.wave, view.t_sim = (
+                msg.error, msg.plan_digest, msg.wave, msg.t_sim,
+            )  # fmt: skip
+        elif isinstance(msg, NeighborRecordMsg):
+            self.records[msg.sender] = msg
+        elif isinstance(msg, DigestMsg):
+            self.digests[msg.sender] = msg
+
+
+class LiveView:
+    """One line per agent, repainted in place on a terminal, else printed on changes."""
+
+    def __init__(self, stream: IO[str], ids: list[int]) -> None:
+        self.stream = stream
+        self.ids = ids
+        self.tty = stream.isatty()
+        self.drawn = 0
+        self.last: dict[int, str] = {}
+        self.last_draw = 0.0
+
+    def line(self, rid: int, v: AgentView | None, elapsed: float) -> str:
+        if v is None:
+            return f"  robot {rid:2d} | {'(waiting)':10s}"
+        n = 20
+        fill = round(v.progress * n)
+        bar = "#" * fill + "." * (n - fill)
+        wave = f"w{v.wave}" if v.wave >= 0 else "  "
+        text = (v.error or v.detail)[:60]
+        return f"  robot {rid:2d} | {v.phase:9s} [{bar}] {wave:3s} t_sim {v.t_sim:6.1f}s | {text}"
+
+    def update(self, obs: Observer, elapsed: float, force: bool = False) -> None:
+        if self.tty:
+            if not force and elapsed - self.last_draw < 0.25:
+                return
+            self.last_draw = elapsed
+            if self.drawn:
+                self.stream.write(f"\x1b[{self.drawn}A")
+            head = f"nao-formation demo  wall {elapsed:6.1f}s"
+            rows = [head] + [self.line(i, obs.agents.get(i), elapsed) for i in self.ids]
+            for r in rows:
+                self.stream.write("\x1b[2K" + r + "\n")
+            self.drawn = len(rows)
+            self.stream.flush()
+            return
+        for i in self.ids:
+            v = obs.agents.get(i)
+            key = "" if v is None else f"{v.phase}:{v.error}"
+            if key and self.last.get(i) != key:
+                self.last[i] = key
+                self.stream.write(f"[{elapsed:6.1f}s]{self.line(i, v, elapsed)}\n")
+                self.stream.flush()
+
+
+# ===================================================================== evaluation
+
+
+def plan_from_agreed(obs: Observer, d_e: float, phi_e: float) -> Any:
+    """The plan recomputed by the evaluator from the records the agents exchanged."""
+    from agent.runner import FormationAdapter
+
+    fa = FormationAdapter()
+    recs = tuple(obs.records[i] for i in sorted(obs.records))
+    return fa, fa.plan(recs, d_e, phi_e)
+
+
+def pyramid_pairs(plan: Any, ids: list[int]) -> list[tuple[int, int]]:
+    """(child, parent) ids of the planned pyramid."""
+    from agent.formation.pyramid import parent_of
+
+    order: dict[int, int] = {}
+    for i in ids:
+        rp = plan.robot(i)
+        parent = getattr(rp, "parent", None)
+        if parent is not None and int(parent) >= 0:
+            order[i] = -1
+            continue
+        order[i] = int(getattr(rp, "slot", getattr(rp, "order", -1)))
+    by_slot = {s: i for i, s in order.items() if s >= 0}
+    pairs = []
+    for i in ids:
+        rp = plan.robot(i)
+        parent = getattr(rp, "parent", None)
+        if parent is not None:
+            if int(parent) >= 0:
+                pairs.append((i, int(parent)))
+            continue
+        po = parent_of(order[i])
+        if po >= 0:
+            pairs.append((i, by_slot[po]))
+    return sorted(pairs)
+
+
+def evaluate(
+    final: dict[int, tuple[float, float, float]],
+    pairs: list[tuple[int, int]],
+    axis: float,
+    d_e: float,
+    phi_e: float,
+) -> list[dict[str, float]]:
+    """Per pair: distance, angle off the backward axis, r_d, r_φ (NAO paper 5.1.1)."""
+    back = np.array([-math.cos(axis), -math.sin(axis)])
+    rows = []
+    for child, parent in pairs:
+        v = np.array(final[child][:2]) - np.array(final[parent][:2])
+        d = float(np.hypot(*v))
+        cosang = float(np.clip(np.dot(v, back) / max(d, 1e-12), -1.0, 1.0))
+        phi = math.acos(cosang)
+        rows.append(
+            {
+                "child": child,
+                "parent": parent,
+                "distance": d,
+                "angle_deg": math.degrees(phi),
+                "r_d": (d - d_e) / d_e,
+                "r_phi": (phi - phi_e) / phi_e,
+            }
+        )
+    return rows
+
+
+def min_separation(obs: Observer) -> float:
+    best = math.inf
+    for _, poses in obs.truth:
+        pts = np.array([p[:2] for p in poses.values()])
+        if len(pts) < 2:
+            continue
+        dd = np.hypot(*(pts[:, None, :] - pts[None, :, :]).transpose(2, 0, 1))
+        dd[np.diag_indices(len(pts))] = np.inf
+        best = min(best, float(dd.min()))
+    return best
+
+
+def plot(obs: Observer, result: dict[str, Any], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 7))
+    ids = sorted(obs.truth[-1][1]) if obs.truth else []
+    colours = plt.get_cmap("tab10")
+    for k, i in enumerate(ids):
+        xs = [poses[i][0] for _, poses in obs.truth if i in poses]
+        ys = [poses[i][1] for _, poses in obs.truth if i in poses]
+        c = colours(k % 10)
+        ax.plot(xs, ys, "-", color=c, lw=1.2, alpha=0.8)
+        ax.plot(xs[0], ys[0], "o", mfc="white", mec=c, ms=10)
+        x, y, h = obs.truth[-1][1][i]
+        ax.add_patch(plt.Circle((x, y), 0.2, color=c, alpha=0.35))
+        ax.annotate("", (x + 0.25 * math.cos(h), y + 0.25 * math.sin(h)), (x, y),
+                    arrowprops={"arrowstyle": "->", "color": c})  # fmt: skip
+        ax.text(x + 0.06, y + 0.06, str(i), fontsize=11, weight="bold")
+        ax.text(xs[0] + 0.06, ys[0] - 0.12, f"{i} start", fontsize=8, color="grey")
+    final = obs.truth[-1][1] if obs.truth else {}
+    for row in result.get("pairs", []):
+        c, p = row["child"], row["parent"]
+        if c in final and p in final:
+            ax.plot([final[c][0], final[p][0]], [final[c][1], final[p][1]], "k--", lw=0.8)
+    leader = result.get("leader")
+    if leader in final:
+        ax.plot(final[leader][0], final[leader][1], "*", color="green", ms=16)
+    ax.set_aspect("equal")
+    ax.grid(True, alpha=0.3)
+    ax.set_xlabel("world x (m)")
+    ax.set_ylabel("world y (m), north")
+    ok = "success" if result.get("success") else "FAILED"
+    ax.set_title(
+        f"{len(ids)} NAOs, seed {result.get('seed')}: {ok}\n"
+        f"max |r_d| {result.get('max_abs_r_d', float('nan')):.1%}, "
+        f"max |r_phi| {result.get('max_abs_r_phi', float('nan')):.1%}, "
+        f"contacts {result.get('contacts')}"
+    )
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+# ===================================================================== one run
+
+
+def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False) -> dict[str, Any]:
+    out.mkdir(parents=True, exist_ok=True)
+    n = args.robots
+    d_e, phi_e = args.d_e, math.radians(args.phi_e_deg)
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    t0 = time.monotonic()
+    rec = Recorder(out / "run.mcap")
+    obs = Observer(t0)
+    procs: list[Proc] = []
+    agents: dict[int, Proc] = {}
+    result: dict[str, Any] = {"robots": n, "seed": seed, "d_e": d_e, "phi_e_deg": args.phi_e_deg}
+    err = sys.stderr
+    bus = Bus(BusConfig(connect=(endpoint,), multicast_scouting=False))
+    try:
+        for key in (KEY_STATUS_ALL, KEY_RECORD_ALL, KEY_DIGEST_ALL, KEY_WORLD_TRUTH_ALL):
+            bus.subscribe(key)
+        bus.watch_alive(KEY_ALIVE_ALL)
+        world = start_world(n, seed, endpoint, out, args.world_arg or [])
+        procs.append(world)
+        deadline = time.monotonic() + args.world_timeout
+        while not any("ready" in ln.lower() for ln in world.lines):
+            if world.popen.poll() is not None:
+                raise RuntimeError(
+                    f"world exited with {world.popen.returncode}; see {out / 'world.log'}"
+                )
+            if time.monotonic() > deadline:
+                raise RuntimeError(f"world not ready after {args.world_timeout:g} s")
+            for ev in bus.drain(0.1):
+                if ev.kind == "msg":
+                    obs.take(ev.key, ev.msg, rec)
+        result["wall_world_ready"] = time.monotonic() - t0
+        agents.update({i: start_agent(i, n, endpoint, out, args) for i in range(n)})
+        procs.extend(agents.values())
+        live = LiveView(err, list(range(n))) if not quiet else None
+        deadline = time.monotonic() + args.timeout
+        while True:
+            for ev in bus.drain(0.1):
+                if ev.kind == "msg":
+                    obs.take(ev.key, ev.msg, rec)
+            for i, p in agents.items():
+                code = p.popen.poll()
+                if code is not None:
+                    obs.agents.setdefault(i, AgentView()).exit_code = code
+            if live is not None:
+                live.update(obs, time.monotonic() - t0)
+            if all(p.popen.poll() is not None for p in agents.values()):
+                break
+            if time.monotonic() > deadline:
+                result["timeout"] = f"agents still running after {args.timeout:g} s"
+                break
+        # the last truth after the motions: drain a little longer (poll, bounded)
+        settle_end = time.monotonic() + 1.5
+        while time.monotonic() < settle_end:
+            for ev in bus.drain(0.1):
+                if ev.kind == "msg":
+                    obs.take(ev.key, ev.msg, rec)
+        if live is not None:
+            live.update(obs, time.monotonic() - t0, force=True)
+        result["wall_total"] = time.monotonic() - t0
+    finally:
+        for p in reversed(procs):
+            stop(p)
+        bus.close()
+        rec.close()
+    for i, p in agents.items():
+        v = obs.agents.setdefault(i, AgentView())
+        if v.exit_code is None:
+            v.exit_code = p.popen.returncode
+    return summarise(obs, result, out, n, d_e, phi_e, quiet)
+
+
+def summarise(
+    obs: Observer, result: dict[str, Any], out: Path, n: int, d_e: float, phi_e: float, quiet: bool
+) -> dict[str, Any]:
+    ids = list(range(n))
+    views = {i: obs.agents.get(i, AgentView()) for i in ids}
+    result["exit_codes"] = {str(i): views[i].exit_code for i in ids}
+    result["final_phase"] = {str(i): views[i].phase for i in ids}
+    result["errors"] = {str(i): views[i].error for i in ids if views[i].error}
+    digests = {views[i].plan_digest for i in ids}
+    result["plan_digests"] = {str(i): views[i].plan_digest for i in ids}
+    result["identical_digests"] = len(digests) == 1 and "" not in digests
+    result["bytes"] = {
+        str(i): {**dict(views[i].bytes_by_kind), "total": sum(views[i].bytes_by_kind.values())}
+        for i in ids
+    }
+    result["exchange_bytes"] = {
+        str(i): views[i].bytes_by_kind.get("record", 0) + views[i].bytes_by_kind.get("digest", 0)
+        for i in ids
+    }
+    robot_contacts = [c for c in obs.contacts if c[2] >= 0]
+    result["contacts"] = max(len(obs.contacts), obs.truth_contacts)
+    result["robot_contacts"] = len(robot_contacts)
+    result["min_separation"] = min_separation(obs)
+    # phases: the slowest agent's duration of each phase, wall and sim
+    phases: dict[str, dict[str, float]] = {}
+    for k, ph in enumerate(PHASE_ORDER[:-1]):
+        walls, sims = [], []
+        for v in views.values():
+            if ph in v.phase_wall:
+                later = [v.phase_wall[q] for q in PHASE_ORDER[k + 1 :] if q in v.phase_wall]
+                later_s = [v.phase_sim[q] for q in PHASE_ORDER[k + 1 :] if q in v.phase_sim]
+                if later:
+                    walls.append(min(later) - v.phase_wall[ph])
+                    sims.append(min(later_s) - v.phase_sim[ph])
+        if walls:
+            phases[ph] = {"wall_max": max(walls), "sim_max": max(sims)}
+    result["phases"] = phases
+    result["t_sim_end"] = obs.truth[-1][0] if obs.truth else 0.0
+    result["pairs"] = []
+    ok_agents = all(views[i].exit_code == 0 and views[i].phase == "done" for i in ids)
+    if obs.truth and len(obs.records) == n:
+        try:
+            fa, plan = plan_from_agreed(obs, d_e, phi_e)
+            result["evaluator_plan_digest"] = str(plan.digest)
+            result["leader"] = int(plan.leader)
+            axis = fa.axis_angle(plan)
+            result["axis_deg"] = math.degrees(axis)
+            pairs = pyramid_pairs(plan, ids)
+            final = obs.truth[-1][1]
+            result["pairs"] = evaluate(final, pairs, axis, d_e, phi_e)
+            result["starts"] = {
+                str(i): list(obs.truth[0][1][i]) for i in ids if i in obs.truth[0][1]
+            }
+            result["finals"] = {str(i): list(final[i]) for i in ids if i in final}
+        except (ValueError, KeyError, AttributeError, ImportError) as exc:
+            result["evaluation_error"] = f"{type(exc).__name__}: {exc}"
+    rows = result["pairs"]
+    result["max_abs_r_d"] = max((abs(r["r_d"]) for r in rows), default=math.nan)
+    result["max_abs_r_phi"] = max((abs(r["r_phi"]) for r in rows), default=math.nan)
+    within = bool(rows) and all(
+        abs(r["r_d"]) <= R_D_MAX and abs(r["r_phi"]) <= R_PHI_MAX for r in rows
+    )
+    result["within_tolerance"] = within
+    result["success"] = bool(
+        ok_agents and within and result["identical_digests"] and result["contacts"] == 0
+        and "timeout" not in result
+    )  # fmt: skip
+    if obs.truth:
+        try:
+            plot(obs, result, out / "formation.png")
+            result["figure"] = str(out / "formation.png")
+        except (ValueError, KeyError) as exc:
+            result["figure_error"] = str(exc)
+    result["recording"] = str(out / "run.mcap")
+    (out / "result.json").write_text(json.dumps(result, indent=2, default=float))
+    if not quiet:
+        print_table(result)
+    return result
+
+
+def print_table(r: dict[str, Any]) -> None:
+    p = print
+    p(f"\nnao-formation demo: {r['robots']} robots, seed {r['seed']}, "
+      f"d_e {r['d_e']:.2f} m, phi_e {r['phi_e_deg']:.0f} deg")  # fmt: skip
+    p(f"{'child':>5} {'parent':>6} {'dist (m)':>9} {'angle (deg)':>11} {'r_d':>8} {'r_phi':>8}  ok")
+    for row in r["pairs"]:
+        ok = abs(row["r_d"]) <= R_D_MAX and abs(row["r_phi"]) <= R_PHI_MAX
+        p(f"{row['child']:>5} {row['parent']:>6} {row['distance']:9.3f} {row['angle_deg']:11.1f} "
+          f"{row['r_d']:+8.1%} {row['r_phi']:+8.1%}  {'yes' if ok else 'NO'}")  # fmt: skip
+    if not r["pairs"]:
+        p(
+            "  (no pairs evaluated"
+            + (f": {r['evaluation_error']}" if "evaluation_error" in r else "")
+            + ")"
+        )
+    p(f"contacts: {r['contacts']} (robot-robot {r['robot_contacts']}), "
+      f"min centre separation {r['min_separation']:.2f} m")  # fmt: skip
+    p("phase       wall max (s)  sim max (s)")
+    for ph, t in r["phases"].items():
+        p(f"  {ph:9s} {t['wall_max']:12.1f} {t['sim_max']:12.1f}")
+    p(f"wall total {r.get('wall_total', float('nan')):.1f} s, sim end {r['t_sim_end']:.1f} s")
+    p("bytes published per agent (record + digest = exchange; status for viewers):")
+    for i, b in r["bytes"].items():
+        p(f"  robot {i}: total {b['total']} B, exchange {r['exchange_bytes'][i]} B, "
+          f"status {b.get('status', 0)} B")  # fmt: skip
+    same = "yes" if r["identical_digests"] else "NO"
+    p(f"identical plan digests: {same} ({next(iter(r['plan_digests'].values()))[:12]})")
+    for i, e in r["errors"].items():
+        p(f"  robot {i} error: {e}")
+    if "timeout" in r:
+        p(f"  {r['timeout']}")
+    p(f"exit codes: {r['exit_codes']}")
+    p(f"figure: {r.get('figure', '-')}   recording: {r['recording']}")
+    p("RESULT: " + ("SUCCESS" if r["success"] else "FAILURE"))
+
+
+# ===================================================================== CLI
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(prog="python -m tools.demo", description=__doc__.split("\n\n")[0])
+    p.add_argument("--robots", type=int, default=3)
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--out", type=Path, default=Path("out/demo"))
+    p.add_argument("--json", type=Path, default=None, help="also write the result JSON here")
+    p.add_argument("--batch", type=int, default=0, help="run seeds seed..seed+K-1, print totals")
+    p.add_argument("--d-e", type=float, default=0.8)
+    p.add_argument("--phi-e-deg", type=float, default=30.0)
+    p.add_argument("--timeout", type=float, default=600.0, help="wall limit for the agents (s)")
+    p.add_argument("--agree-timeout", type=float, default=120.0)
+    p.add_argument("--world-timeout", type=float, default=120.0)
+    p.add_argument(
+        "--world-arg", action="append", default=[], help="extra argument for python -m sim"
+    )
+    a = p.parse_args(argv)
+    if not 1 <= a.robots <= 64:
+        p.error("--robots must be in [1, 64]")
+    if a.batch < 0:
+        p.error("--batch must be >= 0")
+    if not (math.isfinite(a.d_e) and a.d_e > 0) or not 0 < a.phi_e_deg < 90:
+        p.error("--d-e must be > 0 and --phi-e-deg in (0, 90)")
+    return a
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    os.environ.setdefault("PYTHONUNBUFFERED", "1")
+    if args.batch:
+        return batch(args)
+    try:
+        result = run_once(args, args.seed, args.out)
+    except RuntimeError as exc:
+        print(f"demo failed: {exc}", file=sys.stderr)
+        return 1
+    if args.json is not None:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(result, indent=2, default=float))
+    return 0 if result["success"] else 1
+
+
+def batch(args: argparse.Namespace) -> int:
+    results = []
+    for k in range(args.batch):
+        seed = args.seed + k
+        print(
+            f"[batch] run {k + 1}/{args.batch}: {args.robots} robots, seed {seed}", file=sys.stderr
+        )
+        try:
+            r = run_once(args, seed, args.out / f"seed-{seed:03d}", quiet=True)
+        except RuntimeError as exc:
+            r = {"seed": seed, "success": False, "error": str(exc), "contacts": -1,
+                 "identical_digests": False, "pairs": []}  # fmt: skip
+        results.append(r)
+        print(
+            f"[batch] seed {seed}: {'ok' if r['success'] else 'FAIL'} "
+            f"max|r_d| {r.get('max_abs_r_d', math.nan):.1%} max|r_phi| {r.get('max_abs_r_phi', math.nan):.1%} "
+            f"contacts {r.get('contacts')} digests {'same' if r.get('identical_digests') else 'DIFFER'} "
+            f"wall {r.get('wall_total', math.nan):.0f}s",
+            file=sys.stderr,
+        )
+    ok = sum(1 for r in results if r["success"])
+    collisions = sum(1 for r in results if r.get("contacts", -1) != 0)
+    same = sum(1 for r in results if r.get("identical_digests"))
+    completed = sum(1 for r in results if set(r.get("final_phase", {}).values()) == {"done"})
+    rds = [abs(p["r_d"]) for r in results for p in r.get("pairs", [])]
+    rps = [abs(p["r_phi"]) for r in results for p in r.get("pairs", [])]
+    walls = [r["wall_total"] for r in results if "wall_total" in r]
+    exch = [v for r in results for v in r.get("exchange_bytes", {}).values()]
+    tot = [b["total"] for r in results for b in r.get("bytes", {}).values()]
+    summary: dict[str, Any] = {
+        "robots": args.robots, "runs": len(results), "success": ok, "completed": completed,
+        "runs_with_contacts": collisions, "identical_digests": same,
+        "median_abs_r_d": float(np.median(rds)) if rds else math.nan,
+        "max_abs_r_d": max(rds, default=math.nan),
+        "median_abs_r_phi": float(np.median(rps)) if rps else math.nan,
+        "max_abs_r_phi": max(rps, default=math.nan),
+        "wall_median": float(np.median(walls)) if walls else math.nan,
+        "exchange_bytes_max": max(exch, default=0), "published_bytes_max": max(tot, default=0),
+    }  # fmt: skip
+    print(f"\nbatch: {args.robots} robots, seeds {args.seed}..{args.seed + args.batch - 1}")
+    for name, val in summary.items():
+        print(f"  {name:22s} {val:.3f}" if isinstance(val, float) else f"  {name:22s} {val}")
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "batch.json").write_text(
+        json.dumps({"summary": summary, "runs": results}, indent=2, default=float)
+    )
+    if args.json is not None:
+        args.json.write_text(
+            json.dumps({"summary": summary, "runs": results}, indent=2, default=float)
+        )
+    return 0 if ok == len(results) else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
