@@ -1,9 +1,12 @@
 # nao-formation: one image for the router, the world and the agents (DESIGN.md §5).
 #   docker compose build                      # from python:3.11-slim
 #   docker-compose build --build-arg BASE_IMAGE=localhost/nao-base:bookworm   # local base
-# The base needs python3 with the venv module (Debian bookworm or python:3.11-slim).
+# The base needs python3 with the venv module and ca-certificates (Debian bookworm or
+# python:3.11-slim). Behind a TLS-inspecting proxy, pass its CA (public PEM text) so pip
+# can reach PyPI:  --build-arg EXTRA_CA_CERT="$(cat /usr/local/share/ca-certificates/*.crt)"
 ARG BASE_IMAGE=python:3.11-slim
 FROM ${BASE_IMAGE}
+ARG EXTRA_CA_CERT=""
 
 ENV PYTHONUNBUFFERED=1 \
     PYTHONDONTWRITEBYTECODE=1 \
@@ -11,9 +14,14 @@ ENV PYTHONUNBUFFERED=1 \
     PIP_DISABLE_PIP_VERSION_CHECK=1 \
     VIRTUAL_ENV=/opt/venv \
     PATH=/opt/venv/bin:$PATH \
-    MPLBACKEND=Agg
+    MPLBACKEND=Agg \
+    PIP_CERT=/etc/ssl/certs/ca-certificates.crt
 
-RUN python3 -m venv /opt/venv
+RUN if [ -n "$EXTRA_CA_CERT" ]; then \
+        printf '%s\n' "$EXTRA_CA_CERT" > /usr/local/share/ca-certificates/extra-ca.crt \
+        && update-ca-certificates; \
+    fi \
+    && python3 -m venv /opt/venv
 WORKDIR /app
 
 # Dependencies first, in their own layer: editing the code does not reinstall numpy & co.
