@@ -15,6 +15,7 @@ import argparse
 import logging
 import math
 import sys
+from typing import Any
 
 from agent.protocol import MAX_ROBOT_ID
 
@@ -96,8 +97,17 @@ def main(argv: list[str] | None = None) -> int:
             log.info("claimed robot %d", rid)
         else:
             rid = int(args.id)
-        perception = load_perception()
-        formation = load_formation()
+        missing = []
+        perception: Any = None
+        formation: Any = None
+        try:
+            perception = load_perception()
+        except (ValueError, OSError, ImportError) as exc:
+            missing.append(f"perception unavailable: {exc}")
+        try:
+            formation = load_formation()
+        except (ValueError, OSError, ImportError) as exc:
+            missing.append(f"formation core unavailable: {exc}")
         runner = Runner(
             bus,
             Robot(bus, rid),
@@ -111,6 +121,7 @@ def main(argv: list[str] | None = None) -> int:
             ),
             perception=perception,
             formation=formation,
+            unavailable="; ".join(missing),
         )
         code = runner.run()
         st = bus.stats

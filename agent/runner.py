@@ -127,6 +127,7 @@ class Runner:
         perception: Any = None,
         formation: Any = None,
         clock: Callable[[], float] = time.monotonic,
+        unavailable: str = "",
     ) -> None:
         if robot.robot_id != config.robot_id:
             raise ValueError(f"robot {robot.robot_id} driven with config for {config.robot_id}")
@@ -137,6 +138,7 @@ class Runner:
         self.clock = clock
         self.perception = perception
         self.formation = formation
+        self.unavailable = unavailable
         self.heading = NORTH
         self.position = np.zeros(2)
         self.phase = "start"
@@ -464,6 +466,8 @@ class Runner:
         try:
             self.start_bus()
             self.status("start", 0.0, "joined", force=True)
+            if self.unavailable:
+                raise AgentFailure(self.unavailable)
             sightings = self.search()
             record = self.localise(sightings)
             decision = self.agree(record)
@@ -549,16 +553,19 @@ class FormationAdapter:
     """
 
     def __init__(self) -> None:
-        import importlib
+        from agent.formation.plan import PlanParams, plan_from_records
+        from agent.formation.records import NeighborRecord
 
-        self.core = importlib.import_module("agent.formation")
+        self._record = NeighborRecord
+        self._params = PlanParams
+        self._plan = plan_from_records
 
     def records(self, msgs: tuple[NeighborRecordMsg, ...]) -> list[Any]:
         out = []
         for m in msgs:
             k = len(m.neighbours)
             out.append(
-                self.core.NeighborRecord(
+                self._record(
                     robot_id=m.sender,
                     neighbours=np.array(m.neighbours, dtype=np.float64).reshape(k, 2),
                     orientations=np.array(m.orientations)
@@ -570,12 +577,12 @@ class FormationAdapter:
         return out
 
     def plan(self, msgs: tuple[NeighborRecordMsg, ...], d_e: float, phi_e: float) -> Any:
-        params = self.core.PlanParams(d_e=d_e, phi_e=phi_e)
-        return self.core.plan_from_records(self.records(msgs), params)
+        params = self._params(d_e=d_e, phi_e=phi_e)
+        return self._plan(self.records(msgs), params)
 
     @staticmethod
     def members(plan: Any) -> list[int]:
-        return sorted(int(i) for w in plan.waves for i in w)
+        return sorted(int(i) for i in plan.ids)
 
     @staticmethod
     def axis_angle(plan: Any) -> float:

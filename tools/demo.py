@@ -294,30 +294,8 @@ def plan_from_agreed(obs: Observer, d_e: float, phi_e: float) -> Any:
 
 
 def pyramid_pairs(plan: Any, ids: list[int]) -> list[tuple[int, int]]:
-    """(child, parent) ids of the planned pyramid."""
-    from agent.formation.pyramid import parent_of
-
-    order: dict[int, int] = {}
-    for i in ids:
-        rp = plan.robot(i)
-        parent = getattr(rp, "parent", None)
-        if parent is not None and int(parent) >= 0:
-            order[i] = -1
-            continue
-        order[i] = int(getattr(rp, "slot", getattr(rp, "order", -1)))
-    by_slot = {s: i for i, s in order.items() if s >= 0}
-    pairs = []
-    for i in ids:
-        rp = plan.robot(i)
-        parent = getattr(rp, "parent", None)
-        if parent is not None:
-            if int(parent) >= 0:
-                pairs.append((i, int(parent)))
-            continue
-        po = parent_of(order[i])
-        if po >= 0:
-            pairs.append((i, by_slot[po]))
-    return sorted(pairs)
+    """(child, parent) ids of the planned pyramid (AUV eq. 6 via ``RobotPlan.parent``)."""
+    return sorted((i, int(plan.robot(i).parent)) for i in ids if int(plan.robot(i).parent) >= 0)
 
 
 def evaluate(
@@ -439,9 +417,11 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
                 if ev.kind == "msg":
                     obs.take(ev.key, ev.msg, rec)
         result["wall_world_ready"] = time.monotonic() - t0
-        agents.update({i: start_agent(i, n, endpoint, out, args) for i in range(n)})
+        ids = robot_ids(world.lines, n)
+        result["ids"] = ids
+        agents.update({i: start_agent(i, n, endpoint, out, args) for i in ids})
         procs.extend(agents.values())
-        live = LiveView(err, list(range(n))) if not quiet else None
+        live = LiveView(err, ids) if not quiet else None
         deadline = time.monotonic() + args.timeout
         while True:
             for ev in bus.drain(0.1):
@@ -476,13 +456,31 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
         v = obs.agents.setdefault(i, AgentView())
         if v.exit_code is None:
             v.exit_code = p.popen.returncode
-    return summarise(obs, result, out, n, d_e, phi_e, quiet)
+    return summarise(obs, result, out, sorted(agents), d_e, phi_e, quiet)
+
+
+def robot_ids(lines: list[str], n: int) -> list[int]:
+    """Robot ids from the world's ready line ``sim ready robots=1,2,3 ...``."""
+    for ln in lines:
+        if "ready" in ln and "robots=" in ln:
+            raw = ln.split("robots=", 1)[1].split()[0]
+            ids = sorted(int(x) for x in raw.split(",") if x.strip())
+            if len(ids) != n:
+                raise RuntimeError(f"world serves {len(ids)} robots {ids}, asked for {n}")
+            return ids
+    raise RuntimeError(f"world ready line without robot ids: {lines[-1:]}")
 
 
 def summarise(
-    obs: Observer, result: dict[str, Any], out: Path, n: int, d_e: float, phi_e: float, quiet: bool
+    obs: Observer,
+    result: dict[str, Any],
+    out: Path,
+    ids: list[int],
+    d_e: float,
+    phi_e: float,
+    quiet: bool,
 ) -> dict[str, Any]:
-    ids = list(range(n))
+    n = len(ids)
     views = {i: obs.agents.get(i, AgentView()) for i in ids}
     result["exit_codes"] = {str(i): views[i].exit_code for i in ids}
     result["final_phase"] = {str(i): views[i].phase for i in ids}
