@@ -1,0 +1,107 @@
+"""``python -m sim``: start the simulated world and serve it on the bus (issue 3).
+
+Prints ``sim ready robots=1,2,3`` on stdout once every queryable is declared; logs go to
+stderr. Stops cleanly on SIGINT/SIGTERM.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+from typing import Any
+
+from sim import scenarios
+from sim.server import NetConfig, WorldServer
+from sim.world import World
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="python -m sim",
+        description=(
+            "The simulated world: a PyBullet room with NAO robots, serving each robot's "
+            "forehead camera and walking over zenoh (keys world/**, see DESIGN.md §3). "
+            "Prints 'sim ready robots=...' on stdout when it serves."
+        ),
+    )
+    p.add_argument(
+        "--robots", type=int, default=3, help="robots of a generated scenario (ids 1..N)"
+    )
+    p.add_argument("--seed", type=int, default=7, help="seed of the scenario, textures and noise")
+    p.add_argument("--scenario", help="scenario JSON file (overrides --robots/--seed layout)")
+    p.add_argument("--obstacles", type=int, default=0, help="static cylinders (generated)")
+    p.add_argument("--clutter", type=int, default=0, help="orange lookalike cubes (generated)")
+    p.add_argument("--light", type=float, default=1.0, help="light intensity (1.0 = default)")
+    p.add_argument("--no-noise", action="store_true", help="noiseless walking and turning")
+    p.add_argument(
+        "--speed",
+        type=float,
+        default=0.0,
+        help="pace the sim clock at K x real time (default 0: as fast as possible)",
+    )
+    p.add_argument("--truth-rate", type=float, default=10.0, help="truth/clock publications per s")
+    p.add_argument(
+        "--connect", action="append", default=[], help="zenoh endpoint to connect to (repeatable)"
+    )
+    p.add_argument(
+        "--listen", action="append", default=[], help="zenoh endpoint to listen on (repeatable)"
+    )
+    p.add_argument(
+        "--no-multicast-scouting", action="store_true", help="disable multicast scouting"
+    )
+    p.add_argument(
+        "--mode", default="peer", choices=("peer", "client", "router"), help="zenoh mode"
+    )
+    p.add_argument("--gui", action="store_true", help="open the PyBullet GUI (needs a display)")
+    p.add_argument("--dump-scenario", metavar="FILE", help="write the scenario used to FILE")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        if args.scenario:
+            sc = scenarios.load(args.scenario)
+        else:
+            light = scenarios.LightSpec(intensity=args.light)
+            sc = scenarios.generate(
+                args.robots, args.seed, obstacles=args.obstacles, clutter=args.clutter, light=light
+            )
+        if args.dump_scenario:
+            scenarios.dump(sc, args.dump_scenario)
+        net = NetConfig(
+            connect=tuple(args.connect),
+            listen=tuple(args.listen),
+            multicast_scouting=not args.no_multicast_scouting,
+            mode=args.mode,
+        )
+    except (OSError, ValueError) as exc:
+        print(f"sim: {exc}", file=sys.stderr)
+        return 2
+    with World(sc, gui=args.gui, noise=not args.no_noise) as world:
+        server = WorldServer(world, net, speed=args.speed, truth_rate=args.truth_rate)
+
+        def on_signal(signum: int, frame: Any) -> None:
+            server.stop()
+
+        signal.signal(signal.SIGINT, on_signal)
+        signal.signal(signal.SIGTERM, on_signal)
+        try:
+            server.open()
+        except Exception as exc:
+            print(f"sim: cannot open the zenoh session: {exc}", file=sys.stderr)
+            server.close()
+            return 1
+        ids = ",".join(str(r) for r in world.robot_ids)
+        print(f"sim ready robots={ids} room={sc.room:g} seed={sc.seed}", flush=True)
+        try:
+            server.serve()
+        finally:
+            server.close()
+    print("sim stopped", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

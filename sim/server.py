@@ -1,0 +1,348 @@
+"""The world on the bus: zenoh queryables and publications of DESIGN.md §3 (issue 3).
+
+Queryables (payloads are :mod:`agent.protocol` messages):
+
+- ``world/register``: ``RegisterRequest(want)`` -> ``RegisterReply(robot_id)``: the lowest
+  free robot id of the scenario (or ``want`` if it is free). A claim is released when
+  the agent's liveliness token ``nao/alive/{id}`` goes away.
+- ``world/robot/{id}/camera``: ``CameraRequest(yaw)`` -> ``CameraReply`` (PNG). Without a
+  payload, the selector parameter ``yaw`` (radians) is read instead.
+- ``world/robot/{id}/walk`` / ``turn``: ``WalkRequest`` / ``TurnRequest`` -> a
+  ``CommandReply(done|contact)`` sent when the motion has finished in sim time.
+
+Anything malformed or impossible (unknown robot, NaN, yaw out of range, wrong schema
+version, busy robot) gets an ``ErrorReply`` with the reason; the world keeps serving.
+
+Publications: ``world/clock`` (``ClockMsg``) and ``world/truth/poses`` (``TruthPosesMsg``)
+at ``truth_rate`` Hz of wall time and after every finished command; ``world/truth/contacts``
+(``ContactMsg``) when a contact happens.
+
+**Threads and the clock.** zenoh callbacks only put queries on a queue; one loop owns
+PyBullet and the world. The sim clock advances (in fixed steps of 0.02 s) only while at
+least one walk/turn is active, as fast as possible by default or paced at ``speed`` x
+real time; rendering costs no sim time. Queued requests are served between steps.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import queue
+import sys
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import cv2
+import zenoh
+
+from agent.protocol import (
+    KEY_ALIVE_ALL,
+    KEY_WORLD_CLOCK,
+    KEY_WORLD_REGISTER,
+    KEY_WORLD_TRUTH_CONTACTS,
+    KEY_WORLD_TRUTH_POSES,
+    CameraReply,
+    CameraRequest,
+    ClockMsg,
+    CommandReply,
+    ContactMsg,
+    ErrorReply,
+    Message,
+    ProtocolError,
+    RegisterReply,
+    RegisterRequest,
+    TruthPosesMsg,
+    TurnRequest,
+    WalkRequest,
+    decode,
+    encode,
+    id_from_key,
+)
+from sim.locomotion import Contact, Done
+from sim.world import World
+
+PNG_PARAMS = [cv2.IMWRITE_PNG_COMPRESSION, 1]
+
+
+@dataclass(frozen=True)
+class NetConfig:
+    """How the world joins the network (zenoh peer by default)."""
+
+    connect: tuple[str, ...] = ()
+    listen: tuple[str, ...] = ()
+    multicast_scouting: bool = True
+    mode: str = "peer"
+
+    def __post_init__(self) -> None:
+        if self.mode not in ("peer", "client", "router"):
+            raise ValueError(f"mode must be peer, client or router, got {self.mode!r}")
+        for ep in (*self.connect, *self.listen):
+            if "/" not in ep:
+                raise ValueError(f"endpoint {ep!r} is not proto/address (tcp/127.0.0.1:7447)")
+
+    def to_zenoh(self) -> zenoh.Config:
+        cfg = zenoh.Config()
+        cfg.insert_json5("mode", json.dumps(self.mode))
+        if self.connect:
+            cfg.insert_json5("connect/endpoints", json.dumps(list(self.connect)))
+        if self.listen:
+            cfg.insert_json5("listen/endpoints", json.dumps(list(self.listen)))
+        cfg.insert_json5("scouting/multicast/enabled", json.dumps(self.multicast_scouting))
+        return cfg
+
+
+@dataclass
+class _Pending:
+    query: Any
+    kind: str
+    robot_id: int
+
+
+class WorldServer:
+    """Serves one :class:`World` over a zenoh session until :meth:`stop`."""
+
+    def __init__(
+        self,
+        world: World,
+        net: NetConfig | None = None,
+        *,
+        speed: float = 0.0,
+        truth_rate: float = 10.0,
+        log: Any = None,
+    ) -> None:
+        if not (math.isfinite(speed) and speed >= 0):
+            raise ValueError(f"speed {speed} must be >= 0 (0: as fast as possible)")
+        if not (math.isfinite(truth_rate) and truth_rate > 0):
+            raise ValueError(f"truth rate {truth_rate} must be > 0")
+        self.world = world
+        self.net = net or NetConfig()
+        self.speed = speed
+        self.truth_period = 1.0 / truth_rate
+        self.log = log if log is not None else sys.stderr
+        self.inbox: queue.Queue[tuple[str, Any]] = queue.Queue()
+        self.claims: set[int] = set()
+        self.errors = 0
+        self.served = 0
+        self._pending: dict[int, _Pending] = {}
+        self._stop = threading.Event()
+        self._keep: list[Any] = []
+        self.session: Any = None
+
+    # ------------------------------------------------------------------ setup
+
+    def open(self) -> None:
+        self.session = zenoh.open(self.net.to_zenoh())
+        s = self.session
+
+        def handler(kind: str) -> Any:
+            def on_query(q: Any) -> None:
+                self.inbox.put((kind, q))
+
+            return on_query
+
+        self._keep.append(s.declare_queryable(KEY_WORLD_REGISTER, handler("register")))
+        for kind in ("camera", "walk", "turn"):
+            self._keep.append(s.declare_queryable(f"world/robot/*/{kind}", handler(kind)))
+
+        def on_alive(sample: Any) -> None:
+            self.inbox.put(("alive", (str(sample.key_expr), sample.kind)))
+
+        self._keep.append(s.liveliness().declare_subscriber(KEY_ALIVE_ALL, on_alive, history=True))
+        self._pub = {
+            k: s.declare_publisher(k, reliability=zenoh.Reliability.RELIABLE)
+            for k in (KEY_WORLD_CLOCK, KEY_WORLD_TRUTH_POSES, KEY_WORLD_TRUTH_CONTACTS)
+        }
+
+    def close(self) -> None:
+        for p in list(self._pending.values()):
+            self._reply(p.query, ErrorReply(reason="world shutting down"))
+        self._pending.clear()
+        for obj in reversed(self._keep):
+            with contextlib.suppress(Exception):
+                obj.undeclare()
+        self._keep.clear()
+        if self.session is not None:
+            with contextlib.suppress(Exception):
+                self.session.close()
+            self.session = None
+
+    def stop(self) -> None:
+        self._stop.set()
+
+    # ------------------------------------------------------------------ loop
+
+    def serve(self) -> None:
+        """Run until :meth:`stop` (call :meth:`open` first)."""
+        loco = self.world.locomotion
+        next_truth = 0.0
+        pace_wall = time.monotonic()
+        pace_sim = self.world.t_sim
+        while not self._stop.is_set():
+            now = time.monotonic()
+            if now >= next_truth:
+                self._publish_truth()
+                next_truth = now + self.truth_period
+            if loco.active:
+                self._drain(block=False)
+                if self.speed > 0:
+                    target = pace_wall + (self.world.t_sim + loco.dt - pace_sim) / self.speed
+                    delay = target - time.monotonic()
+                    if delay > 0:
+                        self._drain(block=True, timeout=delay)
+                done, contacts = loco.step()
+                if done or contacts:
+                    self._finish(done, contacts)
+            else:
+                self._drain(block=True, timeout=min(0.05, max(0.0, next_truth - now)))
+                pace_wall = time.monotonic()
+                pace_sim = self.world.t_sim
+
+    def _drain(self, block: bool, timeout: float = 0.0) -> None:
+        deadline = time.monotonic() + timeout
+        while True:
+            try:
+                if block:
+                    left = deadline - time.monotonic()
+                    if left <= 0:
+                        return
+                    kind, item = self.inbox.get(timeout=left)
+                else:
+                    kind, item = self.inbox.get_nowait()
+            except queue.Empty:
+                return
+            try:
+                self._handle(kind, item)
+            except Exception as exc:  # never let one request take the world down
+                self._log(f"error handling {kind}: {type(exc).__name__}: {exc}")
+            block = False
+
+    # ------------------------------------------------------------------ requests
+
+    def _handle(self, kind: str, item: Any) -> None:
+        if kind == "alive":
+            key, sample_kind = item
+            if sample_kind == zenoh.SampleKind.DELETE:
+                with contextlib.suppress(ProtocolError):
+                    rid = id_from_key(key)
+                    if rid in self.claims:
+                        self.claims.discard(rid)
+                        self._log(f"robot {rid} released (agent gone)")
+            return
+        q = item
+        try:
+            if kind == "register":
+                self._reply(q, self._register(q))
+                return
+            rid = id_from_key(str(q.key_expr))
+            if rid not in self.world.robot_ids:
+                raise ValueError(f"unknown robot {rid}; robots are {list(self.world.robot_ids)}")
+            if kind == "camera":
+                self._reply(q, self._camera(q, rid))
+            elif kind == "walk":
+                w = self._payload(q, WalkRequest)
+                self._start(q, rid, "walk", lambda: self.world.locomotion.walk(rid, w.distance))
+            elif kind == "turn":
+                t = self._payload(q, TurnRequest)
+                self._start(q, rid, "turn", lambda: self.world.locomotion.turn(rid, t.angle))
+        except ValueError as exc:  # ProtocolError is a ValueError
+            self.errors += 1
+            self._log(f"{kind} {q.key_expr}: rejected: {exc}")
+            self._reply(q, ErrorReply(reason=str(exc)[:500]))
+
+    def _payload(self, q: Any, cls: type[Message]) -> Any:
+        payload = q.payload
+        if payload is None:
+            raise ProtocolError(f"missing {cls.TAG!r} payload")
+        return decode(payload.to_bytes(), expect=cls)
+
+    def _register(self, q: Any) -> Message:
+        req = self._payload(q, RegisterRequest) if q.payload is not None else RegisterRequest()
+        free = [r for r in self.world.robot_ids if r not in self.claims]
+        if req.want >= 0:
+            if req.want not in self.world.robot_ids:
+                raise ValueError(f"robot {req.want} is not in this world's scenario")
+            if req.want in self.claims:
+                raise ValueError(f"robot {req.want} is already claimed")
+            rid = req.want
+        elif not free:
+            raise ValueError(f"every robot is claimed ({list(self.world.robot_ids)})")
+        else:
+            rid = free[0]
+        self.claims.add(rid)
+        self._log(f"robot {rid} claimed")
+        return RegisterReply(robot_id=rid)
+
+    def _camera(self, q: Any, rid: int) -> Message:
+        if q.payload is not None:
+            yaw = self._payload(q, CameraRequest).yaw
+        else:
+            raw = q.parameters.get("yaw")
+            try:
+                yaw = float(raw) if raw is not None else 0.0
+            except ValueError:
+                raise ValueError(f"yaw parameter {raw!r} is not a number") from None
+        img = self.world.render(rid, yaw)
+        ok, png = cv2.imencode(".png", img, PNG_PARAMS)
+        if not ok:
+            raise ValueError("PNG encoding failed")
+        return CameraReply(
+            robot_id=rid,
+            yaw=self.world.head_yaw(rid),
+            t_sim=self.world.t_sim,
+            width=img.shape[1],
+            height=img.shape[0],
+            encoding="png",
+            data=png.tobytes(),
+        )
+
+    def _start(self, q: Any, rid: int, kind: str, start: Any) -> None:
+        if rid in self._pending or self.world.locomotion.busy(rid):
+            raise ValueError(f"robot {rid} is busy with a motion")
+        start()
+        self._pending[rid] = _Pending(q, kind, rid)
+
+    def _finish(self, done: list[Done], contacts: list[Contact]) -> None:
+        for c in contacts:
+            self._put(KEY_WORLD_TRUTH_CONTACTS, ContactMsg(t_sim=c.t_sim, a=c.a, b=c.b))
+            self._log(f"contact t={c.t_sim:.2f} between {c.a} and {c.b}")
+        for d in done:
+            p = self._pending.pop(d.robot_id, None)
+            if p is not None:
+                self._reply(
+                    p.query,
+                    CommandReply(
+                        robot_id=d.robot_id, status=d.status, t_sim=d.t_sim, detail=d.detail
+                    ),
+                )
+        self._publish_truth()
+
+    # ------------------------------------------------------------------ output
+
+    def _reply(self, q: Any, msg: Message) -> None:
+        try:
+            q.reply(q.key_expr, encode(msg))
+            q.drop()
+            self.served += 1
+        except Exception as exc:  # the querier may have gone (timeout)
+            self._log(f"reply on {q.key_expr} failed: {exc}")
+
+    def _put(self, key: str, msg: Message) -> None:
+        try:
+            self._pub[key].put(encode(msg))
+        except Exception as exc:
+            self._log(f"publish on {key} failed: {exc}")
+
+    def _publish_truth(self) -> None:
+        t = self.world.t_sim
+        poses = tuple((rid, *self.world.pose(rid)) for rid in self.world.robot_ids)
+        self._put(KEY_WORLD_CLOCK, ClockMsg(t_sim=t))
+        self._put(
+            KEY_WORLD_TRUTH_POSES,
+            TruthPosesMsg(t_sim=t, poses=poses, contacts=self.world.locomotion.contacts),
+        )
+
+    def _log(self, text: str) -> None:
+        print(f"[sim t={self.world.t_sim:8.2f}] {text}", file=self.log, flush=True)
