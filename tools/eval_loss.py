@@ -9,7 +9,7 @@ builds ``robots + 3`` test hosts with :mod:`tools.netns` (all on this machine):
 host 1     zenoh router (``python -m tools.router``), the rendezvous
 host 2     the world (``python -m sim``)
 host 3     a monitor (this module, ``--monitor``) that records what it sees on the bus
-host 4..   one agent each (``python -m agent --id auto``)
+host 4..   one agent each (``python -m agent --id I``, ids from the world's ready line)
 =========  ====================================================================
 
 Every process gets only the router's endpoint, multicast scouting off. On every agent
@@ -17,12 +17,15 @@ host :mod:`tools.packet_drop` drops packets with probability ``loss`` in both di
 except traffic with the world host: on a real NAO the camera and the legs are on board,
 only the robot-to-robot exchange crosses the radio (``--lossy-world`` drops that too).
 
-Per run it records: success (every agent exits 0, reaches ``done``, all plan digests
-equal, no contact), agreement time (wall seconds from the agents' start until the last
-agent leaves the ``agree`` phase), bytes published per agent (the agents' own
-``bytes_sent``; bytes the monitor received as a fallback) and the packets dropped. It
-writes ``results.json`` and ``loss.png`` (success rate, agreement time and bytes vs loss)
-under ``--out`` and prints a table.
+A monitor on its own (lossless) host observes the bus with ``tools.demo``'s observer and
+judges each run with ``tools.demo``'s criteria (every agent exits 0 in ``done``, identical
+plan digests, no contact, every pair within |r_d| <= 12.5 % and |r_φ| <= 30 %). Per run
+it also records the agreement time (wall seconds from the last agent entering
+``exchange`` to the last agent leaving ``agree``: the cost of the protocol, not of the
+search), the bytes each agent published (all, and records + digests only) and the
+packets dropped. It writes ``results.json`` and ``loss.png`` (success rate, agreement
+time and bytes vs loss) under ``--out``, one directory per run with the processes'
+logs, ``result.json``, ``formation.png`` and ``run.mcap``, and prints a table.
 
 ``python -m tools.eval_loss --loss 0,0.1,0.3 --robots 3 --seeds 3 [--out out/eval_loss]``
 Needs root, iproute2 and iptables (network namespaces).
@@ -36,12 +39,11 @@ import json
 import math
 import os
 import queue
-import signal
 import subprocess
 import sys
 import threading
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -58,91 +60,71 @@ TERMINAL_PHASES = ("done", "failed")
 # =========================================================================== monitor
 
 
-@dataclass
-class AgentSeen:
-    """What the monitor saw of one agent."""
+def monitor(connect: list[str], out: Path, d_e: float, phi_e_deg: float) -> int:
+    """Observe the bus like ``tools.demo`` does, until the orchestrator says the run is over.
 
-    first_phase_t: dict[str, float] = field(default_factory=dict)  # wall time.time()
-    phase: str = ""
-    plan_digest: str = ""
-    error: str = ""
-    bytes_sent: int = 0
-    bytes_observed: int = 0
-    records: int = 0
-    digests: int = 0
-    t_sim: float = 0.0
+    Prints ``monitor ready`` once subscribed, then records statuses, records, digests and
+    ground truth (``tools.demo.Observer``, MCAP recording). The orchestrator writes one
+    JSON line to stdin, ``{"ids": [...], "exit_codes": {...}, "timeout": str|null}``;
+    the monitor then drains 1.5 s more and writes ``out/result.json`` (and the formation
+    figure) with ``tools.demo.summarise``.
+    """
+    from agent.bus import Bus, BusConfig
+    from tools import demo
 
+    out.mkdir(parents=True, exist_ok=True)
+    lines: queue.Queue[str] = queue.Queue()
 
-def monitor(connect: list[str], out_path: Path, stop: threading.Event) -> dict[str, Any]:
-    """Subscribe to the agents' and the truth keys until ``stop``; write a JSON summary."""
-    import zenoh  # tools may use zenoh; imported here so the orchestrator stays light
+    def read_stdin() -> None:
+        for line in sys.stdin:
+            lines.put(line)
+        lines.put("")
 
-    cfg = zenoh.Config()
-    cfg.insert_json5("mode", json.dumps("peer"))
-    cfg.insert_json5("connect/endpoints", json.dumps(connect))
-    cfg.insert_json5("scouting/multicast/enabled", "false")
-    samples: queue.Queue[tuple[str, bytes, float]] = queue.Queue()
-    agents: dict[int, AgentSeen] = {}
-    truth: dict[str, Any] = {}
-    rejected = 0
-    with zenoh.open(cfg) as session:
-        subs = [
-            session.declare_subscriber(
-                key,
-                lambda s: samples.put((str(s.key_expr), s.payload.to_bytes(), time.time())),
-            )
-            for key in ("nao/**", P.KEY_WORLD_TRUTH_ALL)
-        ]
+    threading.Thread(target=read_stdin, daemon=True).start()
+    rec = demo.Recorder(out / "run.mcap")
+    obs = demo.Observer(time.monotonic())
+    bus = Bus(BusConfig(connect=tuple(connect), multicast_scouting=False))
+    try:
+        for key in (P.KEY_STATUS_ALL, P.KEY_RECORD_ALL, P.KEY_DIGEST_ALL, P.KEY_WORLD_TRUTH_ALL):
+            bus.subscribe(key)
         print("monitor ready", flush=True)
-        while not stop.is_set():
-            try:
-                key, data, t = samples.get(timeout=0.2)
-            except queue.Empty:
-                continue
-            try:
-                if key.startswith("world/truth/"):
-                    msg = P.decode(data)
-                    if isinstance(msg, P.TruthPosesMsg):
-                        truth["poses"] = [list(p) for p in msg.poses]
-                        truth["t_sim"] = msg.t_sim
-                        truth["contacts"] = max(int(truth.get("contacts", 0)), msg.contacts)
-                    elif isinstance(msg, P.ContactMsg):
-                        truth["contact_msgs"] = int(truth.get("contact_msgs", 0)) + 1
-                    continue
-                if key.startswith("nao/alive/"):
-                    continue
-                rid = P.id_from_key(key)
-                seen = agents.setdefault(rid, AgentSeen())
-                seen.bytes_observed += len(data)
-                msg = P.decode(data)
-                if isinstance(msg, P.StatusMsg):
-                    seen.phase = msg.phase
-                    seen.first_phase_t.setdefault(msg.phase, t)
-                    seen.plan_digest = msg.plan_digest or seen.plan_digest
-                    seen.error = msg.error or seen.error
-                    seen.bytes_sent = max(seen.bytes_sent, msg.bytes_sent)
-                    seen.t_sim = max(seen.t_sim, msg.t_sim)
-                elif isinstance(msg, P.NeighborRecordMsg):
-                    seen.records += 1
-                elif isinstance(msg, P.DigestMsg):
-                    seen.digests += 1
-            except P.ProtocolError:
-                rejected += 1
-        del subs
-    summary = {
-        "agents": {str(k): asdict(v) for k, v in sorted(agents.items())},
-        "truth": truth,
-        "rejected": rejected,
-    }
-    out_path.write_text(json.dumps(summary))
-    return summary
-
-
-def _monitor_main(connect: list[str], out: str) -> int:
-    stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
-    monitor(connect, Path(out), stop)
+        order: dict[str, Any] | None = None
+        while order is None:
+            for ev in bus.drain(0.1):
+                if ev.kind == "msg":
+                    obs.take(ev.key, ev.msg, rec)
+            with contextlib.suppress(queue.Empty):
+                line = lines.get_nowait()
+                order = json.loads(line) if line.strip() else {}
+        settle = time.monotonic() + 1.5
+        while time.monotonic() < settle:
+            for ev in bus.drain(0.1):
+                if ev.kind == "msg":
+                    obs.take(ev.key, ev.msg, rec)
+    finally:
+        bus.close()
+        rec.close()
+    ids = [int(i) for i in order.get("ids", [])]
+    for i in ids:
+        code = order.get("exit_codes", {}).get(str(i))
+        obs.agents.setdefault(i, demo.AgentView()).exit_code = code
+    result: dict[str, Any] = {"robots": len(ids), "d_e": d_e, "phi_e_deg": phi_e_deg}
+    if order.get("timeout"):
+        result["timeout"] = order["timeout"]
+    result = demo.summarise(obs, result, out, ids, d_e, math.radians(phi_e_deg), quiet=True)
+    # protocol latency: from the last agent entering exchange to the last one agreeing
+    views = [obs.agents[i] for i in ids if i in obs.agents]
+    entered = [v.phase_wall.get("exchange") for v in views]
+    agreed = [
+        min((v.phase_wall[p] for p in AGREED_PHASES if p in v.phase_wall), default=None)
+        for v in views
+    ]
+    if len(views) == len(ids) and all(t is not None for t in entered + agreed):
+        result["agree_s"] = max(t for t in agreed if t is not None) - max(
+            t for t in entered if t is not None
+        )
+    (out / "result.json").write_text(json.dumps(result, indent=2, default=float))
+    print("monitor done", flush=True)
     return 0
 
 
@@ -156,35 +138,63 @@ class RunResult:
     robots: int
     success: bool
     reason: str
-    agree_s: float | None  # wall seconds from agents' start until the last one agreed
+    agree_s: float | None  # last agent entering exchange -> last agent agreed (wall s)
     wall_s: float
-    bytes_per_agent: list[int]
+    bytes_per_agent: list[int]  # everything each agent published (record+digest+status)
+    exchange_bytes_per_agent: list[int]  # records + digests only
     exit_codes: list[int | None]
     phases: list[str]
     same_plan: bool
     contacts: int
+    max_abs_r_d: float
+    max_abs_r_phi: float
     dropped_packets: int
+    out: str
 
 
-def _wait_line(proc: subprocess.Popen[str], prefix: str, deadline_s: float) -> bool:
-    """Read ``proc``'s stdout until a line starting with ``prefix`` (False on timeout/exit)."""
-    lines: queue.Queue[str] = queue.Queue()
+class _Lines:
+    """A child's stdout lines, pumped by a thread into a list (for ready lines)."""
 
-    def pump() -> None:
-        assert proc.stdout is not None
-        for line in proc.stdout:
-            lines.put(line)
+    def __init__(self, proc: subprocess.Popen[str]) -> None:
+        self.lines: list[str] = []
+        self._proc = proc
+        threading.Thread(target=self._pump, daemon=True).start()
 
-    threading.Thread(target=pump, daemon=True).start()
-    end = time.monotonic() + deadline_s
-    while time.monotonic() < end:
-        try:
-            if lines.get(timeout=0.2).startswith(prefix):
+    def _pump(self) -> None:
+        assert self._proc.stdout is not None
+        for line in self._proc.stdout:
+            self.lines.append(line.rstrip("\n"))
+
+    def wait_for(self, needle: str, deadline_s: float) -> bool:
+        end = time.monotonic() + deadline_s
+        while time.monotonic() < end:
+            if any(needle in ln for ln in self.lines):
                 return True
-        except queue.Empty:
-            if proc.poll() is not None:
-                return False
-    return False
+            if self._proc.poll() is not None:
+                return any(needle in ln for ln in self.lines)
+            time.sleep(0.1)
+        return False
+
+
+def _reason(res: dict[str, Any], robots: int) -> str:
+    if res.get("timeout"):
+        return str(res["timeout"])
+    codes = list(res.get("exit_codes", {}).values())
+    if len(codes) != robots or any(c != 0 for c in codes):
+        errors = "; ".join(sorted(set(res.get("errors", {}).values())))[:160]
+        return f"agent exit codes {codes}" + (f": {errors}" if errors else "")
+    if set(res.get("final_phase", {}).values()) != {"done"}:
+        return f"final phases {res.get('final_phase')}"
+    if not res.get("identical_digests"):
+        return "plan digests differ"
+    if res.get("contacts", 0):
+        return f"{res['contacts']} contacts"
+    if not res.get("within_tolerance"):
+        return (
+            f"outside tolerance: max|r_d| {res.get('max_abs_r_d', math.nan):.1%}, "
+            f"max|r_phi| {res.get('max_abs_r_phi', math.nan):.1%}"
+        )
+    return "ok"
 
 
 def run_once(
@@ -195,8 +205,10 @@ def run_once(
     workdir: Path,
     prefix: str,
     lossy_world: bool = False,
+    d_e: float = 0.8,
+    phi_e_deg: float = 30.0,
 ) -> RunResult:
-    """One formation run with ``loss`` on every agent host; processes' logs in ``workdir``."""
+    """One formation run with ``loss`` on every agent host; logs and results in ``workdir``."""
     workdir.mkdir(parents=True, exist_ok=True)
     py = sys.executable
     env = dict(os.environ, PYTHONUNBUFFERED="1", MPLBACKEND="Agg")
@@ -215,108 +227,92 @@ def run_once(
             env=env,
             cwd=str(REPO),
         )
-        if not _wait_line(router, "router ready", 30.0):
+        if not _Lines(router).wait_for("router ready", 30.0):
             raise RuntimeError(f"router did not start; see {workdir / 'router.log'}")
-        fab.popen(
-            2,
-            [py, "-m", "sim", "--robots", str(robots), "--seed", str(seed), *common],
-            stdout=log("world"),
-            stderr=subprocess.STDOUT,
-            env=env,
-            cwd=str(REPO),
-        )
-        mon_out = workdir / "monitor.json"
-        mon = fab.popen(
-            3,
-            [
-                py,
-                "-m",
-                "tools.eval_loss",
-                "--monitor",
-                "--connect",
-                router_ep,
-                "--out",
-                str(mon_out),
-            ],
-            stderr=log("monitor"),
-            env=env,
-            cwd=str(REPO),
-        )
-        if not _wait_line(mon, "monitor ready", 30.0):
-            raise RuntimeError(f"monitor did not start; see {workdir / 'monitor.log'}")
-        droppers = []
-        for i in range(robots):
-            d = Dropper(fab.name(4 + i))
-            d.install(loss, "both", exempt=[] if lossy_world else [fab.address(2)])
-            droppers.append(d)
-        t_agents = time.time()
-        agents = [
-            fab.popen(
-                4 + i,
-                [py, "-m", "agent", "--id", "auto", "--fleet-size", str(robots), *common],
-                stdout=log(f"agent{i + 1}"),
-                stderr=subprocess.STDOUT,
+        mon = subprocess.Popen(
+            netns.netns_cmd(
+                fab.name(3),
+                [
+                    py, "-m", "tools.eval_loss", "--monitor", "--connect", router_ep,
+                    "--out", str(workdir), "--d-e", str(d_e), "--phi-e-deg", str(phi_e_deg),
+                ],
+            ),
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=log("monitor"),
+            text=True, env=env, cwd=str(REPO), start_new_session=True,
+        )  # fmt: skip
+        try:
+            mon_lines = _Lines(mon)
+            if not mon_lines.wait_for("monitor ready", 30.0):
+                raise RuntimeError(f"monitor did not start; see {workdir / 'monitor.log'}")
+            world = fab.popen(
+                2,
+                [py, "-m", "sim", "--robots", str(robots), "--seed", str(seed), *common],
+                stderr=log("world"),
                 env=env,
                 cwd=str(REPO),
             )
-            for i in range(robots)
-        ]
-        end = time.monotonic() + timeout_s
-        while time.monotonic() < end and any(a.poll() is None for a in agents):
-            time.sleep(0.5)
-        timed_out = any(a.poll() is None for a in agents)
-        exit_codes = [a.poll() for a in agents]
-        dropped = sum(d.dropped_packets() for d in droppers)
-        time.sleep(1.0)  # let the last status/truth publications reach the monitor
-        netns.stop(mon, timeout=10.0)
+            world_lines = _Lines(world)
+            if not world_lines.wait_for("ready", 180.0):
+                raise RuntimeError(f"world not ready; see {workdir / 'world.log'}")
+            from tools.demo import robot_ids
+
+            ids = robot_ids(world_lines.lines, robots)
+            droppers = []
+            for i in range(robots):
+                d = Dropper(fab.name(4 + i))
+                d.install(loss, "both", exempt=[] if lossy_world else [fab.address(2)])
+                droppers.append(d)
+            agents = [
+                fab.popen(
+                    4 + i,
+                    [py, "-m", "agent", "--id", str(rid), "--fleet-size", str(robots), *common],
+                    stdout=log(f"agent-{rid}"),
+                    stderr=subprocess.STDOUT,
+                    env=env,
+                    cwd=str(REPO),
+                )
+                for i, rid in enumerate(ids)
+            ]
+            end = time.monotonic() + timeout_s
+            while time.monotonic() < end and any(a.poll() is None for a in agents):
+                time.sleep(0.5)
+            timed_out = any(a.poll() is None for a in agents)
+            dropped = sum(d.dropped_packets() for d in droppers)
+            order = {
+                "ids": ids,
+                "exit_codes": {str(i): a.poll() for i, a in zip(ids, agents)},
+                "timeout": f"agents still running after {timeout_s:g} s" if timed_out else None,
+            }
+            assert mon.stdin is not None
+            mon.stdin.write(json.dumps(order) + "\n")
+            mon.stdin.flush()
+            mon_lines.wait_for("monitor done", 60.0)
+        finally:
+            netns.stop(mon, timeout=10.0)
     wall = time.monotonic() - t_start
-    seen = json.loads(mon_out.read_text()) if mon_out.exists() else {"agents": {}, "truth": {}}
-    agents_seen: dict[str, Any] = seen["agents"]
-    phases = [agents_seen[k]["phase"] for k in sorted(agents_seen, key=int)]
-    digests = {agents_seen[k]["plan_digest"] for k in agents_seen}
-    same_plan = len(agents_seen) == robots and len(digests) == 1 and "" not in digests
-    agree_times = [
-        min((v["first_phase_t"][p] for p in AGREED_PHASES if p in v["first_phase_t"]), default=None)
-        for v in agents_seen.values()
-    ]
-    agree_s = (
-        max(t for t in agree_times if t is not None) - t_agents
-        if agree_times and len(agents_seen) == robots and all(t is not None for t in agree_times)
-        else None
-    )
-    bytes_per_agent = [
-        int(agents_seen[k]["bytes_sent"] or agents_seen[k]["bytes_observed"])
-        for k in sorted(agents_seen, key=int)
-    ]
-    contacts = int(seen["truth"].get("contacts", 0)) + int(seen["truth"].get("contact_msgs", 0))
-    if timed_out:
-        reason = f"timeout after {timeout_s:.0f} s"
-    elif any(c != 0 for c in exit_codes):
-        reason = f"agent exit codes {exit_codes}"
-    elif len(agents_seen) != robots:
-        reason = f"monitor saw {len(agents_seen)} of {robots} agents"
-    elif any(p != "done" for p in phases):
-        reason = f"final phases {phases}"
-    elif not same_plan:
-        reason = "agents disagree on the plan digest"
-    elif contacts:
-        reason = f"{contacts} contacts"
-    else:
-        reason = "ok"
+    res_path = workdir / "result.json"
+    res: dict[str, Any] = json.loads(res_path.read_text()) if res_path.exists() else {}
+    reason = _reason(res, robots) if res else "monitor wrote no result"
+    bytes_tot = [int(b.get("total", 0)) for _, b in sorted(res.get("bytes", {}).items())]
+    exch = [int(v) for _, v in sorted(res.get("exchange_bytes", {}).items())]
     return RunResult(
         loss=loss,
         seed=seed,
         robots=robots,
-        success=reason == "ok",
+        success=bool(res.get("success")) and reason == "ok",
         reason=reason,
-        agree_s=agree_s,
+        agree_s=res.get("agree_s"),
         wall_s=wall,
-        bytes_per_agent=bytes_per_agent,
-        exit_codes=exit_codes,
-        phases=phases,
-        same_plan=same_plan,
-        contacts=contacts,
+        bytes_per_agent=bytes_tot,
+        exchange_bytes_per_agent=exch,
+        exit_codes=list(res.get("exit_codes", {}).values()),
+        phases=list(res.get("final_phase", {}).values()),
+        same_plan=bool(res.get("identical_digests")),
+        contacts=int(res.get("contacts", 0)),
+        max_abs_r_d=float(res.get("max_abs_r_d", math.nan)),
+        max_abs_r_phi=float(res.get("max_abs_r_phi", math.nan)),
         dropped_packets=dropped,
+        out=str(workdir),
     )
 
 
@@ -330,6 +326,7 @@ def summarise(results: list[RunResult]) -> list[dict[str, Any]]:
         rs = [r for r in results if r.loss == loss]
         agree = [r.agree_s for r in rs if r.agree_s is not None]
         per_agent = [b for r in rs for b in r.bytes_per_agent]
+        exch = [b for r in rs for b in r.exchange_bytes_per_agent]
         rows.append(
             {
                 "loss": loss,
@@ -338,6 +335,7 @@ def summarise(results: list[RunResult]) -> list[dict[str, Any]]:
                 "agree_s_mean": sum(agree) / len(agree) if agree else None,
                 "agree_s_max": max(agree) if agree else None,
                 "bytes_per_agent_mean": sum(per_agent) / len(per_agent) if per_agent else None,
+                "exchange_bytes_per_agent_mean": sum(exch) / len(exch) if exch else None,
                 "dropped_packets_mean": sum(r.dropped_packets for r in rs) / len(rs),
             }
         )
@@ -359,7 +357,18 @@ def plot(rows: list[dict[str, Any]], path: Path) -> None:
     ]
     for ax, (key, label, scale) in zip(axes, series):
         ys = [r[key] * scale if r[key] is not None else math.nan for r in rows]
-        ax.plot(loss, ys, "o-")
+        ax.plot(
+            loss, ys, "o-", label="all (record+digest+status)" if key.startswith("bytes") else None
+        )
+        if key.startswith("bytes"):
+            ex = [
+                r["exchange_bytes_per_agent_mean"] * scale
+                if r["exchange_bytes_per_agent_mean"] is not None
+                else math.nan
+                for r in rows
+            ]
+            ax.plot(loss, ex, "s--", label="exchange (record+digest)")
+            ax.legend(fontsize=8)
         ax.set_xlabel("packet loss per direction [%]")
         ax.set_ylabel(label)
         ax.grid(True, alpha=0.3)
@@ -371,7 +380,11 @@ def plot(rows: list[dict[str, Any]], path: Path) -> None:
 
 
 def _fmt(v: float | None, spec: str) -> str:
-    return "-" if v is None else format(v, spec)
+    """``format(v, spec)``, or a dash right-aligned to the spec's width when ``v`` is None."""
+    if v is not None:
+        return format(v, spec)
+    width = spec.split(".")[0]
+    return "-".rjust(int(width) if width.isdigit() else 0)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -385,11 +398,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", default="out/eval_loss")
     ap.add_argument("--prefix", default="nel", help="namespace prefix (tools.netns)")
     ap.add_argument("--lossy-world", action="store_true", help="drop world traffic too")
+    ap.add_argument("--d-e", type=float, default=0.8, help="pyramid distance (m)")
+    ap.add_argument("--phi-e-deg", type=float, default=30.0, help="pyramid angle (deg)")
     ap.add_argument("--monitor", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--connect", action="append", default=[], help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.monitor:
-        return _monitor_main(args.connect, args.out)
+        return monitor(args.connect, Path(args.out), args.d_e, args.phi_e_deg)
     try:
         losses = [float(x) for x in args.loss.split(",") if x.strip()]
     except ValueError:
@@ -444,13 +459,15 @@ def main(argv: list[str] | None = None) -> int:
     (out / "results.json").write_text(json.dumps(doc, indent=2))
     plot(rows, out / "loss.png")
     print(
-        f"{'loss':>6} {'runs':>5} {'success':>8} {'agree s':>8} {'max s':>7} {'B/agent':>9} {'dropped':>8}"
+        f"{'loss':>6} {'runs':>5} {'success':>8} {'agree s':>8} {'max s':>7} {'B/agent':>9} "
+        f"{'exch B':>8} {'dropped':>8}"
     )
     for row in rows:
         print(
             f"{row['loss']:6.2f} {row['runs']:5d} {row['success_rate']:8.0%} "
             f"{_fmt(row['agree_s_mean'], '8.1f')} {_fmt(row['agree_s_max'], '7.1f')} "
-            f"{_fmt(row['bytes_per_agent_mean'], '9.0f')} {row['dropped_packets_mean']:8.0f}"
+            f"{_fmt(row['bytes_per_agent_mean'], '9.0f')} "
+            f"{_fmt(row['exchange_bytes_per_agent_mean'], '8.0f')} {row['dropped_packets_mean']:8.0f}"
         )
     print(f"wrote {out / 'results.json'} and {out / 'loss.png'}")
     return 0 if all(r.success for r in results) else 3
