@@ -64,7 +64,12 @@ from agent.protocol import (
 from sim.locomotion import Contact, Done
 from sim.world import World
 
-PNG_PARAMS = [cv2.IMWRITE_PNG_COMPRESSION, 1]
+PNG_PARAMS = [
+    cv2.IMWRITE_PNG_COMPRESSION,
+    1,
+    cv2.IMWRITE_PNG_STRATEGY,
+    cv2.IMWRITE_PNG_STRATEGY_RLE,
+]
 
 
 @dataclass(frozen=True)

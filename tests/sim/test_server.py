@@ -1,0 +1,309 @@
+"""The world over a real zenoh session on loopback (sim/server.py, python -m sim)."""
+
+from __future__ import annotations
+
+import json
+import math
+import queue
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import cv2
+import msgpack
+import numpy as np
+import pytest
+import zenoh
+
+from agent.protocol import (
+    KEY_WORLD_REGISTER,
+    CameraReply,
+    CameraRequest,
+    ClockMsg,
+    CommandReply,
+    ContactMsg,
+    ErrorReply,
+    RegisterReply,
+    RegisterRequest,
+    TruthPosesMsg,
+    TurnRequest,
+    WalkRequest,
+    decode,
+    encode,
+    key_camera,
+    key_turn,
+    key_walk,
+)
+from sim import scenarios
+
+pytestmark = pytest.mark.system
+ROOT = Path(__file__).resolve().parents[2]
+NORTH = math.pi / 2
+
+
+def png(data: bytes) -> np.ndarray:
+    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+    assert img is not None, "reply data is not a PNG"
+    return img
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+class Client:
+    def __init__(self, endpoint: str) -> None:
+        cfg = zenoh.Config()
+        cfg.insert_json5("connect/endpoints", json.dumps([endpoint]))
+        cfg.insert_json5("scouting/multicast/enabled", "false")
+        self.session = zenoh.open(cfg)
+        self.samples: queue.Queue[Any] = queue.Queue()
+        self.truth: list[TruthPosesMsg] = []
+        self.contacts: list[ContactMsg] = []
+        self.clock: list[ClockMsg] = []
+        self._lock = threading.Lock()
+
+        def on_sample(s: zenoh.Sample) -> None:
+            self.samples.put(s.payload.to_bytes())
+
+        self._sub = self.session.declare_subscriber("world/**", on_sample)
+
+    def pump(self) -> None:
+        while True:
+            try:
+                m = decode(self.samples.get_nowait())
+            except queue.Empty:
+                return
+            if isinstance(m, TruthPosesMsg):
+                self.truth.append(m)
+            elif isinstance(m, ContactMsg):
+                self.contacts.append(m)
+            elif isinstance(m, ClockMsg):
+                self.clock.append(m)
+
+    def raw(self, key: str, payload: bytes | None, timeout: float = 20.0) -> Any:
+        replies = self.session.get(key, payload=payload, timeout=timeout)
+        for r in replies:
+            assert r.ok is not None, "the world must answer with an ok reply"
+            return decode(r.ok.payload.to_bytes())
+        raise AssertionError(f"no reply on {key}")
+
+    def ask(self, key: str, msg: Any, timeout: float = 20.0) -> Any:
+        return self.raw(key, encode(msg), timeout)
+
+    def close(self) -> None:
+        self._sub.undeclare()
+        self.session.close()
+
+
+@pytest.fixture(scope="module")
+def world(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[subprocess.Popen[str], str]]:
+    # Robots 1 and 2 face each other 0.7 m apart (contact test); robot 3 stands apart.
+    sc = scenarios.Scenario(
+        robots=(
+            scenarios.RobotSpec(1, 0.0, 0.0, NORTH),
+            scenarios.RobotSpec(2, 0.0, 0.7, -NORTH),
+            scenarios.RobotSpec(3, 1.5, -1.5, NORTH),
+        ),
+        seed=4,
+        room=3.0,
+    )
+    path = tmp_path_factory.mktemp("sim") / "scenario.json"
+    scenarios.dump(sc, path)
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "sim",
+            "--scenario",
+            str(path),
+            "--listen",
+            endpoint,
+            "--no-multicast-scouting",
+            "--speed",
+            "4",
+        ],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
+    )
+    lines: queue.Queue[str] = queue.Queue()
+
+    def pump() -> None:
+        assert proc.stdout is not None
+        for line in proc.stdout:
+            lines.put(line)
+
+    threading.Thread(target=pump, daemon=True).start()
+    deadline = time.monotonic() + 60.0
+    ready = ""
+    while time.monotonic() < deadline and proc.poll() is None:
+        try:
+            line = lines.get(timeout=0.5)
+        except queue.Empty:
+            continue
+        if line.startswith("sim ready"):
+            ready = line
+            break
+    assert "robots=1,2,3" in ready, f"world did not start: {ready!r}"
+    try:
+        yield proc, endpoint
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+@pytest.fixture(scope="module")
+def client(world: tuple[subprocess.Popen[str], str]) -> Iterator[Client]:
+    c = Client(world[1])
+    # Poll until the link is up: a register query answered.
+    deadline = time.monotonic() + 20.0
+    while time.monotonic() < deadline:
+        try:
+            c.ask(key_camera(3), CameraRequest(yaw=0.0), timeout=2.0)
+            break
+        except AssertionError:
+            time.sleep(0.1)
+    yield c
+    c.close()
+
+
+def test_camera_round_trip(client: Client) -> None:
+    for yaw in (0.0, math.radians(45.0), -math.radians(119.5)):
+        rep = client.ask(key_camera(3), CameraRequest(yaw=yaw))
+        assert isinstance(rep, CameraReply)
+        assert rep.robot_id == 3 and rep.yaw == pytest.approx(yaw)
+        assert (rep.width, rep.height, rep.encoding) == (640, 480, "png")
+        img = png(rep.data)
+        assert img.shape == (480, 640, 3)
+        assert img.std() > 10  # a textured room, not a blank picture
+
+
+def test_camera_yaw_as_selector_parameter(client: Client) -> None:
+    rep = client.raw(key_camera(3) + "?yaw=0.5", None)
+    assert isinstance(rep, CameraReply) and rep.yaw == pytest.approx(0.5)
+    rep = client.raw(key_camera(3) + "?yaw=abc", None)
+    assert isinstance(rep, ErrorReply) and "not a number" in rep.reason
+
+
+def test_robot_1_sees_robot_2(client: Client) -> None:
+    rep = client.ask(key_camera(1), CameraRequest(yaw=0.0))
+    img = png(rep.data)
+    mask = cv2.inRange(cv2.cvtColor(img, cv2.COLOR_BGR2HSV), (2, 170, 50), (10, 255, 255))
+    n, _, stats, _ = cv2.connectedComponentsWithStats(mask)
+    assert sum(1 for i in range(1, n) if stats[i][4] > 30) == 3
+
+
+def _bad(version: int = 1, **fields: Any) -> bytes:
+    return bytes(msgpack.packb({"v": version, **fields}))
+
+
+@pytest.mark.parametrize(
+    ("key", "payload", "reason"),
+    [
+        (key_camera(3), encode(CameraRequest(yaw=math.radians(120.0))), "outside"),
+        (key_camera(3), _bad(t="camera", yaw=float("nan")), "not finite"),
+        (key_camera(3), _bad(version=9, t="camera", yaw=0.0), "schema version"),
+        (key_camera(3), b"\xc1garbage", "not msgpack"),
+        (key_camera(3), encode(WalkRequest(distance=0.1)), "expected a 'camera'"),
+        (key_camera(9), encode(CameraRequest(yaw=0.0)), "unknown robot 9"),
+        ("world/robot/abc/camera", encode(CameraRequest(yaw=0.0)), "not a non-negative"),
+        (key_walk(3), _bad(t="walk", distance=float("nan")), "not finite"),
+        (key_walk(3), encode(WalkRequest(distance=80.0)), "exceeds"),
+        (key_walk(3), None, "missing"),
+        (key_walk(3), _bad(t="walk", distance="far"), "expected a number"),
+        (key_turn(3), _bad(t="turn", angle=float("inf")), "not finite"),
+        (key_turn(3), encode(TurnRequest(angle=100.0)), "exceeds"),
+        (key_turn(7), encode(TurnRequest(angle=0.1)), "unknown robot 7"),
+        (KEY_WORLD_REGISTER, encode(RegisterRequest(want=42)), "not in this world"),
+        (KEY_WORLD_REGISTER, _bad(t="register", want="x"), "expected int"),
+    ],
+)
+def test_bad_requests_get_a_reason_and_the_world_keeps_serving(
+    client: Client, key: str, payload: bytes | None, reason: str
+) -> None:
+    rep = client.raw(key, payload)
+    assert isinstance(rep, ErrorReply)
+    assert reason in rep.reason
+    ok = client.ask(key_camera(3), CameraRequest(yaw=0.0))
+    assert isinstance(ok, CameraReply)
+
+
+def test_register_hands_out_free_ids(client: Client) -> None:
+    assert client.ask(KEY_WORLD_REGISTER, RegisterRequest(want=2)) == RegisterReply(robot_id=2)
+    rep = client.ask(KEY_WORLD_REGISTER, RegisterRequest(want=2))
+    assert isinstance(rep, ErrorReply) and "already claimed" in rep.reason
+    assert client.ask(KEY_WORLD_REGISTER, RegisterRequest()) == RegisterReply(robot_id=1)
+    assert client.ask(KEY_WORLD_REGISTER, RegisterRequest()) == RegisterReply(robot_id=3)
+    rep = client.ask(KEY_WORLD_REGISTER, RegisterRequest())
+    assert isinstance(rep, ErrorReply) and "every robot is claimed" in rep.reason
+
+
+def test_walk_1m_in_20cm_steps_and_read_the_truth(client: Client) -> None:
+    client.pump()
+    x0, y0, _ = next(p[1:] for p in client.truth[-1].poses if p[0] == 3)
+    t_prev = 0.0
+    for _ in range(5):
+        rep = client.ask(key_walk(3), WalkRequest(distance=0.2), timeout=30.0)
+        assert isinstance(rep, CommandReply) and rep.status == "done" and rep.robot_id == 3
+        assert rep.t_sim > t_prev
+        t_prev = rep.t_sim
+    deadline = time.monotonic() + 10.0
+    pose = None
+    while time.monotonic() < deadline:
+        client.pump()
+        if client.truth and client.truth[-1].t_sim >= t_prev:
+            pose = next(p[1:] for p in client.truth[-1].poses if p[0] == 3)
+            break
+        time.sleep(0.05)
+    assert pose is not None, "no truth pose after the last step"
+    travelled = math.hypot(pose[0] - x0, pose[1] - y0)
+    assert 0.85 < travelled < 1.15  # 1 m with the seeded distance/heading noise
+    assert client.clock and client.clock[-1].t_sim >= 5 * 0.2 / 0.095 - 0.1
+
+
+def test_busy_robot_refuses_a_second_motion(client: Client) -> None:
+    first = client.session.get(key_turn(3), payload=encode(TurnRequest(angle=2.0)), timeout=30.0)
+    deadline = time.monotonic() + 10.0
+    rep: Any = None
+    while time.monotonic() < deadline:
+        rep = client.ask(key_walk(3), WalkRequest(distance=0.1))
+        if isinstance(rep, ErrorReply):
+            break
+        time.sleep(0.05)
+    assert isinstance(rep, ErrorReply) and "busy" in rep.reason
+    done = [decode(r.ok.payload.to_bytes()) for r in first if r.ok is not None]
+    assert len(done) == 1 and isinstance(done[0], CommandReply) and done[0].status == "done"
+
+
+def test_two_robots_walking_into_each_other_get_contact(client: Client) -> None:
+    a = client.session.get(key_walk(1), payload=encode(WalkRequest(distance=1.0)), timeout=30.0)
+    b = client.session.get(key_walk(2), payload=encode(WalkRequest(distance=1.0)), timeout=30.0)
+    ra = [decode(r.ok.payload.to_bytes()) for r in a if r.ok is not None]
+    rb = [decode(r.ok.payload.to_bytes()) for r in b if r.ok is not None]
+    assert ra[0].status == "contact" and "robot 2" in ra[0].detail
+    assert rb[0].status == "contact"
+    deadline = time.monotonic() + 10.0
+    while time.monotonic() < deadline and not client.contacts:
+        client.pump()
+        time.sleep(0.05)
+    assert [(c.a, c.b) for c in client.contacts] == [(1, 2)]
+    while time.monotonic() < deadline:
+        client.pump()
+        if client.truth and client.truth[-1].contacts >= 1:
+            break
+        time.sleep(0.05)
+    assert client.truth[-1].contacts == 1
