@@ -61,8 +61,8 @@ log = logging.getLogger("agent.runner")
 
 NORTH = math.pi / 2
 SEARCH_YAWS = tuple(np.linspace(-HEAD_YAW_LIMIT, HEAD_YAW_LIMIT, 7).tolist())
-STATUS_MIN_INTERVAL = 1.0  # s between progress statuses of the same phase
-HEARTBEAT = 2.0  # s between statuses while waiting
+STATUS_MIN_INTERVAL = 3.0  # s between progress statuses of the same phase
+HEARTBEAT = 3.0  # s between statuses while waiting
 
 
 class AgentFailure(RuntimeError):
@@ -263,6 +263,10 @@ class Runner:
             measured = self._compass(before, after, u)
             rc.record(measured)
             self.heading = wrap_pi(self.heading + measured)
+            log.debug(
+                "turn t_sim %.2f cmd %+.2f° measured %+.2f° heading %.2f°",
+                rep.t_sim, math.degrees(u), math.degrees(measured), math.degrees(self.heading),
+            )  # fmt: skip
             before = after
             if label:
                 self.status(self.phase, detail=f"{label}: {math.degrees(rc.error):+.1f}° to go")
@@ -306,6 +310,11 @@ class Runner:
             self.heading = wrap_pi(self.heading + drift)
             self._last_frame = after
             self.position = advance(self.position, h0, self.heading, leg.walk)
+            log.debug(
+                "walk t_sim %.2f %.3f m drift %+.2f° heading %.2f° position %s",
+                rep.t_sim, leg.walk, math.degrees(drift), math.degrees(self.heading),
+                self.position.round(3).tolist(),
+            )  # fmt: skip
             progress(1.0 - max(0.0, leg.remaining - leg.walk) / total)
             if rep.status == "contact":
                 raise AgentFailure(
@@ -430,6 +439,7 @@ class Runner:
 
     def move(self) -> None:
         plan = self.plan
+        self._last_frame = None  # others moved meanwhile: a fresh compass reference
         goals, final_heading = self.formation.goals(plan, self.me)
         self.status("move", 0.0, f"{len(goals)} leg(s)")
         n = len(goals)

@@ -152,6 +152,7 @@ def start_agent(rid: int, robots: int, endpoint: str, out: Path, args: argparse.
         sys.executable, "-m", "agent", "--id", str(rid), "--fleet-size", str(robots),
         "--connect", endpoint, "--no-multicast-scouting",
         "--d-e", str(args.d_e), "--phi-e-deg", str(args.phi_e_deg), "--timeout", str(args.agree_timeout),
+        "--log-level", args.agent_log_level,
     ]  # fmt: skip
     log = (out / f"agent-{rid}.log").open("wb")
     p = subprocess.Popen(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT)
@@ -607,6 +608,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--phi-e-deg", type=float, default=30.0)
     p.add_argument("--timeout", type=float, default=600.0, help="wall limit for the agents (s)")
     p.add_argument("--agree-timeout", type=float, default=120.0)
+    p.add_argument("--agent-log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING"))
     p.add_argument("--world-timeout", type=float, default=120.0)
     p.add_argument(
         "--world-arg", action="append", default=[], help="extra argument for python -m sim"
