@@ -19,6 +19,7 @@ light; every other colour of the model is white, grey or near-black.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import pybullet as pb
@@ -38,40 +39,56 @@ DARK = (0.12, 0.12, 0.14, 1.0)
 
 @dataclass(frozen=True)
 class Part:
-    """A box ``half`` extents at ``pos`` in the body (or head) frame, colour ``rgba``."""
+    """A primitive at ``pos`` in the body (or head) frame, colour ``rgba``.
+
+    ``shape`` is ``box`` (``size`` = half extents), ``cyl`` (``size`` = (radius, radius,
+    half length), axis z before ``rpy``) or ``sphere`` (``size`` = (r, r, r)).
+    """
 
     name: str
-    half: tuple[float, float, float]
+    shape: str
+    size: tuple[float, float, float]
     pos: tuple[float, float, float]
     rgba: tuple[float, float, float, float]
+    rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
+
+EYE = (0.45, 0.7, 1.0, 1.0)
+ALONG_X = (0.0, math.pi / 2, 0.0)  # a cylinder's axis turned from z to x
+ALONG_Y = (math.pi / 2, 0.0, 0.0)
 
 # Fixed to the torso (body frame).
 BODY_PARTS: tuple[Part, ...] = (
-    Part("foot_l", (0.080, 0.045, 0.015), (0.020, 0.055, 0.015), GREY),
-    Part("foot_r", (0.080, 0.045, 0.015), (0.020, -0.055, 0.015), GREY),
-    Part("shin_l", (0.035, 0.035, 0.070), (0.000, 0.055, 0.100), WHITE),
-    Part("shin_r", (0.035, 0.035, 0.070), (0.000, -0.055, 0.100), WHITE),
-    Part("thigh_l", (0.040, 0.040, 0.060), (0.000, 0.055, 0.230), WHITE),
-    Part("thigh_r", (0.040, 0.040, 0.060), (0.000, -0.055, 0.230), WHITE),
-    Part("pelvis", (0.050, 0.090, 0.020), (0.000, 0.000, 0.300), GREY),
-    Part("torso", (0.055, 0.080, 0.070), (0.000, 0.000, 0.385), WHITE),
-    Part("chest", (0.004, 0.050, 0.035), (0.056, 0.000, 0.395), GREY),
-    Part("neck", (0.020, 0.020, 0.010), (0.000, 0.000, 0.460), GREY),
-    Part("shoulder_l", (0.040, 0.030, 0.030), (0.000, 0.110, 0.430), ORANGE),
-    Part("shoulder_r", (0.040, 0.030, 0.030), (0.000, -0.110, 0.430), ORANGE),
-    Part("arm_l", (0.030, 0.025, 0.050), (0.000, 0.110, 0.350), WHITE),
-    Part("arm_r", (0.030, 0.025, 0.050), (0.000, -0.110, 0.350), WHITE),
-    Part("hand_l", (0.028, 0.022, 0.050), (0.010, 0.110, 0.250), GREY),
-    Part("hand_r", (0.028, 0.022, 0.050), (0.010, -0.110, 0.250), GREY),
+    Part("foot_l", "box", (0.080, 0.045, 0.015), (0.020, 0.055, 0.015), GREY),
+    Part("foot_r", "box", (0.080, 0.045, 0.015), (0.020, -0.055, 0.015), GREY),
+    Part("shin_l", "cyl", (0.034, 0.034, 0.070), (0.000, 0.055, 0.100), WHITE),
+    Part("shin_r", "cyl", (0.034, 0.034, 0.070), (0.000, -0.055, 0.100), WHITE),
+    Part("knee_l", "sphere", (0.036, 0.036, 0.036), (0.004, 0.055, 0.172), GREY),
+    Part("knee_r", "sphere", (0.036, 0.036, 0.036), (0.004, -0.055, 0.172), GREY),
+    Part("thigh_l", "cyl", (0.040, 0.040, 0.055), (0.000, 0.055, 0.230), WHITE),
+    Part("thigh_r", "cyl", (0.040, 0.040, 0.055), (0.000, -0.055, 0.230), WHITE),
+    Part("pelvis", "box", (0.050, 0.085, 0.025), (0.000, 0.000, 0.295), GREY),
+    Part("torso", "box", (0.055, 0.075, 0.075), (0.000, 0.000, 0.385), WHITE),
+    Part("chest", "cyl", (0.026, 0.026, 0.003), (0.056, 0.000, 0.405), GREY, ALONG_X),
+    Part("neck", "cyl", (0.020, 0.020, 0.012), (0.000, 0.000, 0.462), GREY),
+    Part("shoulder_l", "sphere", (0.038, 0.038, 0.038), (0.000, 0.100, 0.430), ORANGE),
+    Part("shoulder_r", "sphere", (0.038, 0.038, 0.038), (0.000, -0.100, 0.430), ORANGE),
+    Part("arm_l", "cyl", (0.028, 0.028, 0.050), (0.000, 0.100, 0.345), WHITE),
+    Part("arm_r", "cyl", (0.028, 0.028, 0.050), (0.000, -0.100, 0.345), WHITE),
+    Part("hand_l", "cyl", (0.025, 0.025, 0.050), (0.010, 0.100, 0.250), GREY),
+    Part("hand_r", "cyl", (0.025, 0.025, 0.050), (0.010, -0.100, 0.250), GREY),
 )
 
 # On the head link (head frame: origin on the yaw axis at NECK_Z).
 HEAD_PARTS: tuple[Part, ...] = (
-    Part("head", (0.058, 0.064, 0.055), (0.000, 0.000, 0.060), WHITE),
-    Part("face", (0.003, 0.048, 0.022), (0.059, 0.000, 0.050), DARK),
-    Part("cap", (0.061, 0.067, 0.016), (0.000, 0.000, 0.102), ORANGE),
-    Part("cap_back", (0.006, 0.058, 0.036), (-0.058, 0.000, 0.062), ORANGE),
+    Part("head", "cyl", (0.060, 0.060, 0.053), (0.000, 0.000, 0.060), WHITE),
+    Part("face", "box", (0.004, 0.036, 0.024), (0.052, 0.000, 0.052), DARK),
+    Part("eye_l", "cyl", (0.011, 0.011, 0.003), (0.057, 0.020, 0.056), EYE, ALONG_X),
+    Part("eye_r", "cyl", (0.011, 0.011, 0.003), (0.057, -0.020, 0.056), EYE, ALONG_X),
+    Part("ear_l", "cyl", (0.026, 0.026, 0.006), (0.000, 0.061, 0.055), GREY, ALONG_Y),
+    Part("ear_r", "cyl", (0.026, 0.026, 0.006), (0.000, -0.061, 0.055), GREY, ALONG_Y),
+    Part("cap", "cyl", (0.063, 0.063, 0.014), (0.000, 0.000, 0.104), ORANGE),
+    Part("cap_back", "box", (0.008, 0.045, 0.030), (-0.056, 0.000, 0.072), ORANGE),
 )
 
 
@@ -80,27 +97,30 @@ class NaoBodyFactory:
 
     def __init__(self, client: int) -> None:
         self._client = client
-        self._body_shapes = [self._shape(p) for p in BODY_PARTS]
-        self._head_root = pb.createVisualShape(
-            pb.GEOM_BOX,
-            halfExtents=HEAD_PARTS[0].half,
-            rgbaColor=HEAD_PARTS[0].rgba,
-            specularColor=(0.0, 0.0, 0.0),
-            visualFramePosition=HEAD_PARTS[0].pos,
-            physicsClientId=client,
-        )
-        self._head_shapes = [self._shape(p) for p in HEAD_PARTS[1:]]
+        self._body_shapes = [self._shape(p, (0.0, 0.0, 0.0)) for p in BODY_PARTS]
+        # The head's root shape sits at its offset on the head link itself.
+        self._head_root = self._shape(HEAD_PARTS[0], HEAD_PARTS[0].pos)
+        self._head_shapes = [self._shape(p, (0.0, 0.0, 0.0)) for p in HEAD_PARTS[1:]]
 
-    def _shape(self, part: Part) -> int:
-        return int(
-            pb.createVisualShape(
-                pb.GEOM_BOX,
-                halfExtents=part.half,
-                rgbaColor=part.rgba,
-                specularColor=(0.0, 0.0, 0.0),
-                physicsClientId=self._client,
+    def _shape(self, part: Part, offset: tuple[float, float, float]) -> int:
+        common: dict[str, object] = {
+            "rgbaColor": part.rgba,
+            "specularColor": (0.0, 0.0, 0.0),
+            "visualFramePosition": offset,
+            "visualFrameOrientation": pb.getQuaternionFromEuler(part.rpy),
+            "physicsClientId": self._client,
+        }
+        if part.shape == "box":
+            vid = pb.createVisualShape(pb.GEOM_BOX, halfExtents=part.size, **common)
+        elif part.shape == "cyl":
+            vid = pb.createVisualShape(
+                pb.GEOM_CYLINDER, radius=part.size[0], length=2 * part.size[2], **common
             )
-        )
+        elif part.shape == "sphere":
+            vid = pb.createVisualShape(pb.GEOM_SPHERE, radius=part.size[0], **common)
+        else:
+            raise ValueError(f"unknown part shape {part.shape!r}")
+        return int(vid)
 
     def create(self, x: float, y: float, heading: float) -> int:
         """A new NAO standing at (x, y) facing ``heading``; returns the body id.

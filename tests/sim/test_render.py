@@ -56,6 +56,16 @@ def _part_centre(name: str, x: float, y: float, heading: float) -> np.ndarray:
     raise KeyError(name)
 
 
+def _sphere_extremes(centre: np.ndarray, r: float) -> tuple[float, float, float]:
+    """(min u, max u, min v) of a sphere's silhouette seen by robot 1 at the origin."""
+    eye, _, _ = camera.camera_pose(0.0, 0.0, NORTH, 0.0)
+    g = np.random.default_rng(0).normal(size=(20000, 3))
+    pts = centre + r * g / np.linalg.norm(g, axis=1, keepdims=True)
+    visible = np.einsum("ij,ij->i", pts - centre, eye - pts) >= 0
+    uv = camera.project(0.0, 0.0, NORTH, 0.0, pts[visible])
+    return float(uv[:, 0].min()), float(uv[:, 0].max()), float(uv[:, 1].min())
+
+
 @pytest.mark.parametrize("theta_deg", [0.0, 180.0])
 def test_front_and_back_show_three_blobs_where_the_model_predicts(
     world: World, theta_deg: float
@@ -66,24 +76,37 @@ def test_front_and_back_show_three_blobs_where_the_model_predicts(
     world.set_pose(1, 0.0, 0.0, NORTH)
     world.set_pose(2, 0.0, 0.6, heading)
     world.set_head_yaw(2, 0.0)
-    blobs = orange_blobs(world.render(1, 0.0))
+    img = world.render(1, 0.0)
+    blobs = orange_blobs(img)
     assert len(blobs) == 3
-    # Shoulders: the two lower blobs, left to right, against the projected centres of the
-    # two covers (sorted by u). Seen straight from the front or back, what shows is the
-    # cover's face nearest to the observer, 0.04 m (its half depth) nearer than its
-    # centre: its centre is the blob's centroid. Tolerance 3 px (about 3 mm at 0.6 m)
-    # horizontally, 6 px vertically (the camera, 4 cm higher, also sees the top face).
-    shoulders = sorted((b for b in blobs if b[1] > 200), key=lambda b: b[0])
-    assert len(shoulders) == 2
-    pts = np.array([_part_centre(n, 0.0, 0.6, heading) for n in ("shoulder_l", "shoulder_r")])
-    pts[:, 1] -= 0.04
-    predicted = sorted(camera.project(0.0, 0.0, NORTH, 0.0, pts).tolist())
-    for blob, uv in zip(shoulders, predicted, strict=True):
-        assert abs(blob[0] - uv[0]) < 3.0
-        assert abs(blob[1] - uv[1]) < 6.0
-    head = [b for b in blobs if b[1] < 200]
-    assert len(head) == 1
-    assert abs(head[0][0] - 320.0) < 3.0
+    mask = cv2.inRange(cv2.cvtColor(img, cv2.COLOR_BGR2HSV), (2, 170, 50), (10, 255, 255))
+    n, _, stats, _ = cv2.connectedComponentsWithStats(mask)
+    boxes = sorted(
+        (tuple(int(v) for v in stats[i][:4]) for i in range(1, n) if stats[i][4] >= 30),
+        key=lambda b: b[0],
+    )
+    # Left to right: a shoulder, the head cap, the other shoulder. The shoulder covers
+    # are spheres (r = 0.038 m); their outer side and top are not occluded, so the blob's
+    # bounding box must meet the projected silhouette there. Tolerance 2 px (2 mm at 0.6 m).
+    r = next(p.size[0] for p in BODY_PARTS if p.name == "shoulder_l")
+    centres = sorted(
+        (_part_centre(nm, 0.0, 0.6, heading) for nm in ("shoulder_l", "shoulder_r")),
+        key=lambda c: float(c[0]),
+    )
+    left, right = (_sphere_extremes(c, r) for c in centres)
+    lx, ly, _, _ = boxes[0]
+    rx, ry, rw, _ = boxes[2]
+    assert abs(lx - left[0]) < 2.0
+    assert abs(ly - left[2]) < 2.0
+    assert abs(rx + rw - right[1]) < 2.0
+    assert abs(ry - right[2]) < 2.0
+    # The head cap: centred, its top edge where the cap's top front edge projects.
+    hx, hy, hw, _ = boxes[1]
+    assert abs(hx + hw / 2 - 320.0) < 1.5
+    cap = next(p for p in HEAD_PARTS if p.name == "cap")
+    top_front = np.array([[0.0, 0.6 - cap.size[0], NECK_Z + cap.pos[2] + cap.size[2]]])
+    v_top = camera.project(0.0, 0.0, NORTH, 0.0, top_front)[0, 1]
+    assert abs(hy - v_top) < 2.0
 
 
 @pytest.mark.parametrize("theta_deg", [90.0, 270.0])
