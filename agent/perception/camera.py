@@ -36,7 +36,7 @@ class CameraModel:
     vfov: float = math.radians(47.6)
     height_m: float = 0.50
     pitch: float = math.radians(-1.2)
-    cam_forward: float = 0.0
+    cam_forward: float = 0.062
     neck_forward: float = 0.0
 
     def __post_init__(self) -> None:

@@ -19,7 +19,7 @@ import numpy as np
 from agent.perception.camera import CameraModel
 from agent.perception.dbase import DBase
 from agent.perception.mbase import MBase
-from agent.perception.recognition import LAMBDA_TH, recognise
+from agent.perception.recognition import LAMBDA_TH, Match, recognise
 from agent.perception.segmentation import check_image, extract_tuples, orange_mask
 
 HEAD_YAW_LIMIT = math.radians(119.5)
@@ -46,8 +46,59 @@ class Detection:
     side: bool
 
 
+class Recogniser:
+    """Segmentation, cylindrical resampling and Algorithm 1 on one image (no distances).
+
+    The calibration tool uses it before a D-base exists; :class:`Detector` builds on it.
+    """
+
+    def __init__(
+        self, mbase: MBase, camera: CameraModel | None = None, threshold: float = LAMBDA_TH
+    ) -> None:
+        if not 0.0 < threshold <= 1.0:
+            raise ValueError(f"threshold must be in (0, 1], got {threshold}")
+        self.mbase = mbase
+        self.camera = CameraModel() if camera is None else camera
+        self.threshold = threshold
+        self._map_x, self._map_y = self.camera.cylindrical_maps()
+        cam = self.camera
+        self.horizon_row = cam.cy + cam.fy * math.tan(cam.pitch)
+
+    def cylindrical(self, mask: np.ndarray) -> np.ndarray:
+        """Resample a perspective binary mask to the cylindrical image (nearest pixel)."""
+        return cv2.remap(mask, self._map_x, self._map_y, cv2.INTER_NEAREST)
+
+    def check(self, image_bgr: object, head_yaw: float) -> np.ndarray:
+        """Validate an image and a head yaw; return the image."""
+        img = check_image(image_bgr)
+        if img.shape[:2] != (self.camera.height, self.camera.width):
+            raise ValueError(
+                f"image is {img.shape[1]}x{img.shape[0]}, the camera model expects "
+                f"{self.camera.width}x{self.camera.height}"
+            )
+        if not isinstance(head_yaw, int | float) or not math.isfinite(head_yaw):
+            raise ValueError(f"head yaw must be a finite number, got {head_yaw!r}")
+        if abs(head_yaw) > HEAD_YAW_LIMIT + 1e-9:
+            raise ValueError(f"head yaw {math.degrees(head_yaw):.1f}° outside ±119.5°")
+        return img
+
+    def matches(self, image_bgr: np.ndarray, head_yaw: float = 0.0) -> list[Match]:
+        """Accepted tuple groups of one image (boxes in the cylindrical image)."""
+        img = self.check(image_bgr, head_yaw)
+        mask = orange_mask(img)
+        if not mask.any():
+            return []
+        labels, tuples = extract_tuples(self.cylindrical(mask))
+        return recognise(labels, tuples, self.mbase, self.horizon_row, self.threshold)
+
+    def body_column(self, m: Match) -> float:
+        """The cylindrical column of the matched NAO's body centre."""
+        x, _, w, _ = m.box
+        return x + w / 2.0 + m.scale * float(self.mbase.centre_offset[m.mask])
+
+
 class Detector:
-    """Recognises NAOs in forehead-camera images (thread-compatible, no state per call)."""
+    """Recognises NAOs in forehead-camera images and locates them (no state per call)."""
 
     def __init__(
         self,
@@ -65,45 +116,15 @@ class Detector:
             )
         if self.dbase.mbase_digest != self.mbase.digest():
             raise ValueError("the D-base was calibrated for another M-base (digest mismatch)")
-        if not 0.0 < threshold <= 1.0:
-            raise ValueError(f"threshold must be in (0, 1], got {threshold}")
-        self.threshold = threshold
-        self._map_x, self._map_y = self.camera.cylindrical_maps()
-        cam = self.camera
-        self.horizon_row = cam.cy + cam.fy * math.tan(cam.pitch)
-
-    def cylindrical(self, mask: np.ndarray) -> np.ndarray:
-        """Resample a perspective binary mask to the cylindrical image (nearest pixel)."""
-        return cv2.remap(mask, self._map_x, self._map_y, cv2.INTER_NEAREST)
-
-    def _check(self, image_bgr: object, head_yaw: float) -> np.ndarray:
-        img = check_image(image_bgr)
-        if img.shape[:2] != (self.camera.height, self.camera.width):
-            raise ValueError(
-                f"image is {img.shape[1]}x{img.shape[0]}, the camera model expects "
-                f"{self.camera.width}x{self.camera.height}"
-            )
-        if not isinstance(head_yaw, int | float) or not math.isfinite(head_yaw):
-            raise ValueError(f"head yaw must be a finite number, got {head_yaw!r}")
-        if abs(head_yaw) > HEAD_YAW_LIMIT + 1e-9:
-            raise ValueError(f"head yaw {math.degrees(head_yaw):.1f}° outside ±119.5°")
-        return img
+        self.recogniser = Recogniser(self.mbase, self.camera, threshold)
 
     def detect(self, image_bgr: np.ndarray, head_yaw: float) -> list[Detection]:
         """All NAOs in one BGR image taken at ``head_yaw``; sorted by bearing (left first)."""
-        img = self._check(image_bgr, head_yaw)
-        mask = orange_mask(img)
-        if not mask.any():
-            return []
-        cyl = self.cylindrical(mask)
-        labels, tuples = extract_tuples(cyl)
-        matches = recognise(labels, tuples, self.mbase, self.horizon_row, self.threshold)
+        rec = self.recogniser
         cam = self.camera
         out = []
-        for m in matches:
-            x, _y, w, _h = m.box
-            col = x + w / 2.0 + m.scale * float(self.mbase.centre_offset[m.mask])
-            beta = cam.cyl_bearing(col)
+        for m in rec.matches(image_bgr, head_yaw):
+            beta = cam.cyl_bearing(rec.body_column(m))
             d_cam = self.dbase.distance(m.mask, m.scale)
             ox, oy = cam.body_offset(head_yaw)
             px = ox + d_cam * math.cos(head_yaw + beta)
@@ -117,7 +138,7 @@ class Detector:
                     orientation=orient,
                     scale=m.scale,
                     box=self._perspective_box(m.box),
-                    side=bool(self.mbase.side[m.mask] or self.mbase.n_tuples[m.mask] == 2),
+                    side=bool(self.mbase.side[m.mask]),
                 )
             )
         out.sort(key=lambda d: (-d.bearing, d.distance))

@@ -168,18 +168,27 @@ class MaskSample:
 
 
 def cut_mask(
-    cyl_mask: np.ndarray, horizon_row: float, centre_col: float, min_area: int = 12
+    cyl_mask: np.ndarray,
+    horizon_row: float,
+    centre_col: float,
+    min_area: int = 12,
+    drop_smallest: bool = False,
 ) -> MaskSample:
     """Cut the mask of the one NAO in ``cyl_mask`` (its tuples near the image centre).
 
     ``centre_col`` is the column where the NAO's body centre projects; the tuples kept
-    are those whose centroid lies within half the image width of it.
+    are those whose centroid lies within half the image width of it. ``drop_smallest``
+    leaves out the smallest tuple (ties: the later in sorted order): the look of a NAO
+    whose sliver of a far shoulder vanishes with distance.
     """
     from agent.perception.segmentation import extract_tuples
 
     labels, tuples = extract_tuples(cyl_mask, min_area=min_area)
     half = cyl_mask.shape[1] / 2.0
     keep = [t for t in tuples if abs(t.cx - centre_col) < half]
+    if drop_smallest and len(keep) >= 2:
+        small = min(range(len(keep)), key=lambda i: (keep[i].area, -i))
+        keep = keep[:small] + keep[small + 1 :]
     if not keep:
         raise ValueError("no orange tuple near the image centre: is the NAO in view?")
     x0 = min(t.box[0] for t in keep)

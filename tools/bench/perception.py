@@ -1,0 +1,61 @@
+"""``python -m tools.bench perception``: recognition time per 640x480 frame (target: median <= 30 ms).
+
+Renders a seeded set of views (1-3 NAOs, orange clutter, head yaws across the range)
+once, then times :meth:`Detector.detect` on each (``--repeat`` times, best kept per
+frame) and the visual compass on pairs of views 15° apart. Prints median and p95.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import math
+import sys
+import time
+
+import numpy as np
+
+from agent.perception.compass import VisualCompass
+from agent.perception.detector import Detector
+from tools.eval_perception import run_views
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(
+        prog="python -m tools.bench perception", description=__doc__.split("\n")[0]
+    )
+    ap.add_argument("--frames", type=int, default=40)
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--seed", type=int, default=5)
+    args = ap.parse_args(argv)
+    if args.frames < 1 or args.repeat < 1:
+        print("error: --frames and --repeat must be >= 1", file=sys.stderr)
+        return 2
+    det = Detector()
+    views = run_views(args.seed, args.frames, True, det, keep_images=args.frames)
+    imgs = [(v.image, v) for v in views if v.image is not None]
+    times = []
+    for img, _ in imgs:
+        assert img is not None
+        best = math.inf
+        for _ in range(args.repeat):
+            t0 = time.perf_counter()
+            det.detect(img, 0.0)  # the head yaw does not change the work done
+            best = min(best, time.perf_counter() - t0)
+        times.append(best * 1e3)
+    t = np.array(times)
+    n_tuples = [len(v.detections) for _, v in imgs]
+    print(f"perception: {len(t)} frames, {sum(n_tuples)} detections")
+    print(
+        f"detect ms per frame: median {np.median(t):.1f}  p95 {np.percentile(t, 95):.1f}  max {t.max():.1f}  (target median <= 30)"
+    )
+    vc = VisualCompass()
+    ct = []
+    for (a, _), (b, _) in itertools.pairwise(imgs):
+        assert a is not None and b is not None
+        t0 = time.perf_counter()
+        vc.measure(a, b)
+        ct.append((time.perf_counter() - t0) * 1e3)
+    if ct:
+        print(f"compass ms per pair: median {np.median(ct):.1f}  p95 {np.percentile(ct, 95):.1f}")
+    return 0 if np.median(t) <= 30.0 else 1

@@ -1,0 +1,144 @@
+"""``python -m tools.build_mbase``: render the M-base the paper's way (NAO paper 3.1.2, 5.2.2 (i)).
+
+Observer NAO-i at the origin facing +y (north), NAO-j 0.6 m ahead, turned in 5° steps:
+72 masks of head cap + shoulders, cut from the world's forehead-camera renders at head
+yaw 0. Supplementary side-posture masks are rendered with the observer's head at ±90°
+and NAO-j side-on at 0.6 m along the camera axis (the paper's Figure 20 set-up).
+Orientations where the far shoulder is only a sliver that vanishes with distance also
+get a variant without that sliver ("reduced", same orientation).
+
+The result (``mbase.npz`` + ``mbase.json`` with the parameters and a content digest) is
+written to ``agent/perception/data`` unless ``--out`` says otherwise; the renderer is
+deterministic, so regenerating gives the same digest.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from agent.perception.camera import CameraModel
+from agent.perception.mbase import CANON_H, CANON_W, DATA_DIR, MBase, cut_mask
+from agent.perception.segmentation import HSV_HIGH, HSV_LOW, extract_tuples, orange_mask
+from sim import nao_model
+from sim.scenarios import RobotSpec, Scenario
+from sim.world import World
+
+NORTH = math.pi / 2
+SLIVER = 0.12  # a tuple below this share of the mask's area may vanish with distance
+
+
+def render_target(w: World, cam: CameraModel, dist: float, rel: float, yaw: float) -> np.ndarray:
+    """Observer 1 at the origin facing north, head at ``yaw``; NAO 2 at ``dist`` along the
+    camera axis from the neck, its heading = viewing direction + ``rel``."""
+    view = NORTH + yaw
+    w.set_pose(2, dist * math.cos(view), dist * math.sin(view), view + rel)
+    return w.render(1, yaw)
+
+
+def cylindrical(cam: CameraModel, mask: np.ndarray) -> np.ndarray:
+    mx, my = cam.cylindrical_maps()
+    return cv2.remap(mask, mx, my, cv2.INTER_NEAREST)
+
+
+def build(step_deg: float = 5.0, distance: float = 0.6, seed: int = 0) -> MBase:
+    cam = CameraModel()
+    horizon = cam.cy + cam.fy * math.tan(cam.pitch)
+    masks: list[np.ndarray] = []
+    orient: list[float] = []
+    side: list[bool] = []
+    ntup: list[int] = []
+    tops: list[float] = []
+    cents: list[float] = []
+    kinds: list[str] = []
+
+    def add(cyl: np.ndarray, rel: float, kind: str, drop: bool = False) -> None:
+        cut = cut_mask(cyl, horizon, cam.cx, drop_smallest=drop)
+        masks.append(cut.crop)
+        orient.append(rel % (2 * math.pi))
+        ntup.append(cut.n_tuples)
+        side.append(kind == "side" or (kind == "main" and cut.n_tuples == 2))
+        tops.append(cut.top_offset)
+        cents.append(cut.centre_offset)
+        kinds.append(kind)
+
+    n = round(360.0 / step_deg)
+    sc = Scenario(
+        robots=(RobotSpec(1, 0.0, 0.0, NORTH), RobotSpec(2, 0.0, distance, NORTH)), seed=seed
+    )
+    with World(sc, noise=False) as w:
+        for i in range(n):
+            rel = math.radians(i * step_deg)
+            cyl = cylindrical(cam, orange_mask(render_target(w, cam, distance, rel, 0.0)))
+            add(cyl, rel, "main")
+            _, tuples = extract_tuples(cyl)
+            areas = sorted(t.area for t in tuples)
+            if len(areas) >= 3 and areas[0] < SLIVER * sum(areas):
+                add(cyl, rel, "reduced", drop=True)
+            print(f"\rmask {i + 1}/{n}", end="", file=sys.stderr)
+        for yaw_deg in (90.0, -90.0):
+            for rel_deg in (90.0, 270.0):
+                rel = math.radians(rel_deg)
+                img = render_target(w, cam, distance, rel, math.radians(yaw_deg))
+                add(cylindrical(cam, orange_mask(img)), rel, "side")
+    print(file=sys.stderr)
+    meta = {
+        "paper": "Wang et al. 2019, 3.1.2 and 5.2.2 (i)",
+        "distance_m": distance,
+        "step_deg": step_deg,
+        "head_yaw_deg": 0.0,
+        "side_head_yaw_deg": [90.0, -90.0],
+        "side_orientations_deg": [90.0, 270.0],
+        "sliver_share": SLIVER,
+        "seed": seed,
+        "hsv_low": list(HSV_LOW),
+        "hsv_high": list(HSV_HIGH),
+        "canonical_size": [CANON_W, CANON_H],
+        "image": "cylindrical resampling of the 640x480 forehead camera (camera.py)",
+        "camera": {
+            "hfov_deg": math.degrees(cam.hfov),
+            "height_m": cam.height_m,
+            "pitch_deg": math.degrees(cam.pitch),
+        },
+        "renderer": "sim.world.World (PyBullet TinyRenderer), noise off",
+        "nao_model": {
+            "height": nao_model.HEIGHT,
+            "width": nao_model.WIDTH,
+            "camera_forward": nao_model.CAMERA_FORWARD,
+        },
+        "kinds": kinds,
+    }
+    return MBase(masks, orient, side, ntup, tops, cents, meta)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(
+        prog="python -m tools.build_mbase", description=__doc__.split("\n")[0]
+    )
+    ap.add_argument(
+        "--out", type=Path, default=DATA_DIR, help="output directory (default: the package data)"
+    )
+    ap.add_argument(
+        "--step", type=float, default=5.0, help="orientation step in degrees (paper: 5)"
+    )
+    ap.add_argument("--distance", type=float, default=0.6, help="d_s in metres (paper: 0.6)")
+    ap.add_argument("--seed", type=int, default=0, help="room texture seed (no orange either way)")
+    args = ap.parse_args(argv)
+    if not (0 < args.step <= 90 and 0.3 <= args.distance <= 2.0):
+        print("error: --step must be in (0, 90] and --distance in [0.3, 2.0]", file=sys.stderr)
+        return 2
+    mb = build(args.step, args.distance, args.seed)
+    npz, js = mb.save(args.out)
+    counts = {k: mb.meta["kinds"].count(k) for k in ("main", "reduced", "side")}
+    print(f"M-base: {len(mb)} masks {counts}, digest {mb.digest()[:16]}")
+    print(f"wrote {npz} ({npz.stat().st_size} bytes) and {js}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,410 @@
+"""``python -m tools.eval_perception``: measure the perception of the NAO paper, section 3.
+
+Renders N labelled views in the simulated world (issue 3): an observer with a random
+heading and head yaw across ±119.5°, 1-3 other NAOs at 0.4-1.6 m with any orientation in
+its field of view, optionally orange lookalike clutter in the room; runs the
+:class:`~agent.perception.detector.Detector` on each view and prints recall, precision,
+distance and bearing errors (median, p95, share within 0.1 m and 3°), the recognition
+time per frame, and the visual compass error per turn step in the textured room.
+
+Labels. A robot counts for recall when its distance is in [0.5, 1.45] m, it is wholly in
+the image and no nearer robot overlaps it (angular extent ±atan(0.15/d)). A detection is
+true when its bearing lies within a robot's angular extent (+1°) of any robot in view
+(greedy by bearing difference); other detections are false positives. Errors are
+measured on matched robots that count for recall.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from agent.perception.camera import CameraModel
+from agent.perception.compass import VisualCompass
+from agent.perception.detector import Detection, Detector
+from sim.scenarios import ClutterSpec, RobotSpec, Scenario
+from sim.world import World
+
+YAW_LIMIT = math.radians(119.5)
+HALF_WIDTH = 0.15  # m: half the shoulder width of a NAO plus a margin
+RANGE = (0.5, 1.45)
+VIEWS_PER_WORLD = 10
+COMPASS_STEPS_DEG = (5.0, 10.0, 15.0, 20.0, 30.0, 40.0)
+
+
+@dataclass
+class Truth:
+    robot: int
+    distance: float
+    bearing: float  # observer body frame, rad
+    cam_bearing: float  # from the optical centre, relative to the camera axis
+    half_angle: float
+    in_view: bool = True
+    occluded: bool = False
+
+    @property
+    def counts(self) -> bool:
+        return RANGE[0] <= self.distance <= RANGE[1] and self.in_view and not self.occluded
+
+
+@dataclass
+class ViewResult:
+    truths: list[Truth]
+    detections: list[Detection]
+    seconds: float
+    image: np.ndarray | None = None
+    pairs: list[tuple[int, int]] = field(default_factory=list)  # (truth idx, detection idx)
+
+
+def wrap(a: float) -> float:
+    return (a + math.pi) % (2 * math.pi) - math.pi
+
+
+def make_world(rng: np.random.Generator, n_robots: int, clutter: bool, seed: int) -> World:
+    robots = tuple(RobotSpec(i + 1, -3.0 + 0.7 * i, -3.0, math.pi / 2) for i in range(n_robots + 1))
+    items: list[ClutterSpec] = []
+    if clutter:
+        # orange cubes scattered in the middle of the room, where the views look
+        for _ in range(int(rng.integers(8, 16))):
+            size = float(rng.uniform(0.03, 0.09))
+            x, y = (float(v) for v in rng.uniform(-2.4, 2.4, size=2))
+            z = float(rng.uniform(size / 2, 0.75))
+            items.append(ClutterSpec(round(x, 3), round(y, 3), round(z, 3), round(size, 3)))
+    return World(Scenario(robots=robots, clutter=tuple(items), seed=seed, room=4.0), noise=False)
+
+
+def place(
+    w: World, rng: np.random.Generator, cam: CameraModel, n_others: int, clutter_xy: np.ndarray
+) -> tuple[float, list[Truth]]:
+    """Random observer pose, head yaw and neighbours; returns the head yaw and the labels."""
+    ox, oy = (float(v) for v in rng.uniform(-1.2, 1.2, size=2))
+    heading = float(rng.uniform(-math.pi, math.pi))
+    yaw = float(rng.uniform(-YAW_LIMIT, YAW_LIMIT))
+    w.set_pose(1, ox, oy, heading)
+    view = heading + yaw
+    ex = ox + cam.cam_forward * math.cos(view)
+    ey = oy + cam.cam_forward * math.sin(view)
+    placed: list[tuple[float, float]] = [(ox, oy)]
+    for j in range(n_others):
+        rid = j + 2
+        for _ in range(200):
+            d = float(rng.uniform(0.4, 1.6))
+            b = float(rng.uniform(-math.radians(27), math.radians(27)))
+            x, y = ox + d * math.cos(view + b), oy + d * math.sin(view + b)
+            if all(math.hypot(x - px, y - py) > 0.45 for px, py in placed) and (
+                clutter_xy.size == 0
+                or np.min(np.hypot(clutter_xy[:, 0] - x, clutter_xy[:, 1] - y)) > 0.25
+            ):
+                break
+        placed.append((x, y))
+        w.set_pose(rid, x, y, float(rng.uniform(-math.pi, math.pi)))
+    truths: list[Truth] = []
+    for rid in w.robot_ids:  # every other robot, the parked ones too (for precision)
+        if rid == 1:
+            continue
+        x, y, _ = w.pose(rid)
+        dc = math.hypot(x - ex, y - ey)
+        cb = wrap(math.atan2(y - ey, x - ex) - view)
+        half = math.atan(HALF_WIDTH / max(dc, 1e-6))
+        truths.append(
+            Truth(
+                robot=rid,
+                distance=math.hypot(x - ox, y - oy),
+                bearing=wrap(math.atan2(y - oy, x - ox) - heading),
+                cam_bearing=cb,
+                half_angle=half,
+                in_view=abs(cb) + half <= cam.hfov / 2,
+            )
+        )
+    for t in truths:  # occlusion by any nearer robot whose extent overlaps
+        for u in truths:
+            overlap = abs(u.cam_bearing - t.cam_bearing) < u.half_angle + t.half_angle
+            if u is not t and u.distance < t.distance and overlap:
+                t.occluded = True
+    return yaw, truths
+
+
+def match(truths: list[Truth], dets: list[Detection]) -> list[tuple[int, int]]:
+    """Greedy pairs (truth, detection) by bearing difference within the robot's extent."""
+    cand = []
+    for i, t in enumerate(truths):
+        for j, d in enumerate(dets):
+            diff = abs(wrap(d.bearing - t.bearing))
+            if diff <= t.half_angle + math.radians(1.0):
+                cand.append((diff, i, j))
+    cand.sort()
+    used_t: set[int] = set()
+    used_d: set[int] = set()
+    pairs = []
+    for _, i, j in cand:
+        if i in used_t or j in used_d:
+            continue
+        used_t.add(i)
+        used_d.add(j)
+        pairs.append((i, j))
+    return pairs
+
+
+def run_views(
+    seed: int, n_views: int, clutter: bool, detector: Detector, keep_images: int = 0
+) -> list[ViewResult]:
+    rng = np.random.default_rng([seed, 0xE7A1])
+    cam = detector.camera
+    out: list[ViewResult] = []
+    w: World | None = None
+    clutter_xy = np.zeros((0, 2))
+    try:
+        for v in range(n_views):
+            if v % VIEWS_PER_WORLD == 0:
+                if w is not None:
+                    w.close()
+                w = make_world(rng, 3, clutter, seed * 1000 + v)
+                clutter_xy = np.array([[c.x, c.y] for c in w.scenario.clutter]).reshape(-1, 2)
+            assert w is not None
+            n_others = int(rng.integers(1, 4))
+            for rid in range(n_others + 2, 5):  # park unused robots in a corner, facing the wall
+                w.set_pose(rid, -3.3 + 0.5 * rid, -3.5, -math.pi / 2)
+            yaw, truths = place(w, rng, cam, n_others, clutter_xy)
+            img = w.render(1, yaw)
+            t0 = time.perf_counter()
+            dets = detector.detect(img, yaw)
+            dt = time.perf_counter() - t0
+            res = ViewResult(truths, dets, dt, img if v < keep_images else None)
+            res.pairs = match(truths, dets)
+            out.append(res)
+            if (v + 1) % 10 == 0 or v + 1 == n_views:
+                print(f"\rview {v + 1}/{n_views}", end="", file=sys.stderr)
+    finally:
+        if w is not None:
+            w.close()
+    print(file=sys.stderr)
+    return out
+
+
+def run_compass(seed: int, samples: int, steps_deg: tuple[float, ...]) -> dict[str, Any]:
+    """Compass error per turn step: the observer turns its body in place in the textured
+    room (head yaw 0) and the compass measures the turn."""
+    rng = np.random.default_rng([seed, 0xC0C0])
+    vc = VisualCompass()
+    res: dict[str, Any] = {}
+    sc = Scenario(robots=(RobotSpec(1, 0.0, 0.0, math.pi / 2),), seed=seed, room=4.0)
+    with World(sc, noise=False) as w:
+        for step in steps_deg:
+            errs = []
+            fails = 0
+            for _ in range(samples):
+                x, y = (float(v) for v in rng.uniform(-1.5, 1.5, size=2))
+                h0 = float(rng.uniform(-math.pi, math.pi))
+                sgn = 1.0 if rng.random() < 0.5 else -1.0
+                w.set_pose(1, x, y, h0)
+                a = w.render(1, 0.0)
+                w.set_pose(1, x, y, h0 + sgn * math.radians(step))
+                b = w.render(1, 0.0)
+                r = vc.measure(a, b)
+                if not r.ok:
+                    fails += 1
+                    continue
+                errs.append(abs(math.degrees(r.dtheta) - sgn * step))
+            e = np.array(errs) if errs else np.array([np.nan])
+            res[f"{step:g}"] = {
+                "n": samples,
+                "failures": fails,
+                "median_err_deg": float(np.nanmedian(e)),
+                "p95_err_deg": float(np.nanpercentile(e, 95)),
+                "max_err_deg": float(np.nanmax(e)),
+                "within_2deg": float(np.mean(e <= 2.0)) if errs else 0.0,
+            }
+            print(f"\rcompass step {step:g}°", end="", file=sys.stderr)
+    print(file=sys.stderr)
+    blank = np.full((480, 640, 3), 127, np.uint8)
+    r = vc.measure(blank, blank)
+    res["featureless"] = {"ok": r.ok, "reason": r.reason}
+    return res
+
+
+def summarise(views: list[ViewResult]) -> dict[str, Any]:
+    counted = matched = n_det = false_pos = 0
+    derr: list[float] = []
+    berr: list[float] = []
+    for v in views:
+        n_det += len(v.detections)
+        paired_d = {j for _, j in v.pairs}
+        false_pos += len(v.detections) - len(paired_d)
+        by_t = dict(v.pairs)
+        for i, t in enumerate(v.truths):
+            if not t.counts:
+                continue
+            counted += 1
+            if i in by_t:
+                matched += 1
+                d = v.detections[by_t[i]]
+                derr.append(d.distance - t.distance)
+                berr.append(math.degrees(wrap(d.bearing - t.bearing)))
+    da = np.abs(np.array(derr)) if derr else np.array([np.nan])
+    ba = np.abs(np.array(berr)) if berr else np.array([np.nan])
+    times = np.array([v.seconds for v in views]) * 1e3
+    return {
+        "views": len(views),
+        "robots_counted": counted,
+        "recall": matched / counted if counted else float("nan"),
+        "detections": n_det,
+        "false_positives": false_pos,
+        "precision": (n_det - false_pos) / n_det if n_det else float("nan"),
+        "distance_error_m": {
+            "median": float(np.median(da)),
+            "p95": float(np.percentile(da, 95)),
+            "within_0.1": float(np.mean(da <= 0.1)) if derr else 0.0,
+            "bias": float(np.mean(derr)) if derr else float("nan"),
+        },
+        "bearing_error_deg": {
+            "median": float(np.median(ba)),
+            "p95": float(np.percentile(ba, 95)),
+            "within_3": float(np.mean(ba <= 3.0)) if berr else 0.0,
+        },
+        "time_ms": {"median": float(np.median(times)), "p95": float(np.percentile(times, 95))},
+    }
+
+
+def draw(img: np.ndarray, dets: list[Detection], truths: list[Truth] | None = None) -> np.ndarray:
+    """The view with each detection's box, λ, distance and bearing drawn on it."""
+    out = img.copy()
+    for d in dets:
+        x, y, w, h = d.box
+        cv2.rectangle(out, (x, y), (x + w, y + h), (0, 255, 0), 2)
+        label = f"l={d.confidence:.2f} d={d.distance:.2f}m b={math.degrees(d.bearing):+.1f}"
+        ty = y - 8 if y > 20 else y + h + 16
+        cv2.putText(out, label, (max(0, x - 10), ty), cv2.FONT_HERSHEY_SIMPLEX, 0.48, (0, 0, 0), 3)
+        cv2.putText(
+            out, label, (max(0, x - 10), ty), cv2.FONT_HERSHEY_SIMPLEX, 0.48, (0, 255, 0), 1
+        )
+    if truths is not None:
+        lines = [
+            f"truth: d={t.distance:.2f}m b={math.degrees(t.bearing):+.1f}"
+            for t in truths
+            if t.in_view
+        ]
+        for i, s in enumerate(lines):
+            cv2.putText(out, s, (8, 470 - 18 * i), cv2.FONT_HERSHEY_SIMPLEX, 0.48, (0, 0, 0), 3)
+            cv2.putText(
+                out, s, (8, 470 - 18 * i), cv2.FONT_HERSHEY_SIMPLEX, 0.48, (255, 255, 255), 1
+            )
+    return out
+
+
+def figure(views: list[ViewResult], summary: dict[str, Any], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    derr, berr, dist = [], [], []
+    for v in views:
+        by_t = dict(v.pairs)
+        for i, t in enumerate(v.truths):
+            if t.counts and i in by_t:
+                d = v.detections[by_t[i]]
+                derr.append(d.distance - t.distance)
+                berr.append(math.degrees(wrap(d.bearing - t.bearing)))
+                dist.append(t.distance)
+    shots = [v for v in views if v.image is not None and v.detections][:2]
+    fig = plt.figure(figsize=(13, 8))
+    ax1 = fig.add_subplot(2, 2, 1)
+    ax1.plot(dist, derr, ".", alpha=0.6)
+    ax1.axhline(0.1, color="r", lw=0.8)
+    ax1.axhline(-0.1, color="r", lw=0.8)
+    ax1.set_xlabel("true distance (m)")
+    ax1.set_ylabel("distance error (m)")
+    ax1.set_title(f"recall {summary['recall']:.3f}, precision {summary['precision']:.3f}")
+    ax2 = fig.add_subplot(2, 2, 2)
+    ax2.hist(berr, bins=40)
+    ax2.set_xlabel("bearing error (deg)")
+    ax2.set_title(f"within 3°: {summary['bearing_error_deg']['within_3']:.3f}")
+    for k, v in enumerate(shots):
+        ax = fig.add_subplot(2, 2, 3 + k)
+        assert v.image is not None
+        ax.imshow(cv2.cvtColor(draw(v.image, v.detections, v.truths), cv2.COLOR_BGR2RGB))
+        ax.axis("off")
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(
+        prog="python -m tools.eval_perception", description=__doc__.split("\n")[0]
+    )
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--views", type=int, default=100)
+    ap.add_argument("--clutter", action="store_true", help="orange lookalike cubes in the room")
+    ap.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    ap.add_argument(
+        "--compass-samples", type=int, default=10, help="turns per compass step (0: skip)"
+    )
+    ap.add_argument("--png", type=Path, default=Path("out/perception/eval.png"))
+    ap.add_argument("--view-png", type=Path, default=None, help="also save one annotated view here")
+    args = ap.parse_args(argv)
+    if args.views < 1 or args.compass_samples < 0:
+        print("error: --views must be >= 1 and --compass-samples >= 0", file=sys.stderr)
+        return 2
+    try:
+        det = Detector()
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    views = run_views(args.seed, args.views, args.clutter, det, keep_images=min(args.views, 20))
+    summary: dict[str, Any] = {"seed": args.seed, "clutter": args.clutter, **summarise(views)}
+    if args.compass_samples:
+        summary["compass"] = run_compass(args.seed, args.compass_samples, COMPASS_STEPS_DEG)
+    figure(views, summary, args.png)
+    if args.view_png is not None:
+        best = max(
+            (v for v in views if v.image is not None),
+            key=lambda v: (len(v.pairs), len(v.detections) == len(v.pairs)),
+        )
+        assert best.image is not None
+        args.view_png.parent.mkdir(parents=True, exist_ok=True)
+        cv2.imwrite(str(args.view_png), draw(best.image, best.detections, best.truths))
+    if args.json:
+        print(json.dumps(summary, sort_keys=True))
+        return 0
+    de, be = summary["distance_error_m"], summary["bearing_error_deg"]
+    print(
+        f"views {summary['views']} (seed {args.seed}, clutter {args.clutter}); robots counted {summary['robots_counted']}"
+    )
+    print(f"recall    {summary['recall']:.4f}   (target >= 0.95)")
+    print(
+        f"precision {summary['precision']:.4f}   ({summary['false_positives']} false of {summary['detections']}; target >= 0.99)"
+    )
+    print(
+        f"distance error: median {de['median']:.3f} m, p95 {de['p95']:.3f} m, within 0.1 m {de['within_0.1']:.3f} (target >= 0.95), bias {de['bias']:+.3f} m"
+    )
+    print(
+        f"bearing error:  median {be['median']:.2f}°, p95 {be['p95']:.2f}°, within 3° {be['within_3']:.3f} (target >= 0.95)"
+    )
+    print(
+        f"recognition time per frame: median {summary['time_ms']['median']:.1f} ms, p95 {summary['time_ms']['p95']:.1f} ms"
+    )
+    for step, c in summary.get("compass", {}).items():
+        if step == "featureless":
+            print(f"compass, featureless view: ok={c['ok']} ({c['reason']})")
+        else:
+            print(
+                f"compass step {step:>3}°: failures {c['failures']}/{c['n']}, error median {c['median_err_deg']:.2f}°, "
+                f"p95 {c['p95_err_deg']:.2f}°, max {c['max_err_deg']:.2f}°, within 2° {c['within_2deg']:.2f}"
+            )
+    print(f"wrote {args.png}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
