@@ -92,6 +92,58 @@ HEAD_PARTS: tuple[Part, ...] = (
 )
 
 
+Mesh = tuple[list[list[float]], list[list[float]], list[int]]
+
+
+def cylinder_mesh(r: float, half: float, segments: int = 14) -> Mesh:
+    """A closed cylinder about z (vertices, smooth side normals, CCW-outward triangles)."""
+    verts: list[list[float]] = []
+    normals: list[list[float]] = []
+    idx: list[int] = []
+    for i in range(segments):
+        a = 2 * math.pi * i / segments
+        c, s = math.cos(a), math.sin(a)
+        verts += [[r * c, r * s, -half], [r * c, r * s, half]]
+        normals += [[c, s, 0.0], [c, s, 0.0]]
+    for i in range(segments):
+        b0, t0 = 2 * i, 2 * i + 1
+        b1, t1 = (2 * i + 2) % (2 * segments), (2 * i + 3) % (2 * segments)
+        idx += [b0, b1, t1, b0, t1, t0]
+    for z, nz in ((half, 1.0), (-half, -1.0)):
+        centre = len(verts)
+        verts.append([0.0, 0.0, z])
+        normals.append([0.0, 0.0, nz])
+        ring = len(verts)
+        for i in range(segments):
+            a = 2 * math.pi * i / segments
+            verts.append([r * math.cos(a), r * math.sin(a), z])
+            normals.append([0.0, 0.0, nz])
+        for i in range(segments):
+            j = (i + 1) % segments
+            idx += [centre, ring + i, ring + j] if nz > 0 else [centre, ring + j, ring + i]
+    return verts, normals, idx
+
+
+def sphere_mesh(r: float, rings: int = 8, segments: int = 14) -> Mesh:
+    """A UV sphere (vertices, smooth normals, CCW-outward triangles)."""
+    verts: list[list[float]] = []
+    normals: list[list[float]] = []
+    idx: list[int] = []
+    for j in range(rings + 1):
+        lat = -math.pi / 2 + math.pi * j / rings
+        for i in range(segments + 1):
+            lon = 2 * math.pi * i / segments
+            n = [math.cos(lat) * math.cos(lon), math.cos(lat) * math.sin(lon), math.sin(lat)]
+            normals.append(n)
+            verts.append([r * v for v in n])
+    w = segments + 1
+    for j in range(rings):
+        for i in range(segments):
+            b0, b1, t0, t1 = j * w + i, j * w + i + 1, (j + 1) * w + i, (j + 1) * w + i + 1
+            idx += [b0, b1, t1, b0, t1, t0]
+    return verts, normals, idx
+
+
 class NaoBodyFactory:
     """Creates NAO multibodies in one PyBullet client, sharing the visual shapes."""
 
@@ -112,12 +164,15 @@ class NaoBodyFactory:
         }
         if part.shape == "box":
             vid = pb.createVisualShape(pb.GEOM_BOX, halfExtents=part.size, **common)
-        elif part.shape == "cyl":
+        elif part.shape in ("cyl", "sphere"):
+            # Low-poly meshes: TinyRenderer pays per triangle of every body, visible or not.
+            if part.shape == "cyl":
+                verts, normals, idx = cylinder_mesh(part.size[0], part.size[2])
+            else:
+                verts, normals, idx = sphere_mesh(part.size[0])
             vid = pb.createVisualShape(
-                pb.GEOM_CYLINDER, radius=part.size[0], length=2 * part.size[2], **common
+                pb.GEOM_MESH, vertices=verts, normals=normals, indices=idx, **common
             )
-        elif part.shape == "sphere":
-            vid = pb.createVisualShape(pb.GEOM_SPHERE, radius=part.size[0], **common)
         else:
             raise ValueError(f"unknown part shape {part.shape!r}")
         return int(vid)

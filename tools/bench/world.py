@@ -1,0 +1,208 @@
+"""``python -m tools.bench world``: camera latency over zenoh and sim speed (issue 3).
+
+1. Starts ``python -m sim`` (3 robots) listening on a loopback port, connects a zenoh
+   session and times ``--requests`` camera queries at varying head yaws: render + PNG
+   encode + transfer + decode of the reply (target: median under 100 ms at 640 x 480).
+   The in-process render and PNG-encode times are measured too, for the breakdown.
+2. For each fleet size (``--fleets``, default 3, 15, 50) runs the world in-process with
+   every robot kept busy (alternating 0.2 m walks and 15° turns, as the agents do) for
+   ``--sim-seconds`` of sim time and prints how many times faster than real time the
+   clock advanced (target: at least 10x with 15 robots).
+
+Writes ``world_bench.png`` (latency histogram, speed bars) into ``--out`` if given.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import queue
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def camera_latency(requests: int, seed: int) -> list[float]:
+    import zenoh
+
+    from agent.protocol import CameraReply, CameraRequest, decode, encode, key_camera
+
+    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "sim",
+            "--robots",
+            "3",
+            "--seed",
+            str(seed),
+            "--listen",
+            endpoint,
+            "--no-multicast-scouting",
+        ],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
+    )
+    lines: queue.Queue[str] = queue.Queue()
+
+    def pump() -> None:
+        assert proc.stdout is not None
+        for line in proc.stdout:
+            lines.put(line)
+
+    threading.Thread(target=pump, daemon=True).start()
+    try:
+        deadline = time.monotonic() + 60.0
+        while time.monotonic() < deadline:
+            try:
+                if lines.get(timeout=0.5).startswith("sim ready"):
+                    break
+            except queue.Empty:
+                if proc.poll() is not None:
+                    raise RuntimeError("the world exited before it was ready") from None
+        else:
+            raise RuntimeError("the world did not get ready within 60 s")
+        cfg = zenoh.Config()
+        cfg.insert_json5("connect/endpoints", json.dumps([endpoint]))
+        cfg.insert_json5("scouting/multicast/enabled", "false")
+        times: list[float] = []
+        with zenoh.open(cfg) as s:
+            for i in range(requests + 3):
+                yaw = math.radians(-119.5 + (i * 37.0) % 239.0)
+                t0 = time.perf_counter()
+                rep = None
+                for r in s.get(key_camera(1), payload=encode(CameraRequest(yaw=yaw)), timeout=20):
+                    if r.ok is not None:
+                        rep = decode(r.ok.payload.to_bytes(), expect=CameraReply)
+                if rep is None:
+                    if i < 3:  # the link may still be coming up
+                        time.sleep(0.2)
+                        continue
+                    raise RuntimeError("camera query got no reply")
+                img = cv2.imdecode(np.frombuffer(rep.data, np.uint8), cv2.IMREAD_COLOR)
+                dt = time.perf_counter() - t0
+                if img is None or img.shape != (480, 640, 3):
+                    raise RuntimeError("camera reply is not a 640x480 PNG")
+                if i >= 3:
+                    times.append(dt)
+                    print(f"  camera {i - 2}/{requests}: {dt * 1000:.0f} ms", file=sys.stderr)
+        return times
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+
+
+def render_breakdown(n: int, seed: int) -> tuple[float, float]:
+    from sim.scenarios import generate
+    from sim.server import PNG_PARAMS
+    from sim.world import World
+
+    with World(generate(3, seed)) as w:
+        tr, te = [], []
+        for i in range(n):
+            t0 = time.perf_counter()
+            img = w.render(1, math.radians(-119.5 + (i * 37.0) % 239.0))
+            t1 = time.perf_counter()
+            cv2.imencode(".png", img, PNG_PARAMS)
+            te.append(time.perf_counter() - t1)
+            tr.append(t1 - t0)
+    return float(np.median(tr)), float(np.median(te))
+
+
+def sim_speed(n: int, seed: int, sim_seconds: float) -> float:
+    from sim.scenarios import generate
+    from sim.world import World
+
+    with World(generate(n, seed)) as w:
+        loco = w.locomotion
+        nxt = {rid: 0 for rid in w.robot_ids}
+
+        def command(rid: int) -> None:
+            if nxt[rid] % 2 == 0:
+                loco.walk(rid, 0.2)
+            else:
+                loco.turn(rid, math.radians(15.0 if nxt[rid] % 4 == 1 else -15.0))
+            nxt[rid] += 1
+
+        for rid in w.robot_ids:
+            command(rid)
+        t0 = time.perf_counter()
+        while loco.t_sim < sim_seconds:
+            done, _ = loco.step()
+            for d in done:
+                command(d.robot_id)
+        wall = time.perf_counter() - t0
+    return loco.t_sim / wall
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(
+        prog="python -m tools.bench world", description=__doc__.split("\n")[0]
+    )
+    p.add_argument("--requests", type=int, default=30)
+    p.add_argument("--fleets", default="3,15,50")
+    p.add_argument("--sim-seconds", type=float, default=60.0)
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--out", help="directory for world_bench.png")
+    args = p.parse_args(argv)
+    try:
+        fleets = [int(v) for v in args.fleets.split(",") if v]
+    except ValueError:
+        print("--fleets: comma-separated robot counts", file=sys.stderr)
+        return 2
+    print("camera over zenoh (loopback, 640x480 PNG) ...", file=sys.stderr)
+    lat = np.array(camera_latency(args.requests, args.seed)) * 1000
+    render_ms, encode_ms = (v * 1000 for v in render_breakdown(10, args.seed))
+    print(
+        f"camera request: median {np.median(lat):.1f} ms, p95 {np.percentile(lat, 95):.1f} ms "
+        f"(n={lat.size}; in-process render {render_ms:.1f} ms, PNG encode {encode_ms:.1f} ms)"
+    )
+    speeds = {}
+    for n in fleets:
+        print(f"sim speed with {n} robots walking ...", file=sys.stderr)
+        speeds[n] = sim_speed(n, args.seed, args.sim_seconds)
+        print(f"sim speed, {n:3d} robots walking: {speeds[n]:7.1f}x real time")
+    if args.out:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4))
+        a.hist(lat, bins=20)
+        a.axvline(100, color="r", ls="--", label="target 100 ms")
+        a.set_xlabel("camera request latency (ms)")
+        a.legend()
+        b.bar([str(n) for n in speeds], list(speeds.values()))
+        b.axhline(10, color="r", ls="--", label="target 10x (15 robots)")
+        b.set_xlabel("robots walking")
+        b.set_ylabel("x real time")
+        b.set_yscale("log")
+        b.legend()
+        fig.tight_layout()
+        fig.savefig(out / "world_bench.png", dpi=90)
+        print(f"wrote {out / 'world_bench.png'}")
+    return 0
