@@ -216,17 +216,18 @@ class Locomotion:
                     y + m.sign * ds * math.sin(mid),
                     th + dth,
                 )
-        # Contacts: a moving robot's proposed position against every other body.
+        # Contacts: a moving robot's proposed position against every other body. A
+        # vectorised pass finds the few pairs close enough to matter (a robot moves at
+        # most a few mm per step); the exact test below runs on those only.
         ids = sorted(poses)
         r2 = 2 * FOOTPRINT_RADIUS
+        near = self._near_pairs(ids, poses, proposal, r2 + 0.05)
         for rid in sorted(proposal):
             nx, ny, _ = proposal[rid]
             ox, oy, _ = poses[rid]
             if nx == ox and ny == oy:
                 continue
-            for other in ids:
-                if other == rid:
-                    continue
+            for other in near.get(rid, ()):
                 px, py, _ = proposal.get(other, poses[other])
                 if other in stopped:
                     px, py, _ = poses[other]
@@ -263,6 +264,26 @@ class Locomotion:
                 del self._active[rid]
         # Stationary robots that were bumped have no command to end; nothing more to do.
         return done, contacts
+
+    @staticmethod
+    def _near_pairs(
+        ids: list[int],
+        poses: dict[int, tuple[float, float, float]],
+        proposal: dict[int, tuple[float, float, float]],
+        radius: float,
+    ) -> dict[int, list[int]]:
+        """For every moving robot, the other robots (sorted) within ``radius`` of it."""
+        if len(ids) < 2:
+            return {}
+        pos = np.array([proposal.get(r, poses[r])[:2] for r in ids], dtype=np.float64)
+        moving = np.array([r in proposal for r in ids])
+        diff = pos[moving][:, None, :] - pos[None, :, :]
+        close = np.einsum("ijk,ijk->ij", diff, diff) < radius * radius
+        movers = [r for r in ids if r in proposal]
+        out: dict[int, list[int]] = {}
+        for a, rid in enumerate(movers):
+            out[rid] = [ids[k] for k in np.flatnonzero(close[a]) if ids[k] != rid]
+        return out
 
     def run_until_idle(self, max_time: float = 3600.0) -> tuple[list[Done], list[Contact]]:
         """Step until no command is active (for tests and tools)."""

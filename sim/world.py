@@ -127,6 +127,7 @@ class World:
         self._bodies: dict[int, int] = {}
         self._poses: dict[int, tuple[float, float, float]] = {}
         self._head: dict[int, float] = {}
+        self._dirty: set[int] = set()
         for r in sorted(sc.robots, key=lambda r: r.id):
             self._bodies[r.id] = factory.create(r.x, r.y, r.heading)
             self._poses[r.id] = (float(r.x), float(r.y), _wrap(float(r.heading)))
@@ -262,18 +263,28 @@ class World:
         return self._head[self._check(robot_id)]
 
     def set_pose(self, robot_id: int, x: float, y: float, heading: float) -> None:
-        """Teleport a robot (tools and tests)."""
+        """Teleport a robot (tools and tests; locomotion moves robots through it too).
+
+        The PyBullet body follows lazily, at the next render: stepping many robots costs
+        no renderer calls.
+        """
         self._check(robot_id)
         for v in (x, y, heading):
             if not math.isfinite(v):
                 raise ValueError(f"pose value {v} is not finite")
         self._poses[robot_id] = (float(x), float(y), _wrap(float(heading)))
-        pb.resetBasePositionAndOrientation(
-            self._bodies[robot_id],
-            (x, y, 0.0),
-            pb.getQuaternionFromEuler((0.0, 0.0, heading)),
-            physicsClientId=self._client,
-        )
+        self._dirty.add(robot_id)
+
+    def _sync(self) -> None:
+        for rid in sorted(self._dirty):
+            x, y, th = self._poses[rid]
+            pb.resetBasePositionAndOrientation(
+                self._bodies[rid],
+                (x, y, 0.0),
+                pb.getQuaternionFromEuler((0.0, 0.0, th)),
+                physicsClientId=self._client,
+            )
+        self._dirty.clear()
 
     def set_head_yaw(self, robot_id: int, yaw: float) -> None:
         """Turn a robot's head (±119.5°; outside is a ``ValueError``)."""
@@ -290,6 +301,7 @@ class World:
         """
         self._check(robot_id)
         self.set_head_yaw(robot_id, head_yaw)
+        self._sync()
         x, y, th = self._poses[robot_id]
         body = self._bodies[robot_id]
         cid = self._client
