@@ -1,0 +1,137 @@
+"""Scenario generation, files and validation (sim/scenarios)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sim import scenarios
+from sim.scenarios import (
+    ClutterSpec,
+    LightSpec,
+    ObstacleSpec,
+    RobotSpec,
+    Scenario,
+    builtin,
+    dump,
+    generate,
+    load,
+)
+
+
+def _connected(pts: np.ndarray, lo: float, hi: float) -> bool:
+    n = len(pts)
+    d = np.linalg.norm(pts[:, None] - pts[None], axis=2)
+    adj = (d >= lo) & (d <= hi)
+    seen, stack = {0}, [0]
+    while stack:
+        i = stack.pop()
+        for j in np.flatnonzero(adj[i]):
+            if int(j) not in seen:
+                seen.add(int(j))
+                stack.append(int(j))
+    return len(seen) == n
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 5, 10, 15, 50])
+@pytest.mark.parametrize("seed", [0, 1, 7])
+def test_generated_starts_are_paper_like(n: int, seed: int) -> None:
+    sc = generate(n, seed)
+    assert [r.id for r in sc.robots] == list(range(1, n + 1))
+    assert all(r.heading == math.pi / 2 for r in sc.robots)
+    pts = np.array([(r.x, r.y) for r in sc.robots])
+    if n > 1:
+        d = np.linalg.norm(pts[:, None] - pts[None], axis=2)
+        np.fill_diagonal(d, np.inf)
+        assert d.min() >= 0.6 - 1e-3  # rounding to mm
+        nearest = d.min(axis=1)
+        assert np.all(nearest <= 1.2 + 1e-3)
+        assert np.all((nearest >= 0.5) & (nearest <= 1.45))
+        assert _connected(pts, 0.5, 1.45)
+    assert np.abs(pts).max() <= sc.room - 1.5
+
+
+def test_generate_is_deterministic_and_seeded() -> None:
+    assert generate(8, 3) == generate(8, 3)
+    assert generate(8, 3) != generate(8, 4)
+
+
+def test_generated_obstacles_and_clutter_keep_clear_of_robots() -> None:
+    sc = generate(5, 2, obstacles=3, clutter=4)
+    assert len(sc.obstacles) == 3 and len(sc.clutter) == 4
+    for item in (*sc.obstacles, *sc.clutter):
+        for r in sc.robots:
+            assert math.hypot(item.x - r.x, item.y - r.y) >= 0.8
+
+
+def test_file_round_trip(tmp_path: Path) -> None:
+    sc = generate(4, 9, obstacles=1, clutter=2, light=LightSpec(0.7, 1.0, 0.5))
+    path = tmp_path / "s.json"
+    dump(sc, path)
+    assert load(path) == sc
+
+
+def test_builtin_files_load() -> None:
+    for name in ("paper3", "obstacles", "clutter"):
+        sc = load(builtin(name))
+        assert sc.robots
+    with pytest.raises(ValueError, match="no built-in"):
+        builtin("nope")
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "reason"),
+    [
+        ({"robots": ()}, "no robots"),
+        ({"robots": (RobotSpec(1, 0, 0), RobotSpec(1, 1, 0))}, "duplicate"),
+        ({"robots": (RobotSpec(1, 0, 0),), "room": 0.5}, "room half-size"),
+        ({"robots": (RobotSpec(-1, 0, 0),)}, "robot id"),
+        ({"robots": (RobotSpec(1, math.nan, 0),)}, "not finite"),
+        ({"robots": (RobotSpec(1, 3.9, 0),), "room": 4.0}, "outside the room"),
+        ({"robots": (RobotSpec(1, 0, 0),), "obstacles": (ObstacleSpec(1, 1, 0.0),)}, "obstacle"),
+        (
+            {"robots": (RobotSpec(1, 0, 0),), "clutter": (ClutterSpec(1, 1, 0.1, 2.0),)},
+            "clutter",
+        ),
+        ({"robots": (RobotSpec(1, 0, 0),), "light": LightSpec(intensity=-1)}, "light"),
+    ],
+)
+def test_invalid_scenarios(kwargs: dict[str, object], reason: str) -> None:
+    with pytest.raises(ValueError, match=reason):
+        Scenario(**kwargs)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(
+    ("text", "reason"),
+    [
+        ("[1, 2]", "JSON object"),
+        ('{"robots": [], "extra": 1}', "unknown scenario keys"),
+        ('{"obstacles": []}', "missing"),
+        ('{"robots": [{"id": 1, "x": 0}]}', "bad scenario entry"),
+        ('{"robots": [{"id": 1, "x": 0, "y": 0}], "seed": "a"}', "seed"),
+        ("{not json", "not JSON"),
+    ],
+)
+def test_invalid_files(tmp_path: Path, text: str, reason: str) -> None:
+    path = tmp_path / "bad.json"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=reason):
+        load(path)
+
+
+@pytest.mark.parametrize(("n", "kw"), [(0, {}), (201, {}), (3, {"obstacles": -1})])
+def test_invalid_generate(n: int, kw: dict[str, int]) -> None:
+    with pytest.raises(ValueError):
+        generate(n, 0, **kw)
+
+
+def test_dump_is_plain_json(tmp_path: Path) -> None:
+    path = tmp_path / "s.json"
+    dump(generate(2, 1), path)
+    data = json.loads(path.read_text())
+    assert set(data) == {"robots", "obstacles", "clutter", "light", "seed", "room"}
+    assert scenarios.from_dict(data) == generate(2, 1)
