@@ -123,10 +123,12 @@ def test_invalid_files(tmp_path: Path, text: str, reason: str) -> None:
         load(path)
 
 
-@pytest.mark.parametrize(("n", "kw"), [(0, {}), (201, {}), (3, {"obstacles": -1})])
-def test_invalid_generate(n: int, kw: dict[str, int]) -> None:
-    with pytest.raises(ValueError):
-        generate(n, 0, **kw)
+@pytest.mark.parametrize(
+    ("n", "obstacles", "reason"), [(0, 0, "robot count"), (201, 0, "robot count"), (3, -1, ">= 0")]
+)
+def test_invalid_generate(n: int, obstacles: int, reason: str) -> None:
+    with pytest.raises(ValueError, match=reason):
+        generate(n, 0, obstacles=obstacles)
 
 
 def test_dump_is_plain_json(tmp_path: Path) -> None:
