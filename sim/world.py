@@ -225,7 +225,7 @@ class World:
             for i in range(nu + 1):
                 a, b = i / nu, j / nv
                 vs.append((p0 + a * eu + b * ev).tolist())
-                uvs.append((a, b))
+                uvs.append((1.0 - a if flip else a, b))  # text reads left to right
         idx: list[int] = []
         for j in range(nv):
             for i in range(nu):
