@@ -470,7 +470,11 @@ class Runner:
 
     def wait_for_earlier_waves(self) -> None:
         plan = self.plan
-        earlier = sorted(i for i in self.formation.members(plan) if plan.robot(i).wave < self.wave)
+        earlier = sorted(
+            i
+            for i in self.formation.members(plan)
+            if i != self.me and plan.robot(i).wave < self.wave
+        )
         deadline = self.clock() + self.cfg.wave_timeout
         while True:
             self.pump(0.1)

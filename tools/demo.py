@@ -148,13 +148,15 @@ def start_world(robots: int, seed: int, endpoint: str, out: Path, extra: list[st
 
 
 def start_agent(rid: int, robots: int, endpoint: str, out: Path, args: argparse.Namespace) -> Proc:
+    """Agent process for robot ``rid`` (with ``--auto-ids`` it claims a robot itself)."""
+    auto = bool(getattr(args, "auto_ids", False))
     cmd = [
-        sys.executable, "-m", "agent", "--id", str(rid), "--fleet-size", str(robots),
+        sys.executable, "-m", "agent", "--id", "auto" if auto else str(rid), "--fleet-size", str(robots),
         "--connect", endpoint, "--no-multicast-scouting",
         "--d-e", str(args.d_e), "--phi-e-deg", str(args.phi_e_deg), "--timeout", str(args.agree_timeout),
         "--log-level", args.agent_log_level,
     ]  # fmt: skip
-    log = (out / f"agent-{rid}.log").open("wb")
+    log = (out / (f"agent-slot{rid}.log" if auto else f"agent-{rid}.log")).open("wb")
     p = subprocess.Popen(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT)
     return Proc(f"agent {rid}", p, log)
 
@@ -428,10 +430,6 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
             for ev in bus.drain(0.1):
                 if ev.kind == "msg":
                     obs.take(ev.key, ev.msg, rec)
-            for i, p in agents.items():
-                code = p.popen.poll()
-                if code is not None:
-                    obs.agents.setdefault(i, AgentView()).exit_code = code
             if live is not None:
                 live.update(obs, time.monotonic() - t0)
             if all(p.popen.poll() is not None for p in agents.values()):
@@ -453,11 +451,27 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
             stop(p)
         bus.close()
         rec.close()
+    if getattr(args, "auto_ids", False):
+        agents = claimed_ids(agents, out)
+        result["claimed_ids"] = sorted(agents)
     for i, p in agents.items():
-        v = obs.agents.setdefault(i, AgentView())
-        if v.exit_code is None:
-            v.exit_code = p.popen.returncode
+        obs.agents.setdefault(i, AgentView()).exit_code = p.popen.returncode
     return summarise(obs, result, out, sorted(agents), d_e, phi_e, quiet)
+
+
+def claimed_ids(agents: dict[int, Proc], out: Path) -> dict[int, Proc]:
+    """Re-key ``--id auto`` agents by the robot each one claimed (from its log)."""
+    import re
+
+    mapped: dict[int, Proc] = {}
+    for slot, p in agents.items():
+        text = (out / f"agent-slot{slot}.log").read_text(errors="replace")
+        m = re.search(r"claimed robot (\d+)", text)
+        if m is None or int(m.group(1)) in mapped:
+            mapped[-1 - slot] = p  # claimed nothing (or a duplicate): a failure in the table
+        else:
+            mapped[int(m.group(1))] = p
+    return mapped
 
 
 def robot_ids(lines: list[str], n: int) -> list[int]:
@@ -608,6 +622,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--phi-e-deg", type=float, default=30.0)
     p.add_argument("--timeout", type=float, default=600.0, help="wall limit for the agents (s)")
     p.add_argument("--agree-timeout", type=float, default=120.0)
+    p.add_argument("--auto-ids", action="store_true", help="agents claim robots (--id auto)")
     p.add_argument("--agent-log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING"))
     p.add_argument("--world-timeout", type=float, default=120.0)
     p.add_argument(

@@ -1,0 +1,82 @@
+"""The 3-robot demo as real processes (world + 3 agents over loopback), end to end.
+
+Runs ``python -m tools.demo`` exactly as ``make demo`` does (agents claim their robots
+with ``--id auto``), then checks the printed table, the result JSON, the figure and the
+MCAP recording, and replays the recording with ``python -m tools.replay``. Bounded:
+the demo's own limits stop every process well inside the test timeout.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+pytestmark = [pytest.mark.system, pytest.mark.slow]
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def run(cmd: list[str], timeout: float) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=timeout)
+
+
+def test_three_robot_demo_builds_the_pyramid(tmp_path: Path) -> None:
+    out = tmp_path / "demo"
+    res = run(
+        [sys.executable, "-m", "tools.demo", "--robots", "3", "--seed", "1", "--out", str(out),
+         "--json", str(tmp_path / "result.json"), "--auto-ids", "--timeout", "240"],
+        timeout=290,
+    )  # fmt: skip
+    report = res.stdout
+    assert "child parent" in report and "identical plan digests" in report, res.stderr[-2000:]
+    r = json.loads((tmp_path / "result.json").read_text())
+    # the processes: every agent claimed a distinct robot and exited 0 after holding
+    assert r["claimed_ids"] == [1, 2, 3]
+    assert r["exit_codes"] == {"1": 0, "2": 0, "3": 0}, r.get("errors")
+    assert set(r["final_phase"].values()) == {"done"}
+    # agreement: one plan, and the evaluator computes the same plan from the records
+    assert r["identical_digests"] is True
+    assert r["evaluator_plan_digest"] == r["plan_digests"]["1"]
+    # the pyramid from ground truth: 2 child-parent pairs within the paper's tolerance
+    assert len(r["pairs"]) == 2
+    for p in r["pairs"]:
+        assert abs(p["r_d"]) <= 0.125 and abs(p["r_phi"]) <= 0.30, p
+    assert r["contacts"] == 0 and r["min_separation"] > 0.4
+    # communication: one exchange, a few re-sends; statuses are for viewers
+    for i in ("1", "2", "3"):
+        assert 0 < r["exchange_bytes"][i] < 3000
+        assert r["bytes"][i]["total"] < 10000
+    assert r["success"] is True and res.returncode == 0
+    assert "RESULT: SUCCESS" in report
+    fig = out / "formation.png"
+    assert fig.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # the recording replays: timeline with every phase of every agent, and a picture
+    rep = run([sys.executable, "-m", "tools.replay", str(out / "run.mcap"), "--frames", "2"], 60)
+    assert rep.returncode == 0, rep.stderr[-2000:]
+    for rid in (1, 2, 3):
+        for phase in ("search", "exchange", "plan", "move", "hold", "done"):
+            assert f"robot {rid}: {phase}" in rep.stdout, (rid, phase)
+    assert "0 rejected" in rep.stdout
+    assert (out / "replay" / "replay.png").stat().st_size > 0
+    assert (out / "replay" / "frame-001.png").stat().st_size > 0
+
+
+def test_demo_rejects_bad_arguments() -> None:
+    res = run([sys.executable, "-m", "tools.demo", "--robots", "0"], 30)
+    assert res.returncode == 2 and "--robots" in res.stderr
+
+
+def test_replay_of_a_missing_file_fails_cleanly(tmp_path: Path) -> None:
+    res = run([sys.executable, "-m", "tools.replay", str(tmp_path / "none.mcap")], 30)
+    assert res.returncode == 2 and "no such file" in res.stderr
+
+
+def test_replay_of_a_corrupt_file_fails_cleanly(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(b"\x89MCAP0\r\n" + b"garbage" * 10)
+    res = run([sys.executable, "-m", "tools.replay", str(bad)], 30)
+    assert res.returncode == 1 and "cannot read" in res.stderr

@@ -1,0 +1,160 @@
+"""The runner's boundaries and its safety rules, without the world.
+
+The adapters run on the real formation core and the real perception merge; the wave
+rule runs on a real (unconnected) zenoh session.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+
+from agent.bus import Bus, BusConfig
+from agent.protocol import NeighborRecordMsg
+from agent.robot import Robot
+from agent.runner import (
+    AgentConfig,
+    AgentFailure,
+    FormationAdapter,
+    Peer,
+    PerceptionAdapter,
+    Runner,
+)
+
+# robots 1, 2, 3 at known world positions; every robot sees every other one
+WORLD = {1: (0.0, 0.0), 2: (-1.0, 0.1), 3: (0.9, -0.2)}
+
+
+def records() -> tuple[NeighborRecordMsg, ...]:
+    out = []
+    for i, (x, y) in WORLD.items():
+        nb = tuple((wx - x, wy - y) for j, (wx, wy) in WORLD.items() if j != i)
+        out.append(NeighborRecordMsg(sender=i, round=0, neighbours=nb))
+    return tuple(out)
+
+
+def test_formation_adapter_goals_are_plan_targets_in_own_fixed_frame() -> None:
+    fa = FormationAdapter()
+    plan = fa.plan(records(), 0.8, math.radians(30))
+    assert fa.members(plan) == [1, 2, 3]
+    for i in (1, 2, 3):
+        rp = plan.robot(i)
+        goals, heading = fa.goals(plan, i)
+        # the common frame is parallel to every fixed frame: only a translation
+        want = np.asarray(rp.target) - np.asarray(rp.start)
+        if np.hypot(*want) > 1e-9:
+            assert goals[-1] == pytest.approx(want)
+        assert heading == pytest.approx(plan.axis)
+        # and start + goal is where the robot ends in the world
+        assert np.asarray(WORLD[i]) + goals[-1] == pytest.approx(
+            np.asarray(rp.target) + np.asarray(WORLD[plan.frame_robot]), abs=1e-9
+        )
+
+
+def test_formation_adapter_is_order_independent() -> None:
+    fa = FormationAdapter()
+    a = fa.plan(records(), 0.8, math.radians(30))
+    b = fa.plan(tuple(reversed(records())), 0.8, math.radians(30))
+    assert a.digest == b.digest
+
+
+def test_formation_adapter_axis_from_vector_or_angle() -> None:
+    class P:
+        axis = (0.0, 1.0)
+
+    class Q:
+        axis = 0.25
+
+    assert FormationAdapter.axis_angle(P()) == pytest.approx(math.pi / 2)
+    assert FormationAdapter.axis_angle(Q()) == pytest.approx(0.25)
+
+
+def test_perception_merge_keeps_best_sighting_per_neighbour() -> None:
+    s1 = (np.array([[1.0, 0.0], [0.0, 1.0]]), np.array([0.7, 0.9]), np.array([0.1, 0.2]))
+    s2 = (np.array([[1.1, 0.0]]), np.array([0.9]), np.array([0.3]))
+    pts, ori, conf = PerceptionAdapter.merge([s1, s2])
+    assert pts.shape == (2, 2)
+    k = int(np.argmin(np.hypot(pts[:, 0] - 1.05, pts[:, 1])))
+    assert conf[k] == pytest.approx(0.9) and ori[k] == pytest.approx(0.3)
+    assert PerceptionAdapter.merge([])[0].shape == (0, 2)
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"fleet_size": 0}, "fleet size"),
+        ({"d_e": 0.0}, "d_e"),
+        ({"phi_e": math.radians(95)}, "phi_e"),
+        ({"timeout": -1.0}, "timeout"),
+        ({"search_yaws": (math.radians(130),)}, "search yaw"),
+    ],
+)
+def test_agent_config_rejects_bad_values(kwargs: dict[str, object], match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        AgentConfig(robot_id=1, **kwargs)  # type: ignore[arg-type]
+
+
+@pytest.fixture()
+def runner() -> Iterator[Runner]:
+    bus = Bus(BusConfig(multicast_scouting=False))
+    r = Runner(bus, Robot(bus, 3), AgentConfig(robot_id=3, fleet_size=3, wave_timeout=2.0))
+    r.formation = FormationAdapter()
+    r.plan = r.formation.plan(records(), 0.8, math.radians(30))
+    try:
+        yield r
+    finally:
+        bus.close()
+
+
+def earlier(r: Runner) -> list[int]:
+    return [i for i in (1, 2, 3) if r.plan.robot(i).wave < r.plan.robot(3).wave]
+
+
+def test_runner_rejects_config_for_another_robot() -> None:
+    bus = Bus(BusConfig(multicast_scouting=False))
+    try:
+        with pytest.raises(ValueError, match="driven with config for"):
+            Runner(bus, Robot(bus, 1), AgentConfig(robot_id=2))
+    finally:
+        bus.close()
+
+
+def test_waits_pass_when_earlier_waves_hold(runner: Runner) -> None:
+    runner.wave = max(rp.wave for rp in runner.plan.robots) + 1
+    for i in (1, 2):
+        runner.peers[i] = Peer(alive=True, phase="hold", seen_alive=True)
+    runner.wait_for_earlier_waves()
+
+
+def test_member_of_an_earlier_wave_that_leaves_stops_us(runner: Runner) -> None:
+    runner.wave = max(rp.wave for rp in runner.plan.robots) + 1
+    runner.peers[1] = Peer(alive=False, phase="move", seen_alive=True)
+    runner.peers[2] = Peer(alive=True, phase="hold", seen_alive=True)
+    with pytest.raises(AgentFailure, match=r"robot 1 of wave .* left before holding"):
+        runner.wait_for_earlier_waves()
+
+
+def test_failed_member_of_an_earlier_wave_stops_us(runner: Runner) -> None:
+    runner.wave = max(rp.wave for rp in runner.plan.robots) + 1
+    runner.peers[1] = Peer(alive=True, phase="hold", seen_alive=True)
+    runner.peers[2] = Peer(alive=True, phase="failed", seen_alive=True)
+    with pytest.raises(AgentFailure, match=r"robot 2 of wave .* failed"):
+        runner.wait_for_earlier_waves()
+
+
+def test_earlier_wave_that_never_holds_times_out(runner: Runner) -> None:
+    runner.wave = max(rp.wave for rp in runner.plan.robots) + 1
+    runner.peers[1] = Peer(alive=True, phase="move", seen_alive=True)
+    runner.peers[2] = Peer(alive=True, phase="hold", seen_alive=True)
+    with pytest.raises(AgentFailure, match=r"robots \[1\] of earlier waves did not hold"):
+        runner.wait_for_earlier_waves()
+
+
+def test_unavailable_perception_fails_safely_with_reason(runner: Runner) -> None:
+    runner.unavailable = "perception unavailable: no D-base"
+    assert runner.run() == 1
+    assert runner.phase == "failed"
+    assert runner.bus.stats.published_count["status"] >= 2
