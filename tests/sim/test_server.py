@@ -307,3 +307,18 @@ def test_two_robots_walking_into_each_other_get_contact(client: Client) -> None:
             break
         time.sleep(0.05)
     assert client.truth[-1].contacts == 1
+
+
+def test_snapshot_joins_a_running_world(
+    world: tuple[subprocess.Popen[str], str], client: Client, tmp_path: Path
+) -> None:
+    from tools import snapshot
+
+    common = ["--connect", world[1], "--no-multicast-scouting", "--robot", "3"]
+    out = tmp_path / "remote.png"
+    assert snapshot.main([*common, "--yaw", "10", "--out", str(out)]) == 0
+    assert png(out.read_bytes()).shape == (480, 640, 3)
+    top = tmp_path / "top.png"
+    assert snapshot.main([*common, "--top-down", "--out", str(top)]) == 0
+    assert top.stat().st_size > 1000
+    assert snapshot.main([*common, "--yaw", "130", "--out", str(tmp_path / "bad.png")]) == 1
