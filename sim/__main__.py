@@ -29,7 +29,10 @@ def build_parser() -> argparse.ArgumentParser:
         "--robots", type=int, default=3, help="robots of a generated scenario (ids 1..N)"
     )
     p.add_argument("--seed", type=int, default=7, help="seed of the scenario, textures and noise")
-    p.add_argument("--scenario", help="scenario JSON file (overrides --robots/--seed layout)")
+    p.add_argument(
+        "--scenario",
+        help="scenario JSON file (replaces --robots/--seed/--obstacles/--clutter/--light)",
+    )
     p.add_argument("--obstacles", type=int, default=0, help="static cylinders (generated)")
     p.add_argument("--clutter", type=int, default=0, help="orange lookalike cubes (generated)")
     p.add_argument("--light", type=float, default=1.0, help="light intensity (1.0 = default)")
@@ -61,6 +64,10 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
+        if not (args.speed >= 0 and args.speed < float("inf")):
+            raise ValueError(f"--speed {args.speed}: must be >= 0 (0: as fast as possible)")
+        if not (0 < args.truth_rate <= 1000):
+            raise ValueError(f"--truth-rate {args.truth_rate}: must be in (0, 1000]")
         if args.scenario:
             sc = scenarios.load(args.scenario)
         else:

@@ -1,0 +1,40 @@
+"""``python -m sim`` argument errors (exit 2 with a reason, before any zenoh session)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from sim.__main__ import build_parser, main
+
+
+@pytest.mark.parametrize(
+    ("argv", "reason"),
+    [
+        (["--robots", "0"], "robot count"),
+        (["--speed", "-1"], "--speed"),
+        (["--speed", "nan"], "--speed"),
+        (["--truth-rate", "0"], "--truth-rate"),
+        (["--light", "9"], "light intensity"),
+        (["--listen", "nonsense"], "endpoint"),
+        (["--scenario", "/nonexistent.json"], "No such file"),
+    ],
+)
+def test_bad_arguments(argv: list[str], reason: str, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(argv) == 2
+    assert reason in capsys.readouterr().err
+
+
+def test_dump_scenario(tmp_path: Path) -> None:
+    # A bad endpoint stops the world after the scenario was written.
+    out = tmp_path / "sc.json"
+    assert main(["--robots", "4", "--seed", "2", "--dump-scenario", str(out), "--listen", "x"]) == 2
+    assert out.exists()
+
+
+def test_help_documents_the_stable_flags() -> None:
+    text = build_parser().format_help()
+    for flag in ("--robots", "--seed", "--scenario", "--connect", "--listen",
+                 "--no-multicast-scouting", "--mode", "--gui", "--speed"):  # fmt: skip
+        assert flag in text
