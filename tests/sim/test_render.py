@@ -171,3 +171,22 @@ def test_head_turned_robot_looks_different(world: World) -> None:
     b = world.render(1, 0.0)
     world.set_head_yaw(2, 0.0)
     assert np.abs(a.astype(int) - b.astype(int)).sum() > 0
+
+
+def test_clutter_is_orange_and_light_varies() -> None:
+    from sim.scenarios import ClutterSpec, LightSpec
+
+    sc = Scenario(
+        robots=(RobotSpec(1, 0.0, 0.0),),
+        clutter=(ClutterSpec(0.0, 1.0, 0.45, 0.06),),
+        light=LightSpec(intensity=0.6),
+        seed=2,
+    )
+    with World(sc) as w:
+        blobs = orange_blobs(w.render(1, 0.0))
+        assert len(blobs) == 1
+        uv = camera.project(0.0, 0.0, NORTH, 0.0, np.array([[0.0, 0.97, 0.45]]))[0]
+        assert abs(blobs[0][0] - uv[0]) < 3.0 and abs(blobs[0][1] - uv[1]) < 3.0
+        dim = w.render(1, 0.5).astype(float).mean()
+    with World(Scenario(robots=sc.robots, seed=2)) as w:
+        assert w.render(1, 0.5).astype(float).mean() > dim * 1.3
