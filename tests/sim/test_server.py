@@ -252,6 +252,21 @@ def test_register_hands_out_free_ids(client: Client) -> None:
     assert isinstance(rep, ErrorReply) and "every robot is claimed" in rep.reason
 
 
+def test_claim_is_released_when_the_agent_token_goes(client: Client) -> None:
+    # After test_register_hands_out_free_ids every robot is claimed.
+    rep = client.ask(KEY_WORLD_REGISTER, RegisterRequest(want=1))
+    assert isinstance(rep, ErrorReply)
+    token = client.session.liveliness().declare_token("nao/alive/1")
+    token.undeclare()
+    deadline = time.monotonic() + 10.0
+    while time.monotonic() < deadline:
+        rep = client.ask(KEY_WORLD_REGISTER, RegisterRequest(want=1))
+        if isinstance(rep, RegisterReply):
+            break
+        time.sleep(0.05)
+    assert rep == RegisterReply(robot_id=1)
+
+
 def test_walk_1m_in_20cm_steps_and_read_the_truth(client: Client) -> None:
     client.pump()
     x0, y0, _ = next(p[1:] for p in client.truth[-1].poses if p[0] == 3)
