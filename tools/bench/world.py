@@ -113,21 +113,23 @@ def camera_latency(requests: int, seed: int) -> list[float]:
             proc.kill()
 
 
-def render_breakdown(n: int, seed: int) -> tuple[float, float]:
+def render_breakdown(n: int, seed: int) -> tuple[float, float, float]:
     from sim.scenarios import generate
     from sim.server import PNG_PARAMS
     from sim.world import World
 
     with World(generate(3, seed)) as w:
-        tr, te = [], []
+        tr, te, tc = [], [], []
         for i in range(n):
+            c0 = time.process_time()
             t0 = time.perf_counter()
             img = w.render(1, math.radians(-119.5 + (i * 37.0) % 239.0))
             t1 = time.perf_counter()
+            tc.append(time.process_time() - c0)
             cv2.imencode(".png", img, PNG_PARAMS)
             te.append(time.perf_counter() - t1)
             tr.append(t1 - t0)
-    return float(np.median(tr)), float(np.median(te))
+    return float(np.median(tr)), float(np.median(tc)), float(np.median(te))
 
 
 def sim_speed(n: int, seed: int, sim_seconds: float) -> float:
@@ -173,10 +175,11 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     print("camera over zenoh (loopback, 640x480 PNG) ...", file=sys.stderr)
     lat = np.array(camera_latency(args.requests, args.seed)) * 1000
-    render_ms, encode_ms = (v * 1000 for v in render_breakdown(10, args.seed))
+    render_ms, render_cpu_ms, encode_ms = (v * 1000 for v in render_breakdown(10, args.seed))
     print(
         f"camera request: median {np.median(lat):.1f} ms, p95 {np.percentile(lat, 95):.1f} ms "
-        f"(n={lat.size}; in-process render {render_ms:.1f} ms, PNG encode {encode_ms:.1f} ms)"
+        f"(n={lat.size}; in-process render {render_ms:.1f} ms wall / {render_cpu_ms:.1f} ms CPU, "
+        f"PNG encode {encode_ms:.1f} ms)"
     )
     speeds = {}
     for n in fleets:
