@@ -337,3 +337,24 @@ def test_snapshot_joins_a_running_world(
     assert snapshot.main([*common, "--top-down", "--out", str(top)]) == 0
     assert top.stat().st_size > 1000
     assert snapshot.main([*common, "--yaw", "130", "--out", str(tmp_path / "bad.png")]) == 1
+
+
+def test_client_cli(
+    world: tuple[subprocess.Popen[str], str],
+    client: Client,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    from sim import client as cli
+
+    common = ["--connect", world[1], "--no-multicast-scouting", "--timeout", "30"]
+    out = tmp_path / "c.png"
+    assert cli.main([*common, "camera", "3", "--yaw", "-30", "--out", str(out)]) == 0
+    assert png(out.read_bytes()).shape == (480, 640, 3)
+    assert cli.main([*common, "turn", "3", "10", "--times", "2"]) == 0
+    text = capsys.readouterr().out
+    assert text.count("turn robot 3: done") == 2 and "robot   3:" in text
+    assert cli.main([*common, "poses"]) == 0
+    assert cli.main([*common, "camera", "3", "--yaw", "150"]) == 1
+    assert "outside" in capsys.readouterr().err
+    assert cli.main([*common, "walk", "8", "0.2"]) == 1
