@@ -31,6 +31,7 @@ from sim.nao_model import HEAD_JOINT, NaoBodyFactory
 from sim.scenarios import Scenario
 
 TEXELS_PER_M = 256
+MAX_TEXTURE = 4096  # texels along a texture's longer side (memory and build time)
 # The detector's orange (OpenCV HSV) widened by a margin: no room texel may fall in it.
 GUARD_LO = (0, 110, 40)
 GUARD_HI = (16, 255, 255)
@@ -141,14 +142,14 @@ class World:
                 Path(tmp) / "floor.png",
                 [(-half, -half, 0.0), (half, -half, 0.0), (half, half, 0.0), (-half, half, 0.0)],
                 (0.0, 0.0, 1.0),
-                make_texture(rng, int(2 * half * 160), int(2 * half * 160)),
+                make_texture(rng, *_texture_size(2 * half, 2 * half, 160)),
             )
             corners = [(-half, -half), (half, -half), (half, half), (-half, half)]
             for i in range(4):
                 (x0, y0), (x1, y1) = corners[i], corners[(i + 1) % 4]
                 # Inward normal: rotate the wall direction by +90° (counter-clockwise room).
                 dx, dy = (x1 - x0) / (2 * half), (y1 - y0) / (2 * half)
-                tex = make_texture(rng, int(2 * half * TEXELS_PER_M), int(wall_h * TEXELS_PER_M))
+                tex = make_texture(rng, *_texture_size(2 * half, wall_h, TEXELS_PER_M))
                 self._quad(
                     Path(tmp) / f"wall{i}.png",
                     [(x0, y0, 0.0), (x1, y1, 0.0), (x1, y1, wall_h), (x0, y0, wall_h)],
@@ -339,6 +340,12 @@ class World:
         tb: TracebackType | None,
     ) -> None:
         self.close()
+
+
+def _texture_size(width_m: float, height_m: float, per_m: int) -> tuple[int, int]:
+    """Texture size for a quad, at ``per_m`` texels per metre but at most MAX_TEXTURE."""
+    scale = min(float(per_m), MAX_TEXTURE / max(width_m, height_m))
+    return max(16, int(width_m * scale)), max(16, int(height_m * scale))
 
 
 def _wrap(a: float) -> float:
