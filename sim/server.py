@@ -3,8 +3,10 @@
 Queryables (payloads are :mod:`agent.protocol` messages):
 
 - ``world/register``: ``RegisterRequest(want)`` -> ``RegisterReply(robot_id)``: the lowest
-  free robot id of the scenario (or ``want`` if it is free). A claim is released when
-  the agent's liveliness token ``nao/alive/{id}`` goes away.
+  free robot id of the scenario (or ``want`` if it is free). An id is taken while it is
+  claimed or while an agent holds its liveliness token ``nao/alive/{id}`` (agents
+  started with a fixed ``--id`` register nothing but hold the token); a claim is
+  released when that token goes away.
 - ``world/robot/{id}/camera``: ``CameraRequest(yaw)`` -> ``CameraReply`` (PNG). Without a
   payload, the selector parameter ``yaw`` (radians) is read instead.
 - ``world/robot/{id}/walk`` / ``turn``: ``WalkRequest`` / ``TurnRequest`` -> a
@@ -129,6 +131,7 @@ class WorldServer:
         self.log = log if log is not None else sys.stderr
         self.inbox: queue.Queue[tuple[str, Any]] = queue.Queue()
         self.claims: set[int] = set()
+        self.alive: set[int] = set()  # ids with a live agent token (nao/alive/{id})
         self.errors = 0
         self.served = 0
         self._pending: dict[int, _Pending] = {}
@@ -229,12 +232,15 @@ class WorldServer:
     def _handle(self, kind: str, item: Any) -> None:
         if kind == "alive":
             key, sample_kind = item
-            if sample_kind == zenoh.SampleKind.DELETE:
-                with contextlib.suppress(ProtocolError):
-                    rid = id_from_key(key)
+            with contextlib.suppress(ProtocolError):
+                rid = id_from_key(key)
+                if sample_kind == zenoh.SampleKind.DELETE:
+                    self.alive.discard(rid)
                     if rid in self.claims:
                         self.claims.discard(rid)
                         self._log(f"robot {rid} released (agent gone)")
+                else:
+                    self.alive.add(rid)
             return
         q = item
         try:
@@ -265,12 +271,15 @@ class WorldServer:
 
     def _register(self, q: Any) -> Message:
         req = self._payload(q, RegisterRequest) if q.payload is not None else RegisterRequest()
-        free = [r for r in self.world.robot_ids if r not in self.claims]
+        taken = self.claims | self.alive
+        free = [r for r in self.world.robot_ids if r not in taken]
         if req.want >= 0:
             if req.want not in self.world.robot_ids:
                 raise ValueError(f"robot {req.want} is not in this world's scenario")
             if req.want in self.claims:
                 raise ValueError(f"robot {req.want} is already claimed")
+            if req.want in self.alive:
+                raise ValueError(f"robot {req.want} is already driven by a live agent")
             rid = req.want
         elif not free:
             raise ValueError(f"every robot is claimed ({list(self.world.robot_ids)})")

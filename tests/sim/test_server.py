@@ -252,19 +252,37 @@ def test_register_hands_out_free_ids(client: Client) -> None:
     assert isinstance(rep, ErrorReply) and "every robot is claimed" in rep.reason
 
 
+def _register_until(client: Client, want: int, done: Any) -> Any:
+    deadline = time.monotonic() + 10.0
+    rep = None
+    while time.monotonic() < deadline:
+        rep = client.ask(KEY_WORLD_REGISTER, RegisterRequest(want=want))
+        if done(rep):
+            break
+        time.sleep(0.05)
+    return rep
+
+
 def test_claim_is_released_when_the_agent_token_goes(client: Client) -> None:
     # After test_register_hands_out_free_ids every robot is claimed.
     rep = client.ask(KEY_WORLD_REGISTER, RegisterRequest(want=1))
-    assert isinstance(rep, ErrorReply)
+    assert isinstance(rep, ErrorReply) and "already claimed" in rep.reason
     token = client.session.liveliness().declare_token("nao/alive/1")
     token.undeclare()
-    deadline = time.monotonic() + 10.0
-    while time.monotonic() < deadline:
-        rep = client.ask(KEY_WORLD_REGISTER, RegisterRequest(want=1))
-        if isinstance(rep, RegisterReply):
-            break
-        time.sleep(0.05)
+    rep = _register_until(client, 1, lambda r: isinstance(r, RegisterReply))
     assert rep == RegisterReply(robot_id=1)
+
+
+def test_a_live_agent_token_takes_its_id(client: Client) -> None:
+    # Robot 3 is claimed; its agent leaves, and one started with a fixed --id 3 comes.
+    gone = client.session.liveliness().declare_token("nao/alive/3")
+    gone.undeclare()
+    fixed = client.session.liveliness().declare_token("nao/alive/3")
+    rep = _register_until(client, 3, lambda r: isinstance(r, ErrorReply) and "live" in r.reason)
+    assert isinstance(rep, ErrorReply) and "driven by a live agent" in rep.reason
+    fixed.undeclare()
+    rep = _register_until(client, 3, lambda r: isinstance(r, RegisterReply))
+    assert rep == RegisterReply(robot_id=3)
 
 
 def test_walk_1m_in_20cm_steps_and_read_the_truth(client: Client) -> None:
