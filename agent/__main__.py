@@ -44,6 +44,11 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument(
         "--wave-timeout", type=float, default=600.0, help="wait limit for earlier waves (s)"
     )
+    p.add_argument(
+        "--no-correct",
+        action="store_true",
+        help="skip the final visual alignment to the parent (the papers' open-loop ending)",
+    )
     p.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
     args = p.parse_args(argv)
     if args.id != "auto":
@@ -118,6 +123,7 @@ def main(argv: list[str] | None = None) -> int:
                 phi_e=math.radians(args.phi_e_deg),
                 timeout=args.timeout,
                 wave_timeout=args.wave_timeout,
+                correct=not args.no_correct,
             ),
             perception=perception,
             formation=formation,

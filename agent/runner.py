@@ -80,6 +80,8 @@ class AgentConfig:
     settle: float = 3.0  # s of unchanged membership when no fleet size is given
     search_yaws: tuple[float, ...] = SEARCH_YAWS
     rotation_tolerance: float = math.radians(2.0)
+    correct: bool = True  # final visual alignment to the parent (see Runner.correct)
+    max_correction: float = 0.3  # m
 
     def __post_init__(self) -> None:
         if self.fleet_size is not None and self.fleet_size < 1:
@@ -156,6 +158,7 @@ class Runner:
         self.compass_failures = 0
         self.compass_uses = 0
         self.compass_gain = 1.0
+        self.final_heading = NORTH
 
     # ================================================================= plumbing
 
@@ -313,11 +316,13 @@ class Runner:
             return commanded
         return dtheta
 
-    def walk_to(self, goal: np.ndarray, progress: Callable[[float], None]) -> None:
+    def walk_to(
+        self, goal: np.ndarray, progress: Callable[[float], None], backward_within: float = 0.0
+    ) -> None:
         """Distance control to ``goal`` (fixed frame, m) from the dead-reckoned position."""
         total = float(np.hypot(*(goal - self.position))) or 1.0
         for _ in range(200):
-            leg = next_leg(self.position, self.heading, goal)
+            leg = next_leg(self.position, self.heading, goal, backward_within=backward_within)
             if leg is None:
                 return
             if abs(leg.turn) > self.cfg.rotation_tolerance:
@@ -338,7 +343,7 @@ class Runner:
                 rep.t_sim, leg.walk, math.degrees(drift), math.degrees(self.heading),
                 self.position.round(3).tolist(),
             )  # fmt: skip
-            progress(1.0 - max(0.0, leg.remaining - leg.walk) / total)
+            progress(1.0 - max(0.0, leg.remaining - abs(leg.walk)) / total)
             if rep.status == "contact":
                 raise AgentFailure(
                     f"contact while walking at believed {self.position.round(2).tolist()}"
@@ -511,6 +516,7 @@ class Runner:
         plan = self.plan
         self._last_frame = None  # others moved meanwhile: a fresh compass reference
         goals, final_heading = self.formation.goals(plan, self.me)
+        self.final_heading = final_heading
         self.status("move", 0.0, f"{len(goals)} leg(s)")
         n = len(goals)
         for k, goal in enumerate(goals):
@@ -521,24 +527,94 @@ class Runner:
             self.walk_to(goal, progress)
         self.rotate(wrap_pi(final_heading - self.heading), PAPER_GAINS, "turn to pyramid axis")
 
+    def _all_arrived(self) -> bool:
+        members = self.agreement.held_members() if self.agreement else ()
+        for i in members:
+            peer = self.peers.get(i, Peer())
+            if i != self.me and peer.alive and peer.phase not in ("hold", "done", "failed"):
+                return False
+        return True
+
+    def correct(self) -> None:
+        """Visual alignment to the parent, once everyone has arrived (an addition).
+
+        The papers walk the plan open-loop; the residual error is dominated by the
+        distance estimates of the search (~10 % at 1.2 m, better at d_e). The pyramid
+        is defined by parent–child offsets (AUV II: robots follow the robot in front
+        by visual servoing), so once the whole fleet has arrived and the parent has
+        finished its own correction (``done``), the child looks at where the plan puts
+        its parent, measures it and steps by the difference. Corrections larger than
+        ``max_correction`` (a wrong match) or below 3 cm are not walked.
+        """
+        plan = self.plan
+        rp = plan.robot(self.me)
+        parent = int(rp.parent)
+        if parent < 0 or not self.cfg.correct or self.perception is None:
+            return
+        deadline = self.clock() + self.cfg.wave_timeout
+        while True:
+            self.pump(0.1)
+            peer = self.peers.get(parent, Peer())
+            if peer.phase == "failed" or (peer.seen_alive and not peer.alive):
+                log.warning("parent %d is gone: no correction", parent)
+                return
+            if peer.phase == "done" and self._all_arrived():
+                break
+            if self.clock() > deadline:
+                log.warning("parent %d did not finish in time: no correction", parent)
+                return
+            self.status("hold", 0.5, f"arrived; waiting for parent {parent}")
+        expected = np.asarray(plan.robot(parent).target, dtype=np.float64) - np.asarray(
+            rp.target, dtype=np.float64
+        )
+        for attempt in range(2):
+            bearing = math.atan2(float(expected[1]), float(expected[0]))
+            yaw = float(np.clip(wrap_pi(bearing - self.heading), -HEAD_YAW_LIMIT, HEAD_YAW_LIMIT))
+            frame = self.look(yaw)
+            dets = self.perception.detector.detect(frame.image, yaw)
+            pts, _, _ = self.perception.to_fixed(dets, self.heading)
+            if len(pts) == 0:
+                log.warning("correction: parent %d not seen", parent)
+                return
+            k = int(np.argmin(np.hypot(*(pts - expected).T)))
+            err = pts[k] - expected
+            size = float(np.hypot(*err))
+            log.info(
+                "correction %d: parent %d seen at %s, planned %s, step %.3f m",
+                attempt + 1, parent, pts[k].round(3).tolist(), expected.round(3).tolist(), size,
+            )  # fmt: skip
+            if size < 0.03:
+                break
+            if size > self.cfg.max_correction:
+                log.warning("correction of %.2f m is implausible: not walked", size)
+                break
+            self.status("hold", 0.75, f"correcting {size:.2f} m towards parent {parent}")
+            self._last_frame = None
+            self.walk_to(self.position + err, lambda p: None, backward_within=0.5)
+            self.rotate(wrap_pi(self.final_heading - self.heading), PAPER_GAINS)
+
     def hold(self) -> None:
-        self.status("hold", 1.0, f"believed {self.position.round(2).tolist()}", force=True)
+        """Arrived: correct against the parent, report ``done`` and stay until all are."""
+        self.status(
+            "hold", 0.5, f"arrived at believed {self.position.round(2).tolist()}", force=True
+        )
+        self.correct()
+        self.status("done", 1.0, "formation held", force=True)
         members = self.agreement.held_members() if self.agreement else ()
         deadline = self.clock() + self.cfg.wave_timeout
         while self.clock() < deadline:
             self.pump(0.2)
-            others = [i for i in members if i != self.me]
             waiting = [
                 i
-                for i in others
-                if self.peers.get(i, Peer()).phase not in ("hold", "done", "failed")
+                for i in members
+                if i != self.me
+                and self.peers.get(i, Peer()).phase not in ("done", "failed")
                 and self.peers.get(i, Peer()).alive
             ]
             if not waiting and (self.agreement is None or not self.agreement.due(self.clock())):
                 break
             if self.clock() - self._last_status >= HEARTBEAT:
-                self.status("hold", 1.0, f"waiting for {waiting} to hold", force=True)
-        self.status("done", 1.0, "formation held", force=True)
+                self.status("done", 1.0, f"formation held; waiting for {waiting}", force=True)
 
     # ================================================================= main
 

@@ -62,11 +62,14 @@ def next_leg(
     goal: np.ndarray | tuple[float, float],
     step: float = STEP_LENGTH,
     tolerance: float = ARRIVE_TOLERANCE,
+    backward_within: float = 0.0,
 ) -> Leg | None:
     """The next leg from ``position`` with ``heading`` (fixed frame) towards ``goal``.
 
     ``None`` when within ``tolerance`` of the goal. The walk is the next equal step
-    of :func:`split_distance` for the remaining distance.
+    of :func:`split_distance` for the remaining distance. A goal behind the robot and
+    closer than ``backward_within`` is reached by stepping backwards (negative walk)
+    instead of turning round: small corrections need no half turn.
     """
     p = _xy(position, "position")
     g = _xy(goal, "goal")
@@ -80,7 +83,11 @@ def next_leg(
         return None
     want = math.atan2(float(delta[1]), float(delta[0]))
     steps = split_distance(remaining, step)
-    return Leg(turn=wrap_pi(want - heading), walk=steps[0], heading=want, remaining=remaining)
+    turn = wrap_pi(want - heading)
+    if abs(turn) > math.pi / 2 and remaining < backward_within:
+        back = wrap_pi(want + math.pi)
+        return Leg(turn=wrap_pi(back - heading), walk=-steps[0], heading=back, remaining=remaining)
+    return Leg(turn=turn, walk=steps[0], heading=want, remaining=remaining)
 
 
 def advance(

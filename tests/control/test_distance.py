@@ -108,3 +108,16 @@ def test_advance_bad_input() -> None:
         advance((0.0, 0.0), math.nan, 0.0, 0.1)
     with pytest.raises(ValueError):
         advance((0.0, 0.0), 0.0, 0.0, math.inf)
+
+
+def test_next_leg_steps_back_for_a_small_correction_behind() -> None:
+    # facing north, goal 10 cm south: step back instead of a half turn
+    leg = next_leg((0.0, 0.0), math.pi / 2, (0.0, -0.1), backward_within=0.3)
+    assert leg is not None
+    assert leg.walk == pytest.approx(-0.1)
+    assert leg.turn == pytest.approx(0.0)
+    # but a far goal behind is walked to forwards
+    far = next_leg((0.0, 0.0), math.pi / 2, (0.0, -1.0), backward_within=0.3)
+    assert far is not None and far.walk > 0 and abs(far.turn) == pytest.approx(math.pi)
+    # dead reckoning of a backward step
+    assert advance((0.0, 0.0), math.pi / 2, math.pi / 2, -0.1) == pytest.approx([0.0, -0.1])
