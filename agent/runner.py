@@ -1,7 +1,8 @@
 """The phase machine of one agent (DESIGN.md §1; NAO paper 5.2.2 (iii) steps 1–7).
 
 SEARCH   sweep the head over [-119.5°, 119.5°] at θ = 0, turn to θ = 180° with the
-         rotation control, sweep again (5.2.2 (iii) step 2).
+         rotation control, sweep again (5.2.2 (iii) step 2); complete the circle to
+         calibrate the compass against the first image (an addition).
 LOCALISE detections → fixed frame (eqs. 7–8) with the compass-estimated heading,
          merged across images.
 EXCHANGE/AGREE publish the record, collect every member's, move only once every live
@@ -10,7 +11,9 @@ PLAN     formation core on the agreed records (4.1.2–4.2): identical on every 
 WAIT     for every robot of earlier waves to hold (leader first, 5.2.2 step 7).
 MOVE     rotation control to face the goal, distance control in 20 cm steps with the
          heading corrected after each (4.2, 5.2.2), then turn to the pyramid axis.
-HOLD     report and stay until the fleet holds.
+HOLD     arrived (status ``hold``); once the whole fleet has arrived and the parent is
+         ``done``, look at the parent and step by the measured offset error (an
+         addition, see :meth:`Runner.correct`), then ``done`` and stay until all are.
 
 Heading belief: the agent's heading in its fixed frame starts at pi/2 (every robot
 faces north at the start, 4.1.1) and changes only by visual-compass measurements of its
