@@ -17,6 +17,10 @@ ENV PYTHONUNBUFFERED=1 \
     MPLBACKEND=Agg \
     PIP_CERT=/etc/ssl/certs/ca-certificates.crt
 
+# iptables: fault injection inside an agent container (LOSS=0.2 in docker-compose.yml).
+RUN apt-get update -qq \
+    && apt-get install -y -qq --no-install-recommends iptables >/dev/null \
+    && rm -rf /var/lib/apt/lists/*
 RUN if [ -n "$EXTRA_CA_CERT" ]; then \
         printf '%s\n' "$EXTRA_CA_CERT" > /usr/local/share/ca-certificates/extra-ca.crt \
         && update-ca-certificates; \

@@ -60,14 +60,25 @@ TERMINAL_PHASES = ("done", "failed")
 # =========================================================================== monitor
 
 
-def monitor(connect: list[str], out: Path, d_e: float, phi_e_deg: float) -> int:
-    """Observe the bus like ``tools.demo`` does, until the orchestrator says the run is over.
+def monitor(
+    connect: list[str],
+    out: Path,
+    d_e: float,
+    phi_e_deg: float,
+    until_done: int = 0,
+    timeout_s: float = 900.0,
+    seed: int | None = None,
+) -> int:
+    """Observe the bus like ``tools.demo`` does, until the run is over; judge it.
 
     Prints ``monitor ready`` once subscribed, then records statuses, records, digests and
-    ground truth (``tools.demo.Observer``, MCAP recording). The orchestrator writes one
-    JSON line to stdin, ``{"ids": [...], "exit_codes": {...}, "timeout": str|null}``;
-    the monitor then drains 1.5 s more and writes ``out/result.json`` (and the formation
-    figure) with ``tools.demo.summarise``.
+    ground truth (``tools.demo.Observer``, MCAP recording). The run is over when the
+    orchestrator writes one JSON line to stdin, ``{"ids": [...], "exit_codes": {...},
+    "timeout": str|null}``, or, with ``until_done=N`` (the compose ``observer``, which
+    cannot see exit codes), when N agents have reached ``done`` or ``failed`` (exit code
+    taken as 0 for ``done``, 1 otherwise) or ``timeout_s`` has passed. It then drains
+    1.5 s more and writes ``out/result.json`` (and the formation figure) with
+    ``tools.demo.summarise``. Returns 0 when the run succeeded.
     """
     from agent.bus import Bus, BusConfig
     from tools import demo
@@ -80,7 +91,9 @@ def monitor(connect: list[str], out: Path, d_e: float, phi_e_deg: float) -> int:
             lines.put(line)
         lines.put("")
 
-    threading.Thread(target=read_stdin, daemon=True).start()
+    if not until_done:
+        threading.Thread(target=read_stdin, daemon=True).start()
+    deadline = time.monotonic() + timeout_s
     rec = demo.Recorder(out / "run.mcap")
     obs = demo.Observer(time.monotonic())
     bus = Bus(BusConfig(connect=tuple(connect), multicast_scouting=False))
@@ -93,6 +106,16 @@ def monitor(connect: list[str], out: Path, d_e: float, phi_e_deg: float) -> int:
             for ev in bus.drain(0.1):
                 if ev.kind == "msg":
                     obs.take(ev.key, ev.msg, rec)
+            if until_done:
+                final = {i: v.phase for i, v in obs.agents.items() if v.phase in TERMINAL_PHASES}
+                late = time.monotonic() > deadline
+                if len(final) >= until_done or late:
+                    order = {
+                        "ids": sorted(obs.agents)[:until_done] if late else sorted(final),
+                        "exit_codes": {str(i): 0 if p == "done" else 1 for i, p in final.items()},
+                        "timeout": f"agents not finished after {timeout_s:g} s" if late else None,
+                    }
+                continue
             with contextlib.suppress(queue.Empty):
                 line = lines.get_nowait()
                 order = json.loads(line) if line.strip() else {}
@@ -108,7 +131,13 @@ def monitor(connect: list[str], out: Path, d_e: float, phi_e_deg: float) -> int:
     for i in ids:
         code = order.get("exit_codes", {}).get(str(i))
         obs.agents.setdefault(i, demo.AgentView()).exit_code = code
-    result: dict[str, Any] = {"robots": len(ids), "d_e": d_e, "phi_e_deg": phi_e_deg}
+    result: dict[str, Any] = {
+        "robots": len(ids),
+        "seed": seed,
+        "d_e": d_e,
+        "phi_e_deg": phi_e_deg,
+        "wall_total": time.monotonic() - obs.t0,  # since the monitor started
+    }
     if order.get("timeout"):
         result["timeout"] = order["timeout"]
     result = demo.summarise(obs, result, out, ids, d_e, math.radians(phi_e_deg), quiet=True)
@@ -124,8 +153,10 @@ def monitor(connect: list[str], out: Path, d_e: float, phi_e_deg: float) -> int:
             t for t in entered if t is not None
         )
     (out / "result.json").write_text(json.dumps(result, indent=2, default=float))
+    if until_done:
+        demo.print_table(result)
     print("monitor done", flush=True)
-    return 0
+    return 0 if result.get("success") else 1
 
 
 # =========================================================================== one run
@@ -235,6 +266,7 @@ def run_once(
                 [
                     py, "-m", "tools.eval_loss", "--monitor", "--connect", router_ep,
                     "--out", str(workdir), "--d-e", str(d_e), "--phi-e-deg", str(phi_e_deg),
+                    "--seed", str(seed),
                 ],
             ),
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=log("monitor"),
@@ -394,17 +426,31 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--loss", default="0,0.1,0.3", help="comma-separated drop probabilities")
     ap.add_argument("--robots", type=int, default=3)
     ap.add_argument("--seeds", type=int, default=3, help="seeds 1..S per loss rate")
+    ap.add_argument("--seed", type=int, default=None, help="with --monitor: the run's seed")
     ap.add_argument("--timeout", type=float, default=300.0, help="seconds per run")
     ap.add_argument("--out", default="out/eval_loss")
     ap.add_argument("--prefix", default="nel", help="namespace prefix (tools.netns)")
     ap.add_argument("--lossy-world", action="store_true", help="drop world traffic too")
     ap.add_argument("--d-e", type=float, default=0.8, help="pyramid distance (m)")
     ap.add_argument("--phi-e-deg", type=float, default=30.0, help="pyramid angle (deg)")
-    ap.add_argument("--monitor", action="store_true", help=argparse.SUPPRESS)
-    ap.add_argument("--connect", action="append", default=[], help=argparse.SUPPRESS)
+    ap.add_argument(
+        "--monitor", action="store_true", help="only observe and judge a run (see monitor())"
+    )
+    ap.add_argument(
+        "--until-done", type=int, default=0, help="with --monitor: stop when N agents finished"
+    )
+    ap.add_argument("--connect", action="append", default=[], help="with --monitor: endpoint")
     args = ap.parse_args(argv)
     if args.monitor:
-        return monitor(args.connect, Path(args.out), args.d_e, args.phi_e_deg)
+        return monitor(
+            args.connect,
+            Path(args.out),
+            args.d_e,
+            args.phi_e_deg,
+            args.until_done,
+            args.timeout,
+            args.seed,
+        )
     try:
         losses = [float(x) for x in args.loss.split(",") if x.strip()]
     except ValueError:

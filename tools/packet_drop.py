@@ -19,7 +19,8 @@ through a router (gossip) also open direct links to each other on ephemeral port
 ``--port 7447`` rule only hits the links to the router, so to make a host lossy as a
 whole (what ``tools.eval_loss`` does) give no port.
 
-``--exempt ADDR`` (repeatable) spares the traffic to and from one peer address: in the
+``--exempt ADDR`` (repeatable; an address, a network or a host name such as the
+compose service ``world``) spares the traffic to and from one peer: in the
 project's loss evaluation the world host is exempt, because on a real NAO the camera and
 the legs are on board and only the robot-to-robot exchange crosses WiFi.
 
@@ -42,6 +43,7 @@ import ipaddress
 import json
 import os
 import shutil
+import socket
 import subprocess
 import sys
 from collections.abc import Sequence
@@ -82,10 +84,18 @@ def _check_loss(loss: float) -> float:
 
 
 def _check_addr(addr: str) -> str:
+    """An IPv4 address/network as iptables wants it; a host name is resolved (containers)."""
     try:
         return str(ipaddress.ip_network(addr, strict=False))
     except ValueError:
-        raise ValueError(f"exempt address {addr!r} is not an IPv4 address or network") from None
+        pass
+    try:
+        infos = socket.getaddrinfo(addr, None, socket.AF_INET)
+    except (socket.gaierror, UnicodeError):
+        raise ValueError(
+            f"exempt address {addr!r} is not an IPv4 address, network or resolvable host name"
+        ) from None
+    return f"{sorted({str(i[4][0]) for i in infos})[0]}/32"
 
 
 def _check_port(port: int | None) -> int | None:

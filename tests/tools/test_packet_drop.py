@@ -50,7 +50,12 @@ def test_bad_port() -> None:
 
 def test_bad_exempt_address() -> None:
     with pytest.raises(ValueError, match="exempt address"):
-        Dropper("x").install(0.1, exempt=["router"])
+        Dropper("x").install(0.1, exempt=["no-such-host.invalid"])
+
+
+def test_exempt_host_name_is_resolved() -> None:
+    assert packet_drop._check_addr("localhost") == "127.0.0.1/32"
+    assert packet_drop._check_addr("10.77.0.0/24") == "10.77.0.0/24"
 
 
 def test_cli_needs_exactly_one_action(capsys: pytest.CaptureFixture[str]) -> None:
