@@ -4,10 +4,11 @@
    session and times ``--requests`` camera queries at varying head yaws: render + PNG
    encode + transfer + decode of the reply (target: median under 100 ms at 640 x 480).
    The in-process render and PNG-encode times are measured too, for the breakdown.
-2. For each fleet size (``--fleets``, default 3, 15, 50) runs the world in-process with
-   every robot kept busy (alternating 0.2 m walks and 15° turns, as the agents do) for
-   ``--sim-seconds`` of sim time and prints how many times faster than real time the
-   clock advanced (target: at least 10x with 15 robots).
+2. For each fleet size (``--fleets``, default 3, 15, 50) keeps every robot busy
+   (alternating 0.2 m walks and 15° turns, as the agents do) for ``--sim-seconds`` of
+   sim time and prints how many times faster than real time the clock advanced (target:
+   at least 10x with 15 robots): in-process (the world's own cost) and with
+   ``python -m sim`` driven over zenoh (each next command sent when the last replies).
 
 Writes ``world_bench.png`` (latency histogram, speed bars) into ``--out`` if given.
 """
@@ -24,6 +25,7 @@ import sys
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -37,54 +39,71 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def camera_latency(requests: int, seed: int) -> list[float]:
-    import zenoh
+class WorldProcess:
+    """``python -m sim`` on a loopback port, waited for until it prints its ready line."""
 
-    from agent.protocol import CameraReply, CameraRequest, decode, encode, key_camera
+    def __init__(self, robots: int, seed: int) -> None:
+        self.endpoint = f"tcp/127.0.0.1:{_free_port()}"
+        self.proc = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "sim",
+                "--robots",
+                str(robots),
+                "--seed",
+                str(seed),
+                "--listen",
+                self.endpoint,
+                "--no-multicast-scouting",
+            ],
+            cwd=ROOT,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.DEVNULL,
+            text=True,
+        )
+        lines: queue.Queue[str] = queue.Queue()
 
-    endpoint = f"tcp/127.0.0.1:{_free_port()}"
-    proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "sim",
-            "--robots",
-            "3",
-            "--seed",
-            str(seed),
-            "--listen",
-            endpoint,
-            "--no-multicast-scouting",
-        ],
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.DEVNULL,
-        text=True,
-    )
-    lines: queue.Queue[str] = queue.Queue()
+        def pump() -> None:
+            assert self.proc.stdout is not None
+            for line in self.proc.stdout:
+                lines.put(line)
 
-    def pump() -> None:
-        assert proc.stdout is not None
-        for line in proc.stdout:
-            lines.put(line)
-
-    threading.Thread(target=pump, daemon=True).start()
-    try:
+        threading.Thread(target=pump, daemon=True).start()
         deadline = time.monotonic() + 60.0
         while time.monotonic() < deadline:
             try:
                 if lines.get(timeout=0.5).startswith("sim ready"):
-                    break
+                    return
             except queue.Empty:
-                if proc.poll() is not None:
+                if self.proc.poll() is not None:
                     raise RuntimeError("the world exited before it was ready") from None
-        else:
-            raise RuntimeError("the world did not get ready within 60 s")
+        self.stop()
+        raise RuntimeError("the world did not get ready within 60 s")
+
+    def session(self) -> Any:
+        import zenoh
+
         cfg = zenoh.Config()
-        cfg.insert_json5("connect/endpoints", json.dumps([endpoint]))
+        cfg.insert_json5("connect/endpoints", json.dumps([self.endpoint]))
         cfg.insert_json5("scouting/multicast/enabled", "false")
+        return zenoh.open(cfg)
+
+    def stop(self) -> None:
+        self.proc.terminate()
+        try:
+            self.proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+
+
+def camera_latency(requests: int, seed: int) -> list[float]:
+    from agent.protocol import CameraReply, CameraRequest, decode, encode, key_camera
+
+    world = WorldProcess(3, seed)
+    try:
         times: list[float] = []
-        with zenoh.open(cfg) as s:
+        with world.session() as s:
             for i in range(requests + 3):
                 yaw = math.radians(-119.5 + (i * 37.0) % 239.0)
                 t0 = time.perf_counter()
@@ -106,11 +125,57 @@ def camera_latency(requests: int, seed: int) -> list[float]:
                     print(f"  camera {i - 2}/{requests}: {dt * 1000:.0f} ms", file=sys.stderr)
         return times
     finally:
-        proc.terminate()
-        try:
-            proc.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
+        world.stop()
+
+
+def sim_speed_bus(n: int, seed: int, sim_seconds: float) -> float:
+    """Sim speed of ``python -m sim`` driven over zenoh: every robot gets its next walk or
+    turn as soon as its previous one replies (what a fleet of agents does at most)."""
+    from agent.protocol import (
+        CommandReply,
+        TurnRequest,
+        WalkRequest,
+        decode,
+        encode,
+        key_turn,
+        key_walk,
+    )
+
+    world = WorldProcess(n, seed)
+    try:
+        replies: queue.Queue[tuple[int, bytes | None]] = queue.Queue()
+        with world.session() as s:
+            count = dict.fromkeys(range(1, n + 1), 0)
+
+            def send(rid: int) -> None:
+                k = count[rid]
+                count[rid] += 1
+                if k % 2 == 0:
+                    key, msg = key_walk(rid), encode(WalkRequest(distance=0.2))
+                else:
+                    angle = math.radians(15.0 if k % 4 == 1 else -15.0)
+                    key, msg = key_turn(rid), encode(TurnRequest(angle=angle))
+
+                def on_reply(r: Any, rid: int = rid) -> None:
+                    replies.put((rid, r.ok.payload.to_bytes() if r.ok is not None else None))
+
+                s.get(key, on_reply, payload=msg, timeout=60.0)
+
+            t0 = time.perf_counter()
+            for rid in range(1, n + 1):
+                send(rid)
+            t_sim = 0.0
+            while t_sim < sim_seconds:
+                rid, data = replies.get(timeout=60.0)
+                if data is None:
+                    raise RuntimeError(f"robot {rid}: error reply")
+                rep = decode(data, expect=CommandReply)
+                t_sim = max(t_sim, rep.t_sim)
+                send(rid)
+            wall = time.perf_counter() - t0
+        return t_sim / wall
+    finally:
+        world.stop()
 
 
 def render_breakdown(n: int, seed: int) -> tuple[float, float, float]:
@@ -185,7 +250,11 @@ def main(argv: list[str] | None = None) -> int:
     for n in fleets:
         print(f"sim speed with {n} robots walking ...", file=sys.stderr)
         speeds[n] = sim_speed(n, args.seed, args.sim_seconds)
-        print(f"sim speed, {n:3d} robots walking: {speeds[n]:7.1f}x real time")
+        bus = sim_speed_bus(n, args.seed, args.sim_seconds)
+        print(
+            f"sim speed, {n:3d} robots walking: {speeds[n]:7.1f}x real time in-process, "
+            f"{bus:7.1f}x driven over zenoh"
+        )
     if args.out:
         import matplotlib
 
