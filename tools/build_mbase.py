@@ -113,7 +113,15 @@ def build(step_deg: float = 5.0, distance: float = 0.6, seed: int = 0) -> MBase:
         },
         "kinds": kinds,
     }
-    return MBase(masks, orient, side, ntup, tops, cents, meta)
+    return MBase(
+        masks,
+        np.asarray(orient),
+        np.asarray(side),
+        np.asarray(ntup),
+        np.asarray(tops),
+        np.asarray(cents),
+        meta,
+    )
 
 
 def main(argv: list[str] | None = None) -> int:

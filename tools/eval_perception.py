@@ -8,7 +8,9 @@ distance and bearing errors (median, p95, share within 0.1 m and 3°), the recog
 time per frame, and the visual compass error per turn step in the textured room.
 
 Labels. A robot counts for recall when its distance is in [0.5, 1.45] m, it is wholly in
-the image and no nearer robot overlaps it (angular extent ±atan(0.15/d)). A detection is
+the image, no nearer robot or clutter cube overlaps it (angular extent ±atan(0.15/d),
+orange band 0.36-0.58 m high) and no clutter cube behind it touches it in the image
+(those are reported apart: their blobs merge with the robot's). A detection is
 true when its bearing lies within a robot's angular extent (+1°) of any robot in view
 (greedy by bearing difference); other detections are false positives. Errors are
 measured on matched robots that count for recall.
@@ -37,6 +39,7 @@ from sim.world import World
 YAW_LIMIT = math.radians(119.5)
 HALF_WIDTH = 0.15  # m: half the shoulder width of a NAO plus a margin
 RANGE = (0.5, 1.45)
+BAND = (0.36, 0.58)  # m: heights of the orange parts (shoulder covers to head cap)
 VIEWS_PER_WORLD = 10
 COMPASS_STEPS_DEG = (5.0, 10.0, 15.0, 20.0, 30.0, 40.0)
 
@@ -50,10 +53,15 @@ class Truth:
     half_angle: float
     in_view: bool = True
     occluded: bool = False
+    overlapped: bool = False  # clutter behind it overlaps it in the image
+
+    @property
+    def in_range(self) -> bool:
+        return RANGE[0] <= self.distance <= RANGE[1] and self.in_view and not self.occluded
 
     @property
     def counts(self) -> bool:
-        return RANGE[0] <= self.distance <= RANGE[1] and self.in_view and not self.occluded
+        return self.in_range and not self.overlapped
 
 
 @dataclass
@@ -83,7 +91,11 @@ def make_world(rng: np.random.Generator, n_robots: int, clutter: bool, seed: int
 
 
 def place(
-    w: World, rng: np.random.Generator, cam: CameraModel, n_others: int, clutter_xy: np.ndarray
+    w: World,
+    rng: np.random.Generator,
+    cam: CameraModel,
+    n_others: int,
+    clutter: tuple[ClutterSpec, ...],
 ) -> tuple[float, list[Truth]]:
     """Random observer pose, head yaw and neighbours; returns the head yaw and the labels."""
     ox, oy = (float(v) for v in rng.uniform(-1.2, 1.2, size=2))
@@ -100,9 +112,8 @@ def place(
             d = float(rng.uniform(0.4, 1.6))
             b = float(rng.uniform(-math.radians(27), math.radians(27)))
             x, y = ox + d * math.cos(view + b), oy + d * math.sin(view + b)
-            if all(math.hypot(x - px, y - py) > 0.45 for px, py in placed) and (
-                clutter_xy.size == 0
-                or np.min(np.hypot(clutter_xy[:, 0] - x, clutter_xy[:, 1] - y)) > 0.25
+            if all(math.hypot(x - px, y - py) > 0.45 for px, py in placed) and all(
+                math.hypot(c.x - x, c.y - y) > 0.25 for c in clutter
             ):
                 break
         placed.append((x, y))
@@ -130,6 +141,23 @@ def place(
             overlap = abs(u.cam_bearing - t.cam_bearing) < u.half_angle + t.half_angle
             if u is not t and u.distance < t.distance and overlap:
                 t.occluded = True
+    cz = cam.height_m
+    for t in truths:  # orange clutter in front (occludes) or behind (overlaps) it
+        dc = HALF_WIDTH / math.tan(t.half_angle)
+        band = (math.atan((BAND[0] - cz) / dc), math.atan((BAND[1] - cz) / dc))
+        for c in clutter:
+            cdist = math.hypot(c.x - ex, c.y - ey)
+            if cdist < 0.05:
+                continue
+            cb = wrap(math.atan2(c.y - ey, c.x - ex) - view)
+            chalf = math.atan(c.size * 0.75 / cdist)
+            lo = math.atan((c.z - c.size / 2 - cz) / cdist)
+            hi = math.atan((c.z + c.size / 2 - cz) / cdist)
+            if abs(cb - t.cam_bearing) < t.half_angle + chalf and lo < band[1] and hi > band[0]:
+                if cdist < dc:
+                    t.occluded = True
+                else:
+                    t.overlapped = True
     return yaw, truths
 
 
@@ -161,19 +189,17 @@ def run_views(
     cam = detector.camera
     out: list[ViewResult] = []
     w: World | None = None
-    clutter_xy = np.zeros((0, 2))
     try:
         for v in range(n_views):
             if v % VIEWS_PER_WORLD == 0:
                 if w is not None:
                     w.close()
                 w = make_world(rng, 3, clutter, seed * 1000 + v)
-                clutter_xy = np.array([[c.x, c.y] for c in w.scenario.clutter]).reshape(-1, 2)
             assert w is not None
             n_others = int(rng.integers(1, 4))
             for rid in range(n_others + 2, 5):  # park unused robots in a corner, facing the wall
                 w.set_pose(rid, -3.3 + 0.5 * rid, -3.5, -math.pi / 2)
-            yaw, truths = place(w, rng, cam, n_others, clutter_xy)
+            yaw, truths = place(w, rng, cam, n_others, w.scenario.clutter)
             img = w.render(1, yaw)
             t0 = time.perf_counter()
             dets = detector.detect(img, yaw)
@@ -232,7 +258,7 @@ def run_compass(seed: int, samples: int, steps_deg: tuple[float, ...]) -> dict[s
 
 
 def summarise(views: list[ViewResult]) -> dict[str, Any]:
-    counted = matched = n_det = false_pos = 0
+    counted = matched = n_det = false_pos = over = over_found = 0
     derr: list[float] = []
     berr: list[float] = []
     for v in views:
@@ -241,6 +267,9 @@ def summarise(views: list[ViewResult]) -> dict[str, Any]:
         false_pos += len(v.detections) - len(paired_d)
         by_t = dict(v.pairs)
         for i, t in enumerate(v.truths):
+            if t.in_range and t.overlapped:
+                over += 1
+                over_found += int(i in by_t)
             if not t.counts:
                 continue
             counted += 1
@@ -256,6 +285,7 @@ def summarise(views: list[ViewResult]) -> dict[str, Any]:
         "views": len(views),
         "robots_counted": counted,
         "recall": matched / counted if counted else float("nan"),
+        "overlapped_by_clutter": {"robots": over, "found": over_found},
         "detections": n_det,
         "false_positives": false_pos,
         "precision": (n_det - false_pos) / n_det if n_det else float("nan"),

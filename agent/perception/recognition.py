@@ -3,7 +3,8 @@
 Every group of 3 tuples (2 for the side postures) is compared with every mask at the
 scale r_g at which the mask just fits into the group's box (Algorithm 1 grows r_g in
 steps of 0.01 until the scaled mask would exceed the group), and the confidence of the
-best mask is λ. The group is an NAO when λ >= λ_th = 0.6.
+best mask is λ. The group is an NAO when λ >= λ_th = 0.6 (0.7 for a 2-tuple group: a
+side posture has fewer features, 5.2.2 (i), and pairs of orange clutter mimic it).
 
 Confidence. The paper's λ = sqrt(a/b) with a = (f*g), b = (f*f) saturates at 1 for any
 orange blob that covers the mask, which would make clutter look like NAOs. We use the
@@ -37,6 +38,9 @@ from agent.perception.mbase import CANON_H, CANON_W, MBase
 from agent.perception.segmentation import Tuple
 
 LAMBDA_TH = 0.6
+# A 2-tuple group (side posture) has fewer features, so lookalikes match it more easily
+# (paper 5.2.2 (i)); it must reach this stricter confidence.
+LAMBDA_TH_PAIR = 0.7
 SCALE_MIN = 0.01
 SCALE_MAX = 1.5
 SCALE_STEP = 0.01
@@ -74,36 +78,45 @@ def group_crop(labels: np.ndarray, tuples: list[Tuple], group: tuple[int, ...]) 
 def candidate_groups(
     tuples: list[Tuple], mbase: MBase, horizon_row: float
 ) -> list[tuple[int, ...]]:
-    """Tuple groups worth scoring: 3-groups (2-groups if side masks exist) whose box size,
-    aspect and height above the horizon could be an NAO at r_g in [0.35, 1.5].
+    """Tuple groups worth scoring: 3-groups (and 2-groups, for the masks with 2 tuples)
+    whose box size, aspect and height above the horizon could be an NAO at r_g in
+    [0.35, 1.5] (vectorised over all combinations).
 
     These gates only drop groups that no mask could match at a plausible distance; they
-    never decide between masks.
+    never decide between masks. Groups come out in combination order.
     """
     if len(tuples) > MAX_TUPLES:  # keep the largest tuples; ties by the sorted order
         keep = sorted(range(len(tuples)), key=lambda i: (-tuples[i].area, i))[:MAX_TUPLES]
         idx = sorted(keep)
     else:
         idx = list(range(len(tuples)))
+    boxes = np.array([tuples[i].box for i in idx], dtype=np.float64).reshape(-1, 4)
+    x0, y0 = boxes[:, 0], boxes[:, 1]
+    x1, y1 = x0 + boxes[:, 2], y0 + boxes[:, 3]
     out: list[tuple[int, ...]] = []
     for n in sorted({int(v) for v in mbase.n_tuples}, reverse=True):
         sel = mbase.n_tuples == n
         if n > len(idx) or not np.any(sel):
             continue
-        w_lo, w_hi = 0.35 * mbase.sizes[sel, 0].min(), 1.5 * mbase.sizes[sel, 0].max()
-        h_lo, h_hi = 0.35 * mbase.sizes[sel, 1].min(), 1.5 * mbase.sizes[sel, 1].max()
-        ar = mbase.sizes[sel, 0] / mbase.sizes[sel, 1]
-        ar_lo, ar_hi = 0.75 * ar.min(), 1.33 * ar.max()
-        top = mbase.top_offset[sel]
-        for group in itertools.combinations(idx, n):
-            _x, y, w, h = group_box(tuples, group)
-            if not (w_lo <= w <= w_hi and h_lo <= h <= h_hi and ar_lo <= w / h <= ar_hi):
-                continue
-            # the crop's top must lie where some mask's top would be at this size
-            rg = h / mbase.sizes[sel, 1]
-            if not np.any(np.abs(y - (horizon_row + rg * top)) <= 0.3 * h + 6):
-                continue
-            out.append(group)
+        combos = np.array(list(itertools.combinations(range(len(idx)), n)), dtype=np.int64)
+        gx0, gy0 = x0[combos].min(axis=1), y0[combos].min(axis=1)
+        w = x1[combos].max(axis=1) - gx0
+        h = y1[combos].max(axis=1) - gy0
+        sizes = mbase.sizes[sel]
+        ar = sizes[:, 0] / sizes[:, 1]
+        ok = (
+            (w >= 0.35 * sizes[:, 0].min())
+            & (w <= 1.5 * sizes[:, 0].max())
+            & (h >= 0.35 * sizes[:, 1].min())
+            & (h <= 1.5 * sizes[:, 1].max())
+            & (w / h >= 0.75 * ar.min())
+            & (w / h <= 1.33 * ar.max())
+        )
+        # the crop's top must lie where some mask's top would be at this size
+        rg = h[:, None] / sizes[None, :, 1]
+        expect = horizon_row + rg * mbase.top_offset[sel][None, :]
+        ok &= np.any(np.abs(gy0[:, None] - expect) <= 0.3 * h[:, None] + 6, axis=1)
+        out.extend(tuple(idx[int(i)] for i in c) for c in combos[ok])
     return out
 
 
@@ -185,7 +198,7 @@ def recognise(
     for gi, g in enumerate(groups):
         k = int(best[gi])
         v = float(lam[gi, k])
-        if v >= threshold:
+        if v >= (max(threshold, LAMBDA_TH_PAIR) if len(g) == 2 else threshold):
             box = group_box(tuples, g)
             cand.append((-v, -len(g), box[0], box[1], gi, k))
     cand.sort()
