@@ -194,12 +194,14 @@ class WorldServer:
                 self._publish_truth()
                 next_truth = now + self.truth_period
             if loco.active:
-                self._drain(block=False)
+                # Serving requests costs no sim time: when pacing, the wall time spent on
+                # them (a render) moves the pacing origin instead of causing a catch-up.
+                pace_wall += self._drain(block=False)
                 if self.speed > 0:
                     target = pace_wall + (self.world.t_sim + loco.dt - pace_sim) / self.speed
                     delay = target - time.monotonic()
                     if delay > 0:
-                        self._drain(block=True, timeout=delay)
+                        pace_wall += self._drain(block=True, timeout=delay)
                 done, contacts = loco.step()
                 if done or contacts:
                     self._finish(done, contacts)
@@ -208,23 +210,28 @@ class WorldServer:
                 pace_wall = time.monotonic()
                 pace_sim = self.world.t_sim
 
-    def _drain(self, block: bool, timeout: float = 0.0) -> None:
+    def _drain(self, block: bool, timeout: float = 0.0) -> float:
+        """Handle queued requests (waiting up to ``timeout`` for the first if ``block``);
+        returns the wall time spent handling them (not waiting)."""
         deadline = time.monotonic() + timeout
+        spent = 0.0
         while True:
             try:
                 if block:
                     left = deadline - time.monotonic()
                     if left <= 0:
-                        return
+                        return spent
                     kind, item = self.inbox.get(timeout=left)
                 else:
                     kind, item = self.inbox.get_nowait()
             except queue.Empty:
-                return
+                return spent
+            t0 = time.monotonic()
             try:
                 self._handle(kind, item)
             except Exception as exc:  # never let one request take the world down
                 self._log(f"error handling {kind}: {type(exc).__name__}: {exc}")
+            spent += time.monotonic() - t0
             block = False
 
     # ------------------------------------------------------------------ requests
