@@ -86,7 +86,12 @@ def main(argv: list[str] | None = None) -> int:
     except (OSError, ValueError) as exc:
         print(f"sim: {exc}", file=sys.stderr)
         return 2
-    with World(sc, gui=args.gui, noise=not args.no_noise) as world:
+    try:
+        world = World(sc, gui=args.gui, noise=not args.no_noise)
+    except ValueError as exc:
+        print(f"sim: {exc}", file=sys.stderr)
+        return 2
+    with world:
         server = WorldServer(world, net, speed=args.speed, truth_rate=args.truth_rate)
 
         def on_signal(signum: int, frame: Any) -> None:

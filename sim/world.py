@@ -17,6 +17,8 @@ in-process API; :mod:`sim.server` puts it on the bus.
 from __future__ import annotations
 
 import math
+import os
+import sys
 import tempfile
 from pathlib import Path
 from types import TracebackType
@@ -105,6 +107,9 @@ class World:
     def __init__(self, scenario: Scenario, *, gui: bool = False, noise: bool = True) -> None:
         self.scenario = scenario
         self.noise = noise
+        if gui and sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
+            # PyBullet's GUI would end the whole process on a missing X server.
+            raise ValueError("the GUI needs a display, and DISPLAY is not set")
         self._client = int(pb.connect(pb.GUI if gui else pb.DIRECT))
         if self._client < 0:
             raise RuntimeError("cannot connect to PyBullet")

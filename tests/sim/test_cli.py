@@ -38,3 +38,11 @@ def test_help_documents_the_stable_flags() -> None:
     for flag in ("--robots", "--seed", "--scenario", "--connect", "--listen",
                  "--no-multicast-scouting", "--mode", "--gui", "--speed"):  # fmt: skip
         assert flag in text
+
+
+def test_gui_without_a_display(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.delenv("DISPLAY", raising=False)
+    assert main(["--robots", "1", "--gui"]) == 2
+    assert "DISPLAY" in capsys.readouterr().err
