@@ -140,7 +140,7 @@ class World:
             self._head[r.id] = 0.0
         rng = np.random.default_rng([sc.seed, 0x5EED])
         half = sc.room
-        wall_h = 1.0 + 0.9 * half
+        wall_h = 0.8 + 1.2 * half  # the top of the view from a far corner stays on the wall
         with tempfile.TemporaryDirectory(prefix="nao-sim-") as tmp:
             # Floor: z = 0, seen from above.
             self._quad(
