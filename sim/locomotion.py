@@ -14,10 +14,12 @@ spot at :data:`TURN_RATE`. All active commands advance together in fixed steps o
 robot id, so results do not depend on what other robots do):
 
 - walk distance: actual = commanded × (1 + N(0, 0.04));
-- walk heading: a curvature κ ~ N(0, 0.35 rad/m) drawn per command plus a random walk of
-  0.12 rad/√m, i.e. after a segment of length s the heading error has
-  σ = sqrt((0.35 s)² + 0.12² s): 0.09 rad at 0.2 m, 0.37 rad at 1.0 m (Table 2: mean |e|
-  ≈ 0.11 rad at 0.2 m, ≈ 0.4 rad at 0.8-1.0 m);
+- walk heading: a curvature κ = κ_r + κ_c plus a random walk of 0.10 rad/√m, where
+  κ_r ~ N(0, 0.30 rad/m) is the robot's own drift (drawn once per robot: a NAO tends to
+  veer to the same side, as the mostly positive long-distance errors of Table 2 show)
+  and κ_c ~ N(0, 0.20 rad/m) is drawn per command. Over robots, after a segment of length
+  s the heading error has σ = sqrt(0.13 s² + 0.01 s): 0.09 rad at 0.2 m, 0.37 rad at
+  1.0 m (Table 2, one NAO: |e| 0.02-0.10 rad at 0.2 m, 0.33-0.45 rad at 0.8-1.0 m);
 - turn: actual = commanded × (1 + N(0, 0.05)) + N(0, 0.02 rad).
 
 **Contacts.** Each robot is a disc of radius :data:`~sim.nao_model.FOOTPRINT_RADIUS`
@@ -49,14 +51,15 @@ MAX_ANGLE = 4 * math.pi  # rad, largest accepted turn command
 @dataclass(frozen=True)
 class NoiseModel:
     distance_scale: float = 0.04  # σ of the relative distance error
-    curvature: float = 0.35  # σ of the per-command heading drift, rad per metre
-    heading_walk: float = 0.12  # σ of the heading random walk, rad per sqrt(metre)
+    curvature_bias: float = 0.30  # σ of each robot's own heading drift, rad per metre
+    curvature: float = 0.20  # σ of the per-command heading drift, rad per metre
+    heading_walk: float = 0.10  # σ of the heading random walk, rad per sqrt(metre)
     turn_scale: float = 0.05  # σ of the relative turn error
     turn_offset: float = 0.02  # σ of the absolute turn error, rad
 
     @staticmethod
     def none() -> NoiseModel:
-        return NoiseModel(0.0, 0.0, 0.0, 0.0, 0.0)
+        return NoiseModel(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 
 
 @dataclass(frozen=True)
@@ -130,6 +133,11 @@ class Locomotion:
         self._rngs = {
             rid: np.random.default_rng([seed, rid, 0x1E65]) for rid in sorted(world.robot_ids)
         }
+        # Each robot's own drift: the first draw of its generator.
+        self.drift = {
+            rid: self.noise.curvature_bias * float(rng.standard_normal())
+            for rid, rng in self._rngs.items()
+        }
         self._active: dict[int, _Motion] = {}
 
     # ------------------------------------------------------------------ commands
@@ -160,7 +168,7 @@ class Locomotion:
         rng = self._check_free(robot_id)
         n = self.noise
         actual = abs(d) * max(0.0, 1.0 + n.distance_scale * float(rng.standard_normal()))
-        kappa = n.curvature * float(rng.standard_normal())
+        kappa = self.drift[robot_id] + n.curvature * float(rng.standard_normal())
         self._active[robot_id] = _Motion(
             "walk", actual, 1.0 if d >= 0 else -1.0, WALK_SPEED if d >= 0 else BACK_SPEED, kappa
         )
