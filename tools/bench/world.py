@@ -10,7 +10,11 @@
    at least 10x with 15 robots): in-process (the world's own cost) and with
    ``python -m sim`` driven over zenoh (each next command sent when the last replies).
 
-Writes ``world_bench.png`` (latency histogram, speed bars) into ``--out`` if given.
+3. Prints the heading error of one open-loop walk over 300 seeded robots against the NAO
+   paper's Table 2.
+
+Writes ``world_bench.png`` (latency histogram, speed bars) and ``noise_vs_table2.png``
+into ``--out`` if given.
 """
 
 from __future__ import annotations
@@ -223,6 +227,71 @@ def sim_speed(n: int, seed: int, sim_seconds: float) -> float:
     return loco.t_sim / wall
 
 
+# NAO paper Table 2: (distance m, heading error rad) of one NAO walking open loop; the two
+# starred values (0.3 m: 0.3734, 0.7 m: 0.5292) are the paper's "heave sway" outliers.
+TABLE2 = (
+    (0.2, -0.0211), (0.2, 0.0957), (0.3, 0.3734), (0.3, -0.0379), (0.4, 0.0125),
+    (0.4, -0.1579), (0.5, 0.1374), (0.5, 0.1698), (0.7, 0.5292), (0.7, 0.2274),
+    (0.8, 0.334), (0.8, 0.4465), (1.0, 0.4493), (1.0, 0.4062),
+)  # fmt: skip
+
+
+def noise_vs_table2(robots: int, out: Path | None) -> None:
+    """Heading error after one open-loop walk, over seeded robots, against Table 2."""
+    from sim.locomotion import Locomotion
+
+    class Store:
+        robot_ids: tuple[int, ...] = (1,)
+
+        def __init__(self) -> None:
+            self.p = (0.0, 0.0, math.pi / 2)
+
+        def pose(self, robot_id: int) -> tuple[float, float, float]:
+            return self.p
+
+        def set_pose(self, robot_id: int, x: float, y: float, heading: float) -> None:
+            self.p = (x, y, heading)
+
+    dists = (0.2, 0.3, 0.4, 0.5, 0.7, 0.8, 1.0)
+    errs: dict[float, np.ndarray] = {}
+    for d in dists:
+        e: list[float] = []
+        for seed in range(robots):
+            st = Store()
+            loco = Locomotion(st, seed=seed)
+            loco.walk(1, d)
+            loco.run_until_idle()
+            e.append(st.p[2] - math.pi / 2)
+        errs[d] = np.array(e)
+    print("heading error after one walk (rad): distance, model RMS, model mean|e|, Table 2")
+    for d in dists:
+        t2 = ", ".join(f"{v:+.3f}" for dd, v in TABLE2 if dd == d)
+        ed = errs[d]
+        print(f"  {d:.1f} m: {np.sqrt(np.mean(ed**2)):.3f}  {np.mean(np.abs(ed)):.3f}   [{t2}]")
+    if out is None:
+        return
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for d in dists:
+        ax.scatter(np.full(60, d) + np.linspace(-0.02, 0.02, 60), errs[d][:60], s=4, c="0.6")
+    rms = [float(np.sqrt(np.mean(errs[d] ** 2))) for d in dists]
+    ax.plot(dists, rms, "b-", label="model RMS (over robots)")
+    ax.plot(dists, [-r for r in rms], "b-")
+    ax.scatter([d for d, _ in TABLE2], [e for _, e in TABLE2], c="r", marker="x", s=40,
+               label="NAO paper Table 2")  # fmt: skip
+    ax.set_xlabel("open-loop walk (m)")
+    ax.set_ylabel("heading error (rad)")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(out / "noise_vs_table2.png", dpi=90)
+    plt.close(fig)
+    print(f"wrote {out / 'noise_vs_table2.png'}")
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(
         prog="python -m tools.bench world", description=__doc__.split("\n")[0]
@@ -233,6 +302,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--out", help="directory for world_bench.png")
     args = p.parse_args(argv)
+    if args.out:
+        Path(args.out).mkdir(parents=True, exist_ok=True)
     try:
         fleets = [int(v) for v in args.fleets.split(",") if v]
     except ValueError:
@@ -255,6 +326,7 @@ def main(argv: list[str] | None = None) -> int:
             f"sim speed, {n:3d} robots walking: {speeds[n]:7.1f}x real time in-process, "
             f"{bus:7.1f}x driven over zenoh"
         )
+    noise_vs_table2(300, Path(args.out) if args.out else None)
     if args.out:
         import matplotlib
 
@@ -262,7 +334,6 @@ def main(argv: list[str] | None = None) -> int:
         import matplotlib.pyplot as plt
 
         out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
         fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4))
         a.hist(lat, bins=20)
         a.axvline(100, color="r", ls="--", label="target 100 ms")
