@@ -34,6 +34,7 @@ import queue
 import sys
 import threading
 import time
+from collections import Counter, defaultdict
 from dataclasses import dataclass
 from typing import Any
 
@@ -134,6 +135,8 @@ class WorldServer:
         self.alive: set[int] = set()  # ids with a live agent token (nao/alive/{id})
         self.errors = 0
         self.served = 0
+        self.counts: Counter[str] = Counter()  # requests handled, by kind
+        self.busy_s: dict[str, float] = defaultdict(float)  # wall seconds on them, by kind
         self._pending: dict[int, _Pending] = {}
         self._stop = threading.Event()
         self._keep: list[Any] = []
@@ -164,7 +167,21 @@ class WorldServer:
             for k in (KEY_WORLD_CLOCK, KEY_WORLD_TRUTH_POSES, KEY_WORLD_TRUTH_CONTACTS)
         }
 
+    def summary(self) -> str:
+        """One line: requests by kind (mean handling time), errors, contacts, sim time."""
+        parts = [
+            f"{k}={self.counts[k]} ({1000 * self.busy_s[k] / self.counts[k]:.0f} ms)"
+            for k in ("camera", "walk", "turn", "register")
+            if self.counts[k]
+        ]
+        return (
+            f"served {' '.join(parts) or 'nothing'}; errors={self.errors} "
+            f"contacts={self.world.locomotion.contacts} t_sim={self.world.t_sim:.2f} s"
+        )
+
     def close(self) -> None:
+        if self.session is not None:
+            self._log(self.summary())
         for p in list(self._pending.values()):
             self._reply(p.query, ErrorReply(reason="world shutting down"))
         self._pending.clear()
@@ -231,7 +248,10 @@ class WorldServer:
                 self._handle(kind, item)
             except Exception as exc:  # never let one request take the world down
                 self._log(f"error handling {kind}: {type(exc).__name__}: {exc}")
-            spent += time.monotonic() - t0
+            dt = time.monotonic() - t0
+            spent += dt
+            self.counts[kind] += 1
+            self.busy_s[kind] += dt
             block = False
 
     # ------------------------------------------------------------------ requests
