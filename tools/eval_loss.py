@@ -489,7 +489,7 @@ def main(argv: list[str] | None = None) -> int:
             results.append(r)
             print(
                 f"[{n}/{total}] {'OK  ' if r.success else 'FAIL'} {r.reason}; agree "
-                f"{_fmt(r.agree_s, '.1f')} s, bytes/agent {r.bytes_per_agent}, "
+                f"{_fmt(r.agree_s, '.2f')} s, bytes/agent {r.bytes_per_agent}, "
                 f"dropped {r.dropped_packets} pkts, wall {r.wall_s:.0f} s",
                 file=sys.stderr,
                 flush=True,
@@ -511,7 +511,7 @@ def main(argv: list[str] | None = None) -> int:
     for row in rows:
         print(
             f"{row['loss']:6.2f} {row['runs']:5d} {row['success_rate']:8.0%} "
-            f"{_fmt(row['agree_s_mean'], '8.1f')} {_fmt(row['agree_s_max'], '7.1f')} "
+            f"{_fmt(row['agree_s_mean'], '8.2f')} {_fmt(row['agree_s_max'], '7.2f')} "
             f"{_fmt(row['bytes_per_agent_mean'], '9.0f')} "
             f"{_fmt(row['exchange_bytes_per_agent_mean'], '8.0f')} {row['dropped_packets_mean']:8.0f}"
         )
