@@ -1,0 +1,69 @@
+"""tools/demo.py evaluation helpers: known answers worked by hand."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+
+from tools.demo import (
+    AgentView,
+    Observer,
+    evaluate,
+    min_separation,
+    robot_ids,
+    summarise,
+)
+
+
+def test_evaluate_perfect_pyramid_facing_north() -> None:
+    d, phi = 0.8, math.radians(30)
+    # leader 1 at origin facing +y; children behind-left (2) and behind-right (3)
+    final = {
+        1: (0.0, 0.0, math.pi / 2),
+        2: (-d * math.sin(phi), -d * math.cos(phi), math.pi / 2),
+        3: (d * math.sin(phi), -d * math.cos(phi), math.pi / 2),
+    }
+    rows = evaluate(final, [(2, 1), (3, 1)], math.pi / 2, d, phi)
+    for r in rows:
+        assert r["distance"] == pytest.approx(0.8)
+        assert r["angle_deg"] == pytest.approx(30.0)
+        assert r["r_d"] == pytest.approx(0.0, abs=1e-12)
+        assert r["r_phi"] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_evaluate_errors_known_answer() -> None:
+    # child 0.9 m straight behind the parent: r_d = +12.5 %, angle 0 -> r_phi = -100 %
+    final = {1: (0.0, 0.0, 0.0), 2: (-0.9, 0.0, 0.0)}
+    (r,) = evaluate(final, [(2, 1)], 0.0, 0.8, math.radians(30))
+    assert r["r_d"] == pytest.approx(0.125)
+    assert r["angle_deg"] == pytest.approx(0.0, abs=1e-6)
+    assert r["r_phi"] == pytest.approx(-1.0)
+
+
+def test_min_separation() -> None:
+    obs = Observer(0.0)
+    obs.truth = [
+        (0.0, {1: (0.0, 0.0, 0.0), 2: (1.0, 0.0, 0.0)}),
+        (1.0, {1: (0.0, 0.0, 0.0), 2: (0.5, 0.0, 0.0)}),
+    ]
+    assert min_separation(obs) == pytest.approx(0.5)
+
+
+def test_robot_ids_from_ready_line() -> None:
+    assert robot_ids(["x", "sim ready robots=3,1,2 room=6 seed=1"], 3) == [1, 2, 3]
+    with pytest.raises(RuntimeError, match="asked for 4"):
+        robot_ids(["sim ready robots=1,2,3 room=6"], 4)
+    with pytest.raises(RuntimeError, match="without robot ids"):
+        robot_ids(["sim ready"], 3)
+
+
+def test_summarise_failure_without_truth(tmp_path: Path) -> None:
+    obs = Observer(0.0)
+    obs.agents[1] = AgentView(phase="failed", error="no agreement", exit_code=1)
+    r = summarise(obs, {"robots": 1, "seed": 0, "d_e": 0.8, "phi_e_deg": 30.0}, tmp_path, [1],
+                  0.8, math.radians(30), quiet=True)  # fmt: skip
+    assert r["success"] is False
+    assert r["errors"] == {"1": "no agreement"}
+    assert (tmp_path / "result.json").is_file()
