@@ -376,3 +376,30 @@ def test_client_cli(
     assert cli.main([*common, "camera", "3", "--yaw", "150"]) == 1
     assert "outside" in capsys.readouterr().err
     assert cli.main([*common, "walk", "8", "0.2"]) == 1
+
+
+def test_concurrent_clients_are_all_served(client: Client) -> None:
+    # Three robots' worth of traffic at once: camera sweeps and a turn each.
+    results: queue.Queue[Any] = queue.Queue()
+
+    def agent(rid: int) -> None:
+        try:
+            for k in range(3):
+                yaw = math.radians(-60.0 + 60.0 * k)
+                rep = client.ask(key_camera(rid), CameraRequest(yaw=yaw), timeout=60.0)
+                results.put((rid, "camera", isinstance(rep, CameraReply) and rep.robot_id == rid))
+            rep = client.ask(key_turn(rid), TurnRequest(angle=0.2), timeout=60.0)
+            results.put((rid, "turn", isinstance(rep, CommandReply) and rep.status == "done"))
+        except Exception as exc:  # report, do not hang the test
+            results.put((rid, "exception", repr(exc)))
+
+    threads = [threading.Thread(target=agent, args=(rid,)) for rid in (1, 2, 3)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=120.0)
+    got = []
+    while not results.empty():
+        got.append(results.get())
+    assert len(got) == 12, got
+    assert all(ok is True for _, _, ok in got), got
