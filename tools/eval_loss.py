@@ -39,12 +39,14 @@ import json
 import math
 import os
 import queue
+import signal
 import subprocess
 import sys
 import threading
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from types import FrameType
 from typing import Any
 
 from agent import protocol as P
@@ -472,6 +474,19 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+
+    def on_term(signum: int, frame: FrameType | None) -> None:
+        raise KeyboardInterrupt  # unwinds through netns.Fabric, which tears the hosts down
+
+    signal.signal(signal.SIGTERM, on_term)
+    try:
+        return _evaluate(args, losses, out)
+    except KeyboardInterrupt:
+        print("eval_loss: interrupted; test hosts removed", file=sys.stderr)
+        return 130
+
+
+def _evaluate(args: argparse.Namespace, losses: list[float], out: Path) -> int:
     results: list[RunResult] = []
     total = len(losses) * args.seeds
     for loss in losses:
