@@ -83,6 +83,9 @@ class AgentConfig:
     settle: float = 3.0  # s of unchanged membership when no fleet size is given
     search_yaws: tuple[float, ...] = SEARCH_YAWS
     rotation_tolerance: float = math.radians(2.0)
+    # Re-publication backoff cap: a peer that lacks our record says so in its digest,
+    # which re-arms us at once, so long waits (others still searching) need few re-sends.
+    backoff_max: float = 16.0
     correct: bool = True  # final visual alignment to the parent (see Runner.correct)
     max_correction: float = 0.3  # m
 
@@ -447,6 +450,7 @@ class Runner:
             fleet_size=self.cfg.fleet_size,
             timeout=self.cfg.timeout,
             settle=self.cfg.settle,
+            backoff_max=self.cfg.backoff_max,
         )
         for rid, peer in sorted(self.peers.items()):
             if rid != self.me and peer.alive:
