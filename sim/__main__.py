@@ -45,6 +45,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--truth-rate", type=float, default=10.0, help="truth/clock publications per s")
     p.add_argument(
+        "--render-workers",
+        type=int,
+        default=0,
+        help="render camera images in K worker processes (default 0: in the world process)",
+    )
+    p.add_argument(
         "--connect", action="append", default=[], help="zenoh endpoint to connect to (repeatable)"
     )
     p.add_argument(
@@ -92,7 +98,17 @@ def main(argv: list[str] | None = None) -> int:
         print(f"sim: {exc}", file=sys.stderr)
         return 2
     with world:
-        server = WorldServer(world, net, speed=args.speed, truth_rate=args.truth_rate)
+        try:
+            server = WorldServer(
+                world,
+                net,
+                speed=args.speed,
+                truth_rate=args.truth_rate,
+                render_workers=args.render_workers,
+            )
+        except ValueError as exc:
+            print(f"sim: {exc}", file=sys.stderr)
+            return 2
 
         def on_signal(signum: int, frame: Any) -> None:
             server.stop()

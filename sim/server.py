@@ -64,15 +64,10 @@ from agent.protocol import (
     encode,
     id_from_key,
 )
+from sim import camera
 from sim.locomotion import Contact, Done
+from sim.render_pool import PNG_PARAMS, Job, RenderPool, Result
 from sim.world import World
-
-PNG_PARAMS = [
-    cv2.IMWRITE_PNG_COMPRESSION,
-    1,
-    cv2.IMWRITE_PNG_STRATEGY,
-    cv2.IMWRITE_PNG_STRATEGY_RLE,
-]
 
 
 @dataclass(frozen=True)
@@ -119,6 +114,7 @@ class WorldServer:
         *,
         speed: float = 0.0,
         truth_rate: float = 10.0,
+        render_workers: int = 0,
         log: Any = None,
     ) -> None:
         if not (math.isfinite(speed) and speed >= 0):
@@ -138,6 +134,12 @@ class WorldServer:
         self.counts: Counter[str] = Counter()  # requests handled, by kind
         self.busy_s: dict[str, float] = defaultdict(float)  # wall seconds on them, by kind
         self._pending: dict[int, _Pending] = {}
+        if isinstance(render_workers, bool) or not 0 <= render_workers <= 16:
+            raise ValueError(f"render workers {render_workers!r} must be in [0, 16]")
+        self.render_workers = render_workers
+        self.pool: RenderPool | None = None
+        self._cam_pending: dict[int, tuple[Any, int, float, float]] = {}
+        self._next_job = 0
         self._stop = threading.Event()
         self._keep: list[Any] = []
         self.session: Any = None
@@ -145,6 +147,12 @@ class WorldServer:
     # ------------------------------------------------------------------ setup
 
     def open(self) -> None:
+        if self.render_workers > 0:
+            self.pool = RenderPool(
+                self.world.scenario,
+                self.render_workers,
+                lambda r: self.inbox.put(("rendered", r)),
+            )
         self.session = zenoh.open(self.net.to_zenoh())
         s = self.session
 
@@ -185,6 +193,12 @@ class WorldServer:
         for p in list(self._pending.values()):
             self._reply(p.query, ErrorReply(reason="world shutting down"))
         self._pending.clear()
+        for q, *_ in list(self._cam_pending.values()):
+            self._reply(q, ErrorReply(reason="world shutting down"))
+        self._cam_pending.clear()
+        if self.pool is not None:
+            self.pool.close()
+            self.pool = None
         for obj in reversed(self._keep):
             with contextlib.suppress(Exception):
                 obj.undeclare()
@@ -269,6 +283,9 @@ class WorldServer:
                 else:
                     self.alive.add(rid)
             return
+        if kind == "rendered":
+            self._rendered(item)
+            return
         q = item
         try:
             if kind == "register":
@@ -278,7 +295,9 @@ class WorldServer:
             if rid not in self.world.robot_ids:
                 raise ValueError(f"unknown robot {rid}; robots are {list(self.world.robot_ids)}")
             if kind == "camera":
-                self._reply(q, self._camera(q, rid))
+                rep = self._camera(q, rid)
+                if rep is not None:  # else a render worker has it
+                    self._reply(q, rep)
             elif kind == "walk":
                 w = self._payload(q, WalkRequest)
                 self._start(q, rid, "walk", lambda: self.world.locomotion.walk(rid, w.distance))
@@ -316,7 +335,7 @@ class WorldServer:
         self._log(f"robot {rid} claimed")
         return RegisterReply(robot_id=rid)
 
-    def _camera(self, q: Any, rid: int) -> Message:
+    def _camera(self, q: Any, rid: int) -> Message | None:
         if q.payload is not None:
             yaw = self._payload(q, CameraRequest).yaw
         else:
@@ -325,6 +344,24 @@ class WorldServer:
                 yaw = float(raw) if raw is not None else 0.0
             except ValueError:
                 raise ValueError(f"yaw parameter {raw!r} is not a number") from None
+        yaw = camera.check_yaw(yaw)
+        if self.pool is not None and self.pool.alive > 0:
+            # The state the picture depends on is taken now; a worker draws it.
+            self.world.set_head_yaw(rid, yaw)
+            job = Job(
+                self._next_job,
+                rid,
+                yaw,
+                self.world.poses(),
+                {r: self.world.head_yaw(r) for r in self.world.robot_ids},
+            )
+            self._next_job += 1
+            self._cam_pending[job.job_id] = (q, rid, yaw, self.world.t_sim)
+            self.pool.submit(job)
+            return None
+        return self._render_here(rid, yaw, self.world.t_sim)
+
+    def _render_here(self, rid: int, yaw: float, t_sim: float) -> Message:
         img = self.world.render(rid, yaw)
         ok, png = cv2.imencode(".png", img, PNG_PARAMS)
         if not ok:
@@ -332,12 +369,42 @@ class WorldServer:
         return CameraReply(
             robot_id=rid,
             yaw=self.world.head_yaw(rid),
-            t_sim=self.world.t_sim,
+            t_sim=t_sim,
             width=img.shape[1],
             height=img.shape[0],
             encoding="png",
             data=png.tobytes(),
         )
+
+    def _rendered(self, res: Result) -> None:
+        """A worker's picture (or failure) for a pending camera request."""
+        assert self.pool is not None
+        self.pool.worker_done(res)
+        pending = self._cam_pending.pop(res.job_id, None)
+        if pending is not None:
+            q, rid, yaw, t_sim = pending
+            if res.error:
+                self.errors += 1
+                self._log(f"camera robot {rid}: render failed: {res.error}")
+                self._reply(q, ErrorReply(reason=f"render failed: {res.error}"[:500]))
+            else:
+                msg = CameraReply(
+                    robot_id=rid,
+                    yaw=yaw,
+                    t_sim=t_sim,
+                    width=camera.WIDTH,
+                    height=camera.HEIGHT,
+                    encoding="png",
+                    data=res.png,
+                )
+                self._reply(q, msg)
+        if res.dead:
+            self._log(f"render worker {res.worker} died; {self.pool.alive} left")
+            if self.pool.alive == 0:  # render what is left here, and from now on
+                for job in self.pool.take_backlog():
+                    left = self._cam_pending.pop(job.job_id, None)
+                    if left is not None:
+                        self._reply(left[0], self._render_here(job.robot_id, job.yaw, left[3]))
 
     def _start(self, q: Any, rid: int, kind: str, start: Any) -> None:
         if rid in self._pending or self.world.locomotion.busy(rid):

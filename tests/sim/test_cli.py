@@ -16,6 +16,8 @@ from sim.__main__ import build_parser, main
         (["--speed", "-1"], "--speed"),
         (["--speed", "nan"], "--speed"),
         (["--truth-rate", "0"], "--truth-rate"),
+        (["--render-workers", "17"], "render workers"),
+        (["--render-workers", "-1"], "render workers"),
         (["--light", "9"], "light intensity"),
         (["--listen", "nonsense"], "endpoint"),
         (["--scenario", "/nonexistent.json"], "No such file"),

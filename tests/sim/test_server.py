@@ -103,8 +103,12 @@ class Client:
         self.session.close()
 
 
-@pytest.fixture(scope="module")
-def world(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[subprocess.Popen[str], str]]:
+@pytest.fixture(scope="module", params=[0, 2], ids=["render-in-process", "render-workers-2"])
+def world(
+    request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
+) -> Iterator[tuple[subprocess.Popen[str], str]]:
+    # The whole module runs twice: camera images rendered by the world process itself,
+    # and by a pool of two render workers (python -m sim --render-workers 2).
     # Robots 1 and 2 face each other 0.7 m apart (contact test); robot 3 stands apart.
     sc = scenarios.Scenario(
         robots=(
@@ -130,6 +134,8 @@ def world(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[subprocess
             "--no-multicast-scouting",
             "--speed",
             "4",
+            "--render-workers",
+            str(request.param),
         ],
         cwd=ROOT,
         stdout=subprocess.PIPE,
