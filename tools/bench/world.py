@@ -10,7 +10,9 @@
    at least 10x with 15 robots): in-process (the world's own cost) and with
    ``python -m sim`` driven over zenoh (each next command sent when the last replies).
 
-3. Prints the heading error of one open-loop walk over 300 seeded robots against the NAO
+3. Camera throughput with 3 robots sweeping their heads at once, rendered in the world
+   process and by 2 render workers (``--render-workers 2``).
+4. Prints the heading error of one open-loop walk over 300 seeded robots against the NAO
    paper's Table 2.
 
 Writes ``world_bench.png`` (latency histogram, speed bars) and ``noise_vs_table2.png``
@@ -46,7 +48,7 @@ def _free_port() -> int:
 class WorldProcess:
     """``python -m sim`` on a loopback port, waited for until it prints its ready line."""
 
-    def __init__(self, robots: int, seed: int) -> None:
+    def __init__(self, robots: int, seed: int, render_workers: int = 0) -> None:
         self.endpoint = f"tcp/127.0.0.1:{_free_port()}"
         self.proc = subprocess.Popen(
             [
@@ -60,6 +62,8 @@ class WorldProcess:
                 "--listen",
                 self.endpoint,
                 "--no-multicast-scouting",
+                "--render-workers",
+                str(render_workers),
             ],
             cwd=ROOT,
             stdout=subprocess.PIPE,
@@ -128,6 +132,42 @@ def camera_latency(requests: int, seed: int) -> list[float]:
                     times.append(dt)
                     print(f"  camera {i - 2}/{requests}: {dt * 1000:.0f} ms", file=sys.stderr)
         return times
+    finally:
+        world.stop()
+
+
+def camera_throughput(seed: int, workers: int, clients: int = 3, each: int = 8) -> float:
+    """Images per second when ``clients`` robots sweep their heads at the same time."""
+    from agent.protocol import CameraReply, CameraRequest, decode, encode, key_camera
+
+    world = WorldProcess(clients, seed, render_workers=workers)
+    try:
+        with world.session() as s:
+            for rid in range(1, clients + 1):  # warm up the links
+                list(s.get(key_camera(rid), payload=encode(CameraRequest(yaw=0.0)), timeout=30))
+            errors: list[str] = []
+
+            def sweep(rid: int) -> None:
+                for k in range(each):
+                    yaw = math.radians(-100.0 + 200.0 * k / max(1, each - 1))
+                    payload = encode(CameraRequest(yaw=yaw))
+                    ok = False
+                    for r in s.get(key_camera(rid), payload=payload, timeout=60):
+                        if r.ok is not None:
+                            ok = isinstance(decode(r.ok.payload.to_bytes()), CameraReply)
+                    if not ok:
+                        errors.append(f"robot {rid} request {k}")
+
+            threads = [threading.Thread(target=sweep, args=(r,)) for r in range(1, clients + 1)]
+            t0 = time.perf_counter()
+            for t in threads:
+                t.start()
+            for t in threads:
+                t.join()
+            wall = time.perf_counter() - t0
+            if errors:
+                raise RuntimeError(f"camera requests failed: {errors[:3]}")
+        return clients * each / wall
     finally:
         world.stop()
 
@@ -320,6 +360,13 @@ def main(argv: list[str] | None = None) -> int:
         f"(n={lat.size}; in-process render {render_ms:.1f} ms wall / {render_cpu_ms:.1f} ms CPU, "
         f"PNG encode {encode_ms:.1f} ms)"
     )
+    for workers in (0, 2):
+        print(f"camera throughput, render workers {workers} ...", file=sys.stderr)
+        rate = camera_throughput(args.seed, workers)
+        print(
+            f"camera throughput, 3 robots sweeping at once, render workers {workers}: "
+            f"{rate:.1f} images/s"
+        )
     speeds = {}
     for n in fleets:
         print(f"sim speed with {n} robots walking ...", file=sys.stderr)
