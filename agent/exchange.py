@@ -17,8 +17,8 @@ the same record set, and moves only then:
   before agreement, the live set exceeds ``fleet_size``, or ``timeout`` expires; the
   reason names who is missing.
 
-Re-publishing (what :meth:`Agreement.due` returns): the record while some live member's
-digest does not list this agent; the digest while some member's digest differs from
+Re-publishing (what :meth:`Agreement.due` returns): the record once, again when a member
+joins, and while some member's latest digest does not list this agent; the digest while some member's digest differs from
 ours, and after agreement until every member has reported a post-agreement phase.
 Intervals back off exponentially from ``backoff_min`` to ``backoff_max`` and reset when
 something new arrives. Pure: the caller passes the time and does the I/O.
@@ -126,6 +126,7 @@ class Agreement:
         self.rejected: list[str] = []
         self.membership_changed = now
         self._record_tx = _Backoff(backoff_min, backoff_max)
+        self._record_pending = True  # publish at least once (again after a newcomer)
         self._digest_tx = _Backoff(backoff_min, backoff_max)
         self._final: Decision | None = None
         self._digest_cache: tuple[tuple[int, ...], str] | None = None
@@ -139,6 +140,7 @@ class Agreement:
         self.left.discard(robot_id)
         self.membership_changed = now
         # A newcomer has seen none of our earlier publications (no history).
+        self._record_pending = True
         self._record_tx.reset(now)
         self._digest_tx.reset(now)
 
@@ -280,8 +282,12 @@ class Agreement:
             if (others - self.peer_agreed) and self._digest_tx.due(now):
                 out.append("digest")
             return out
-        unacked = [i for i in others if self.self_id not in self._members_of(i)]
-        if (unacked or not others) and self._record_tx.due(now):
+        # Re-send the record only to answer a digest that lacks it: a peer still
+        # searching publishes its digest when it starts exchanging, which re-arms us.
+        unacked = [
+            i for i in others if i in self.digests and self.self_id not in self._members_of(i)
+        ]
+        if (self._record_pending or unacked or not others) and self._record_tx.due(now):
             out.append("record")
         if (self.disagreeing() or not others) and self._digest_tx.due(now):
             out.append("digest")
@@ -290,6 +296,7 @@ class Agreement:
     def sent(self, what: Iterable[str], now: float) -> None:
         for w in what:
             if w == "record":
+                self._record_pending = False
                 self._record_tx.fired(now)
             elif w == "digest":
                 self._digest_tx.fired(now)

@@ -268,3 +268,22 @@ def test_sent_rejects_unknown_publication() -> None:
     a = Agreement(0, rec(0), 0.0)
     with pytest.raises(ValueError, match="unknown publication"):
         a.sent(["status"], 0.0)
+
+
+def test_record_goes_out_once_then_only_on_request() -> None:
+    a = Agreement(0, rec(0), 0.0, fleet_size=3)
+    a.member_joined(1, 0.0)
+    assert "record" in a.due(0.0)
+    a.sent(["record", "digest"], 0.0)
+    # peer 1 is still searching (no digest yet): no record re-sends, digests back off
+    for t in (1.0, 5.0, 30.0):
+        assert "record" not in a.due(t)
+        a.sent(a.due(t), t)
+    # a newcomer gets it once more
+    a.member_joined(2, 31.0)
+    assert "record" in a.due(31.0)
+    a.sent(["record"], 31.0)
+    assert "record" not in a.due(60.0)
+    # a digest that lacks our record asks for it at once
+    a.on_digest(DigestMsg(sender=1, round=0, digest="1" * 64, members=(1,)), 61.0)
+    assert "record" in a.due(61.0)
