@@ -155,6 +155,7 @@ def start_agent(rid: int, robots: int, endpoint: str, out: Path, args: argparse.
         "--connect", endpoint, "--no-multicast-scouting",
         "--d-e", str(args.d_e), "--phi-e-deg", str(args.phi_e_deg), "--timeout", str(args.agree_timeout),
         "--log-level", args.agent_log_level,
+        *(["--no-correct"] if getattr(args, "no_correct", False) else []),
     ]  # fmt: skip
     log = (out / (f"agent-slot{rid}.log" if auto else f"agent-{rid}.log")).open("wb")
     p = subprocess.Popen(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT)
@@ -623,6 +624,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--timeout", type=float, default=600.0, help="wall limit for the agents (s)")
     p.add_argument("--agree-timeout", type=float, default=120.0)
     p.add_argument("--auto-ids", action="store_true", help="agents claim robots (--id auto)")
+    p.add_argument("--no-correct", action="store_true", help="agents skip the final alignment")
     p.add_argument("--agent-log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING"))
     p.add_argument("--world-timeout", type=float, default=120.0)
     p.add_argument(
