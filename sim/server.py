@@ -23,6 +23,9 @@ at ``truth_rate`` Hz of wall time and after every finished command; ``world/trut
 PyBullet and the world. The sim clock advances (in fixed steps of 0.02 s) only while at
 least one walk/turn is active, as fast as possible by default or paced at ``speed`` x
 real time; rendering costs no sim time. Queued requests are served between steps.
+With ``render_workers`` > 0 a camera request's state (poses, head yaws, sim time) is
+taken at once and the picture drawn by a :class:`~sim.render_pool.RenderPool` worker;
+its result comes back through the same queue.
 """
 
 from __future__ import annotations
