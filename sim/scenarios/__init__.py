@@ -29,6 +29,7 @@ DETECT_MIN = 0.5
 DETECT_MAX = 1.45
 ROOM_MARGIN = 1.8  # metres between the outermost robot and a wall
 MIN_ROOM = 3.0  # smallest room half-size (a 6 m x 6 m room)
+MIN_BODY_GAP = 0.31  # two NAO footprints (radius 0.155 m) must not overlap
 
 
 @dataclass(frozen=True)
@@ -100,6 +101,14 @@ def validate(sc: Scenario) -> None:
                 raise ValueError(f"robot {r.id}: pose value {v} is not finite")
         if max(abs(r.x), abs(r.y)) > sc.room - 0.3:
             raise ValueError(f"robot {r.id} at ({r.x}, {r.y}) is outside the room ±{sc.room}")
+    rs = sorted(sc.robots, key=lambda r: r.id)
+    for i, a in enumerate(rs):
+        for b in rs[i + 1 :]:
+            if math.hypot(a.x - b.x, a.y - b.y) < MIN_BODY_GAP:
+                raise ValueError(
+                    f"robots {a.id} and {b.id} overlap: centres "
+                    f"{math.hypot(a.x - b.x, a.y - b.y):.3f} m apart, at least {MIN_BODY_GAP} m"
+                )
     for o in sc.obstacles:
         if not (math.isfinite(o.x) and math.isfinite(o.y) and 0.01 <= o.radius <= 5.0):
             raise ValueError(f"bad obstacle {o}")

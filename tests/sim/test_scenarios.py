@@ -98,6 +98,7 @@ def test_builtin_files_load() -> None:
             "clutter",
         ),
         ({"robots": (RobotSpec(1, 0, 0),), "light": LightSpec(intensity=-1)}, "light"),
+        ({"robots": (RobotSpec(1, 0, 0), RobotSpec(2, 0.3, 0))}, "overlap"),
     ],
 )
 def test_invalid_scenarios(kwargs: dict[str, object], reason: str) -> None:
