@@ -112,6 +112,9 @@ def validate(sc: Scenario) -> None:
     for o in sc.obstacles:
         if not (math.isfinite(o.x) and math.isfinite(o.y) and 0.01 <= o.radius <= 5.0):
             raise ValueError(f"bad obstacle {o}")
+        for r in rs:
+            if math.hypot(o.x - r.x, o.y - r.y) < o.radius + MIN_BODY_GAP / 2:
+                raise ValueError(f"obstacle at ({o.x}, {o.y}) overlaps robot {r.id}")
     for c in sc.clutter:
         if not all(math.isfinite(v) for v in (c.x, c.y, c.z)) or not 0.005 <= c.size <= 1.0:
             raise ValueError(f"bad clutter {c}")

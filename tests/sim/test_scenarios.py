@@ -99,6 +99,7 @@ def test_builtin_files_load() -> None:
         ),
         ({"robots": (RobotSpec(1, 0, 0),), "light": LightSpec(intensity=-1)}, "light"),
         ({"robots": (RobotSpec(1, 0, 0), RobotSpec(2, 0.3, 0))}, "overlap"),
+        ({"robots": (RobotSpec(1, 0, 0),), "obstacles": (ObstacleSpec(0.3, 0),)}, "overlaps robot"),
     ],
 )
 def test_invalid_scenarios(kwargs: dict[str, object], reason: str) -> None:
