@@ -311,11 +311,13 @@ def test_walk_1m_in_20cm_steps_and_read_the_truth(client: Client) -> None:
     assert pose is not None, "no truth pose after the last step"
     travelled = math.hypot(pose[0] - x0, pose[1] - y0)
     assert 0.85 < travelled < 1.15  # 1 m with the seeded distance/heading noise
-    assert client.clock and client.clock[-1].t_sim >= 5 * 0.2 / 0.095 - 0.1
+    assert client.clock and client.clock[-1].t_sim >= t_prev
 
 
 def test_busy_robot_refuses_a_second_motion(client: Client) -> None:
-    first = client.session.get(key_turn(3), payload=encode(TurnRequest(angle=2.0)), timeout=30.0)
+    # A 6 rad turn lasts 10 s of sim time, 2.5 s of wall time at --speed 4: time enough for
+    # the second request to arrive while it runs, even on a loaded machine.
+    first = client.session.get(key_turn(3), payload=encode(TurnRequest(angle=6.0)), timeout=60.0)
     deadline = time.monotonic() + 10.0
     rep: Any = None
     while time.monotonic() < deadline:
@@ -334,18 +336,18 @@ def test_two_robots_walking_into_each_other_get_contact(client: Client) -> None:
     ra = [decode(r.ok.payload.to_bytes()) for r in a if r.ok is not None]
     rb = [decode(r.ok.payload.to_bytes()) for r in b if r.ok is not None]
     assert ra[0].status == "contact" and "robot 2" in ra[0].detail
-    assert rb[0].status == "contact"
+    assert rb[0].status == "contact" and "robot 1" in rb[0].detail
+    # One contact if both walks ran together; two if robot 2's request came after robot 1
+    # had already bumped into it standing (then robot 2's first step is a contact too).
     deadline = time.monotonic() + 10.0
-    while time.monotonic() < deadline and not client.contacts:
-        client.pump()
-        time.sleep(0.05)
-    assert [(c.a, c.b) for c in client.contacts] == [(1, 2)]
     while time.monotonic() < deadline:
         client.pump()
-        if client.truth and client.truth[-1].contacts >= 1:
+        if client.contacts and client.truth and client.truth[-1].contacts == len(client.contacts):
             break
         time.sleep(0.05)
-    assert client.truth[-1].contacts == 1
+    assert 1 <= len(client.contacts) <= 2
+    assert all((c.a, c.b) == (1, 2) for c in client.contacts)
+    assert client.truth[-1].contacts == len(client.contacts)
 
 
 def test_snapshot_joins_a_running_world(
