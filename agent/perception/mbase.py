@@ -81,6 +81,7 @@ class MBase:
         self.masks = masks
         self.sizes = np.array([[m.shape[1], m.shape[0]] for m in masks], dtype=np.float64)
         self.canon = np.stack([canonical(m) for m in masks])
+        self.canon32 = self.canon.astype(np.float32)
         self.areas = np.array([float(m.sum()) for m in masks])
 
     def __len__(self) -> int:

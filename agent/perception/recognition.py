@@ -67,12 +67,21 @@ def group_box(tuples: list[Tuple], group: tuple[int, ...]) -> tuple[int, int, in
     return x0, y0, x1 - x0, y1 - y0
 
 
-def group_crop(labels: np.ndarray, tuples: list[Tuple], group: tuple[int, ...]) -> np.ndarray:
-    """The 0/1 image of only the group's tuples inside the group's box (g[x, y] of eq. 1)."""
+def group_crop(
+    labels: np.ndarray, tuples: list[Tuple], group: tuple[int, ...], subsample: bool = False
+) -> np.ndarray:
+    """The 0/1 image of only the group's tuples inside the group's box (g[x, y] of eq. 1).
+
+    ``subsample`` takes every s-th pixel of a box more than 4x the canonical size (s >= 2),
+    which changes its canonical resampling by well under a pixel.
+    """
     x, y, w, h = group_box(tuples, group)
-    sub = labels[y : y + h, x : x + w]
-    ids = np.array([tuples[i].label for i in group], dtype=labels.dtype)
-    return np.isin(sub, ids).astype(np.uint8)
+    step = max(1, min(w // (4 * CANON_W), h // (4 * CANON_H))) if subsample else 1
+    sub = labels[y : y + h : step, x : x + w : step]
+    ids = [tuples[i].label for i in group]
+    lut = np.zeros(max(ids) + 1, dtype=np.uint8)
+    lut[ids] = 1
+    return lut[np.minimum(sub, max(ids))] if sub.size else sub.astype(np.uint8)
 
 
 def candidate_groups(
@@ -103,38 +112,48 @@ def candidate_groups(
         w = x1[combos].max(axis=1) - gx0
         h = y1[combos].max(axis=1) - gy0
         sizes = mbase.sizes[sel]
-        ar = sizes[:, 0] / sizes[:, 1]
+        # per (group, mask): scale in [0.35, 1.5] on both sides, aspect within 0.75-1.33
+        # and the crop's top where the mask's top would be at this size
+        rw = w[:, None] / sizes[None, :, 0]
+        rh = h[:, None] / sizes[None, :, 1]
+        expect = horizon_row + rh * mbase.top_offset[sel][None, :]
         ok = (
-            (w >= 0.35 * sizes[:, 0].min())
-            & (w <= 1.5 * sizes[:, 0].max())
-            & (h >= 0.35 * sizes[:, 1].min())
-            & (h <= 1.5 * sizes[:, 1].max())
-            & (w / h >= 0.75 * ar.min())
-            & (w / h <= 1.33 * ar.max())
-        )
-        # the crop's top must lie where some mask's top would be at this size
-        rg = h[:, None] / sizes[None, :, 1]
-        expect = horizon_row + rg * mbase.top_offset[sel][None, :]
-        ok &= np.any(np.abs(gy0[:, None] - expect) <= 0.3 * h[:, None] + 6, axis=1)
+            (rw >= 0.35)
+            & (rw <= 1.5)
+            & (rh >= 0.35)
+            & (rh <= 1.5)
+            & (rw / rh >= 0.75)
+            & (rw / rh <= 1.33)
+            & (np.abs(gy0[:, None] - expect) <= 0.3 * h[:, None] + 6)
+        ).any(axis=1)
         out.extend(tuple(idx[int(i)] for i in c) for c in combos[ok])
     return out
 
 
-def fast_scores(crops: list[np.ndarray], mbase: MBase) -> tuple[np.ndarray, np.ndarray]:
-    """λ and r_g of every crop against every mask, shapes (G, K), vectorised."""
+def fast_scores(
+    crops: list[np.ndarray], mbase: MBase, sizes_px: list[tuple[int, int]] | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """λ and r_g of every crop against every mask, shapes (G, K), vectorised.
+
+    ``sizes_px`` are the groups' box sizes (w, h) when the crops were subsampled.
+    """
     if not crops:
         return np.zeros((0, len(mbase))), np.zeros((0, len(mbase)))
-    vecs = np.empty((len(crops), CANON_W * CANON_H))
+    vecs = np.empty((len(crops), CANON_W * CANON_H), dtype=np.float32)
     sizes = np.empty((len(crops), 2))
     for i, c in enumerate(crops):
         if c.ndim != 2 or c.size == 0:
             raise ValueError(f"crop {i} must be a non-empty 2-D array")
         small = cv2.resize(c.astype(np.float32), (CANON_W, CANON_H), interpolation=cv2.INTER_AREA)
         v = small.reshape(-1)
-        n = float(np.linalg.norm(v))
+        n = float(np.sqrt(np.dot(v, v)))
         vecs[i] = v / n if n > 0 else 0.0
-        sizes[i] = (c.shape[1], c.shape[0])
-    ncc = vecs @ mbase.canon.T
+        sizes[i] = (c.shape[1], c.shape[0]) if sizes_px is None else sizes_px[i]
+    # cv2.gemm: one small single-call product, no BLAS thread pool to wake up
+    ncc = np.asarray(
+        cv2.gemm(vecs, mbase.canon32, 1.0, None, 0.0, flags=cv2.GEMM_2_T),  # type: ignore[call-overload]
+        dtype=np.float64,
+    )
     ar_g = (sizes[:, 0] / sizes[:, 1])[:, None]
     ar_m = (mbase.sizes[:, 0] / mbase.sizes[:, 1])[None, :]
     aspect = np.sqrt(np.minimum(ar_g / ar_m, ar_m / ar_g))
@@ -184,13 +203,14 @@ def recognise(
     groups = candidate_groups(tuples, mbase, horizon_row)
     if not groups:
         return []
-    crops = [group_crop(labels, tuples, g) for g in groups]
-    lam, rg = fast_scores(crops, mbase)
+    crops = [group_crop(labels, tuples, g, subsample=True) for g in groups]
+    boxes = [group_box(tuples, g) for g in groups]
+    lam, rg = fast_scores(crops, mbase, [(b[2], b[3]) for b in boxes])
     counts = np.array([len(g) for g in groups])
     lam = np.where(counts[:, None] == mbase.n_tuples[None, :], lam, 0.0)
     # the box top must sit where the chosen mask's top sits at that scale
-    tops = np.array([group_box(tuples, g)[1] for g in groups], dtype=np.float64)
-    heights = np.array([c.shape[0] for c in crops], dtype=np.float64)
+    tops = np.array([b[1] for b in boxes], dtype=np.float64)
+    heights = np.array([b[3] for b in boxes], dtype=np.float64)
     expect = horizon_row + rg * mbase.top_offset[None, :]
     lam = np.where(np.abs(tops[:, None] - expect) <= 0.3 * heights[:, None] + 6, lam, 0.0)
     best = np.argmax(lam, axis=1)

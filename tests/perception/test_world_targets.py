@@ -17,7 +17,7 @@ import pytest
 from agent.perception.detector import Detector
 from tools.eval_perception import run_compass, run_views, summarise
 
-VIEWS = 60
+VIEWS = 80
 
 
 @pytest.fixture(scope="module")
@@ -32,7 +32,7 @@ def summary(request: pytest.FixtureRequest, detector: Detector) -> dict[str, Any
 
 
 def test_enough_labelled_robots(summary: dict[str, Any]) -> None:
-    assert summary["robots_counted"] >= 40
+    assert summary["robots_counted"] >= 50
 
 
 def test_recall_and_precision(summary: dict[str, Any]) -> None:

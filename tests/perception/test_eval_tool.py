@@ -1,0 +1,55 @@
+"""The evaluation tool as a user runs it: a real process printing one JSON object."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_eval_perception_json(tmp_path: Path) -> None:
+    png = tmp_path / "eval.png"
+    view = tmp_path / "view.png"
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "tools.eval_perception",
+            "--seed",
+            "3",
+            "--views",
+            "4",
+            "--compass-samples",
+            "1",
+            "--json",
+            "--png",
+            str(png),
+            "--view-png",
+            str(view),
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert out.returncode == 0, out.stderr
+    summary = json.loads(out.stdout)
+    assert summary["views"] == 4 and summary["seed"] == 3
+    for key in ("recall", "precision", "distance_error_m", "bearing_error_deg", "compass"):
+        assert key in summary
+    assert summary["compass"]["featureless"]["ok"] is False
+    assert png.stat().st_size > 10_000 and view.stat().st_size > 10_000
+
+
+def test_eval_perception_rejects_bad_arguments() -> None:
+    out = subprocess.run(
+        [sys.executable, "-m", "tools.eval_perception", "--views", "0"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert out.returncode == 2 and "--views" in out.stderr
