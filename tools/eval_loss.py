@@ -240,6 +240,7 @@ def run_once(
     lossy_world: bool = False,
     d_e: float = 0.8,
     phi_e_deg: float = 30.0,
+    agent_mode: str = "peer",
 ) -> RunResult:
     """One formation run with ``loss`` on every agent host; logs and results in ``workdir``."""
     workdir.mkdir(parents=True, exist_ok=True)
@@ -299,7 +300,18 @@ def run_once(
             agents = [
                 fab.popen(
                     4 + i,
-                    [py, "-m", "agent", "--id", str(rid), "--fleet-size", str(robots), *common],
+                    [
+                        py,
+                        "-m",
+                        "agent",
+                        "--id",
+                        str(rid),
+                        "--fleet-size",
+                        str(robots),
+                        "--mode",
+                        agent_mode,
+                        *common,
+                    ],
                     stdout=log(f"agent-{rid}"),
                     stderr=subprocess.STDOUT,
                     env=env,
@@ -433,6 +445,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", default="out/eval_loss")
     ap.add_argument("--prefix", default="nel", help="namespace prefix (tools.netns)")
     ap.add_argument("--lossy-world", action="store_true", help="drop world traffic too")
+    ap.add_argument(
+        "--agent-mode",
+        choices=("peer", "client"),
+        default="peer",
+        help="zenoh mode of the agents: peer (mesh, DESIGN.md §3) or client (via the router)",
+    )
     ap.add_argument("--d-e", type=float, default=0.8, help="pyramid distance (m)")
     ap.add_argument("--phi-e-deg", type=float, default=30.0, help="pyramid angle (deg)")
     ap.add_argument(
@@ -497,6 +515,7 @@ def _evaluate(args: argparse.Namespace, losses: list[float], out: Path) -> int:
                 r = run_once(
                     loss, seed, args.robots, args.timeout,
                     out / f"loss{loss:g}_seed{seed}", args.prefix, args.lossy_world,
+                    args.d_e, args.phi_e_deg, args.agent_mode,
                 )  # fmt: skip
             except (RuntimeError, netns.NetnsError, OSError) as exc:
                 print(f"eval_loss: run failed to start: {exc}", file=sys.stderr)
@@ -514,6 +533,7 @@ def _evaluate(args: argparse.Namespace, losses: list[float], out: Path) -> int:
         "robots": args.robots,
         "seeds": args.seeds,
         "lossy_world": args.lossy_world,
+        "agent_mode": args.agent_mode,
         "summary": rows,
         "runs": [asdict(r) for r in results],
     }
