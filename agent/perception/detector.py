@@ -5,7 +5,8 @@ M-base (Algorithm 1) → distance by the D-base (eq. 6) → bearing by the angle
 (eq. 3: head yaw) plus the detection's offset from the image centre. The distance and
 bearing of a :class:`Detection` are of the neighbour's body centre relative to the
 observer's body centre, in the observer's body frame (x forward, bearing +left), so the
-camera's offset from the neck axis is accounted for.
+camera's offset from the neck axis is accounted for. A NAO touching the left or right
+image border is not reported (its box, hence its distance, would be truncated).
 """
 
 from __future__ import annotations
@@ -23,6 +24,9 @@ from agent.perception.recognition import LAMBDA_TH, Match, recognise
 from agent.perception.segmentation import check_image, extract_tuples, orange_mask
 
 HEAD_YAW_LIMIT = math.radians(119.5)
+# A NAO cut by the left or right image border has a truncated box, hence a wrong r_g and
+# distance: such groups are dropped (the sweep's overlapping head yaws see it whole).
+BORDER_PX = 2
 TWO_PI = 2.0 * math.pi
 
 
@@ -124,6 +128,9 @@ class Detector:
         cam = self.camera
         out = []
         for m in rec.matches(image_bgr, head_yaw):
+            box = self._perspective_box(m.box)
+            if box[0] < BORDER_PX or box[0] + box[2] > cam.width - BORDER_PX:
+                continue
             beta = cam.cyl_bearing(rec.body_column(m))
             d_cam = self.dbase.distance(m.mask, m.scale)
             ox, oy = cam.body_offset(head_yaw)
@@ -137,7 +144,7 @@ class Detector:
                     confidence=m.confidence,
                     orientation=orient,
                     scale=m.scale,
-                    box=self._perspective_box(m.box),
+                    box=box,
                     side=bool(self.mbase.side[m.mask]),
                 )
             )

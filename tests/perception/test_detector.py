@@ -87,3 +87,12 @@ def test_bad_head_yaw_and_construction(det: Detector) -> None:
         Detector(det.mbase, DBase([Fit(0.6, 0, 1, 0, 3)], det.mbase.digest()), CAM)
     with pytest.raises(ValueError, match="threshold"):
         Detector(det.mbase, det.dbase, CAM, threshold=1.5)
+
+
+def test_nao_cut_by_the_image_border_is_not_reported(det: Detector) -> None:
+    img = canvas()
+    draw_nao(img, 60, HR - 40 * 0.5, 0.5, 0.0)  # left shoulder cut by the border
+    assert det.detect(img, 0.0) == []
+    img = canvas()
+    draw_nao(img, 120, HR - 40 * 0.5, 0.5, 0.0)  # wholly inside
+    assert len(det.detect(img, 0.0)) == 1
