@@ -101,3 +101,26 @@ class CameraModel:
             self.neck_forward + self.cam_forward * math.cos(head_yaw),
             self.cam_forward * math.sin(head_yaw),
         )
+
+    def sweep_yaws(
+        self,
+        min_distance: float = 0.5,
+        half_width: float = 0.15,
+        limit: float = math.radians(119.5),
+    ) -> tuple[float, ...]:
+        """Evenly spaced head yaws over [-limit, limit] (rad) such that a NAO at least
+        ``min_distance`` m away (half-width ``half_width`` m) is wholly inside at least one
+        image: the step is at most hfov - 2·atan(half_width / min_distance).
+
+        With the defaults: 10 yaws, 26.6° apart (the detector drops NAOs cut by the border).
+        """
+        if not (min_distance > half_width > 0 and 0 < limit < math.pi):
+            raise ValueError(
+                f"need min_distance > half_width > 0 and 0 < limit < pi, got "
+                f"{min_distance}, {half_width}, {limit}"
+            )
+        step = self.hfov - 2.0 * math.atan(half_width / min_distance)
+        if step <= 0:
+            raise ValueError(f"a NAO at {min_distance} m does not fit in the image")
+        n = max(2, math.ceil(2.0 * limit / step) + 1)
+        return tuple(float(v) for v in np.linspace(-limit, limit, n))

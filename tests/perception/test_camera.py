@@ -51,3 +51,20 @@ def test_bad_inputs() -> None:
     with pytest.raises(ValueError, match="hfov"):
         CameraModel(hfov=0.0)
     assert np.isfinite(cam.cylindrical_maps()[0]).all()
+
+
+def test_sweep_yaws_see_every_nao_whole() -> None:
+    cam = CameraModel()
+    yaws = cam.sweep_yaws()
+    assert len(yaws) == 10
+    assert yaws[0] == pytest.approx(-math.radians(119.5)) and yaws[-1] == pytest.approx(
+        math.radians(119.5)
+    )
+    half = math.atan(0.15 / 0.5)
+    for b in np.linspace(-math.radians(119.5), math.radians(119.5), 2001):
+        assert any(abs(b - y) + half <= cam.hfov / 2 + 1e-9 for y in yaws)
+    assert len(cam.sweep_yaws(min_distance=1.0)) < len(yaws)
+    with pytest.raises(ValueError, match="min_distance"):
+        cam.sweep_yaws(min_distance=0.1)
+    with pytest.raises(ValueError, match="fit"):
+        CameraModel(hfov=math.radians(20)).sweep_yaws(min_distance=0.2)
