@@ -1,0 +1,372 @@
+"""The plan: from neighbour records to one safe pyramid plan (NAO paper 4.1-4.2, 5.2.2 (iii)).
+
+Pipeline: neighbour check (Algorithm 2, eq. 9) -> common frame (eq. 10 or least
+squares) -> pyramid frame (PCA eq. 12-13, or CP) -> slots (AUV eqs. 5-7) ->
+assignment (combined sub-groups + Lemma 1, or exact) -> trajectories (η_i, d_i) ->
+execution waves with via points where straight paths cannot be scheduled safely.
+
+Every quantity of a :class:`Plan` is in the *common frame* (the fixed frame of the frame
+robot; :func:`plan_from_positions` uses the caller's frame and sets ``frame_robot=-1``).
+``axis`` is the direction the pyramid faces (from the last layer toward the leader);
+at the end every robot turns to face it. ``heading`` / ``distance`` describe the first
+leg (to the first via point, or to the target); a robot already on its slot has
+``distance == 0`` and ``heading == axis``.
+
+The digest is sha256 over a canonical binary encoding (ids ascending, float64 bits),
+so two agents holding the same record set compute bit-identical plans and digests.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import struct
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from agent.formation.assignment import STRATEGIES, assign
+from agent.formation.common_frame import METHODS, build_common_frame
+from agent.formation.neighbour_check import DEFAULT_EPSILON, identify_neighbours
+from agent.formation.obstacles import plan_around_obstacles
+from agent.formation.pyramid import (
+    ORIENTATIONS,
+    PLACEMENTS,
+    check_geometry,
+    parent_of,
+    placed_slots,
+    pyramid_frame,
+)
+from agent.formation.records import NeighborRecord
+from agent.formation.safety import Schedule, ScheduleError, schedule
+
+#: ``default`` strategy: exact min-sum (``optimal``) up to this many robots; the paper's
+#: O(n log n) strategy above. Whatever it starts with, ``default`` falls back to the
+#: next attempt of :func:`attempts` when a plan cannot be scheduled safely.
+OPTIMAL_MAX_N = 200
+
+
+@dataclass(frozen=True)
+class PlanParams:
+    d_e: float = 0.8
+    phi_e: float = math.radians(30)
+    radius: float = 0.2
+    strategy: str = "default"  # "paper" | "optimal" | "capt" | "default"
+    orientation: str = "pca"  # "pca" | "cp"
+    frame_method: str = "default"  # "bfs" (paper eq. 10) | "lsq" | "default" (= lsq)
+    epsilon: float = DEFAULT_EPSILON  # eq. 9 threshold, metres (see neighbour_check)
+    # "centroid" (slots centred on the starts) | "front" (pyramid ahead of the fleet) |
+    # "default": centroid, or front when the centroid placement cannot be scheduled safely
+    placement: str = "default"
+
+    def __post_init__(self) -> None:
+        check_geometry(self.d_e, self.phi_e)
+        if not (
+            isinstance(self.radius, int | float) and math.isfinite(self.radius) and self.radius > 0
+        ):
+            raise ValueError(f"radius must be a finite distance > 0, got {self.radius!r}")
+        if self.strategy not in (*STRATEGIES, "default"):
+            raise ValueError(
+                f"strategy must be one of {(*STRATEGIES, 'default')}, got {self.strategy!r}"
+            )
+        if self.orientation not in ORIENTATIONS:
+            raise ValueError(f"orientation must be one of {ORIENTATIONS}, got {self.orientation!r}")
+        if self.frame_method not in (*METHODS, "default"):
+            raise ValueError(
+                f"frame_method must be one of {(*METHODS, 'default')}, got {self.frame_method!r}"
+            )
+        if self.placement not in (*PLACEMENTS, "default"):
+            raise ValueError(
+                f"placement must be one of {(*PLACEMENTS, 'default')}, got {self.placement!r}"
+            )
+        if not (
+            isinstance(self.epsilon, int | float)
+            and math.isfinite(self.epsilon)
+            and self.epsilon > 0
+        ):
+            raise ValueError(f"epsilon must be a finite distance > 0, got {self.epsilon!r}")
+
+    def resolved_strategy(self, n: int) -> str:
+        if self.strategy != "default":
+            return self.strategy
+        return "optimal" if n <= OPTIMAL_MAX_N else "paper"
+
+    def attempts(self, n: int) -> list[tuple[str, str]]:
+        """(strategy, placement) pairs tried in turn until one schedules safely.
+
+        An explicit strategy keeps its strategy; the ``default`` placement falls back
+        from ``centroid`` to ``front``. The ``default`` strategy tries optimal (small N)
+        then paper (whose top-to-bottom ranking schedules well in dense fleets).
+        """
+        strategies = [self.resolved_strategy(n)]
+        if self.strategy == "default" and "paper" not in strategies:
+            strategies.append("paper")
+        placements = ["centroid", "front"] if self.placement == "default" else [self.placement]
+        return [(s, p) for p in placements for s in strategies]
+
+
+@dataclass(frozen=True)
+class RobotPlan:
+    robot_id: int
+    start: np.ndarray  # (2,)
+    target: np.ndarray  # (2,)
+    order: int
+    parent: int  # parent robot id, -1 for the leader
+    heading: float  # η_i of the first leg, rad, CCW from +x of the common frame
+    distance: float  # d_i of the first leg
+    via: tuple[np.ndarray, ...] = ()
+    wave: int = 0
+
+    def waypoints(self) -> list[np.ndarray]:
+        return [*self.via, self.target]
+
+    def path(self) -> np.ndarray:
+        """(m, 2) polyline start, via..., target."""
+        return np.vstack([self.start, *self.via, self.target])
+
+    def length(self) -> float:
+        return float(np.sum(np.hypot(*np.diff(self.path(), axis=0).T)))
+
+
+@dataclass(frozen=True)
+class Plan:
+    frame_robot: int
+    leader: int
+    axis: float
+    origin: np.ndarray
+    robots: tuple[RobotPlan, ...]  # sorted by id
+    waves: tuple[tuple[int, ...], ...]
+    digest: str
+    strategy: str = ""
+    obstacles: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+
+    def robot(self, robot_id: int) -> RobotPlan:
+        for r in self.robots:
+            if r.robot_id == robot_id:
+                return r
+        raise ValueError(f"robot {robot_id} is not in the plan")
+
+    @property
+    def ids(self) -> tuple[int, ...]:
+        return tuple(r.robot_id for r in self.robots)
+
+    def starts(self) -> np.ndarray:
+        return np.array([r.start for r in self.robots])
+
+    def targets(self) -> np.ndarray:
+        return np.array([r.target for r in self.robots])
+
+    def paths(self) -> list[np.ndarray]:
+        return [r.path() for r in self.robots]
+
+    def wave_of(self) -> np.ndarray:
+        return np.array([r.wave for r in self.robots], dtype=np.int64)
+
+
+def _check_positions(ids: Sequence[int], positions: np.ndarray) -> tuple[list[int], np.ndarray]:
+    id_list = []
+    for i in ids:
+        if isinstance(i, bool) or not isinstance(i, int | np.integer) or int(i) < 0:
+            raise ValueError(f"robot ids must be non-negative ints, got {i!r}")
+        id_list.append(int(i))
+    pos = np.asarray(positions, dtype=np.float64)
+    if pos.ndim != 2 or pos.shape[1] != 2:
+        raise ValueError(f"positions must have shape (N, 2), got {pos.shape}")
+    if pos.shape[0] != len(id_list):
+        raise ValueError(f"{len(id_list)} ids but {pos.shape[0]} positions")
+    if not id_list:
+        raise ValueError("no robots")
+    if len(set(id_list)) != len(id_list):
+        dup = sorted({i for i in id_list if id_list.count(i) > 1}) if len(id_list) < 5000 else []
+        raise ValueError(f"duplicate robot ids {dup}")
+    if not np.all(np.isfinite(pos)):
+        raise ValueError("positions contain non-finite values")
+    return id_list, pos
+
+
+#: How many rounds of slot swaps :func:`_schedule_with_repair` may make before giving up.
+MAX_SWAPS = 10
+
+
+def _schedule_with_repair(
+    pos: np.ndarray,
+    targets: np.ndarray,
+    order: np.ndarray,
+    vias: list[tuple[np.ndarray, ...]],
+    obs: np.ndarray,
+    params: PlanParams,
+) -> tuple[Schedule, np.ndarray, np.ndarray]:
+    """Schedule; when two robots block each other in both orders (each one's slot lies
+    within the clearance of the other's start: a swap no single wave can do), they
+    exchange slots (a 2-opt step in the spirit of Lemma 1) and we schedule again.
+    Blocked pairs are swapped in ascending row order, each robot at most once per round."""
+    order = order.copy()
+    targets = np.array(targets, dtype=np.float64)
+    vias = list(vias)
+    for _ in range(MAX_SWAPS + 1):
+        leader_row = int(np.flatnonzero(order == 0)[0])
+        try:
+            sched = schedule(
+                pos, targets, leader_row, order, params.radius, fixed_vias=vias, obstacles=obs
+            )
+            return sched, order, targets
+        except ScheduleError as exc:
+            if not exc.pairs:
+                raise
+            touched: set[int] = set()
+            for a, b in sorted(exc.pairs):
+                if a in touched or b in touched:
+                    continue
+                touched.update((a, b))
+                order[[a, b]] = order[[b, a]]
+                targets[[a, b]] = targets[[b, a]]
+                vias[a], vias[b] = (), ()
+    raise ValueError(f"no safe schedule found after {MAX_SWAPS} rounds of slot swaps")
+
+
+def _f(x: float) -> bytes:
+    return struct.pack("<d", float(x))
+
+
+def plan_digest(plan_fields: dict[str, object], robots: Sequence[RobotPlan]) -> str:
+    h = hashlib.sha256(b"nao-formation/plan/v1")
+    for key in sorted(plan_fields):
+        h.update(key.encode())
+        v = plan_fields[key]
+        if isinstance(v, float):
+            h.update(_f(v))
+        elif isinstance(v, np.ndarray):
+            h.update(np.ascontiguousarray(v, dtype="<f8").tobytes())
+        else:
+            h.update(str(v).encode())
+    for r in robots:
+        h.update(struct.pack("<qqqqq", r.robot_id, r.order, r.parent, r.wave, len(r.via)))
+        for arr in (r.start, r.target, *r.via):
+            h.update(np.ascontiguousarray(arr, dtype="<f8").tobytes())
+        h.update(_f(r.heading) + _f(r.distance))
+    return h.hexdigest()
+
+
+def plan_from_positions(
+    ids: Sequence[int],
+    positions: np.ndarray,
+    params: PlanParams = PlanParams(),
+    obstacles: np.ndarray | None = None,
+    frame_robot: int = -1,
+) -> Plan:
+    """Plan a pyramid for robots at known positions (caller's frame)."""
+    id_list, pos = _check_positions(ids, positions)
+    order_idx = np.argsort(np.asarray(id_list), kind="stable")
+    sorted_ids = [id_list[k] for k in order_idx]
+    pos = pos[order_idx]
+    obs = np.zeros((0, 2)) if obstacles is None else np.asarray(obstacles, dtype=np.float64)
+    if obs.size == 0:
+        obs = obs.reshape(0, 2)
+    if obs.ndim != 2 or obs.shape[1] != 2 or not np.all(np.isfinite(obs)):
+        raise ValueError(f"obstacles must be a finite (M, 2) array, got shape {obs.shape}")
+    n = len(sorted_ids)
+    strategy = params.resolved_strategy(n + obs.shape[0])
+    if obs.shape[0]:
+        op = plan_around_obstacles(pos, obs, params, strategy)
+        frame_origin, beta = op.origin, op.beta
+        order, vias_pre, targets = op.order, op.vias, op.targets
+        sched, order, targets = _schedule_with_repair(pos, targets, order, vias_pre, obs, params)
+    else:
+        frame = pyramid_frame(pos, params.orientation)
+        starts_p = frame.to_pyramid(pos)
+        frame_origin, beta = frame.origin, frame.beta
+        last_error: ValueError | None = None
+        for strategy, placement in params.attempts(n):
+            slots_p = placed_slots(n, params.d_e, params.phi_e, starts_p, placement)
+            perm = assign(starts_p, slots_p, strategy, params.d_e, params.phi_e)
+            try:
+                sched, order, targets = _schedule_with_repair(
+                    pos, frame.to_common(slots_p[perm]), perm, [() for _ in range(n)], obs, params
+                )
+                break
+            except ValueError as exc:
+                last_error = exc
+        else:
+            assert last_error is not None
+            raise last_error
+    leader_row = int(np.flatnonzero(order == 0)[0])
+    row_of_order = {int(o): k for k, o in enumerate(order)}
+    robots: list[RobotPlan] = []
+    for k, rid in enumerate(sorted_ids):
+        via = tuple(np.asarray(v, dtype=np.float64) for v in sched.vias[k])
+        first = via[0] if via else targets[k]
+        leg = first - pos[k]
+        dist = float(math.hypot(leg[0], leg[1]))
+        heading = float(math.atan2(leg[1], leg[0])) if dist > 1e-12 else float(beta)
+        par = parent_of(int(order[k]))
+        robots.append(
+            RobotPlan(
+                robot_id=rid,
+                start=pos[k].copy(),
+                target=np.asarray(targets[k], dtype=np.float64).copy(),
+                order=int(order[k]),
+                parent=-1
+                if par < 0
+                else sorted_ids[row_of_order[par]]
+                if par in row_of_order
+                else -1,
+                heading=heading,
+                distance=dist,
+                via=via,
+                wave=int(sched.waves[k]),
+            )
+        )
+    n_waves = int(sched.waves.max()) + 1
+    buckets: list[list[int]] = [[] for _ in range(n_waves)]
+    for r in robots:
+        buckets[r.wave].append(r.robot_id)
+    waves = tuple(tuple(b) for b in buckets if b)
+    # renumber waves densely (empty waves can appear after conflict bumps)
+    dense = {w: k for k, w in enumerate(sorted({r.wave for r in robots}))}
+    robots = [
+        RobotPlan(
+            r.robot_id,
+            r.start,
+            r.target,
+            r.order,
+            r.parent,
+            r.heading,
+            r.distance,
+            r.via,
+            dense[r.wave],
+        )
+        for r in robots
+    ]
+    leader = sorted_ids[leader_row]
+    fields_ = {
+        "frame_robot": int(frame_robot),
+        "leader": leader,
+        "axis": float(beta),
+        "origin": np.asarray(frame_origin, dtype=np.float64),
+        "strategy": strategy,
+        "obstacles": obs,
+        "params": repr((params.d_e, params.phi_e, params.radius, params.orientation)),
+    }
+    return Plan(
+        frame_robot=int(frame_robot),
+        leader=leader,
+        axis=float(beta),
+        origin=np.asarray(frame_origin, dtype=np.float64),
+        robots=tuple(robots),
+        waves=waves,
+        digest=plan_digest(fields_, robots),
+        strategy=strategy,
+        obstacles=obs,
+    )
+
+
+def plan_from_records(
+    records: Sequence[NeighborRecord],
+    params: PlanParams = PlanParams(),
+    obstacles: np.ndarray | None = None,
+) -> Plan:
+    """The whole pipeline on a record set (any order): the same records -> the same plan."""
+    graph = identify_neighbours(records, params.epsilon)
+    cf = build_common_frame(graph, params.frame_method)
+    return plan_from_positions(cf.ids, cf.positions, params, obstacles, frame_robot=cf.frame_robot)

@@ -1,0 +1,546 @@
+"""Execution waves and the safety checker (NAO paper 4.2 and 5.2.2(7): "the leader goes to its
+destination firstly, and then the followers"; our strengthening of Lemma 1).
+
+Lemma 1 only promises that matched straight paths do not *cross*; two robots on
+non-crossing paths that walk at the same time can still brush each other. The
+criterion here is speed-independent. A plan is split into waves; robots of one wave
+walk at the same time at arbitrary speeds, a wave starts when the previous one is done.
+With clearance ``c = 2·radius``, a plan is *safe* when for every wave w:
+
+* any two robots walking in w: the distance between their whole paths (polylines,
+  start -> via points -> target) is >= c;
+* any robot walking in w and any robot standing during w (at its start if its wave is
+  later, at its target if earlier): the distance from the path to that point is >= c.
+
+Pairs whose estimated starts (or targets) are already closer than c - estimates can
+be - are held to that smaller distance instead (they may not come closer than that).
+
+The pair test reduces to three flags per pair (i, k): *same* (may walk together),
+*i-before-k*, *k-before-i*. Only pairs whose paths come within c matter; they are
+found by spatial hashing of points sampled along every segment (cell 2c, samples at
+most c apart, 3×3 neighbourhood), so the checker and the scheduler are ~O(n log n)
+for fleets whose paths do not all pile up in one place.
+
+Scheduling (:func:`schedule`): wave 0 = the leader alone. Pairs that may not share a
+wave but can go in either order must be in different waves; pairs that can only go in
+one order give a precedence edge. Robots are taken in a topological order of the
+precedence edges, ready robots by ascending pyramid order (then id); each gets the first
+wave >= 1 after all its predecessors that no conflicting robot already holds. Pairs
+that can go in no order, precedence cycles, and a leader whose path is blocked are
+resolved by a detour: one via point on the side of the blocked path (candidates
+perpendicular to the path at its middle, quarter and three-quarter points, offsets
+1, 1.5, 2, 3, 4.5, 6 × c, left before right), the candidate with the fewest remaining
+conflicts (then the shortest) wins; this repeats until nothing is left to resolve.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+_SAME, _IK, _KI = 0, 1, 2
+
+
+class ScheduleError(ValueError):
+    """No safe schedule; ``pairs`` are robot-row pairs that can go in no order."""
+
+    def __init__(self, message: str, robots: list[int], pairs: list[tuple[int, int]]) -> None:
+        super().__init__(message)
+        self.robots = robots
+        self.pairs = pairs
+
+
+@dataclass(frozen=True)
+class Violation:
+    wave: int
+    robot_a: int  # row indices (ascending-id order of the plan)
+    robot_b: int
+    kind: str  # "paths" | "path-vs-standing"
+    distance: float
+    required: float
+
+
+@dataclass(frozen=True)
+class PairFlags:
+    """Robot pairs (rows a < b) whose paths come within c, with their three flags."""
+
+    a: np.ndarray
+    b: np.ndarray
+    same_ok: np.ndarray
+    ab_ok: np.ndarray  # a strictly before b
+    ba_ok: np.ndarray
+    d_path: np.ndarray
+    d_ab: np.ndarray  # min(d(path_a, start_b), d(path_b, target_a))
+    d_ba: np.ndarray
+    required: np.ndarray
+
+
+# ----------------------------------------------------------------- geometry (vectorized)
+
+
+def point_seg_dist(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Distance from points p to segments [a, b] (broadcast over leading axes)."""
+    ab = b - a
+    ap = p - a
+    den = np.sum(ab * ab, axis=-1)
+    t = np.where(den > 0, np.sum(ap * ab, axis=-1) / np.where(den > 0, den, 1.0), 0.0)
+    t = np.clip(t, 0.0, 1.0)
+    q = a + t[..., None] * ab
+    return np.hypot(p[..., 0] - q[..., 0], p[..., 1] - q[..., 1])
+
+
+def _cross(o: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return (a[..., 0] - o[..., 0]) * (b[..., 1] - o[..., 1]) - (a[..., 1] - o[..., 1]) * (
+        b[..., 0] - o[..., 0]
+    )
+
+
+def seg_seg_dist(a0: np.ndarray, a1: np.ndarray, b0: np.ndarray, b1: np.ndarray) -> np.ndarray:
+    """Distance between segments [a0, a1] and [b0, b1] (0 if they cross)."""
+    d = np.minimum(
+        np.minimum(point_seg_dist(a0, b0, b1), point_seg_dist(a1, b0, b1)),
+        np.minimum(point_seg_dist(b0, a0, a1), point_seg_dist(b1, a0, a1)),
+    )
+    o1, o2 = _cross(a0, a1, b0), _cross(a0, a1, b1)
+    o3, o4 = _cross(b0, b1, a0), _cross(b0, b1, a1)
+    crossing = (o1 * o2 < 0) & (o3 * o4 < 0)
+    return np.where(crossing, 0.0, d)
+
+
+def paths_cross(a0: np.ndarray, a1: np.ndarray, b0: np.ndarray, b1: np.ndarray) -> np.ndarray:
+    """True where the two segments properly cross (Lemma 1's 'intercrossing')."""
+    o1, o2 = _cross(a0, a1, b0), _cross(a0, a1, b1)
+    o3, o4 = _cross(b0, b1, a0), _cross(b0, b1, a1)
+    return (o1 * o2 < 0) & (o3 * o4 < 0)
+
+
+# ----------------------------------------------------------------- segments and hashing
+
+
+def _segments(paths: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Flatten polylines to segments (a, b, owner). A zero-length path is one point segment."""
+    a_list: list[np.ndarray] = []
+    b_list: list[np.ndarray] = []
+    o_list: list[np.ndarray] = []
+    for i, p in enumerate(paths):
+        pts = np.asarray(p, dtype=np.float64).reshape(-1, 2)
+        if pts.shape[0] == 1:
+            pts = np.vstack([pts, pts])
+        a_list.append(pts[:-1])
+        b_list.append(pts[1:])
+        o_list.append(np.full(pts.shape[0] - 1, i, dtype=np.int64))
+    return np.vstack(a_list), np.vstack(b_list), np.concatenate(o_list)
+
+
+def candidate_segment_pairs(
+    seg_a: np.ndarray, seg_b: np.ndarray, owner: np.ndarray, c: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Segment index pairs (s, t), owner[s] < owner[t], that may come within c."""
+    if seg_a.shape[0] == 0:
+        empty = np.zeros(0, dtype=np.int64)
+        return empty, empty
+    h = 2.0 * c
+    vec = seg_b - seg_a
+    length = np.hypot(vec[:, 0], vec[:, 1])
+    nsamp = np.ceil(length / c).astype(np.int64) + 1
+    seg_of = np.repeat(np.arange(seg_a.shape[0]), nsamp)
+    start_of = np.cumsum(nsamp) - nsamp
+    k = np.arange(seg_of.shape[0]) - np.repeat(start_of, nsamp)
+    denom = np.maximum(nsamp - 1, 1)[seg_of]
+    t = k / denom
+    pts = seg_a[seg_of] + t[:, None] * vec[seg_of]
+    cell = np.floor(pts / h).astype(np.int64)
+    cell -= cell.min(axis=0) - 1
+    width = int(cell[:, 1].max()) + 3
+    key = cell[:, 0] * width + cell[:, 1]
+    # one entry per (segment, cell)
+    both = np.unique(key * seg_a.shape[0] + seg_of)
+    key = both // seg_a.shape[0]
+    seg_of = both % seg_a.shape[0]
+    order = np.argsort(key, kind="stable")
+    key = key[order]
+    seg_of = seg_of[order]
+    out_s: list[np.ndarray] = []
+    out_t: list[np.ndarray] = []
+    n_ent = key.shape[0]
+    for dx in (-1, 0, 1):
+        for dy in (-1, 0, 1):
+            nk = key + dx * width + dy
+            lo = np.searchsorted(key, nk, side="left")
+            hi = np.searchsorted(key, nk, side="right")
+            cnt = hi - lo
+            total = int(cnt.sum())
+            if total == 0:
+                continue
+            src = np.repeat(np.arange(n_ent), cnt)
+            offs = np.arange(total) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+            dst = lo[src] + offs
+            s, tt = seg_of[src], seg_of[dst]
+            keep = owner[s] < owner[tt]
+            out_s.append(s[keep])
+            out_t.append(tt[keep])
+    if not out_s:
+        empty = np.zeros(0, dtype=np.int64)
+        return empty, empty
+    s_all = np.concatenate(out_s)
+    t_all = np.concatenate(out_t)
+    m = seg_a.shape[0]
+    uniq = np.unique(s_all * m + t_all)
+    return uniq // m, uniq % m
+
+
+def pair_flags(paths: Sequence[np.ndarray], clearance: float) -> PairFlags:
+    """Flags of every robot pair whose paths come within ``clearance``."""
+    n = len(paths)
+    starts = np.array([np.asarray(p, dtype=np.float64).reshape(-1, 2)[0] for p in paths])
+    targets = np.array([np.asarray(p, dtype=np.float64).reshape(-1, 2)[-1] for p in paths])
+    seg_a, seg_b, owner = _segments(paths)
+    s, t = candidate_segment_pairs(seg_a, seg_b, owner, clearance)
+    if s.size == 0:
+        z = np.zeros(0, dtype=np.int64)
+        zf = np.zeros(0)
+        zb = np.zeros(0, dtype=bool)
+        return PairFlags(z, z, zb, zb, zb, zf, zf, zf, zf)
+    i, k = owner[s], owner[t]
+    d_ss = seg_seg_dist(seg_a[s], seg_b[s], seg_a[t], seg_b[t])
+    d_i_sk = point_seg_dist(starts[k], seg_a[s], seg_b[s])
+    d_k_ti = point_seg_dist(targets[i], seg_a[t], seg_b[t])
+    d_k_si = point_seg_dist(starts[i], seg_a[t], seg_b[t])
+    d_i_tk = point_seg_dist(targets[k], seg_a[s], seg_b[s])
+    pk = i * n + k
+    order = np.argsort(pk, kind="stable")
+    pk = pk[order]
+    first = np.flatnonzero(np.r_[True, pk[1:] != pk[:-1]])
+    a = pk[first] // n
+    b = pk[first] % n
+    d_path = np.minimum.reduceat(d_ss[order], first)
+    d_ab = np.minimum(
+        np.minimum.reduceat(d_i_sk[order], first), np.minimum.reduceat(d_k_ti[order], first)
+    )
+    d_ba = np.minimum(
+        np.minimum.reduceat(d_k_si[order], first), np.minimum.reduceat(d_i_tk[order], first)
+    )
+    d_start = np.hypot(*(starts[a] - starts[b]).T)
+    d_target = np.hypot(*(targets[a] - targets[b]).T)
+    req = np.minimum(clearance, np.minimum(d_start, d_target)) * (1.0 - 1e-9)
+    return PairFlags(
+        a=a,
+        b=b,
+        same_ok=d_path >= req,
+        ab_ok=d_ab >= req,
+        ba_ok=d_ba >= req,
+        d_path=d_path,
+        d_ab=d_ab,
+        d_ba=d_ba,
+        required=req,
+    )
+
+
+# ----------------------------------------------------------------- the checker
+
+
+def check_safety(
+    paths: Sequence[np.ndarray], waves: Sequence[int], radius: float
+) -> list[Violation]:
+    """Every violation of the wave-safety criterion (empty list = safe).
+
+    ``paths[i]`` is robot i's polyline (start, via..., target) as an (m, 2) array and
+    ``waves[i]`` its wave number.
+    """
+    if not (math.isfinite(radius) and radius > 0):
+        raise ValueError(f"radius must be > 0, got {radius!r}")
+    if len(paths) != len(waves):
+        raise ValueError(f"{len(paths)} paths but {len(waves)} wave numbers")
+    if not paths:
+        return []
+    flags = pair_flags(paths, 2.0 * radius)
+    w = np.asarray(waves, dtype=np.int64)
+    out: list[Violation] = []
+    wa, wb = w[flags.a], w[flags.b]
+    bad_same = (wa == wb) & ~flags.same_ok
+    bad_ab = (wa < wb) & ~flags.ab_ok
+    bad_ba = (wa > wb) & ~flags.ba_ok
+    for idx in np.flatnonzero(bad_same | bad_ab | bad_ba):
+        a, b = int(flags.a[idx]), int(flags.b[idx])
+        if bad_same[idx]:
+            out.append(
+                Violation(
+                    int(wa[idx]),
+                    a,
+                    b,
+                    "paths",
+                    float(flags.d_path[idx]),
+                    float(flags.required[idx]),
+                )
+            )
+        elif bad_ab[idx]:
+            out.append(
+                Violation(
+                    int(wb[idx]),
+                    a,
+                    b,
+                    "path-vs-standing",
+                    float(flags.d_ab[idx]),
+                    float(flags.required[idx]),
+                )
+            )
+        else:
+            out.append(
+                Violation(
+                    int(wa[idx]),
+                    a,
+                    b,
+                    "path-vs-standing",
+                    float(flags.d_ba[idx]),
+                    float(flags.required[idx]),
+                )
+            )
+    return out
+
+
+# ----------------------------------------------------------------- the scheduler
+
+
+@dataclass(frozen=True)
+class Schedule:
+    waves: np.ndarray  # (N,) wave of each robot row
+    vias: tuple[tuple[np.ndarray, ...], ...]  # per robot row
+
+
+def _assign_waves(
+    n: int, leader: int, priority: np.ndarray, flags: PairFlags
+) -> tuple[np.ndarray, list[int]]:
+    """Topological wave assignment. Returns (waves, robots left in cycles / blocked).
+
+    The leader goes first (wave 0, alone) unless some robot *must* move before it (its
+    slot lies within the clearance of that robot's start): those ancestors of the leader
+    in the precedence graph go first, then the leader alone, then everyone else.
+    Rows >= n are static obstacles: standing in every wave, never scheduled.
+    """
+    succ: list[list[int]] = [[] for _ in range(n)]
+    pred: list[list[int]] = [[] for _ in range(n)]
+    conflict: list[list[int]] = [[] for _ in range(n)]
+    problems: set[int] = set()
+    for idx in np.flatnonzero(~flags.same_ok):
+        a, b = int(flags.a[idx]), int(flags.b[idx])
+        ab, ba = bool(flags.ab_ok[idx]), bool(flags.ba_ok[idx])
+        if b >= n:  # a robot path too close to an obstacle (a < b always)
+            if a < n:
+                problems.add(a)
+            continue
+        if ab and ba:
+            conflict[a].append(b)
+            conflict[b].append(a)
+        elif ab:
+            succ[a].append(b)
+            pred[b].append(a)
+        elif ba:
+            succ[b].append(a)
+            pred[a].append(b)
+        else:
+            problems.update((a, b))
+    # ancestors of the leader
+    anc: set[int] = set()
+    stack = list(pred[leader])
+    while stack:
+        u = stack.pop()
+        if u not in anc:
+            anc.add(u)
+            stack.extend(pred[u])
+    waves = np.full(n, -1, dtype=np.int64)
+    earliest = np.zeros(n, dtype=np.int64)
+    indeg = np.array([len(p) for p in pred], dtype=np.int64)
+
+    def run(members: set[int] | None, floor: int) -> None:
+        heap = [
+            (int(priority[i]), i)
+            for i in range(n)
+            if waves[i] < 0 and indeg[i] == 0 and (members is None or i in members)
+        ]
+        heapq.heapify(heap)
+        while heap:
+            _, i = heapq.heappop(heap)
+            w = max(int(earliest[i]), floor)
+            taken = {int(waves[j]) for j in conflict[i] if waves[j] >= 0}
+            while w in taken:
+                w += 1
+            waves[i] = w
+            for j in succ[i]:
+                earliest[j] = max(earliest[j], w + 1)
+                indeg[j] -= 1
+                if indeg[j] == 0 and (members is None or j in members):
+                    heapq.heappush(heap, (int(priority[j]), j))
+
+    if leader in anc:
+        problems.add(leader)  # the leader is on a precedence cycle
+    else:
+        if anc:
+            run(anc, 0)
+        if all(waves[i] >= 0 for i in anc):
+            lw = max((int(waves[i]) for i in anc), default=-1) + 1
+            waves[leader] = lw
+            for j in succ[leader]:
+                earliest[j] = max(earliest[j], lw + 1)
+                indeg[j] -= 1
+            run(None, lw + 1)
+    left = np.flatnonzero(waves < 0)
+    if left.size:
+        # robots on precedence cycles (strongly connected components of size > 1)
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import connected_components
+
+        src = [a for a in range(n) for b in succ[a]]
+        dst = [b for a in range(n) for b in succ[a]]
+        graph = coo_matrix((np.ones(len(src)), (src, dst)), shape=(n, n))
+        _, label = connected_components(graph, directed=True, connection="strong")
+        sizes = np.bincount(label)
+        problems.update(int(i) for i in left if sizes[label[i]] > 1)
+        if leader in left:
+            problems.add(leader)
+        if not problems:  # pragma: no cover - left nodes always descend from a cycle
+            problems.update(int(i) for i in left)
+    return waves, sorted(problems)
+
+
+def _detour_candidates(p: np.ndarray, q: np.ndarray, c: float) -> list[np.ndarray]:
+    d = q - p
+    length = float(np.hypot(*d))
+    if length < 1e-9:
+        return []
+    u = d / length
+    nrm = np.array([-u[1], u[0]])
+    out = []
+    for frac in (0.5, 0.25, 0.75):
+        base = p + frac * d
+        for off in (1.0, 1.5, 2.0, 3.0, 4.5, 6.0):
+            for sign in (1.0, -1.0):
+                out.append(base + sign * off * c * nrm)
+    return out
+
+
+def _bbox(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    return p.min(axis=0), p.max(axis=0)
+
+
+def _score_paths(
+    cands: np.ndarray, near: np.ndarray, paths: Sequence[np.ndarray], c: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Score K candidate paths (K, m, 2) of one robot against the robots ``near``.
+
+    Returns (total clearance deficit of blocked pairs, pairs that may not share a wave),
+    each (K,). For each other robot k, the deficit of an order is the sum of the
+    clearance missing from its two point-to-path tests; a pair's deficit is that of its
+    better order.
+    """
+    k_cand = cands.shape[0]
+    if near.size == 0:
+        return np.zeros(k_cand), np.zeros(k_cand, dtype=np.int64)
+    seg_a, seg_b, owner = _segments([paths[k] for k in near])
+    starts = np.array([paths[k][0] for k in near])
+    targets = np.array([paths[k][-1] for k in near])
+    m = near.shape[0]
+    ca = cands[:, :-1, :].reshape(-1, 1, 2)  # (K*(m-1), 1, 2) candidate segments
+    cb = cands[:, 1:, :].reshape(-1, 1, 2)
+    nseg = cands.shape[1] - 1
+    # candidate segments vs other robots' segments -> min per (candidate, robot)
+    dss = seg_seg_dist(ca, cb, seg_a[None], seg_b[None]).reshape(k_cand, nseg, -1).min(axis=1)
+    d_path = np.full((k_cand, m), np.inf)
+    np.minimum.at(d_path.T, owner, dss.T)
+    d_i_s = point_seg_dist(starts[None], ca, cb).reshape(k_cand, nseg, m).min(axis=1)
+    d_i_t = point_seg_dist(targets[None], ca, cb).reshape(k_cand, nseg, m).min(axis=1)
+    own_s, own_t = cands[0, 0], cands[0, -1]
+    d_k_si = np.full(m, np.inf)
+    d_k_ti = np.full(m, np.inf)
+    np.minimum.at(d_k_si, owner, point_seg_dist(own_s[None], seg_a, seg_b))
+    np.minimum.at(d_k_ti, owner, point_seg_dist(own_t[None], seg_a, seg_b))
+    req = np.minimum(
+        c, np.minimum(np.hypot(*(starts - own_s).T), np.hypot(*(targets - own_t).T))
+    ) * (1.0 - 1e-9)
+    i_first = np.maximum(req - d_i_s, 0) + np.maximum(req - d_k_ti, 0)
+    k_first = np.maximum(req - d_k_si, 0) + np.maximum(req - d_i_t, 0)
+    deficit = np.minimum(i_first, k_first).sum(axis=1)
+    return deficit, np.sum(d_path < req, axis=1)
+
+
+def schedule(
+    starts: np.ndarray,
+    targets: np.ndarray,
+    leader: int,
+    priority: np.ndarray,
+    radius: float,
+    max_rounds: int = 30,
+    fixed_vias: Sequence[tuple[np.ndarray, ...]] | None = None,
+    obstacles: np.ndarray | None = None,
+) -> Schedule:
+    """Waves (+ via points where needed) that pass :func:`check_safety`.
+
+    ``fixed_vias`` are via points the caller wants (e.g. the obstacle procedure); a robot
+    whose path cannot be scheduled may have them replaced by a detour. ``obstacles``
+    (M, 2) stand still in every wave and are held to the same clearance.
+    """
+    n = starts.shape[0]
+    c = 2.0 * radius
+    vias: list[tuple[np.ndarray, ...]] = (
+        [() for _ in range(n)] if fixed_vias is None else [tuple(v) for v in fixed_vias]
+    )
+    obs = np.zeros((0, 2)) if obstacles is None else np.asarray(obstacles, dtype=np.float64)
+    detoured: set[int] = set()
+
+    def path(i: int) -> np.ndarray:
+        return np.vstack([starts[i], *vias[i], targets[i]])
+
+    paths = [path(i) for i in range(n)] + [np.vstack([o, o]) for o in obs]
+    lo = np.array([p.min(axis=0) for p in paths])
+    hi = np.array([p.max(axis=0) for p in paths])
+    for _ in range(max_rounds):
+        flags = pair_flags(paths, c)
+        waves, problems = _assign_waves(n, leader, priority, flags)
+        if not problems:
+            return Schedule(waves=waves[:n], vias=tuple(vias))
+        # Try a detour for every problem robot (the leader first, then by priority),
+        # each scored against the current paths of the robots near it.
+        fixed = False
+        ordered = sorted(problems, key=lambda r: (r != leader, int(priority[r])))
+        for r in ordered:
+            if r in detoured:
+                continue
+            cands = _detour_candidates(starts[r], targets[r], c)
+            if not cands:
+                continue
+            allp = np.vstack([paths[r], *cands])
+            blo, bhi = allp.min(axis=0) - c, allp.max(axis=0) + c
+            mask = np.all(lo <= bhi, axis=1) & np.all(hi >= blo, axis=1)
+            mask[r] = False
+            near = np.flatnonzero(mask)
+            base_d, base_c = _score_paths(paths[r][None], near, paths, c)
+            stack = np.array([np.vstack([starts[r], v, targets[r]]) for v in cands])
+            deficit, conflicts = _score_paths(stack, near, paths, c)
+            lengths = np.sum(np.hypot(*np.diff(stack, axis=1).transpose(2, 0, 1)), axis=1)
+            pick = int(np.lexsort((np.arange(len(cands)), lengths, conflicts, deficit))[0])
+            best = ((float(deficit[pick]), int(conflicts[pick]), float(lengths[pick])), cands[pick])
+            base = (float(base_d[0]), int(base_c[0]))
+            if best is not None and (
+                best[0][0] < base[0] - 1e-12
+                or (best[0][0] <= base[0] + 1e-12 and best[0][1] < base[1])
+            ):
+                vias[r] = (best[1],)
+                paths[r] = path(r)
+                lo[r], hi[r] = paths[r].min(axis=0), paths[r].max(axis=0)
+                detoured.add(r)
+                fixed = True
+        if not fixed:
+            break
+    blocked = [
+        (int(flags.a[k]), int(flags.b[k]))
+        for k in np.flatnonzero(~flags.same_ok & ~flags.ab_ok & ~flags.ba_ok)
+        if flags.b[k] < n
+    ]
+    raise ScheduleError(
+        f"no safe schedule found: robots {problems[:10]} stay blocked after detours",
+        problems,
+        blocked,
+    )
