@@ -1,0 +1,148 @@
+"""The whole plan: invariants, digest, safety, obstacles, errors."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from agent.formation.plan import PlanParams, plan_from_positions, plan_from_records
+from agent.formation.pyramid import parent_of
+from agent.formation.records import NeighborRecord
+from agent.formation.safety import check_safety
+from tests.formation.conftest import random_fleet, records_from_positions
+
+
+def _rot(theta: float) -> np.ndarray:
+    c, s = math.cos(theta), math.sin(theta)
+    return np.array([[c, -s], [s, c]])
+
+
+def test_three_robots_by_hand() -> None:
+    # robots exactly on a pyramid of d_e = 1 facing north: the plan keeps them there.
+    h = math.cos(math.radians(30))
+    pos = np.array([[0.0, 0.0], [-0.5, -h], [0.5, -h]]) + np.array([2.0, 1.0])
+    plan = plan_from_positions([5, 8, 3], pos[[0, 1, 2]], PlanParams(d_e=1.0))
+    assert plan.leader == 5
+    assert plan.axis == pytest.approx(math.pi / 2)
+    r5, r8, r3 = plan.robot(5), plan.robot(8), plan.robot(3)
+    assert (r5.order, r8.order, r3.order) == (0, 1, 2)
+    assert (r5.parent, r8.parent, r3.parent) == (-1, 5, 5)
+    for r in plan.robots:
+        assert r.distance == pytest.approx(0.0, abs=1e-9)
+        assert r.heading == pytest.approx(plan.axis)  # nothing to walk: face the axis
+    assert plan.waves[0] == (5,)
+
+
+@pytest.mark.parametrize("strategy", ["paper", "optimal", "capt", "default"])
+def test_random_fleets_are_safe_and_consistent(strategy: str) -> None:
+    rng = np.random.default_rng(42)
+    for n in (1, 2, 3, 5, 8, 12, 15):
+        pos = random_fleet(rng, n, spacing=0.6)
+        ids = [int(i) for i in rng.permutation(100)[:n]]
+        plan = plan_from_positions(ids, pos, PlanParams(d_e=0.8, strategy=strategy))
+        assert [r.robot_id for r in plan.robots] == sorted(ids)
+        assert sorted(r.order for r in plan.robots) == list(range(n))
+        assert check_safety(plan.paths(), plan.wave_of(), 0.2) == []
+        by_order = {r.order: r for r in plan.robots}
+        for r in plan.robots:
+            if r.order == 0:
+                assert r.parent == -1 and r.robot_id == plan.leader
+            else:
+                par = by_order[parent_of(r.order)]
+                assert r.parent == par.robot_id
+                assert math.hypot(*(r.target - par.target)) == pytest.approx(0.8)
+            first = r.waypoints()[0]
+            assert math.hypot(*(first - r.start)) == pytest.approx(r.distance)
+        assert sorted(i for w in plan.waves for i in w) == sorted(ids)
+
+
+def test_shuffled_records_give_bit_identical_digest() -> None:
+    rng = np.random.default_rng(7)
+    pos = random_fleet(rng, 9, spacing=0.6)
+    ids = list(range(10, 19))
+    recs = records_from_positions(ids, pos, noise=0.03, rng=rng)
+    base = plan_from_records(recs)
+    for _ in range(5):
+        order = rng.permutation(len(recs))
+        shuffled = []
+        for k in order:
+            r = recs[k]
+            p = rng.permutation(r.count)
+            shuffled.append(NeighborRecord(r.robot_id, r.neighbours[p]))
+        assert plan_from_records(shuffled).digest == base.digest
+    # plan in the frame robot's fixed frame: it starts at the origin
+    assert np.allclose(base.robot(base.frame_robot).start, 0.0)
+
+
+def test_rigid_motion_moves_the_plan() -> None:
+    rng = np.random.default_rng(9)
+    for _ in range(5):
+        pos = random_fleet(rng, 10, spacing=0.6)
+        ids = list(range(10))
+        theta, shift = rng.uniform(-math.pi, math.pi), rng.uniform(-5, 5, 2)
+        moved = pos @ _rot(theta).T + shift
+        for strategy in ("paper", "optimal"):
+            a = plan_from_positions(ids, pos, PlanParams(strategy=strategy))
+            b = plan_from_positions(ids, moved, PlanParams(strategy=strategy))
+            assert a.leader == b.leader
+            assert [r.order for r in a.robots] == [r.order for r in b.robots]
+            assert np.allclose(a.targets() @ _rot(theta).T + shift, b.targets(), atol=1e-6)
+            d = (b.axis - a.axis - theta + math.pi) % (2 * math.pi) - math.pi
+            assert abs(d) < 1e-6
+
+
+def test_collinear_and_clustered_fleets() -> None:
+    line = np.stack([np.arange(8) * 0.7, np.zeros(8)], axis=1)
+    plan = plan_from_positions(list(range(8)), line)
+    assert check_safety(plan.paths(), plan.wave_of(), 0.2) == []
+    rng = np.random.default_rng(1)
+    cluster = random_fleet(rng, 12, spacing=0.45, spread=1.0)
+    plan = plan_from_positions(list(range(12)), cluster, PlanParams(d_e=2.0))
+    assert check_safety(plan.paths(), plan.wave_of(), 0.2) == []
+
+
+def test_obstacles_take_part_and_the_pyramid_moves_out() -> None:
+    rng = np.random.default_rng(2)
+    pts = random_fleet(rng, 11, spacing=0.8)
+    robots, obstacles = pts[:8], pts[8:]
+    plan = plan_from_positions(list(range(8)), robots, PlanParams(d_e=0.8), obstacles=obstacles)
+    paths = plan.paths() + [np.vstack([o, o]) for o in obstacles]
+    waves = list(plan.wave_of()) + [10**6] * len(obstacles)  # obstacles never move
+    assert check_safety(paths, waves, 0.2) == []
+    t = plan.targets()
+    d = np.hypot(*(t[:, None, :] - obstacles[None, :, :]).T)
+    assert d.min() >= 0.8 - 1e-9  # final pyramid clear of obstacles (4·radius)
+    assert sorted(r.order for r in plan.robots) == list(range(8))
+
+
+def test_plan_errors() -> None:
+    with pytest.raises(ValueError, match="duplicate"):
+        plan_from_positions([1, 1], np.zeros((2, 2)))
+    with pytest.raises(ValueError, match="no robots"):
+        plan_from_positions([], np.zeros((0, 2)))
+    with pytest.raises(ValueError, match="shape"):
+        plan_from_positions([1], np.zeros((1, 3)))
+    with pytest.raises(ValueError, match="2 ids but 1"):
+        plan_from_positions([1, 2], np.zeros((1, 2)))
+    with pytest.raises(ValueError, match="non-finite"):
+        plan_from_positions([1], np.array([[np.nan, 0.0]]))
+    with pytest.raises(ValueError, match="non-negative"):
+        plan_from_positions([-1], np.zeros((1, 2)))
+    with pytest.raises(ValueError, match="obstacles"):
+        plan_from_positions([1], np.zeros((1, 2)), obstacles=np.zeros((2, 3)))
+    with pytest.raises(ValueError, match="not in the plan"):
+        plan_from_positions([1], np.zeros((1, 2))).robot(2)
+    for kw, msg in (
+        ({"d_e": -1.0}, "d_e"),
+        ({"phi_e": 2.0}, "phi_e"),
+        ({"radius": 0.0}, "radius"),
+        ({"strategy": "x"}, "strategy"),
+        ({"orientation": "x"}, "orientation"),
+        ({"frame_method": "x"}, "frame_method"),
+        ({"epsilon": -1.0}, "epsilon"),
+        ({"placement": "x"}, "placement"),
+    ):
+        with pytest.raises(ValueError, match=msg):
+            PlanParams(**kw)  # type: ignore[arg-type]
