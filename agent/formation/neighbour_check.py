@@ -10,7 +10,11 @@ Reading of Algorithm 2 (it overwrites IDs while looping, so the literal loop dep
 the order of the records): we make "the candidate with minimum ε_d" order-independent
 by a *global greedy matching*: every detection pair that meets eq. 9 is a candidate;
 candidates are taken in increasing ε_d (ties: lower owner id, then detection index, in
-the canonical record order of :mod:`records`); a candidate is accepted when neither of
+the canonical record order of :mod:`records`), after one addition of ours: a candidate
+with more *mutual support* goes first. The paper's test alone is fooled when a third
+robot stands half-way between i and j (i sees it at v, j sees it at -v: ε ≈ 0 for the
+wrong pair); the support counts the other detections of i that j also reports at the
+place the candidate implies (see :func:`_support`), which the right pair wins; a candidate is accepted when neither of
 its two detections is already used and the two robots are not already a neighbour pair.
 The second pass of the paper ("re-going through all the neighbours with their IDs and
 delete those neighbour pairs whose errors do not meet (9)") is then applied to the
@@ -94,6 +98,34 @@ def meets_eq9(v_ij: np.ndarray, v_ji: np.ndarray, epsilon: float) -> tuple[bool,
     return (abs(ex) < epsilon and abs(ey) < epsilon and ed < epsilon), ed
 
 
+def _support(
+    r2: np.ndarray, c2: np.ndarray, owner: np.ndarray, vecs: np.ndarray, epsilon: float
+) -> np.ndarray:
+    """Mutual support of each candidate pair (detection r2 of i <-> detection c2 of k).
+
+    If the candidate is right, k sits at ``p_i + v_ia``, so every other detection of i,
+    shifted by ``-v_ia``, should appear among k's detections when k sees it too. The
+    support is the number of i's other detections that do (within ε).
+    """
+    out = np.zeros(r2.shape[0], dtype=np.int64)
+    by_owner: dict[int, np.ndarray] = {}
+    for o in np.unique(owner):
+        by_owner[int(o)] = np.flatnonzero(owner == o)
+    trees: dict[int, cKDTree] = {}
+    for t in range(r2.shape[0]):
+        oi, ok = int(owner[r2[t]]), int(owner[c2[t]])
+        mine = by_owner[oi]
+        others = mine[mine != r2[t]]
+        if others.size == 0:
+            continue
+        if ok not in trees:
+            trees[ok] = cKDTree(vecs[by_owner[ok]])
+        shifted = vecs[others] - vecs[r2[t]]
+        dist, _ = trees[ok].query(shifted, distance_upper_bound=epsilon)
+        out[t] = int(np.sum(np.isfinite(dist)))
+    return out
+
+
 def identify_neighbours(
     records: Sequence[NeighborRecord], epsilon: float = DEFAULT_EPSILON
 ) -> NeighbourGraph:
@@ -135,7 +167,8 @@ def identify_neighbours(
         swap = owner[rows] > owner[cols]
         r2 = np.where(swap, cols, rows)
         c2 = np.where(swap, rows, cols)
-        order = np.lexsort((c2, r2, ed))
+        support = _support(r2, c2, owner, vecs, epsilon)
+        order = np.lexsort((c2, r2, ed, -support))
         used: set[int] = set()
         linked: set[tuple[int, int]] = set()
         for t in order:

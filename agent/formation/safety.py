@@ -244,7 +244,7 @@ def pair_flags(paths: Sequence[np.ndarray], clearance: float) -> PairFlags:
 
 
 def check_safety(
-    paths: Sequence[np.ndarray], waves: Sequence[int], radius: float
+    paths: Sequence[np.ndarray], waves: Sequence[int] | np.ndarray, radius: float
 ) -> list[Violation]:
     """Every violation of the wave-safety criterion (empty list = safe).
 

@@ -97,3 +97,17 @@ def test_single_robot() -> None:
     g = identify_neighbours([NeighborRecord(4, np.zeros((0, 2)))])
     cf = build_common_frame(g)
     assert cf.frame_robot == 4 and np.allclose(cf.positions, [[0.0, 0.0]])
+
+
+def test_robot_half_way_does_not_fool_the_check() -> None:
+    # 0 at (0,0), 1 at (1,0), 2 at (2,0): 0 sees 1 at +x, 2 sees 1 at -x (ε = 0 for the
+    # wrong pair 0<->2 through robot 1); mutual support must pick the right pairs.
+    pos = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]])
+    g = identify_neighbours(records_from_positions([0, 1, 2], pos, seen=2.5), epsilon=0.2)
+    assert [(p.i, p.j) for p in g.pairs] == [(0, 1), (0, 2), (1, 2)]
+    assert np.allclose(
+        build_common_frame(g, "bfs").positions - build_common_frame(g, "bfs").positions[1],
+        pos - pos[1],
+    )
+    for p in g.pairs:
+        assert np.allclose(p.v_ij, pos[p.j] - pos[p.i])
