@@ -45,6 +45,8 @@ SCALE_MIN = 0.01
 SCALE_MAX = 1.5
 SCALE_STEP = 0.01
 MAX_TUPLES = 24
+RG_MIN = 0.25  # scale gate of the candidate groups: NAOs up to about 2 m
+RG_MAX = 1.5
 
 
 @dataclass(frozen=True)
@@ -89,7 +91,7 @@ def candidate_groups(
 ) -> list[tuple[int, ...]]:
     """Tuple groups worth scoring: 3-groups (and 2-groups, for the masks with 2 tuples)
     whose box size, aspect and height above the horizon could be an NAO at r_g in
-    [0.35, 1.5] (vectorised over all combinations).
+    [RG_MIN, RG_MAX] = [0.25, 1.5] (about 0.4-2 m) (vectorised over all combinations).
 
     These gates only drop groups that no mask could match at a plausible distance; they
     never decide between masks. Groups come out in combination order.
@@ -112,16 +114,16 @@ def candidate_groups(
         w = x1[combos].max(axis=1) - gx0
         h = y1[combos].max(axis=1) - gy0
         sizes = mbase.sizes[sel]
-        # per (group, mask): scale in [0.35, 1.5] on both sides, aspect within 0.75-1.33
+        # per (group, mask): scale in [RG_MIN, RG_MAX] on both sides, aspect within 0.75-1.33
         # and the crop's top where the mask's top would be at this size
         rw = w[:, None] / sizes[None, :, 0]
         rh = h[:, None] / sizes[None, :, 1]
         expect = horizon_row + rh * mbase.top_offset[sel][None, :]
         ok = (
-            (rw >= 0.35)
-            & (rw <= 1.5)
-            & (rh >= 0.35)
-            & (rh <= 1.5)
+            (rw >= RG_MIN)
+            & (rw <= RG_MAX)
+            & (rh >= RG_MIN)
+            & (rh <= RG_MAX)
             & (rw / rh >= 0.75)
             & (rw / rh <= 1.33)
             & (np.abs(gy0[:, None] - expect) <= 0.3 * h[:, None] + 6)
