@@ -456,6 +456,8 @@ class Runner:
             if rid != self.me and peer.alive:
                 agr.member_joined(rid, now)
             elif rid != self.me and peer.seen_alive:
+                # it was a member and left while we searched: that is a departure too
+                agr.member_joined(rid, now)
                 agr.member_left(rid, now)
         for msg in self.early_records.values():
             agr.on_record(msg, now)
