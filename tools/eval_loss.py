@@ -77,8 +77,10 @@ def monitor(
     ground truth (``tools.demo.Observer``, MCAP recording). The run is over when the
     orchestrator writes one JSON line to stdin, ``{"ids": [...], "exit_codes": {...},
     "timeout": str|null}``, or, with ``until_done=N`` (the compose ``observer``, which
-    cannot see exit codes), when N agents have reached ``done`` or ``failed`` (exit code
-    taken as 0 for ``done``, 1 otherwise) or ``timeout_s`` has passed. It then drains
+    cannot see exit codes), when N agents have reached ``done`` or ``failed``, or N agents
+    were alive and every liveliness token has been gone for 5 s (a final status lost on a
+    dead link), or ``timeout_s`` has passed; the exit code is taken as 0 for an agent in
+    ``done``, 1 otherwise. It then drains
     1.5 s more and writes ``out/result.json`` (and the formation figure) with
     ``tools.demo.summarise``. Returns 0 when the run succeeded.
     """
@@ -102,19 +104,38 @@ def monitor(
     try:
         for key in (P.KEY_STATUS_ALL, P.KEY_RECORD_ALL, P.KEY_DIGEST_ALL, P.KEY_WORLD_TRUTH_ALL):
             bus.subscribe(key)
+        bus.watch_alive(P.KEY_ALIVE_ALL)
         print("monitor ready", flush=True)
         order: dict[str, Any] | None = None
+        alive: set[int] = set()
+        ever_alive: set[int] = set()
+        all_gone_since: float | None = None
         while order is None:
             for ev in bus.drain(0.1):
                 if ev.kind == "msg":
+                    known = len(obs.agents)
                     obs.take(ev.key, ev.msg, rec)
+                    if len(obs.agents) > known:
+                        print(f"monitor sees agents {sorted(obs.agents)}", flush=True)
+                elif ev.kind == "alive":
+                    alive.add(ev.robot_id)
+                    ever_alive.add(ev.robot_id)
+                elif ev.kind == "gone":
+                    alive.discard(ev.robot_id)
             if until_done:
+                now = time.monotonic()
+                if alive or len(ever_alive) < until_done:
+                    all_gone_since = None
+                elif all_gone_since is None:
+                    all_gone_since = now
                 final = {i: v.phase for i, v in obs.agents.items() if v.phase in TERMINAL_PHASES}
-                late = time.monotonic() > deadline
-                if len(final) >= until_done or late:
+                gone = all_gone_since is not None and now - all_gone_since > 5.0
+                late = now > deadline
+                if len(final) >= until_done or gone or late:
+                    ids = sorted(final) if len(final) >= until_done else sorted(obs.agents)
                     order = {
-                        "ids": sorted(obs.agents)[:until_done] if late else sorted(final),
-                        "exit_codes": {str(i): 0 if p == "done" else 1 for i, p in final.items()},
+                        "ids": ids[:until_done],
+                        "exit_codes": {str(i): int(final.get(i) != "done") for i in ids},
                         "timeout": f"agents not finished after {timeout_s:g} s" if late else None,
                     }
                 continue

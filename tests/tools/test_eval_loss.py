@@ -2,11 +2,18 @@
 
 from __future__ import annotations
 
+import json
 import math
+import socket
+import subprocess
+import sys
+import threading
 from pathlib import Path
 
 import pytest
+import zenoh
 
+from agent import protocol as P
 from tools import eval_loss
 from tools.eval_loss import RunResult, _fmt, _reason, summarise
 
@@ -104,3 +111,62 @@ def test_cli_rejects_bad_arguments(
 ) -> None:
     assert eval_loss.main(argv) == 2
     assert msg in capsys.readouterr().err
+
+
+@pytest.mark.system
+def test_observer_stops_when_every_agent_is_gone(tmp_path: Path) -> None:
+    """The compose observer (``--monitor --until-done N``) ends when the agents' liveliness
+    tokens are gone even if no final status arrived, and judges the run a failure."""
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        ep = f"tcp/127.0.0.1:{sock.getsockname()[1]}"
+    repo = Path(__file__).resolve().parents[2]
+    procs = []
+    try:
+        router = subprocess.Popen(
+            [sys.executable, "-m", "tools.router", "--listen", ep, "--no-multicast-scouting"],
+            stdout=subprocess.PIPE, text=True, cwd=str(repo),
+        )  # fmt: skip
+        procs.append(router)
+        assert router.stdout is not None and "router ready" in router.stdout.readline()
+        mon = subprocess.Popen(
+            [
+                sys.executable, "-m", "tools.eval_loss", "--monitor", "--until-done", "1",
+                "--timeout", "60", "--connect", ep, "--out", str(tmp_path), "--seed", "4",
+            ],
+            stdout=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True, cwd=str(repo),
+        )  # fmt: skip
+        procs.append(mon)
+        assert mon.stdout is not None and mon.stdout.readline().strip() == "monitor ready"
+        cfg = zenoh.Config()
+        cfg.insert_json5("connect/endpoints", json.dumps([ep]))
+        cfg.insert_json5("scouting/multicast/enabled", "false")
+        with zenoh.open(cfg) as s:
+            token = s.liveliness().declare_token(P.key_alive(5))
+            status = P.encode(P.StatusMsg(sender=5, phase="move"))
+            stop = threading.Event()
+
+            def publish() -> None:  # re-published: a fresh session may not know routes yet
+                while not stop.wait(0.2):
+                    s.put(P.key_status(5), status)
+
+            t = threading.Thread(target=publish, daemon=True)
+            t.start()
+            try:
+                # the monitor says when it has seen the status (the readline is bounded by
+                # the monitor's own 60 s timeout)
+                assert mon.stdout.readline().strip() == "monitor sees agents [5]"
+            finally:
+                stop.set()
+                t.join(timeout=5)
+            token.undeclare()
+            assert mon.wait(timeout=30) == 1  # not a success: the agent never finished
+        result = json.loads((tmp_path / "result.json").read_text())
+        assert result["exit_codes"] == {"5": 1}
+        assert result["final_phase"] == {"5": "move"}
+        assert result["seed"] == 4 and result["success"] is False
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.kill()
+                p.wait(timeout=10)
