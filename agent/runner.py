@@ -53,6 +53,7 @@ from agent.protocol import (
     DigestMsg,
     NeighborRecordMsg,
     StatusMsg,
+    id_from_key,
     key_alive,
     key_digest,
     key_record,
@@ -234,6 +235,14 @@ class Runner:
                     agr.member_left(ev.robot_id, now)
             return
         msg = ev.msg
+        sender = getattr(msg, "sender", None)
+        try:
+            key_id = id_from_key(ev.key)
+        except ValueError:
+            key_id = None
+        if sender is None or key_id != sender:
+            log.warning("dropped %s on %s: sender %s does not own the key", msg.TAG, ev.key, sender)
+            return
         if isinstance(msg, NeighborRecordMsg):
             if agr is not None:
                 agr.on_record(msg, now)

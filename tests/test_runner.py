@@ -158,3 +158,13 @@ def test_unavailable_perception_fails_safely_with_reason(runner: Runner) -> None
     assert runner.run() == 1
     assert runner.phase == "failed"
     assert runner.bus.stats.published_count["status"] >= 2
+
+
+def test_messages_whose_sender_does_not_own_the_key_are_dropped(runner: Runner) -> None:
+    from agent.bus import Event
+
+    impostor = NeighborRecordMsg(sender=2, round=0, neighbours=((1.0, 0.0),))
+    runner._handle(Event("msg", "nao/1/record", impostor))
+    assert runner.early_records == {}
+    runner._handle(Event("msg", "nao/2/record", impostor))
+    assert runner.early_records == {2: impostor}
