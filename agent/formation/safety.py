@@ -46,7 +46,8 @@ _SAME, _IK, _KI = 0, 1, 2
 
 
 class ScheduleError(ValueError):
-    """No safe schedule; ``pairs`` are robot-row pairs that can go in no order."""
+    """No safe schedule; ``pairs`` are robot-row pairs that can go in no order (or, if
+    there are none, pairs on precedence cycles) - candidates for a slot swap."""
 
     def __init__(self, message: str, robots: list[int], pairs: list[tuple[int, int]]) -> None:
         super().__init__(message)
@@ -136,6 +137,13 @@ def _segments(paths: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.n
     return np.vstack(a_list), np.vstack(b_list), np.concatenate(o_list)
 
 
+def _sorted_unique(a: np.ndarray) -> np.ndarray:
+    if a.size == 0:
+        return a
+    a = np.sort(a, kind="stable")
+    return a[np.r_[True, a[1:] != a[:-1]]]
+
+
 def candidate_segment_pairs(
     seg_a: np.ndarray, seg_b: np.ndarray, owner: np.ndarray, c: float
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -158,7 +166,7 @@ def candidate_segment_pairs(
     width = int(cell[:, 1].max()) + 3
     key = cell[:, 0] * width + cell[:, 1]
     # one entry per (segment, cell)
-    both = np.unique(key * seg_a.shape[0] + seg_of)
+    both = _sorted_unique(key * seg_a.shape[0] + seg_of)
     key = both // seg_a.shape[0]
     seg_of = both % seg_a.shape[0]
     order = np.argsort(key, kind="stable")
@@ -167,8 +175,8 @@ def candidate_segment_pairs(
     out_s: list[np.ndarray] = []
     out_t: list[np.ndarray] = []
     n_ent = key.shape[0]
-    for dx in (-1, 0, 1):
-        for dy in (-1, 0, 1):
+    for dx, dy in ((0, 0), (1, -1), (1, 0), (1, 1), (0, 1)):
+        if True:
             nk = key + dx * width + dy
             lo = np.searchsorted(key, nk, side="left")
             hi = np.searchsorted(key, nk, side="right")
@@ -180,16 +188,17 @@ def candidate_segment_pairs(
             offs = np.arange(total) - np.repeat(np.cumsum(cnt) - cnt, cnt)
             dst = lo[src] + offs
             s, tt = seg_of[src], seg_of[dst]
-            keep = owner[s] < owner[tt]
-            out_s.append(s[keep])
-            out_t.append(tt[keep])
+            lo_first = owner[s] < owner[tt]
+            hi_first = owner[s] > owner[tt]
+            out_s.append(np.concatenate([s[lo_first], tt[hi_first]]))
+            out_t.append(np.concatenate([tt[lo_first], s[hi_first]]))
     if not out_s:
         empty = np.zeros(0, dtype=np.int64)
         return empty, empty
     s_all = np.concatenate(out_s)
     t_all = np.concatenate(out_t)
     m = seg_a.shape[0]
-    uniq = np.unique(s_all * m + t_all)
+    uniq = _sorted_unique(s_all * m + t_all)
     return uniq // m, uniq % m
 
 
@@ -539,6 +548,15 @@ def schedule(
         for k in np.flatnonzero(~flags.same_ok & ~flags.ab_ok & ~flags.ba_ok)
         if flags.b[k] < n
     ]
+    if not blocked:
+        # precedence cycles: offer the one-order pairs among the stuck robots for swapping
+        stuck = set(problems)
+        one_order = ~flags.same_ok & (flags.ab_ok ^ flags.ba_ok)
+        blocked = [
+            (int(flags.a[k]), int(flags.b[k]))
+            for k in np.flatnonzero(one_order)
+            if int(flags.a[k]) in stuck and int(flags.b[k]) in stuck
+        ]
     raise ScheduleError(
         f"no safe schedule found: robots {problems[:10]} stay blocked after detours",
         problems,

@@ -1,0 +1,104 @@
+"""``python -m tools.bench plan``: planning time vs fleet size, per strategy.
+
+Fleet: a jittered square grid with the paper's simulation spacing (d_e = 2 m, starts
+0.9·d_e apart ± 0.15·d_e, robot radius 0.2 m), ids shuffled; the clock covers
+``plan_from_positions`` (pyramid, assignment, safety waves and detours). Exact solvers
+(``optimal``, ``capt``) run only up to ``--exact-max`` robots. Prints a table of seconds,
+the fitted growth exponent k of t ~ n^k per strategy (fit over n >= 1000), and whether
+the plan of every run passed the safety checker (checked outside the clock, up to
+``--check-max`` robots).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+
+import numpy as np
+
+from agent.formation.plan import PlanParams, plan_from_positions
+from agent.formation.safety import check_safety
+
+D_E = 2.0
+
+
+def fleet(n: int, seed: int = 0) -> tuple[list[int], np.ndarray]:
+    rng = np.random.default_rng(seed)
+    g = math.ceil(math.sqrt(n))
+    grid = np.stack(np.meshgrid(np.arange(g), np.arange(g)), -1).reshape(-1, 2)[:n].astype(float)
+    pos = (grid + rng.uniform(-1 / 6, 1 / 6, grid.shape)) * 0.9 * D_E
+    ids = [int(i) for i in rng.permutation(n)]
+    return ids, pos
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(
+        prog="python -m tools.bench plan", description=__doc__.splitlines()[0]
+    )
+    ap.add_argument("--sizes", default="10,100,1000,10000,100000")
+    ap.add_argument("--strategies", default="paper,default,optimal,capt")
+    ap.add_argument("--exact-max", type=int, default=2000)
+    ap.add_argument("--check-max", type=int, default=10000)
+    ap.add_argument(
+        "--budget", type=float, default=120.0, help="skip larger n once one run exceeds this (s)"
+    )
+    args = ap.parse_args(argv)
+    try:
+        sizes = [int(x) for x in args.sizes.split(",") if x]
+    except ValueError:
+        print("error: --sizes must be a comma list of ints", file=sys.stderr)
+        return 2
+    strategies = [s for s in args.strategies.split(",") if s]
+    times: dict[str, dict[int, float]] = {s: {} for s in strategies}
+    safe: dict[str, dict[int, str]] = {s: {} for s in strategies}
+    for s in strategies:
+        skip = False
+        for n in sizes:
+            if skip or (s in ("optimal", "capt") and n > args.exact_max):
+                continue
+            ids, pos = fleet(n)
+            print(f"[bench plan] {s} n={n} ...", file=sys.stderr)
+            t0 = time.perf_counter()
+            try:
+                plan = plan_from_positions(ids, pos, PlanParams(d_e=D_E, strategy=s))
+            except ValueError as exc:
+                times[s][n] = float("nan")
+                safe[s][n] = f"fail: {exc}"[:40]
+                continue
+            dt = time.perf_counter() - t0
+            times[s][n] = dt
+            if n <= args.check_max:
+                ok = not check_safety(plan.paths(), plan.wave_of(), 0.2)
+                safe[s][n] = f"safe, {len(plan.waves)} waves" if ok else "UNSAFE"
+            else:
+                safe[s][n] = f"{len(plan.waves)} waves (not checked)"
+            if dt > args.budget:
+                skip = True
+    print(f"{'strategy':10s} " + " ".join(f"{n:>10d}" for n in sizes) + "   exponent")
+    for s in strategies:
+        row = []
+        for n in sizes:
+            t = times[s].get(n)
+            row.append(f"{'-':>10s}" if t is None else f"{t:10.3f}")
+        pts = [(n, t) for n, t in times[s].items() if n >= 1000 and math.isfinite(t) and t > 0]
+        if len(pts) < 2:
+            pts = [(n, t) for n, t in times[s].items() if math.isfinite(t) and t > 0]
+        exp = "-"
+        if len(pts) >= 2:
+            x = np.log([p[0] for p in pts])
+            y = np.log([p[1] for p in pts])
+            exp = f"{np.polyfit(x, y, 1)[0]:.2f}"
+        print(f"{s:10s} " + " ".join(row) + f"   {exp}")
+    print(
+        "safety: "
+        + "; ".join(
+            f"{s} " + ", ".join(f"n={n}: {v}" for n, v in safe[s].items()) for s in strategies
+        )
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
