@@ -7,7 +7,8 @@ execution waves with via points where straight paths cannot be scheduled safely.
 
 Every quantity of a :class:`Plan` is in the *common frame* (the fixed frame of the frame
 robot; :func:`plan_from_positions` uses the caller's frame and sets ``frame_robot=-1``).
-``axis`` is the direction the pyramid faces (from the last layer toward the leader);
+``origin`` is o_p of eq. 13 (mean of the starts; moved with the pattern when obstacles
+push it out). ``axis`` is the direction the pyramid faces (from the last layer toward the leader);
 at the end every robot turns to face it. ``heading`` / ``distance`` describe the first
 leg (to the first via point, or to the target); a robot already on its slot has
 ``distance == 0`` and ``heading == axis``.
@@ -255,7 +256,11 @@ def plan_from_positions(
     obstacles: np.ndarray | None = None,
     frame_robot: int = -1,
 ) -> Plan:
-    """Plan a pyramid for robots at known positions (caller's frame)."""
+    """Plan a pyramid for robots at known positions (caller's frame).
+
+    Wave 0 is the leader alone, unless the leader's slot lies within 2·radius of another
+    robot's start: then the robots that must clear it go first (see :mod:`safety`).
+    """
     id_list, pos = _check_positions(ids, positions)
     order_idx = np.argsort(np.asarray(id_list), kind="stable")
     sorted_ids = [id_list[k] for k in order_idx]
@@ -366,7 +371,12 @@ def plan_from_records(
     params: PlanParams = PlanParams(),
     obstacles: np.ndarray | None = None,
 ) -> Plan:
-    """The whole pipeline on a record set (any order): the same records -> the same plan."""
+    """The whole pipeline on a record set (any order): the same records -> the same plan.
+
+    ``obstacles`` (M, 2), if any, are positions in the common frame (the frame robot's
+    fixed frame). Raises ``ValueError`` for bad records, a fleet that is not connected
+    through identified neighbours, or (never seen in tests) no safe schedule.
+    """
     graph = identify_neighbours(records, params.epsilon)
     cf = build_common_frame(graph, params.frame_method)
     return plan_from_positions(cf.ids, cf.positions, params, obstacles, frame_robot=cf.frame_robot)
