@@ -47,6 +47,9 @@ from agent.formation.safety import Schedule, ScheduleError, schedule
 #: next attempt of :func:`attempts` when a plan cannot be scheduled safely.
 OPTIMAL_MAX_N = 200
 
+#: The ``front`` fallback placement is only tried up to this many robots.
+FRONT_MAX_N = 2000
+
 
 @dataclass(frozen=True)
 class PlanParams:
@@ -104,6 +107,8 @@ class PlanParams:
         if self.strategy == "default" and "paper" not in strategies:
             strategies.append("paper")
         placements = ["centroid", "front"] if self.placement == "default" else [self.placement]
+        if self.placement == "default" and n > FRONT_MAX_N:
+            placements = ["centroid"]  # "front" makes O(n^1.5) long paths: hours at 10^4
         return [(s, p) for p in placements for s in strategies]
 
 
