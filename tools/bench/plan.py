@@ -6,7 +6,8 @@ Fleet: a jittered square grid with the paper's simulation spacing (d_e = 2 m, st
 (``optimal``, ``capt``) run only up to ``--exact-max`` robots. Prints a table of seconds,
 the fitted growth exponent k of t ~ n^k per strategy (fit over n >= 1000), and whether
 the plan of every run passed the safety checker (checked outside the clock, up to
-``--check-max`` robots).
+``--check-max`` robots). Once one run of a strategy takes longer than ``--budget``
+seconds, its larger sizes are skipped and reported as such.
 """
 
 from __future__ import annotations
@@ -57,6 +58,7 @@ def main(argv: list[str] | None = None) -> int:
         skip = False
         for n in sizes:
             if skip or (s in ("optimal", "capt") and n > args.exact_max):
+                safe[s][n] = "skipped (budget)" if skip else "skipped (exact solver)"
                 continue
             ids, pos = fleet(n)
             print(f"[bench plan] {s} n={n} ...", file=sys.stderr)
