@@ -28,15 +28,17 @@ RUN if [ -n "$EXTRA_CA_CERT" ]; then \
     && python3 -m venv /opt/venv
 WORKDIR /app
 
-# Dependencies first, in their own layer: editing the code does not reinstall numpy & co.
-COPY pyproject.toml README.md ./
+# Dependencies first, in their own layer: editing the code (or the README, which the
+# package metadata names) does not reinstall numpy & co.
+COPY pyproject.toml ./
 RUN mkdir -p agent sim tools \
-    && touch agent/__init__.py sim/__init__.py tools/__init__.py \
+    && touch README.md agent/__init__.py sim/__init__.py tools/__init__.py \
     && pip install . \
     && pip uninstall -y nao-formation \
     && rm -rf agent sim tools build *.egg-info
 
 # The project itself.
+COPY README.md ./
 COPY agent ./agent
 COPY sim ./sim
 COPY tools ./tools
