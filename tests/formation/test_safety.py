@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from agent.formation.safety import (
+    candidate_segment_pairs,
     check_safety,
     pair_flags,
     point_seg_dist,
@@ -86,3 +87,74 @@ def test_checker_errors() -> None:
     with pytest.raises(ValueError, match="wave numbers"):
         check_safety([P((0, 0), (1, 0))], [0, 1], R)
     assert check_safety([], [], R) == []
+
+
+def test_candidate_segment_pairs_is_exact_against_brute_force() -> None:
+    # every segment pair of different owners within c is found, and no other: random,
+    # point, vertical, horizontal and long segments, owners in any order
+    rng = np.random.default_rng(1)
+    for trial in range(120):
+        m = int(rng.integers(1, 30))
+        a = rng.uniform(-5, 5, (m, 2))
+        b = a + rng.normal(0, float(rng.choice([0.01, 1.0, 4.0])), (m, 2))
+        z = rng.random(m) < 0.2
+        b[z] = a[z]
+        v = rng.random(m) < 0.1
+        b[v, 0] = a[v, 0]
+        hz = rng.random(m) < 0.1
+        b[hz, 1] = a[hz, 1]
+        owner = rng.integers(0, m, m)
+        c = float(rng.choice([0.1, 0.4, 2.0]))
+        s, t = candidate_segment_pairs(a, b, owner, c)
+        got = set(zip(s.tolist(), t.tolist(), strict=True))
+        want = {
+            (i, j)
+            for i in range(m)
+            for j in range(m)
+            if owner[i] < owner[j] and seg_seg_dist(a[i], b[i], a[j], b[j]) <= c
+        }
+        assert got == want, trial
+
+
+def _brute_violations(paths: list[np.ndarray], waves: list[int], r: float) -> set[tuple[int, int]]:
+    c = 2 * r
+    bad = set()
+    for i in range(len(paths)):
+        for k in range(i + 1, len(paths)):
+            pi, pk = paths[i], paths[k]
+            req = min(c, float(np.hypot(*(pi[0] - pk[0]))), float(np.hypot(*(pi[-1] - pk[-1]))))
+            req *= 1 - 1e-9
+
+            def path_d(p: np.ndarray, q: np.ndarray) -> float:
+                return min(
+                    float(seg_seg_dist(p[u], p[u + 1], q[w], q[w + 1]))
+                    for u in range(len(p) - 1)
+                    for w in range(len(q) - 1)
+                )
+
+            def pt_d(p: np.ndarray, x: np.ndarray) -> float:
+                return min(float(point_seg_dist(x, p[u], p[u + 1])) for u in range(len(p) - 1))
+
+            if waves[i] == waves[k]:
+                d = path_d(pi, pk)
+            elif waves[i] < waves[k]:  # i walks while k stands at its start, then k walks
+                d = min(pt_d(pi, pk[0]), pt_d(pk, pi[-1]))
+            else:
+                d = min(pt_d(pk, pi[0]), pt_d(pi, pk[-1]))
+            if d < req:
+                bad.add((i, k))
+    return bad
+
+
+def test_checker_agrees_with_brute_force_on_random_plans() -> None:
+    rng = np.random.default_rng(7)
+    for _ in range(60):
+        n = int(rng.integers(2, 12))
+        paths = []
+        for _ in range(n):
+            k = int(rng.integers(1, 4))
+            pts = rng.uniform(0, 3, (k, 2))
+            paths.append(np.vstack([pts, pts[-1:]]) if k == 1 else pts)
+        waves = [int(w) for w in rng.integers(0, 3, n)]
+        got = {(v.robot_a, v.robot_b) for v in check_safety(paths, waves, R)}
+        assert got == _brute_violations(paths, waves, R)
