@@ -79,6 +79,33 @@ def preflight() -> None:
         raise NetnsError("network namespaces need root (run as root or with sudo)")
 
 
+_UNAVAILABLE: list[str | None] = []
+
+
+def unavailable_reason() -> str | None:
+    """Why test hosts cannot be made here (for pytest skips), or None when they can.
+
+    Besides root and ``ip``, tries to create and delete one namespace: a root shell in a
+    container without ``CAP_SYS_ADMIN``/``CAP_NET_ADMIN`` passes the first checks and
+    still cannot. The answer is cached for the process.
+    """
+    if not _UNAVAILABLE:
+        try:
+            preflight()
+            probe = f"naoprobe{os.getpid()}"
+            made = _ip("netns", "add", probe, check=False)
+            _ip("netns", "del", probe, check=False)
+            reason = (
+                None
+                if made.returncode == 0
+                else (f"cannot create a network namespace: {made.stderr.strip()}")
+            )
+        except NetnsError as exc:
+            reason = str(exc)
+        _UNAVAILABLE.append(reason)
+    return _UNAVAILABLE[0]
+
+
 def _ip(*args: str, check: bool = True) -> subprocess.CompletedProcess[str]:
     proc = subprocess.run(["ip", *args], capture_output=True, text=True, check=False)
     if check and proc.returncode != 0:

@@ -30,8 +30,8 @@ pytestmark = [
     pytest.mark.netns,
     pytest.mark.system,
     pytest.mark.skipif(
-        os.geteuid() != 0 or shutil.which("ip") is None or shutil.which("iptables") is None,
-        reason="needs root, iproute2 (ip) and iptables for network namespaces",
+        shutil.which("iptables") is None or netns.unavailable_reason() is not None,
+        reason=f"needs iptables and network namespaces: {netns.unavailable_reason()}",
     ),
 ]
 

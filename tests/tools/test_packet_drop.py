@@ -12,9 +12,9 @@ import pytest
 from tools import netns, packet_drop
 from tools.packet_drop import Dropper, PacketDropError
 
-ROOT_OK = os.geteuid() == 0 and shutil.which("ip") is not None and shutil.which("iptables")
 needs_root = pytest.mark.skipif(
-    not ROOT_OK, reason="needs root, iproute2 (ip) and iptables for network namespaces"
+    shutil.which("iptables") is None or netns.unavailable_reason() is not None,
+    reason=f"needs iptables and network namespaces: {netns.unavailable_reason()}",
 )
 PREFIX = f"pd{os.getpid() % 100000}"
 
