@@ -123,18 +123,18 @@ def paths_cross(a0: np.ndarray, a1: np.ndarray, b0: np.ndarray, b1: np.ndarray) 
 
 
 def _segments(paths: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Flatten polylines to segments (a, b, owner). A zero-length path is one point segment."""
-    a_list: list[np.ndarray] = []
-    b_list: list[np.ndarray] = []
-    o_list: list[np.ndarray] = []
-    for i, p in enumerate(paths):
-        pts = np.asarray(p, dtype=np.float64).reshape(-1, 2)
-        if pts.shape[0] == 1:
-            pts = np.vstack([pts, pts])
-        a_list.append(pts[:-1])
-        b_list.append(pts[1:])
-        o_list.append(np.full(pts.shape[0] - 1, i, dtype=np.int64))
-    return np.vstack(a_list), np.vstack(b_list), np.concatenate(o_list)
+    """Flatten polylines to segments (a, b, owner). A one-point path is one point segment."""
+    arrs = [np.asarray(p, dtype=np.float64).reshape(-1, 2) for p in paths]
+    lens = np.fromiter((p.shape[0] for p in arrs), dtype=np.int64, count=len(arrs))
+    if np.any(lens == 0):
+        raise ValueError("a path has no points")
+    pts = np.concatenate(arrs)
+    first = np.cumsum(lens) - lens
+    nseg = np.maximum(lens - 1, 1)
+    owner = np.repeat(np.arange(len(arrs)), nseg)
+    ia = first[owner] + (np.arange(owner.size) - np.repeat(np.cumsum(nseg) - nseg, nseg))
+    ib = ia + (lens[owner] > 1)
+    return pts[ia], pts[ib], owner
 
 
 def _sorted_unique(a: np.ndarray) -> np.ndarray:
@@ -184,19 +184,18 @@ def _register(
     return (col[idx] + _OFF) * (1 << 31) + (cy + _OFF), sc[idx]
 
 
-def candidate_segment_pairs(
-    seg_a: np.ndarray, seg_b: np.ndarray, owner: np.ndarray, c: float
+def _segment_pairs(
+    seg_a: np.ndarray,
+    seg_b: np.ndarray,
+    owner: np.ndarray,
+    c: float,
+    query: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Segment index pairs (s, t), owner[s] < owner[t], whose distance is <= c.
-
-    Exact (every such pair, no other), sorted by (s, t). Spatial hashing: each segment
-    is entered in every cell (side 3c) its c/2-dilation may meet - two segments within
-    c share such a cell - so only same-cell pairs are candidates; they are deduplicated
-    with one int64 key, then measured. Cost ~ total path length / c + candidates.
-    """
+    """Segment pairs (s, t), owner[s] < owner[t], within c; with ``query`` (bool per
+    segment) only the pairs with at least one query segment."""
     m = seg_a.shape[0]
     empty = np.zeros(0, dtype=np.int64)
-    if m == 0:
+    if m == 0 or (query is not None and not np.any(query)):
         return empty, empty
     lim = float(np.max(np.abs(np.concatenate([seg_a, seg_b]))))
     h = _CELL_PER_C * c
@@ -208,18 +207,27 @@ def candidate_segment_pairs(
     seg = seg[order]
     e = key.size
     gend = np.r_[np.flatnonzero(key[1:] != key[:-1]) + 1, e]
-    cnt = np.repeat(gend, np.diff(np.r_[0, gend])) - np.arange(e) - 1
+    gsize = np.diff(np.r_[0, gend])
+    if query is None:  # each entry with the later entries of its cell
+        ent = np.arange(e)
+        cnt = np.repeat(gend, gsize) - ent - 1
+        first = ent + 1
+    else:  # each query entry with every other entry of its cell
+        ent = np.flatnonzero(query[seg])
+        cnt = np.repeat(gsize, gsize)[ent]
+        first = np.repeat(gend - gsize, gsize)[ent]
     csum = np.cumsum(cnt)
     out: list[np.ndarray] = []
     lo = 0
-    while lo < e:
+    while lo < ent.size:
         base = int(csum[lo - 1]) if lo else 0
         hi = max(int(np.searchsorted(csum, base + _CHUNK, side="right")), lo + 1)
         c_cnt = cnt[lo:hi]
         total = int(c_cnt.sum())
         if total:
-            src = np.repeat(np.arange(lo, hi), c_cnt)
-            dst = src + 1 + (np.arange(total) - np.repeat(np.cumsum(c_cnt) - c_cnt, c_cnt))
+            src = np.repeat(ent[lo:hi], c_cnt)
+            offs = np.arange(total) - np.repeat(np.cumsum(c_cnt) - c_cnt, c_cnt)
+            dst = np.repeat(first[lo:hi], c_cnt) + offs
             s, t = seg[src], seg[dst]
             os_, ot = owner[s], owner[t]
             keep = os_ != ot
@@ -236,13 +244,31 @@ def candidate_segment_pairs(
     return u // m, u % m
 
 
-def pair_flags(paths: Sequence[np.ndarray], clearance: float) -> PairFlags:
-    """Flags of every robot pair whose paths come within ``clearance``."""
-    n = len(paths)
-    starts = np.array([np.asarray(p, dtype=np.float64).reshape(-1, 2)[0] for p in paths])
-    targets = np.array([np.asarray(p, dtype=np.float64).reshape(-1, 2)[-1] for p in paths])
-    seg_a, seg_b, owner = _segments(paths)
-    s, t = candidate_segment_pairs(seg_a, seg_b, owner, clearance)
+def candidate_segment_pairs(
+    seg_a: np.ndarray, seg_b: np.ndarray, owner: np.ndarray, c: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Segment index pairs (s, t), owner[s] < owner[t], whose distance is <= c.
+
+    Exact (every such pair, no other), sorted by (s, t). Spatial hashing: each segment
+    is entered in every cell (side 3c) its c/2-dilation may meet - two segments within
+    c share such a cell - so only same-cell pairs are candidates; they are deduplicated
+    with one int64 key, then measured. Cost ~ total path length / c + candidates.
+    """
+    return _segment_pairs(seg_a, seg_b, owner, c)
+
+
+def _flags_from_pairs(
+    starts: np.ndarray,
+    targets: np.ndarray,
+    seg_a: np.ndarray,
+    seg_b: np.ndarray,
+    owner: np.ndarray,
+    s: np.ndarray,
+    t: np.ndarray,
+    clearance: float,
+) -> PairFlags:
+    """Per robot pair flags from its segment pairs (s, t), owner[s] < owner[t]."""
+    n = starts.shape[0]
     if s.size == 0:
         z = np.zeros(0, dtype=np.int64)
         zf = np.zeros(0)
@@ -281,6 +307,40 @@ def pair_flags(paths: Sequence[np.ndarray], clearance: float) -> PairFlags:
         d_ba=d_ba,
         required=req,
     )
+
+
+def _ends(paths: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    arrs = [np.asarray(p, dtype=np.float64).reshape(-1, 2) for p in paths]
+    return np.array([p[0] for p in arrs]), np.array([p[-1] for p in arrs])
+
+
+def pair_flags(paths: Sequence[np.ndarray], clearance: float) -> PairFlags:
+    """Flags of every robot pair whose paths come within ``clearance`` (sorted by (a, b);
+    pairs farther apart can share a wave and go in either order)."""
+    starts, targets = _ends(paths)
+    seg_a, seg_b, owner = _segments(paths)
+    s, t = _segment_pairs(seg_a, seg_b, owner, clearance)
+    return _flags_from_pairs(starts, targets, seg_a, seg_b, owner, s, t, clearance)
+
+
+def _update_flags(
+    flags: PairFlags, paths: Sequence[np.ndarray], changed: Sequence[int], clearance: float
+) -> PairFlags:
+    """:func:`pair_flags` after the paths of ``changed`` robots changed (same result)."""
+    n = len(paths)
+    starts, targets = _ends(paths)
+    seg_a, seg_b, owner = _segments(paths)
+    moved = np.zeros(n, dtype=bool)
+    moved[np.asarray(changed, dtype=np.int64)] = True
+    s, t = _segment_pairs(seg_a, seg_b, owner, clearance, query=moved[owner])
+    new = _flags_from_pairs(starts, targets, seg_a, seg_b, owner, s, t, clearance)
+    keep = ~(moved[flags.a] | moved[flags.b])
+    parts = [(getattr(flags, f)[keep], getattr(new, f)) for f in PairFlags.__dataclass_fields__]
+    merged = {
+        f: np.concatenate(p) for f, p in zip(PairFlags.__dataclass_fields__, parts, strict=True)
+    }
+    order = np.argsort(merged["a"] * n + merged["b"], kind="stable")
+    return PairFlags(**{f: v[order] for f, v in merged.items()})
 
 
 # ----------------------------------------------------------------- the checker
@@ -354,6 +414,14 @@ class Schedule:
     vias: tuple[tuple[np.ndarray, ...], ...]  # per robot row
 
 
+def _adjacency(u: np.ndarray, v: np.ndarray, n: int) -> list[list[int]]:
+    """Adjacency lists of the edges u -> v (in the order of the edge arrays)."""
+    order = np.argsort(u, kind="stable")
+    vl = v[order].tolist()
+    ptr = np.searchsorted(u[order], np.arange(n + 1)).tolist()
+    return [vl[ptr[i] : ptr[i + 1]] for i in range(n)]
+
+
 def _assign_waves(
     n: int, leader: int, priority: np.ndarray, flags: PairFlags
 ) -> tuple[np.ndarray, list[int]]:
@@ -364,28 +432,22 @@ def _assign_waves(
     in the precedence graph go first, then the leader alone, then everyone else.
     Rows >= n are static obstacles: standing in every wave, never scheduled.
     """
-    succ: list[list[int]] = [[] for _ in range(n)]
-    pred: list[list[int]] = [[] for _ in range(n)]
-    conflict: list[list[int]] = [[] for _ in range(n)]
-    problems: set[int] = set()
-    for idx in np.flatnonzero(~flags.same_ok):
-        a, b = int(flags.a[idx]), int(flags.b[idx])
-        ab, ba = bool(flags.ab_ok[idx]), bool(flags.ba_ok[idx])
-        if b >= n:  # a robot path too close to an obstacle (a < b always)
-            if a < n:
-                problems.add(a)
-            continue
-        if ab and ba:
-            conflict[a].append(b)
-            conflict[b].append(a)
-        elif ab:
-            succ[a].append(b)
-            pred[b].append(a)
-        elif ba:
-            succ[b].append(a)
-            pred[a].append(b)
-        else:
-            problems.update((a, b))
+    ns = np.flatnonzero(~flags.same_ok)
+    fa, fb, fab, fba = flags.a[ns], flags.b[ns], flags.ab_ok[ns], flags.ba_ok[ns]
+    obst = fb >= n  # a robot path too close to an obstacle (a < b always)
+    problems: set[int] = set(fa[obst & (fa < n)].tolist())
+    fa, fb, fab, fba = fa[~obst], fb[~obst], fab[~obst], fba[~obst]
+    both, only_ab, only_ba = fab & fba, fab & ~fba, fba & ~fab
+    neither = ~fab & ~fba
+    problems.update(fa[neither].tolist())
+    problems.update(fb[neither].tolist())
+    src = np.concatenate([fa[only_ab], fb[only_ba]])
+    dst = np.concatenate([fb[only_ab], fa[only_ba]])
+    succ = _adjacency(src, dst, n)
+    pred = _adjacency(dst, src, n)
+    conflict = _adjacency(
+        np.concatenate([fa[both], fb[both]]), np.concatenate([fb[both], fa[both]]), n
+    )
     # ancestors of the leader
     anc: set[int] = set()
     stack = list(pred[leader])
@@ -394,29 +456,32 @@ def _assign_waves(
         if u not in anc:
             anc.add(u)
             stack.extend(pred[u])
-    waves = np.full(n, -1, dtype=np.int64)
-    earliest = np.zeros(n, dtype=np.int64)
-    indeg = np.array([len(p) for p in pred], dtype=np.int64)
+    waves = [-1] * n
+    earliest = [0] * n
+    indeg = [len(p) for p in pred]
+    prio = [int(p) for p in priority.tolist()]
 
     def run(members: set[int] | None, floor: int) -> None:
         heap = [
-            (int(priority[i]), i)
+            (prio[i], i)
             for i in range(n)
             if waves[i] < 0 and indeg[i] == 0 and (members is None or i in members)
         ]
         heapq.heapify(heap)
         while heap:
             _, i = heapq.heappop(heap)
-            w = max(int(earliest[i]), floor)
-            taken = {int(waves[j]) for j in conflict[i] if waves[j] >= 0}
-            while w in taken:
-                w += 1
+            w = max(earliest[i], floor)
+            if conflict[i]:
+                taken = {waves[j] for j in conflict[i]}
+                while w in taken:
+                    w += 1
             waves[i] = w
             for j in succ[i]:
-                earliest[j] = max(earliest[j], w + 1)
+                if earliest[j] < w + 1:
+                    earliest[j] = w + 1
                 indeg[j] -= 1
                 if indeg[j] == 0 and (members is None or j in members):
-                    heapq.heappush(heap, (int(priority[j]), j))
+                    heapq.heappush(heap, (prio[j], j))
 
     if leader in anc:
         problems.add(leader)  # the leader is on a precedence cycle
@@ -424,21 +489,20 @@ def _assign_waves(
         if anc:
             run(anc, 0)
         if all(waves[i] >= 0 for i in anc):
-            lw = max((int(waves[i]) for i in anc), default=-1) + 1
+            lw = max((waves[i] for i in anc), default=-1) + 1
             waves[leader] = lw
             for j in succ[leader]:
                 earliest[j] = max(earliest[j], lw + 1)
                 indeg[j] -= 1
             run(None, lw + 1)
-    left = np.flatnonzero(waves < 0)
+    wv = np.array(waves, dtype=np.int64)
+    left = np.flatnonzero(wv < 0)
     if left.size:
         # robots on precedence cycles (strongly connected components of size > 1)
         from scipy.sparse import coo_matrix
         from scipy.sparse.csgraph import connected_components
 
-        src = [a for a in range(n) for b in succ[a]]
-        dst = [b for a in range(n) for b in succ[a]]
-        graph = coo_matrix((np.ones(len(src)), (src, dst)), shape=(n, n))
+        graph = coo_matrix((np.ones(src.size), (src, dst)), shape=(n, n))
         _, label = connected_components(graph, directed=True, connection="strong")
         sizes = np.bincount(label)
         problems.update(int(i) for i in left if sizes[label[i]] > 1)
@@ -446,7 +510,7 @@ def _assign_waves(
             problems.add(leader)
         if not problems:  # pragma: no cover - left nodes always descend from a cycle
             problems.update(int(i) for i in left)
-    return waves, sorted(problems)
+    return wv, sorted(problems)
 
 
 def _detour_candidates(p: np.ndarray, q: np.ndarray, c: float) -> list[np.ndarray]:
