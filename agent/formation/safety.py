@@ -529,10 +529,6 @@ def _detour_candidates(p: np.ndarray, q: np.ndarray, c: float) -> list[np.ndarra
     return out
 
 
-def _bbox(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    return p.min(axis=0), p.max(axis=0)
-
-
 def _score_paths(
     cands: np.ndarray, near: np.ndarray, paths: Sequence[np.ndarray], c: float
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -573,6 +569,50 @@ def _score_paths(
     return deficit, np.sum(d_path < req, axis=1)
 
 
+def _near_sets(
+    robots: Sequence[int],
+    regions: Sequence[Sequence[np.ndarray]],
+    paths: Sequence[np.ndarray],
+    c: float,
+) -> list[np.ndarray]:
+    """For each robot r of ``robots``: a superset of the robots whose current path comes
+    within c of a path of its region (its own path and its detour candidates), plus the
+    other listed robots whose regions come within c of it (their path may change
+    first): every robot sharing a hash cell with the region. Robots farther away add
+    nothing to a score (every term of :func:`_score_paths` is 0)."""
+    total = len(paths)
+    pa, pb, po = _segments(paths)
+    ra, rb, ro = _segments([p for reg in regions for p in reg])
+    reg_of = np.repeat(np.arange(len(robots)), [len(reg) for reg in regions])
+    h = _CELL_PER_C * c
+    r = 0.5 * c * (1 + 1e-6) + 1e-9
+    key_p, seg_p = _register(pa, pb, r, h)
+    key_r, seg_r = _register(ra, rb, r, h)
+    key = np.concatenate([key_p, key_r])
+    own = np.concatenate([po[seg_p], total + reg_of[ro[seg_r]]])
+    order = np.lexsort((own, key))
+    key, own = key[order], own[order]
+    first = np.r_[True, (key[1:] != key[:-1]) | (own[1:] != own[:-1])]
+    key, own = key[first], own[first]  # one entry per (cell, owner)
+    e = key.size
+    gend = np.r_[np.flatnonzero(key[1:] != key[:-1]) + 1, e]
+    gsize = np.diff(np.r_[0, gend])
+    ent = np.flatnonzero(own >= total)
+    cnt = np.repeat(gsize, gsize)[ent]
+    beg = np.repeat(gend - gsize, gsize)[ent]
+    src = np.repeat(ent, cnt)
+    dst = np.repeat(beg, cnt) + (np.arange(int(cnt.sum())) - np.repeat(np.cumsum(cnt) - cnt, cnt))
+    rob = np.asarray(robots, dtype=np.int64)
+    q = own[src] - total
+    other = own[dst]
+    k = np.where(other < total, other, rob[np.maximum(other - total, 0)])
+    ok = k != rob[q]
+    both = _sorted_unique(q[ok] * total + k[ok])
+    qs, ks = both // total, both % total
+    ptr = np.searchsorted(qs, np.arange(len(robots) + 1))
+    return [ks[ptr[j] : ptr[j + 1]] for j in range(len(robots))]
+
+
 def schedule(
     starts: np.ndarray,
     targets: np.ndarray,
@@ -598,49 +638,54 @@ def schedule(
     detoured: set[int] = set()
 
     def path(i: int) -> np.ndarray:
+        if not vias[i]:
+            return np.array([starts[i], targets[i]], dtype=np.float64)
         return np.vstack([starts[i], *vias[i], targets[i]])
 
-    paths = [path(i) for i in range(n)] + [np.vstack([o, o]) for o in obs]
-    lo = np.array([p.min(axis=0) for p in paths])
-    hi = np.array([p.max(axis=0) for p in paths])
+    paths = [path(i) for i in range(n)] + [np.array([o, o]) for o in obs]
+    flags = pair_flags(paths, c)
     for _ in range(max_rounds):
-        flags = pair_flags(paths, c)
         waves, problems = _assign_waves(n, leader, priority, flags)
         if not problems:
             return Schedule(waves=waves[:n], vias=tuple(vias))
         # Try a detour for every problem robot (the leader first, then by priority),
         # each scored against the current paths of the robots near it.
-        fixed = False
         ordered = sorted(problems, key=lambda r: (r != leader, int(priority[r])))
+        todo = []
         for r in ordered:
             if r in detoured:
                 continue
             cands = _detour_candidates(starts[r], targets[r], c)
-            if not cands:
-                continue
-            allp = np.vstack([paths[r], *cands])
-            blo, bhi = allp.min(axis=0) - c, allp.max(axis=0) + c
-            mask = np.all(lo <= bhi, axis=1) & np.all(hi >= blo, axis=1)
-            mask[r] = False
-            near = np.flatnonzero(mask)
+            if cands:
+                todo.append((r, cands))
+        if not todo:
+            break
+        near_of = _near_sets(
+            [r for r, _ in todo],
+            [
+                [paths[r], *(np.array([starts[r], v, targets[r]]) for v in cands)]
+                for r, cands in todo
+            ],
+            paths,
+            c,
+        )
+        changed: list[int] = []
+        for (r, cands), near in zip(todo, near_of, strict=True):
             base_d, base_c = _score_paths(paths[r][None], near, paths, c)
             stack = np.array([np.vstack([starts[r], v, targets[r]]) for v in cands])
             deficit, conflicts = _score_paths(stack, near, paths, c)
             lengths = np.sum(np.hypot(*np.diff(stack, axis=1).transpose(2, 0, 1)), axis=1)
             pick = int(np.lexsort((np.arange(len(cands)), lengths, conflicts, deficit))[0])
-            best = ((float(deficit[pick]), int(conflicts[pick]), float(lengths[pick])), cands[pick])
-            base = (float(base_d[0]), int(base_c[0]))
-            if best is not None and (
-                best[0][0] < base[0] - 1e-12
-                or (best[0][0] <= base[0] + 1e-12 and best[0][1] < base[1])
+            if deficit[pick] < base_d[0] - 1e-12 or (
+                deficit[pick] <= base_d[0] + 1e-12 and conflicts[pick] < base_c[0]
             ):
-                vias[r] = (best[1],)
+                vias[r] = (cands[pick],)
                 paths[r] = path(r)
-                lo[r], hi[r] = paths[r].min(axis=0), paths[r].max(axis=0)
                 detoured.add(r)
-                fixed = True
-        if not fixed:
+                changed.append(r)
+        if not changed:
             break
+        flags = _update_flags(flags, paths, changed, c)
     blocked = [
         (int(flags.a[k]), int(flags.b[k]))
         for k in np.flatnonzero(~flags.same_ok & ~flags.ab_ok & ~flags.ba_ok)
