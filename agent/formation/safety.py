@@ -190,9 +190,10 @@ def _segment_pairs(
     owner: np.ndarray,
     c: float,
     query: np.ndarray | None = None,
+    cross_only: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Segment pairs (s, t), owner[s] < owner[t], within c; with ``query`` (bool per
-    segment) only the pairs with at least one query segment."""
+    segment) only the pairs with at least one query segment (``cross_only``: exactly one)."""
     m = seg_a.shape[0]
     empty = np.zeros(0, dtype=np.int64)
     if m == 0 or (query is not None and not np.any(query)):
@@ -202,7 +203,8 @@ def _segment_pairs(
     if not (math.isfinite(lim) and c > 0 and lim / h < _OFF / 4):
         raise ValueError("segments must be finite and c > 0 (and coordinates / c < 2^26)")
     key, seg = _register(seg_a, seg_b, 0.5 * c * (1 + 1e-6) + 1e-9, h)
-    order = np.argsort(key, kind="stable")  # within a cell: ascending segment
+    # within a cell: ascending segment (query: the other segments first)
+    order = np.argsort(key, kind="stable") if query is None else np.lexsort((query[seg], key))
     key = key[order]
     seg = seg[order]
     e = key.size
@@ -212,9 +214,13 @@ def _segment_pairs(
         ent = np.arange(e)
         cnt = np.repeat(gend, gsize) - ent - 1
         first = ent + 1
-    else:  # each query entry with every other entry of its cell
-        ent = np.flatnonzero(query[seg])
-        cnt = np.repeat(gsize, gsize)[ent]
+    else:  # each query entry with every other (cross_only: non-query) entry of its cell
+        isq = query[seg]
+        ent = np.flatnonzero(isq)
+        if cross_only:
+            cnt = np.repeat(np.add.reduceat((~isq).astype(np.int64), gend - gsize), gsize)[ent]
+        else:
+            cnt = np.repeat(gsize, gsize)[ent]
         first = np.repeat(gend - gsize, gsize)[ent]
     csum = np.cumsum(cnt)
     out: list[np.ndarray] = []
@@ -569,48 +575,56 @@ def _score_paths(
     return deficit, np.sum(d_path < req, axis=1)
 
 
-def _near_sets(
-    robots: Sequence[int],
-    regions: Sequence[Sequence[np.ndarray]],
-    paths: Sequence[np.ndarray],
-    c: float,
-) -> list[np.ndarray]:
-    """For each robot r of ``robots``: a superset of the robots whose current path comes
-    within c of a path of its region (its own path and its detour candidates), plus the
-    other listed robots whose regions come within c of it (their path may change
-    first): every robot sharing a hash cell with the region. Robots farther away add
-    nothing to a score (every term of :func:`_score_paths` is 0)."""
+def _score_batch(
+    owners: Sequence[int], cand_paths: Sequence[np.ndarray], paths: Sequence[np.ndarray], c: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_score_paths` of many candidate paths at once (``owners[g]`` is the robot
+    of candidate g), each against every other robot's current path, sparsely: only
+    (candidate, robot) pairs within c have a non-zero term (each distance of a term is
+    >= the path distance), and those are exactly the pairs the hashing finds. Also
+    returns the (candidate, robot) pairs within c, sorted by candidate."""
     total = len(paths)
+    n_c = len(cand_paths)
+    starts, targets = _ends(paths)
     pa, pb, po = _segments(paths)
-    ra, rb, ro = _segments([p for reg in regions for p in reg])
-    reg_of = np.repeat(np.arange(len(robots)), [len(reg) for reg in regions])
-    h = _CELL_PER_C * c
-    r = 0.5 * c * (1 + 1e-6) + 1e-9
-    key_p, seg_p = _register(pa, pb, r, h)
-    key_r, seg_r = _register(ra, rb, r, h)
-    key = np.concatenate([key_p, key_r])
-    own = np.concatenate([po[seg_p], total + reg_of[ro[seg_r]]])
-    order = np.lexsort((own, key))
-    key, own = key[order], own[order]
-    first = np.r_[True, (key[1:] != key[:-1]) | (own[1:] != own[:-1])]
-    key, own = key[first], own[first]  # one entry per (cell, owner)
-    e = key.size
-    gend = np.r_[np.flatnonzero(key[1:] != key[:-1]) + 1, e]
-    gsize = np.diff(np.r_[0, gend])
-    ent = np.flatnonzero(own >= total)
-    cnt = np.repeat(gsize, gsize)[ent]
-    beg = np.repeat(gend - gsize, gsize)[ent]
-    src = np.repeat(ent, cnt)
-    dst = np.repeat(beg, cnt) + (np.arange(int(cnt.sum())) - np.repeat(np.cumsum(cnt) - cnt, cnt))
-    rob = np.asarray(robots, dtype=np.int64)
-    q = own[src] - total
-    other = own[dst]
-    k = np.where(other < total, other, rob[np.maximum(other - total, 0)])
-    ok = k != rob[q]
-    both = _sorted_unique(q[ok] * total + k[ok])
-    qs, ks = both // total, both % total
-    ptr = np.searchsorted(qs, np.arange(len(robots) + 1))
-    return [ks[ptr[j] : ptr[j + 1]] for j in range(len(robots))]
+    ca, cb, co = _segments(cand_paths)
+    seg_a = np.concatenate([pa, ca])
+    seg_b = np.concatenate([pb, cb])
+    owner = np.concatenate([po, total + co])
+    query = np.r_[np.zeros(pa.shape[0], dtype=bool), np.ones(ca.shape[0], dtype=bool)]
+    s, t = _segment_pairs(seg_a, seg_b, owner, c, query=query, cross_only=True)
+    g = owner[t] - total  # candidate
+    k = owner[s]  # robot
+    own = np.asarray(owners, dtype=np.int64)
+    ok = k != own[g]
+    s, t, g, k = s[ok], t[ok], g[ok], k[ok]
+    own_s = np.array([p[0] for p in cand_paths]).reshape(-1, 2)
+    own_t = np.array([p[-1] for p in cand_paths]).reshape(-1, 2)
+    dss = seg_seg_dist(seg_a[t], seg_b[t], seg_a[s], seg_b[s])
+    d_i_s = point_seg_dist(starts[k], seg_a[t], seg_b[t])
+    d_i_t = point_seg_dist(targets[k], seg_a[t], seg_b[t])
+    d_k_si = point_seg_dist(own_s[g], seg_a[s], seg_b[s])
+    d_k_ti = point_seg_dist(own_t[g], seg_a[s], seg_b[s])
+    gk = g * total + k
+    order = np.argsort(gk, kind="stable")
+    gk = gk[order]
+    first = np.flatnonzero(np.r_[True, gk[1:] != gk[:-1]]) if gk.size else gk
+    if first.size == 0:
+        return np.zeros(n_c), np.zeros(n_c, dtype=np.int64), first, first
+
+    def red(x: np.ndarray) -> np.ndarray:
+        return np.minimum.reduceat(x[order], first)
+
+    gg, kk = gk[first] // total, gk[first] % total
+    req = np.minimum(
+        c,
+        np.minimum(np.hypot(*(starts[kk] - own_s[gg]).T), np.hypot(*(targets[kk] - own_t[gg]).T)),
+    ) * (1.0 - 1e-9)
+    i_first = np.maximum(req - red(d_i_s), 0) + np.maximum(req - red(d_k_ti), 0)
+    k_first = np.maximum(req - red(d_k_si), 0) + np.maximum(req - red(d_i_t), 0)
+    deficit = np.bincount(gg, weights=np.minimum(i_first, k_first), minlength=n_c)
+    conflicts = np.bincount(gg, weights=red(dss) < req, minlength=n_c).astype(np.int64)
+    return deficit, conflicts, gg, kk
 
 
 def schedule(
@@ -649,38 +663,55 @@ def schedule(
         if not problems:
             return Schedule(waves=waves[:n], vias=tuple(vias))
         # Try a detour for every problem robot (the leader first, then by priority),
-        # each scored against the current paths of the robots near it.
+        # each scored against the current paths of the robots near it: all at once
+        # against the paths of the start of the round, again alone for a robot that a
+        # detour taken earlier in the round may concern.
         ordered = sorted(problems, key=lambda r: (r != leader, int(priority[r])))
-        todo = []
+        todo: list[tuple[int, np.ndarray]] = []
         for r in ordered:
             if r in detoured:
                 continue
             cands = _detour_candidates(starts[r], targets[r], c)
             if cands:
-                todo.append((r, cands))
+                todo.append((r, np.array([[starts[r], v, targets[r]] for v in cands])))
         if not todo:
             break
-        near_of = _near_sets(
-            [r for r, _ in todo],
-            [
-                [paths[r], *(np.array([starts[r], v, targets[r]]) for v in cands)]
-                for r, cands in todo
-            ],
-            paths,
-            c,
-        )
+        cand_paths: list[np.ndarray] = []
+        owners: list[int] = []
+        for r, stack in todo:
+            cand_paths.extend([paths[r], *stack])
+            owners.extend([r] * (1 + stack.shape[0]))
+        all_d, all_c, gg, kk = _score_batch(owners, cand_paths, paths, c)
+        pa, pb, po = _segments(paths)
+        cut = np.searchsorted(po, np.arange(len(paths)))
+        lo = np.minimum.reduceat(np.minimum(pa, pb), cut)
+        hi = np.maximum.reduceat(np.maximum(pa, pb), cut)
         changed: list[int] = []
-        for (r, cands), near in zip(todo, near_of, strict=True):
-            base_d, base_c = _score_paths(paths[r][None], near, paths, c)
-            stack = np.array([np.vstack([starts[r], v, targets[r]]) for v in cands])
-            deficit, conflicts = _score_paths(stack, near, paths, c)
+        g0 = 0
+        for r, stack in todo:
+            g1 = g0 + 1 + stack.shape[0]
+            blo = np.minimum(paths[r].min(axis=0), stack.min(axis=(0, 1))) - c
+            bhi = np.maximum(paths[r].max(axis=0), stack.max(axis=(0, 1))) + c
+            # robots within c of r's region at the start of the round (their paths are
+            # unchanged, or they changed) and robots whose new path may come near it
+            deps = kk[np.searchsorted(gg, g0) : np.searchsorted(gg, g1)]
+            moved = [j for j in changed if np.all(lo[j] <= bhi) and np.all(hi[j] >= blo)]
+            if moved or np.isin(changed, deps).any():
+                near = _sorted_unique(np.r_[deps, np.asarray(moved, dtype=np.int64)])
+                base_d, base_c = _score_paths(paths[r][None], near, paths, c)
+                deficit, conflicts = _score_paths(stack, near, paths, c)
+            else:
+                base_d, base_c = all_d[g0 : g0 + 1], all_c[g0 : g0 + 1]
+                deficit, conflicts = all_d[g0 + 1 : g1], all_c[g0 + 1 : g1]
+            g0 = g1
             lengths = np.sum(np.hypot(*np.diff(stack, axis=1).transpose(2, 0, 1)), axis=1)
-            pick = int(np.lexsort((np.arange(len(cands)), lengths, conflicts, deficit))[0])
+            pick = int(np.lexsort((np.arange(len(stack)), lengths, conflicts, deficit))[0])
             if deficit[pick] < base_d[0] - 1e-12 or (
                 deficit[pick] <= base_d[0] + 1e-12 and conflicts[pick] < base_c[0]
             ):
-                vias[r] = (cands[pick],)
+                vias[r] = (stack[pick, 1].copy(),)
                 paths[r] = path(r)
+                lo[r], hi[r] = paths[r].min(axis=0), paths[r].max(axis=0)
                 detoured.add(r)
                 changed.append(r)
         if not changed:
