@@ -575,56 +575,52 @@ def _score_paths(
     return deficit, np.sum(d_path < req, axis=1)
 
 
-def _score_batch(
-    owners: Sequence[int], cand_paths: Sequence[np.ndarray], paths: Sequence[np.ndarray], c: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`_score_paths` of many candidate paths at once (``owners[g]`` is the robot
-    of candidate g), each against every other robot's current path, sparsely: only
-    (candidate, robot) pairs within c have a non-zero term (each distance of a term is
-    >= the path distance), and those are exactly the pairs the hashing finds. Also
-    returns the (candidate, robot) pairs within c, sorted by candidate."""
+#: Farthest a detour candidate strays from the straight path, in clearances (the largest
+#: offset of :func:`_detour_candidates`).
+_MAX_OFFSET = 6.0
+
+
+def _near_sets(
+    todo: Sequence[int],
+    starts: np.ndarray,
+    targets: np.ndarray,
+    paths: Sequence[np.ndarray],
+    c: float,
+) -> list[np.ndarray]:
+    """For each robot r of ``todo``: a superset of the robots whose path may come within
+    c of r's path or of one of its detour candidates during the round. Every candidate
+    lies within 6c of the straight segment start -> target, so: the robots whose
+    current path comes within 7c of that segment or within c of r's current path, and
+    the other robots of ``todo`` whose segments come within 13c (their path may change
+    first). Robots farther away add nothing to a score (each term of
+    :func:`_score_paths` is 0)."""
     total = len(paths)
-    n_c = len(cand_paths)
-    starts, targets = _ends(paths)
+    rob = np.asarray(todo, dtype=np.int64)
+    m = rob.size
     pa, pb, po = _segments(paths)
-    ca, cb, co = _segments(cand_paths)
-    seg_a = np.concatenate([pa, ca])
-    seg_b = np.concatenate([pb, cb])
-    owner = np.concatenate([po, total + co])
-    query = np.r_[np.zeros(pa.shape[0], dtype=bool), np.ones(ca.shape[0], dtype=bool)]
-    s, t = _segment_pairs(seg_a, seg_b, owner, c, query=query, cross_only=True)
-    g = owner[t] - total  # candidate
-    k = owner[s]  # robot
-    own = np.asarray(owners, dtype=np.int64)
-    ok = k != own[g]
-    s, t, g, k = s[ok], t[ok], g[ok], k[ok]
-    own_s = np.array([p[0] for p in cand_paths]).reshape(-1, 2)
-    own_t = np.array([p[-1] for p in cand_paths]).reshape(-1, 2)
-    dss = seg_seg_dist(seg_a[t], seg_b[t], seg_a[s], seg_b[s])
-    d_i_s = point_seg_dist(starts[k], seg_a[t], seg_b[t])
-    d_i_t = point_seg_dist(targets[k], seg_a[t], seg_b[t])
-    d_k_si = point_seg_dist(own_s[g], seg_a[s], seg_b[s])
-    d_k_ti = point_seg_dist(own_t[g], seg_a[s], seg_b[s])
-    gk = g * total + k
-    order = np.argsort(gk, kind="stable")
-    gk = gk[order]
-    first = np.flatnonzero(np.r_[True, gk[1:] != gk[:-1]]) if gk.size else gk
-    if first.size == 0:
-        return np.zeros(n_c), np.zeros(n_c, dtype=np.int64), first, first
+    qa, qb = starts[rob], targets[rob]
+    ca, cb, co = _segments([paths[r] for r in todo])
+    found: list[np.ndarray] = []
 
-    def red(x: np.ndarray) -> np.ndarray:
-        return np.minimum.reduceat(x[order], first)
+    def cross(sa: np.ndarray, sb: np.ndarray, so: np.ndarray, dist: float) -> None:
+        seg_a = np.concatenate([pa, sa])
+        seg_b = np.concatenate([pb, sb])
+        owner = np.concatenate([po, total + so])
+        query = np.r_[np.zeros(pa.shape[0], dtype=bool), np.ones(sa.shape[0], dtype=bool)]
+        s, t = _segment_pairs(seg_a, seg_b, owner, dist, query=query, cross_only=True)
+        found.append((owner[t] - total) * total + owner[s])
 
-    gg, kk = gk[first] // total, gk[first] % total
-    req = np.minimum(
-        c,
-        np.minimum(np.hypot(*(starts[kk] - own_s[gg]).T), np.hypot(*(targets[kk] - own_t[gg]).T)),
-    ) * (1.0 - 1e-9)
-    i_first = np.maximum(req - red(d_i_s), 0) + np.maximum(req - red(d_k_ti), 0)
-    k_first = np.maximum(req - red(d_k_si), 0) + np.maximum(req - red(d_i_t), 0)
-    deficit = np.bincount(gg, weights=np.minimum(i_first, k_first), minlength=n_c)
-    conflicts = np.bincount(gg, weights=red(dss) < req, minlength=n_c).astype(np.int64)
-    return deficit, conflicts, gg, kk
+    cross(qa, qb, np.arange(m), (_MAX_OFFSET + 1.0) * c)
+    cross(ca, cb, co, c)
+    s, t = candidate_segment_pairs(qa, qb, np.arange(m), (2 * _MAX_OFFSET + 1.0) * c)
+    found.append(s * total + rob[t])
+    found.append(t * total + rob[s])
+    key = _sorted_unique(np.concatenate(found))
+    qs, ks = key // total, key % total
+    keep = ks != rob[qs]
+    qs, ks = qs[keep], ks[keep]
+    ptr = np.searchsorted(qs, np.arange(m + 1))
+    return [ks[ptr[j] : ptr[j + 1]] for j in range(m)]
 
 
 def schedule(
@@ -663,9 +659,7 @@ def schedule(
         if not problems:
             return Schedule(waves=waves[:n], vias=tuple(vias))
         # Try a detour for every problem robot (the leader first, then by priority),
-        # each scored against the current paths of the robots near it: all at once
-        # against the paths of the start of the round, again alone for a robot that a
-        # detour taken earlier in the round may concern.
+        # each scored against the current paths of the robots near it.
         ordered = sorted(problems, key=lambda r: (r != leader, int(priority[r])))
         todo: list[tuple[int, np.ndarray]] = []
         for r in ordered:
@@ -676,34 +670,11 @@ def schedule(
                 todo.append((r, np.array([[starts[r], v, targets[r]] for v in cands])))
         if not todo:
             break
-        cand_paths: list[np.ndarray] = []
-        owners: list[int] = []
-        for r, stack in todo:
-            cand_paths.extend([paths[r], *stack])
-            owners.extend([r] * (1 + stack.shape[0]))
-        all_d, all_c, gg, kk = _score_batch(owners, cand_paths, paths, c)
-        pa, pb, po = _segments(paths)
-        cut = np.searchsorted(po, np.arange(len(paths)))
-        lo = np.minimum.reduceat(np.minimum(pa, pb), cut)
-        hi = np.maximum.reduceat(np.maximum(pa, pb), cut)
+        near_of = _near_sets([r for r, _ in todo], starts, targets, paths, c)
         changed: list[int] = []
-        g0 = 0
-        for r, stack in todo:
-            g1 = g0 + 1 + stack.shape[0]
-            blo = np.minimum(paths[r].min(axis=0), stack.min(axis=(0, 1))) - c
-            bhi = np.maximum(paths[r].max(axis=0), stack.max(axis=(0, 1))) + c
-            # robots within c of r's region at the start of the round (their paths are
-            # unchanged, or they changed) and robots whose new path may come near it
-            deps = kk[np.searchsorted(gg, g0) : np.searchsorted(gg, g1)]
-            moved = [j for j in changed if np.all(lo[j] <= bhi) and np.all(hi[j] >= blo)]
-            if moved or np.isin(changed, deps).any():
-                near = _sorted_unique(np.r_[deps, np.asarray(moved, dtype=np.int64)])
-                base_d, base_c = _score_paths(paths[r][None], near, paths, c)
-                deficit, conflicts = _score_paths(stack, near, paths, c)
-            else:
-                base_d, base_c = all_d[g0 : g0 + 1], all_c[g0 : g0 + 1]
-                deficit, conflicts = all_d[g0 + 1 : g1], all_c[g0 + 1 : g1]
-            g0 = g1
+        for (r, stack), near in zip(todo, near_of, strict=True):
+            base_d, base_c = _score_paths(paths[r][None], near, paths, c)
+            deficit, conflicts = _score_paths(stack, near, paths, c)
             lengths = np.sum(np.hypot(*np.diff(stack, axis=1).transpose(2, 0, 1)), axis=1)
             pick = int(np.lexsort((np.arange(len(stack)), lengths, conflicts, deficit))[0])
             if deficit[pick] < base_d[0] - 1e-12 or (
@@ -711,7 +682,6 @@ def schedule(
             ):
                 vias[r] = (stack[pick, 1].copy(),)
                 paths[r] = path(r)
-                lo[r], hi[r] = paths[r].min(axis=0), paths[r].max(axis=0)
                 detoured.add(r)
                 changed.append(r)
         if not changed:
