@@ -5,7 +5,9 @@ Observer NAO-i at the origin facing +y (north), NAO-j 0.6 m ahead, turned in 5°
 yaw 0. Supplementary side-posture masks are rendered with the observer's head at ±90°
 and NAO-j side-on at 0.6 m along the camera axis (the paper's Figure 20 set-up).
 Orientations where the far shoulder is only a sliver that vanishes with distance also
-get a variant without that sliver ("reduced", same orientation).
+get a variant without that sliver ("reduced", same orientation). Since the neighbours
+sweep their heads as well, every 30° of orientation also gets masks with the observed
+NAO's head turned by ±45° and ±90° ("head"; an addition to the paper).
 
 The result (``mbase.npz`` + ``mbase.json`` with the parameters and a content digest) is
 written to ``agent/perception/data`` unless ``--out`` says otherwise; the renderer is
@@ -30,7 +32,9 @@ from sim.scenarios import RobotSpec, Scenario
 from sim.world import World
 
 NORTH = math.pi / 2
-SLIVER = 0.12  # a tuple below this share of the mask's area may vanish with distance
+SLIVER = 0.12
+HEAD_YAWS_DEG = (-90.0, -45.0, 45.0, 90.0)  # the observed NAO's head, for "head" masks
+HEAD_EVERY = 6  # every 6th orientation (30°) gets the turned-head masks  # a tuple below this share of the mask's area may vanish with distance
 
 
 def render_target(w: World, cam: CameraModel, dist: float, rel: float, yaw: float) -> np.ndarray:
@@ -81,6 +85,14 @@ def build(step_deg: float = 5.0, distance: float = 0.6, seed: int = 0) -> MBase:
             if len(areas) >= 3 and areas[0] < SLIVER * sum(areas):
                 add(cyl, rel, "reduced", drop=True)
             print(f"\rmask {i + 1}/{n}", end="", file=sys.stderr)
+        # neighbours sweep their heads too: masks of NAOs with the head turned
+        for i in range(0, n, HEAD_EVERY):
+            rel = math.radians(i * step_deg)
+            for hy in HEAD_YAWS_DEG:
+                w.set_head_yaw(2, math.radians(hy))
+                cyl = cylindrical(cam, orange_mask(render_target(w, cam, distance, rel, 0.0)))
+                add(cyl, rel, "head")
+            w.set_head_yaw(2, 0.0)
         for yaw_deg in (90.0, -90.0):
             for rel_deg in (90.0, 270.0):
                 rel = math.radians(rel_deg)
@@ -95,6 +107,10 @@ def build(step_deg: float = 5.0, distance: float = 0.6, seed: int = 0) -> MBase:
         "side_head_yaw_deg": [90.0, -90.0],
         "side_orientations_deg": [90.0, 270.0],
         "sliver_share": SLIVER,
+        "head_masks": {
+            "observed_head_yaw_deg": list(HEAD_YAWS_DEG),
+            "every_deg": HEAD_EVERY * step_deg,
+        },
         "seed": seed,
         "hsv_low": list(HSV_LOW),
         "hsv_high": list(HSV_HIGH),
@@ -142,7 +158,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     mb = build(args.step, args.distance, args.seed)
     npz, js = mb.save(args.out)
-    counts = {k: mb.meta["kinds"].count(k) for k in ("main", "reduced", "side")}
+    counts = {k: mb.meta["kinds"].count(k) for k in ("main", "reduced", "head", "side")}
     print(f"M-base: {len(mb)} masks {counts}, digest {mb.digest()[:16]}")
     print(f"wrote {npz} ({npz.stat().st_size} bytes) and {js}")
     return 0

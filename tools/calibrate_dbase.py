@@ -51,7 +51,7 @@ def collect(
             same = [
                 k
                 for k in range(len(mb))
-                if kinds[k] != "side" and abs(mb.orientation[k] - rel) < 1e-9
+                if kinds[k] in ("main", "reduced") and abs(mb.orientation[k] - rel) < 1e-9
             ]
             for d in distances:
                 w.set_pose(2, 0.0, d, NORTH + rel)

@@ -196,7 +196,12 @@ def match(truths: list[Truth], dets: list[Detection]) -> list[tuple[int, int]]:
 
 
 def run_views(
-    seed: int, n_views: int, clutter: bool, detector: Detector, keep_images: int = 0
+    seed: int,
+    n_views: int,
+    clutter: bool,
+    detector: Detector,
+    keep_images: int = 0,
+    neighbour_heads: bool = False,
 ) -> list[ViewResult]:
     rng = np.random.default_rng([seed, 0xE7A1])
     cam = detector.camera
@@ -213,6 +218,9 @@ def run_views(
             for rid in range(n_others + 2, 5):  # park unused robots in a corner, facing the wall
                 w.set_pose(rid, -3.3 + 0.5 * rid, -3.5, -math.pi / 2)
             yaw, truths = place(w, rng, cam, n_others, w.scenario.clutter)
+            for rid in w.robot_ids[1:]:  # the neighbours' heads: straight, or mid-sweep
+                hy = float(rng.uniform(-YAW_LIMIT, YAW_LIMIT)) if neighbour_heads else 0.0
+                w.set_head_yaw(rid, hy)
             img = w.render(1, yaw)
             t0 = time.perf_counter()
             dets = detector.detect(img, yaw)
@@ -393,6 +401,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--views", type=int, default=100)
     ap.add_argument("--clutter", action="store_true", help="orange lookalike cubes in the room")
+    ap.add_argument(
+        "--neighbour-heads",
+        action="store_true",
+        help="the observed NAOs' heads at random yaws (as while they sweep), not straight",
+    )
     ap.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     ap.add_argument(
         "--compass-samples", type=int, default=10, help="turns per compass step (0: skip)"
@@ -408,8 +421,20 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    views = run_views(args.seed, args.views, args.clutter, det, keep_images=min(args.views, 20))
-    summary: dict[str, Any] = {"seed": args.seed, "clutter": args.clutter, **summarise(views)}
+    views = run_views(
+        args.seed,
+        args.views,
+        args.clutter,
+        det,
+        keep_images=min(args.views, 20),
+        neighbour_heads=args.neighbour_heads,
+    )
+    summary: dict[str, Any] = {
+        "seed": args.seed,
+        "clutter": args.clutter,
+        "neighbour_heads": args.neighbour_heads,
+        **summarise(views),
+    }
     if args.compass_samples:
         summary["compass"] = run_compass(args.seed, args.compass_samples, COMPASS_STEPS_DEG)
     figure(views, summary, args.png)
