@@ -205,21 +205,33 @@ def _schedule_with_repair(
 ) -> tuple[Schedule, np.ndarray, np.ndarray]:
     """Schedule; when two robots block each other in both orders (each one's slot lies
     within the clearance of the other's start: a swap no single wave can do), they
-    exchange slots (a 2-opt step in the spirit of Lemma 1) and we schedule again.
-    Blocked pairs are swapped in ascending row order, each robot at most once per round."""
+    exchange slots (a 2-opt step in the spirit of Lemma 1) and we schedule again, keeping
+    the detours found for the other robots. Blocked pairs are swapped in ascending row
+    order, each robot at most once per round."""
     order = order.copy()
     targets = np.array(targets, dtype=np.float64)
     vias = list(vias)
+    prior: ScheduleError | None = None
     for _ in range(MAX_SWAPS + 1):
         leader_row = int(np.flatnonzero(order == 0)[0])
         try:
             sched = schedule(
-                pos, targets, leader_row, order, params.radius, fixed_vias=vias, obstacles=obs
+                pos,
+                targets,
+                leader_row,
+                order,
+                params.radius,
+                fixed_vias=vias,
+                obstacles=obs,
+                prior=prior,
             )
             return sched, order, targets
         except ScheduleError as exc:
             if not exc.pairs:
                 raise
+            prior = exc
+            if exc.vias:
+                vias = list(exc.vias)
             touched: set[int] = set()
             for a, b in sorted(exc.pairs):
                 if a in touched or b in touched:

@@ -49,10 +49,19 @@ class ScheduleError(ValueError):
     """No safe schedule; ``pairs`` are robot-row pairs that can go in no order (or, if
     there are none, pairs on precedence cycles) - candidates for a slot swap."""
 
-    def __init__(self, message: str, robots: list[int], pairs: list[tuple[int, int]]) -> None:
+    def __init__(
+        self,
+        message: str,
+        robots: list[int],
+        pairs: list[tuple[int, int]],
+        vias: tuple[tuple[np.ndarray, ...], ...] = (),
+        state: tuple[list[np.ndarray], PairFlags] | None = None,
+    ) -> None:
         super().__init__(message)
         self.robots = robots
         self.pairs = pairs
+        self.vias = vias  # the detours found so far, per robot row (may be kept)
+        self.state = state  # the paths and their pair flags (see schedule(prior=...))
 
 
 @dataclass(frozen=True)
@@ -632,12 +641,15 @@ def schedule(
     max_rounds: int = 30,
     fixed_vias: Sequence[tuple[np.ndarray, ...]] | None = None,
     obstacles: np.ndarray | None = None,
+    prior: ScheduleError | None = None,
 ) -> Schedule:
     """Waves (+ via points where needed) that pass :func:`check_safety`.
 
     ``fixed_vias`` are via points the caller wants (e.g. the obstacle procedure); a robot
     whose path cannot be scheduled may have them replaced by a detour. ``obstacles``
-    (M, 2) stand still in every wave and are held to the same clearance.
+    (M, 2) stand still in every wave and are held to the same clearance. ``prior``, the
+    error of a previous call on (mostly) the same paths, only saves time: the pair
+    flags of the paths that did not change are taken from it.
     """
     n = starts.shape[0]
     c = 2.0 * radius
@@ -653,7 +665,16 @@ def schedule(
         return np.vstack([starts[i], *vias[i], targets[i]])
 
     paths = [path(i) for i in range(n)] + [np.array([o, o]) for o in obs]
-    flags = pair_flags(paths, c)
+    if prior is not None and prior.state is not None and len(prior.state[0]) == len(paths):
+        old_paths, old_flags = prior.state
+        changed0 = [
+            i
+            for i, (p, q) in enumerate(zip(paths, old_paths, strict=True))
+            if p.shape != q.shape or not np.array_equal(p, q)
+        ]
+        flags = _update_flags(old_flags, paths, changed0, c) if changed0 else old_flags
+    else:
+        flags = pair_flags(paths, c)
     for _ in range(max_rounds):
         waves, problems = _assign_waves(n, leader, priority, flags)
         if not problems:
@@ -705,4 +726,6 @@ def schedule(
         f"no safe schedule found: robots {problems[:10]} stay blocked after detours",
         problems,
         blocked,
+        vias=tuple(vias),
+        state=(list(paths), flags),
     )
