@@ -608,7 +608,7 @@ def _near_sets(
     m = rob.size
     pa, pb, po = _segments(paths)
     qa, qb = starts[rob], targets[rob]
-    ca, cb, co = _segments([paths[r] for r in todo])
+    bent = [j for j, r in enumerate(todo) if paths[r].shape[0] > 2]  # others: in the capsule
     found: list[np.ndarray] = []
 
     def cross(sa: np.ndarray, sb: np.ndarray, so: np.ndarray, dist: float) -> None:
@@ -620,7 +620,9 @@ def _near_sets(
         found.append((owner[t] - total) * total + owner[s])
 
     cross(qa, qb, np.arange(m), (_MAX_OFFSET + 1.0) * c)
-    cross(ca, cb, co, c)
+    if bent:
+        ca, cb, co = _segments([paths[todo[j]] for j in bent])
+        cross(ca, cb, np.asarray(bent, dtype=np.int64)[co], c)
     s, t = candidate_segment_pairs(qa, qb, np.arange(m), (2 * _MAX_OFFSET + 1.0) * c)
     found.append(s * total + rob[t])
     found.append(t * total + rob[s])
