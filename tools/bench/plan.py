@@ -6,8 +6,10 @@ Fleet: a jittered square grid with the paper's simulation spacing (d_e = 2 m, st
 (``optimal``, ``capt``) run only up to ``--exact-max`` robots. Prints a table of seconds,
 the fitted growth exponent k of t ~ n^k per strategy (fit over n >= 1000), and whether
 the plan of every run passed the safety checker (checked outside the clock, up to
-``--check-max`` robots). Once one run of a strategy takes longer than ``--budget``
-seconds, its larger sizes are skipped and reported as such.
+``--check-max`` robots). A size is skipped, with the reason printed, once one run of
+the strategy took longer than ``--budget`` seconds or when the previous size predicts
+(growth n^1.5) more than ``--limit`` seconds. Wall-clock seconds are the table; the
+process CPU seconds follow (the machine is shared, so wall time includes waiting).
 """
 
 from __future__ import annotations
@@ -45,6 +47,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--budget", type=float, default=120.0, help="skip larger n once one run exceeds this (s)"
     )
+    ap.add_argument(
+        "--limit", type=float, default=90.0, help="skip n if predicted (n^1.5) above this (s)"
+    )
     args = ap.parse_args(argv)
     try:
         sizes = [int(x) for x in args.sizes.split(",") if x]
@@ -53,16 +58,23 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     strategies = [s for s in args.strategies.split(",") if s]
     times: dict[str, dict[int, float]] = {s: {} for s in strategies}
+    cpu: dict[str, dict[int, float]] = {s: {} for s in strategies}
     safe: dict[str, dict[int, str]] = {s: {} for s in strategies}
     for s in strategies:
         skip = False
+        last: tuple[int, float] | None = None
         for n in sizes:
+            predicted = last[1] * (n / last[0]) ** 1.5 if last else 0.0
             if skip or (s in ("optimal", "capt") and n > args.exact_max):
                 safe[s][n] = "skipped (budget)" if skip else "skipped (exact solver)"
+                continue
+            if predicted > args.limit:
+                safe[s][n] = f"skipped (predicted {predicted:.0f} s > --limit {args.limit:g} s)"
                 continue
             ids, pos = fleet(n)
             print(f"[bench plan] {s} n={n} ...", file=sys.stderr)
             t0 = time.perf_counter()
+            c0 = time.process_time()
             try:
                 plan = plan_from_positions(ids, pos, PlanParams(d_e=D_E, strategy=s))
             except ValueError as exc:
@@ -71,6 +83,8 @@ def main(argv: list[str] | None = None) -> int:
                 continue
             dt = time.perf_counter() - t0
             times[s][n] = dt
+            cpu[s][n] = time.process_time() - c0
+            last = (n, dt)
             if n <= args.check_max:
                 ok = not check_safety(plan.paths(), plan.wave_of(), 0.2)
                 safe[s][n] = f"safe, {len(plan.waves)} waves" if ok else "UNSAFE"
@@ -78,21 +92,22 @@ def main(argv: list[str] | None = None) -> int:
                 safe[s][n] = f"{len(plan.waves)} waves (not checked)"
             if dt > args.budget:
                 skip = True
-    print(f"{'strategy':10s} " + " ".join(f"{n:>10d}" for n in sizes) + "   exponent")
-    for s in strategies:
-        row = []
-        for n in sizes:
-            t = times[s].get(n)
-            row.append(f"{'-':>10s}" if t is None else f"{t:10.3f}")
-        pts = [(n, t) for n, t in times[s].items() if n >= 1000 and math.isfinite(t) and t > 0]
-        if len(pts) < 2:
-            pts = [(n, t) for n, t in times[s].items() if math.isfinite(t) and t > 0]
-        exp = "-"
-        if len(pts) >= 2:
-            x = np.log([p[0] for p in pts])
-            y = np.log([p[1] for p in pts])
-            exp = f"{np.polyfit(x, y, 1)[0]:.2f}"
-        print(f"{s:10s} " + " ".join(row) + f"   {exp}")
+    for title, table in (("wall s", times), ("cpu s", cpu)):
+        print(f"{title:10s} " + " ".join(f"{n:>10d}" for n in sizes) + "   exponent")
+        for s in strategies:
+            row = []
+            for n in sizes:
+                t = table[s].get(n)
+                row.append(f"{'-':>10s}" if t is None else f"{t:10.3f}")
+            pts = [(n, t) for n, t in table[s].items() if n >= 1000 and math.isfinite(t) and t > 0]
+            if len(pts) < 2:
+                pts = [(n, t) for n, t in table[s].items() if math.isfinite(t) and t > 0]
+            exp = "-"
+            if len(pts) >= 2:
+                x = np.log([p[0] for p in pts])
+                y = np.log([p[1] for p in pts])
+                exp = f"{np.polyfit(x, y, 1)[0]:.2f}"
+            print(f"{s:10s} " + " ".join(row) + f"   {exp}")
     print(
         "safety: "
         + "; ".join(
