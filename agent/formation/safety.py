@@ -545,39 +545,47 @@ def _detour_candidates(p: np.ndarray, q: np.ndarray, c: float) -> list[np.ndarra
 
 
 def _score_paths(
-    cands: np.ndarray, near: np.ndarray, paths: Sequence[np.ndarray], c: float
+    cands: np.ndarray,
+    seg_a: np.ndarray,
+    seg_b: np.ndarray,
+    first: np.ndarray,
+    starts: np.ndarray,
+    targets: np.ndarray,
+    c: float,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Score K candidate paths (K, m, 2) of one robot against the robots ``near``.
+    """Score K candidate paths (K, m, 2) of one robot against the m' robots near it
+    (their path segments, robot by robot: robot q owns segments first[q]..first[q+1]-1;
+    their starts and targets).
 
     Returns (total clearance deficit of blocked pairs, pairs that may not share a wave),
     each (K,). For each other robot k, the deficit of an order is the sum of the
     clearance missing from its two point-to-path tests; a pair's deficit is that of its
-    better order.
+    better order. A robot whose path stays >= c from every candidate adds 0 (each
+    distance of a term is >= the path distance).
     """
     k_cand = cands.shape[0]
-    if near.size == 0:
+    m = starts.shape[0]
+    if m == 0:
         return np.zeros(k_cand), np.zeros(k_cand, dtype=np.int64)
-    seg_a, seg_b, owner = _segments([paths[k] for k in near])
-    starts = np.array([paths[k][0] for k in near])
-    targets = np.array([paths[k][-1] for k in near])
-    m = near.shape[0]
-    ca = cands[:, :-1, :].reshape(-1, 1, 2)  # (K*(m-1), 1, 2) candidate segments
+    ca = cands[:, :-1, :].reshape(-1, 1, 2)  # (K*(n-1), 1, 2) candidate segments
     cb = cands[:, 1:, :].reshape(-1, 1, 2)
     nseg = cands.shape[1] - 1
     # candidate segments vs other robots' segments -> min per (candidate, robot)
     dss = seg_seg_dist(ca, cb, seg_a[None], seg_b[None]).reshape(k_cand, nseg, -1).min(axis=1)
-    d_path = np.full((k_cand, m), np.inf)
-    np.minimum.at(d_path.T, owner, dss.T)
-    d_i_s = point_seg_dist(starts[None], ca, cb).reshape(k_cand, nseg, m).min(axis=1)
-    d_i_t = point_seg_dist(targets[None], ca, cb).reshape(k_cand, nseg, m).min(axis=1)
+    d_path = np.minimum.reduceat(dss, first[:-1], axis=1)  # (K, m)
+    close = np.flatnonzero(d_path.min(axis=0) < c)
+    if close.size == 0:
+        return np.zeros(k_cand), np.zeros(k_cand, dtype=np.int64)
+    d_path = d_path[:, close]
+    st, tg = starts[close], targets[close]
+    d_i_s = point_seg_dist(st[None], ca, cb).reshape(k_cand, nseg, -1).min(axis=1)
+    d_i_t = point_seg_dist(tg[None], ca, cb).reshape(k_cand, nseg, -1).min(axis=1)
     own_s, own_t = cands[0, 0], cands[0, -1]
-    d_k_si = np.full(m, np.inf)
-    d_k_ti = np.full(m, np.inf)
-    np.minimum.at(d_k_si, owner, point_seg_dist(own_s[None], seg_a, seg_b))
-    np.minimum.at(d_k_ti, owner, point_seg_dist(own_t[None], seg_a, seg_b))
-    req = np.minimum(
-        c, np.minimum(np.hypot(*(starts - own_s).T), np.hypot(*(targets - own_t).T))
-    ) * (1.0 - 1e-9)
+    d_k_si = np.minimum.reduceat(point_seg_dist(own_s[None], seg_a, seg_b), first[:-1])[close]
+    d_k_ti = np.minimum.reduceat(point_seg_dist(own_t[None], seg_a, seg_b), first[:-1])[close]
+    req = np.minimum(c, np.minimum(np.hypot(*(st - own_s).T), np.hypot(*(tg - own_t).T))) * (
+        1.0 - 1e-9
+    )
     i_first = np.maximum(req - d_i_s, 0) + np.maximum(req - d_k_ti, 0)
     k_first = np.maximum(req - d_k_si, 0) + np.maximum(req - d_i_t, 0)
     deficit = np.minimum(i_first, k_first).sum(axis=1)
@@ -667,6 +675,8 @@ def schedule(
         return np.vstack([starts[i], *vias[i], targets[i]])
 
     paths = [path(i) for i in range(n)] + [np.array([o, o]) for o in obs]
+    all_s = np.concatenate([starts, obs]).reshape(-1, 2)
+    all_t = np.concatenate([targets, obs]).reshape(-1, 2)
     if prior is not None and prior.state is not None and len(prior.state[0]) == len(paths):
         old_paths, old_flags = prior.state
         changed0 = [
@@ -694,10 +704,33 @@ def schedule(
         if not todo:
             break
         near_of = _near_sets([r for r, _ in todo], starts, targets, paths, c)
+        pa, pb, po = _segments(paths)
+        ptr = np.searchsorted(po, np.arange(len(paths) + 1))
         changed: list[int] = []
         for (r, stack), near in zip(todo, near_of, strict=True):
-            base_d, base_c = _score_paths(paths[r][None], near, paths, c)
-            deficit, conflicts = _score_paths(stack, near, paths, c)
+            # segments of the near robots (robots that changed this round: their new path)
+            fresh = np.isin(near, changed)
+            if fresh.any():
+                na, nb, no = _segments([paths[k] for k in near])
+                nfirst = np.searchsorted(no, np.arange(near.size + 1))
+            else:
+                cnt = ptr[near + 1] - ptr[near]
+                idx = np.repeat(ptr[near], cnt) + (
+                    np.arange(int(cnt.sum())) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+                )
+                na, nb = pa[idx], pb[idx]
+                nfirst = np.r_[0, np.cumsum(cnt)]
+            args = (na, nb, nfirst, all_s[near], all_t[near], c)
+            base = paths[r]
+            if base.shape[0] == 2:  # the straight path as [s, s, t]: the same distances
+                both_d, both_c = _score_paths(
+                    np.concatenate([np.array([[base[0], base[0], base[1]]]), stack]), *args
+                )
+                base_d, base_c = both_d[:1], both_c[:1]
+                deficit, conflicts = both_d[1:], both_c[1:]
+            else:
+                base_d, base_c = _score_paths(base[None], *args)
+                deficit, conflicts = _score_paths(stack, *args)
             lengths = np.sum(np.hypot(*np.diff(stack, axis=1).transpose(2, 0, 1)), axis=1)
             pick = int(np.lexsort((np.arange(len(stack)), lengths, conflicts, deficit))[0])
             if deficit[pick] < base_d[0] - 1e-12 or (
