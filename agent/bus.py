@@ -17,6 +17,7 @@ import json
 import logging
 import queue
 import threading
+import time
 from collections import Counter
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
@@ -29,9 +30,21 @@ log = logging.getLogger("agent.bus")
 
 M = TypeVar("M", bound=Message)
 
+#: A query that ends with no reply within this many seconds met no queryable (see NoRoute).
+NO_ROUTE_WINDOW = 0.25
+
 
 class BusError(RuntimeError):
     """A query that got no usable reply (timeout, error reply, undecodable reply)."""
+
+
+class NoRoute(BusError):
+    """A query that ended at once with no reply at all: no queryable was reachable yet.
+
+    Zenoh finishes a ``get`` immediately when it knows no matching queryable, e.g. a
+    fresh peer session that has not learnt the world's routes, or a route being rebuilt
+    after a lossy link dropped. Nothing was executed, so the caller may retry.
+    """
 
 
 @dataclass(frozen=True)
@@ -207,6 +220,7 @@ class Bus:
         data = encode(msg)
         with self._lock:
             self.stats.query_bytes += len(data)
+        started = time.monotonic()
         replies = self.session.get(key, payload=data, timeout=timeout)
         errors: list[str] = []
         for reply in replies:
@@ -230,5 +244,9 @@ class Bus:
                 errors.append(f"unexpected reply {type(out).__name__}")
                 continue
             return out
-        why = "; ".join(errors) if errors else f"no reply within {timeout:g} s"
-        raise BusError(f"{key}: {why}")
+        if errors:
+            raise BusError(f"{key}: {'; '.join(errors)}")
+        elapsed = time.monotonic() - started
+        if elapsed < min(NO_ROUTE_WINDOW, timeout / 2):
+            raise NoRoute(f"{key}: no reply: no queryable reachable (ended after {elapsed:.3f} s)")
+        raise BusError(f"{key}: no reply within {timeout:g} s")

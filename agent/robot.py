@@ -8,12 +8,15 @@ The body reports no pose: the agent knows only what it commanded and what it see
 from __future__ import annotations
 
 import math
+import time
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TypeVar
 
 import cv2
 import numpy as np
 
-from agent.bus import Bus, BusError
+from agent.bus import Bus, BusError, NoRoute
 from agent.protocol import (
     HEAD_YAW_LIMIT,
     KEY_WORLD_REGISTER,
@@ -34,6 +37,28 @@ class RobotError(RuntimeError):
     """The world refused or failed a request for this robot; the text says why."""
 
 
+T = TypeVar("T")
+
+
+def retry_no_route(call: Callable[[], T], deadline_s: float, first_wait: float = 0.05) -> T:
+    """``call()``, repeated with backoff while it raises :class:`NoRoute`, until ``deadline_s``.
+
+    A query that met no queryable executed nothing, so repeating it is safe; the papers
+    assume lossless WiFi, but on a lossy link zenoh rebuilds routes and queries made
+    meanwhile end at once with no reply. Any other error is raised at once.
+    """
+    end = time.monotonic() + deadline_s
+    wait = first_wait
+    while True:
+        try:
+            return call()
+        except NoRoute:
+            if time.monotonic() + wait > end:
+                raise
+            time.sleep(wait)  # back off before asking the network again
+            wait = min(wait * 2.0, 1.0)
+
+
 @dataclass(frozen=True)
 class Frame:
     """One camera image (BGR uint8, (H, W, 3)) with the head yaw and sim time it was taken."""
@@ -46,7 +71,12 @@ class Frame:
 def register(bus: Bus, want: int = -1, timeout: float = 10.0) -> int:
     """Claim a free robot of the scenario from the world (``--id auto``)."""
     try:
-        reply = bus.query(KEY_WORLD_REGISTER, RegisterRequest(want=want), RegisterReply, timeout)
+        reply = retry_no_route(
+            lambda: bus.query(
+                KEY_WORLD_REGISTER, RegisterRequest(want=want), RegisterReply, timeout
+            ),
+            timeout,
+        )
     except BusError as exc:
         raise RobotError(f"cannot register with the world: {exc}") from None
     return reply.robot_id
@@ -74,8 +104,14 @@ class Robot:
         if not math.isfinite(yaw) or abs(yaw) > HEAD_YAW_LIMIT + 1e-9:
             raise ValueError(f"head yaw {yaw} rad outside ±119.5°")
         try:
-            rep = self.bus.query(
-                key_camera(self.robot_id), CameraRequest(yaw=yaw), CameraReply, self.camera_timeout
+            rep = retry_no_route(
+                lambda: self.bus.query(
+                    key_camera(self.robot_id),
+                    CameraRequest(yaw=yaw),
+                    CameraReply,
+                    self.camera_timeout,
+                ),
+                self.camera_timeout,
             )
         except BusError as exc:
             raise RobotError(f"camera at yaw {math.degrees(yaw):.1f}°: {exc}") from None
@@ -96,7 +132,11 @@ class Robot:
 
     def _motion(self, key: str, req: WalkRequest | TurnRequest, what: str) -> CommandReply:
         try:
-            rep = self.bus.query(key, req, CommandReply, self.motion_timeout)
+            # Safe to repeat: NoRoute means the command reached no queryable (it ended
+            # within bus.NO_ROUTE_WINDOW with no reply), so the world never started it.
+            rep = retry_no_route(
+                lambda: self.bus.query(key, req, CommandReply, self.motion_timeout), 30.0
+            )
         except BusError as exc:
             raise RobotError(f"{what}: {exc}") from None
         if rep.status == "error":

@@ -44,6 +44,7 @@ from agent.control import (
     wrap_pi,
 )
 from agent.exchange import Agreement, Decision
+from agent.perception.camera import CameraModel
 from agent.protocol import (
     HEAD_YAW_LIMIT,
     KEY_ALIVE_ALL,
@@ -64,7 +65,11 @@ from agent.robot import Frame, Robot, RobotError
 log = logging.getLogger("agent.runner")
 
 NORTH = math.pi / 2
-SEARCH_YAWS = tuple(np.linspace(-HEAD_YAW_LIMIT, HEAD_YAW_LIMIT, 7).tolist())
+#: Head yaws of one sweep (paper 5.2.2 iii): the camera model's, 26.6° apart, so that every
+#: NAO at >= 0.5 m is wholly inside some image (7 evenly spaced yaws, 39.8° apart, left
+#: gaps where a NAO closer than about 0.8 m fell between two images and was dropped as
+#: cut by the border).
+SEARCH_YAWS = CameraModel().sweep_yaws(limit=HEAD_YAW_LIMIT)
 STATUS_MIN_INTERVAL = 3.0  # s between progress statuses of the same phase
 HEARTBEAT = 3.0  # s between statuses while waiting
 
