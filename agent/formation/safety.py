@@ -339,11 +339,16 @@ def pair_flags(paths: Sequence[np.ndarray], clearance: float) -> PairFlags:
 
 
 def _update_flags(
-    flags: PairFlags, paths: Sequence[np.ndarray], changed: Sequence[int], clearance: float
+    flags: PairFlags,
+    paths: Sequence[np.ndarray],
+    changed: Sequence[int],
+    clearance: float,
+    ends: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> PairFlags:
-    """:func:`pair_flags` after the paths of ``changed`` robots changed (same result)."""
+    """:func:`pair_flags` after the paths of ``changed`` robots changed (same result).
+    ``ends``: the (starts, targets) of the paths, if known."""
     n = len(paths)
-    starts, targets = _ends(paths)
+    starts, targets = _ends(paths) if ends is None else ends
     seg_a, seg_b, owner = _segments(paths)
     moved = np.zeros(n, dtype=bool)
     moved[np.asarray(changed, dtype=np.int64)] = True
@@ -684,7 +689,9 @@ def schedule(
             for i, (p, q) in enumerate(zip(paths, old_paths, strict=True))
             if p.shape != q.shape or not np.array_equal(p, q)
         ]
-        flags = _update_flags(old_flags, paths, changed0, c) if changed0 else old_flags
+        flags = (
+            _update_flags(old_flags, paths, changed0, c, (all_s, all_t)) if changed0 else old_flags
+        )
     else:
         flags = pair_flags(paths, c)
     for _ in range(max_rounds):
@@ -742,7 +749,7 @@ def schedule(
                 changed.append(r)
         if not changed:
             break
-        flags = _update_flags(flags, paths, changed, c)
+        flags = _update_flags(flags, paths, changed, c, (all_s, all_t))
     blocked = [
         (int(flags.a[k]), int(flags.b[k]))
         for k in np.flatnonzero(~flags.same_ok & ~flags.ab_ok & ~flags.ba_ok)
