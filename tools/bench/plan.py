@@ -7,15 +7,18 @@ Fleet: a jittered square grid with the paper's simulation spacing (d_e = 2 m, st
 the fitted growth exponent k of t ~ n^k per strategy (fit over n >= 1000), and whether
 the plan of every run passed the safety checker (checked outside the clock, up to
 ``--check-max`` robots). A size is skipped, with the reason printed, once one run of
-the strategy took longer than ``--budget`` seconds or when the previous size predicts
-(growth n^1.5) more than ``--limit`` seconds. Wall-clock seconds are the table; the
+the strategy took longer than ``--budget`` seconds, when the previous size predicts
+(growth n^1.5) more than ``--limit`` seconds, or - sizes above ``--isolate`` run in a
+child process instead - when it is not done within ``--limit`` seconds. Wall-clock seconds are the table; the
 process CPU seconds follow (the machine is shared, so wall time includes waiting).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import math
+import subprocess
 import sys
 import time
 
@@ -36,6 +39,23 @@ def fleet(n: int, seed: int = 0) -> tuple[list[int], np.ndarray]:
     return ids, pos
 
 
+def run_one(strategy: str, n: int, check_max: int) -> tuple[float, float, str]:
+    """(wall s, CPU s, verdict) of one planning run (nan seconds if it failed)."""
+    ids, pos = fleet(n)
+    t0 = time.perf_counter()
+    c0 = time.process_time()
+    try:
+        plan = plan_from_positions(ids, pos, PlanParams(d_e=D_E, strategy=strategy))
+    except ValueError as exc:
+        return float("nan"), float("nan"), f"fail: {exc}"[:60]
+    dt = time.perf_counter() - t0
+    dc = time.process_time() - c0
+    if n <= check_max:
+        ok = not check_safety(plan.paths(), plan.wave_of(), 0.2)
+        return dt, dc, f"safe, {len(plan.waves)} waves" if ok else "UNSAFE"
+    return dt, dc, f"{len(plan.waves)} waves (not checked)"
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
         prog="python -m tools.bench plan", description=__doc__.splitlines()[0]
@@ -48,9 +68,19 @@ def main(argv: list[str] | None = None) -> int:
         "--budget", type=float, default=120.0, help="skip larger n once one run exceeds this (s)"
     )
     ap.add_argument(
-        "--limit", type=float, default=90.0, help="skip n if predicted (n^1.5) above this (s)"
+        "--limit", type=float, default=60.0, help="skip n if predicted (n^1.5) above this (s)"
     )
+    ap.add_argument(
+        "--isolate",
+        type=int,
+        default=10000,
+        help="sizes above this run in a child process stopped after --limit seconds",
+    )
+    ap.add_argument("--one", nargs=2, metavar=("STRATEGY", "N"), help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
+    if args.one:
+        print(json.dumps(run_one(args.one[0], int(args.one[1]), args.check_max)))
+        return 0
     try:
         sizes = [int(x) for x in args.sizes.split(",") if x]
     except ValueError:
@@ -68,30 +98,34 @@ def main(argv: list[str] | None = None) -> int:
             if skip or (s in ("optimal", "capt") and n > args.exact_max):
                 safe[s][n] = "skipped (budget)" if skip else "skipped (exact solver)"
                 continue
-            if predicted > args.limit:
+            if predicted > args.limit and n <= args.isolate:
                 safe[s][n] = f"skipped (predicted {predicted:.0f} s > --limit {args.limit:g} s)"
                 continue
-            ids, pos = fleet(n)
             print(f"[bench plan] {s} n={n} ...", file=sys.stderr)
-            t0 = time.perf_counter()
-            c0 = time.process_time()
-            try:
-                plan = plan_from_positions(ids, pos, PlanParams(d_e=D_E, strategy=s))
-            except ValueError as exc:
-                times[s][n] = float("nan")
-                safe[s][n] = f"fail: {exc}"[:40]
-                continue
-            dt = time.perf_counter() - t0
-            times[s][n] = dt
-            cpu[s][n] = time.process_time() - c0
-            last = (n, dt)
-            if n <= args.check_max:
-                ok = not check_safety(plan.paths(), plan.wave_of(), 0.2)
-                safe[s][n] = f"safe, {len(plan.waves)} waves" if ok else "UNSAFE"
+            if n > args.isolate:  # in a child process, stopped after --limit seconds
+                cmd = [sys.executable, "-m", "tools.bench.plan", "--one", s, str(n)]
+                cmd += ["--check-max", str(args.check_max)]
+                try:
+                    res = subprocess.run(
+                        cmd, capture_output=True, text=True, timeout=args.limit, check=False
+                    )
+                    dt, dc, verdict = json.loads(res.stdout.strip().splitlines()[-1])
+                except subprocess.TimeoutExpired:
+                    safe[s][n] = f"skipped (not done within --limit {args.limit:g} s)"
+                    skip = True
+                    continue
+                except (ValueError, IndexError):
+                    safe[s][n] = "fail: child process gave no result"
+                    continue
             else:
-                safe[s][n] = f"{len(plan.waves)} waves (not checked)"
-            if dt > args.budget:
-                skip = True
+                dt, dc, verdict = run_one(s, n, args.check_max)
+            times[s][n] = dt
+            safe[s][n] = verdict
+            if math.isfinite(dt):
+                cpu[s][n] = dc
+                last = (n, dt)
+                if dt > args.budget:
+                    skip = True
     for title, table in (("wall s", times), ("cpu s", cpu)):
         print(f"{title:10s} " + " ".join(f"{n:>10d}" for n in sizes) + "   exponent")
         for s in strategies:
@@ -118,4 +152,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(main(sys.argv[1:]))
