@@ -94,13 +94,14 @@ class PairFlags:
 
 def point_seg_dist(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Distance from points p to segments [a, b] (broadcast over leading axes)."""
-    ab = b - a
-    ap = p - a
-    den = np.sum(ab * ab, axis=-1)
-    t = np.where(den > 0, np.sum(ap * ab, axis=-1) / np.where(den > 0, den, 1.0), 0.0)
+    ax, ay = a[..., 0], a[..., 1]
+    abx, aby = b[..., 0] - ax, b[..., 1] - ay
+    apx, apy = p[..., 0] - ax, p[..., 1] - ay
+    den = abx * abx + aby * aby
+    pos = den > 0
+    t = np.where(pos, (apx * abx + apy * aby) / np.where(pos, den, 1.0), 0.0)
     t = np.clip(t, 0.0, 1.0)
-    q = a + t[..., None] * ab
-    return np.hypot(p[..., 0] - q[..., 0], p[..., 1] - q[..., 1])
+    return np.hypot(p[..., 0] - (ax + t * abx), p[..., 1] - (ay + t * aby))
 
 
 def _cross(o: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
