@@ -13,7 +13,6 @@ nothing may block, inside a callback); the caller drains them with :meth:`Bus.dr
 from __future__ import annotations
 
 import contextlib
-import json
 import logging
 import queue
 import threading
@@ -24,7 +23,15 @@ from typing import Any, TypeVar
 
 import zenoh
 
-from agent.protocol import ErrorReply, Message, ProtocolError, decode, encode, id_from_key
+from agent.protocol import (
+    ErrorReply,
+    Message,
+    NetworkSpec,
+    ProtocolError,
+    decode,
+    encode,
+    id_from_key,
+)
 
 log = logging.getLogger("agent.bus")
 
@@ -47,37 +54,16 @@ class NoRoute(BusError):
     """
 
 
-@dataclass(frozen=True)
-class BusConfig:
-    """How to join the network; the defaults suit peers on one machine."""
+#: How the agent joins the bus: the shared :class:`agent.protocol.NetworkSpec`.
+BusConfig = NetworkSpec
 
-    connect: tuple[str, ...] = ()
-    listen: tuple[str, ...] = ()
-    multicast_scouting: bool = True
-    mode: str = "peer"
 
-    def __post_init__(self) -> None:
-        if self.mode not in ("peer", "client", "router"):
-            raise ValueError(f"mode must be peer, client or router, got {self.mode!r}")
-        for ep in (*self.connect, *self.listen):
-            if "/" not in ep:
-                raise ValueError(
-                    f"endpoint {ep!r} is not of the form proto/address, e.g. tcp/127.0.0.1:7447"
-                )
-        if self.mode == "client" and not self.connect and not self.multicast_scouting:
-            raise ValueError(
-                "client mode without --connect needs multicast scouting to find a router"
-            )
-
-    def to_zenoh(self) -> zenoh.Config:
-        cfg = zenoh.Config()
-        cfg.insert_json5("mode", json.dumps(self.mode))
-        if self.connect:
-            cfg.insert_json5("connect/endpoints", json.dumps(list(self.connect)))
-        if self.listen:
-            cfg.insert_json5("listen/endpoints", json.dumps(list(self.listen)))
-        cfg.insert_json5("scouting/multicast/enabled", json.dumps(self.multicast_scouting))
-        return cfg
+def zenoh_config(spec: NetworkSpec) -> zenoh.Config:
+    """The zenoh config of ``spec``."""
+    cfg = zenoh.Config()
+    for key, value in spec.json5_items():
+        cfg.insert_json5(key, value)
+    return cfg
 
 
 @dataclass(frozen=True)
@@ -107,7 +93,7 @@ class Bus:
 
     def __init__(self, config: BusConfig | None = None) -> None:
         self.config = config or BusConfig()
-        self.session = zenoh.open(self.config.to_zenoh())
+        self.session = zenoh.open(zenoh_config(self.config))
         self.events: queue.Queue[Event] = queue.Queue()
         self.stats = Stats()
         self._keep: list[Any] = []  # subscribers, tokens, publishers: keep them alive

@@ -13,6 +13,7 @@ Images are encoded (PNG) bytes of a BGR uint8 picture, as OpenCV writes them.
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields
@@ -102,6 +103,53 @@ def id_from_key(key: str) -> int:
     if not raw.isdigit():
         raise ProtocolError(f"key {key!r}: robot id {raw!r} is not a non-negative integer")
     return _check_id(int(raw))
+
+
+# --------------------------------------------------------------------------- joining
+
+
+ZENOH_MODES = ("peer", "client", "router")
+
+
+@dataclass(frozen=True)
+class NetworkSpec:
+    """How a process joins the bus (DESIGN.md §3): zenoh mode, endpoints, scouting.
+
+    Pure data shared by every process (agents, world, router, tools), so that all of them
+    accept and check the same flags; :meth:`json5_items` gives the zenoh config entries,
+    which ``agent/bus.py`` and the world turn into a ``zenoh.Config``. The defaults suit
+    peers on one machine (multicast scouting); separate hosts use ``connect`` to a router.
+    """
+
+    connect: tuple[str, ...] = ()
+    listen: tuple[str, ...] = ()
+    multicast_scouting: bool = True
+    mode: str = "peer"
+
+    def __post_init__(self) -> None:
+        if self.mode not in ZENOH_MODES:
+            raise ValueError(f"mode must be peer, client or router, got {self.mode!r}")
+        for ep in (*self.connect, *self.listen):
+            if not isinstance(ep, str) or "/" not in ep:
+                raise ValueError(
+                    f"endpoint {ep!r} is not of the form proto/address, e.g. tcp/127.0.0.1:7447"
+                )
+        if self.mode == "client" and not self.connect and not self.multicast_scouting:
+            raise ValueError(
+                "client mode without --connect needs multicast scouting to find a router"
+            )
+        if self.mode == "router" and not self.listen:
+            raise ValueError("a router needs at least one --listen endpoint")
+
+    def json5_items(self) -> list[tuple[str, str]]:
+        """(key, JSON5 value) pairs for ``zenoh.Config.insert_json5``."""
+        items = [("mode", json.dumps(self.mode))]
+        if self.connect:
+            items.append(("connect/endpoints", json.dumps(list(self.connect))))
+        if self.listen:
+            items.append(("listen/endpoints", json.dumps(list(self.listen))))
+        items.append(("scouting/multicast/enabled", json.dumps(self.multicast_scouting)))
+        return items
 
 
 # --------------------------------------------------------------------------- errors

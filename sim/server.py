@@ -31,7 +31,6 @@ its result comes back through the same queue.
 from __future__ import annotations
 
 import contextlib
-import json
 import math
 import queue
 import sys
@@ -57,6 +56,7 @@ from agent.protocol import (
     ContactMsg,
     ErrorReply,
     Message,
+    NetworkSpec,
     ProtocolError,
     RegisterReply,
     RegisterRequest,
@@ -72,32 +72,16 @@ from sim.locomotion import Contact, Done
 from sim.render_pool import PNG_PARAMS, Job, RenderPool, Result
 from sim.world import World
 
+#: How the world joins the bus: the shared :class:`agent.protocol.NetworkSpec`.
+NetConfig = NetworkSpec
 
-@dataclass(frozen=True)
-class NetConfig:
-    """How the world joins the network (zenoh peer by default)."""
 
-    connect: tuple[str, ...] = ()
-    listen: tuple[str, ...] = ()
-    multicast_scouting: bool = True
-    mode: str = "peer"
-
-    def __post_init__(self) -> None:
-        if self.mode not in ("peer", "client", "router"):
-            raise ValueError(f"mode must be peer, client or router, got {self.mode!r}")
-        for ep in (*self.connect, *self.listen):
-            if "/" not in ep:
-                raise ValueError(f"endpoint {ep!r} is not proto/address (tcp/127.0.0.1:7447)")
-
-    def to_zenoh(self) -> zenoh.Config:
-        cfg = zenoh.Config()
-        cfg.insert_json5("mode", json.dumps(self.mode))
-        if self.connect:
-            cfg.insert_json5("connect/endpoints", json.dumps(list(self.connect)))
-        if self.listen:
-            cfg.insert_json5("listen/endpoints", json.dumps(list(self.listen)))
-        cfg.insert_json5("scouting/multicast/enabled", json.dumps(self.multicast_scouting))
-        return cfg
+def zenoh_config(spec: NetworkSpec) -> zenoh.Config:
+    """The zenoh config of ``spec`` (the world may not import ``agent.bus``)."""
+    cfg = zenoh.Config()
+    for key, value in spec.json5_items():
+        cfg.insert_json5(key, value)
+    return cfg
 
 
 @dataclass
@@ -156,7 +140,7 @@ class WorldServer:
                 self.render_workers,
                 lambda r: self.inbox.put(("rendered", r)),
             )
-        self.session = zenoh.open(self.net.to_zenoh())
+        self.session = zenoh.open(zenoh_config(self.net))
         s = self.session
 
         def handler(kind: str) -> Any:

@@ -139,3 +139,32 @@ def test_keys_and_ids() -> None:
         p.id_from_key("other/1")
     with pytest.raises(p.ProtocolError):
         p.key_record(-1)
+
+
+def test_network_spec_json5_items() -> None:
+    spec = p.NetworkSpec(connect=("tcp/10.0.0.1:7447",), multicast_scouting=False, mode="client")
+    assert spec.json5_items() == [
+        ("mode", '"client"'),
+        ("connect/endpoints", '["tcp/10.0.0.1:7447"]'),
+        ("scouting/multicast/enabled", "false"),
+    ]
+    router = p.NetworkSpec(mode="router", listen=("tcp/0.0.0.0:7447",))
+    assert ("listen/endpoints", '["tcp/0.0.0.0:7447"]') in router.json5_items()
+    assert p.NetworkSpec().json5_items() == [
+        ("mode", '"peer"'),
+        ("scouting/multicast/enabled", "true"),
+    ]
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "reason"),
+    [
+        ({"mode": "server"}, "mode must be"),
+        ({"listen": ("localhost:7447",)}, "proto/address"),
+        ({"mode": "client", "multicast_scouting": False}, "needs multicast scouting"),
+        ({"mode": "router"}, "at least one --listen"),
+    ],
+)
+def test_network_spec_rejects(kwargs: dict[str, object], reason: str) -> None:
+    with pytest.raises(ValueError, match=reason):
+        p.NetworkSpec(**kwargs)  # type: ignore[arg-type]

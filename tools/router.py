@@ -16,13 +16,15 @@ and runs until SIGTERM or SIGINT, then closes the session and exits 0.
 from __future__ import annotations
 
 import argparse
-import json
 import signal
 import sys
 import threading
 from types import FrameType
 
 import zenoh
+
+from agent.bus import zenoh_config
+from agent.protocol import NetworkSpec
 
 DEFAULT_LISTEN = "tcp/0.0.0.0:7447"
 
@@ -31,18 +33,13 @@ def router_config(
     listen: list[str], connect: list[str] | None = None, multicast_scouting: bool = True
 ) -> zenoh.Config:
     """The zenoh config of a router listening on ``listen`` (and connecting to ``connect``)."""
-    if not listen:
-        raise ValueError("a router needs at least one --listen endpoint")
-    for ep in [*listen, *(connect or [])]:
-        if "/" not in ep:
-            raise ValueError(f"endpoint {ep!r} must look like tcp/HOST:PORT")
-    cfg = zenoh.Config()
-    cfg.insert_json5("mode", json.dumps("router"))
-    cfg.insert_json5("listen/endpoints", json.dumps(list(listen)))
-    if connect:
-        cfg.insert_json5("connect/endpoints", json.dumps(list(connect)))
-    cfg.insert_json5("scouting/multicast/enabled", json.dumps(bool(multicast_scouting)))
-    return cfg
+    spec = NetworkSpec(
+        mode="router",
+        listen=tuple(listen),
+        connect=tuple(connect or ()),
+        multicast_scouting=bool(multicast_scouting),
+    )
+    return zenoh_config(spec)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -16,12 +16,14 @@ first publication on KEY arrives (e.g. ``world/clock``). Exits 0 (printing ``see
 from __future__ import annotations
 
 import argparse
-import json
 import queue
 import sys
 import time
 
 import zenoh
+
+from agent.bus import zenoh_config
+from agent.protocol import NetworkSpec
 
 
 def wait_for(
@@ -35,11 +37,7 @@ def wait_for(
 
     ``queryable``: a queryable matches ``key``; otherwise: a sample on ``key`` arrived.
     """
-    cfg = zenoh.Config()
-    cfg.insert_json5("mode", json.dumps("peer"))
-    if connect:
-        cfg.insert_json5("connect/endpoints", json.dumps(connect))
-    cfg.insert_json5("scouting/multicast/enabled", json.dumps(multicast_scouting))
+    cfg = zenoh_config(NetworkSpec(connect=tuple(connect), multicast_scouting=multicast_scouting))
     got: queue.Queue[str] = queue.Queue()
     with zenoh.open(cfg) as session:
         if queryable:

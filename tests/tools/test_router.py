@@ -107,13 +107,13 @@ def test_wait_for_queryable_and_sample(
 def test_router_config_errors() -> None:
     with pytest.raises(ValueError, match="at least one"):
         router.router_config([])
-    with pytest.raises(ValueError, match="tcp/HOST:PORT"):
+    with pytest.raises(ValueError, match="proto/address"):
         router.router_config(["localhost"])
 
 
 def test_router_cli_bad_endpoint(capsys: pytest.CaptureFixture[str]) -> None:
     assert router.main(["--listen", "nonsense"]) == 2
-    assert "tcp/HOST:PORT" in capsys.readouterr().err
+    assert "proto/address" in capsys.readouterr().err
 
 
 def test_wait_for_cli_errors(capsys: pytest.CaptureFixture[str]) -> None:
