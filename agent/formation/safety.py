@@ -609,6 +609,7 @@ def _near_sets(
     targets: np.ndarray,
     paths: Sequence[np.ndarray],
     c: float,
+    segs: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> list[np.ndarray]:
     """For each robot r of ``todo``: a superset of the robots whose path may come within
     c of r's path or of one of its detour candidates during the round. Every candidate
@@ -620,7 +621,7 @@ def _near_sets(
     total = len(paths)
     rob = np.asarray(todo, dtype=np.int64)
     m = rob.size
-    pa, pb, po = _segments(paths)
+    pa, pb, po = _segments(paths) if segs is None else segs
     qa, qb = starts[rob], targets[rob]
     bent = [j for j, r in enumerate(todo) if paths[r].shape[0] > 2]  # others: in the capsule
     found: list[np.ndarray] = []
@@ -711,8 +712,8 @@ def schedule(
                 todo.append((r, np.array([[starts[r], v, targets[r]] for v in cands])))
         if not todo:
             break
-        near_of = _near_sets([r for r, _ in todo], starts, targets, paths, c)
         pa, pb, po = _segments(paths)
+        near_of = _near_sets([r for r, _ in todo], starts, targets, paths, c, (pa, pb, po))
         ptr = np.searchsorted(po, np.arange(len(paths) + 1))
         changed: list[int] = []
         for (r, stack), near in zip(todo, near_of, strict=True):
