@@ -17,9 +17,10 @@ be - are held to that smaller distance instead (they may not come closer than th
 
 The pair test reduces to three flags per pair (i, k): *same* (may walk together),
 *i-before-k*, *k-before-i*. Only pairs whose paths come within c matter; they are
-found by spatial hashing of points sampled along every segment (cell 2c, samples at
-most c apart, 3×3 neighbourhood), so the checker and the scheduler are ~O(n log n)
-for fleets whose paths do not all pile up in one place.
+found exactly by spatial hashing (every segment entered in the cells of side 3c its
+c/2-dilation may meet, same-cell pairs deduplicated by one int64 key, then measured),
+so the checker and the scheduler cost ~ (total path length / c + close pairs) · log.
+Between detour rounds only the pairs of the robots whose path changed are redone.
 
 Scheduling (:func:`schedule`): wave 0 = the leader alone. Pairs that may not share a
 wave but can go in either order must be in different waves; pairs that can only go in
@@ -31,6 +32,8 @@ resolved by a detour: one via point on the side of the blocked path (candidates
 perpendicular to the path at its middle, quarter and three-quarter points, offsets
 1, 1.5, 2, 3, 4.5, 6 × c, left before right), the candidate with the fewest remaining
 conflicts (then the shortest) wins; this repeats until nothing is left to resolve.
+Robots are still taken one by one (a detour changes the score of the next ones), each
+scored only against the robots that can matter (found for the whole round at once).
 """
 
 from __future__ import annotations
