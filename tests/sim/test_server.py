@@ -315,10 +315,15 @@ def test_walk_1m_in_20cm_steps_and_read_the_truth(client: Client) -> None:
 
 
 def test_busy_robot_refuses_a_second_motion(client: Client) -> None:
-    # A 12 rad turn (under the 4π limit) lasts 20 s of sim time, 5 s of wall time at
-    # --speed 4: time enough for the second request to arrive while it runs, even on a
-    # loaded machine (6 rad, 2.5 s, was once too short with every core busy).
-    first = client.session.get(key_turn(3), payload=encode(TurnRequest(angle=12.0)), timeout=60.0)
+    # A 6 rad turn lasts 10 s of sim time, 2.5 s of wall time at --speed 4: time enough for
+    # the second request to arrive while it runs, even on a loaded machine.
+    # An earlier test of this module may leave robot 3 still moving: wait until a zero
+    # turn is accepted (the robot is free) before starting the long one.
+    deadline = time.monotonic() + 30.0
+    while not isinstance(client.ask(key_turn(3), TurnRequest(angle=0.0)), CommandReply):
+        assert time.monotonic() < deadline, "robot 3 never became free"
+        time.sleep(0.05)
+    first = client.session.get(key_turn(3), payload=encode(TurnRequest(angle=6.0)), timeout=60.0)
     deadline = time.monotonic() + 10.0
     rep: Any = None
     while time.monotonic() < deadline:
