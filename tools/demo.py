@@ -46,6 +46,7 @@ from agent.protocol import (
     KEY_RECORD_ALL,
     KEY_STATUS_ALL,
     KEY_WORLD_TRUTH_ALL,
+    PHASES,
     ContactMsg,
     DigestMsg,
     NeighborRecordMsg,
@@ -57,18 +58,8 @@ from agent.protocol import (
 
 R_D_MAX = 0.125
 R_PHI_MAX = 0.30
-PHASE_ORDER = (
-    "start",
-    "search",
-    "localise",
-    "exchange",
-    "agree",
-    "plan",
-    "wait",
-    "move",
-    "hold",
-    "done",
-)
+#: The phases of DESIGN.md §1 in order (the wire's list, less the terminal "failed").
+PHASE_ORDER = tuple(p for p in PHASES if p != "failed")
 ROOT = Path(__file__).resolve().parents[1]
 
 
