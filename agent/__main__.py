@@ -12,28 +12,23 @@ usage error.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import logging
 import math
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from agent.protocol import MAX_ROBOT_ID
+from agent.protocol import MAX_ROBOT_ID, add_network_arguments, network_spec
+
+if TYPE_CHECKING:
+    from agent.bus import Bus
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="python -m agent", description=__doc__.split("\n\n")[0])
     p.add_argument("--id", required=True, help="robot id, or 'auto' to claim one from the world")
     p.add_argument("--fleet-size", type=int, default=None, help="require exactly N members")
-    p.add_argument(
-        "--connect", action="append", default=[], metavar="EP", help="zenoh endpoint to connect to"
-    )
-    p.add_argument(
-        "--listen", action="append", default=[], metavar="EP", help="zenoh endpoint to listen on"
-    )
-    p.add_argument(
-        "--no-multicast-scouting", action="store_true", help="disable multicast scouting"
-    )
-    p.add_argument("--mode", choices=("peer", "client"), default="peer", help="zenoh session mode")
+    add_network_arguments(p, ("peer", "client"))
     p.add_argument("--d-e", type=float, default=0.8, help="expected parent-child distance (m)")
     p.add_argument(
         "--phi-e-deg", type=float, default=30.0, help="expected parent-child angle (deg)"
@@ -69,6 +64,48 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return args
 
 
+def open_bus(args: argparse.Namespace, log: logging.Logger) -> tuple[Bus, int]:
+    """The agent's bus and robot id.
+
+    Secure, ``--id N``: the session opens with robot N's key. Secure, ``--id auto``: for
+    each robot key in the credentials folder (sorted), open a session with it and ask the
+    world for that id; the world grants an id only to the key that owns it, so the first
+    free one wins. Insecure: ``--id auto`` takes the lowest free id.
+    """
+    from agent.bus import Bus
+    from agent.robot import RobotError, register
+    from agent.trust import Credentials
+
+    if args.id != "auto":
+        rid = int(args.id)
+        return Bus(network_spec(args, f"robot-{rid}")), rid
+    spec = network_spec(args, "robot-0")
+    if not spec.secure:
+        bus = Bus(spec)
+        try:
+            rid = register(bus, -1, timeout=30.0)
+        except RobotError:
+            bus.close()
+            raise
+        log.info("claimed robot %d", rid)
+        return bus, rid
+    keys = Credentials(spec.credentials).own_robot_keys()
+    if not keys:
+        raise ValueError(f"{spec.credentials} holds no robot key to claim a robot with")
+    reasons = []
+    for rid in keys:
+        bus = Bus(dataclasses.replace(spec, identity=f"robot-{rid}"))
+        try:
+            got = register(bus, rid, timeout=30.0)
+        except RobotError as exc:
+            bus.close()
+            reasons.append(str(exc))
+            continue
+        log.info("claimed robot %d with its key", got)
+        return bus, got
+    raise RobotError(f"no robot could be claimed with keys {keys}: {'; '.join(reasons)}")
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     logging.basicConfig(
@@ -78,30 +115,19 @@ def main(argv: list[str] | None = None) -> int:
     )
     log = logging.getLogger("agent")
     # Imported here so that `--help` and usage errors need no zenoh session.
-    from agent.bus import Bus, BusConfig
-    from agent.robot import Robot, RobotError, register
+    from agent.robot import Robot, RobotError
     from agent.runner import AgentConfig, Runner, load_formation, load_perception
 
     try:
-        cfg = BusConfig(
-            connect=tuple(args.connect),
-            listen=tuple(args.listen),
-            multicast_scouting=not args.no_multicast_scouting,
-            mode=args.mode,
-        )
-    except ValueError as exc:
+        opened = open_bus(args, log)
+    except ValueError as exc:  # usage: bad flags, no credentials (TrustError is one too)
         print(f"python -m agent: {exc}", file=sys.stderr)
         return 2
-    with Bus(cfg) as bus:
-        if args.id == "auto":
-            try:
-                rid = register(bus, -1, timeout=30.0)
-            except RobotError as exc:
-                log.error("%s", exc)
-                return 1
-            log.info("claimed robot %d", rid)
-        else:
-            rid = int(args.id)
+    except RobotError as exc:
+        log.error("%s", exc)
+        return 1
+    bus, rid = opened
+    with bus:
         missing = []
         perception: Any = None
         formation: Any = None

@@ -32,6 +32,14 @@ from agent.protocol import (
     encode,
     id_from_key,
 )
+from agent.trust import (
+    MAX_SEALED_BYTES,
+    Credentials,
+    Identity,
+    Signer,
+    TrustError,
+    Verifier,
+)
 
 log = logging.getLogger("agent.bus")
 
@@ -74,6 +82,9 @@ class Event:
     key: str
     msg: Any = None
     robot_id: int = -1
+    #: Who signed ``msg`` and in which epoch (``agent.trust``); empty / -1 when insecure.
+    signer: str = ""
+    epoch: int = -1
 
 
 @dataclass
@@ -82,6 +93,8 @@ class Stats:
     published_count: Counter[str] = field(default_factory=Counter)
     query_bytes: int = 0
     rejected: int = 0
+    #: Of ``rejected``: envelopes that failed authentication (forged, replayed, unsigned).
+    untrusted: int = 0
 
     @property
     def total_published(self) -> int:
@@ -93,6 +106,12 @@ class Bus:
 
     def __init__(self, config: BusConfig | None = None) -> None:
         self.config = config or BusConfig()
+        self.signer: Signer | None = None
+        self.verifier: Verifier | None = None
+        if self.config.secure:
+            creds = Credentials(self.config.credentials)
+            self.signer = creds.signer(Identity.parse(self.config.identity))
+            self.verifier = creds.verifier()
         self.session = zenoh.open(zenoh_config(self.config))
         self.events: queue.Queue[Event] = queue.Queue()
         self.stats = Stats()
@@ -124,8 +143,10 @@ class Bus:
     # ----------------------------------------------------------------- pub/sub
 
     def publish(self, key: str, msg: Message, category: str = "") -> int:
-        """Publish ``msg`` on ``key`` (reliable); returns the payload size in bytes."""
+        """Publish ``msg`` on ``key`` (reliable, sealed when secure); returns its size in bytes."""
         data = encode(msg)
+        if self.signer is not None:
+            data = self.signer.seal(key, data)
         pub = self._publishers.get(key)
         if pub is None:
             pub = self.session.declare_publisher(key, reliability=zenoh.Reliability.RELIABLE)
@@ -142,19 +163,43 @@ class Bus:
         """Decoded messages on ``key_expr`` arrive as ``Event("msg", key, msg)``."""
 
         def on_sample(sample: zenoh.Sample) -> None:
+            if len(sample.payload) > MAX_SEALED_BYTES:  # bounded before it is copied
+                with self._lock:
+                    self.stats.rejected += 1
+                log.warning(
+                    "rejected message on %s: %d bytes", sample.key_expr, len(sample.payload)
+                )
+                return
             self._enqueue_sample(str(sample.key_expr), sample.payload.to_bytes())
 
         self._keep.append(self.session.declare_subscriber(key_expr, on_sample))
 
     def _enqueue_sample(self, key: str, data: bytes) -> None:
         try:
-            msg = decode(data)
+            signer, epoch, payload = self._open(key, data)
+            msg = decode(payload)
         except ProtocolError as exc:
             with self._lock:
                 self.stats.rejected += 1
-            log.warning("rejected message on %s: %s", key, exc)
+                if isinstance(exc, TrustError):
+                    self.stats.untrusted += 1
+            log.warning("rejected message on %s: %s", key, str(exc)[:200])
             return
-        self.events.put(Event("msg", key, msg))
+        self.events.put(Event("msg", key, msg, signer=signer, epoch=epoch))
+
+    def _open(self, key: str, data: bytes) -> tuple[str, int, bytes]:
+        """(signer, epoch, payload) of a publication on ``key``; the signer must own ``key``.
+
+        ``nao/{i}/...`` must be signed by ``robot-i``, ``world/...`` by the world.
+        Insecure buses pass the payload through unchanged.
+        """
+        if self.verifier is None:
+            return "", -1, data
+        opened = self.verifier.open(key, data)
+        owner = Identity("world") if key.startswith("world/") else Identity.robot(id_from_key(key))
+        if opened.who != owner:
+            raise TrustError(f"{opened.who.cn} signed a message on {key}, owned by {owner.cn}")
+        return opened.who.cn, opened.epoch, opened.payload
 
     # ----------------------------------------------------------------- liveliness
 
@@ -204,6 +249,9 @@ class Bus:
         that does not decode.
         """
         data = encode(msg)
+        nonce = b""
+        if self.signer is not None:
+            data, nonce = self.signer.seal_request(key, data)
         with self._lock:
             self.stats.query_bytes += len(data)
         started = time.monotonic()
@@ -220,9 +268,18 @@ class Bus:
                 continue
             raw = reply.ok.payload.to_bytes()
             try:
+                if self.verifier is not None:
+                    opened = self.verifier.open(key, raw, bind=nonce, replay=False)
+                    if opened.who != Identity("world"):
+                        raise TrustError(f"reply signed by {opened.who.cn}, not the world")
+                    raw = opened.payload
                 out = decode(raw)
             except ProtocolError as exc:
-                errors.append(f"undecodable reply: {exc}")
+                with self._lock:
+                    self.stats.rejected += 1
+                    if isinstance(exc, TrustError):
+                        self.stats.untrusted += 1
+                errors.append(f"rejected reply: {str(exc)[:200]}")
                 continue
             if isinstance(out, ErrorReply):
                 raise BusError(f"{key}: {out.reason}")

@@ -13,8 +13,11 @@ Images are encoded (PNG) bytes of a BGR uint8 picture, as OpenCV writes them.
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
+import os
+import sys
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields
 from typing import Any, ClassVar, TypeVar
@@ -125,10 +128,27 @@ class NetworkSpec:
     listen: tuple[str, ...] = ()
     multicast_scouting: bool = True
     mode: str = "peer"
+    #: The fleet credentials folder (``agent.trust``); empty: insecure (development only).
+    credentials: str = ""
+    #: Whose key opens the links: a common name of ``agent.trust.Identity`` (``robot-2``).
+    identity: str = ""
 
     def __post_init__(self) -> None:
         if self.mode not in ZENOH_MODES:
             raise ValueError(f"mode must be peer, client or router, got {self.mode!r}")
+        if self.credentials:
+            if not self.identity:
+                raise ValueError("credentials need the identity whose key opens the links")
+            if self.mode == "peer":
+                raise ValueError(
+                    "with credentials every process is a zenoh client of a TLS router "
+                    "(python -m tools.router --credentials DIR); use --mode client"
+                )
+            if self.multicast_scouting and not self.connect:
+                raise ValueError("with credentials, --connect tls/ROUTER:7447 is required")
+            for ep in (*self.connect, *self.listen):
+                if not ep.startswith("tls/"):
+                    raise ValueError(f"with credentials every link is TLS: {ep!r} is not tls/...")
         for ep in (*self.connect, *self.listen):
             if not isinstance(ep, str) or "/" not in ep:
                 raise ValueError(
@@ -149,7 +169,85 @@ class NetworkSpec:
         if self.listen:
             items.append(("listen/endpoints", json.dumps(list(self.listen))))
         items.append(("scouting/multicast/enabled", json.dumps(self.multicast_scouting)))
+        if self.credentials:
+            from agent.trust import Credentials, Identity, acl_settings, tls_settings
+
+            creds = Credentials(self.credentials)
+            who = Identity.parse(self.identity)
+            items.append(("transport/link/tls", json.dumps(tls_settings(creds, who))))
+            if self.mode == "router":
+                items.append(("access_control", json.dumps(acl_settings(creds.roster))))
         return items
+
+    @property
+    def secure(self) -> bool:
+        return bool(self.credentials)
+
+
+#: Environment variable naming the credentials folder (containers: a mounted secret).
+CREDENTIALS_ENV = "NAO_CREDENTIALS"
+INSECURE_WARNING = (
+    "WARNING: --insecure: no TLS, no access control, no signatures. Anyone on the network "
+    "can forge records, walk any robot and read everything. Development only."
+)
+
+
+def add_network_arguments(p: argparse.ArgumentParser, modes: tuple[str, ...]) -> None:
+    """The join flags every process shares: endpoints, scouting, mode, credentials."""
+    p.add_argument(
+        "--connect", action="append", default=[], metavar="EP", help="zenoh endpoint to connect to"
+    )
+    p.add_argument(
+        "--listen", action="append", default=[], metavar="EP", help="zenoh endpoint to listen on"
+    )
+    p.add_argument(
+        "--no-multicast-scouting", action="store_true", help="disable multicast scouting"
+    )
+    p.add_argument(
+        "--mode",
+        choices=modes,
+        default=None,
+        help="zenoh mode (default: client with credentials, else peer)",
+    )
+    p.add_argument(
+        "--credentials",
+        metavar="DIR",
+        default=None,
+        help="fleet credentials folder (python -m tools.fleet init; default: $NAO_CREDENTIALS)",
+    )
+    p.add_argument(
+        "--insecure",
+        action="store_true",
+        help="no TLS, access control or signatures (development only; prints a warning)",
+    )
+
+
+def network_spec(
+    args: argparse.Namespace, identity: str, default_mode: str = "peer"
+) -> NetworkSpec:
+    """The :class:`NetworkSpec` of flags added by :func:`add_network_arguments`.
+
+    Secure by default: without credentials (flag or ``$NAO_CREDENTIALS``) it raises
+    ``ValueError`` unless ``--insecure`` was given, which prints a warning to stderr.
+    Secure sessions are zenoh clients of a TLS router unless ``--mode`` says otherwise.
+    """
+    creds = "" if args.insecure else (args.credentials or os.environ.get(CREDENTIALS_ENV, ""))
+    if args.insecure:
+        print(INSECURE_WARNING, file=sys.stderr, flush=True)
+    elif not creds:
+        raise ValueError(
+            "no fleet credentials: pass --credentials DIR (create them with "
+            "python -m tools.fleet init) or set NAO_CREDENTIALS; --insecure for development"
+        )
+    mode = args.mode or ("client" if creds and default_mode == "peer" else default_mode)
+    return NetworkSpec(
+        connect=tuple(args.connect),
+        listen=tuple(args.listen),
+        multicast_scouting=not args.no_multicast_scouting,
+        mode=mode,
+        credentials=creds,
+        identity=identity if creds else "",
+    )
 
 
 # --------------------------------------------------------------------------- errors
@@ -543,6 +641,28 @@ def encode(msg: Message) -> bytes:
     return data
 
 
+def unpack_bounded(data: bytes | bytearray | memoryview, max_bytes: int) -> Any:
+    """msgpack-decode ``data`` of at most ``max_bytes`` with every length capped.
+
+    Raises :class:`ProtocolError` for anything that is too large or not msgpack.
+    """
+    if len(data) > max_bytes:
+        raise ProtocolError(f"payload of {len(data)} bytes exceeds {max_bytes}")
+    try:
+        return msgpack.unpackb(
+            data,
+            raw=False,
+            strict_map_key=True,
+            max_bin_len=max_bytes,
+            max_str_len=max(MAX_TEXT * 4, 4096),
+            max_array_len=4 * MAX_MEMBERS,
+            max_map_len=64,
+            max_ext_len=0,
+        )
+    except Exception as exc:  # msgpack raises several unrelated types
+        raise ProtocolError(f"not msgpack: {type(exc).__name__}: {str(exc)[:100]}") from None
+
+
 def decode(data: bytes | bytearray | memoryview, expect: type[M] | None = None) -> Any:
     """Parse and validate one message. ``expect`` restricts the accepted type.
 
@@ -582,3 +702,9 @@ def decode(data: bytes | bytearray | memoryview, expect: type[M] | None = None) 
 def message_types() -> dict[str, type[Message]]:
     """Every registered message class by tag (for tests and tools)."""
     return dict(_REGISTRY)
+
+
+# --------------------------------------------------------------------------- trust
+# The signed envelope and the fleet credentials are part of the wire contract; sim/
+# reaches them here. Imported last: agent.trust uses the codec above.
+from agent import trust  # noqa: E402, F401

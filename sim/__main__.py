@@ -11,8 +11,9 @@ import signal
 import sys
 from typing import Any
 
+from agent.protocol import add_network_arguments, network_spec
 from sim import scenarios
-from sim.server import NetConfig, WorldServer
+from sim.server import WorldServer
 from sim.world import World
 
 
@@ -50,18 +51,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=0,
         help="render camera images in K worker processes (default 0: in the world process)",
     )
-    p.add_argument(
-        "--connect", action="append", default=[], help="zenoh endpoint to connect to (repeatable)"
-    )
-    p.add_argument(
-        "--listen", action="append", default=[], help="zenoh endpoint to listen on (repeatable)"
-    )
-    p.add_argument(
-        "--no-multicast-scouting", action="store_true", help="disable multicast scouting"
-    )
-    p.add_argument(
-        "--mode", default="peer", choices=("peer", "client", "router"), help="zenoh mode"
-    )
+    add_network_arguments(p, ("peer", "client", "router"))
     p.add_argument("--gui", action="store_true", help="open the PyBullet GUI (needs a display)")
     p.add_argument("--dump-scenario", metavar="FILE", help="write the scenario used to FILE")
     return p
@@ -83,12 +73,7 @@ def main(argv: list[str] | None = None) -> int:
             )
         if args.dump_scenario:
             scenarios.dump(sc, args.dump_scenario)
-        net = NetConfig(
-            connect=tuple(args.connect),
-            listen=tuple(args.listen),
-            multicast_scouting=not args.no_multicast_scouting,
-            mode=args.mode,
-        )
+        net = network_spec(args, "world")
     except (OSError, ValueError) as exc:
         print(f"sim: {exc}", file=sys.stderr)
         return 2

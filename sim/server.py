@@ -66,6 +66,7 @@ from agent.protocol import (
     decode,
     encode,
     id_from_key,
+    trust,
 )
 from sim import camera
 from sim.locomotion import Contact, Done
@@ -84,9 +85,49 @@ def zenoh_config(spec: NetworkSpec) -> zenoh.Config:
     return cfg
 
 
+class Request:
+    """One query to the world, authenticated when the world runs with credentials.
+
+    Secure: the payload is the :mod:`agent.trust` envelope's, ``signer`` is who sealed
+    it, and replies are sealed by the world and bound to the request (``nonce``), so a
+    reply can neither be forged nor replayed to another request. Insecure: the query's
+    own payload, no signer.
+    """
+
+    def __init__(
+        self,
+        q: Any,
+        verifier: trust.Verifier | None,
+        signer: trust.Signer | None,
+    ) -> None:
+        self.q = q
+        self.key = str(q.key_expr)
+        self.parameters = q.parameters
+        self.signer = signer
+        self.who: trust.Identity | None = None
+        self.epoch = -1
+        self.nonce = b""
+        raw = q.payload
+        data = raw.to_bytes() if raw is not None else None
+        if verifier is not None:
+            if data is None:
+                raise trust.TrustError(f"unsigned request on {self.key}")
+            opened = verifier.open(self.key, data)
+            self.who, self.epoch, self.nonce = opened.who, opened.epoch, opened.nonce
+            data = opened.payload
+        self.payload: bytes | None = data
+
+    def reply(self, msg: Message) -> None:
+        data = encode(msg)
+        if self.signer is not None:
+            data = self.signer.seal(self.key, data, bind=self.nonce)
+        self.q.reply(self.q.key_expr, data)
+        self.q.drop()
+
+
 @dataclass
 class _Pending:
-    query: Any
+    query: Request
     kind: str
     robot_id: int
 
@@ -130,6 +171,14 @@ class WorldServer:
         self._stop = threading.Event()
         self._keep: list[Any] = []
         self.session: Any = None
+        self.verifier: trust.Verifier | None = None
+        self.signer: trust.Signer | None = None
+        self.untrusted = 0  # requests refused by authentication
+        self.bound: dict[int, int] = {}  # robot id -> the epoch of the session driving it
+        if self.net.secure:
+            creds = trust.Credentials(self.net.credentials)
+            self.signer = creds.signer(trust.Identity("world"))
+            self.verifier = creds.verifier()
 
     # ------------------------------------------------------------------ setup
 
@@ -273,12 +322,22 @@ class WorldServer:
         if kind == "rendered":
             self._rendered(item)
             return
-        q = item
+        try:
+            q = Request(item, self.verifier, self.signer)
+        except ProtocolError as exc:  # TrustError is one: unsigned, forged or replayed
+            self.errors += 1
+            self.untrusted += isinstance(exc, trust.TrustError)
+            self._log(f"{kind} {item.key_expr}: refused: {str(exc)[:200]}")
+            with contextlib.suppress(Exception):
+                item.drop()  # no answer: a stranger learns nothing
+            return
         try:
             if kind == "register":
                 self._reply(q, self._register(q))
                 return
-            rid = id_from_key(str(q.key_expr))
+            rid = id_from_key(q.key)
+            if q.who is not None:
+                self._authorise(q, rid)
             if rid not in self.world.robot_ids:
                 raise ValueError(f"unknown robot {rid}; robots are {list(self.world.robot_ids)}")
             if kind == "camera":
@@ -293,17 +352,38 @@ class WorldServer:
                 self._start(q, rid, "turn", lambda: self.world.locomotion.turn(rid, t.angle))
         except ValueError as exc:  # ProtocolError is a ValueError
             self.errors += 1
-            self._log(f"{kind} {q.key_expr}: rejected: {exc}")
+            self._log(f"{kind} {q.key}: rejected: {str(exc)[:200]}")
             self._reply(q, ErrorReply(reason=str(exc)[:500]))
 
-    def _payload(self, q: Any, cls: type[Message]) -> Any:
-        payload = q.payload
-        if payload is None:
-            raise ProtocolError(f"missing {cls.TAG!r} payload")
-        return decode(payload.to_bytes(), expect=cls)
+    def _authorise(self, q: Request, rid: int) -> None:
+        """Secure: only robot ``rid``'s key, in the session bound to ``rid``, drives it.
 
-    def _register(self, q: Any) -> Message:
+        A robot is bound to the epoch (session) that claimed it (``--id auto``) or, with
+        a fixed id, that last commanded it; a newer epoch of the same key (a restart)
+        takes an unclaimed robot over, an older one (a replay) is refused.
+        """
+        if q.who != trust.Identity.robot(rid):
+            self.untrusted += 1
+            raise ValueError(f"{q.who.cn if q.who else 'nobody'} may not command robot {rid}")
+        bound = self.bound.get(rid)
+        if bound is not None and q.epoch != bound and (rid in self.claims or q.epoch < bound):
+            self.untrusted += 1
+            raise ValueError(f"robot {rid} is bound to another session of its key")
+        self.bound[rid] = q.epoch
+
+    def _payload(self, q: Request, cls: type[Message]) -> Any:
+        if q.payload is None:
+            raise ProtocolError(f"missing {cls.TAG!r} payload")
+        return decode(q.payload, expect=cls)
+
+    def _register(self, q: Request) -> Message:
         req = self._payload(q, RegisterRequest) if q.payload is not None else RegisterRequest()
+        if q.who is not None:  # secure: a key claims its own robot id, and only that one
+            if q.who.role != "robot":
+                raise ValueError(f"{q.who.cn} is not a robot and may not claim one")
+            if req.want not in (-1, q.who.robot_id):
+                raise ValueError(f"{q.who.cn} may not claim robot {req.want}")
+            req = RegisterRequest(want=q.who.robot_id)
         taken = self.claims | self.alive
         free = [r for r in self.world.robot_ids if r not in taken]
         if req.want >= 0:
@@ -319,10 +399,12 @@ class WorldServer:
         else:
             rid = free[0]
         self.claims.add(rid)
+        if q.who is not None:
+            self.bound[rid] = q.epoch  # the claiming session drives it from now on
         self._log(f"robot {rid} claimed")
         return RegisterReply(robot_id=rid)
 
-    def _camera(self, q: Any, rid: int) -> Message | None:
+    def _camera(self, q: Request, rid: int) -> Message | None:
         if q.payload is not None:
             yaw = self._payload(q, CameraRequest).yaw
         else:
@@ -393,7 +475,7 @@ class WorldServer:
                     if left is not None:
                         self._reply(left[0], self._render_here(job.robot_id, job.yaw, left[3]))
 
-    def _start(self, q: Any, rid: int, kind: str, start: Any) -> None:
+    def _start(self, q: Request, rid: int, kind: str, start: Any) -> None:
         if rid in self._pending or self.world.locomotion.busy(rid):
             raise ValueError(f"robot {rid} is busy with a motion")
         start()
@@ -416,17 +498,19 @@ class WorldServer:
 
     # ------------------------------------------------------------------ output
 
-    def _reply(self, q: Any, msg: Message) -> None:
+    def _reply(self, q: Request, msg: Message) -> None:
         try:
-            q.reply(q.key_expr, encode(msg))
-            q.drop()
+            q.reply(msg)
             self.served += 1
         except Exception as exc:  # the querier may have gone (timeout)
-            self._log(f"reply on {q.key_expr} failed: {exc}")
+            self._log(f"reply on {q.key} failed: {str(exc)[:200]}")
 
     def _put(self, key: str, msg: Message) -> None:
         try:
-            self._pub[key].put(encode(msg))
+            data = encode(msg)
+            if self.signer is not None:
+                data = self.signer.seal(key, data)
+            self._pub[key].put(data)
         except Exception as exc:
             self._log(f"publish on {key} failed: {exc}")
 

@@ -1,21 +1,25 @@
 """A zenoh router: the rendezvous of agents and world on separate hosts (DESIGN.md §3, §5).
 
-On one machine every process finds the others by multicast scouting. Across hosts,
-containers or network namespaces, processes run with ``--connect tcp/ROUTER:7447
---no-multicast-scouting`` and this router (a zenoh-python session in ``mode: "router"``;
-no separate binary) forwards their traffic. It prints one ready line to stdout::
+Secure (the default, DESIGN.md §8): ``--credentials DIR`` (or ``$NAO_CREDENTIALS``); the
+router listens on ``tls/0.0.0.0:7447``, accepts only links with a certificate of the
+fleet CA (mutual TLS) and enforces the fleet's access control by common name
+(``agent.trust.acl_settings``). Every other process then runs with ``--credentials DIR
+--connect tls/ROUTER:7447`` as a zenoh client. ``--insecure`` (development only): plain
+TCP on ``tcp/0.0.0.0:7447``, anyone may connect. This router (a zenoh-python session in
+``mode: "router"``; no separate binary) forwards the traffic. It prints one ready line::
 
-    router ready zid=<hex> listen=tcp/0.0.0.0:7447
+    router ready zid=<hex> listen=tls/0.0.0.0:7447
 
 and runs until SIGTERM or SIGINT, then closes the session and exits 0.
 
-``python -m tools.router [--listen tcp/0.0.0.0:7447]... [--connect EP]...
+``python -m tools.router (--credentials DIR | --insecure) [--listen EP]... [--connect EP]...
 [--no-multicast-scouting]``
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import sys
 import threading
@@ -24,33 +28,22 @@ from types import FrameType
 import zenoh
 
 from agent.bus import zenoh_config
-from agent.protocol import NetworkSpec
+from agent.protocol import CREDENTIALS_ENV, add_network_arguments, network_spec
 
 DEFAULT_LISTEN = "tcp/0.0.0.0:7447"
-
-
-def router_config(
-    listen: list[str], connect: list[str] | None = None, multicast_scouting: bool = True
-) -> zenoh.Config:
-    """The zenoh config of a router listening on ``listen`` (and connecting to ``connect``)."""
-    spec = NetworkSpec(
-        mode="router",
-        listen=tuple(listen),
-        connect=tuple(connect or ()),
-        multicast_scouting=bool(multicast_scouting),
-    )
-    return zenoh_config(spec)
+DEFAULT_LISTEN_TLS = "tls/0.0.0.0:7447"
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m tools.router", description="zenoh router")
-    ap.add_argument("--listen", action="append", help=f"endpoint (default {DEFAULT_LISTEN})")
-    ap.add_argument("--connect", action="append", default=[], help="another router to join")
-    ap.add_argument("--no-multicast-scouting", action="store_true")
+    add_network_arguments(ap, ("router",))
     args = ap.parse_args(argv)
-    listen = args.listen or [DEFAULT_LISTEN]
+    if not args.listen:
+        secure = not args.insecure and (args.credentials or os.environ.get(CREDENTIALS_ENV))
+        args.listen = [DEFAULT_LISTEN_TLS if secure else DEFAULT_LISTEN]
+    listen = args.listen
     try:
-        cfg = router_config(listen, args.connect, not args.no_multicast_scouting)
+        cfg = zenoh_config(network_spec(args, "router", default_mode="router"))
     except ValueError as exc:
         print(f"router: {exc}", file=sys.stderr)
         return 2

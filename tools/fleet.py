@@ -1,0 +1,95 @@
+"""Fleet credentials (DESIGN.md §8): create them, show them, hand them out per host.
+
+    python -m tools.fleet init --robots 3 --out fleet/          # CA + robot-1..3, world,
+                                                                 # observer, router
+    python -m tools.fleet init --ids 2,5,9 --host router.lab --out fleet/
+    python -m tools.fleet show fleet/                           # the roster, checked
+    python -m tools.fleet export fleet/ --identity robot-2 --out robot-2/   # one host's set
+
+``export`` copies the public part (``ca.pem``, ``certs/``) and exactly one private key:
+that is what one host gets. The CA's private key (``ca-private/``) never leaves the
+machine that made the fleet. See ``agent/trust.py`` for the layout and the checks.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import sys
+from pathlib import Path
+
+from agent.trust import Credentials, FleetPaths, Identity, TrustError, create_fleet
+
+
+def _ids(args: argparse.Namespace) -> list[int]:
+    if args.ids:
+        try:
+            return sorted({int(t) for t in args.ids.split(",") if t.strip()})
+        except ValueError:
+            raise ValueError(f"--ids {args.ids!r}: expected integers like 1,2,5") from None
+    if args.robots is None or args.robots < 1:
+        raise ValueError("give --robots N (ids 1..N) or --ids 1,2,5")
+    return list(range(1, args.robots + 1))
+
+
+def export(src: Path, who: Identity, out: Path) -> FleetPaths:
+    """Copy the public credentials and ``who``'s private key from ``src`` to ``out``."""
+    creds = Credentials(src)  # checks the source before copying anything
+    key = creds.paths.key(who)
+    if not key.is_file():
+        raise ValueError(f"{src} holds no private key for {who.cn}")
+    dst = FleetPaths(out)
+    if dst.ca.exists():
+        raise ValueError(f"{out} already holds credentials")
+    dst.certs.mkdir(parents=True, exist_ok=True)
+    shutil.copy2(creds.paths.ca, dst.ca)
+    for cert in sorted(creds.paths.certs.glob("*.pem")):
+        shutil.copy2(cert, dst.certs / cert.name)
+    dst.keys.mkdir(parents=True, exist_ok=True)
+    shutil.copy2(key, dst.key(who))
+    dst.key(who).chmod(0o600)
+    return dst
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m tools.fleet", description=__doc__.split("\n")[0])
+    sub = p.add_subparsers(dest="cmd", required=True)
+    i = sub.add_parser("init", help="create a fleet CA and every identity's key and certificate")
+    i.add_argument("--robots", type=int, default=None, help="robot ids 1..N")
+    i.add_argument("--ids", default="", help="robot ids, comma-separated (instead of --robots)")
+    i.add_argument("--host", action="append", default=[], help="a name the router is reached at")
+    i.add_argument("--days", type=int, default=365, help="certificate validity (days)")
+    i.add_argument("--out", required=True, help="new folder for the credentials")
+    s = sub.add_parser("show", help="check a credentials folder and list its roster")
+    s.add_argument("dir")
+    e = sub.add_parser("export", help="one host's credentials: public part + one private key")
+    e.add_argument("dir")
+    e.add_argument("--identity", required=True, help="robot-N, world, observer or router")
+    e.add_argument("--out", required=True)
+    args = p.parse_args(argv)
+    try:
+        if args.cmd == "init":
+            paths = create_fleet(args.out, _ids(args), hosts=args.host, valid_days=args.days)
+            creds = Credentials(paths.root)
+            print(
+                f"fleet created in {paths.root}: robots {creds.robots()}, world, observer, "
+                f"router; keep {paths.ca_key} offline"
+            )
+        elif args.cmd == "show":
+            creds = Credentials(args.dir)
+            print(f"fleet CA {creds.paths.ca}")
+            for who in sorted(creds.roster):
+                own = "key here" if creds.paths.key(who).is_file() else "certificate only"
+                print(f"  {who.cn:12s} {own}")
+        else:
+            dst = export(Path(args.dir), Identity.parse(args.identity), Path(args.out))
+            print(f"wrote {dst.root}: ca.pem, certs/, keys/{args.identity}.key")
+    except (ValueError, OSError) as exc:  # TrustError is a ValueError
+        kind = "untrusted" if isinstance(exc, TrustError) else "error"
+        print(f"fleet: {kind}: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
