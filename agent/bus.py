@@ -85,6 +85,8 @@ class Event:
     #: Who signed ``msg`` and in which epoch (``agent.trust``); empty / -1 when insecure.
     signer: str = ""
     epoch: int = -1
+    #: Bytes of the sample on the wire (the envelope included).
+    size: int = 0
 
 
 @dataclass
@@ -185,7 +187,7 @@ class Bus:
                     self.stats.untrusted += 1
             log.warning("rejected message on %s: %s", key, str(exc)[:200])
             return
-        self.events.put(Event("msg", key, msg, signer=signer, epoch=epoch))
+        self.events.put(Event("msg", key, msg, signer=signer, epoch=epoch, size=len(data)))
 
     def _open(self, key: str, data: bytes) -> tuple[str, int, bytes]:
         """(signer, epoch, payload) of a publication on ``key``; the signer must own ``key``.

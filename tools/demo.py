@@ -41,6 +41,7 @@ import numpy as np
 
 from agent.bus import Bus, BusConfig
 from agent.protocol import (
+    INSECURE_WARNING,
     KEY_ALIVE_ALL,
     KEY_DIGEST_ALL,
     KEY_RECORD_ALL,
@@ -55,6 +56,7 @@ from agent.protocol import (
     encode,
     id_from_key,
 )
+from agent.trust import create_fleet
 
 R_D_MAX = 0.125
 R_PHI_MAX = 0.30
@@ -119,10 +121,19 @@ class Proc:
     lines: list[str] = field(default_factory=list)
 
 
-def start_world(robots: int, seed: int, endpoint: str, out: Path, extra: list[str]) -> Proc:
+def start_world(
+    robots: int,
+    seed: int,
+    endpoint: str,
+    out: Path,
+    extra: list[str],
+    net: list[str] | None = None,
+) -> Proc:
+    """``python -m sim``; ``net``: its join flags (default: listen on ``endpoint``, insecure)."""
+    if net is None:
+        net = ["--listen", endpoint, "--no-multicast-scouting", "--insecure"]
     cmd = [
-        sys.executable, "-m", "sim", "--robots", str(robots), "--seed", str(seed),
-        "--listen", endpoint, "--no-multicast-scouting", *extra,
+        sys.executable, "-m", "sim", "--robots", str(robots), "--seed", str(seed), *net, *extra,
     ]  # fmt: skip
     log = (out / "world.log").open("wb")
     p = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=log)
@@ -138,12 +149,22 @@ def start_world(robots: int, seed: int, endpoint: str, out: Path, extra: list[st
     return proc
 
 
-def start_agent(rid: int, robots: int, endpoint: str, out: Path, args: argparse.Namespace) -> Proc:
-    """Agent process for robot ``rid`` (with ``--auto-ids`` it claims a robot itself)."""
+def start_agent(
+    rid: int,
+    robots: int,
+    endpoint: str,
+    out: Path,
+    args: argparse.Namespace,
+    net: list[str] | None = None,
+) -> Proc:
+    """Agent process for robot ``rid`` (with ``--auto-ids`` it claims a robot itself);
+    ``net``: its join flags (default: connect to ``endpoint``, insecure)."""
     auto = bool(getattr(args, "auto_ids", False))
+    if net is None:
+        net = ["--connect", endpoint, "--no-multicast-scouting", "--insecure"]
     cmd = [
         sys.executable, "-m", "agent", "--id", "auto" if auto else str(rid), "--fleet-size", str(robots),
-        "--connect", endpoint, "--no-multicast-scouting",
+        *net,
         "--d-e", str(args.d_e), "--phi-e-deg", str(args.phi_e_deg), "--timeout", str(args.agree_timeout),
         "--log-level", args.agent_log_level,
         *(["--no-correct"] if getattr(args, "no_correct", False) else []),
@@ -151,6 +172,39 @@ def start_agent(rid: int, robots: int, endpoint: str, out: Path, args: argparse.
     log = (out / (f"agent-slot{rid}.log" if auto else f"agent-{rid}.log")).open("wb")
     p = subprocess.Popen(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT)
     return Proc(f"agent {rid}", p, log)
+
+
+def start_router(endpoint: str, out: Path, net: list[str]) -> Proc:
+    """``python -m tools.router`` listening on ``endpoint``; waits for its ready line."""
+    cmd = [sys.executable, "-m", "tools.router", "--listen", endpoint, *net]
+    log = (out / "router.log").open("wb")
+    p = subprocess.Popen(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT)
+    proc = Proc("router", p, log)
+    deadline = time.monotonic() + 30.0
+    while "router ready" not in (out / "router.log").read_text(errors="replace"):
+        if p.poll() is not None or time.monotonic() > deadline:
+            stop(proc)
+            raise RuntimeError(f"router did not start; see {out / 'router.log'}")
+        time.sleep(0.05)  # polling the router's log for its ready line, bounded above
+    return proc
+
+
+def fleet_network(args: argparse.Namespace, out: Path, robots: int) -> tuple[str, list[str]]:
+    """(endpoint, join flags) of one run: secure by default (DESIGN.md §8).
+
+    Secure: a throwaway fleet in ``out/fleet`` unless ``--credentials`` names one, a TLS
+    router on a free loopback port, every process a client of it. ``--insecure``: plain
+    TCP, the world listening, everybody else connecting to it.
+    """
+    port = free_port()
+    if args.insecure:
+        return f"tcp/127.0.0.1:{port}", ["--no-multicast-scouting", "--insecure"]
+    creds = args.credentials
+    if creds is None:
+        creds = out / "fleet"
+        if not (creds / "ca.pem").exists():
+            create_fleet(creds, range(1, robots + 1))
+    return f"tls/127.0.0.1:{port}", ["--no-multicast-scouting", "--credentials", str(creds)]
 
 
 def stop(proc: Proc, grace: float = 5.0) -> None:
@@ -199,7 +253,8 @@ class Observer:
     records: dict[int, NeighborRecordMsg] = field(default_factory=dict)
     digests: dict[int, DigestMsg] = field(default_factory=dict)
 
-    def take(self, key: str, msg: Any, rec: Recorder | None) -> None:
+    def take(self, key: str, msg: Any, rec: Recorder | None, size: int = 0) -> None:
+        """Record one message; ``size``: its bytes on the wire (0: its encoding's)."""
         if rec is not None:
             rec.write(key, encode(msg))
         now = time.monotonic() - self.t0
@@ -216,7 +271,7 @@ class Observer:
             return
         view = self.agents.setdefault(sender, AgentView())
         kind = key.rsplit("/", 1)[-1]
-        view.bytes_by_kind[kind] += len(encode(msg))
+        view.bytes_by_kind[kind] += size or len(encode(msg))
         view.count_by_kind[kind] += 1
         if isinstance(msg, StatusMsg):
             if msg.phase not in view.phase_wall:
@@ -385,7 +440,8 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
     out.mkdir(parents=True, exist_ok=True)
     n = args.robots
     d_e, phi_e = args.d_e, math.radians(args.phi_e_deg)
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    endpoint, net = fleet_network(args, out, n)
+    secure = not args.insecure
     t0 = time.monotonic()
     rec = Recorder(out / "run.mcap")
     obs = Observer(t0)
@@ -393,12 +449,26 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
     agents: dict[int, Proc] = {}
     result: dict[str, Any] = {"robots": n, "seed": seed, "d_e": d_e, "phi_e_deg": args.phi_e_deg}
     err = sys.stderr
-    bus = Bus(BusConfig(connect=(endpoint,), multicast_scouting=False))
+    result["secure"] = secure
+    if secure:
+        procs.append(start_router(endpoint, out, net))
+        observer_net = BusConfig(
+            connect=(endpoint,),
+            multicast_scouting=False,
+            mode="client",
+            credentials=str(net[net.index("--credentials") + 1]),
+            identity="observer",
+        )
+        world_net = ["--connect", endpoint, *net]
+    else:
+        observer_net = BusConfig(connect=(endpoint,), multicast_scouting=False)
+        world_net = ["--listen", endpoint, *net]
+    bus = Bus(observer_net)
     try:
         for key in (KEY_STATUS_ALL, KEY_RECORD_ALL, KEY_DIGEST_ALL, KEY_WORLD_TRUTH_ALL):
             bus.subscribe(key)
         bus.watch_alive(KEY_ALIVE_ALL)
-        world = start_world(n, seed, endpoint, out, args.world_arg or [])
+        world = start_world(n, seed, endpoint, out, args.world_arg or [], world_net)
         procs.append(world)
         deadline = time.monotonic() + args.world_timeout
         while not any("ready" in ln.lower() for ln in world.lines):
@@ -410,18 +480,19 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
                 raise RuntimeError(f"world not ready after {args.world_timeout:g} s")
             for ev in bus.drain(0.1):
                 if ev.kind == "msg":
-                    obs.take(ev.key, ev.msg, rec)
+                    obs.take(ev.key, ev.msg, rec, ev.size)
         result["wall_world_ready"] = time.monotonic() - t0
         ids = robot_ids(world.lines, n)
         result["ids"] = ids
-        agents.update({i: start_agent(i, n, endpoint, out, args) for i in ids})
+        agent_net = ["--connect", endpoint, *net]
+        agents.update({i: start_agent(i, n, endpoint, out, args, agent_net) for i in ids})
         procs.extend(agents.values())
         live = LiveView(err, ids) if not quiet else None
         deadline = time.monotonic() + args.timeout
         while True:
             for ev in bus.drain(0.1):
                 if ev.kind == "msg":
-                    obs.take(ev.key, ev.msg, rec)
+                    obs.take(ev.key, ev.msg, rec, ev.size)
             if live is not None:
                 live.update(obs, time.monotonic() - t0)
             if all(p.popen.poll() is not None for p in agents.values()):
@@ -434,7 +505,7 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
         while time.monotonic() < settle_end:
             for ev in bus.drain(0.1):
                 if ev.kind == "msg":
-                    obs.take(ev.key, ev.msg, rec)
+                    obs.take(ev.key, ev.msg, rec, ev.size)
         if live is not None:
             live.update(obs, time.monotonic() - t0, force=True)
         result["wall_total"] = time.monotonic() - t0
@@ -621,6 +692,15 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument(
         "--world-arg", action="append", default=[], help="extra argument for python -m sim"
     )
+    p.add_argument(
+        "--credentials",
+        type=Path,
+        default=None,
+        help="fleet credentials folder (default: a throwaway fleet in OUT/fleet)",
+    )
+    p.add_argument(
+        "--insecure", action="store_true", help="no TLS, access control or signatures (dev only)"
+    )
     a = p.parse_args(argv)
     if not 1 <= a.robots <= 64:
         p.error("--robots must be in [1, 64]")
@@ -634,6 +714,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     os.environ.setdefault("PYTHONUNBUFFERED", "1")
+    if args.insecure:
+        print(INSECURE_WARNING, file=sys.stderr)
     if args.batch:
         return batch(args)
     try:
