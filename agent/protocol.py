@@ -132,19 +132,22 @@ class NetworkSpec:
     credentials: str = ""
     #: Whose key opens the links: a common name of ``agent.trust.Identity`` (``robot-2``).
     identity: str = ""
+    #: With credentials: TLS links and access control (False: signatures over plain
+    #: links, for tests of the end-to-end layer as if a router were compromised).
+    tls: bool = True
 
     def __post_init__(self) -> None:
         if self.mode not in ZENOH_MODES:
             raise ValueError(f"mode must be peer, client or router, got {self.mode!r}")
-        if self.credentials:
-            if not self.identity:
-                raise ValueError("credentials need the identity whose key opens the links")
+        if self.credentials and not self.identity:
+            raise ValueError("credentials need the identity whose key opens the links")
+        if self.credentials and self.tls:
             if self.mode == "peer":
                 raise ValueError(
                     "with credentials every process is a zenoh client of a TLS router "
                     "(python -m tools.router --credentials DIR); use --mode client"
                 )
-            if self.multicast_scouting and not self.connect:
+            if self.mode == "client" and not self.connect:
                 raise ValueError("with credentials, --connect tls/ROUTER:7447 is required")
             for ep in (*self.connect, *self.listen):
                 if not ep.startswith("tls/"):
@@ -169,7 +172,7 @@ class NetworkSpec:
         if self.listen:
             items.append(("listen/endpoints", json.dumps(list(self.listen))))
         items.append(("scouting/multicast/enabled", json.dumps(self.multicast_scouting)))
-        if self.credentials:
+        if self.credentials and self.tls:
             from agent.trust import Credentials, Identity, acl_settings, tls_settings
 
             creds = Credentials(self.credentials)
@@ -220,6 +223,11 @@ def add_network_arguments(p: argparse.ArgumentParser, modes: tuple[str, ...]) ->
         action="store_true",
         help="no TLS, access control or signatures (development only; prints a warning)",
     )
+    p.add_argument(
+        "--plain-links",
+        action="store_true",
+        help="tests only: signed messages over plain TCP, no TLS or access control",
+    )
 
 
 def network_spec(
@@ -239,7 +247,8 @@ def network_spec(
             "no fleet credentials: pass --credentials DIR (create them with "
             "python -m tools.fleet init) or set NAO_CREDENTIALS; --insecure for development"
         )
-    mode = args.mode or ("client" if creds and default_mode == "peer" else default_mode)
+    tls = not args.plain_links
+    mode = args.mode or ("client" if creds and tls and default_mode == "peer" else default_mode)
     return NetworkSpec(
         connect=tuple(args.connect),
         listen=tuple(args.listen),
@@ -247,6 +256,7 @@ def network_spec(
         mode=mode,
         credentials=creds,
         identity=identity if creds else "",
+        tls=tls,
     )
 
 

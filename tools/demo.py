@@ -189,22 +189,89 @@ def start_router(endpoint: str, out: Path, net: list[str]) -> Proc:
     return proc
 
 
-def fleet_network(args: argparse.Namespace, out: Path, robots: int) -> tuple[str, list[str]]:
-    """(endpoint, join flags) of one run: secure by default (DESIGN.md §8).
+@dataclass(frozen=True)
+class FleetNet:
+    """How one run's processes join the bus (DESIGN.md §8): see :func:`fleet_network`."""
+
+    endpoint: str
+    flags: list[str]  # join flags every process gets (besides --listen/--connect)
+    credentials: str = ""  # empty: insecure
+    tls: bool = True
+
+    @property
+    def router(self) -> bool:
+        """Secure TLS runs meet at a router; the others at the world's listener."""
+        return bool(self.credentials) and self.tls
+
+    def observer(self) -> BusConfig:
+        if not self.credentials:
+            return BusConfig(connect=(self.endpoint,), multicast_scouting=False)
+        return BusConfig(
+            connect=(self.endpoint,),
+            multicast_scouting=False,
+            mode="client" if self.tls else "peer",
+            credentials=self.credentials,
+            identity="observer",
+            tls=self.tls,
+        )
+
+
+def fleet_network(args: argparse.Namespace, out: Path, robots: int) -> FleetNet:
+    """One run's network: secure by default.
 
     Secure: a throwaway fleet in ``out/fleet`` unless ``--credentials`` names one, a TLS
-    router on a free loopback port, every process a client of it. ``--insecure``: plain
-    TCP, the world listening, everybody else connecting to it.
+    router on a free loopback port, every process a client of it. ``--plain-links``
+    (tests): the same signatures over plain TCP, the world listening. ``--insecure``:
+    plain TCP, no signatures.
     """
     port = free_port()
     if args.insecure:
-        return f"tcp/127.0.0.1:{port}", ["--no-multicast-scouting", "--insecure"]
+        return FleetNet(f"tcp/127.0.0.1:{port}", ["--no-multicast-scouting", "--insecure"])
     creds = args.credentials
     if creds is None:
         creds = out / "fleet"
         if not (creds / "ca.pem").exists():
             create_fleet(creds, range(1, robots + 1))
-    return f"tls/127.0.0.1:{port}", ["--no-multicast-scouting", "--credentials", str(creds)]
+    flags = ["--no-multicast-scouting", "--credentials", str(creds)]
+    if getattr(args, "plain_links", False):
+        return FleetNet(f"tcp/127.0.0.1:{port}", [*flags, "--plain-links"], str(creds), False)
+    return FleetNet(f"tls/127.0.0.1:{port}", flags, str(creds))
+
+
+def start_rogues(net: FleetNet, out: Path, ids: list[int], duration: float) -> list[Proc]:
+    """``tools.rogue`` attackers for ``--rogue`` (issue #8), each writing a JSON report.
+
+    Always a stranger (no credentials). Secure TLS fleets: also an insider holding the
+    observer's key (access control limits it). Plain-links fleets: also an insider
+    holding robot ``ids[-1]``'s key attacking robot ``ids[0]`` (only the end-to-end
+    signatures stand in its way).
+    """
+    target = ids[0]
+    base = [sys.executable, "-m", "tools.rogue", "--connect", net.endpoint,
+            "--target", str(target), "--robots", ",".join(map(str, ids)),
+            "--duration", f"{duration:g}"]  # fmt: skip
+    if not net.tls:
+        base.append("--plain-links")
+    who: list[tuple[str, list[str]]] = [("stranger", [])]
+    if net.credentials:
+        insider = "observer" if net.tls else f"robot-{ids[-1]}"
+        who.append((insider, ["--credentials", net.credentials, "--identity", insider]))
+    procs = []
+    for name, extra in who:
+        cmd = [*base, *extra, "--json", str(out / f"rogue-{name}.json")]
+        log = (out / f"rogue-{name}.log").open("wb")
+        p = subprocess.Popen(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT)
+        procs.append(Proc(f"rogue {name}", p, log))
+    return procs
+
+
+def rogue_reports(out: Path) -> dict[str, Any]:
+    """The rogues' JSON reports, by name (those that wrote one)."""
+    reports = {}
+    for path in sorted(out.glob("rogue-*.json")):
+        with contextlib.suppress(ValueError, OSError):
+            reports[path.stem.removeprefix("rogue-")] = json.loads(path.read_text())
+    return reports
 
 
 def stop(proc: Proc, grace: float = 5.0) -> None:
@@ -440,8 +507,8 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
     out.mkdir(parents=True, exist_ok=True)
     n = args.robots
     d_e, phi_e = args.d_e, math.radians(args.phi_e_deg)
-    endpoint, net = fleet_network(args, out, n)
-    secure = not args.insecure
+    net = fleet_network(args, out, n)
+    endpoint = net.endpoint
     t0 = time.monotonic()
     rec = Recorder(out / "run.mcap")
     obs = Observer(t0)
@@ -449,20 +516,12 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
     agents: dict[int, Proc] = {}
     result: dict[str, Any] = {"robots": n, "seed": seed, "d_e": d_e, "phi_e_deg": args.phi_e_deg}
     err = sys.stderr
-    result["secure"] = secure
-    if secure:
-        procs.append(start_router(endpoint, out, net))
-        observer_net = BusConfig(
-            connect=(endpoint,),
-            multicast_scouting=False,
-            mode="client",
-            credentials=str(net[net.index("--credentials") + 1]),
-            identity="observer",
-        )
-        world_net = ["--connect", endpoint, *net]
-    else:
-        observer_net = BusConfig(connect=(endpoint,), multicast_scouting=False)
-        world_net = ["--listen", endpoint, *net]
+    result["secure"] = bool(net.credentials)
+    result["tls"] = net.router
+    if net.router:
+        procs.append(start_router(endpoint, out, net.flags))
+    world_net = ["--connect" if net.router else "--listen", endpoint, *net.flags]
+    observer_net = net.observer()
     bus = Bus(observer_net)
     try:
         for key in (KEY_STATUS_ALL, KEY_RECORD_ALL, KEY_DIGEST_ALL, KEY_WORLD_TRUTH_ALL):
@@ -484,9 +543,10 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
         result["wall_world_ready"] = time.monotonic() - t0
         ids = robot_ids(world.lines, n)
         result["ids"] = ids
-        agent_net = ["--connect", endpoint, *net]
+        agent_net = ["--connect", endpoint, *net.flags]
         agents.update({i: start_agent(i, n, endpoint, out, args, agent_net) for i in ids})
         procs.extend(agents.values())
+        rogues = start_rogues(net, out, ids, args.rogue) if args.rogue > 0 else []
         live = LiveView(err, ids) if not quiet else None
         deadline = time.monotonic() + args.timeout
         while True:
@@ -509,6 +569,10 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
         if live is not None:
             live.update(obs, time.monotonic() - t0, force=True)
         result["wall_total"] = time.monotonic() - t0
+        for r in rogues:  # they stop by themselves after --rogue seconds
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                r.popen.wait(max(1.0, args.rogue + 30.0 - (time.monotonic() - t0)))
+            stop(r)
     finally:
         for p in reversed(procs):
             stop(p)
@@ -618,9 +682,23 @@ def summarise(
         abs(r["r_d"]) <= R_D_MAX and abs(r["r_phi"]) <= R_PHI_MAX for r in rows
     )
     result["within_tolerance"] = within
+    # The agents planned from exactly the records the robots signed: the evaluator, which
+    # accepts only verified envelopes, recomputes the same plan digest from them.
+    result["plan_matches_records"] = bool(digests) and digests == {
+        result.get("evaluator_plan_digest")
+    }
+    trusted = True
+    rogues = rogue_reports(out)
+    if rogues:
+        result["rogues"] = rogues
+        trusted = result["plan_matches_records"] and all(
+            r.get("commands_executed", 0) == 0 and r.get("claims_granted", 0) == 0
+            for r in rogues.values()
+        )
+        result["rogue_defeated"] = trusted
     result["success"] = bool(
         ok_agents and within and result["identical_digests"] and result["contacts"] == 0
-        and "timeout" not in result
+        and "timeout" not in result and trusted
     )  # fmt: skip
     if obs.truth:
         try:
@@ -650,6 +728,16 @@ def print_table(r: dict[str, Any]) -> None:
             + (f": {r['evaluation_error']}" if "evaluation_error" in r else "")
             + ")"
         )
+    for name, rep in r.get("rogues", {}).items():
+        if not rep.get("connected"):
+            p(f"rogue {name}: could not connect ({rep.get('reason', '')[:70]})")
+        else:
+            p(f"rogue {name}: sent {sum(rep.get('sent', {}).values())} messages/requests, "
+              f"{rep.get('commands_executed')} commands executed, "
+              f"{rep.get('claims_granted')} claims granted")  # fmt: skip
+    if "rogues" in r:
+        p(f"plan digest recomputed from the signed records: "
+          f"{'same' if r['plan_matches_records'] else 'DIFFERENT'}")  # fmt: skip
     p(f"contacts: {r['contacts']} (robot-robot {r['robot_contacts']}), "
       f"min centre separation {r['min_separation']:.2f} m")  # fmt: skip
     p("phase       wall max (s)  sim max (s)")
@@ -700,6 +788,18 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     )
     p.add_argument(
         "--insecure", action="store_true", help="no TLS, access control or signatures (dev only)"
+    )
+    p.add_argument(
+        "--rogue",
+        type=float,
+        default=0.0,
+        metavar="S",
+        help="attack the fleet with tools.rogue for S seconds while it works (issue #8)",
+    )
+    p.add_argument(
+        "--plain-links",
+        action="store_true",
+        help="tests: signatures over plain TCP links (no TLS/ACL), as behind a bad router",
     )
     a = p.parse_args(argv)
     if not 1 <= a.robots <= 64:
