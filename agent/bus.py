@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import math
 import queue
 import threading
 import time
@@ -121,6 +122,8 @@ class Bus:
         self._publishers: dict[str, Any] = {}
         self._lock = threading.Lock()
         self._closed = False
+        self._last_warn = -math.inf
+        self._suppressed = 0
 
     # ----------------------------------------------------------------- lifecycle
 
@@ -185,7 +188,7 @@ class Bus:
                 self.stats.rejected += 1
                 if isinstance(exc, TrustError):
                     self.stats.untrusted += 1
-            log.warning("rejected message on %s: %s", key, str(exc)[:200])
+            self._warn(f"rejected message on {key}: {exc}")
             return
         self.events.put(Event("msg", key, msg, signer=signer, epoch=epoch, size=len(data)))
 
@@ -202,6 +205,18 @@ class Bus:
         if opened.who != owner:
             raise TrustError(f"{opened.who.cn} signed a message on {key}, owned by {owner.cn}")
         return opened.who.cn, opened.epoch, opened.payload
+
+    def _warn(self, text: str) -> None:
+        """Log ``text`` (cut to 200 characters) at most once a second; a flood of
+        rejected messages must not become a flood of log lines."""
+        now = time.monotonic()
+        with self._lock:
+            if now - self._last_warn < 1.0:
+                self._suppressed += 1
+                return
+            self._last_warn, n, self._suppressed = now, self._suppressed, 0
+        more = f" ({n} more rejected since the last report)" if n else ""
+        log.warning("%s%s", text[:200], more)
 
     # ----------------------------------------------------------------- liveliness
 
@@ -257,7 +272,15 @@ class Bus:
         with self._lock:
             self.stats.query_bytes += len(data)
         started = time.monotonic()
-        replies = self.session.get(key, payload=data, timeout=timeout)
+        # Every queryable that matches gets the query and every reply is kept (no
+        # consolidation): a stranger's queryable answering first cannot hide the world's.
+        replies = self.session.get(
+            key,
+            payload=data,
+            timeout=timeout,
+            target=zenoh.QueryTarget.ALL,
+            consolidation=zenoh.ConsolidationMode.NONE,
+        )
         errors: list[str] = []
         for reply in replies:
             if reply.ok is None:

@@ -26,6 +26,7 @@ import contextlib
 import json
 import math
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -229,9 +230,9 @@ def fleet_network(args: argparse.Namespace, out: Path, robots: int) -> FleetNet:
         return FleetNet(f"tcp/127.0.0.1:{port}", ["--no-multicast-scouting", "--insecure"])
     creds = args.credentials
     if creds is None:
-        creds = out / "fleet"
-        if not (creds / "ca.pem").exists():
-            create_fleet(creds, range(1, robots + 1))
+        creds = out / "fleet"  # throwaway: made anew for every run
+        shutil.rmtree(creds, ignore_errors=True)
+        create_fleet(creds, range(1, robots + 2))  # one spare robot key: --rogue's insider
     flags = ["--no-multicast-scouting", "--credentials", str(creds)]
     if getattr(args, "plain_links", False):
         return FleetNet(f"tcp/127.0.0.1:{port}", [*flags, "--plain-links"], str(creds), False)
@@ -243,8 +244,8 @@ def start_rogues(net: FleetNet, out: Path, ids: list[int], duration: float) -> l
 
     Always a stranger (no credentials). Secure TLS fleets: also an insider holding the
     observer's key (access control limits it). Plain-links fleets: also an insider
-    holding robot ``ids[-1]``'s key attacking robot ``ids[0]`` (only the end-to-end
-    signatures stand in its way).
+    holding the key of a fleet robot that is not in this run (the demo's fleet has one
+    spare) attacking robot ``ids[0]``: only the end-to-end signatures stand in its way.
     """
     target = ids[0]
     base = [sys.executable, "-m", "tools.rogue", "--connect", net.endpoint,
@@ -254,9 +255,11 @@ def start_rogues(net: FleetNet, out: Path, ids: list[int], duration: float) -> l
         base.append("--plain-links")
     who: list[tuple[str, list[str]]] = [("stranger", [])]
     if net.credentials:
-        insider = "observer" if net.tls else f"robot-{ids[-1]}"
+        insider = "observer" if net.tls else f"robot-{max(ids) + 1}"
         who.append((insider, ["--credentials", net.credentials, "--identity", insider]))
     procs = []
+    for old in out.glob("rogue-*.json"):
+        old.unlink()
     for name, extra in who:
         cmd = [*base, *extra, "--json", str(out / f"rogue-{name}.json")]
         log = (out / f"rogue-{name}.log").open("wb")
@@ -547,6 +550,7 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
         agents.update({i: start_agent(i, n, endpoint, out, args, agent_net) for i in ids})
         procs.extend(agents.values())
         rogues = start_rogues(net, out, ids, args.rogue) if args.rogue > 0 else []
+        result["rogues_started"] = [r.name for r in rogues]
         live = LiveView(err, ids) if not quiet else None
         deadline = time.monotonic() + args.timeout
         while True:
@@ -689,11 +693,15 @@ def summarise(
     }
     trusted = True
     rogues = rogue_reports(out)
-    if rogues:
+    if result.get("rogues_started"):
         result["rogues"] = rogues
-        trusted = result["plan_matches_records"] and all(
-            r.get("commands_executed", 0) == 0 and r.get("claims_granted", 0) == 0
-            for r in rogues.values()
+        trusted = (
+            result["plan_matches_records"]
+            and len(rogues) == len(result["rogues_started"])
+            and all(
+                r.get("commands_executed", 0) == 0 and r.get("claims_granted", 0) == 0
+                for r in rogues.values()
+            )
         )
         result["rogue_defeated"] = trusted
     result["success"] = bool(

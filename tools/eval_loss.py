@@ -270,14 +270,22 @@ def run_once(
     t_start = time.monotonic()
     with netns.Fabric(robots + 3, prefix=prefix) as fab, contextlib.ExitStack() as files:
         router_ep = f"tcp/{fab.address(1)}:{ROUTER_PORT}"
-        common = ["--connect", router_ep, "--no-multicast-scouting"]
+        common = ["--connect", router_ep, "--no-multicast-scouting", "--insecure"]
 
         def log(name: str) -> Any:
             return files.enter_context(open(workdir / f"{name}.log", "w"))
 
         router = fab.popen(
             1,
-            [py, "-m", "tools.router", "--listen", router_ep, "--no-multicast-scouting"],
+            [
+                py,
+                "-m",
+                "tools.router",
+                "--listen",
+                router_ep,
+                "--no-multicast-scouting",
+                "--insecure",
+            ],
             stderr=log("router"),
             env=env,
             cwd=str(REPO),

@@ -24,14 +24,37 @@ from sim.__main__ import build_parser, main
     ],
 )
 def test_bad_arguments(argv: list[str], reason: str, capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(argv) == 2
+    assert main([*argv, "--insecure"]) == 2
     assert reason in capsys.readouterr().err
+
+
+def test_no_credentials_is_a_usage_error(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.delenv("NAO_CREDENTIALS", raising=False)
+    assert main(["--robots", "1"]) == 2
+    assert "no fleet credentials" in capsys.readouterr().err
 
 
 def test_dump_scenario(tmp_path: Path) -> None:
     # A bad endpoint stops the world after the scenario was written.
     out = tmp_path / "sc.json"
-    assert main(["--robots", "4", "--seed", "2", "--dump-scenario", str(out), "--listen", "x"]) == 2
+    assert (
+        main(
+            [
+                "--robots",
+                "4",
+                "--seed",
+                "2",
+                "--dump-scenario",
+                str(out),
+                "--listen",
+                "x",
+                "--insecure",
+            ]
+        )
+        == 2
+    )
     assert out.exists()
 
 
@@ -46,5 +69,5 @@ def test_gui_without_a_display(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     monkeypatch.delenv("DISPLAY", raising=False)
-    assert main(["--robots", "1", "--gui"]) == 2
+    assert main(["--robots", "1", "--gui", "--insecure"]) == 2
     assert "DISPLAY" in capsys.readouterr().err

@@ -132,6 +132,7 @@ def world(
             "--listen",
             endpoint,
             "--no-multicast-scouting",
+            "--insecure",
             "--speed",
             "4",
             "--render-workers",

@@ -147,6 +147,7 @@ def test_zenoh_through_router_survives_30_percent_loss(tmp_path: Path) -> None:
                 "--listen",
                 router_ep,
                 "--no-multicast-scouting",
+                "--insecure",
             ],
             cwd=str(REPO),
         )

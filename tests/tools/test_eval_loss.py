@@ -124,7 +124,8 @@ def test_observer_stops_when_every_agent_is_gone(tmp_path: Path) -> None:
     procs = []
     try:
         router = subprocess.Popen(
-            [sys.executable, "-m", "tools.router", "--listen", ep, "--no-multicast-scouting"],
+            [sys.executable, "-m", "tools.router", "--listen", ep, "--no-multicast-scouting",
+             "--insecure"],
             stdout=subprocess.PIPE, text=True, cwd=str(repo),
         )  # fmt: skip
         procs.append(router)

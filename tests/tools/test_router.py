@@ -38,7 +38,15 @@ def _session(endpoint: str) -> zenoh.Session:
 def running_router() -> Iterator[tuple[str, str, subprocess.Popen[str]]]:
     ep = f"tcp/127.0.0.1:{_free_port()}"
     proc = subprocess.Popen(
-        [sys.executable, "-m", "tools.router", "--listen", ep, "--no-multicast-scouting"],
+        [
+            sys.executable,
+            "-m",
+            "tools.router",
+            "--listen",
+            ep,
+            "--no-multicast-scouting",
+            "--insecure",
+        ],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -104,16 +112,14 @@ def test_wait_for_queryable_and_sample(
         q.undeclare()
 
 
-def test_router_config_errors() -> None:
-    with pytest.raises(ValueError, match="at least one"):
-        router.router_config([])
-    with pytest.raises(ValueError, match="proto/address"):
-        router.router_config(["localhost"])
-
-
-def test_router_cli_bad_endpoint(capsys: pytest.CaptureFixture[str]) -> None:
-    assert router.main(["--listen", "nonsense"]) == 2
+def test_router_cli_bad_endpoint(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    assert router.main(["--listen", "nonsense", "--insecure"]) == 2
     assert "proto/address" in capsys.readouterr().err
+    monkeypatch.delenv("NAO_CREDENTIALS", raising=False)
+    assert router.main([]) == 2
+    assert "no fleet credentials" in capsys.readouterr().err
 
 
 def test_wait_for_cli_errors(capsys: pytest.CaptureFixture[str]) -> None:

@@ -62,6 +62,7 @@ class WorldProcess:
                 "--listen",
                 self.endpoint,
                 "--no-multicast-scouting",
+                "--insecure",
                 "--render-workers",
                 str(render_workers),
             ],
