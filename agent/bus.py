@@ -8,6 +8,13 @@ counted, never raised into the caller's loop.
 
 Callbacks only hand samples to thread-safe queues (zenoh must not be called, and
 nothing may block, inside a callback); the caller drains them with :meth:`Bus.drain`.
+
+Hardening (issue #8): a payload's size is checked before it is copied out of zenoh
+(``MAX_PUBLICATION_BYTES`` for subscriptions, ``MAX_MESSAGE_BYTES`` for query replies);
+every callback survives every exception, counts it in ``stats.rejected`` and logs a
+reason of at most 200 characters (rate limited); the event queue is bounded
+(``EVENT_CAPS``: a full lane drops its oldest event, counted in ``stats.dropped``); a
+reply that is not what was asked for is a :class:`BusError`, never another exception.
 """
 
 from __future__ import annotations
@@ -18,19 +25,26 @@ import queue
 import threading
 import time
 from collections import Counter
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
 import zenoh
 
 from agent.protocol import (
+    MAX_MESSAGE_BYTES,
+    MAX_PUBLICATION_BYTES,
     ErrorReply,
+    Guard,
+    Inbox,
     Message,
     NetworkSpec,
     ProtocolError,
     decode,
     encode,
     id_from_key,
+    reason,
+    take_payload,
 )
 
 log = logging.getLogger("agent.bus")
@@ -39,6 +53,13 @@ M = TypeVar("M", bound=Message)
 
 #: A query that ends with no reply within this many seconds met no queryable (see NoRoute).
 NO_ROUTE_WINDOW = 0.25
+#: Capacity of the event queue's lanes. Messages: a few seconds of a large fleet's
+#: records, digests and statuses (re-published, so a dropped one comes again);
+#: liveliness changes have their own lane so that a message flood cannot push out a
+#: membership change.
+EVENT_CAPS = {"alive": 1024, "msg": 4096}
+#: A query's reasons for failing: at most this many are kept (the rest are counted).
+MAX_REPLY_ERRORS = 4
 
 
 class BusError(RuntimeError):
@@ -81,7 +102,10 @@ class Stats:
     published_bytes: Counter[str] = field(default_factory=Counter)
     published_count: Counter[str] = field(default_factory=Counter)
     query_bytes: int = 0
+    #: payloads, tokens and replies refused (undecodable, oversized, unexpected)
     rejected: int = 0
+    #: events dropped unread because the queue was full (oldest first)
+    dropped: int = 0
 
     @property
     def total_published(self) -> int:
@@ -93,13 +117,24 @@ class Bus:
 
     def __init__(self, config: BusConfig | None = None) -> None:
         self.config = config or BusConfig()
-        self.session = zenoh.open(zenoh_config(self.config))
-        self.events: queue.Queue[Event] = queue.Queue()
+        self.events: Inbox[Event] = Inbox(EVENT_CAPS)
         self.stats = Stats()
         self._keep: list[Any] = []  # subscribers, tokens, publishers: keep them alive
         self._publishers: dict[str, Any] = {}
         self._lock = threading.Lock()
         self._closed = False
+        self.guard = Guard(log.warning, on_reject=self._count_rejected)
+        self.session = zenoh.open(zenoh_config(self.config))
+
+    def _count_rejected(self) -> None:
+        with self._lock:
+            self.stats.rejected += 1
+
+    def _put(self, ev: Event) -> None:
+        lane = "msg" if ev.kind == "msg" else "alive"
+        if self.events.put(lane, ev) is not None:
+            with self._lock:
+                self.stats.dropped += 1
 
     # ----------------------------------------------------------------- lifecycle
 
@@ -138,23 +173,32 @@ class Bus:
             self.stats.published_count[cat] += 1
         return len(data)
 
-    def subscribe(self, key_expr: str) -> None:
-        """Decoded messages on ``key_expr`` arrive as ``Event("msg", key, msg)``."""
+    def subscribe(self, key_expr: str, max_bytes: int = MAX_PUBLICATION_BYTES) -> None:
+        """Decoded messages on ``key_expr`` arrive as ``Event("msg", key, msg)``.
+
+        Payloads over ``max_bytes`` are rejected without being copied."""
 
         def on_sample(sample: zenoh.Sample) -> None:
-            self._enqueue_sample(str(sample.key_expr), sample.payload.to_bytes())
+            self._on_sample(sample, max_bytes)
 
         self._keep.append(self.session.declare_subscriber(key_expr, on_sample))
 
-    def _enqueue_sample(self, key: str, data: bytes) -> None:
+    def _on_sample(self, sample: Any, max_bytes: int = MAX_PUBLICATION_BYTES) -> None:
+        """The subscriber callback: never raises; what does not decode is counted."""
+        key = "?"
         try:
-            msg = decode(data)
-        except ProtocolError as exc:
-            with self._lock:
-                self.stats.rejected += 1
-            log.warning("rejected message on %s: %s", key, exc)
-            return
-        self.events.put(Event("msg", key, msg))
+            key = str(sample.key_expr)
+            msg = decode(take_payload(sample.payload, max_bytes), max_bytes=max_bytes)
+            self._put(Event("msg", key, msg))
+        except Exception as exc:  # ProtocolError, and anything unforeseen: count, go on
+            self.guard.reject(f"message on {key}", exc)
+
+    def _enqueue_sample(self, key: str, data: bytes) -> None:
+        """Decode ``data`` as if it had arrived on ``key`` (tests, tools)."""
+        try:
+            self._put(Event("msg", key, decode(data)))
+        except Exception as exc:
+            self.guard.reject(f"message on {key}", exc)
 
     # ----------------------------------------------------------------- liveliness
 
@@ -165,18 +209,22 @@ class Bus:
         """Liveliness of ``key_expr`` (with history) as ``alive`` / ``gone`` events."""
 
         def on_sample(sample: zenoh.Sample) -> None:
-            key = str(sample.key_expr)
-            try:
-                rid = id_from_key(key)
-            except ProtocolError as exc:
-                log.warning("ignored liveliness token %s: %s", key, exc)
-                return
-            kind = "alive" if sample.kind == zenoh.SampleKind.PUT else "gone"
-            self.events.put(Event(kind, key, robot_id=rid))
+            self._on_alive(sample)
 
         self._keep.append(
             self.session.liveliness().declare_subscriber(key_expr, on_sample, history=True)
         )
+
+    def _on_alive(self, sample: Any) -> None:
+        """The liveliness callback: never raises; a token naming no robot is counted."""
+        key = "?"
+        try:
+            key = str(sample.key_expr)
+            rid = id_from_key(key)
+            kind = "alive" if sample.kind == zenoh.SampleKind.PUT else "gone"
+            self._put(Event(kind, key, robot_id=rid))
+        except Exception as exc:
+            self.guard.reject(f"liveliness token {key}", exc)
 
     # ----------------------------------------------------------------- events
 
@@ -184,14 +232,13 @@ class Bus:
         """Every event queued now; waits up to ``timeout`` s for the first one."""
         out: list[Event] = []
         try:
-            out.append(
-                self.events.get(timeout=timeout) if timeout > 0 else self.events.get_nowait()
-            )
+            _, ev = self.events.get(timeout=timeout) if timeout > 0 else self.events.get_nowait()
         except queue.Empty:
             return out
+        out.append(ev)
         while True:
             try:
-                out.append(self.events.get_nowait())
+                out.append(self.events.get_nowait()[1])
             except queue.Empty:
                 return out
 
@@ -207,32 +254,67 @@ class Bus:
         with self._lock:
             self.stats.query_bytes += len(data)
         started = time.monotonic()
-        replies = self.session.get(key, payload=data, timeout=timeout)
+        try:
+            replies = self.session.get(key, payload=data, timeout=timeout)
+        except Exception as exc:  # zenoh refused the query (bad key, closed session)
+            raise BusError(f"{key}: query failed: {reason(exc)}") from None
         errors: list[str] = []
-        for reply in replies:
-            if reply.ok is None:
-                err = reply.err
-                errors.append(
-                    f"error reply: {bytes(err.payload.to_bytes())[:200]!r}"
-                    if err
-                    else "empty reply"
-                )
-                continue
-            raw = reply.ok.payload.to_bytes()
-            try:
-                out = decode(raw)
-            except ProtocolError as exc:
-                errors.append(f"undecodable reply: {exc}")
-                continue
-            if isinstance(out, ErrorReply):
-                raise BusError(f"{key}: {out.reason}")
-            if not isinstance(out, expect):
-                errors.append(f"unexpected reply {type(out).__name__}")
-                continue
+        out = self._first_reply(key, replies, expect, errors)
+        if out is not None:
             return out
         if errors:
-            raise BusError(f"{key}: {'; '.join(errors)}")
+            shown = errors[:MAX_REPLY_ERRORS]
+            if len(errors) > MAX_REPLY_ERRORS:
+                shown.append(f"and {len(errors) - MAX_REPLY_ERRORS} more")
+            raise BusError(f"{key}: {'; '.join(shown)}")
         elapsed = time.monotonic() - started
         if elapsed < min(NO_ROUTE_WINDOW, timeout / 2):
             raise NoRoute(f"{key}: no reply: no queryable reachable (ended after {elapsed:.3f} s)")
         raise BusError(f"{key}: no reply within {timeout:g} s")
+
+    def _first_reply(
+        self, key: str, replies: Iterable[Any], expect: type[M], errors: list[str]
+    ) -> M | None:
+        """The first reply of type ``expect``; the reasons the others were refused go to
+        ``errors``. An ``ErrorReply`` raises :class:`BusError`. Never raises anything else:
+        every unusable reply is counted in ``stats.rejected``."""
+        try:
+            for reply in replies:
+                try:
+                    out = self._reply_message(reply)
+                except BusError as exc:  # an error reply (zenoh's "Timeout" among them)
+                    errors.append(str(exc))
+                    continue
+                except Exception as exc:  # ProtocolError or anything unforeseen
+                    errors.append(reason(exc))
+                    self.guard.reject(f"reply on {key}", exc)
+                    continue
+                if isinstance(out, ErrorReply):
+                    raise BusError(f"{key}: {out.reason}")
+                if not isinstance(out, expect):
+                    why = f"unexpected reply {type(out).__name__}, expected {expect.__name__}"
+                    errors.append(why)
+                    self.guard.reject(f"reply on {key}", why)
+                    continue
+                return out
+        except BusError:
+            raise
+        except Exception as exc:  # the reply stream itself failed
+            errors.append(f"reply stream failed: {reason(exc)}")
+            self.guard.reject(f"replies on {key}", exc)
+        return None
+
+    @staticmethod
+    def _reply_message(reply: Any) -> Any:
+        """The decoded message of one reply, or an exception saying why not."""
+        ok = reply.ok
+        if ok is None:
+            err = reply.err
+            if err is None:
+                raise BusError("empty reply")
+            text = take_payload(err.payload, 4096)[:200]
+            raise BusError(f"error reply: {text!r}")
+        try:
+            return decode(take_payload(ok.payload, MAX_MESSAGE_BYTES))
+        except ProtocolError as exc:
+            raise ProtocolError(f"undecodable reply: {exc}") from None
