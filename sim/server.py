@@ -154,6 +154,7 @@ class WorldServer:
         self.robot_ids = frozenset(world.robot_ids)  # read by the zenoh callbacks
         self.inbox: Inbox[Any] = Inbox(INBOX_CAPS, priority=True)
         self.guard = Guard(self._log)
+        self._drop_log = Guard(self._log, burst=3, per_second=0.2)  # its count: dropped
         self.claims: set[int] = set()
         self.alive: set[int] = set()  # ids with a live agent token (nao/alive/{id})
         self.errors = 0
@@ -231,10 +232,8 @@ class WorldServer:
     # and never raise.
 
     def _queue(self, lane: str, item: Any) -> None:
-        old = self.inbox.put(lane, item)
-        if old is not None:
-            what = getattr(old, "kind", None) or lane
-            self.guard.reject(f"{what} (queue full)", f"oldest {lane} item dropped")
+        if self.inbox.put(lane, item) is not None:  # counted in inbox.dropped
+            self._drop_log.reject(f"{lane} queue full", f"oldest {lane} item dropped")
 
     def admit(self, kind: str, q: Any) -> None:
         """A query arrived: check it cheaply and queue it as valid or malformed."""

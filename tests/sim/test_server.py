@@ -533,7 +533,7 @@ def test_a_flood_of_malformed_requests_is_bounded_and_cannot_delay_a_valid_one(
     lane, req = server.inbox.get_nowait()  # the valid request is served first
     assert lane == "valid" and req.msg == WalkRequest(distance=0.1)
     # the log is rate limited: far fewer lines than rejected inputs
-    assert server.rejected == 3010 + (3010 - cap) and len(server.log_lines) < 50
+    assert server.rejected == 3010 and len(server.log_lines) < 50
 
 
 def test_liveliness_of_non_robots_keeps_no_state(server: Any) -> None:
