@@ -58,6 +58,9 @@ NO_ROUTE_WINDOW = 0.25
 #: liveliness changes have their own lane so that a message flood cannot push out a
 #: membership change.
 EVENT_CAPS = {"alive": 1024, "msg": 4096}
+#: ... and the payload bytes the message lane may hold (a decoded message takes up to
+#: ~12x its payload in Python objects: 4 MiB of payloads stay within ~50 MB).
+EVENT_MAX_BYTES = {"msg": 4 * 1024 * 1024}
 #: A query's reasons for failing: at most this many are kept (the rest are counted).
 MAX_REPLY_ERRORS = 4
 
@@ -117,24 +120,27 @@ class Bus:
 
     def __init__(self, config: BusConfig | None = None) -> None:
         self.config = config or BusConfig()
-        self.events: Inbox[Event] = Inbox(EVENT_CAPS)
+        self.events: Inbox[Event] = Inbox(EVENT_CAPS, max_weight=EVENT_MAX_BYTES)
         self.stats = Stats()
         self._keep: list[Any] = []  # subscribers, tokens, publishers: keep them alive
         self._publishers: dict[str, Any] = {}
         self._lock = threading.Lock()
         self._closed = False
         self.guard = Guard(log.warning, on_reject=self._count_rejected)
+        self._drop_log = Guard(log.warning, burst=3, per_second=0.2)  # drops: stats.dropped
         self.session = zenoh.open(zenoh_config(self.config))
 
     def _count_rejected(self) -> None:
         with self._lock:
             self.stats.rejected += 1
 
-    def _put(self, ev: Event) -> None:
+    def _put(self, ev: Event, size: int = 0) -> None:
         lane = "msg" if ev.kind == "msg" else "alive"
-        if self.events.put(lane, ev) is not None:
+        dropped = self.events.put(lane, ev, size)
+        if dropped:
             with self._lock:
-                self.stats.dropped += 1
+                self.stats.dropped += dropped
+            self._drop_log.reject(f"{lane} queue full", f"{dropped} oldest event(s) dropped")
 
     # ----------------------------------------------------------------- lifecycle
 
@@ -188,15 +194,15 @@ class Bus:
         key = "?"
         try:
             key = str(sample.key_expr)
-            msg = decode(take_payload(sample.payload, max_bytes), max_bytes=max_bytes)
-            self._put(Event("msg", key, msg))
+            data = take_payload(sample.payload, max_bytes)
+            self._put(Event("msg", key, decode(data, max_bytes=max_bytes)), len(data))
         except Exception as exc:  # ProtocolError, and anything unforeseen: count, go on
             self.guard.reject(f"message on {key}", exc)
 
     def _enqueue_sample(self, key: str, data: bytes) -> None:
         """Decode ``data`` as if it had arrived on ``key`` (tests, tools)."""
         try:
-            self._put(Event("msg", key, decode(data)))
+            self._put(Event("msg", key, decode(data)), len(data))
         except Exception as exc:
             self.guard.reject(f"message on {key}", exc)
 

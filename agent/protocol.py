@@ -861,39 +861,67 @@ class Guard:
 
 
 class Inbox(Generic[T]):
-    """Bounded, thread-safe queue in lanes: a full lane drops its *oldest* item.
+    """Bounded, thread-safe queue in lanes: a full lane drops its *oldest* items.
 
-    ``caps`` names the lanes and their capacity. :meth:`put` returns the item it dropped
-    (or None) and counts it in ``dropped[lane]``. :meth:`get` takes the oldest item of
-    all lanes (arrival order), or with ``priority=True`` the oldest of the first
-    non-empty lane in the order of ``caps``. Raises ``queue.Empty`` like ``queue.Queue``.
+    ``caps`` names the lanes and their capacity in items; ``max_weight`` optionally caps
+    a lane's total weight too (e.g. payload bytes, so that a lane of big messages stays
+    small in memory). :meth:`put` returns how many items it dropped to make room (an
+    item heavier than the whole lane is itself dropped) and counts them in
+    ``dropped[lane]``. :meth:`get` takes the oldest item of all lanes (arrival order),
+    or with ``priority=True`` the oldest of the first non-empty lane in the order of
+    ``caps``. Raises ``queue.Empty`` like ``queue.Queue``.
     """
 
-    def __init__(self, caps: Mapping[str, int], priority: bool = False) -> None:
-        if not caps or any(
-            isinstance(c, bool) or not isinstance(c, int) or c < 1 for c in caps.values()
+    def __init__(
+        self,
+        caps: Mapping[str, int],
+        priority: bool = False,
+        max_weight: Mapping[str, int] | None = None,
+    ) -> None:
+        weights = dict(max_weight or {})
+        if (
+            not caps
+            or any(isinstance(c, bool) or not isinstance(c, int) or c < 1 for c in caps.values())
+            or any(w < 1 for w in weights.values())
+            or not set(weights) <= set(caps)
         ):
-            raise ValueError(f"every lane needs a capacity >= 1, got {dict(caps)}")
-        self._lanes: dict[str, collections.deque[tuple[int, T]]] = {
+            raise ValueError(
+                f"every lane needs a capacity >= 1 (and weight cap >= 1), got {dict(caps)}, "
+                f"{weights}"
+            )
+        self._lanes: dict[str, collections.deque[tuple[int, T, int]]] = {
             lane: collections.deque() for lane in caps
         }
         self._caps = dict(caps)
+        self._max_weight = weights
+        self._weight: collections.Counter[str] = collections.Counter()
         self._priority = priority
         self._seq = 0
         self._cond = threading.Condition()
         self.dropped: collections.Counter[str] = collections.Counter()
 
-    def put(self, lane: str, item: T) -> T | None:
+    def put(self, lane: str, item: T, weight: int = 0) -> int:
+        """Queue ``item``; returns the number of items dropped (oldest first)."""
         with self._cond:
             q = self._lanes[lane]
-            old: T | None = None
-            if len(q) >= self._caps[lane]:
-                old = q.popleft()[1]
+            cap_w = self._max_weight.get(lane)
+            if cap_w is not None and weight > cap_w:
                 self.dropped[lane] += 1
-            q.append((self._seq, item))
+                return 1
+            dropped = 0
+            while q and (
+                len(q) >= self._caps[lane]
+                or (cap_w is not None and self._weight[lane] + weight > cap_w)
+            ):
+                self._weight[lane] -= q.popleft()[2]
+                dropped += 1
+            if dropped:
+                self.dropped[lane] += dropped
+            q.append((self._seq, item, weight))
+            self._weight[lane] += weight
             self._seq += 1
             self._cond.notify()
-            return old
+            return dropped
 
     def _pop(self) -> tuple[str, T] | None:
         best: str | None = None
@@ -904,7 +932,9 @@ class Inbox(Generic[T]):
                     break
         if best is None:
             return None
-        return best, self._lanes[best].popleft()[1]
+        _, item, weight = self._lanes[best].popleft()
+        self._weight[best] -= weight
+        return best, item
 
     def get(self, timeout: float | None = None) -> tuple[str, T]:
         """The next (lane, item), waiting up to ``timeout`` s (None: forever)."""
@@ -933,3 +963,7 @@ class Inbox(Generic[T]):
     def lengths(self) -> dict[str, int]:
         with self._cond:
             return {lane: len(q) for lane, q in self._lanes.items()}
+
+    def weights(self) -> dict[str, int]:
+        with self._cond:
+            return {lane: self._weight[lane] for lane in self._lanes}

@@ -106,6 +106,9 @@ def zenoh_config(spec: NetworkSpec) -> zenoh.Config:
 #: ``valid``: requests that passed the callback's checks; ``malformed``: requests
 #: waiting only for an ErrorReply.
 INBOX_CAPS = {"rendered": 256, "alive": 1024, "valid": 256, "malformed": 1024}
+#: A malformed query keeps its payload (in zenoh's memory) until it is answered: the
+#: lane holds at most this many payload bytes; a bigger request is dropped unanswered.
+MALFORMED_MAX_BYTES = 16 * 1024 * 1024
 #: Camera requests handed to render workers and not yet answered.
 MAX_RENDER_PENDING = 64
 #: Longest ``yaw`` selector parameter read (a float needs a few dozen characters).
@@ -127,6 +130,14 @@ class _Request:
     query: Any
     robot_id: int
     msg: Any
+
+
+def _payload_size(q: Any) -> int:
+    """Length of a query's payload (0 if none or unreadable), without copying it."""
+    try:
+        return 0 if q.payload is None else len(q.payload)
+    except Exception:
+        return 0
 
 
 class WorldServer:
@@ -152,7 +163,9 @@ class WorldServer:
         self.truth_period = 1.0 / truth_rate
         self.log = log if log is not None else sys.stderr
         self.robot_ids = frozenset(world.robot_ids)  # read by the zenoh callbacks
-        self.inbox: Inbox[Any] = Inbox(INBOX_CAPS, priority=True)
+        self.inbox: Inbox[Any] = Inbox(
+            INBOX_CAPS, priority=True, max_weight={"malformed": MALFORMED_MAX_BYTES}
+        )
         self.guard = Guard(self._log)
         self._drop_log = Guard(self._log, burst=3, per_second=0.2)  # its count: dropped
         self.claims: set[int] = set()
@@ -231,9 +244,10 @@ class WorldServer:
     # Called by zenoh's threads: they check and queue, never touch the world or zenoh,
     # and never raise.
 
-    def _queue(self, lane: str, item: Any) -> None:
-        if self.inbox.put(lane, item) is not None:  # counted in inbox.dropped
-            self._drop_log.reject(f"{lane} queue full", f"oldest {lane} item dropped")
+    def _queue(self, lane: str, item: Any, size: int = 0) -> None:
+        dropped = self.inbox.put(lane, item, size)  # counted in inbox.dropped
+        if dropped:
+            self._drop_log.reject(f"{lane} queue full", f"{dropped} oldest item(s) dropped")
 
     def admit(self, kind: str, q: Any) -> None:
         """A query arrived: check it cheaply and queue it as valid or malformed."""
@@ -243,7 +257,7 @@ class WorldServer:
             except Exception as exc:  # ValueError/ProtocolError, or anything unforeseen
                 why = reason(exc) if isinstance(exc, ValueError) else f"internal: {reason(exc)}"
                 self.guard.reject(f"{kind} request", exc)
-                self._queue("malformed", (kind, q, why))
+                self._queue("malformed", (kind, q, why), _payload_size(q))
                 return
             self._queue("valid", req)
         except Exception as exc:
@@ -279,6 +293,7 @@ class WorldServer:
 
     @staticmethod
     def _decode(payload: Any, cls: type[Message]) -> Any:
+        """``payload`` decoded as a ``cls``; its length is checked before the copy."""
         if payload is None:
             raise ProtocolError(f"missing {cls.TAG!r} payload")
         data = take_payload(payload, MAX_REQUEST_BYTES)

@@ -14,13 +14,14 @@ import msgpack
 import pytest
 import zenoh
 
-from agent.bus import EVENT_CAPS, Bus, BusConfig, BusError, Event, NoRoute
+from agent.bus import EVENT_CAPS, EVENT_MAX_BYTES, Bus, BusConfig, BusError, Event, NoRoute
 from agent.protocol import (
     MAX_MESSAGE_BYTES,
     MAX_PUBLICATION_BYTES,
     ClockMsg,
     CommandReply,
     ErrorReply,
+    NeighborRecordMsg,
     StatusMsg,
     WalkRequest,
     decode,
@@ -396,3 +397,19 @@ def test_query_on_a_bad_key_is_a_bus_error(pair: tuple[Bus, Bus, str]) -> None:
     _, b, _ = pair
     with pytest.raises(BusError, match="query failed"):
         b.query("world/robot/**/#bad?", WalkRequest(distance=0.1), CommandReply, timeout=1.0)
+
+
+def test_event_queue_is_bounded_in_payload_bytes_too(pair: tuple[Bus, Bus, str]) -> None:
+    _, b, _ = pair
+    big = encode(
+        NeighborRecordMsg(
+            sender=1, round=0, neighbours=tuple((0.1 * i, 1.0 / (i + 1)) for i in range(64))
+        )
+    )
+    n = EVENT_CAPS["msg"]
+    assert n * len(big) > EVENT_MAX_BYTES["msg"]  # the byte cap binds before the count
+    for _ in range(n):
+        b._enqueue_sample("nao/1/record", big)
+    kept = EVENT_MAX_BYTES["msg"] // len(big)
+    assert b.events.weights()["msg"] <= EVENT_MAX_BYTES["msg"]
+    assert b.stats.dropped == n - kept and len(b.drain()) == kept

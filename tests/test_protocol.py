@@ -382,10 +382,10 @@ def test_guard_survives_a_broken_log_and_counter() -> None:
 
 def test_inbox_drops_oldest_and_counts() -> None:
     box: p.Inbox[int] = p.Inbox({"a": 2, "b": 3})
-    assert box.put("a", 1) is None
+    assert box.put("a", 1) == 0
     box.put("b", 10)
     box.put("a", 2)
-    assert box.put("a", 3) == 1  # the oldest of lane a
+    assert box.put("a", 3) == 1  # the oldest of lane a (1) made room
     assert box.dropped == {"a": 1}
     assert len(box) == 3 and box.lengths() == {"a": 2, "b": 1}
     # arrival order across lanes
@@ -409,3 +409,19 @@ def test_inbox_priority_and_blocking_get() -> None:
     for caps in ({}, {"a": 0}, {"a": True}):
         with pytest.raises(ValueError, match="capacity"):
             p.Inbox(caps)  # type: ignore[arg-type]
+    for weights in ({"a": 0}, {"b": 5}):
+        with pytest.raises(ValueError, match="weight cap"):
+            p.Inbox({"a": 3}, max_weight=weights)
+
+
+def test_inbox_weight_cap_drops_oldest_until_the_new_item_fits() -> None:
+    box: p.Inbox[str] = p.Inbox({"big": 100, "small": 2}, max_weight={"big": 10})
+    assert box.put("big", "x", 4) == 0
+    assert box.put("big", "y", 4) == 0
+    assert box.put("big", "z", 5) == 1  # x went: 4 + 5 fits
+    assert box.weights() == {"big": 9, "small": 0}
+    assert box.put("big", "huge", 11) == 1  # heavier than the lane: itself dropped
+    assert box.dropped == {"big": 2}
+    assert box.get_nowait() == ("big", "y")
+    assert box.weights()["big"] == 5
+    assert box.put("small", "s", 10**9) == 0  # no weight cap on this lane

@@ -472,7 +472,7 @@ def server() -> Any:
 @pytest.mark.parametrize(
     ("kind", "key", "payload", "reason"),
     [
-        ("camera", key_camera(3), FakeZBytes(10**9), "exceeds 1024"),  # never copied
+        ("camera", key_camera(3), FakeZBytes(2 * 2**20), "exceeds 1024"),  # never copied
         ("camera", key_camera(3), b"\xc1", "not msgpack"),
         ("camera", key_camera(9), encode(CameraRequest(yaw=0.0)), "unknown robot 9"),
         ("camera", "world/robot/03/camera", encode(CameraRequest(yaw=0.0)), "robot id"),
@@ -494,6 +494,21 @@ def test_malformed_requests_are_sorted_out_in_the_callback(
     (rep,) = q.replies
     assert isinstance(rep, ErrorReply) and reason in rep.reason
     assert server.errors == 1
+
+
+def test_huge_malformed_requests_cannot_pile_up(server: Any) -> None:
+    from sim.server import MALFORMED_MAX_BYTES
+
+    alone = FakeQuery(key_camera(3), FakeZBytes(MALFORMED_MAX_BYTES + 1))
+    server.admit("camera", alone)  # heavier than the whole lane: dropped unanswered
+    assert server.inbox.lengths()["malformed"] == 0 and server.dropped == 1
+    big = [FakeQuery(key_camera(3), FakeZBytes(4 * 2**20)) for _ in range(10)]
+    for q in big:
+        server.admit("camera", q)
+    assert server.inbox.lengths()["malformed"] == 4 and server.dropped == 7
+    server._drain(block=False)
+    assert [len(q.replies) for q in big] == [0] * 6 + [1] * 4  # the newest are answered
+    assert server.rejected == 11
 
 
 def test_camera_yaw_parameter_checked_in_the_callback(server: Any) -> None:
