@@ -153,3 +153,13 @@ def test_tool_prints_counts_and_meets_the_targets(capsys: pytest.CaptureFixture[
     out = capsys.readouterr().out
     assert "crashed" in out and "payloads/s" in out and "all targets met" in out
     assert fuzz.main(["--n", "-1"]) == 2
+
+
+@pytest.mark.system
+def test_flood_against_a_world_it_starts() -> None:
+    # correctness only: every malformed request is answered and the valid one served;
+    # the timing target is measured by python -m tools.fuzz --flood (10 000 requests)
+    fr = fuzz.flood(None, n=300, seed=2)
+    assert fr.finished == 300 and fr.error_replies == 300
+    assert fr.during_s > 0 and len(fr.baseline_s) == 5
+    assert "rejected=300" in fr.world_summary and "dropped=0" in fr.world_summary

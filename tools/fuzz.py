@@ -461,6 +461,7 @@ class FloodResult:
     after_s: float
     error_replies: int
     finished: int
+    all_done_s: float = math.nan  # from the first malformed request to the last one's end
     world_summary: str = ""
 
     @property
@@ -497,6 +498,7 @@ def flood(endpoint: str | None, n: int = 10_000, seed: int = 1) -> FloodResult:
     cfg.insert_json5("scouting/multicast/enabled", "false")
     rng = random.Random(seed)
     counts = {"error": 0, "done": 0}
+    last_done = [0.0]
     lock = threading.Lock()
 
     def on_reply(r: Any) -> None:
@@ -507,6 +509,7 @@ def flood(endpoint: str | None, n: int = 10_000, seed: int = 1) -> FloodResult:
     def on_done() -> None:
         with lock:
             counts["done"] += 1
+            last_done[0] = time.perf_counter()
 
     try:
         with zenoh.open(cfg) as s:
@@ -530,7 +533,9 @@ def flood(endpoint: str | None, n: int = 10_000, seed: int = 1) -> FloodResult:
             end = time.monotonic() + 60.0
             while time.monotonic() < end and counts["done"] < n:
                 time.sleep(0.05)  # polling the reply counter, bounded by the deadline
-        result = FloodResult(n, baseline, send, during, after, counts["error"], counts["done"])
+        result = FloodResult(
+            n, baseline, send, during, after, counts["error"], counts["done"], last_done[0] - t0
+        )
     finally:
         if proc is not None:
             proc.terminate()
@@ -602,7 +607,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"  valid camera request: idle {base:.3f} s (median of 5), during the flood "
               f"{fr.during_s:.3f} s, after {fr.after_s:.3f} s: delayed {fr.delay_s:+.3f} s "
               f"(target < {FLOOD_TARGET_S:g} s)")  # fmt: skip
-        print(f"  malformed: {fr.error_replies} error replies, {fr.finished} queries finished")
+        print(f"  malformed: {fr.error_replies} error replies, {fr.finished} queries finished, "
+              f"the last {fr.all_done_s:.2f} s after the first was sent")  # fmt: skip
         if fr.world_summary:
             print(f"  world: {fr.world_summary}")
         report["flood"] = dict(vars(fr), delay_s=fr.delay_s)
