@@ -610,7 +610,13 @@ _CONTAINERS = {0xDC: (2, 1), 0xDD: (4, 1), 0xDE: (2, 2), 0xDF: (4, 2)}  # array,
 _EXT = frozenset({0xC7, 0xC8, 0xC9, 0xD4, 0xD5, 0xD6, 0xD7, 0xD8})
 
 
-def _scan(raw: bytes, max_objects: int, max_depth: int) -> None:
+def _scan(
+    raw: bytes,
+    max_objects: int,
+    max_depth: int,
+    max_str: int = MAX_STR_BYTES,
+    max_bin: int = MAX_IMAGE_BYTES,
+) -> None:
     """Walk the msgpack structure of ``raw`` without building it.
 
     Rejects, before anything is allocated per object: more than ``max_objects``
@@ -643,13 +649,15 @@ def _scan(raw: bytes, max_objects: int, max_depth: int) -> None:
         elif b <= 0x9F:  # fixarray
             count = b & 0x0F
         elif b <= 0xBF:  # fixstr
+            if b & 0x1F > max_str:
+                raise ProtocolError(f"string of {b & 0x1F} bytes, at most {max_str}")
             pos += b & 0x1F
         elif b in _FIXED:
             pos += _FIXED[b]
         elif b in _SIZED:
             w = _SIZED[b]
             size = int.from_bytes(raw[pos : pos + w], "big")
-            limit = MAX_STR_BYTES if b >= 0xD9 else MAX_IMAGE_BYTES
+            limit = max_str if b >= 0xD9 else max_bin
             if size > limit:
                 kind = "string" if b >= 0xD9 else "binary"
                 raise ProtocolError(f"{kind} of {size} bytes, at most {limit}")
@@ -685,6 +693,8 @@ def unpack_bounded(
     *,
     max_objects: int = MAX_OBJECTS,
     max_depth: int = MAX_DEPTH,
+    max_str_bytes: int = MAX_STR_BYTES,
+    max_bin_bytes: int = MAX_IMAGE_BYTES,
 ) -> Any:
     """One msgpack object from ``data`` within hard limits, or :class:`ProtocolError`.
 
@@ -698,6 +708,10 @@ def unpack_bounded(
     UTF-8 of ``MAX_TEXT`` characters), binaries over ``MAX_IMAGE_BYTES``, ext types and
     trailing bytes; msgpack's own limits repeat these caps. Map keys must be text or
     bytes; text must be valid UTF-8. Every failure is a ``ProtocolError``.
+
+    For an envelope that carries a whole message as one binary field, pass
+    ``max_bin_bytes=MAX_MESSAGE_BYTES`` and a ``max_bytes`` that adds the envelope's own
+    overhead; then :func:`decode` the inner bytes (the limits apply again there).
     """
     if not isinstance(data, bytes | bytearray | memoryview):
         raise ProtocolError(f"expected bytes, got {type(data).__name__}")
@@ -705,14 +719,14 @@ def unpack_bounded(
     if n > max_bytes:
         raise ProtocolError(f"message of {n} bytes exceeds {max_bytes}")
     raw = bytes(data)
-    _scan(raw, max_objects, max_depth)
+    _scan(raw, max_objects, max_depth, max_str_bytes, max_bin_bytes)
     try:
         return msgpack.unpackb(
             raw,
             raw=False,
             strict_map_key=True,
-            max_str_len=MAX_STR_BYTES,
-            max_bin_len=MAX_IMAGE_BYTES,
+            max_str_len=max_str_bytes,
+            max_bin_len=max_bin_bytes,
             max_array_len=MAX_ARRAY_LEN,
             max_map_len=MAX_MAP_LEN,
             max_ext_len=0,

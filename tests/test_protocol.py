@@ -270,6 +270,18 @@ def test_unpack_bounded_size_and_type() -> None:
         p.unpack_bounded("text")  # type: ignore[arg-type]
     with pytest.raises(p.ProtocolError, match="exceeds"):
         p.decode(p.encode(p.ErrorReply(reason="x" * 100)), max_bytes=50)
+    # an envelope around a whole message: a binary field bigger than an image
+    inner = p.encode(
+        p.CameraReply(robot_id=1, yaw=0.0, t_sim=0.0, width=1, height=1, encoding="png",
+                      data=b"\x00" * p.MAX_IMAGE_BYTES)
+    )  # fmt: skip
+    env = msgpack.packb({"payload": inner, "sig": b"s" * 64}, use_bin_type=True)
+    with pytest.raises(p.ProtocolError, match="binary of"):
+        p.unpack_bounded(env, p.MAX_MESSAGE_BYTES + 512)
+    got = p.unpack_bounded(env, p.MAX_MESSAGE_BYTES + 512, max_bin_bytes=p.MAX_MESSAGE_BYTES)
+    assert p.decode(got["payload"]).width == 1
+    with pytest.raises(p.ProtocolError, match="string of 9 bytes, at most 8"):
+        p.unpack_bounded(msgpack.packb("x" * 9), max_str_bytes=8)
     deep = b"\x91" * 7 + b"\x90"  # depth 8 is allowed
     assert p.unpack_bounded(deep) == [[[[[[[[]]]]]]]]
 
