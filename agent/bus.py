@@ -12,8 +12,9 @@ nothing may block, inside a callback); the caller drains them with :meth:`Bus.dr
 Hardening (issue #8): a payload's size is checked before it is copied out of zenoh
 (``MAX_PUBLICATION_BYTES`` for subscriptions, ``MAX_MESSAGE_BYTES`` for query replies);
 every callback survives every exception, counts it in ``stats.rejected`` and logs a
-reason of at most 200 characters (rate limited); the event queue is bounded
-(``EVENT_CAPS``: a full lane drops its oldest event, counted in ``stats.dropped``); a
+reason of at most 200 characters (rate limited); the event queue is bounded in events
+and payload bytes (``EVENT_CAPS``, ``EVENT_MAX_BYTES``: a full lane drops its oldest
+events, counted in ``stats.dropped``); a
 reply that is not what was asked for is a :class:`BusError`, never another exception.
 """
 

@@ -19,7 +19,8 @@ version, busy robot) gets an ``ErrorReply`` with the reason; the world keeps ser
 arrives (payload length before the copy, at most ``MAX_REQUEST_BYTES``; robot id; schema;
 yaw) and queue it in one of two bounded lanes: well-formed requests, served first, and
 malformed ones, answered with their reason when nothing else waits. A full lane drops
-its oldest request (counted in ``dropped``; zenoh then ends that query with no reply),
+its oldest request (counted in ``dropped``; zenoh then ends that query with no reply;
+the malformed lane also holds at most ``MALFORMED_MAX_BYTES`` of payloads),
 so a flood of garbage can neither grow memory nor delay a valid request by more than
 one queue's worth. Every callback survives every exception; rejected input is counted
 in ``rejected`` and logged with a reason cut to 200 characters, rate limited. At most
