@@ -8,30 +8,44 @@ counted, never raised into the caller's loop.
 
 Callbacks only hand samples to thread-safe queues (zenoh must not be called, and
 nothing may block, inside a callback); the caller drains them with :meth:`Bus.drain`.
+
+Hardening (issue #8): a payload's size is checked before it is copied out of zenoh
+(``MAX_PUBLICATION_BYTES`` for subscriptions, ``MAX_MESSAGE_BYTES`` for query replies);
+every callback survives every exception, counts it in ``stats.rejected`` and logs a
+reason of at most 200 characters (rate limited); the event queue is bounded in events
+and payload bytes (``EVENT_CAPS``, ``EVENT_MAX_BYTES``: a full lane drops its oldest
+events, counted in ``stats.dropped``); a
+reply that is not what was asked for is a :class:`BusError`, never another exception.
 """
 
 from __future__ import annotations
 
 import contextlib
 import logging
-import math
 import queue
 import threading
 import time
 from collections import Counter
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
 import zenoh
 
 from agent.protocol import (
+    MAX_MESSAGE_BYTES,
+    MAX_PUBLICATION_BYTES,
     ErrorReply,
+    Guard,
+    Inbox,
     Message,
     NetworkSpec,
     ProtocolError,
     decode,
     encode,
     id_from_key,
+    reason,
+    take_payload,
 )
 from agent.trust import (
     MAX_SEALED_BYTES,
@@ -48,6 +62,16 @@ M = TypeVar("M", bound=Message)
 
 #: A query that ends with no reply within this many seconds met no queryable (see NoRoute).
 NO_ROUTE_WINDOW = 0.25
+#: Capacity of the event queue's lanes. Messages: a few seconds of a large fleet's
+#: records, digests and statuses (re-published, so a dropped one comes again);
+#: liveliness changes have their own lane so that a message flood cannot push out a
+#: membership change.
+EVENT_CAPS = {"alive": 1024, "msg": 4096}
+#: ... and the payload bytes the message lane may hold (a decoded message takes up to
+#: ~12x its payload in Python objects: 4 MiB of payloads stay within ~50 MB).
+EVENT_MAX_BYTES = {"msg": 4 * 1024 * 1024}
+#: A query's reasons for failing: at most this many are kept (the rest are counted).
+MAX_REPLY_ERRORS = 4
 
 
 class BusError(RuntimeError):
@@ -95,9 +119,12 @@ class Stats:
     published_bytes: Counter[str] = field(default_factory=Counter)
     published_count: Counter[str] = field(default_factory=Counter)
     query_bytes: int = 0
+    #: payloads, tokens and replies refused (undecodable, oversized, unexpected)
     rejected: int = 0
     #: Of ``rejected``: envelopes that failed authentication (forged, replayed, unsigned).
     untrusted: int = 0
+    #: events dropped unread because the queue was full (oldest first)
+    dropped: int = 0
 
     @property
     def total_published(self) -> int:
@@ -115,15 +142,27 @@ class Bus:
             creds = Credentials(self.config.credentials)
             self.signer = creds.signer(Identity.parse(self.config.identity))
             self.verifier = creds.verifier()
-        self.session = zenoh.open(zenoh_config(self.config))
-        self.events: queue.Queue[Event] = queue.Queue()
+        self.events: Inbox[Event] = Inbox(EVENT_CAPS, max_weight=EVENT_MAX_BYTES)
         self.stats = Stats()
         self._keep: list[Any] = []  # subscribers, tokens, publishers: keep them alive
         self._publishers: dict[str, Any] = {}
         self._lock = threading.Lock()
         self._closed = False
-        self._last_warn = -math.inf
-        self._suppressed = 0
+        self.guard = Guard(log.warning, on_reject=self._count_rejected)
+        self._drop_log = Guard(log.warning, burst=3, per_second=0.2)  # drops: stats.dropped
+        self.session = zenoh.open(zenoh_config(self.config))
+
+    def _count_rejected(self) -> None:
+        with self._lock:
+            self.stats.rejected += 1
+
+    def _put(self, ev: Event, size: int = 0) -> None:
+        lane = "msg" if ev.kind == "msg" else "alive"
+        dropped = self.events.put(lane, ev, size)
+        if dropped:
+            with self._lock:
+                self.stats.dropped += dropped
+            self._drop_log.reject(f"{lane} queue full", f"{dropped} oldest event(s) dropped")
 
     # ----------------------------------------------------------------- lifecycle
 
@@ -164,33 +203,43 @@ class Bus:
             self.stats.published_count[cat] += 1
         return len(data)
 
-    def subscribe(self, key_expr: str) -> None:
-        """Decoded messages on ``key_expr`` arrive as ``Event("msg", key, msg)``."""
+    def subscribe(self, key_expr: str, max_bytes: int = MAX_PUBLICATION_BYTES) -> None:
+        """Decoded messages on ``key_expr`` arrive as ``Event("msg", key, msg)``.
+
+        Payloads over ``max_bytes`` are rejected without being copied."""
 
         def on_sample(sample: zenoh.Sample) -> None:
-            if len(sample.payload) > MAX_SEALED_BYTES:  # bounded before it is copied
-                with self._lock:
-                    self.stats.rejected += 1
-                log.warning(
-                    "rejected message on %s: %d bytes", sample.key_expr, len(sample.payload)
-                )
-                return
-            self._enqueue_sample(str(sample.key_expr), sample.payload.to_bytes())
+            self._on_sample(sample, max_bytes)
 
         self._keep.append(self.session.declare_subscriber(key_expr, on_sample))
 
-    def _enqueue_sample(self, key: str, data: bytes) -> None:
+    def _on_sample(self, sample: Any, max_bytes: int = MAX_PUBLICATION_BYTES) -> None:
+        """The subscriber callback: never raises; what does not decode is counted."""
+        key = "?"
         try:
-            signer, epoch, payload = self._open(key, data)
-            msg = decode(payload)
-        except ProtocolError as exc:
+            key = str(sample.key_expr)
+            self._accept(key, take_payload(sample.payload, max_bytes), max_bytes)
+        except Exception as exc:  # ProtocolError, and anything unforeseen: count, go on
+            self._reject(f"message on {key}", exc)
+
+    def _enqueue_sample(self, key: str, data: bytes) -> None:
+        """Open and decode ``data`` as if it had arrived on ``key`` (tests, tools)."""
+        try:
+            self._accept(key, data, MAX_PUBLICATION_BYTES)
+        except Exception as exc:
+            self._reject(f"message on {key}", exc)
+
+    def _accept(self, key: str, data: bytes, max_bytes: int) -> None:
+        signer, epoch, payload = self._open(key, data)
+        msg = decode(payload, max_bytes=max_bytes)
+        self._put(Event("msg", key, msg, signer=signer, epoch=epoch, size=len(data)), len(data))
+
+    def _reject(self, what: str, exc: BaseException) -> None:
+        """Count (``rejected``; ``untrusted`` for authentication failures) and log."""
+        if isinstance(exc, TrustError):
             with self._lock:
-                self.stats.rejected += 1
-                if isinstance(exc, TrustError):
-                    self.stats.untrusted += 1
-            self._warn(f"rejected message on {key}: {exc}")
-            return
-        self.events.put(Event("msg", key, msg, signer=signer, epoch=epoch, size=len(data)))
+                self.stats.untrusted += 1
+        self.guard.reject(what, exc)
 
     def _open(self, key: str, data: bytes) -> tuple[str, int, bytes]:
         """(signer, epoch, payload) of a publication on ``key``; the signer must own ``key``.
@@ -206,18 +255,6 @@ class Bus:
             raise TrustError(f"{opened.who.cn} signed a message on {key}, owned by {owner.cn}")
         return opened.who.cn, opened.epoch, opened.payload
 
-    def _warn(self, text: str) -> None:
-        """Log ``text`` (cut to 200 characters) at most once a second; a flood of
-        rejected messages must not become a flood of log lines."""
-        now = time.monotonic()
-        with self._lock:
-            if now - self._last_warn < 1.0:
-                self._suppressed += 1
-                return
-            self._last_warn, n, self._suppressed = now, self._suppressed, 0
-        more = f" ({n} more rejected since the last report)" if n else ""
-        log.warning("%s%s", text[:200], more)
-
     # ----------------------------------------------------------------- liveliness
 
     def declare_alive(self, key: str) -> None:
@@ -227,18 +264,22 @@ class Bus:
         """Liveliness of ``key_expr`` (with history) as ``alive`` / ``gone`` events."""
 
         def on_sample(sample: zenoh.Sample) -> None:
-            key = str(sample.key_expr)
-            try:
-                rid = id_from_key(key)
-            except ProtocolError as exc:
-                log.warning("ignored liveliness token %s: %s", key, exc)
-                return
-            kind = "alive" if sample.kind == zenoh.SampleKind.PUT else "gone"
-            self.events.put(Event(kind, key, robot_id=rid))
+            self._on_alive(sample)
 
         self._keep.append(
             self.session.liveliness().declare_subscriber(key_expr, on_sample, history=True)
         )
+
+    def _on_alive(self, sample: Any) -> None:
+        """The liveliness callback: never raises; a token naming no robot is counted."""
+        key = "?"
+        try:
+            key = str(sample.key_expr)
+            rid = id_from_key(key)
+            kind = "alive" if sample.kind == zenoh.SampleKind.PUT else "gone"
+            self._put(Event(kind, key, robot_id=rid))
+        except Exception as exc:
+            self.guard.reject(f"liveliness token {key}", exc)
 
     # ----------------------------------------------------------------- events
 
@@ -246,14 +287,13 @@ class Bus:
         """Every event queued now; waits up to ``timeout`` s for the first one."""
         out: list[Event] = []
         try:
-            out.append(
-                self.events.get(timeout=timeout) if timeout > 0 else self.events.get_nowait()
-            )
+            _, ev = self.events.get(timeout=timeout) if timeout > 0 else self.events.get_nowait()
         except queue.Empty:
             return out
+        out.append(ev)
         while True:
             try:
-                out.append(self.events.get_nowait())
+                out.append(self.events.get_nowait()[1])
             except queue.Empty:
                 return out
 
@@ -272,49 +312,87 @@ class Bus:
         with self._lock:
             self.stats.query_bytes += len(data)
         started = time.monotonic()
-        # Every queryable that matches gets the query and every reply is kept (no
-        # consolidation): a stranger's queryable answering first cannot hide the world's.
-        replies = self.session.get(
-            key,
-            payload=data,
-            timeout=timeout,
-            target=zenoh.QueryTarget.ALL,
-            consolidation=zenoh.ConsolidationMode.NONE,
-        )
+        try:
+            # Every queryable that matches gets the query and every reply is kept (no
+            # consolidation): a stranger's queryable answering first cannot hide the world's.
+            replies = self.session.get(
+                key,
+                payload=data,
+                timeout=timeout,
+                target=zenoh.QueryTarget.ALL,
+                consolidation=zenoh.ConsolidationMode.NONE,
+            )
+        except Exception as exc:  # zenoh refused the query (bad key, closed session)
+            raise BusError(f"{key}: query failed: {reason(exc)}") from None
         errors: list[str] = []
-        for reply in replies:
-            if reply.ok is None:
-                err = reply.err
-                errors.append(
-                    f"error reply: {bytes(err.payload.to_bytes())[:200]!r}"
-                    if err
-                    else "empty reply"
-                )
-                continue
-            raw = reply.ok.payload.to_bytes()
-            try:
-                if self.verifier is not None:
-                    opened = self.verifier.open(key, raw, bind=nonce, replay=False)
-                    if opened.who != Identity("world"):
-                        raise TrustError(f"reply signed by {opened.who.cn}, not the world")
-                    raw = opened.payload
-                out = decode(raw)
-            except ProtocolError as exc:
-                with self._lock:
-                    self.stats.rejected += 1
-                    if isinstance(exc, TrustError):
-                        self.stats.untrusted += 1
-                errors.append(f"rejected reply: {str(exc)[:200]}")
-                continue
-            if isinstance(out, ErrorReply):
-                raise BusError(f"{key}: {out.reason}")
-            if not isinstance(out, expect):
-                errors.append(f"unexpected reply {type(out).__name__}")
-                continue
+        out = self._first_reply(key, replies, expect, errors, nonce)
+        if out is not None:
             return out
         if errors:
-            raise BusError(f"{key}: {'; '.join(errors)}")
+            shown = errors[:MAX_REPLY_ERRORS]
+            if len(errors) > MAX_REPLY_ERRORS:
+                shown.append(f"and {len(errors) - MAX_REPLY_ERRORS} more")
+            raise BusError(f"{key}: {'; '.join(shown)}")
         elapsed = time.monotonic() - started
         if elapsed < min(NO_ROUTE_WINDOW, timeout / 2):
             raise NoRoute(f"{key}: no reply: no queryable reachable (ended after {elapsed:.3f} s)")
         raise BusError(f"{key}: no reply within {timeout:g} s")
+
+    def _first_reply(
+        self,
+        key: str,
+        replies: Iterable[Any],
+        expect: type[M],
+        errors: list[str],
+        nonce: bytes = b"",
+    ) -> M | None:
+        """The first reply of type ``expect``; the reasons the others were refused go to
+        ``errors``. An ``ErrorReply`` raises :class:`BusError`. Never raises anything else:
+        every unusable reply is counted in ``stats.rejected``."""
+        try:
+            for reply in replies:
+                try:
+                    out = self._reply_message(key, reply, nonce)
+                except BusError as exc:  # an error reply (zenoh's "Timeout" among them)
+                    errors.append(str(exc))
+                    continue
+                except Exception as exc:  # ProtocolError or anything unforeseen
+                    errors.append(reason(exc))
+                    self._reject(f"reply on {key}", exc)
+                    continue
+                if isinstance(out, ErrorReply):
+                    raise BusError(f"{key}: {out.reason}")
+                if not isinstance(out, expect):
+                    why = f"unexpected reply {type(out).__name__}, expected {expect.__name__}"
+                    errors.append(why)
+                    self.guard.reject(f"reply on {key}", why)
+                    continue
+                return out
+        except BusError:
+            raise
+        except Exception as exc:  # the reply stream itself failed
+            errors.append(f"reply stream failed: {reason(exc)}")
+            self.guard.reject(f"replies on {key}", exc)
+        return None
+
+    def _reply_message(self, key: str, reply: Any, nonce: bytes) -> Any:
+        """The decoded message of one reply, or an exception saying why not.
+
+        Secure: the reply must be sealed by the world and bound to this request."""
+        ok = reply.ok
+        if ok is None:
+            err = reply.err
+            if err is None:
+                raise BusError("empty reply")
+            text = take_payload(err.payload, 4096)[:200]
+            raise BusError(f"error reply: {text!r}")
+        raw = take_payload(ok.payload, MAX_SEALED_BYTES if self.verifier else MAX_MESSAGE_BYTES)
+        if self.verifier is not None:
+            opened = self.verifier.open(key, raw, bind=nonce, replay=False)
+            if opened.who != Identity("world"):
+                raise TrustError(f"reply signed by {opened.who.cn}, not the world")
+            raw = opened.payload
+        try:
+            return decode(raw)
+        except ProtocolError as exc:
+            raise ProtocolError(f"undecodable reply: {exc}") from None

@@ -23,6 +23,12 @@ ours, and after agreement until every member has reported a post-agreement phase
 Intervals back off exponentially from ``backoff_min`` to ``backoff_max`` and reset when
 something new arrives. Pure: the caller passes the time and does the I/O.
 
+Per-sender state is kept only for fleet members (issue #8): a record, digest or phase
+from a sender that is not a live member is ignored and counted in ``ignored``, so a
+stranger cycling through 65 536 ids cannot grow it. Nothing is lost for a real member
+whose record outran its liveliness token: our digest does not list it, which makes it
+re-send its record (see the re-publishing rules above).
+
 Tie-breaks: a record with a higher ``round`` replaces an older one; for the same round
 the latest received wins (re-publications are identical). Digests are over the
 records sorted by sender id.
@@ -124,6 +130,7 @@ class Agreement:
         self.digests: dict[int, DigestMsg] = {}
         self.peer_agreed: set[int] = set()
         self.rejected: list[str] = []
+        self.ignored = 0  # records, digests and phases from non-members, not kept
         self.membership_changed = now
         self._record_tx = _Backoff(backoff_min, backoff_max)
         self._record_pending = True  # publish at least once (again after a newcomer)
@@ -155,6 +162,9 @@ class Agreement:
         """Take a record; True when it changed the set held."""
         if msg.sender == self.self_id:
             return False  # our own echo (or an impostor): ours is authoritative
+        if msg.sender not in self.live:
+            self.ignored += 1
+            return False
         old = self.records.get(msg.sender)
         if old is not None and (old.round > msg.round or old == msg):
             return False
@@ -166,6 +176,9 @@ class Agreement:
     def on_digest(self, msg: DigestMsg, now: float) -> None:
         if msg.sender == self.self_id:
             return
+        if msg.sender not in self.live:
+            self.ignored += 1
+            return
         old = self.digests.get(msg.sender)
         self.digests[msg.sender] = msg
         if old is None or (old.digest, old.members) != (msg.digest, msg.members):
@@ -176,7 +189,9 @@ class Agreement:
 
     def on_peer_phase(self, robot_id: int, phase: str) -> None:
         """A member's status: a post-agreement phase acknowledges our digest."""
-        if phase in POST_AGREE_PHASES:
+        if robot_id not in self.live:
+            self.ignored += 1
+        elif phase in POST_AGREE_PHASES:
             self.peer_agreed.add(robot_id)
 
     # ----------------------------------------------------------------- state

@@ -14,13 +14,19 @@ Images are encoded (PNG) bytes of a BGR uint8 picture, as OpenCV writes them.
 from __future__ import annotations
 
 import argparse
+import collections
+import contextlib
 import json
 import math
 import os
+import queue
+import re
 import sys
+import threading
+import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields
-from typing import Any, ClassVar, TypeVar
+from typing import Any, ClassVar, Generic, Protocol, TypeVar
 
 import msgpack
 
@@ -31,6 +37,17 @@ MAX_MEMBERS = 1024
 MAX_TEXT = 512
 MAX_IMAGE_BYTES = 8 * 1024 * 1024
 MAX_MESSAGE_BYTES = MAX_IMAGE_BYTES + 4096
+#: Publications (records, digests, statuses, clock, truth for 1024 robots: ~40 KB) are
+#: small; only camera replies carry an image. Subscribers reject bigger payloads unread.
+MAX_PUBLICATION_BYTES = 64 * 1024
+#: World requests (register, camera, walk, turn) are a few dozen bytes.
+MAX_REQUEST_BYTES = 1024
+#: msgpack limits of :func:`unpack_bounded` (see its docstring for why these values).
+MAX_OBJECTS = 8192
+MAX_DEPTH = 8
+MAX_MAP_LEN = 32
+MAX_ARRAY_LEN = MAX_MEMBERS
+MAX_STR_BYTES = 4 * MAX_TEXT  # MAX_TEXT characters of UTF-8
 MAX_COORD = 1000.0  # metres: no NAO fleet spans a kilometre
 MAX_STEP = 50.0  # metres: the longest single walk command accepted
 HEAD_YAW_LIMIT = math.radians(119.5)
@@ -94,7 +111,9 @@ def key_turn(robot_id: int) -> str:
 
 def id_from_key(key: str) -> int:
     """The robot id in ``nao/{id}/...``, ``nao/alive/{id}`` or ``world/robot/{id}/...``."""
-    parts = str(key).split("/")
+    if not isinstance(key, str) or len(key) > 256:
+        raise ProtocolError(f"key {_short(key)} is not a key expression of at most 256 characters")
+    parts = key.split("/")
     if len(parts) >= 3 and parts[0] == "nao" and parts[1] == "alive":
         raw = parts[2]
     elif len(parts) >= 2 and parts[0] == "nao":
@@ -102,10 +121,27 @@ def id_from_key(key: str) -> int:
     elif len(parts) >= 3 and parts[0] == "world" and parts[1] == "robot":
         raw = parts[2]
     else:
-        raise ProtocolError(f"key {key!r} names no robot")
-    if not raw.isdigit():
-        raise ProtocolError(f"key {key!r}: robot id {raw!r} is not a non-negative integer")
+        raise ProtocolError(f"key {_short(key)} names no robot")
+    if not _ID_TEXT.fullmatch(raw):
+        raise ProtocolError(
+            f"key {_short(key)}: robot id {_short(raw)} is not a non-negative integer "
+            "in ASCII digits without leading zeros"
+        )
     return _check_id(int(raw))
+
+
+#: A robot id in a key: ASCII digits, no sign, no leading zero (one spelling per robot).
+_ID_TEXT = re.compile(r"0|[1-9][0-9]{0,4}", re.ASCII)
+
+
+def _short(v: Any, limit: int = 40) -> str:
+    """``repr(v)`` cut to ``limit`` characters, for error texts about untrusted values."""
+    if isinstance(v, str | bytes) and len(v) > limit:
+        v = v[:limit]  # never repr a megabyte to cut it afterwards
+    elif isinstance(v, list | tuple | dict) and len(v) > 8:
+        return f"<{type(v).__name__} of {len(v)} items>"
+    text = repr(v)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 # --------------------------------------------------------------------------- joining
@@ -321,7 +357,7 @@ def _str(
         if len(v) > max_len:
             raise ProtocolError(f"{name}: {len(v)} characters, at most {max_len}")
         if choices is not None and v not in choices:
-            raise ProtocolError(f"{name}: {v!r} is not one of {', '.join(choices)}")
+            raise ProtocolError(f"{name}: {_short(v)} is not one of {', '.join(choices)}")
         return v
 
     return check
@@ -651,55 +687,196 @@ def encode(msg: Message) -> bytes:
     return data
 
 
-def unpack_bounded(data: bytes | bytearray | memoryview, max_bytes: int) -> Any:
-    """msgpack-decode ``data`` of at most ``max_bytes`` with every length capped.
+class _Sized(Protocol):
+    def __len__(self) -> int: ...
+    def to_bytes(self) -> bytes: ...
 
-    Raises :class:`ProtocolError` for anything that is too large or not msgpack.
+
+def take_payload(payload: _Sized | None, max_bytes: int) -> bytes:
+    """The bytes of a zenoh payload (``ZBytes``), its length checked *before* the copy.
+
+    Raises :class:`ProtocolError` for a missing payload or one over ``max_bytes``: an
+    oversized payload is never copied out of zenoh's buffers.
     """
-    if len(data) > max_bytes:
-        raise ProtocolError(f"payload of {len(data)} bytes exceeds {max_bytes}")
+    if payload is None:
+        raise ProtocolError("no payload")
+    n = len(payload)
+    if n > max_bytes:
+        raise ProtocolError(f"payload of {n} bytes exceeds {max_bytes}")
+    data = payload.to_bytes()
+    if len(data) != n:  # cannot happen with ZBytes; a lying object must not slip through
+        raise ProtocolError(f"payload said {n} bytes, gave {len(data)}")
+    return data
+
+
+# msgpack's first bytes (https://github.com/msgpack/msgpack/blob/master/spec.md): the
+# size of what follows each type byte. Used by the structure scan below.
+_FIXED = {0xC0: 0, 0xC2: 0, 0xC3: 0, 0xCA: 4, 0xCB: 8, 0xCC: 1, 0xCD: 2, 0xCE: 4, 0xCF: 8}
+_FIXED.update({0xD0: 1, 0xD1: 2, 0xD2: 4, 0xD3: 8})
+_SIZED = {0xC4: 1, 0xC5: 2, 0xC6: 4, 0xD9: 1, 0xDA: 2, 0xDB: 4}  # bin 8/16/32, str 8/16/32
+_CONTAINERS = {0xDC: (2, 1), 0xDD: (4, 1), 0xDE: (2, 2), 0xDF: (4, 2)}  # array, map 16/32
+_EXT = frozenset({0xC7, 0xC8, 0xC9, 0xD4, 0xD5, 0xD6, 0xD7, 0xD8})
+
+
+def _scan(
+    raw: bytes,
+    max_objects: int,
+    max_depth: int,
+    max_str: int = MAX_STR_BYTES,
+    max_bin: int = MAX_IMAGE_BYTES,
+) -> None:
+    """Walk the msgpack structure of ``raw`` without building it.
+
+    Rejects, before anything is allocated per object: more than ``max_objects``
+    objects, nesting deeper than ``max_depth``, containers longer than the codec's
+    limits, ext types, the reserved byte 0xc1, truncation and trailing bytes. The walk
+    stops at the first excess, so its cost is bounded by ``max_objects`` steps whatever
+    the payload's size (strings and binaries are skipped, not read).
+    """
+    n = len(raw)
+    pos = 0
+    left = [1]  # objects still to read in each open container; the top holds one object
+    objects = 0
+    while left:
+        if left[-1] == 0:
+            left.pop()
+            continue
+        left[-1] -= 1
+        if pos >= n:
+            raise ProtocolError(f"not msgpack: truncated: {n} bytes end before the object does")
+        b = raw[pos]
+        pos += 1
+        objects += 1
+        if objects > max_objects:
+            raise ProtocolError(f"more than {max_objects} msgpack objects")
+        count = 0
+        if b <= 0x7F or b >= 0xE0:  # positive/negative fixint
+            continue
+        if b <= 0x8F:  # fixmap
+            count = 2 * (b & 0x0F)
+        elif b <= 0x9F:  # fixarray
+            count = b & 0x0F
+        elif b <= 0xBF:  # fixstr
+            if b & 0x1F > max_str:
+                raise ProtocolError(f"string of {b & 0x1F} bytes, at most {max_str}")
+            pos += b & 0x1F
+        elif b in _FIXED:
+            pos += _FIXED[b]
+        elif b in _SIZED:
+            w = _SIZED[b]
+            size = int.from_bytes(raw[pos : pos + w], "big")
+            limit = max_str if b >= 0xD9 else max_bin
+            if size > limit:
+                kind = "string" if b >= 0xD9 else "binary"
+                raise ProtocolError(f"{kind} of {size} bytes, at most {limit}")
+            pos += w + size
+        elif b in _CONTAINERS:
+            w, per = _CONTAINERS[b]
+            items = int.from_bytes(raw[pos : pos + w], "big")
+            pos += w
+            limit = MAX_MAP_LEN if per == 2 else MAX_ARRAY_LEN
+            if items > limit:
+                kind = "map of" if per == 2 else "array of"
+                raise ProtocolError(f"{kind} {items} entries, at most {limit}")
+            count = per * items
+        elif b in _EXT:
+            raise ProtocolError(f"msgpack ext type (0x{b:02x}) is not part of the protocol")
+        else:  # 0xc1: never used
+            raise ProtocolError(f"not msgpack: invalid byte 0x{b:02x} at {pos - 1}")
+        if pos > n:
+            raise ProtocolError(f"not msgpack: truncated: needs {pos} bytes, has {n}")
+        if count:
+            if len(left) > max_depth:
+                raise ProtocolError(f"msgpack nested deeper than {max_depth}")
+            left.append(count)
+    if pos != n:
+        raise ProtocolError(
+            f"not msgpack: {n - pos} bytes of trailing data after the msgpack object"
+        )
+
+
+def unpack_bounded(
+    data: bytes | bytearray | memoryview,
+    max_bytes: int = MAX_MESSAGE_BYTES,
+    *,
+    max_objects: int = MAX_OBJECTS,
+    max_depth: int = MAX_DEPTH,
+    max_str_bytes: int = MAX_STR_BYTES,
+    max_bin_bytes: int = MAX_IMAGE_BYTES,
+) -> Any:
+    """One msgpack object from ``data`` within hard limits, or :class:`ProtocolError`.
+
+    The limits bound time and memory for *any* input, valid or not: the size is checked
+    first (pass the payload's length check to :func:`take_payload` to avoid the copy
+    too); a structure scan then rejects more than ``max_objects`` objects (a truth
+    message for 1024 robots has ~5200; each object costs ~50-100 B of Python memory, so
+    8192 objects stay under 1 MB), nesting deeper than ``max_depth`` (messages are 3
+    deep), maps over ``MAX_MAP_LEN`` entries (messages have at most 11 fields), arrays
+    over ``MAX_ARRAY_LEN`` items (``MAX_MEMBERS``), strings over ``MAX_STR_BYTES`` (the
+    UTF-8 of ``MAX_TEXT`` characters), binaries over ``MAX_IMAGE_BYTES``, ext types and
+    trailing bytes; msgpack's own limits repeat these caps. Map keys must be text or
+    bytes; text must be valid UTF-8. Every failure is a ``ProtocolError``.
+
+    For an envelope that carries a whole message as one binary field, pass
+    ``max_bin_bytes=MAX_MESSAGE_BYTES`` and a ``max_bytes`` that adds the envelope's own
+    overhead; then :func:`decode` the inner bytes (the limits apply again there).
+    """
+    if not isinstance(data, bytes | bytearray | memoryview):
+        raise ProtocolError(f"expected bytes, got {type(data).__name__}")
+    n = data.nbytes if isinstance(data, memoryview) else len(data)
+    if n > max_bytes:
+        raise ProtocolError(f"message of {n} bytes exceeds {max_bytes}")
+    raw = bytes(data)
+    _scan(raw, max_objects, max_depth, max_str_bytes, max_bin_bytes)
     try:
         return msgpack.unpackb(
-            data,
+            raw,
             raw=False,
             strict_map_key=True,
-            max_bin_len=max_bytes,
-            max_str_len=max(MAX_TEXT * 4, 4096),
-            max_array_len=4 * MAX_MEMBERS,
-            max_map_len=64,
+            max_str_len=max_str_bytes,
+            max_bin_len=max_bin_bytes,
+            max_array_len=MAX_ARRAY_LEN,
+            max_map_len=MAX_MAP_LEN,
             max_ext_len=0,
         )
     except Exception as exc:  # msgpack raises several unrelated types
-        raise ProtocolError(f"not msgpack: {type(exc).__name__}: {str(exc)[:100]}") from None
+        raise ProtocolError(f"not msgpack: {type(exc).__name__}: {_short(str(exc), 120)}") from None
 
 
-def decode(data: bytes | bytearray | memoryview, expect: type[M] | None = None) -> Any:
+def decode(
+    data: bytes | bytearray | memoryview,
+    expect: type[M] | None = None,
+    *,
+    max_bytes: int = MAX_MESSAGE_BYTES,
+) -> Any:
     """Parse and validate one message. ``expect`` restricts the accepted type.
 
-    Raises :class:`ProtocolError` with the reason for anything that does not fit.
+    Raises :class:`ProtocolError` with the reason for anything that does not fit; no
+    other exception leaves this function (the fuzz test in tests/test_fuzz.py and
+    ``python -m tools.fuzz`` hold it to that).
     """
-    raw = bytes(data)
-    if len(raw) > MAX_MESSAGE_BYTES:
-        raise ProtocolError(f"message of {len(raw)} bytes exceeds {MAX_MESSAGE_BYTES}")
-    try:
-        obj = msgpack.unpackb(raw, raw=False, strict_map_key=True, max_bin_len=MAX_IMAGE_BYTES)
-    except Exception as exc:  # msgpack raises several unrelated types
-        raise ProtocolError(f"not msgpack: {type(exc).__name__}: {exc}") from None
+    obj = unpack_bounded(data, max_bytes)
     if not isinstance(obj, dict):
         raise ProtocolError(f"expected a map, got {type(obj).__name__}")
+    if not all(isinstance(k, str) for k in obj):
+        raise ProtocolError("field names must be text, got binary")
     version = obj.get("v")
-    if version != SCHEMA_VERSION:
-        raise ProtocolError(f"schema version {version!r}, this build speaks {SCHEMA_VERSION}")
+    if type(version) is not int or version != SCHEMA_VERSION:  # not True, not 1.0
+        raise ProtocolError(
+            f"schema version {_short(version)}, this build speaks {SCHEMA_VERSION} (an int)"
+        )
     tag = obj.get("t")
     cls = _REGISTRY.get(tag) if isinstance(tag, str) else None
     if cls is None:
-        raise ProtocolError(f"unknown message type {tag!r}")
+        raise ProtocolError(f"unknown message type {_short(tag)}")
     if expect is not None and cls is not expect:
         raise ProtocolError(f"expected a {expect.TAG!r} message, got {tag!r}")
     names = {f.name for f in fields(cls)}
     extra = set(obj) - names - {"v", "t"}
     if extra:
-        raise ProtocolError(f"{tag}: unknown fields {sorted(extra)}")
+        shown = ", ".join(_short(k, 24) for k in sorted(extra)[:4])
+        more = f" and {len(extra) - 4} more" if len(extra) > 4 else ""
+        raise ProtocolError(f"{tag}: unknown fields {shown}{more}")
     kwargs = {k: obj[k] for k in names if k in obj}
     try:
         return cls(**kwargs)
@@ -712,6 +889,206 @@ def decode(data: bytes | bytearray | memoryview, expect: type[M] | None = None) 
 def message_types() -> dict[str, type[Message]]:
     """Every registered message class by tag (for tests and tools)."""
     return dict(_REGISTRY)
+
+
+# --------------------------------------------------------------------------- receiving
+# Shared by every process that listens on the bus (agents, world, tools): the world may
+# import only this module of agent/, so the receiving helpers live here too.
+
+#: Log lines about rejected input are cut to this many characters.
+MAX_REASON = 200
+
+T = TypeVar("T")
+
+
+def reason(exc: BaseException | str, limit: int = MAX_REASON) -> str:
+    """One log line about ``exc``: its text (with the type unless it is a
+    ``ProtocolError``), on one line, cut to ``limit`` characters."""
+    if isinstance(exc, str):
+        text = exc
+    else:
+        try:
+            msg = str(exc)
+        except Exception:  # an exception whose __str__ raises: still a reason
+            msg = "<unprintable>"
+        text = msg if isinstance(exc, ProtocolError) else f"{type(exc).__name__}: {msg}"
+    text = text[: limit * 2].replace("\n", " ").replace("\r", " ")
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+class Guard:
+    """Keeps zenoh callbacks alive: every exception is caught, counted and logged.
+
+    :meth:`wrap` turns a callback into one that never raises; :meth:`reject` counts one
+    rejected input and logs its reason (cut to ``MAX_REASON`` characters). Log lines are
+    rate limited (``burst`` lines, then ``per_second``), so a flood of garbage cannot
+    flood the log; the next line that is written says how many were suppressed.
+    Thread-safe: zenoh calls callbacks from its own threads.
+    """
+
+    def __init__(
+        self,
+        log: Callable[[str], Any],
+        *,
+        on_reject: Callable[[], Any] | None = None,
+        burst: int = 20,
+        per_second: float = 2.0,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        if burst < 1 or not per_second > 0:
+            raise ValueError(f"need burst >= 1 and per_second > 0, got {burst}, {per_second}")
+        self._log = log
+        self._on_reject = on_reject
+        self._burst = float(burst)
+        self._rate = per_second
+        self._clock = clock
+        self._tokens = float(burst)
+        self._last = clock()
+        self._lock = threading.Lock()
+        self.rejected = 0
+        self.suppressed = 0
+
+    def reject(self, what: str, why: BaseException | str) -> None:
+        """Count one rejected input on ``what`` and log ``why`` (rate limited)."""
+        with self._lock:
+            self.rejected += 1
+            now = self._clock()
+            self._tokens = min(self._burst, self._tokens + (now - self._last) * self._rate)
+            self._last = now
+            if self._tokens < 1.0:
+                self.suppressed += 1
+                line = None
+            else:
+                self._tokens -= 1.0
+                extra = f" (+{self.suppressed} suppressed)" if self.suppressed else ""
+                self.suppressed = 0
+                line = f"rejected {reason(what, 80)}: {reason(why)}{extra}"
+        if self._on_reject is not None:
+            with contextlib.suppress(Exception):  # a counter must not break its callback
+                self._on_reject()
+        if line is not None:
+            with contextlib.suppress(Exception):  # nor may a broken log
+                self._log(line)
+
+    def wrap(self, fn: Callable[[T], Any], what: str) -> Callable[[T], None]:
+        """``fn`` as a callback that counts and logs any exception instead of raising."""
+
+        def guarded(arg: T) -> None:
+            try:
+                fn(arg)
+            except Exception as exc:
+                self.reject(what, exc)
+
+        return guarded
+
+
+class Inbox(Generic[T]):
+    """Bounded, thread-safe queue in lanes: a full lane drops its *oldest* items.
+
+    ``caps`` names the lanes and their capacity in items; ``max_weight`` optionally caps
+    a lane's total weight too (e.g. payload bytes, so that a lane of big messages stays
+    small in memory). :meth:`put` returns how many items it dropped to make room (an
+    item heavier than the whole lane is itself dropped) and counts them in
+    ``dropped[lane]``. :meth:`get` takes the oldest item of all lanes (arrival order),
+    or with ``priority=True`` the oldest of the first non-empty lane in the order of
+    ``caps``. Raises ``queue.Empty`` like ``queue.Queue``.
+    """
+
+    def __init__(
+        self,
+        caps: Mapping[str, int],
+        priority: bool = False,
+        max_weight: Mapping[str, int] | None = None,
+    ) -> None:
+        weights = dict(max_weight or {})
+        if (
+            not caps
+            or any(isinstance(c, bool) or not isinstance(c, int) or c < 1 for c in caps.values())
+            or any(w < 1 for w in weights.values())
+            or not set(weights) <= set(caps)
+        ):
+            raise ValueError(
+                f"every lane needs a capacity >= 1 (and weight cap >= 1), got {dict(caps)}, "
+                f"{weights}"
+            )
+        self._lanes: dict[str, collections.deque[tuple[int, T, int]]] = {
+            lane: collections.deque() for lane in caps
+        }
+        self._caps = dict(caps)
+        self._max_weight = weights
+        self._weight: collections.Counter[str] = collections.Counter()
+        self._priority = priority
+        self._seq = 0
+        self._cond = threading.Condition()
+        self.dropped: collections.Counter[str] = collections.Counter()
+
+    def put(self, lane: str, item: T, weight: int = 0) -> int:
+        """Queue ``item``; returns the number of items dropped (oldest first)."""
+        with self._cond:
+            q = self._lanes[lane]
+            cap_w = self._max_weight.get(lane)
+            if cap_w is not None and weight > cap_w:
+                self.dropped[lane] += 1
+                return 1
+            dropped = 0
+            while q and (
+                len(q) >= self._caps[lane]
+                or (cap_w is not None and self._weight[lane] + weight > cap_w)
+            ):
+                self._weight[lane] -= q.popleft()[2]
+                dropped += 1
+            if dropped:
+                self.dropped[lane] += dropped
+            q.append((self._seq, item, weight))
+            self._weight[lane] += weight
+            self._seq += 1
+            self._cond.notify()
+            return dropped
+
+    def _pop(self) -> tuple[str, T] | None:
+        best: str | None = None
+        for lane, q in self._lanes.items():
+            if q and (best is None or (not self._priority and q[0][0] < self._lanes[best][0][0])):
+                best = lane
+                if self._priority:
+                    break
+        if best is None:
+            return None
+        _, item, weight = self._lanes[best].popleft()
+        self._weight[best] -= weight
+        return best, item
+
+    def get(self, timeout: float | None = None) -> tuple[str, T]:
+        """The next (lane, item), waiting up to ``timeout`` s (None: forever)."""
+        with self._cond:
+            end = None if timeout is None else time.monotonic() + timeout
+            while True:
+                got = self._pop()
+                if got is not None:
+                    return got
+                left = None if end is None else end - time.monotonic()
+                if left is not None and left <= 0:
+                    raise queue.Empty
+                self._cond.wait(left)
+
+    def get_nowait(self) -> tuple[str, T]:
+        with self._cond:
+            got = self._pop()
+            if got is None:
+                raise queue.Empty
+            return got
+
+    def __len__(self) -> int:
+        with self._cond:
+            return sum(len(q) for q in self._lanes.values())
+
+    def lengths(self) -> dict[str, int]:
+        with self._cond:
+            return {lane: len(q) for lane, q in self._lanes.items()}
+
+    def weights(self) -> dict[str, int]:
+        with self._cond:
+            return {lane: self._weight[lane] for lane in self._lanes}
 
 
 # --------------------------------------------------------------------------- trust

@@ -457,7 +457,7 @@ class Verifier:
         ``replay=False`` skips the replay window (replies, which their binding already
         makes unique).
         """
-        obj = unpack_bounded(data, MAX_SEALED_BYTES)
+        obj = unpack_bounded(data, MAX_SEALED_BYTES, max_bin_bytes=MAX_MESSAGE_BYTES)
         if not isinstance(obj, dict) or set(obj) != {"v", "by", "e", "n", "ts", "p", "s"}:
             raise TrustError("not a sealed envelope (unsigned or foreign payload)")
         v, by, e, n, ts, p, s = (obj[k] for k in ("v", "by", "e", "n", "ts", "p", "s"))

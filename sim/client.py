@@ -29,11 +29,16 @@ import zenoh
 from agent.protocol import (
     KEY_WORLD_REGISTER,
     KEY_WORLD_TRUTH_POSES,
+    MAX_MESSAGE_BYTES,
+    MAX_PUBLICATION_BYTES,
     CameraReply,
     CameraRequest,
     CommandReply,
     ErrorReply,
+    Guard,
+    Inbox,
     Message,
+    ProtocolError,
     RegisterReply,
     RegisterRequest,
     TruthPosesMsg,
@@ -44,6 +49,7 @@ from agent.protocol import (
     key_camera,
     key_turn,
     key_walk,
+    take_payload,
 )
 
 
@@ -51,11 +57,19 @@ class WorldError(RuntimeError):
     """The world refused a request or did not answer."""
 
 
+#: Counts and logs (cut, rate limited) what this client refuses; never raises.
+GUARD = Guard(lambda line: print(f"sim.client: {line}", file=sys.stderr))
+
+
 def ask(session: Any, key: str, msg: Message, timeout: float) -> Any:
     for r in session.get(key, payload=encode(msg), timeout=timeout):
         if r.ok is None:
             continue
-        rep = decode(r.ok.payload.to_bytes())
+        try:
+            rep = decode(take_payload(r.ok.payload, MAX_MESSAGE_BYTES))
+        except ProtocolError as exc:
+            GUARD.reject(f"reply on {key}", exc)
+            continue
         if isinstance(rep, ErrorReply):
             raise WorldError(f"the world says: {rep.reason}")
         return rep
@@ -64,14 +78,23 @@ def ask(session: Any, key: str, msg: Message, timeout: float) -> Any:
 
 def truth(session: Any, timeout: float, after: float = -1.0) -> TruthPosesMsg:
     """The first truth message with ``t_sim`` >= ``after``."""
-    q: queue.Queue[bytes] = queue.Queue()
-    sub = session.declare_subscriber(KEY_WORLD_TRUTH_POSES, lambda s: q.put(s.payload.to_bytes()))
+    q: Inbox[bytes] = Inbox({"truth": 16})
+
+    def on_truth(s: Any) -> None:
+        q.put("truth", take_payload(s.payload, MAX_PUBLICATION_BYTES))
+
+    sub = session.declare_subscriber(
+        KEY_WORLD_TRUTH_POSES, GUARD.wrap(on_truth, KEY_WORLD_TRUTH_POSES)
+    )
     try:
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             try:
-                m = decode(q.get(timeout=0.1), expect=TruthPosesMsg)
+                m = decode(q.get(timeout=0.1)[1], expect=TruthPosesMsg)
             except queue.Empty:
+                continue
+            except ProtocolError as exc:
+                GUARD.reject(KEY_WORLD_TRUTH_POSES, exc)
                 continue
             if m.t_sim >= after:
                 return m

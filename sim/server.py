@@ -15,6 +15,18 @@ Queryables (payloads are :mod:`agent.protocol` messages):
 Anything malformed or impossible (unknown robot, NaN, yaw out of range, wrong schema
 version, busy robot) gets an ``ErrorReply`` with the reason; the world keeps serving.
 
+**Hardening (issue #8).** The zenoh callbacks check each request cheaply where it
+arrives (payload length before the copy, at most ``MAX_REQUEST_BYTES``; robot id; schema;
+yaw) and queue it in one of two bounded lanes: well-formed requests, served first, and
+malformed ones, answered with their reason when nothing else waits. A full lane drops
+its oldest request (counted in ``dropped``; zenoh then ends that query with no reply;
+the malformed lane also holds at most ``MALFORMED_MAX_BYTES`` of payloads),
+so a flood of garbage can neither grow memory nor delay a valid request by more than
+one queue's worth. Every callback survives every exception; rejected input is counted
+in ``rejected`` and logged with a reason cut to 200 characters, rate limited. At most
+``MAX_RENDER_PENDING`` camera requests wait for render workers; liveliness tokens of
+ids that are not robots of this world are ignored.
+
 Publications: ``world/clock`` (``ClockMsg``) and ``world/truth/poses`` (``TruthPosesMsg``)
 at ``truth_rate`` Hz of wall time and after every finished command; ``world/truth/contacts``
 (``ContactMsg``) when a contact happens.
@@ -49,12 +61,15 @@ from agent.protocol import (
     KEY_WORLD_REGISTER,
     KEY_WORLD_TRUTH_CONTACTS,
     KEY_WORLD_TRUTH_POSES,
+    MAX_REQUEST_BYTES,
     CameraReply,
     CameraRequest,
     ClockMsg,
     CommandReply,
     ContactMsg,
     ErrorReply,
+    Guard,
+    Inbox,
     Message,
     NetworkSpec,
     ProtocolError,
@@ -66,6 +81,8 @@ from agent.protocol import (
     decode,
     encode,
     id_from_key,
+    reason,
+    take_payload,
     trust,
 )
 from sim import camera
@@ -108,7 +125,7 @@ class Request:
         self.epoch = -1
         self.nonce = b""
         raw = q.payload
-        data = raw.to_bytes() if raw is not None else None
+        data = take_payload(raw, MAX_REQUEST_BYTES) if raw is not None else None
         if verifier is not None:
             if data is None:
                 raise trust.TrustError(f"unsigned request on {self.key}")
@@ -124,12 +141,49 @@ class Request:
         self.q.reply(self.q.key_expr, data)
         self.q.drop()
 
+    def refuse(self) -> None:
+        """No answer at all: a stranger learns nothing (zenoh ends its query)."""
+        self.q.drop()
+
+
+#: Lanes of the world's inbox, in the order they are served, and their capacities.
+#: ``rendered``: results of render workers (at most MAX_RENDER_PENDING are ever
+#: outstanding, so this lane never overflows); ``alive``: liveliness changes;
+#: ``valid``: requests that passed the callback's checks; ``malformed``: requests
+#: waiting only for an ErrorReply.
+INBOX_CAPS = {"rendered": 256, "alive": 1024, "valid": 256, "malformed": 1024}
+#: A malformed query keeps its payload (in zenoh's memory) until it is answered: the
+#: lane holds at most this many payload bytes; a bigger request is dropped unanswered.
+MALFORMED_MAX_BYTES = 16 * 1024 * 1024
+#: Camera requests handed to render workers and not yet answered.
+MAX_RENDER_PENDING = 64
+#: Longest ``yaw`` selector parameter read (a float needs a few dozen characters).
+MAX_PARAM_CHARS = 64
+
 
 @dataclass
 class _Pending:
     query: Request
     kind: str
     robot_id: int
+
+
+@dataclass
+class _Request:
+    """A request that passed the callback's checks: ``msg`` is its decoded payload."""
+
+    kind: str
+    query: Request
+    robot_id: int
+    msg: Any
+
+
+def _payload_size(q: Any) -> int:
+    """Length of a query's payload (0 if none or unreadable), without copying it."""
+    try:
+        return 0 if q.payload is None else len(q.payload)
+    except Exception:
+        return 0
 
 
 class WorldServer:
@@ -154,7 +208,12 @@ class WorldServer:
         self.speed = speed
         self.truth_period = 1.0 / truth_rate
         self.log = log if log is not None else sys.stderr
-        self.inbox: queue.Queue[tuple[str, Any]] = queue.Queue()
+        self.robot_ids = frozenset(world.robot_ids)  # read by the zenoh callbacks
+        self.inbox: Inbox[Any] = Inbox(
+            INBOX_CAPS, priority=True, max_weight={"malformed": MALFORMED_MAX_BYTES}
+        )
+        self.guard = Guard(self._log)
+        self._drop_log = Guard(self._log, burst=3, per_second=0.2)  # its count: dropped
         self.claims: set[int] = set()
         self.alive: set[int] = set()  # ids with a live agent token (nao/alive/{id})
         self.errors = 0
@@ -187,14 +246,14 @@ class WorldServer:
             self.pool = RenderPool(
                 self.world.scenario,
                 self.render_workers,
-                lambda r: self.inbox.put(("rendered", r)),
+                self.guard.wrap(lambda r: self._queue("rendered", r), "render result"),
             )
         self.session = zenoh.open(zenoh_config(self.net))
         s = self.session
 
         def handler(kind: str) -> Any:
             def on_query(q: Any) -> None:
-                self.inbox.put((kind, q))
+                self.admit(kind, q)
 
             return on_query
 
@@ -203,7 +262,7 @@ class WorldServer:
             self._keep.append(s.declare_queryable(f"world/robot/*/{kind}", handler(kind)))
 
         def on_alive(sample: Any) -> None:
-            self.inbox.put(("alive", (str(sample.key_expr), sample.kind)))
+            self.admit_alive(sample)
 
         self._keep.append(s.liveliness().declare_subscriber(KEY_ALIVE_ALL, on_alive, history=True))
         self._pub = {
@@ -220,8 +279,98 @@ class WorldServer:
         ]
         return (
             f"served {' '.join(parts) or 'nothing'}; errors={self.errors} "
+            f"rejected={self.rejected} dropped={self.dropped} "
             f"contacts={self.world.locomotion.contacts} t_sim={self.world.t_sim:.2f} s"
         )
+
+    @property
+    def rejected(self) -> int:
+        """Inputs refused: malformed requests and tokens, requests the world could not
+        serve, exceptions in callbacks and handlers."""
+        return self.guard.rejected
+
+    @property
+    def dropped(self) -> int:
+        """Queued items dropped unread because their lane was full (oldest first)."""
+        return sum(self.inbox.dropped.values())
+
+    # ------------------------------------------------------------------ callbacks
+    # Called by zenoh's threads: they check and queue, never touch the world or zenoh,
+    # and never raise.
+
+    def _queue(self, lane: str, item: Any, size: int = 0) -> None:
+        dropped = self.inbox.put(lane, item, size)  # counted in inbox.dropped
+        if dropped:
+            self._drop_log.reject(f"{lane} queue full", f"{dropped} oldest item(s) dropped")
+
+    def admit(self, kind: str, q: Any) -> None:
+        """A query arrived: check it cheaply and queue it as valid or malformed."""
+        try:
+            try:
+                target: Request | Any = Request(q, self.verifier, self.signer)
+            except trust.TrustError as exc:  # unsigned, forged, replayed: no answer at all
+                self.guard.reject(f"{kind} request", exc)
+                self._queue("malformed", (kind, q, None), _payload_size(q))
+                return
+            except Exception as exc:  # too big for a request: answered when insecure
+                self.guard.reject(f"{kind} request", exc)
+                self._queue("malformed", (kind, q, reason(exc)), _payload_size(q))
+                return
+            try:
+                req = self._check(kind, target)
+            except Exception as exc:  # ValueError/ProtocolError, or anything unforeseen
+                why = reason(exc) if isinstance(exc, ValueError) else f"internal: {reason(exc)}"
+                self.guard.reject(f"{kind} request", exc)
+                self._queue("malformed", (kind, target, why), _payload_size(q))
+                return
+            self._queue("valid", req)
+        except Exception as exc:
+            self.guard.reject(f"{kind} request", exc)
+
+    def _check(self, kind: str, q: Request) -> _Request:
+        """The request ``q`` decoded and checked, or a ``ValueError`` saying why not."""
+        payload = q.payload
+        if kind == "register":
+            if payload is None:
+                return _Request(kind, q, -1, RegisterRequest())
+            return _Request(kind, q, -1, self._decode(payload, RegisterRequest))
+        rid = id_from_key(q.key)
+        if rid not in self.robot_ids:
+            raise ValueError(f"unknown robot {rid}; robots are {sorted(self.robot_ids)}")
+        if kind == "camera":
+            if payload is not None:
+                yaw = self._decode(payload, CameraRequest).yaw
+            else:
+                raw = q.parameters.get("yaw")
+                if raw is not None and len(raw) > MAX_PARAM_CHARS:
+                    raise ValueError(f"yaw parameter of {len(raw)} characters is not a number")
+                try:
+                    yaw = float(raw) if raw is not None else 0.0
+                except ValueError:
+                    raise ValueError(f"yaw parameter {raw!r} is not a number") from None
+            return _Request(kind, q, rid, CameraRequest(yaw=camera.check_yaw(yaw)))
+        if kind == "walk":
+            return _Request(kind, q, rid, self._decode(payload, WalkRequest))
+        if kind == "turn":
+            return _Request(kind, q, rid, self._decode(payload, TurnRequest))
+        raise ValueError(f"unknown request kind {kind!r}")
+
+    @staticmethod
+    def _decode(payload: bytes | None, cls: type[Message]) -> Any:
+        """``payload`` (already bounded by :class:`Request`) decoded as a ``cls``."""
+        if payload is None:
+            raise ProtocolError(f"missing {cls.TAG!r} payload")
+        return decode(payload, expect=cls, max_bytes=MAX_REQUEST_BYTES)
+
+    def admit_alive(self, sample: Any) -> None:
+        """A liveliness change: queued only for ids that are robots of this world."""
+        try:
+            rid = id_from_key(str(sample.key_expr))
+            if rid not in self.robot_ids:
+                return  # not a robot of this world: no state kept for it
+            self._queue("alive", (rid, sample.kind == zenoh.SampleKind.DELETE))
+        except Exception as exc:
+            self.guard.reject("liveliness token", exc)
 
     def close(self) -> None:
         if self.session is not None:
@@ -288,16 +437,17 @@ class WorldServer:
                     left = deadline - time.monotonic()
                     if left <= 0:
                         return spent
-                    kind, item = self.inbox.get(timeout=left)
+                    lane, item = self.inbox.get(timeout=left)
                 else:
-                    kind, item = self.inbox.get_nowait()
+                    lane, item = self.inbox.get_nowait()
             except queue.Empty:
                 return spent
             t0 = time.monotonic()
+            kind = item.kind if lane == "valid" else lane
             try:
-                self._handle(kind, item)
+                self._handle(lane, item)
             except Exception as exc:  # never let one request take the world down
-                self._log(f"error handling {kind}: {type(exc).__name__}: {exc}")
+                self.guard.reject(f"handling {kind}", exc)
             dt = time.monotonic() - t0
             spent += dt
             self.counts[kind] += 1
@@ -306,54 +456,58 @@ class WorldServer:
 
     # ------------------------------------------------------------------ requests
 
-    def _handle(self, kind: str, item: Any) -> None:
-        if kind == "alive":
-            key, sample_kind = item
-            with contextlib.suppress(ProtocolError):
-                rid = id_from_key(key)
-                if sample_kind == zenoh.SampleKind.DELETE:
-                    self.alive.discard(rid)
-                    if rid in self.claims:
-                        self.claims.discard(rid)
-                        self._log(f"robot {rid} released (agent gone)")
-                else:
-                    self.alive.add(rid)
+    def _handle(self, lane: str, item: Any) -> None:
+        if lane == "alive":
+            rid, gone = item
+            if gone:
+                self.alive.discard(rid)
+                if rid in self.claims:
+                    self.claims.discard(rid)
+                    self._log(f"robot {rid} released (agent gone)")
+            else:
+                self.alive.add(rid)
             return
-        if kind == "rendered":
+        if lane == "rendered":
             self._rendered(item)
             return
-        try:
-            q = Request(item, self.verifier, self.signer)
-        except ProtocolError as exc:  # TrustError is one: unsigned, forged or replayed
+        if lane == "malformed":
+            _, target, why = item
             self.errors += 1
-            self.untrusted += isinstance(exc, trust.TrustError)
-            self._log(f"{kind} {item.key_expr}: refused: {str(exc)[:200]}")
-            with contextlib.suppress(Exception):
-                item.drop()  # no answer: a stranger learns nothing
+            if isinstance(target, Request):
+                self._reply(target, ErrorReply(reason=why[:500]))
+            elif why is None or self.verifier is not None:
+                self.untrusted += why is None
+                with contextlib.suppress(Exception):
+                    target.drop()  # secure: no answer to what is not authenticated
+            else:
+                try:
+                    target.reply(target.key_expr, encode(ErrorReply(reason=why[:500])))
+                    target.drop()
+                    self.served += 1
+                except Exception as exc:  # the querier may have gone
+                    self._log(f"reply failed: {reason(exc)}")
             return
+        req: _Request = item
+        q, rid = req.query, req.robot_id
         try:
-            if kind == "register":
-                self._reply(q, self._register(q))
-                return
-            rid = id_from_key(q.key)
-            if q.who is not None:
+            if req.kind != "register" and q.who is not None:
                 self._authorise(q, rid)
-            if rid not in self.world.robot_ids:
-                raise ValueError(f"unknown robot {rid}; robots are {list(self.world.robot_ids)}")
-            if kind == "camera":
-                rep = self._camera(q, rid)
+            if req.kind == "register":
+                self._reply(q, self._register(q, req.msg))
+            elif req.kind == "camera":
+                rep = self._camera(q, rid, req.msg.yaw)
                 if rep is not None:  # else a render worker has it
                     self._reply(q, rep)
-            elif kind == "walk":
-                w = self._payload(q, WalkRequest)
-                self._start(q, rid, "walk", lambda: self.world.locomotion.walk(rid, w.distance))
-            elif kind == "turn":
-                t = self._payload(q, TurnRequest)
-                self._start(q, rid, "turn", lambda: self.world.locomotion.turn(rid, t.angle))
+            elif req.kind == "walk":
+                d = req.msg.distance
+                self._start(q, rid, "walk", lambda: self.world.locomotion.walk(rid, d))
+            elif req.kind == "turn":
+                a = req.msg.angle
+                self._start(q, rid, "turn", lambda: self.world.locomotion.turn(rid, a))
         except ValueError as exc:  # ProtocolError is a ValueError
             self.errors += 1
-            self._log(f"{kind} {q.key}: rejected: {str(exc)[:200]}")
-            self._reply(q, ErrorReply(reason=str(exc)[:500]))
+            self.guard.reject(f"{req.kind} {q.key}", exc)
+            self._reply(q, ErrorReply(reason=reason(exc, 500)))
 
     def _authorise(self, q: Request, rid: int) -> None:
         """Secure: only robot ``rid``'s key, in the session bound to ``rid``, drives it.
@@ -371,13 +525,7 @@ class WorldServer:
             raise ValueError(f"robot {rid} is bound to another session of its key")
         self.bound[rid] = q.epoch
 
-    def _payload(self, q: Request, cls: type[Message]) -> Any:
-        if q.payload is None:
-            raise ProtocolError(f"missing {cls.TAG!r} payload")
-        return decode(q.payload, expect=cls)
-
-    def _register(self, q: Request) -> Message:
-        req = self._payload(q, RegisterRequest) if q.payload is not None else RegisterRequest()
+    def _register(self, q: Request, req: RegisterRequest) -> Message:
         if q.who is not None:  # secure: a key claims its own robot id, and only that one
             if q.who.role != "robot":
                 raise ValueError(f"{q.who.cn} is not a robot and may not claim one")
@@ -404,17 +552,10 @@ class WorldServer:
         self._log(f"robot {rid} claimed")
         return RegisterReply(robot_id=rid)
 
-    def _camera(self, q: Request, rid: int) -> Message | None:
-        if q.payload is not None:
-            yaw = self._payload(q, CameraRequest).yaw
-        else:
-            raw = q.parameters.get("yaw")
-            try:
-                yaw = float(raw) if raw is not None else 0.0
-            except ValueError:
-                raise ValueError(f"yaw parameter {raw!r} is not a number") from None
-        yaw = camera.check_yaw(yaw)
+    def _camera(self, q: Request, rid: int, yaw: float) -> Message | None:
         if self.pool is not None and self.pool.alive > 0:
+            if len(self._cam_pending) >= MAX_RENDER_PENDING:
+                raise ValueError(f"world busy: {len(self._cam_pending)} pictures being drawn")
             # The state the picture depends on is taken now; a worker draws it.
             self.world.set_head_yaw(rid, yaw)
             job = Job(
@@ -454,8 +595,8 @@ class WorldServer:
             q, rid, yaw, t_sim = pending
             if res.error:
                 self.errors += 1
-                self._log(f"camera robot {rid}: render failed: {res.error}")
-                self._reply(q, ErrorReply(reason=f"render failed: {res.error}"[:500]))
+                self._log(f"camera robot {rid}: render failed: {reason(res.error)}")
+                self._reply(q, ErrorReply(reason=f"render failed: {reason(res.error, 480)}"))
             else:
                 msg = CameraReply(
                     robot_id=rid,
@@ -503,7 +644,7 @@ class WorldServer:
             q.reply(msg)
             self.served += 1
         except Exception as exc:  # the querier may have gone (timeout)
-            self._log(f"reply on {q.key} failed: {str(exc)[:200]}")
+            self._log(f"reply failed: {reason(exc)}")
 
     def _put(self, key: str, msg: Message) -> None:
         try:
@@ -512,7 +653,7 @@ class WorldServer:
                 data = self.signer.seal(key, data)
             self._pub[key].put(data)
         except Exception as exc:
-            self._log(f"publish on {key} failed: {exc}")
+            self._log(f"publish on {key} failed: {reason(exc)}")
 
     def _publish_truth(self) -> None:
         t = self.world.t_sim

@@ -3,17 +3,25 @@
 from __future__ import annotations
 
 import json
+import logging
 import socket
 import time
 from collections.abc import Iterator
+from types import SimpleNamespace
+from typing import Any
 
+import msgpack
 import pytest
 import zenoh
 
-from agent.bus import Bus, BusConfig, BusError, Event, NoRoute
+from agent.bus import EVENT_CAPS, EVENT_MAX_BYTES, Bus, BusConfig, BusError, Event, NoRoute
 from agent.protocol import (
+    MAX_MESSAGE_BYTES,
+    MAX_PUBLICATION_BYTES,
+    ClockMsg,
     CommandReply,
     ErrorReply,
+    NeighborRecordMsg,
     StatusMsg,
     WalkRequest,
     decode,
@@ -69,12 +77,14 @@ def test_publish_subscribe_round_trip_counts_bytes(pair: tuple[Bus, Bus, str]) -
 
 
 def test_malformed_payload_is_rejected_and_the_bus_goes_on(pair: tuple[Bus, Bus, str]) -> None:
+    # The garbage may go out before the route exists and be lost: keep sending all three
+    # until both the good message and the rejections have been seen (deadline, no sleep).
     a, b, _ = pair
     b.subscribe("nao/**")
     good = StatusMsg(sender=1, phase="hold")
     end = time.monotonic() + 10
     seen_good = False
-    while time.monotonic() < end and not seen_good:
+    while time.monotonic() < end and not (seen_good and b.stats.rejected >= 2):
         a.session.put("nao/1/status", b"\xc1 not msgpack")
         a.session.put("nao/1/status", encode(good)[:-3])
         a.publish(key_status(1), good)
@@ -83,6 +93,7 @@ def test_malformed_payload_is_rejected_and_the_bus_goes_on(pair: tuple[Bus, Bus,
             seen_good = True
     assert seen_good
     assert b.stats.rejected >= 2
+    assert b.guard.rejected == b.stats.rejected
 
 
 def test_liveliness_alive_and_gone(pair: tuple[Bus, Bus, str]) -> None:
@@ -163,7 +174,7 @@ def test_query_undecodable_reply_raises(pair: tuple[Bus, Bus, str]) -> None:
     w = world_session(ep)
     q = serve(w, key_walk(3), b"garbage")
     try:
-        with pytest.raises(BusError, match="rejected reply"):
+        with pytest.raises(BusError, match="undecodable reply"):
             query_eventually(b, key_walk(3), CommandReply)
     finally:
         q.undeclare()
@@ -220,3 +231,185 @@ def test_decode_of_reply_helpers() -> None:
     # the codec round trip the bus relies on
     rep = CommandReply(robot_id=1, status="contact", t_sim=2.0, detail="bumped robot 2")
     assert decode(encode(rep), expect=CommandReply) == rep
+
+
+# --------------------------------------------------------------------------- hardening
+
+
+class FakeZBytes:
+    """A zenoh payload stand-in whose copy must not happen when it is too big."""
+
+    def __init__(self, n: int, data: bytes | None = None) -> None:
+        self.n, self.data = n, data
+
+    def __len__(self) -> int:
+        return self.n
+
+    def to_bytes(self) -> bytes:
+        assert self.data is not None, "an oversized payload was copied"
+        return self.data
+
+
+def sample(key: object, payload: object, kind: object = zenoh.SampleKind.PUT) -> Any:
+    return SimpleNamespace(key_expr=key, payload=payload, kind=kind)
+
+
+class BadStr:
+    def __str__(self) -> str:
+        raise RuntimeError("key that cannot be printed")
+
+
+def test_callbacks_survive_everything_and_count_it(
+    pair: tuple[Bus, Bus, str], caplog: pytest.LogCaptureFixture
+) -> None:
+    _, b, _ = pair
+    caplog.set_level(logging.WARNING, "agent.bus")
+    good = encode(StatusMsg(sender=1, phase="hold"))
+    b._on_sample(sample("nao/1/status", FakeZBytes(MAX_PUBLICATION_BYTES + 1)))  # not copied
+    b._on_sample(sample("nao/1/status", FakeZBytes(len(good), good)), max_bytes=10)
+    b._on_sample(sample(BadStr(), FakeZBytes(len(good), good)))
+    b._on_sample(sample("nao/1/status", None))
+    b._on_sample(object())  # no attributes at all
+    b._on_sample(sample("nao/1/status", FakeZBytes(3, b"\xc1" * 3)))
+    b._on_alive(sample("nao/alive/01", None))  # an alias of robot 1
+    b._on_alive(sample("nao/alive/\u0661", None))
+    b._on_alive(sample(BadStr(), None))
+    assert b.stats.rejected == 9
+    assert b.drain() == []
+    lines = [r.getMessage() for r in caplog.records]
+    assert len(lines) == 9 and all(len(line) < 300 for line in lines)
+    assert "exceeds" in lines[0] and "RuntimeError" in lines[2]
+    # and the bus goes on
+    b._on_sample(sample("nao/1/status", FakeZBytes(len(good), good)))
+    b._on_alive(sample("nao/alive/1", None))
+    got = b.drain()
+    assert [e.kind for e in got] == ["msg", "alive"] and got[1].robot_id == 1
+
+
+def test_long_exception_text_is_cut_in_the_log(
+    pair: tuple[Bus, Bus, str], caplog: pytest.LogCaptureFixture
+) -> None:
+    _, b, _ = pair
+    caplog.set_level(logging.WARNING, "agent.bus")
+
+    class Huge:
+        def __len__(self) -> int:
+            raise ValueError("x" * 11_000_000)  # the 11 MB exception text of issue #8
+
+    b._on_sample(sample("nao/1/status", Huge()))
+    (line,) = [r.getMessage() for r in caplog.records]
+    assert len(line) < 300 and b.stats.rejected == 1
+
+
+def test_event_queue_is_bounded_oldest_dropped_and_counted(pair: tuple[Bus, Bus, str]) -> None:
+    _, b, _ = pair
+    b._on_alive(sample("nao/alive/5", None))
+    cap = EVENT_CAPS["msg"]
+    for i in range(cap + 100):
+        b._enqueue_sample("nao/1/status", encode(StatusMsg(sender=1, phase="hold", wave=i)))
+    assert b.stats.dropped == 100
+    got = b.drain()
+    assert got[0].kind == "alive" and got[0].robot_id == 5  # a flood cannot push it out
+    waves = [e.msg.wave for e in got[1:]]
+    assert waves == list(range(100, cap + 100))  # the oldest went first
+    for i in range(EVENT_CAPS["alive"] + 1):
+        b._on_alive(sample(f"nao/alive/{i}", None))
+    assert b.stats.dropped == 101
+    assert len(b.drain()) == EVENT_CAPS["alive"]
+
+
+def serve_raw(session: zenoh.Session, key: str, replies: list[bytes]) -> zenoh.Queryable:
+    def on_query(q: zenoh.Query) -> None:
+        for r in replies:
+            q.reply(key, r)
+
+    return session.declare_queryable(key, on_query)
+
+
+@pytest.mark.parametrize(
+    ("payloads", "match"),
+    [
+        # was an uncaught TypeError in the agent (sorted() over str and bytes names)
+        (
+            [msgpack.packb({"v": 1, "t": "done", "a": 1, b"b": 2}, use_bin_type=True)],
+            "field names must be text",
+        ),
+        ([encode(ClockMsg(t_sim=1.0))], "unexpected reply ClockMsg, expected CommandReply"),
+        ([msgpack.packb({"v": True, "t": "done"})], "schema version"),
+    ],
+)
+def test_unexpected_replies_are_a_bus_error(
+    pair: tuple[Bus, Bus, str], payloads: list[bytes], match: str
+) -> None:
+    _, b, ep = pair
+    w = world_session(ep)
+    q = serve_raw(w, key_walk(3), payloads)
+    try:
+        with pytest.raises(BusError, match=match):
+            query_eventually(b, key_walk(3), CommandReply)
+        assert b.stats.rejected >= len(payloads)
+    finally:
+        q.undeclare()
+        w.close()
+
+
+def ok_reply(data: bytes) -> Any:
+    return SimpleNamespace(ok=SimpleNamespace(payload=FakeZBytes(len(data), data)), err=None)
+
+
+def test_a_good_reply_after_bad_ones_is_taken_and_reasons_are_capped(
+    pair: tuple[Bus, Bus, str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # zenoh consolidates one queryable's replies on one key: feed the reply loop directly
+    _, b, _ = pair
+    rep = CommandReply(robot_id=3, status="done", t_sim=1.0)
+    bad = [ok_reply(b"junk"), ok_reply(encode(ClockMsg(t_sim=1.0)))]
+    replies: list[Any] = [*bad, ok_reply(encode(rep))]
+    monkeypatch.setattr(b, "session", SimpleNamespace(get=lambda *a, **k: replies))
+    assert b.query(key_walk(3), WalkRequest(distance=0.1), CommandReply) == rep
+    assert b.stats.rejected == 2
+    replies = [ok_reply(b"\xc1" * (i + 1)) for i in range(6)]
+    with pytest.raises(BusError, match=r"not msgpack.*; and 2 more$"):
+        b.query(key_walk(3), WalkRequest(distance=0.1), CommandReply)
+    assert b.stats.rejected == 8
+
+
+def test_reply_checks_without_a_network(pair: tuple[Bus, Bus, str]) -> None:
+    _, b, _ = pair
+    big = SimpleNamespace(ok=SimpleNamespace(payload=FakeZBytes(MAX_MESSAGE_BYTES + 1)), err=None)
+    huge_err = SimpleNamespace(ok=None, err=SimpleNamespace(payload=FakeZBytes(10**9)))
+    empty = SimpleNamespace(ok=None, err=None)
+    errors: list[str] = []
+    assert b._first_reply("k", [big, huge_err, empty], CommandReply, errors) is None
+    assert "exceeds" in errors[0] and "exceeds 4096" in errors[1] and errors[2] == "empty reply"
+    assert b.stats.rejected == 2  # the empty reply is zenoh's, not an attack
+
+    def broken() -> Iterator[Any]:
+        yield empty
+        raise RuntimeError("link gone")
+
+    errors = []
+    assert b._first_reply("k", broken(), CommandReply, errors) is None
+    assert errors[-1] == "reply stream failed: RuntimeError: link gone"
+
+
+def test_query_on_a_bad_key_is_a_bus_error(pair: tuple[Bus, Bus, str]) -> None:
+    _, b, _ = pair
+    with pytest.raises(BusError, match="query failed"):
+        b.query("world/robot/**/#bad?", WalkRequest(distance=0.1), CommandReply, timeout=1.0)
+
+
+def test_event_queue_is_bounded_in_payload_bytes_too(pair: tuple[Bus, Bus, str]) -> None:
+    _, b, _ = pair
+    big = encode(
+        NeighborRecordMsg(
+            sender=1, round=0, neighbours=tuple((0.1 * i, 1.0 / (i + 1)) for i in range(64))
+        )
+    )
+    n = EVENT_CAPS["msg"]
+    assert n * len(big) > EVENT_MAX_BYTES["msg"]  # the byte cap binds before the count
+    for _ in range(n):
+        b._enqueue_sample("nao/1/record", big)
+    kept = EVENT_MAX_BYTES["msg"] // len(big)
+    assert b.events.weights()["msg"] <= EVENT_MAX_BYTES["msg"]
+    assert b.stats.dropped == n - kept and len(b.drain()) == kept

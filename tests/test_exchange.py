@@ -222,6 +222,7 @@ def test_backoff_doubles_and_caps() -> None:
 
 def test_newer_round_replaces_older_and_echo_is_ignored() -> None:
     a = Agreement(0, rec(0), 0.0)
+    a.member_joined(1, 0.0)
     assert a.on_record(rec(1, 1), 0.0)
     assert not a.on_record(rec(1, 0), 0.0)  # older round
     assert not a.on_record(rec(1, 1), 0.0)  # duplicate
@@ -232,12 +233,41 @@ def test_newer_round_replaces_older_and_echo_is_ignored() -> None:
     assert a.records[0] == rec(0)
 
 
-def test_records_of_non_members_are_held_but_not_digested() -> None:
+def test_nothing_is_kept_for_non_members() -> None:
     a = Agreement(0, rec(0), 0.0, fleet_size=2)
-    a.on_record(rec(1), 0.0)
-    assert a.held_members() == (0,)
+    for sender in range(1, 2000):  # a stranger cycling through ids
+        assert not a.on_record(NeighborRecordMsg(sender=sender, round=0, neighbours=()), 0.0)
+        a.on_digest(DigestMsg(sender=sender, round=0, digest="0" * 64, members=(0,)), 0.0)
+        a.on_peer_phase(sender, "plan")
+    assert a.records.keys() == {0} and a.digests == {} and a.peer_agreed == set()
+    assert a.ignored == 3 * 1999
     a.member_joined(1, 0.0)
+    assert a.on_record(rec(1), 0.0)
     assert a.held_members() == (0, 1)
+
+
+def test_a_record_that_outran_its_token_is_sent_again() -> None:
+    # b's record reaches a before b's liveliness token: a drops it; a's digest, which
+    # does not list b, makes b re-send it, and the two agree.
+    a = Agreement(0, rec(0), 0.0, fleet_size=2)
+    b = Agreement(1, rec(1), 0.0, fleet_size=2)
+    b.member_joined(0, 0.0)
+    a.on_record(rec(1), 0.0)
+    assert a.ignored == 1
+    a.member_joined(1, 0.0)
+    t = 0.0
+    while t < 10.0 and not (a.agreed and b.agreed):
+        t = round(t + 0.05, 2)
+        for x, y, me in ((a, b, 0), (b, a, 1)):
+            due = x.due(t)
+            for what in due:
+                if what == "record":
+                    y.on_record(x.records[me], t)
+                else:
+                    y.on_digest(x.digest_msg(), t)
+            x.sent(due, t)
+            x.decide(t)
+    assert a.agreed and b.agreed and t < 2.0
 
 
 def test_digest_is_order_independent_and_content_sensitive() -> None:

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import math
+import queue
+import threading
 
 import msgpack
 import pytest
@@ -168,3 +170,270 @@ def test_network_spec_json5_items() -> None:
 def test_network_spec_rejects(kwargs: dict[str, object], reason: str) -> None:
     with pytest.raises(ValueError, match=reason):
         p.NetworkSpec(**kwargs)  # type: ignore[arg-type]
+
+
+# --------------------------------------------------------------------------- strictness
+
+
+@pytest.mark.parametrize("version", [True, 1.0, "1", None, [1]])
+def test_version_must_be_the_int_1(version: object) -> None:
+    with pytest.raises(p.ProtocolError, match="schema version"):
+        p.decode(_raw(v=version, t="walk", distance=1.0))
+
+
+@pytest.mark.parametrize(
+    "raw",
+    ["01", "00", "١", "+1", "-1", " 1", "1 ", "1.0", "", "0x1", "1_0", "²", "123456"],
+)
+def test_key_ids_are_plain_ascii_digits(raw: str) -> None:
+    for key in (f"nao/alive/{raw}", f"nao/{raw}/record", f"world/robot/{raw}/camera"):
+        with pytest.raises(p.ProtocolError, match="robot id"):
+            p.id_from_key(key)
+
+
+def test_key_id_range_and_one_spelling_per_robot() -> None:
+    assert p.id_from_key("nao/alive/0") == 0
+    assert p.id_from_key("nao/alive/65535") == 65535
+    with pytest.raises(p.ProtocolError, match="outside"):
+        p.id_from_key("nao/alive/65536")
+    with pytest.raises(p.ProtocolError, match="at most 256"):
+        p.id_from_key("nao/1/" + "x" * 300)
+    with pytest.raises(p.ProtocolError, match="key expression"):
+        p.id_from_key(b"nao/1/record")  # type: ignore[arg-type]
+
+
+def test_unknown_fields_mixing_text_and_binary_names_are_rejected() -> None:
+    # was a TypeError: sorted() over str and bytes
+    data = msgpack.packb({"v": 1, "t": "walk", "distance": 1.0, "a": 1, b"b": 2}, use_bin_type=True)
+    with pytest.raises(p.ProtocolError, match="field names must be text"):
+        p.decode(data)
+
+
+def test_many_unknown_fields_give_a_short_reason() -> None:
+    fields = {f"f{i:02d}" + "x" * 100: i for i in range(20)}
+    with pytest.raises(p.ProtocolError, match="and 16 more") as info:
+        p.decode(_raw(v=1, t="walk", distance=1.0, **fields))
+    assert len(str(info.value)) < 200
+
+
+def test_huge_tag_is_cut_in_the_reason() -> None:
+    with pytest.raises(p.ProtocolError, match="unknown message type") as info:
+        p.decode(_raw(v=1, t="x" * 2000))
+    assert len(str(info.value)) < 100
+
+
+def _bin32(size: int, body: bytes = b"") -> bytes:
+    return b"\xc6" + size.to_bytes(4, "big") + body
+
+
+def _array32(n: int, body: bytes = b"") -> bytes:
+    return b"\xdd" + n.to_bytes(4, "big") + body
+
+
+@pytest.mark.parametrize(
+    ("payload", "reason"),
+    [
+        (b"", "truncated"),
+        (b"\x92\x01", "truncated"),
+        (b"\xa5ab", "truncated"),
+        (b"\xcb\x00", "truncated"),
+        (b"\x01\x02", "trailing data"),
+        (b"\xc1", "invalid byte 0xc1"),
+        (b"\xd6\xff\x00\x00\x00\x01", "ext type"),  # a msgpack Timestamp
+        (b"\xc7\x00\x05", "ext type"),
+        (b"\x91" * 9 + b"\x90", "nested deeper than 8"),
+        (_array32(1025), "array of 1025 entries, at most 1024"),
+        (b"\xde" + (33).to_bytes(2, "big"), "map of 33 entries, at most 32"),
+        (b"\xdb" + (2049).to_bytes(4, "big"), "string of 2049 bytes, at most 2048"),
+        (_bin32(p.MAX_IMAGE_BYTES + 1), "binary of"),
+        (
+            b"\x9f" + (b"\x9f" + (b"\x9f" + b"\x90" * 15) * 15) * 15,
+            "more than 1000 msgpack objects",
+        ),
+        (b"\xa2\xff\xfe", "not msgpack: UnicodeDecodeError"),
+        (msgpack.packb({1: 2}), "not msgpack"),  # int map keys
+    ],
+)
+def test_unpack_bounded_rejects(payload: bytes, reason: str) -> None:
+    with pytest.raises(p.ProtocolError, match=reason):
+        p.unpack_bounded(payload, max_objects=1000)
+    with pytest.raises(p.ProtocolError):
+        p.decode(payload)
+
+
+def test_unpack_bounded_size_and_type() -> None:
+    assert p.unpack_bounded(msgpack.packb([1, "a", b"b"], use_bin_type=True)) == [1, "a", b"b"]
+    assert p.unpack_bounded(memoryview(msgpack.packb({"k": None}))) == {"k": None}
+    with pytest.raises(p.ProtocolError, match="exceeds 3"):
+        p.unpack_bounded(b"\x94\x01\x02\x03\x04", max_bytes=3)
+    with pytest.raises(p.ProtocolError, match="expected bytes"):
+        p.unpack_bounded("text")  # type: ignore[arg-type]
+    with pytest.raises(p.ProtocolError, match="exceeds"):
+        p.decode(p.encode(p.ErrorReply(reason="x" * 100)), max_bytes=50)
+    # an envelope around a whole message: a binary field bigger than an image
+    inner = p.encode(
+        p.CameraReply(robot_id=1, yaw=0.0, t_sim=0.0, width=1, height=1, encoding="png",
+                      data=b"\x00" * p.MAX_IMAGE_BYTES)
+    )  # fmt: skip
+    env = msgpack.packb({"payload": inner, "sig": b"s" * 64}, use_bin_type=True)
+    with pytest.raises(p.ProtocolError, match="binary of"):
+        p.unpack_bounded(env, p.MAX_MESSAGE_BYTES + 512)
+    got = p.unpack_bounded(env, p.MAX_MESSAGE_BYTES + 512, max_bin_bytes=p.MAX_MESSAGE_BYTES)
+    assert p.decode(got["payload"]).width == 1
+    with pytest.raises(p.ProtocolError, match="string of 9 bytes, at most 8"):
+        p.unpack_bounded(msgpack.packb("x" * 9), max_str_bytes=8)
+    deep = b"\x91" * 7 + b"\x90"  # depth 8 is allowed
+    assert p.unpack_bounded(deep) == [[[[[[[[]]]]]]]]
+
+
+def test_objects_limit_bounds_the_largest_message() -> None:
+    poses = tuple((i, 1.0, 2.0, 0.5) for i in range(p.MAX_MEMBERS))
+    big = p.TruthPosesMsg(t_sim=1.0, poses=poses, contacts=3)
+    data = p.encode(big)
+    assert len(data) < p.MAX_PUBLICATION_BYTES
+    assert p.decode(data, max_bytes=p.MAX_PUBLICATION_BYTES) == big
+
+
+def test_eight_mib_of_empty_arrays_is_rejected_fast_and_small() -> None:
+    # was: 3 s and 580 MiB to reject
+    import time
+    import tracemalloc
+
+    payloads = [
+        _array32(1000, b"\x90" * (8 * 1024 * 1024 - 8)),
+        b"\x9f" * (8 * 1024 * 1024),
+        b"\xdc\x04\x00" + b"\xdc\x04\x00" * 2000,
+    ]
+    for data in payloads:
+        tracemalloc.start()
+        t0 = time.perf_counter()
+        with pytest.raises(p.ProtocolError):
+            p.decode(data)
+        dt = time.perf_counter() - t0
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        assert dt < 0.5 and peak < 50 * 2**20, (dt, peak)
+
+
+class FakeZBytes:
+    """A payload whose copy must not happen: ``to_bytes`` fails the test."""
+
+    def __init__(self, n: int, data: bytes | None = None) -> None:
+        self.n, self.data = n, data
+
+    def __len__(self) -> int:
+        return self.n
+
+    def to_bytes(self) -> bytes:
+        assert self.data is not None, "an oversized payload was copied"
+        return self.data
+
+
+def test_take_payload_checks_the_size_before_the_copy() -> None:
+    with pytest.raises(p.ProtocolError, match="exceeds 1024"):
+        p.take_payload(FakeZBytes(2**30), 1024)
+    with pytest.raises(p.ProtocolError, match="no payload"):
+        p.take_payload(None, 1024)
+    with pytest.raises(p.ProtocolError, match="said 3 bytes, gave 5"):
+        p.take_payload(FakeZBytes(3, b"12345"), 1024)
+    assert p.take_payload(FakeZBytes(3, b"123"), 1024) == b"123"
+
+
+# --------------------------------------------------------------------------- receiving
+
+
+def test_reason_is_one_short_line() -> None:
+    assert p.reason(p.ProtocolError("bad")) == "bad"
+    assert p.reason(TypeError("x\ny")) == "TypeError: x y"
+    long = p.reason(ValueError("z" * 11_000_000))
+    assert len(long) == 200 and long.endswith("...")
+
+    class Unprintable(Exception):
+        def __str__(self) -> str:
+            raise RuntimeError("no")
+
+    assert p.reason(Unprintable()) == "Unprintable: <unprintable>"
+
+
+def test_guard_counts_logs_and_throttles() -> None:
+    lines: list[str] = []
+    counted: list[int] = []
+    now = [0.0]
+    g = p.Guard(
+        lines.append, on_reject=lambda: counted.append(1), burst=2, per_second=1.0,
+        clock=lambda: now[0],
+    )  # fmt: skip
+
+    def boom(x: int) -> None:
+        raise TypeError("t" * 1000)
+
+    cb = g.wrap(boom, "nao/1/status")
+    for _ in range(5):
+        cb(1)  # never raises
+    assert g.rejected == 5 and len(counted) == 5
+    assert len(lines) == 2 and g.suppressed == 3
+    assert all(len(line) < 300 and "TypeError" in line for line in lines)
+    now[0] = 1.0
+    g.reject("world/robot/1/camera", "why")
+    assert lines[-1].endswith("why (+3 suppressed)")
+    ok = g.wrap(lambda x: None, "k")
+    ok(1)
+    assert g.rejected == 6
+
+
+def test_guard_survives_a_broken_log_and_counter() -> None:
+    def broken(_: object = None) -> None:
+        raise OSError("disk full")
+
+    g = p.Guard(broken, on_reject=broken)
+    g.wrap(broken, "k")(None)
+    assert g.rejected == 1
+    with pytest.raises(ValueError, match="burst"):
+        p.Guard(print, burst=0)
+
+
+def test_inbox_drops_oldest_and_counts() -> None:
+    box: p.Inbox[int] = p.Inbox({"a": 2, "b": 3})
+    assert box.put("a", 1) == 0
+    box.put("b", 10)
+    box.put("a", 2)
+    assert box.put("a", 3) == 1  # the oldest of lane a (1) made room
+    assert box.dropped == {"a": 1}
+    assert len(box) == 3 and box.lengths() == {"a": 2, "b": 1}
+    # arrival order across lanes
+    assert [box.get_nowait() for _ in range(3)] == [("b", 10), ("a", 2), ("a", 3)]
+    with pytest.raises(queue.Empty):
+        box.get_nowait()
+    with pytest.raises(queue.Empty):
+        box.get(timeout=0.01)
+
+
+def test_inbox_priority_and_blocking_get() -> None:
+    box: p.Inbox[str] = p.Inbox({"first": 4, "then": 4}, priority=True)
+    box.put("then", "x")
+    box.put("first", "y")
+    assert box.get(timeout=1.0) == ("first", "y")
+    assert box.get() == ("then", "x")
+    t = threading.Timer(0.05, lambda: box.put("then", "late"))
+    t.start()
+    assert box.get(timeout=10.0) == ("then", "late")
+    t.join()
+    for caps in ({}, {"a": 0}, {"a": True}):
+        with pytest.raises(ValueError, match="capacity"):
+            p.Inbox(caps)  # type: ignore[arg-type]
+    for weights in ({"a": 0}, {"b": 5}):
+        with pytest.raises(ValueError, match="weight cap"):
+            p.Inbox({"a": 3}, max_weight=weights)
+
+
+def test_inbox_weight_cap_drops_oldest_until_the_new_item_fits() -> None:
+    box: p.Inbox[str] = p.Inbox({"big": 100, "small": 2}, max_weight={"big": 10})
+    assert box.put("big", "x", 4) == 0
+    assert box.put("big", "y", 4) == 0
+    assert box.put("big", "z", 5) == 1  # x went: 4 + 5 fits
+    assert box.weights() == {"big": 9, "small": 0}
+    assert box.put("big", "huge", 11) == 1  # heavier than the lane: itself dropped
+    assert box.dropped == {"big": 2}
+    assert box.get_nowait() == ("big", "y")
+    assert box.weights()["big"] == 5
+    assert box.put("small", "s", 10**9) == 0  # no weight cap on this lane

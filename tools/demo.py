@@ -51,6 +51,7 @@ from agent.protocol import (
     PHASES,
     ContactMsg,
     DigestMsg,
+    Guard,
     NeighborRecordMsg,
     StatusMsg,
     TruthPosesMsg,
@@ -322,6 +323,22 @@ class Observer:
     truth_contacts: int = 0
     records: dict[int, NeighborRecordMsg] = field(default_factory=dict)
     digests: dict[int, DigestMsg] = field(default_factory=dict)
+    #: events whose handling failed (counted, reason logged, the observer goes on)
+    rejected: int = 0
+    guard: Guard = field(
+        default_factory=lambda: Guard(lambda line: print(f"observer: {line}", file=sys.stderr))
+    )
+
+    def take_event(self, ev: Any, rec: Recorder | None) -> None:
+        """:meth:`take` for one bus event; never raises (a failure is counted in
+        ``rejected`` and logged with a reason cut to 200 characters, rate limited)."""
+        if ev.kind != "msg":
+            return
+        try:
+            self.take(ev.key, ev.msg, rec, ev.size)
+        except Exception as exc:
+            self.rejected += 1
+            self.guard.reject(f"message on {ev.key}", exc)
 
     def take(self, key: str, msg: Any, rec: Recorder | None, size: int = 0) -> None:
         """Record one message; ``size``: its bytes on the wire (0: its encoding's)."""
@@ -541,8 +558,7 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
             if time.monotonic() > deadline:
                 raise RuntimeError(f"world not ready after {args.world_timeout:g} s")
             for ev in bus.drain(0.1):
-                if ev.kind == "msg":
-                    obs.take(ev.key, ev.msg, rec, ev.size)
+                obs.take_event(ev, rec)
         result["wall_world_ready"] = time.monotonic() - t0
         ids = robot_ids(world.lines, n)
         result["ids"] = ids
@@ -555,8 +571,7 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
         deadline = time.monotonic() + args.timeout
         while True:
             for ev in bus.drain(0.1):
-                if ev.kind == "msg":
-                    obs.take(ev.key, ev.msg, rec, ev.size)
+                obs.take_event(ev, rec)
             if live is not None:
                 live.update(obs, time.monotonic() - t0)
             if all(p.popen.poll() is not None for p in agents.values()):
@@ -568,11 +583,15 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
         settle_end = time.monotonic() + 1.5
         while time.monotonic() < settle_end:
             for ev in bus.drain(0.1):
-                if ev.kind == "msg":
-                    obs.take(ev.key, ev.msg, rec, ev.size)
+                obs.take_event(ev, rec)
         if live is not None:
             live.update(obs, time.monotonic() - t0, force=True)
         result["wall_total"] = time.monotonic() - t0
+        result["rejected"] = {
+            "bus": bus.stats.rejected, "untrusted": bus.stats.untrusted,
+            "observer": obs.rejected,
+        }  # fmt: skip
+        result["dropped"] = bus.stats.dropped
         for r in rogues:  # they stop by themselves after --rogue seconds
             with contextlib.suppress(subprocess.TimeoutExpired):
                 r.popen.wait(max(1.0, args.rogue + 30.0 - (time.monotonic() - t0)))

@@ -114,7 +114,7 @@ def monitor(
             for ev in bus.drain(0.1):
                 if ev.kind == "msg":
                     known = len(obs.agents)
-                    obs.take(ev.key, ev.msg, rec)
+                    obs.take_event(ev, rec)
                     if len(obs.agents) > known:
                         print(f"monitor sees agents {sorted(obs.agents)}", flush=True)
                 elif ev.kind == "alive":
@@ -145,8 +145,7 @@ def monitor(
         settle = time.monotonic() + 1.5
         while time.monotonic() < settle:
             for ev in bus.drain(0.1):
-                if ev.kind == "msg":
-                    obs.take(ev.key, ev.msg, rec)
+                obs.take_event(ev, rec)
     finally:
         bus.close()
         rec.close()

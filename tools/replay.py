@@ -20,10 +20,10 @@ from agent.protocol import (
     ContactMsg,
     DigestMsg,
     NeighborRecordMsg,
-    ProtocolError,
     StatusMsg,
     TruthPosesMsg,
     decode,
+    reason,
 )
 
 
@@ -50,9 +50,9 @@ def load(path: Path) -> Replay:
             rp.messages += 1
             try:
                 msg: Any = decode(message.data)
-            except ProtocolError as exc:
+            except Exception as exc:  # ProtocolError, or anything unforeseen: count, go on
                 rp.rejected += 1
-                rp.events.append((t, f"rejected message on {channel.topic}: {exc}"))
+                rp.events.append((t, f"rejected message on {channel.topic}: {reason(exc)}"))
                 continue
             if isinstance(msg, TruthPosesMsg):
                 rp.truth.append((t, {p[0]: (p[1], p[2], p[3]) for p in msg.poses}))

@@ -19,6 +19,7 @@ import queue
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import cv2
 
@@ -114,33 +115,45 @@ def run_remote(args: argparse.Namespace, out: Path) -> int:
 
     from agent.protocol import (
         KEY_WORLD_TRUTH_POSES,
+        MAX_MESSAGE_BYTES,
+        MAX_PUBLICATION_BYTES,
         CameraReply,
         CameraRequest,
         ErrorReply,
+        Guard,
+        Inbox,
+        ProtocolError,
         TruthPosesMsg,
         decode,
         encode,
         key_camera,
+        take_payload,
     )
 
     cfg = zenoh.Config()
     cfg.insert_json5("connect/endpoints", json.dumps(list(args.connect)))
     if args.no_multicast_scouting:
         cfg.insert_json5("scouting/multicast/enabled", "false")
-    samples: queue.Queue[bytes] = queue.Queue()
+    samples: Inbox[bytes] = Inbox({"truth": 16})
+    guard = Guard(lambda line: print(f"snapshot: {line}", file=sys.stderr))
     with zenoh.open(cfg) as s:
         if args.top_down:
+
+            def on_truth(smp: Any) -> None:
+                samples.put("truth", take_payload(smp.payload, MAX_PUBLICATION_BYTES))
+
             sub = s.declare_subscriber(
-                KEY_WORLD_TRUTH_POSES, lambda smp: samples.put(smp.payload.to_bytes())
+                KEY_WORLD_TRUTH_POSES, guard.wrap(on_truth, KEY_WORLD_TRUTH_POSES)
             )
             deadline = time.monotonic() + args.timeout
             msg = None
             while time.monotonic() < deadline and msg is None:
                 try:
-                    m = decode(samples.get(timeout=0.2), expect=TruthPosesMsg)
-                    msg = m
+                    msg = decode(samples.get(timeout=0.2)[1], expect=TruthPosesMsg)
                 except queue.Empty:
                     continue
+                except ProtocolError as exc:
+                    guard.reject(KEY_WORLD_TRUTH_POSES, exc)
             sub.undeclare()
             if msg is None:
                 print("snapshot: no truth poses from the world", file=sys.stderr)
@@ -159,7 +172,11 @@ def run_remote(args: argparse.Namespace, out: Path) -> int:
         for r in replies:
             if r.ok is None:
                 continue
-            rep = decode(r.ok.payload.to_bytes())
+            try:
+                rep = decode(take_payload(r.ok.payload, MAX_MESSAGE_BYTES))
+            except ProtocolError as exc:
+                guard.reject(f"reply on {key_camera(args.robot)}", exc)
+                continue
             if isinstance(rep, ErrorReply):
                 print(f"snapshot: the world says: {rep.reason}", file=sys.stderr)
                 return 1

@@ -16,14 +16,14 @@ first publication on KEY arrives (e.g. ``world/clock``). Exits 0 (printing ``see
 from __future__ import annotations
 
 import argparse
-import queue
 import sys
+import threading
 import time
 
 import zenoh
 
 from agent.bus import zenoh_config
-from agent.protocol import NetworkSpec
+from agent.protocol import Guard, NetworkSpec
 
 
 def wait_for(
@@ -38,7 +38,8 @@ def wait_for(
     ``queryable``: a queryable matches ``key``; otherwise: a sample on ``key`` arrived.
     """
     cfg = zenoh_config(NetworkSpec(connect=tuple(connect), multicast_scouting=multicast_scouting))
-    got: queue.Queue[str] = queue.Queue()
+    seen = threading.Event()  # all the callback records: bounded by construction
+    guard = Guard(lambda line: print(f"wait_for: {line}", file=sys.stderr))
     with zenoh.open(cfg) as session:
         if queryable:
             querier = session.declare_querier(key)
@@ -52,12 +53,9 @@ def wait_for(
                 return False
             finally:
                 querier.undeclare()
-        sub = session.declare_subscriber(key, lambda s: got.put(str(s.key_expr)))
+        sub = session.declare_subscriber(key, guard.wrap(lambda s: seen.set(), f"sample on {key}"))
         try:
-            got.get(timeout=timeout)
-            return True
-        except queue.Empty:
-            return False
+            return seen.wait(timeout)
         finally:
             sub.undeclare()
 
