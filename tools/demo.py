@@ -240,13 +240,17 @@ def fleet_network(args: argparse.Namespace, out: Path, robots: int) -> FleetNet:
     return FleetNet(f"tls/127.0.0.1:{port}", flags, str(creds))
 
 
-def start_rogues(net: FleetNet, out: Path, ids: list[int], duration: float) -> list[Proc]:
+def start_rogues(
+    net: FleetNet, out: Path, ids: list[int], duration: float, replay: Path | None = None
+) -> list[Proc]:
     """``tools.rogue`` attackers for ``--rogue`` (issue #8), each writing a JSON report.
 
     Always a stranger (no credentials). Secure TLS fleets: also an insider holding the
     observer's key (access control limits it). Plain-links fleets: also an insider
     holding the key of a fleet robot that is not in this run (the demo's fleet has one
     spare) attacking robot ``ids[0]``: only the end-to-end signatures stand in its way.
+    Each writes what it saw to ``rogue-NAME.capture``; ``replay`` (a capture of an
+    earlier run) is replayed as well.
     """
     target = ids[0]
     base = [sys.executable, "-m", "tools.rogue", "--connect", net.endpoint,
@@ -262,7 +266,10 @@ def start_rogues(net: FleetNet, out: Path, ids: list[int], duration: float) -> l
     for old in out.glob("rogue-*.json"):
         old.unlink()
     for name, extra in who:
-        cmd = [*base, *extra, "--json", str(out / f"rogue-{name}.json")]
+        cmd = [*base, *extra, "--json", str(out / f"rogue-{name}.json"),
+               "--capture", str(out / f"rogue-{name}.capture")]  # fmt: skip
+        if replay is not None:
+            cmd += ["--replay-file", str(replay)]
         log = (out / f"rogue-{name}.log").open("wb")
         p = subprocess.Popen(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT)
         procs.append(Proc(f"rogue {name}", p, log))
@@ -565,7 +572,9 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
         agent_net = ["--connect", endpoint, *net.flags]
         agents.update({i: start_agent(i, n, endpoint, out, args, agent_net) for i in ids})
         procs.extend(agents.values())
-        rogues = start_rogues(net, out, ids, args.rogue) if args.rogue > 0 else []
+        rogues = (
+            start_rogues(net, out, ids, args.rogue, args.rogue_replay) if args.rogue > 0 else []
+        )
         result["rogues_started"] = [r.name for r in rogues]
         live = LiveView(err, ids) if not quiet else None
         deadline = time.monotonic() + args.timeout
@@ -822,6 +831,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         default=0.0,
         metavar="S",
         help="attack the fleet with tools.rogue for S seconds while it works (issue #8)",
+    )
+    p.add_argument(
+        "--rogue-replay",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="the rogue also replays this capture of an earlier run (rogue-*.capture)",
     )
     p.add_argument(
         "--plain-links",
