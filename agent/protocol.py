@@ -21,6 +21,8 @@ from typing import Any, ClassVar, TypeVar
 
 import msgpack
 
+from agent import nao as nao  # NAO facts, shared with sim/ through this module
+
 SCHEMA_VERSION = 1
 MAX_ROBOT_ID = 65535
 MAX_NEIGHBOURS = 64
@@ -30,7 +32,7 @@ MAX_IMAGE_BYTES = 8 * 1024 * 1024
 MAX_MESSAGE_BYTES = MAX_IMAGE_BYTES + 4096
 MAX_COORD = 1000.0  # metres: no NAO fleet spans a kilometre
 MAX_STEP = 50.0  # metres: the longest single walk command accepted
-HEAD_YAW_LIMIT = math.radians(119.5)
+HEAD_YAW_LIMIT = nao.HEAD_YAW_LIMIT
 DIGEST_HEX_LEN = 64
 
 PHASES = (

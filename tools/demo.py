@@ -281,7 +281,7 @@ class LiveView:
 
 def plan_from_agreed(obs: Observer, d_e: float, phi_e: float) -> Any:
     """The plan recomputed by the evaluator from the records the agents exchanged."""
-    from agent.runner import FormationAdapter
+    from agent.adapters import FormationAdapter
 
     fa = FormationAdapter()
     recs = tuple(obs.records[i] for i in sorted(obs.records))
