@@ -19,6 +19,7 @@ from agent.bus import Bus, BusError, NoRoute
 from agent.nao import HEAD_YAW_LIMIT
 from agent.protocol import (
     KEY_WORLD_REGISTER,
+    MAX_STEP,
     CameraReply,
     CameraRequest,
     CommandReply,
@@ -125,6 +126,8 @@ class ZenohBody:
 
     def walk(self, distance: float) -> MotionResult:
         """Walk ``distance`` m straight ahead; returns when done (status done|contact)."""
+        if not math.isfinite(distance) or abs(distance) > MAX_STEP:
+            raise ValueError(f"walk distance {distance} m outside ±{MAX_STEP:g} m")
         return self._motion(key_walk(self.robot_id), WalkRequest(distance=distance), "walk")
 
     def turn(self, angle: float) -> MotionResult:
