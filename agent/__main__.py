@@ -105,8 +105,9 @@ def main(argv: list[str] | None = None) -> int:
     log = logging.getLogger("agent")
     # Imported here so that `--help` and usage errors need no zenoh session.
     from agent.bus import Bus, BusConfig
+    from agent.config import AgentConfig
     from agent.robot import ZenohBody, register
-    from agent.runner import AgentConfig, Runner, report_unavailable
+    from agent.runner import Runner, report_unavailable
     from agent.seams import Body, BodyError
 
     try:

@@ -15,9 +15,10 @@ import pytest
 
 from agent.adapters import FormationAdapter, PerceptionAdapter
 from agent.bus import Bus, BusConfig
+from agent.config import AgentConfig
 from agent.protocol import NeighborRecordMsg
 from agent.robot import ZenohBody
-from agent.runner import AgentConfig, AgentFailure, Peer, Runner, report_unavailable
+from agent.runner import AgentFailure, Peer, Runner, report_unavailable
 
 # robots 1, 2, 3 at known world positions; every robot sees every other one
 WORLD = {1: (0.0, 0.0), 2: (-1.0, 0.1), 3: (0.9, -0.2)}

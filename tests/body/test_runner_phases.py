@@ -19,9 +19,10 @@ import pytest
 from agent.adapters import FormationAdapter, PerceptionAdapter
 from agent.body_world import WorldBody
 from agent.bus import Bus, BusConfig
+from agent.config import AgentConfig
 from agent.control import wrap_pi
 from agent.protocol import NeighborRecordMsg
-from agent.runner import NORTH, AgentConfig, Peer, Runner
+from agent.runner import NORTH, Peer, Runner
 from sim import scenarios
 from sim.world import World
 

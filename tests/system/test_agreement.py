@@ -18,10 +18,11 @@ import pytest
 
 from agent.adapters import FormationAdapter, PerceptionAdapter
 from agent.bus import Bus, BusConfig
+from agent.config import AgentConfig
 from agent.exchange import Decision
 from agent.protocol import Message, NeighborRecordMsg, StatusMsg
 from agent.robot import ZenohBody
-from agent.runner import AgentConfig, Runner
+from agent.runner import Runner
 
 
 @functools.cache
