@@ -42,6 +42,8 @@ T = TypeVar("T")
 
 HEAD_TOLERANCE = math.radians(1.0)  # the head has reached its target
 HEAD_SETTLE_S = 3.0  # longest wait for the head (a full 239° sweep at 0.3 takes ~1 s)
+HEAD_START_S = 0.15  # a head that has not moved this long after setAngles has stopped
+CAMERA_FPS = 15  # ALVideoDevice subscription rate
 
 
 def _call(action: str, fn: Callable[[], T]) -> T:
@@ -93,7 +95,7 @@ class NaoqiBody:
                     nao.TOP_CAMERA,
                     nao.RESOLUTION_VGA,
                     nao.COLORSPACE_BGR,
-                    5,
+                    CAMERA_FPS,
                 ),
             )
         except BodyError:
@@ -124,23 +126,44 @@ class NaoqiBody:
             lambda: self.motion.setAngles(nao.HEAD_YAW_JOINT, float(yaw), nao.HEAD_SPEED_FRACTION),
         )
         applied = self._head_settled(yaw)
-        raw = _call("ALVideoDevice.getImageRemote", lambda: self.video.getImageRemote(self._handle))
-        img, t = self._decode(what, raw)
+        settled_at = self._robot_time()
+        # the camera streams: an image stamped before the head settled was taken while
+        # it moved (a real NAO's frame can be a frame period old); take the next one
+        for _ in range(5):
+            raw = _call(
+                "ALVideoDevice.getImageRemote", lambda: self.video.getImageRemote(self._handle)
+            )
+            img, t = self._decode(what, raw)
+            if t >= settled_at - 1e-3:  # getTime is a float32 on the wire
+                break
+            time.sleep(1.0 / CAMERA_FPS)
         self._t_sim = max(self._t_sim, t)
         return Frame(img, applied, t)
 
     def _head_settled(self, target: float) -> float:
-        """The HeadYaw sensor once it reads ``target`` or stops moving."""
-        end = time.monotonic() + HEAD_SETTLE_S
+        """The HeadYaw sensor once it reads ``target``, or has stopped short of it (a
+        joint at its mechanical stop, backlash) after ``HEAD_START_S``."""
+        start = time.monotonic()
         last = math.inf
         while True:
             now = self._read_head()
-            if abs(now - target) <= HEAD_TOLERANCE or abs(now - last) < 1e-4:
+            waited = time.monotonic() - start
+            if abs(now - target) <= HEAD_TOLERANCE:
                 return now
-            if time.monotonic() > end:
+            if waited > HEAD_START_S and abs(now - last) < 1e-4:
+                return now
+            if waited > HEAD_SETTLE_S:
                 raise BodyError("HeadYaw", f"at {math.degrees(now):.1f}°, not at the target")
             last = now
             time.sleep(0.02)
+
+    def _robot_time(self) -> float:
+        """The robot's clock (``ALMotion.getTime``; sim time on a virtual NAO), or this
+        computer's monotonic clock on a NAOqi without it."""
+        try:
+            return float(self.motion.getTime(0))
+        except Exception:
+            return time.monotonic()
 
     def _read_head(self) -> float:
         vals = _call("ALMotion.getAngles", lambda: self.motion.getAngles(nao.HEAD_YAW_JOINT, True))
@@ -181,7 +204,7 @@ class NaoqiBody:
     def _move(self, what: str, x: float, theta: float) -> MotionResult:
         self._open(what)
         ok = _call(f"{what} (ALMotion.moveTo)", lambda: self.motion.moveTo(x, 0.0, theta))
-        t = float(_call("ALMotion.getTime", lambda: self.motion.getTime(0)))
+        t = self._robot_time()
         self._t_sim = max(self._t_sim, t)
         if ok is False:
             self.contacts += 1
