@@ -16,7 +16,8 @@ import math
 import socket
 import threading
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 import pytest
 
@@ -40,6 +41,9 @@ class Rig:
     kind: str
     world: World
     make: Callable[[int], Body]
+    server: Any = None  # the WorldServer (zenoh and naoqi)
+    urls: dict[int, str] = field(default_factory=dict)  # the virtual NAOs (naoqi)
+    gateway: Any = None
 
 
 @contextlib.contextmanager
@@ -75,7 +79,9 @@ def rig(kind: str, scenario: Scenario, noise: bool = False) -> Iterator[Rig]:
 
             bus = Bus(BusConfig(connect=(ep,), multicast_scouting=False))
             stack.callback(bus.close)
-            yield Rig(kind, world, lambda rid: keep(ZenohBody(bus, rid, camera_timeout=5.0)))
+            yield Rig(
+                kind, world, lambda rid: keep(ZenohBody(bus, rid, camera_timeout=5.0)), server
+            )
             return
         from agent.body_naoqi import NaoqiBody
         from sim.naoqi_gateway import NaoqiGateway
@@ -89,7 +95,7 @@ def rig(kind: str, scenario: Scenario, noise: bool = False) -> Iterator[Rig]:
             url = urls.get(rid, f"tcp://127.0.0.1:{free_port()}")
             return keep(NaoqiBody(url, rid, timeout=3.0))
 
-        yield Rig(kind, world, naoqi)
+        yield Rig(kind, world, naoqi, server, urls, gateway)
 
 
 #: robot 1 at the origin facing north, robot 2 0.9 m ahead facing it
