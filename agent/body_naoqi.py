@@ -18,8 +18,9 @@ NAO (``tcp://nao.local:9559``) or a virtual one served by ``python -m sim --naoq
 Limits are checked before anything moves: head yaw within ±119.5° (``ValueError``), one
 walk at most 50 m (the protocol's bound). Every qi error (connection lost, a service
 missing, a method refusing) becomes a :class:`~agent.seams.BodyError`. The session is
-closed explicitly (also at interpreter exit): a qi session left open when Python
-finalises ends the process with "terminate called without an active exception".
+closed explicitly, also at interpreter exit (``atexit``): a bare qi session left to
+Python's finalisation can end the process with "terminate called without an active
+exception" (tests/body/test_naoqi.py checks a process that never calls ``close``).
 """
 
 from __future__ import annotations

@@ -1,7 +1,8 @@
-"""The zenoh body (DESIGN.md §2–3, §8): a :class:`~agent.seams.Body` over the world's queryables.
+"""The zenoh body (DESIGN.md §2–3, §8): a :class:`~agent.seams.Body` on the world process.
 
-Forehead camera at a head yaw, walk, turn. Each action is a query to the world's queryables (``world/robot/{id}/camera|walk|turn``,
-DESIGN.md §3); walk and turn replies arrive when the motion has finished in sim time.
+Forehead camera at a head yaw, walk, turn. Each action is a query to the world's
+queryables (``world/robot/{id}/camera|walk|turn``, DESIGN.md §3); walk and turn replies
+arrive when the motion has finished in sim time.
 The body reports no pose: the agent knows only what it commanded and what it sees.
 """
 
