@@ -2,7 +2,12 @@
 
     python -m agent --id N|auto [--fleet-size N] [--connect EP]... [--listen EP]...
                     [--no-multicast-scouting] [--mode peer|client] [--d-e 0.8]
-                    [--phi-e-deg 30] [--timeout S]
+                    [--phi-e-deg 30] [--timeout S] [--body zenoh|naoqi]
+                    [--nao tcp://HOST:9559]
+
+The body is the simulated world over zenoh (``--body zenoh``, the default) or a NAO
+over its qi protocol (``--body naoqi --nao tcp://nao.local:9559``: a real robot, or a
+virtual one served by ``python -m sim --naoqi``). Agents always talk zenoh to each other.
 
 Exit status: 0 when the robot holds its place in the pyramid, 1 on a safe stop
 (failed agreement, planning or motion; the reason is logged and published), 2 on a
@@ -16,8 +21,9 @@ import dataclasses
 import logging
 import math
 import sys
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
+from agent.nao import NAOQI_PORT
 from agent.protocol import MAX_ROBOT_ID, add_network_arguments, network_spec
 
 if TYPE_CHECKING:
@@ -44,6 +50,18 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         action="store_true",
         help="skip the final visual alignment to the parent (the papers' open-loop ending)",
     )
+    p.add_argument(
+        "--body",
+        choices=("zenoh", "naoqi"),
+        default="zenoh",
+        help="what the agent drives: the simulated world over zenoh, or a NAO over qi",
+    )
+    p.add_argument(
+        "--nao",
+        metavar="URL",
+        default=None,
+        help=f"qi URL of the NAO for --body naoqi (e.g. tcp://nao.local:{NAOQI_PORT})",
+    )
     p.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
     args = p.parse_args(argv)
     if args.id != "auto":
@@ -53,6 +71,15 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
             p.error(f"--id must be an integer or 'auto', got {args.id!r}")
         if not 0 <= rid <= MAX_ROBOT_ID:
             p.error(f"--id {rid} outside [0, {MAX_ROBOT_ID}]")
+    if args.body == "naoqi":
+        if not args.nao:
+            p.error(f"--body naoqi needs --nao URL (e.g. tcp://nao.local:{NAOQI_PORT})")
+        if args.id == "auto":
+            p.error("--body naoqi needs a fixed --id (the robot at --nao)")
+        if "://" not in args.nao:
+            p.error(f"--nao {args.nao!r} is not a URL like tcp://HOST:{NAOQI_PORT}")
+    elif args.nao:
+        p.error("--nao needs --body naoqi")
     if args.fleet_size is not None and args.fleet_size < 1:
         p.error("--fleet-size must be >= 1")
     if not (math.isfinite(args.d_e) and args.d_e > 0):
@@ -73,7 +100,8 @@ def open_bus(args: argparse.Namespace, log: logging.Logger) -> tuple[Bus, int]:
     free one wins. Insecure: ``--id auto`` takes the lowest free id.
     """
     from agent.bus import Bus
-    from agent.robot import RobotError, register
+    from agent.robot import register
+    from agent.seams import BodyError
     from agent.trust import Credentials
 
     if args.id != "auto":
@@ -84,7 +112,7 @@ def open_bus(args: argparse.Namespace, log: logging.Logger) -> tuple[Bus, int]:
         bus = Bus(spec)
         try:
             rid = register(bus, -1, timeout=30.0)
-        except RobotError:
+        except BodyError:
             bus.close()
             raise
         log.info("claimed robot %d", rid)
@@ -97,13 +125,13 @@ def open_bus(args: argparse.Namespace, log: logging.Logger) -> tuple[Bus, int]:
         bus = Bus(dataclasses.replace(spec, identity=f"robot-{rid}"))
         try:
             got = register(bus, rid, timeout=30.0)
-        except RobotError as exc:
+        except BodyError as exc:
             bus.close()
             reasons.append(str(exc))
             continue
         log.info("claimed robot %d with its key", got)
         return bus, got
-    raise RobotError(f"no robot could be claimed with keys {keys}: {'; '.join(reasons)}")
+    raise BodyError("register", f"no robot could be claimed with keys {keys}: {'; '.join(reasons)}")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -115,50 +143,61 @@ def main(argv: list[str] | None = None) -> int:
     )
     log = logging.getLogger("agent")
     # Imported here so that `--help` and usage errors need no zenoh session.
-    from agent.robot import Robot, RobotError
-    from agent.runner import AgentConfig, Runner, load_formation, load_perception
+    from agent.config import AgentConfig
+    from agent.robot import ZenohBody
+    from agent.runner import Runner, report_unavailable
+    from agent.seams import Body, BodyError
 
     try:
         opened = open_bus(args, log)
     except ValueError as exc:  # usage: bad flags, no credentials (TrustError is one too)
         print(f"python -m agent: {exc}", file=sys.stderr)
         return 2
-    except RobotError as exc:
+    except BodyError as exc:
         log.error("%s", exc)
         return 1
     bus, rid = opened
     with bus:
-        missing = []
-        perception: Any = None
-        formation: Any = None
         try:
-            perception = load_perception()
+            from agent.adapters import FormationAdapter, PerceptionAdapter
+
+            perception = PerceptionAdapter()
+            formation = FormationAdapter()
         except (ValueError, OSError, ImportError) as exc:
-            missing.append(f"perception unavailable: {exc}")
+            return report_unavailable(bus, rid, f"perception or formation unavailable: {exc}")
+        body: Body
+        if args.body == "naoqi":
+            from agent.body_naoqi import NaoqiBody
+
+            try:
+                body = NaoqiBody(args.nao, rid)
+            except BodyError as exc:
+                return report_unavailable(bus, rid, str(exc))
+        else:
+            body = ZenohBody(bus, rid)
         try:
-            formation = load_formation()
-        except (ValueError, OSError, ImportError) as exc:
-            missing.append(f"formation core unavailable: {exc}")
-        runner = Runner(
-            bus,
-            Robot(bus, rid),
-            AgentConfig(
-                robot_id=rid,
-                fleet_size=args.fleet_size,
-                d_e=args.d_e,
-                phi_e=math.radians(args.phi_e_deg),
-                timeout=args.timeout,
-                wave_timeout=args.wave_timeout,
-                correct=not args.no_correct,
-            ),
-            perception=perception,
-            formation=formation,
-            unavailable="; ".join(missing),
-        )
-        code = runner.run()
+            runner = Runner(
+                bus,
+                body,
+                AgentConfig(
+                    robot_id=rid,
+                    fleet_size=args.fleet_size,
+                    d_e=args.d_e,
+                    phi_e=math.radians(args.phi_e_deg),
+                    timeout=args.timeout,
+                    wave_timeout=args.wave_timeout,
+                    correct=not args.no_correct,
+                ),
+                perception,
+                formation,
+            )
+            code = runner.run()
+        finally:
+            body.close()
         st = bus.stats
         log.info(
-            "robot %d exit %d: published %d B (%s), compass %d/%d failed",
+            "robot %d exit %d: published %d B (%s), compass %d/%d failed, "
+            "rejected %d (untrusted %d), dropped %d",
             rid,
             code,
             st.total_published,
@@ -167,6 +206,9 @@ def main(argv: list[str] | None = None) -> int:
             ),
             runner.compass_failures,
             runner.compass_uses,
+            st.rejected,
+            st.untrusted,
+            st.dropped,
         )
         return code
 

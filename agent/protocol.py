@@ -30,6 +30,8 @@ from typing import Any, ClassVar, Generic, Protocol, TypeVar
 
 import msgpack
 
+from agent import nao as nao  # NAO facts, shared with sim/ through this module
+
 SCHEMA_VERSION = 1
 MAX_ROBOT_ID = 65535
 MAX_NEIGHBOURS = 64
@@ -50,7 +52,7 @@ MAX_ARRAY_LEN = MAX_MEMBERS
 MAX_STR_BYTES = 4 * MAX_TEXT  # MAX_TEXT characters of UTF-8
 MAX_COORD = 1000.0  # metres: no NAO fleet spans a kilometre
 MAX_STEP = 50.0  # metres: the longest single walk command accepted
-HEAD_YAW_LIMIT = math.radians(119.5)
+HEAD_YAW_LIMIT = nao.HEAD_YAW_LIMIT
 DIGEST_HEX_LEN = 64
 
 PHASES = (

@@ -1,7 +1,8 @@
-"""The body an agent drives (DESIGN.md §2): forehead camera at a head yaw, walk, turn.
+"""The zenoh body (DESIGN.md §2–3, §8): a :class:`~agent.seams.Body` on the world process.
 
-Each action is a query to the world's queryables (``world/robot/{id}/camera|walk|turn``,
-DESIGN.md §3); walk and turn replies arrive when the motion has finished in sim time.
+Forehead camera at a head yaw, walk, turn. Each action is a query to the world's
+queryables (``world/robot/{id}/camera|walk|turn``, DESIGN.md §3); walk and turn replies
+arrive when the motion has finished in sim time.
 The body reports no pose: the agent knows only what it commanded and what it sees.
 """
 
@@ -10,16 +11,16 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import TypeVar
 
 import cv2
 import numpy as np
 
 from agent.bus import Bus, BusError, NoRoute
+from agent.nao import HEAD_YAW_LIMIT
 from agent.protocol import (
-    HEAD_YAW_LIMIT,
     KEY_WORLD_REGISTER,
+    MAX_STEP,
     CameraReply,
     CameraRequest,
     CommandReply,
@@ -31,11 +32,10 @@ from agent.protocol import (
     key_turn,
     key_walk,
 )
+from agent.seams import BodyError, Frame, MotionResult
 
-
-class RobotError(RuntimeError):
-    """The world refused or failed a request for this robot; the text says why."""
-
+#: Former name of :class:`~agent.seams.BodyError` (kept for callers of the old API).
+RobotError = BodyError
 
 T = TypeVar("T")
 
@@ -59,15 +59,6 @@ def retry_no_route(call: Callable[[], T], deadline_s: float, first_wait: float =
             wait = min(wait * 2.0, 1.0)
 
 
-@dataclass(frozen=True)
-class Frame:
-    """One camera image (BGR uint8, (H, W, 3)) with the head yaw and sim time it was taken."""
-
-    image: np.ndarray
-    yaw: float
-    t_sim: float
-
-
 def register(bus: Bus, want: int = -1, timeout: float = 10.0) -> int:
     """Claim a free robot of the scenario from the world (``--id auto``)."""
     try:
@@ -78,12 +69,16 @@ def register(bus: Bus, want: int = -1, timeout: float = 10.0) -> int:
             timeout,
         )
     except BusError as exc:
-        raise RobotError(f"cannot register with the world: {exc}") from None
+        raise BodyError("register", f"cannot register with the world: {exc}") from None
     return reply.robot_id
 
 
-class Robot:
-    """Camera, walk and turn of robot ``robot_id`` through the world process."""
+class ZenohBody:
+    """Camera, walk and turn of robot ``robot_id`` through the world process.
+
+    Satisfies :class:`agent.seams.Body`; :meth:`stop` and :meth:`close` do nothing: a
+    motion ends in the world, and the bus belongs to the caller.
+    """
 
     def __init__(
         self,
@@ -93,16 +88,24 @@ class Robot:
         motion_timeout: float = 300.0,
     ) -> None:
         self.bus = bus
-        self.robot_id = robot_id
+        self._robot_id = robot_id
         self.camera_timeout = camera_timeout
         self.motion_timeout = motion_timeout
-        self.t_sim = 0.0
+        self._t_sim = 0.0
         self.contacts = 0
+
+    @property
+    def robot_id(self) -> int:
+        return self._robot_id
+
+    @property
+    def t_sim(self) -> float:
+        return self._t_sim
 
     def camera(self, yaw: float) -> Frame:
         """The forehead image with the head at ``yaw`` (rad, + left, |yaw| <= 119.5°)."""
         if not math.isfinite(yaw) or abs(yaw) > HEAD_YAW_LIMIT + 1e-9:
-            raise ValueError(f"head yaw {yaw} rad outside ±119.5°")
+            raise ValueError(f"head yaw {yaw} rad outside ±{math.degrees(HEAD_YAW_LIMIT):.1f}°")
         try:
             rep = retry_no_route(
                 lambda: self.bus.query(
@@ -114,23 +117,31 @@ class Robot:
                 self.camera_timeout,
             )
         except BusError as exc:
-            raise RobotError(f"camera at yaw {math.degrees(yaw):.1f}°: {exc}") from None
+            raise BodyError(f"camera at yaw {math.degrees(yaw):.1f}°", str(exc)) from None
         buf = np.frombuffer(rep.data, dtype=np.uint8)
         img = cv2.imdecode(buf, cv2.IMREAD_COLOR)
         if img is None or img.shape != (rep.height, rep.width, 3):
-            raise RobotError(f"camera at yaw {math.degrees(yaw):.1f}°: undecodable image")
-        self.t_sim = max(self.t_sim, rep.t_sim)
+            raise BodyError(f"camera at yaw {math.degrees(yaw):.1f}°", "undecodable image")
+        self._t_sim = max(self._t_sim, rep.t_sim)
         return Frame(img, rep.yaw, rep.t_sim)
 
-    def walk(self, distance: float) -> CommandReply:
+    def walk(self, distance: float) -> MotionResult:
         """Walk ``distance`` m straight ahead; returns when done (status done|contact)."""
+        if not math.isfinite(distance) or abs(distance) > MAX_STEP:
+            raise ValueError(f"walk distance {distance} m outside ±{MAX_STEP:g} m")
         return self._motion(key_walk(self.robot_id), WalkRequest(distance=distance), "walk")
 
-    def turn(self, angle: float) -> CommandReply:
+    def turn(self, angle: float) -> MotionResult:
         """Turn on the spot by ``angle`` rad (+ CCW); returns when done."""
         return self._motion(key_turn(self.robot_id), TurnRequest(angle=angle), "turn")
 
-    def _motion(self, key: str, req: WalkRequest | TurnRequest, what: str) -> CommandReply:
+    def stop(self) -> None:
+        """Nothing to stop: the world ends each motion itself (it has no cancel)."""
+
+    def close(self) -> None:
+        """Nothing to release: the bus is the caller's."""
+
+    def _motion(self, key: str, req: WalkRequest | TurnRequest, what: str) -> MotionResult:
         try:
             # Safe to repeat: NoRoute means the command reached no queryable (it ended
             # within bus.NO_ROUTE_WINDOW with no reply), so the world never started it.
@@ -138,10 +149,15 @@ class Robot:
                 lambda: self.bus.query(key, req, CommandReply, self.motion_timeout), 30.0
             )
         except BusError as exc:
-            raise RobotError(f"{what}: {exc}") from None
-        if rep.status == "error":
-            raise RobotError(f"{what}: world reports error: {rep.detail}")
+            raise BodyError(what, str(exc)) from None
+        self._t_sim = max(self._t_sim, rep.t_sim)
         if rep.status == "contact":
             self.contacts += 1
-        self.t_sim = max(self.t_sim, rep.t_sim)
-        return rep
+            return MotionResult("contact", rep.t_sim, rep.detail)
+        if rep.status != "done":
+            raise BodyError(what, f"world reports {rep.status}: {rep.detail}")
+        return MotionResult("done", rep.t_sim, rep.detail)
+
+
+#: Former name of :class:`ZenohBody`.
+Robot = ZenohBody

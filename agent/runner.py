@@ -24,16 +24,18 @@ commanded steps along the believed heading. Agents never read ground truth.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import time
+import traceback
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
 from agent.bus import Bus, Event
+from agent.config import AgentConfig
 from agent.control import (
     PAPER_GAINS,
     STEP_GAINS,
@@ -44,9 +46,10 @@ from agent.control import (
     wrap_pi,
 )
 from agent.exchange import Agreement, Decision
-from agent.perception.camera import CameraModel
+from agent.formation.plan import Plan
+from agent.nao import HEAD_YAW_LIMIT
+from agent.perception.detector import Detection
 from agent.protocol import (
-    HEAD_YAW_LIMIT,
     KEY_ALIVE_ALL,
     KEY_DIGEST_ALL,
     KEY_RECORD_ALL,
@@ -59,56 +62,19 @@ from agent.protocol import (
     key_digest,
     key_record,
     key_status,
+    reason,
 )
-from agent.robot import Frame, Robot, RobotError
+from agent.seams import Body, BodyError, Formation, Frame, Perception, Sightings
 
 log = logging.getLogger("agent.runner")
 
 NORTH = math.pi / 2
-#: Head yaws of one sweep (paper 5.2.2 iii): the camera model's, 26.6° apart, so that every
-#: NAO at >= 0.5 m is wholly inside some image (7 evenly spaced yaws, 39.8° apart, left
-#: gaps where a NAO closer than about 0.8 m fell between two images and was dropped as
-#: cut by the border).
-SEARCH_YAWS = CameraModel().sweep_yaws(limit=HEAD_YAW_LIMIT)
 STATUS_MIN_INTERVAL = 3.0  # s between progress statuses of the same phase
 HEARTBEAT = 3.0  # s between statuses while waiting
 
 
 class AgentFailure(RuntimeError):
     """A reason to stop safely (status ``failed``); the text is the reason."""
-
-
-@dataclass(frozen=True)
-class AgentConfig:
-    robot_id: int
-    fleet_size: int | None = None
-    d_e: float = 0.8
-    phi_e: float = math.radians(30.0)
-    timeout: float = 120.0  # s from the end of the search to agreement
-    wave_timeout: float = 600.0  # s to wait for earlier waves, and for the fleet to hold
-    settle: float = 3.0  # s of unchanged membership when no fleet size is given
-    search_yaws: tuple[float, ...] = SEARCH_YAWS
-    rotation_tolerance: float = math.radians(2.0)
-    # Re-publication backoff cap: a peer that lacks our record says so in its digest,
-    # which re-arms us at once, so long waits (others still searching) need few re-sends.
-    backoff_max: float = 16.0
-    correct: bool = True  # final visual alignment to the parent (see Runner.correct)
-    max_correction: float = 0.3  # m
-
-    def __post_init__(self) -> None:
-        if self.fleet_size is not None and self.fleet_size < 1:
-            raise ValueError(f"fleet size must be >= 1, got {self.fleet_size}")
-        if not (math.isfinite(self.d_e) and self.d_e > 0.0):
-            raise ValueError(f"d_e must be > 0 m, got {self.d_e}")
-        if not (math.isfinite(self.phi_e) and 0.0 < self.phi_e < math.pi / 2):
-            raise ValueError(f"phi_e must be in (0°, 90°), got {math.degrees(self.phi_e)}°")
-        for name in ("timeout", "wave_timeout", "settle"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v >= 0.0):
-                raise ValueError(f"{name} must be finite and >= 0, got {v}")
-        for y in self.search_yaws:
-            if abs(y) > HEAD_YAW_LIMIT + 1e-9:
-                raise ValueError(f"search yaw {math.degrees(y):.1f}° outside ±119.5°")
 
 
 @dataclass
@@ -131,36 +97,41 @@ class Timeline:
 
 
 class Runner:
-    """Drives one robot through the phases; :meth:`run` returns the exit code."""
+    """Drives one robot through the phases; :meth:`run` returns the exit code.
+
+    It depends only on the seams of :mod:`agent.seams`: a :class:`~agent.seams.Body`
+    (zenoh world, NAOqi or in-process world), a :class:`~agent.seams.Perception` and a
+    :class:`~agent.seams.Formation`; the bus carries the exchange between agents.
+    """
 
     def __init__(
         self,
         bus: Bus,
-        robot: Robot,
+        body: Body,
         config: AgentConfig,
-        perception: Any = None,
-        formation: Any = None,
+        perception: Perception,
+        formation: Formation,
         clock: Callable[[], float] = time.monotonic,
-        unavailable: str = "",
     ) -> None:
-        if robot.robot_id != config.robot_id:
-            raise ValueError(f"robot {robot.robot_id} driven with config for {config.robot_id}")
+        if body.robot_id != config.robot_id:
+            raise ValueError(f"robot {body.robot_id} driven with config for {config.robot_id}")
         self.bus = bus
-        self.robot = robot
+        self.body = body
         self.cfg = config
         self.me = config.robot_id
         self.clock = clock
         self.perception = perception
         self.formation = formation
-        self.unavailable = unavailable
         self.heading = NORTH
         self.position = np.zeros(2)
         self.phase = "start"
         self.peers: dict[int, Peer] = {}
         self.early_records: dict[int, NeighborRecordMsg] = {}
+        self.epochs: dict[int, int] = {}  # newest session (epoch) heard per sender
+        self.agreed_epochs: dict[int, int] = {}  # the sessions the agreement was made with
         self.early_digests: dict[int, DigestMsg] = {}
         self.agreement: Agreement | None = None
-        self.plan: Any = None
+        self._plan: Plan | None = None
         self.plan_digest = ""
         self.wave = -1
         self.record_round = 0
@@ -173,6 +144,17 @@ class Runner:
         self.final_heading = NORTH
 
     # ================================================================= plumbing
+
+    @property
+    def plan(self) -> Plan:
+        """The agreed plan (after :meth:`make_plan`)."""
+        if self._plan is None:
+            raise AgentFailure("no plan yet")
+        return self._plan
+
+    @plan.setter
+    def plan(self, plan: Plan) -> None:
+        self._plan = plan
 
     def start_bus(self) -> None:
         for key in (KEY_RECORD_ALL, KEY_DIGEST_ALL, KEY_STATUS_ALL):
@@ -191,7 +173,7 @@ class Runner:
         now = self.clock()
         changed = phase != self.phase
         if changed:
-            self.timeline.mark(phase, self.robot.t_sim)
+            self.timeline.mark(phase, self.body.t_sim)
         self.phase = phase
         if not (changed or force or now - self._last_status >= STATUS_MIN_INTERVAL):
             return
@@ -204,7 +186,7 @@ class Runner:
             plan_digest=self.plan_digest,
             wave=self.wave,
             error=error[:500],
-            t_sim=self.robot.t_sim,
+            t_sim=self.body.t_sim,
             bytes_sent=self.bus.stats.total_published,
         )
         self.bus.publish(key_status(self.me), msg, "status")
@@ -212,7 +194,10 @@ class Runner:
     def pump(self, timeout: float = 0.0) -> None:
         """Handle what arrived; (re-)publish what the agreement says is due."""
         for ev in self.bus.drain(timeout):
-            self._handle(ev)
+            try:
+                self._handle(ev)
+            except Exception as exc:  # one bad event is counted and skipped, never fatal
+                self.bus.guard.reject(f"event on {ev.key}", exc)
         agr = self.agreement
         if agr is not None:
             now = self.clock()
@@ -240,38 +225,65 @@ class Runner:
                     agr.member_left(ev.robot_id, now)
             return
         msg = ev.msg
-        sender = getattr(msg, "sender", None)
+        if not isinstance(msg, NeighborRecordMsg | DigestMsg | StatusMsg):
+            return
         try:
             key_id = id_from_key(ev.key)
         except ValueError:
             key_id = None
-        if sender is None or key_id != sender:
-            log.warning("dropped %s on %s: sender %s does not own the key", msg.TAG, ev.key, sender)
+        if key_id != msg.sender:
+            log.warning(
+                "dropped %s on %s: sender %s does not own the key", msg.TAG, ev.key, msg.sender
+            )
+            return
+        if not self._current_session(ev, msg.sender):
             return
         if isinstance(msg, NeighborRecordMsg):
             if agr is not None:
                 agr.on_record(msg, now)
-            elif msg.sender != self.me:
+            elif msg.sender != self.me and self._member(msg.sender):
                 old = self.early_records.get(msg.sender)
                 if old is None or old.round <= msg.round:
                     self.early_records[msg.sender] = msg
         elif isinstance(msg, DigestMsg):
             if agr is not None:
                 agr.on_digest(msg, now)
-            elif msg.sender != self.me:
+            elif msg.sender != self.me and self._member(msg.sender):
                 self.early_digests[msg.sender] = msg
         elif isinstance(msg, StatusMsg):
-            if msg.sender == self.me:
-                return
-            peer = self.peers.setdefault(msg.sender, Peer())
-            peer.phase, peer.wave, peer.plan_digest = msg.phase, msg.wave, msg.plan_digest
+            member = self.peers.get(msg.sender)
+            if msg.sender == self.me or member is None or not member.seen_alive:
+                return  # per-sender state only for members (their token came first)
+            member.phase, member.wave, member.plan_digest = msg.phase, msg.wave, msg.plan_digest
             if agr is not None:
                 agr.on_peer_phase(msg.sender, msg.phase)
+
+    def _member(self, rid: int) -> bool:
+        peer = self.peers.get(rid)
+        return peer is not None and peer.alive
+
+    def _current_session(self, ev: Event, sender: int) -> bool:
+        """Whether ``ev`` comes from the member's current session (DESIGN.md §8).
+
+        Secure buses tag each message with its signer's epoch (the sending process's
+        start). A message from an older session of a member than one already heard is
+        stale (a replay, or a process since replaced); once the fleet has agreed, only
+        the session whose record was agreed counts. Insecure buses carry no epoch.
+        """
+        if ev.epoch < 0:
+            return True
+        pinned = self.agreed_epochs.get(sender)
+        if pinned is not None:
+            return ev.epoch == pinned
+        if ev.epoch < self.epochs.get(sender, -1):
+            return False
+        self.epochs[sender] = ev.epoch
+        return True
 
     # ================================================================= motion
 
     def look(self, yaw: float = 0.0) -> Frame:
-        frame = self.robot.camera(yaw)
+        frame = self.body.camera(yaw)
         self.pump()
         return frame
 
@@ -283,7 +295,7 @@ class Runner:
         before = self._last_frame if self._last_frame is not None else self.look(0.0)
         while not (rc.done or rc.exhausted):
             u = rc.next_step()
-            rep = self.robot.turn(u)
+            rep = self.body.turn(u)
             self.pump()
             after = self.look(0.0)
             measured = self._compass(before, after, u)
@@ -307,19 +319,17 @@ class Runner:
         """The rotation between two head-yaw-0 frames; the command when the compass fails.
 
         ``walking``: the frames are 20 cm apart, so only the central band of the image
-        is matched (see :meth:`PerceptionAdapter.measure_walk`)."""
-        if self.perception is None:
-            return commanded
+        is matched (see :meth:`agent.adapters.PerceptionAdapter.measure_walk`)."""
         if walking:
             res = self.perception.measure_walk(before.image, after.image)
         else:
-            res = self.perception.compass.measure(before.image, after.image)
+            res = self.perception.measure_turn(before.image, after.image)
         self.compass_uses += 1
-        if not getattr(res, "ok", False):
+        if not res.ok:
             self.compass_failures += 1
             log.warning(
                 "compass failed (%s): assuming the %s %+.1f°",
-                getattr(res, "reason", "?"), "drift" if walking else "command",
+                res.reason, "drift" if walking else "command",
                 math.degrees(commanded),
             )  # fmt: skip
             return commanded
@@ -351,7 +361,7 @@ class Runner:
                 )
             before = self._last_frame if self._last_frame is not None else self.look(0.0)
             h0 = self.heading
-            rep = self.robot.walk(leg.walk)
+            rep = self.body.walk(leg.walk)
             self.pump()
             after = self.look(0.0)
             drift = self._compass(before, after, 0.0, walking=True)
@@ -372,7 +382,7 @@ class Runner:
 
     # ================================================================= phases
 
-    def search(self) -> list[Any]:
+    def search(self) -> list[Sightings]:
         """Sweeps at θ = 0 and θ = 180° (5.2.2 (iii)); returns fixed-frame sightings.
 
         Addition to the paper: after the second sweep the robot completes the circle
@@ -384,7 +394,7 @@ class Runner:
         """
         self.status("search", 0.0, "sweep at θ = 0°")
         n = 2 * len(self.cfg.search_yaws)
-        raw: list[tuple[int, list[Any]]] = []
+        raw: list[tuple[int, list[Detection]]] = []
         done = 0
         origin: Frame | None = None
         turned = [0.0, 0.0]
@@ -397,8 +407,7 @@ class Runner:
                     self._last_frame = frame
                     if sweep == 0:
                         origin = frame
-                if self.perception is not None:
-                    raw.append((sweep, self.perception.detector.detect(frame.image, yaw)))
+                raw.append((sweep, self.perception.detect(frame.image, yaw)))
                 done += 1
                 self.status(
                     "search", done / n, f"θ = {180 * sweep}°, head {math.degrees(yaw):+.0f}°"
@@ -413,21 +422,17 @@ class Runner:
         self._calibrate(origin, self._last_frame, turned)
         if self.compass_gain != 1.0:
             heading_180 = wrap_pi(NORTH + self.compass_gain * turned[0])
-        sightings = []
-        if self.perception is not None:
-            for sweep, dets in raw:
-                heading = NORTH if sweep == 0 else heading_180
-                sightings.append(self.perception.to_fixed(dets, heading))
-        return sightings
+        return [
+            self.perception.to_fixed(dets, NORTH if sweep == 0 else heading_180)
+            for sweep, dets in raw
+        ]
 
     def _calibrate(self, origin: Frame, final: Frame, turned: list[float]) -> None:
         """Compass gain and absolute heading from the full circle (see :meth:`search`)."""
-        if self.perception is None:
-            return
-        res = self.perception.compass.measure(origin.image, final.image)
+        res = self.perception.measure_turn(origin.image, final.image)
         total = turned[0] + turned[1]
-        if not getattr(res, "ok", False) or total < math.pi:
-            log.warning("compass calibration skipped: %s", getattr(res, "reason", "no turn"))
+        if not res.ok or total < math.pi:
+            log.warning("compass calibration skipped: %s", res.reason if not res.ok else "no turn")
             return
         r = float(res.dtheta)
         gain = (2.0 * math.pi + r) / total
@@ -440,10 +445,8 @@ class Runner:
             "compass calibrated over the circle: gain %.4f, residual %+.2f°", gain, math.degrees(r)
         )
 
-    def localise(self, sightings: list[Any]) -> NeighborRecordMsg:
+    def localise(self, sightings: list[Sightings]) -> NeighborRecordMsg:
         self.status("localise", 0.0)
-        if self.perception is None:
-            raise AgentFailure("no perception available")
         pts, ori, conf = self.perception.merge(sightings)
         rec = NeighborRecordMsg(
             sender=self.me,
@@ -492,16 +495,16 @@ class Runner:
             phase = "exchange" if agr.missing_records() else "agree"
             self.status(phase, (held + agreeing) / (2 * n), d.reason)
 
-    def make_plan(self, decision: Decision) -> Any:
+    def make_plan(self, decision: Decision) -> Plan:
         self.status("plan", 0.0, decision.reason)
-        if self.formation is None:
-            raise AgentFailure("no formation core available")
         try:
             plan = self.formation.plan(decision.records, self.cfg.d_e, self.cfg.phi_e)
         except ValueError as exc:
             raise AgentFailure(f"planning failed on the agreed records: {exc}") from None
         self.plan = plan
         self.plan_digest = str(plan.digest)
+        members = {int(r) for r in self.formation.members(plan)}
+        self.agreed_epochs = {r: e for r, e in self.epochs.items() if r in members}
         rp = plan.robot(self.me)
         self.wave = int(rp.wave)
         self.status("plan", 1.0, f"wave {self.wave}, leader {plan.leader}", force=True)
@@ -572,7 +575,7 @@ class Runner:
         plan = self.plan
         rp = plan.robot(self.me)
         parent = int(rp.parent)
-        if parent < 0 or not self.cfg.correct or self.perception is None:
+        if parent < 0 or not self.cfg.correct:
             return
         deadline = self.clock() + self.cfg.wave_timeout
         while True:
@@ -594,7 +597,7 @@ class Runner:
             bearing = math.atan2(float(expected[1]), float(expected[0]))
             yaw = float(np.clip(wrap_pi(bearing - self.heading), -HEAD_YAW_LIMIT, HEAD_YAW_LIMIT))
             frame = self.look(yaw)
-            dets = self.perception.detector.detect(frame.image, yaw)
+            dets = self.perception.detect(frame.image, yaw)
             pts, _, _ = self.perception.to_fixed(dets, self.heading)
             if len(pts) == 0:
                 log.warning("correction: parent %d not seen", parent)
@@ -645,8 +648,6 @@ class Runner:
         try:
             self.start_bus()
             self.status("start", 0.0, "joined", force=True)
-            if self.unavailable:
-                raise AgentFailure(self.unavailable)
             sightings = self.search()
             record = self.localise(sightings)
             decision = self.agree(record)
@@ -657,160 +658,41 @@ class Runner:
             self.move()
             self.hold()
             return 0
-        except (AgentFailure, RobotError, ValueError) as exc:
-            log.error("robot %d failed: %s", self.me, exc)
-            self.status("failed", 0.0, error=str(exc), force=True)
-            # let the failure status and any pending digest reach the others
-            end = self.clock() + 1.0
-            while self.clock() < end:
-                self.pump(0.1)
-            return 1
-
-
-# ===================================================================== adapters
-# The runner talks to perception and the formation core through these two small
-# adapters, so the phase machine stays independent of their exact signatures.
-
-
-class PerceptionAdapter:
-    """Detector, fixed-frame conversion, merging and visual compass (agent/perception)."""
-
-    def __init__(self) -> None:
-        from agent.perception.compass import VisualCompass
-        from agent.perception.detector import Detector
-
-        self.detector = Detector()
-        self.compass = VisualCompass()
-        # For heading drift over a 20 cm step: forward motion spreads the horizontal
-        # shifts of the image's sides (radial expansion), so the default compass rejects
-        # the match. Near the image centre expansion is small and symmetric: match only
-        # the central band, with a looser inlier ratio. In the simulated room this gives
-        # drift errors with σ ≈ 0.15° (max 0.4°) over 0.2 m steps, against 0 of 120
-        # steps accepted by the default compass.
-        self.walk_compass = VisualCompass(min_inlier_ratio=0.1, tol=math.radians(1.0))
-
-    WALK_BANDS = (120, 200)  # half-widths tried in turn when a band has too few matches
-
-    def measure_walk(self, before: np.ndarray, after: np.ndarray) -> Any:
-        """Compass over the central band of two images taken before and after a step.
-
-        A band may lack matches (a neighbour walked into it): the wider band is tried
-        next (σ ≈ 0.35° in the simulated room), the first ``ok`` result wins."""
-        res: Any = None
-        for half in self.WALK_BANDS:
-            res = self.walk_compass.measure(self._band(before, half), self._band(after, half))
-            if res.ok:
-                return res
-        return res
-
-    @staticmethod
-    def _band(img: np.ndarray, half: int) -> np.ndarray:
-        out = np.array(img, copy=True)
-        c = out.shape[1] // 2
-        out[:, : c - half] = 128
-        out[:, c + half :] = 128
-        return out
-
-    @staticmethod
-    def to_fixed(dets: list[Any], heading: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(points (k, 2) in the fixed frame, confidences (k,), orientations (k,))."""
-        from agent.perception.localise import to_fixed_frame
-
-        pts = to_fixed_frame(dets, heading)
-        conf = np.array([float(d.confidence) for d in dets], dtype=np.float64)
-        ori = np.array([float(d.orientation) for d in dets], dtype=np.float64)
-        return pts.reshape(-1, 2), conf, ori
-
-    @staticmethod
-    def merge(
-        sightings: list[tuple[np.ndarray, np.ndarray, np.ndarray]],
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """One entry per neighbour; orientation and confidence of its best sighting."""
-        from agent.perception.localise import cluster_sightings, merge_sightings
-
-        if not sightings:
-            return np.zeros((0, 2)), np.zeros(0), np.zeros(0)
-        pts = np.concatenate([s[0] for s in sightings]).reshape(-1, 2)
-        conf = np.concatenate([s[1] for s in sightings])
-        ori = np.concatenate([s[2] for s in sightings])
-        if pts.shape[0] == 0:
-            return np.zeros((0, 2)), np.zeros(0), np.zeros(0)
-        merged = merge_sightings(pts, conf)
-        labels = cluster_sightings(pts, conf, 0.25)
-        m = merged.shape[0]
-        best_conf = np.zeros(m)
-        best_ori = np.zeros(m)
-        for lab in range(m):
-            idx = np.flatnonzero(labels == lab)
-            # seed = most confident sighting, ties by input order (cluster_sightings' rule)
-            k = idx[np.argmax(conf[idx])]
-            best_conf[lab], best_ori[lab] = conf[k], ori[k]
-        return merged, best_ori, best_conf
-
-
-def load_perception() -> PerceptionAdapter:
-    return PerceptionAdapter()
-
-
-class FormationAdapter:
-    """The formation core (agent/formation): agreed wire records → plan → my goals.
-
-    ``Plan`` is in the common frame (the fixed frame of ``Plan.frame_robot``); since all
-    fixed frames are parallel (4.1.1), a point p of the common frame is p - start in
-    this robot's fixed frame, where start is this robot's position in the plan.
-    """
-
-    def __init__(self) -> None:
-        from agent.formation.plan import PlanParams, plan_from_records
-        from agent.formation.records import NeighborRecord
-
-        self._record = NeighborRecord
-        self._params = PlanParams
-        self._plan = plan_from_records
-
-    def records(self, msgs: tuple[NeighborRecordMsg, ...]) -> list[Any]:
-        out = []
-        for m in msgs:
-            k = len(m.neighbours)
-            out.append(
-                self._record(
-                    robot_id=m.sender,
-                    neighbours=np.array(m.neighbours, dtype=np.float64).reshape(k, 2),
-                    orientations=np.array(m.orientations)
-                    if len(m.orientations) == k and k
-                    else None,
-                    confidences=np.array(m.confidences) if len(m.confidences) == k and k else None,
-                )
+        except (AgentFailure, BodyError, ValueError) as exc:
+            return self.fail(reason(exc))
+        except Exception as exc:  # a bug or an input nobody foresaw: stop safely, never crash
+            log.error(
+                "robot %d: unexpected %s\n%s",
+                self.me,
+                reason(exc),
+                "".join(traceback.format_tb(exc.__traceback__))[-2000:],
             )
-        return out
+            try:
+                return self.fail(f"unexpected {reason(exc)}")
+            except Exception as exc2:
+                log.error("robot %d could not publish failed: %s", self.me, reason(exc2))
+                return 1
+        finally:
+            with contextlib.suppress(BodyError):
+                self.body.stop()
 
-    def plan(self, msgs: tuple[NeighborRecordMsg, ...], d_e: float, phi_e: float) -> Any:
-        params = self._params(d_e=d_e, phi_e=phi_e)
-        return self._plan(self.records(msgs), params)
-
-    @staticmethod
-    def members(plan: Any) -> list[int]:
-        return sorted(int(i) for i in plan.ids)
-
-    @staticmethod
-    def axis_angle(plan: Any) -> float:
-        """The pyramid orientation (rad, CCW from +x) in the common frame."""
-        ax = plan.axis
-        if np.ndim(ax) == 0:
-            return float(ax)
-        v = np.asarray(ax, dtype=np.float64).reshape(2)
-        return math.atan2(float(v[1]), float(v[0]))
-
-    def goals(self, plan: Any, me: int) -> tuple[list[np.ndarray], float]:
-        """Waypoints (fixed frame of this robot, excluding the start) and the final heading."""
-        rp = plan.robot(me)
-        start = np.asarray(rp.start, dtype=np.float64).reshape(2)
-        pts = [np.asarray(w, dtype=np.float64).reshape(2) for w in rp.waypoints()]
-        goals = [p - start for p in pts if float(np.hypot(*(p - start))) > 1e-9]
-        if not goals:
-            goals = [np.asarray(rp.target, dtype=np.float64).reshape(2) - start]
-        return goals, self.axis_angle(plan)
+    def fail(self, reason: str) -> int:
+        """Stop safely: publish ``failed`` with ``reason``, let it reach the others; 1."""
+        log.error("robot %d failed: %s", self.me, reason)
+        self.status("failed", 0.0, error=reason, force=True)
+        # let the failure status and any pending digest reach the others
+        end = self.clock() + 1.0
+        while self.clock() < end:
+            self.pump(0.1)
+        return 1
 
 
-def load_formation() -> FormationAdapter:
-    return FormationAdapter()
+def report_unavailable(bus: Bus, robot_id: int, reason: str) -> int:
+    """An agent that cannot run (perception or formation core missing) joins, publishes
+    ``failed`` with ``reason`` so the fleet stops safely, and returns exit code 1."""
+    log.error("robot %d cannot run: %s", robot_id, reason)
+    bus.declare_alive(key_alive(robot_id))
+    msg = StatusMsg(sender=robot_id, phase="failed", error=reason[:500])
+    bus.publish(key_status(robot_id), msg, "status")
+    bus.drain(1.0)
+    return 1

@@ -2,6 +2,10 @@
 
 Prints ``sim ready robots=1,2,3`` on stdout once every queryable is declared; logs go to
 stderr. Stops cleanly on SIGINT/SIGTERM.
+
+With ``--naoqi`` every robot is also a virtual NAO (:mod:`sim.naoqi_gateway`): NAOqi
+services over the qi protocol, one service directory per robot on its own port, each
+announced before the ready line as ``sim naoqi robot=ID url=tcp://HOST:PORT``.
 """
 
 from __future__ import annotations
@@ -52,6 +56,19 @@ def build_parser() -> argparse.ArgumentParser:
         help="render camera images in K worker processes (default 0: in the world process)",
     )
     add_network_arguments(p, ("peer", "client", "router"))
+    p.add_argument(
+        "--naoqi",
+        action="store_true",
+        help="also serve every robot as a virtual NAO over qi (ALMotion, ALVideoDevice, ...)",
+    )
+    p.add_argument("--naoqi-host", default="127.0.0.1", help="address the virtual NAOs listen on")
+    p.add_argument(
+        "--naoqi-port",
+        type=int,
+        default=0,
+        help="port of the first robot's NAO, the next robots on the following ports "
+        "(default 0: a free port each)",
+    )
     p.add_argument("--gui", action="store_true", help="open the PyBullet GUI (needs a display)")
     p.add_argument("--dump-scenario", metavar="FILE", help="write the scenario used to FILE")
     return p
@@ -106,11 +123,25 @@ def main(argv: list[str] | None = None) -> int:
             print(f"sim: cannot open the zenoh session: {exc}", file=sys.stderr)
             server.close()
             return 1
+        gateway = None
+        if args.naoqi:
+            from sim.naoqi_gateway import NaoqiGateway
+
+            try:
+                gateway = NaoqiGateway(server, args.naoqi_host, args.naoqi_port)
+                for rid, url in gateway.open().items():
+                    print(f"sim naoqi robot={rid} url={url}", flush=True)
+            except Exception as exc:
+                print(f"sim: cannot serve the virtual NAOs: {exc}", file=sys.stderr)
+                server.close()
+                return 1
         ids = ",".join(str(r) for r in world.robot_ids)
         print(f"sim ready robots={ids} room={sc.room:g} seed={sc.seed}", flush=True)
         try:
             server.serve()
         finally:
+            if gateway is not None:
+                gateway.close()
             server.close()
     print("sim stopped", file=sys.stderr)
     return 0

@@ -2,7 +2,7 @@
 
 A pinhole camera, 640 x 480, horizontal FOV 60.9°, vertical 47.6° (square pixels,
 fx = fy = 320 / tan(30.45°) ≈ 543.9 px, principal point at the image centre), at
-:data:`~sim.nao_model.CAMERA_Z` = 0.50 m above the floor, 6.2 cm in front of the head yaw
+:data:`CAMERA_Z` = 0.50 m above the floor, 6.2 cm in front of the head yaw
 axis, pitched down 1.2°. The head yaws within ±119.5° (positive = to the robot's left);
 a request outside that range is an error, never a clamp. Rendered by PyBullet's CPU
 TinyRenderer and returned as a (480, 640, 3) uint8 BGR array (OpenCV order).
@@ -18,16 +18,19 @@ import math
 import numpy as np
 import pybullet as pb
 
-from sim.nao_model import CAMERA_FORWARD, CAMERA_Z
+from agent.protocol import nao
 
-WIDTH = 640
-HEIGHT = 480
-HFOV = math.radians(60.9)
+# The NAO's numbers have one home, agent/nao.py (reached through agent.protocol).
+CAMERA_Z = nao.CAMERA_HEIGHT_M
+CAMERA_FORWARD = nao.CAMERA_FORWARD
+WIDTH = nao.CAMERA_WIDTH
+HEIGHT = nao.CAMERA_HEIGHT
+HFOV = nao.CAMERA_HFOV
 FX = (WIDTH / 2) / math.tan(HFOV / 2)
-FY = FX
+FY = FX  # square pixels: the vertical FOV follows (47.6°, nao.CAMERA_VFOV)
 VFOV = 2.0 * math.atan((HEIGHT / 2) / FY)
-PITCH = math.radians(1.2)  # downwards
-YAW_LIMIT = math.radians(119.5)
+PITCH = nao.CAMERA_PITCH_DOWN  # downwards
+YAW_LIMIT = nao.HEAD_YAW_LIMIT
 NEAR = 0.02
 FAR = 30.0
 

@@ -305,9 +305,20 @@ class WorldServer:
 
     def admit(self, kind: str, q: Any) -> None:
         """A query arrived: check it cheaply and queue it as valid or malformed."""
+        self._admit(kind, q, self.verifier, self.signer)
+
+    def admit_local(self, kind: str, q: Any) -> None:
+        """A request of an in-process gateway (the virtual NAOs of ``sim.naoqi_gateway``):
+        trusted as a NAO trusts its own qi port, checked like any other and served by the
+        same loop; replies are not sealed."""
+        self._admit(kind, q, None, None)
+
+    def _admit(
+        self, kind: str, q: Any, verifier: trust.Verifier | None, signer: trust.Signer | None
+    ) -> None:
         try:
             try:
-                target: Request | Any = Request(q, self.verifier, self.signer)
+                target: Request | Any = Request(q, verifier, signer)
             except trust.TrustError as exc:  # unsigned, forged, replayed: no answer at all
                 self.guard.reject(f"{kind} request", exc)
                 self._queue("malformed", (kind, q, None), _payload_size(q))

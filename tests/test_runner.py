@@ -1,7 +1,8 @@
 """The runner's boundaries and its safety rules, without the world.
 
 The adapters run on the real formation core and the real perception merge; the wave
-rule runs on a real (unconnected) zenoh session.
+rule runs on a real (unconnected) zenoh session. The phases that move the robot are in
+tests/body/test_runner_phases.py, on an in-process world.
 """
 
 from __future__ import annotations
@@ -12,17 +13,12 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
+from agent.adapters import FormationAdapter, PerceptionAdapter
 from agent.bus import Bus, BusConfig
+from agent.config import AgentConfig
 from agent.protocol import NeighborRecordMsg
-from agent.robot import Robot
-from agent.runner import (
-    AgentConfig,
-    AgentFailure,
-    FormationAdapter,
-    Peer,
-    PerceptionAdapter,
-    Runner,
-)
+from agent.robot import ZenohBody
+from agent.runner import AgentFailure, Peer, Runner, report_unavailable
 
 # robots 1, 2, 3 at known world positions; every robot sees every other one
 WORLD = {1: (0.0, 0.0), 2: (-1.0, 0.1), 3: (0.9, -0.2)}
@@ -68,8 +64,8 @@ def test_formation_adapter_axis_from_vector_or_angle() -> None:
     class Q:
         axis = 0.25
 
-    assert FormationAdapter.axis_angle(P()) == pytest.approx(math.pi / 2)
-    assert FormationAdapter.axis_angle(Q()) == pytest.approx(0.25)
+    assert FormationAdapter.axis_angle(P()) == pytest.approx(math.pi / 2)  # type: ignore[arg-type]
+    assert FormationAdapter.axis_angle(Q()) == pytest.approx(0.25)  # type: ignore[arg-type]
 
 
 def test_perception_merge_keeps_best_sighting_per_neighbour() -> None:
@@ -97,11 +93,16 @@ def test_agent_config_rejects_bad_values(kwargs: dict[str, object], match: str) 
         AgentConfig(robot_id=1, **kwargs)  # type: ignore[arg-type]
 
 
+@pytest.fixture(scope="module")
+def perception() -> PerceptionAdapter:
+    return PerceptionAdapter()
+
+
 @pytest.fixture()
-def runner() -> Iterator[Runner]:
+def runner(perception: PerceptionAdapter) -> Iterator[Runner]:
     bus = Bus(BusConfig(multicast_scouting=False))
-    r = Runner(bus, Robot(bus, 3), AgentConfig(robot_id=3, fleet_size=3, wave_timeout=2.0))
-    r.formation = FormationAdapter()
+    cfg = AgentConfig(robot_id=3, fleet_size=3, wave_timeout=2.0)
+    r = Runner(bus, ZenohBody(bus, 3), cfg, perception, FormationAdapter())
     r.plan = r.formation.plan(records(), 0.8, math.radians(30))
     try:
         yield r
@@ -113,11 +114,11 @@ def earlier(r: Runner) -> list[int]:
     return [i for i in (1, 2, 3) if r.plan.robot(i).wave < r.plan.robot(3).wave]
 
 
-def test_runner_rejects_config_for_another_robot() -> None:
+def test_runner_rejects_config_for_another_robot(perception: PerceptionAdapter) -> None:
     bus = Bus(BusConfig(multicast_scouting=False))
     try:
         with pytest.raises(ValueError, match="driven with config for"):
-            Runner(bus, Robot(bus, 1), AgentConfig(robot_id=2))
+            Runner(bus, ZenohBody(bus, 1), AgentConfig(robot_id=2), perception, FormationAdapter())
     finally:
         bus.close()
 
@@ -153,11 +154,10 @@ def test_earlier_wave_that_never_holds_times_out(runner: Runner) -> None:
         runner.wait_for_earlier_waves()
 
 
-def test_unavailable_perception_fails_safely_with_reason(runner: Runner) -> None:
-    runner.unavailable = "perception unavailable: no D-base"
-    assert runner.run() == 1
-    assert runner.phase == "failed"
-    assert runner.bus.stats.published_count["status"] >= 2
+def test_unavailable_perception_fails_safely_with_reason() -> None:
+    with Bus(BusConfig(multicast_scouting=False)) as bus:
+        assert report_unavailable(bus, 3, "perception unavailable: no D-base") == 1
+        assert bus.stats.published_count["status"] == 1
 
 
 def test_messages_whose_sender_does_not_own_the_key_are_dropped(runner: Runner) -> None:

@@ -170,6 +170,7 @@ def start_agent(
         "--d-e", str(args.d_e), "--phi-e-deg", str(args.phi_e_deg), "--timeout", str(args.agree_timeout),
         "--log-level", args.agent_log_level,
         *(["--no-correct"] if getattr(args, "no_correct", False) else []),
+        *(["--body", "naoqi", "--nao", args.nao_urls[rid]] if getattr(args, "body", "") == "naoqi" else []),
     ]  # fmt: skip
     log = (out / (f"agent-slot{rid}.log" if auto else f"agent-{rid}.log")).open("wb")
     p = subprocess.Popen(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT)
@@ -430,7 +431,7 @@ class LiveView:
 
 def plan_from_agreed(obs: Observer, d_e: float, phi_e: float) -> Any:
     """The plan recomputed by the evaluator from the records the agents exchanged."""
-    from agent.runner import FormationAdapter
+    from agent.adapters import FormationAdapter
 
     fa = FormationAdapter()
     recs = tuple(obs.records[i] for i in sorted(obs.records))
@@ -554,7 +555,8 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
         for key in (KEY_STATUS_ALL, KEY_RECORD_ALL, KEY_DIGEST_ALL, KEY_WORLD_TRUTH_ALL):
             bus.subscribe(key)
         bus.watch_alive(KEY_ALIVE_ALL)
-        world = start_world(n, seed, endpoint, out, args.world_arg or [], world_net)
+        naoqi = ["--naoqi"] if getattr(args, "body", "") == "naoqi" else []
+        world = start_world(n, seed, endpoint, out, [*(args.world_arg or []), *naoqi], world_net)
         procs.append(world)
         deadline = time.monotonic() + args.world_timeout
         while not any("ready" in ln.lower() for ln in world.lines):
@@ -569,6 +571,12 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
         result["wall_world_ready"] = time.monotonic() - t0
         ids = robot_ids(world.lines, n)
         result["ids"] = ids
+        # with --body naoqi: each robot's virtual NAO, "sim naoqi robot=ID url=URL"
+        args.nao_urls = {
+            int(ln.split("robot=")[1].split()[0]): ln.split("url=")[1].strip()
+            for ln in world.lines
+            if ln.startswith("sim naoqi ")
+        }
         agent_net = ["--connect", endpoint, *net.flags]
         agents.update({i: start_agent(i, n, endpoint, out, args, agent_net) for i in ids})
         procs.extend(agents.values())
@@ -814,6 +822,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--agent-log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING"))
     p.add_argument("--world-timeout", type=float, default=120.0)
     p.add_argument(
+        "--body",
+        choices=("zenoh", "naoqi"),
+        default="zenoh",
+        help="agents drive the world over zenoh, or its virtual NAOs over qi (sim --naoqi)",
+    )
+    p.add_argument(
         "--world-arg", action="append", default=[], help="extra argument for python -m sim"
     )
     p.add_argument(
@@ -849,6 +863,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         p.error("--robots must be in [1, 64]")
     if a.batch < 0:
         p.error("--batch must be >= 0")
+    if a.body == "naoqi" and a.auto_ids:
+        p.error("--body naoqi drives the robot at a fixed URL: no --auto-ids")
     if not (math.isfinite(a.d_e) and a.d_e > 0) or not 0 < a.phi_e_deg < 90:
         p.error("--d-e must be > 0 and --phi-e-deg in (0, 90)")
     return a

@@ -20,6 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from agent import nao
+
 
 @dataclass(frozen=True)
 class CameraModel:
@@ -30,14 +32,14 @@ class CameraModel:
     metres; they turn a camera-relative sighting into a body-relative one.
     """
 
-    width: int = 640
-    height: int = 480
-    hfov: float = math.radians(60.9)
-    vfov: float = math.radians(47.6)
-    height_m: float = 0.50
-    pitch: float = math.radians(-1.2)
-    cam_forward: float = 0.062
-    neck_forward: float = 0.0
+    width: int = nao.CAMERA_WIDTH
+    height: int = nao.CAMERA_HEIGHT
+    hfov: float = nao.CAMERA_HFOV
+    vfov: float = nao.CAMERA_VFOV
+    height_m: float = nao.CAMERA_HEIGHT_M
+    pitch: float = -nao.CAMERA_PITCH_DOWN
+    cam_forward: float = nao.CAMERA_FORWARD
+    neck_forward: float = nao.NECK_FORWARD
 
     def __post_init__(self) -> None:
         if self.width < 16 or self.height < 16:
@@ -106,7 +108,7 @@ class CameraModel:
         self,
         min_distance: float = 0.5,
         half_width: float = 0.15,
-        limit: float = math.radians(119.5),
+        limit: float = nao.HEAD_YAW_LIMIT,
     ) -> tuple[float, ...]:
         """Evenly spaced head yaws over [-limit, limit] (rad) such that a NAO at least
         ``min_distance`` m away (half-width ``half_width`` m) is wholly inside at least one

@@ -17,13 +17,13 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from agent.nao import HEAD_YAW_LIMIT
 from agent.perception.camera import CameraModel
 from agent.perception.dbase import DBase
 from agent.perception.mbase import MBase
 from agent.perception.recognition import LAMBDA_TH, Match, recognise
 from agent.perception.segmentation import check_image, extract_tuples, orange_mask
 
-HEAD_YAW_LIMIT = math.radians(119.5)
 # A NAO cut by the left or right image border has a truncated box, hence a wrong r_g and
 # distance: such groups are dropped (the sweep's overlapping head yaws see it whole).
 BORDER_PX = 2

@@ -8,6 +8,7 @@ re-sent; a member that dies before agreement stops everyone safely.
 
 from __future__ import annotations
 
+import functools
 import socket
 import threading
 from collections.abc import Callable, Iterator
@@ -15,11 +16,20 @@ from typing import Any
 
 import pytest
 
+from agent.adapters import FormationAdapter, PerceptionAdapter
 from agent.bus import Bus, BusConfig
+from agent.config import AgentConfig
 from agent.exchange import Decision
 from agent.protocol import Message, NeighborRecordMsg, StatusMsg
-from agent.robot import Robot
-from agent.runner import AgentConfig, Runner
+from agent.robot import ZenohBody
+from agent.runner import Runner
+
+
+@functools.cache
+def _perception() -> PerceptionAdapter:
+    """One perception for every peer (agreement never looks at an image)."""
+    return PerceptionAdapter()
+
 
 pytestmark = pytest.mark.system
 
@@ -44,8 +54,10 @@ class Peer:
         self.bus = Bus(cfg)
         self.runner = Runner(
             self.bus,
-            Robot(self.bus, rid),
+            ZenohBody(self.bus, rid),
             AgentConfig(robot_id=rid, fleet_size=fleet, timeout=timeout),
+            _perception(),
+            FormationAdapter(),
         )
         self.runner.start_bus()
         self.decision: Decision | None = None

@@ -65,9 +65,43 @@ def test_three_robot_demo_builds_the_pyramid(tmp_path: Path) -> None:
     assert (out / "replay" / "frame-001.png").stat().st_size > 0
 
 
+def test_three_robot_demo_with_body_naoqi(tmp_path: Path) -> None:
+    """``tools.demo --body naoqi``: the world serves its robots as virtual NAOs over the qi
+    protocol; each agent drives its NAO through ALMotion/ALVideoDevice/ALRobotPosture
+    and talks zenoh to the others only."""
+    out = tmp_path / "demo"
+    res = run(
+        [sys.executable, "-m", "tools.demo", "--body", "naoqi", "--robots", "3", "--seed", "1",
+         "--out", str(out), "--json", str(tmp_path / "result.json"), "--timeout", "240"],
+        timeout=290,
+    )  # fmt: skip
+    assert "identical plan digests" in res.stdout, res.stderr[-2000:]
+    world_log = (out / "world.log").read_text()
+    urls = [ln for ln in world_log.splitlines() if ln.startswith("sim naoqi robot=")]
+    assert len(urls) == 3 and all("url=tcp://127.0.0.1:" in u for u in urls), world_log[-2000:]
+    r = json.loads((tmp_path / "result.json").read_text())
+    assert r["exit_codes"] == {"1": 0, "2": 0, "3": 0}, r.get("errors")
+    assert set(r["final_phase"].values()) == {"done"}
+    assert r["identical_digests"] is True
+    assert len(r["pairs"]) == 2
+    for p in r["pairs"]:
+        assert abs(p["r_d"]) <= 0.125 and abs(p["r_phi"]) <= 0.30, p
+    assert r["contacts"] == 0
+    assert r["success"] is True and res.returncode == 0
+    # the world was driven through qi alone: the agents asked the world nothing over zenoh
+    # (the virtual NAOs' requests are counted by the world like any other)
+    assert "served camera=" in world_log
+    for i in (1, 2, 3):
+        log = (out / f"agent-{i}.log").read_text()
+        assert f"robot {i} exit 0" in log, log[-2000:]
+        assert "terminate called" not in log
+
+
 def test_demo_rejects_bad_arguments() -> None:
     res = run([sys.executable, "-m", "tools.demo", "--robots", "0"], 30)
     assert res.returncode == 2 and "--robots" in res.stderr
+    res = run([sys.executable, "-m", "tools.demo", "--body", "naoqi", "--auto-ids"], 30)
+    assert res.returncode == 2 and "--auto-ids" in res.stderr
 
 
 def test_replay_of_a_missing_file_fails_cleanly(tmp_path: Path) -> None:

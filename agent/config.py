@@ -1,0 +1,57 @@
+"""The agent's settings (DESIGN.md §1; NAO paper 5.2.2): one immutable, validated value.
+
+The runner (:mod:`agent.runner`) takes an :class:`AgentConfig`; ``python -m agent``
+builds it from the command line.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from agent.nao import HEAD_YAW_LIMIT
+from agent.perception.camera import CameraModel
+
+#: Head yaws of one sweep (paper 5.2.2 iii): the camera model's, 26.6° apart, so that every
+#: NAO at >= 0.5 m is wholly inside some image (7 evenly spaced yaws, 39.8° apart, left
+#: gaps where a NAO closer than about 0.8 m fell between two images and was dropped as
+#: cut by the border).
+SEARCH_YAWS = CameraModel().sweep_yaws(limit=HEAD_YAW_LIMIT)
+
+
+@dataclass(frozen=True)
+class AgentConfig:
+    """What one agent is told: its robot, the fleet, the pyramid (d_e, phi_e) and limits."""
+
+    robot_id: int
+    fleet_size: int | None = None
+    d_e: float = 0.8
+    phi_e: float = math.radians(30.0)
+    timeout: float = 120.0  # s from the end of the search to agreement
+    wave_timeout: float = 600.0  # s to wait for earlier waves, and for the fleet to hold
+    settle: float = 3.0  # s of unchanged membership when no fleet size is given
+    search_yaws: tuple[float, ...] = SEARCH_YAWS
+    rotation_tolerance: float = math.radians(2.0)
+    # Re-publication backoff cap: a peer that lacks our record says so in its digest,
+    # which re-arms us at once, so long waits (others still searching) need few re-sends.
+    backoff_max: float = 16.0
+    correct: bool = True  # final visual alignment to the parent (see Runner.correct)
+    max_correction: float = 0.3  # m
+
+    def __post_init__(self) -> None:
+        if self.fleet_size is not None and self.fleet_size < 1:
+            raise ValueError(f"fleet size must be >= 1, got {self.fleet_size}")
+        if not (math.isfinite(self.d_e) and self.d_e > 0.0):
+            raise ValueError(f"d_e must be > 0 m, got {self.d_e}")
+        if not (math.isfinite(self.phi_e) and 0.0 < self.phi_e < math.pi / 2):
+            raise ValueError(f"phi_e must be in (0°, 90°), got {math.degrees(self.phi_e)}°")
+        for name in ("timeout", "wave_timeout", "settle"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0.0):
+                raise ValueError(f"{name} must be finite and >= 0, got {v}")
+        for y in self.search_yaws:
+            if abs(y) > HEAD_YAW_LIMIT + 1e-9:
+                raise ValueError(
+                    f"search yaw {math.degrees(y):.1f}° outside "
+                    f"±{math.degrees(HEAD_YAW_LIMIT):.1f}°"
+                )

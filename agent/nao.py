@@ -1,0 +1,45 @@
+"""Facts of the NAO robot (H25 V4–V6) that the agent and the simulated world share.
+
+DESIGN.md §4 and the NAO paper (§3, Fig. 1; §5.2.2): the forehead ("top") camera, the
+head-yaw range and the walking speeds. This module is the one home of these numbers:
+the agent imports it directly, ``sim/`` imports it through :mod:`agent.protocol`
+(``from agent.protocol import nao``), which is the only agent module ``sim/`` may import.
+Standard library only, so both sides can import it without pulling anything else in.
+
+The NAOqi identifiers at the end are those of the NAOqi API documentation
+(ALVideoDevice camera indices, resolutions and colour spaces; the joint name of the
+head yaw; the default port of a robot's qi service directory).
+"""
+
+from __future__ import annotations
+
+import math
+
+# ------------------------------------------------------------------ head
+#: HeadYaw joint range (NAO H25: ±119.5°), rad, + to the robot's left.
+HEAD_YAW_LIMIT = math.radians(119.5)
+#: Head yaw speed as a fraction of the joint's maximum when the agent turns its head.
+HEAD_SPEED_FRACTION = 0.3
+
+# ------------------------------------------------------------------ forehead camera
+CAMERA_WIDTH = 640  # px (VGA)
+CAMERA_HEIGHT = 480  # px
+CAMERA_HFOV = math.radians(60.9)  # horizontal field of view
+CAMERA_VFOV = math.radians(47.6)  # vertical field of view (square pixels: 2·atan(240/fx))
+CAMERA_HEIGHT_M = 0.50  # m above the floor, robot standing
+CAMERA_PITCH_DOWN = math.radians(1.2)  # optical axis below the horizontal
+CAMERA_FORWARD = 0.062  # m, optical centre ahead of the head-yaw axis
+NECK_FORWARD = 0.0  # m, head-yaw axis ahead of the body centre
+
+# ------------------------------------------------------------------ walking
+WALK_SPEED = 0.095  # m/s forwards (NAO default gait)
+BACK_SPEED = 0.06  # m/s backwards
+MAX_SEGMENT = 0.2  # m: the paper walks straight segments of at most 20 cm (§4.2)
+
+# ------------------------------------------------------------------ NAOqi
+NAOQI_PORT = 9559  # a NAO's qi service directory: tcp://nao.local:9559
+HEAD_YAW_JOINT = "HeadYaw"
+TOP_CAMERA = 0  # ALVideoDevice camera index of the forehead camera
+RESOLUTION_VGA = 2  # ALVideoDevice kVGA: 640x480
+COLORSPACE_BGR = 13  # ALVideoDevice kBGRColorSpace: 3 bytes per pixel, OpenCV order
+POSTURE_STAND_INIT = "StandInit"

@@ -1,0 +1,115 @@
+"""The three bodies of :class:`agent.seams.Body` on one simulated world each (issue #11).
+
+- ``world``: :class:`agent.body_world.WorldBody`, the world in this process;
+- ``zenoh``: :class:`agent.robot.ZenohBody` over a real zenoh session (loopback) to a
+  :class:`sim.server.WorldServer` whose loop runs in a thread of this process;
+- ``naoqi``: :class:`agent.body_naoqi.NaoqiBody` over the real qi protocol (loopback) to
+  the virtual NAOs of :class:`sim.naoqi_gateway.NaoqiGateway` on that same world loop.
+
+Every image is a real render; nothing is mocked.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import socket
+import threading
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from typing import Any
+
+import pytest
+
+from agent.seams import Body
+from sim.scenarios import RobotSpec, Scenario
+from sim.world import World
+
+KINDS = ("world", "zenoh", "naoqi")
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@dataclass
+class Rig:
+    """A world and a way to get a body for one of its robots (or a missing one)."""
+
+    kind: str
+    world: World
+    make: Callable[[int], Body]
+    server: Any = None  # the WorldServer (zenoh and naoqi)
+    urls: dict[int, str] = field(default_factory=dict)  # the virtual NAOs (naoqi)
+    gateway: Any = None
+
+
+@contextlib.contextmanager
+def rig(kind: str, scenario: Scenario, noise: bool = False) -> Iterator[Rig]:
+    world = World(scenario, noise=noise)
+    bodies: list[Body] = []
+    with contextlib.ExitStack() as stack:
+        stack.callback(world.close)
+
+        def keep(b: Body) -> Body:
+            bodies.append(b)
+            return b
+
+        stack.callback(lambda: [b.close() for b in bodies])
+        if kind == "world":
+            from agent.body_world import WorldBody
+
+            yield Rig(kind, world, lambda rid: keep(WorldBody(world, rid)))
+            return
+        from agent.bus import Bus, BusConfig
+        from sim.server import NetConfig, WorldServer
+
+        ep = f"tcp/127.0.0.1:{free_port()}"
+        server = WorldServer(world, NetConfig(listen=(ep,), multicast_scouting=False))
+        server.open()
+        stack.callback(server.close)
+        thread = threading.Thread(target=server.serve, daemon=True)
+        thread.start()
+        stack.callback(thread.join, 10.0)
+        stack.callback(server.stop)
+        if kind == "zenoh":
+            from agent.robot import ZenohBody
+
+            bus = Bus(BusConfig(connect=(ep,), multicast_scouting=False))
+            stack.callback(bus.close)
+            yield Rig(
+                kind, world, lambda rid: keep(ZenohBody(bus, rid, camera_timeout=5.0)), server
+            )
+            return
+        from agent.body_naoqi import NaoqiBody
+        from sim.naoqi_gateway import NaoqiGateway
+
+        gateway = NaoqiGateway(server)
+        urls = gateway.open()
+        stack.callback(gateway.close)
+
+        def naoqi(rid: int) -> Body:
+            # a robot the world lacks has no NAO: a port where nothing listens
+            url = urls.get(rid, f"tcp://127.0.0.1:{free_port()}")
+            return keep(NaoqiBody(url, rid, timeout=3.0))
+
+        yield Rig(kind, world, naoqi, server, urls, gateway)
+
+
+#: robot 1 at the origin facing north, robot 2 0.9 m ahead facing it
+FACING = Scenario(
+    robots=(
+        RobotSpec(1, 0.0, 0.0, math.pi / 2),
+        RobotSpec(2, 0.0, 0.9, -math.pi / 2),
+    ),
+    seed=11,
+    room=3.0,
+)
+
+
+@pytest.fixture(scope="module", params=KINDS)
+def facing(request: pytest.FixtureRequest) -> Iterator[Rig]:
+    with rig(str(request.param), FACING) as r:
+        yield r

@@ -1,0 +1,141 @@
+"""The runner's moving phases, one by one, on an in-process world (issue #11).
+
+:class:`agent.body_world.WorldBody` gives real renders and the world's seeded motion
+noise without a network; the bus is a real zenoh session with no peers (the phases
+publish statuses). Ground truth comes from the world, which the agent never reads.
+
+Every robot of a generated scenario starts facing north, so each fixed frame (4.1.1) is
+the world frame moved to the robot's start.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+
+from agent.adapters import FormationAdapter, PerceptionAdapter
+from agent.body_world import WorldBody
+from agent.bus import Bus, BusConfig
+from agent.config import AgentConfig
+from agent.control import wrap_pi
+from agent.protocol import NeighborRecordMsg
+from agent.runner import NORTH, Peer, Runner
+from sim import scenarios
+from sim.world import World
+
+SEED = 4
+
+
+@pytest.fixture(scope="module")
+def perception() -> PerceptionAdapter:
+    return PerceptionAdapter()
+
+
+@pytest.fixture()
+def world() -> Iterator[World]:
+    with World(scenarios.generate(3, SEED)) as w:
+        yield w
+
+
+@pytest.fixture()
+def bus() -> Iterator[Bus]:
+    with Bus(BusConfig(multicast_scouting=False)) as b:
+        yield b
+
+
+def runner_for(rid: int, world: World, bus: Bus, perception: PerceptionAdapter) -> Runner:
+    cfg = AgentConfig(robot_id=rid, fleet_size=3, wave_timeout=5.0)
+    return Runner(bus, WorldBody(world, rid), cfg, perception, FormationAdapter())
+
+
+def test_search_sees_every_neighbour_where_it_stands(
+    world: World, bus: Bus, perception: PerceptionAdapter
+) -> None:
+    r = runner_for(1, world, bus, perception)
+    x0, y0, h0 = world.pose(1)
+    rec = r.localise(r.search())
+    truth = {j: np.subtract(world.pose(j)[:2], (x0, y0)) for j in (2, 3)}
+    assert len(rec.neighbours) == 2, rec
+    for j, p in truth.items():
+        d = min(float(np.hypot(*(np.asarray(n) - p))) for n in rec.neighbours)
+        assert d < 0.05 + 0.12 * float(np.hypot(*p)), (j, p, rec.neighbours)
+    # the full circle brought the robot back near θ = 0, and it knows its heading
+    h = world.pose(1)[2]
+    assert abs(wrap_pi(r.heading - (NORTH + wrap_pi(h - h0)))) < math.radians(3)
+    assert r.compass_gain != 1.0 and 0.9 <= r.compass_gain <= 1.1
+
+
+def test_rotate_turns_by_the_compass(world: World, bus: Bus, perception: PerceptionAdapter) -> None:
+    r = runner_for(2, world, bus, perception)
+    h0 = world.pose(2)[2]
+    done = r.rotate(math.pi / 2)
+    turned = wrap_pi(world.pose(2)[2] - h0)
+    assert turned == pytest.approx(math.pi / 2, abs=math.radians(4))
+    assert done == pytest.approx(turned, abs=math.radians(3))
+    assert r.heading == pytest.approx(NORTH + done, abs=1e-9)
+    assert r.compass_failures == 0
+
+
+def test_walk_to_reaches_the_goal_in_steps(
+    world: World, bus: Bus, perception: PerceptionAdapter
+) -> None:
+    r = runner_for(3, world, bus, perception)
+    x0, y0, _ = world.pose(3)
+    seen: list[float] = []
+    goal = np.array([0.0, -0.5])  # behind: turn round, then about three 20 cm steps
+    r.walk_to(goal, seen.append)
+    x, y, _ = world.pose(3)
+    assert np.hypot(x - x0 - goal[0], y - y0 - goal[1]) < 0.08
+    assert float(np.hypot(*(r.position - goal))) < 0.05  # what it believes
+    assert len(seen) >= 3 and seen[-1] == pytest.approx(1.0, abs=0.05)
+    assert world.locomotion.contacts == 0
+
+
+def _true_records(world: World) -> tuple[NeighborRecordMsg, ...]:
+    pos = {i: np.asarray(world.pose(i)[:2]) for i in world.robot_ids}
+    return tuple(
+        NeighborRecordMsg(
+            sender=i,
+            round=0,
+            neighbours=tuple(tuple(float(v) for v in pos[j] - pos[i]) for j in pos if j != i),
+        )
+        for i in pos
+    )
+
+
+def test_correct_steps_towards_the_planned_offset_to_the_parent(
+    world: World, bus: Bus, perception: PerceptionAdapter
+) -> None:
+    fa = FormationAdapter()
+    plan = fa.plan(_true_records(world), 0.8, math.radians(30))
+    origin = np.asarray(world.pose(plan.frame_robot)[:2]) - np.asarray(
+        plan.robot(plan.frame_robot).start
+    )
+    axis = fa.axis_angle(plan)
+    for rp in plan.robots:  # everyone holds its slot, facing the pyramid axis
+        x, y = origin + np.asarray(rp.target)
+        world.set_pose(rp.robot_id, float(x), float(y), axis)
+    child = next(rp for rp in plan.robots if rp.parent >= 0)
+    parent = plan.robot(child.parent)
+    want = np.asarray(parent.target) - np.asarray(child.target)
+    # the child stands 15 cm off its slot, sideways to the axis
+    x, y, h = world.pose(child.robot_id)
+    off = 0.15 * np.array([-math.sin(axis), math.cos(axis)])
+    world.set_pose(child.robot_id, x + off[0], y + off[1], h)
+
+    r = runner_for(child.robot_id, world, bus, perception)
+    r.plan = plan
+    r.heading = r.final_heading = wrap_pi(axis)  # fixed frames are world-parallel here
+    r.peers[parent.robot_id] = Peer(alive=True, phase="done", seen_alive=True)
+
+    def offset_error() -> float:
+        d = np.subtract(world.pose(parent.robot_id)[:2], world.pose(child.robot_id)[:2])
+        return float(np.hypot(*(d - want)))
+
+    assert offset_error() == pytest.approx(0.15, abs=1e-6)
+    r.correct()
+    assert offset_error() < 0.06
+    assert world.locomotion.contacts == 0
