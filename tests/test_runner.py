@@ -16,7 +16,7 @@ import pytest
 from agent.adapters import FormationAdapter, PerceptionAdapter
 from agent.bus import Bus, BusConfig
 from agent.config import AgentConfig
-from agent.protocol import NeighborRecordMsg
+from agent.protocol import NeighborRecordMsg, StatusMsg
 from agent.robot import ZenohBody
 from agent.runner import AgentFailure, Peer, Runner, report_unavailable
 
@@ -167,4 +167,21 @@ def test_messages_whose_sender_does_not_own_the_key_are_dropped(runner: Runner) 
     runner._handle(Event("msg", "nao/1/record", impostor))
     assert runner.early_records == {}
     runner._handle(Event("msg", "nao/2/record", impostor))
+    assert runner.early_records == {}  # 2 is no member yet: no state kept for it
+    runner._handle(Event("alive", "nao/alive/2", robot_id=2))
+    runner._handle(Event("msg", "nao/2/record", impostor))
     assert runner.early_records == {2: impostor}
+
+
+def test_only_the_current_session_of_a_member_counts(runner: Runner) -> None:
+    from agent.bus import Event
+
+    runner._handle(Event("alive", "nao/alive/2", robot_id=2))
+    new = NeighborRecordMsg(sender=2, round=0, neighbours=((1.0, 0.0),))
+    old = NeighborRecordMsg(sender=2, round=3, neighbours=((9.0, 0.0),))
+    runner._handle(Event("msg", "nao/2/record", new, signer="robot-2", epoch=200))
+    runner._handle(Event("msg", "nao/2/record", old, signer="robot-2", epoch=100))
+    assert runner.early_records == {2: new}  # the older session (a replay) is ignored
+    runner.agreed_epochs = {2: 200}
+    runner._handle(Event("msg", "nao/2/status", StatusMsg(sender=2, phase="done"), epoch=300))
+    assert runner.peers[2].phase != "done"  # after agreement only the agreed session counts

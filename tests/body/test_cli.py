@@ -55,7 +55,7 @@ def test_an_unreachable_nao_is_a_safe_stop_with_the_reason(tmp_path: Path) -> No
     """The agent joins the bus, publishes ``failed`` with the reason, and exits 1."""
     res = subprocess.run(
         [sys.executable, "-m", "agent", "--id", "4", "--body", "naoqi",
-         "--nao", "tcp://127.0.0.1:9", "--no-multicast-scouting"],
+         "--nao", "tcp://127.0.0.1:9", "--no-multicast-scouting", "--insecure"],
         cwd=ROOT, capture_output=True, text=True, timeout=90,
     )  # fmt: skip
     assert res.returncode == 1, res.stderr[-2000:]
