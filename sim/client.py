@@ -3,20 +3,24 @@
 A small command-line client of the world's bus contract (DESIGN.md §3), for people
 trying the world and for debugging; agents use ``agent/robot.py`` instead::
 
-    python -m sim.client --connect tcp/127.0.0.1:7447 camera 1 --yaw 30 --out v.png
-    python -m sim.client --connect tcp/127.0.0.1:7447 walk 1 0.2 --times 5
-    python -m sim.client --connect tcp/127.0.0.1:7447 turn 1 -15
-    python -m sim.client --connect tcp/127.0.0.1:7447 poses
+    python -m sim.client --credentials fleet/ --connect tls/127.0.0.1:7447 camera 1 --yaw 30
+    python -m sim.client --credentials fleet/ --connect tls/127.0.0.1:7447 walk 1 0.2 --times 5
+    python -m sim.client --credentials fleet/ --connect tls/127.0.0.1:7447 poses
+    python -m sim.client --insecure --connect tcp/127.0.0.1:7447 turn 1 -15
 
-Angles on the command line are degrees. ``poses`` reads ``world/truth/poses``
-(evaluation data: fine for a person, never for an agent). Exit status 0 on success,
-1 if the world refused or did not answer, 2 on bad arguments.
+With credentials (DESIGN.md §8) the client acts with a key of the folder: robot N's for
+``camera``/``walk``/``turn N`` and ``register --want N``, the observer's for ``poses``
+(``--as CN`` chooses another); it seals its requests and accepts only what the world
+signed. The world obeys robot N's key only in the session that drives robot N, so a
+robot that an agent drives refuses the client's commands. Angles on the command line are
+degrees. ``poses`` reads ``world/truth/poses`` (evaluation data: fine for a person, never
+for an agent). Exit status 0 on success, 1 if the world refused or did not answer, 2 on
+bad arguments.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import queue
 import sys
@@ -29,7 +33,6 @@ import zenoh
 from agent.protocol import (
     KEY_WORLD_REGISTER,
     KEY_WORLD_TRUTH_POSES,
-    MAX_MESSAGE_BYTES,
     MAX_PUBLICATION_BYTES,
     CameraReply,
     CameraRequest,
@@ -38,18 +41,22 @@ from agent.protocol import (
     Guard,
     Inbox,
     Message,
+    NetworkSpec,
     ProtocolError,
     RegisterReply,
     RegisterRequest,
     TruthPosesMsg,
     TurnRequest,
     WalkRequest,
+    add_network_arguments,
     decode,
     encode,
     key_camera,
     key_turn,
     key_walk,
+    network_spec,
     take_payload,
+    trust,
 )
 
 
@@ -61,12 +68,51 @@ class WorldError(RuntimeError):
 GUARD = Guard(lambda line: print(f"sim.client: {line}", file=sys.stderr))
 
 
-def ask(session: Any, key: str, msg: Message, timeout: float) -> Any:
-    for r in session.get(key, payload=encode(msg), timeout=timeout):
+class Link:
+    """The client's zenoh session; secure, it seals requests with its key and opens only
+    what the world signed (a reply bound to its request, publications)."""
+
+    def __init__(self, session: Any, spec: NetworkSpec) -> None:
+        self.session = session
+        self.signer: trust.Signer | None = None
+        self.verifier: trust.Verifier | None = None
+        if spec.secure:
+            creds = trust.Credentials(spec.credentials)
+            self.signer = creds.signer(trust.Identity.parse(spec.identity))
+            self.verifier = creds.verifier()
+
+    def get(self, key: str, msg: Message, timeout: float) -> tuple[Any, bytes]:
+        """The replies to ``msg`` on ``key``, and the nonce they must be bound to."""
+        data, nonce = encode(msg), b""
+        if self.signer is not None:
+            data, nonce = self.signer.seal_request(key, data)
+        replies = self.session.get(
+            key,
+            payload=data,
+            timeout=timeout,
+            target=zenoh.QueryTarget.ALL,
+            consolidation=zenoh.ConsolidationMode.NONE,
+        )
+        return replies, nonce
+
+    def open(self, key: str, data: bytes, bind: bytes = b"", reply: bool = False) -> bytes:
+        """The payload of what the world sent on ``key`` (:class:`ProtocolError` if not)."""
+        if self.verifier is None:
+            return data
+        opened = self.verifier.open(key, data, bind=bind, replay=not reply)
+        if opened.who != trust.Identity("world"):
+            raise trust.TrustError(f"{opened.who.cn} is not the world")
+        return opened.payload
+
+
+def ask(link: Link, key: str, msg: Message, timeout: float) -> Any:
+    replies, nonce = link.get(key, msg, timeout)
+    for r in replies:
         if r.ok is None:
             continue
         try:
-            rep = decode(take_payload(r.ok.payload, MAX_MESSAGE_BYTES))
+            raw = take_payload(r.ok.payload, trust.MAX_SEALED_BYTES)
+            rep = decode(link.open(key, raw, nonce, reply=True))
         except ProtocolError as exc:
             GUARD.reject(f"reply on {key}", exc)
             continue
@@ -76,14 +122,15 @@ def ask(session: Any, key: str, msg: Message, timeout: float) -> Any:
     raise WorldError(f"no reply on {key} within {timeout:g} s (is the world running?)")
 
 
-def truth(session: Any, timeout: float, after: float = -1.0) -> TruthPosesMsg:
+def truth(link: Link, timeout: float, after: float = -1.0) -> TruthPosesMsg:
     """The first truth message with ``t_sim`` >= ``after``."""
     q: Inbox[bytes] = Inbox({"truth": 16})
+    key = KEY_WORLD_TRUTH_POSES
 
     def on_truth(s: Any) -> None:
-        q.put("truth", take_payload(s.payload, MAX_PUBLICATION_BYTES))
+        q.put("truth", link.open(key, take_payload(s.payload, MAX_PUBLICATION_BYTES)))
 
-    sub = session.declare_subscriber(
+    sub = link.session.declare_subscriber(
         KEY_WORLD_TRUTH_POSES, GUARD.wrap(on_truth, KEY_WORLD_TRUTH_POSES)
     )
     try:
@@ -109,7 +156,20 @@ def _print_poses(m: TruthPosesMsg) -> None:
         print(f"  robot {rid:3d}: x {x:+.3f} m  y {y:+.3f} m  heading {math.degrees(th):+7.2f}°")
 
 
-def run(args: argparse.Namespace, session: Any) -> int:
+def identity(args: argparse.Namespace) -> str:
+    """Whose key the client acts with: ``--as``, else the one the command needs."""
+    if args.as_:
+        return str(args.as_)
+    if args.cmd in ("camera", "walk", "turn"):
+        return f"robot-{args.robot}"
+    if args.cmd == "register":
+        if args.want < 0:
+            raise ValueError("with credentials, register --want N: a key claims its own id")
+        return f"robot-{args.want}"
+    return "observer"
+
+
+def run(args: argparse.Namespace, session: Link) -> int:
     t = args.timeout
     if args.cmd == "camera":
         rep = ask(session, key_camera(args.robot), CameraRequest(yaw=math.radians(args.yaw)), t)
@@ -133,7 +193,8 @@ def run(args: argparse.Namespace, session: Any) -> int:
             last = rep.t_sim
             if rep.status != "done":
                 return 1
-        _print_poses(truth(session, t, after=last))
+        if session.verifier is None or args.as_ == "observer":
+            _print_poses(truth(session, t, after=last))
     elif args.cmd == "poses":
         _print_poses(truth(session, t))
     elif args.cmd == "register":
@@ -145,8 +206,8 @@ def run(args: argparse.Namespace, session: Any) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m sim.client", description=__doc__.split("\n")[0])
-    p.add_argument("--connect", action="append", default=[], help="zenoh endpoint of the world")
-    p.add_argument("--no-multicast-scouting", action="store_true")
+    add_network_arguments(p, ("peer", "client"))
+    p.add_argument("--as", dest="as_", default="", help="act with this identity's key")
     p.add_argument("--timeout", type=float, default=60.0, help="seconds to wait for a reply")
     sub = p.add_subparsers(dest="cmd", required=True)
     c = sub.add_parser("camera", help="save a robot's camera image")
@@ -164,12 +225,11 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     cfg = zenoh.Config()
     try:
-        if args.connect:
-            cfg.insert_json5("connect/endpoints", json.dumps(list(args.connect)))
-        if args.no_multicast_scouting:
-            cfg.insert_json5("scouting/multicast/enabled", "false")
+        spec = network_spec(args, identity(args))
+        for k, v in spec.json5_items():
+            cfg.insert_json5(k, v)
         with zenoh.open(cfg) as session:
-            return run(args, session)
+            return run(args, Link(session, spec))
     except WorldError as exc:
         print(f"sim.client: {exc}", file=sys.stderr)
         return 1

@@ -13,16 +13,13 @@ only) moves robots first, e.g. to look at a NAO 0.6 m ahead turned by some angle
 from __future__ import annotations
 
 import argparse
-import json
 import math
-import queue
 import sys
-import time
 from pathlib import Path
-from typing import Any
 
 import cv2
 
+from agent.protocol import add_network_arguments
 from sim import scenarios
 from sim.camera import HFOV
 from sim.nao_model import FOOTPRINT_RADIUS
@@ -111,80 +108,38 @@ def run_local(args: argparse.Namespace, out: Path) -> int:
 
 
 def run_remote(args: argparse.Namespace, out: Path) -> int:
+    """Ask a running world (``sim.client``'s link: sealed with credentials, or not)."""
     import zenoh
 
-    from agent.protocol import (
-        KEY_WORLD_TRUTH_POSES,
-        MAX_MESSAGE_BYTES,
-        MAX_PUBLICATION_BYTES,
-        CameraReply,
-        CameraRequest,
-        ErrorReply,
-        Guard,
-        Inbox,
-        ProtocolError,
-        TruthPosesMsg,
-        decode,
-        encode,
-        key_camera,
-        take_payload,
-    )
+    from agent.protocol import CameraReply, CameraRequest, key_camera, network_spec
+    from sim.client import Link, WorldError, ask, truth
 
+    spec = network_spec(args, "observer" if args.top_down else f"robot-{args.robot}")
     cfg = zenoh.Config()
-    cfg.insert_json5("connect/endpoints", json.dumps(list(args.connect)))
-    if args.no_multicast_scouting:
-        cfg.insert_json5("scouting/multicast/enabled", "false")
-    samples: Inbox[bytes] = Inbox({"truth": 16})
-    guard = Guard(lambda line: print(f"snapshot: {line}", file=sys.stderr))
+    for k, v in spec.json5_items():
+        cfg.insert_json5(k, v)
     with zenoh.open(cfg) as s:
-        if args.top_down:
-
-            def on_truth(smp: Any) -> None:
-                samples.put("truth", take_payload(smp.payload, MAX_PUBLICATION_BYTES))
-
-            sub = s.declare_subscriber(
-                KEY_WORLD_TRUTH_POSES, guard.wrap(on_truth, KEY_WORLD_TRUTH_POSES)
-            )
-            deadline = time.monotonic() + args.timeout
-            msg = None
-            while time.monotonic() < deadline and msg is None:
-                try:
-                    msg = decode(samples.get(timeout=0.2)[1], expect=TruthPosesMsg)
-                except queue.Empty:
-                    continue
-                except ProtocolError as exc:
-                    guard.reject(KEY_WORLD_TRUTH_POSES, exc)
-            sub.undeclare()
-            if msg is None:
-                print("snapshot: no truth poses from the world", file=sys.stderr)
-                return 1
-            poses = {p[0]: (p[1], p[2], p[3]) for p in msg.poses}
-            room = max(2.0, max(max(abs(x), abs(y)) for x, y, _ in poses.values()) + 1.0)
-            plan_view(
-                poses, None, room, args.robot, math.radians(args.yaw), out, f"t = {msg.t_sim:.1f} s"
-            )
-            return 0
-        replies = s.get(
-            key_camera(args.robot),
-            payload=encode(CameraRequest(yaw=math.radians(args.yaw))),
-            timeout=args.timeout,
-        )
-        for r in replies:
-            if r.ok is None:
-                continue
-            try:
-                rep = decode(take_payload(r.ok.payload, MAX_MESSAGE_BYTES))
-            except ProtocolError as exc:
-                guard.reject(f"reply on {key_camera(args.robot)}", exc)
-                continue
-            if isinstance(rep, ErrorReply):
-                print(f"snapshot: the world says: {rep.reason}", file=sys.stderr)
-                return 1
-            if isinstance(rep, CameraReply):
-                out.write_bytes(rep.data)
+        link = Link(s, spec)
+        try:
+            if args.top_down:
+                msg = truth(link, args.timeout)
+                poses = {p[0]: (p[1], p[2], p[3]) for p in msg.poses}
+                room = max(2.0, max(max(abs(x), abs(y)) for x, y, _ in poses.values()) + 1.0)
+                plan_view(
+                    poses, None, room, args.robot, math.radians(args.yaw), out,
+                    f"t = {msg.t_sim:.1f} s",
+                )  # fmt: skip
                 return 0
-    print("snapshot: no camera reply (is the world running?)", file=sys.stderr)
-    return 1
+            req = CameraRequest(yaw=math.radians(args.yaw))
+            rep = ask(link, key_camera(args.robot), req, args.timeout)
+        except WorldError as exc:
+            print(f"snapshot: {exc}", file=sys.stderr)
+            return 1
+    if not isinstance(rep, CameraReply):
+        print(f"snapshot: unexpected reply {type(rep).__name__}", file=sys.stderr)
+        return 1
+    out.write_bytes(rep.data)
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -198,8 +153,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--yaw", type=float, default=0.0, help="head yaw in degrees (+ left)")
     p.add_argument("--top-down", action="store_true", help="plan view instead of the camera")
     p.add_argument("--place", action="append", default=[], help="ID:X:Y:HEADING_DEG")
-    p.add_argument("--connect", action="append", default=[], help="join a running world")
-    p.add_argument("--no-multicast-scouting", action="store_true")
+    add_network_arguments(p, ("peer", "client"))
     p.add_argument("--timeout", type=float, default=20.0)
     p.add_argument("--out", default="view.png")
     args = p.parse_args(argv)

@@ -362,7 +362,7 @@ def test_snapshot_joins_a_running_world(
 ) -> None:
     from tools import snapshot
 
-    common = ["--connect", world[1], "--no-multicast-scouting", "--robot", "3"]
+    common = ["--connect", world[1], "--no-multicast-scouting", "--insecure", "--robot", "3"]
     out = tmp_path / "remote.png"
     assert snapshot.main([*common, "--yaw", "10", "--out", str(out)]) == 0
     assert png(out.read_bytes()).shape == (480, 640, 3)
@@ -380,7 +380,7 @@ def test_client_cli(
 ) -> None:
     from sim import client as cli
 
-    common = ["--connect", world[1], "--no-multicast-scouting", "--timeout", "30"]
+    common = ["--connect", world[1], "--no-multicast-scouting", "--insecure", "--timeout", "30"]
     out = tmp_path / "c.png"
     assert cli.main([*common, "camera", "3", "--yaw", "-30", "--out", str(out)]) == 0
     assert png(out.read_bytes()).shape == (480, 640, 3)

@@ -207,6 +207,26 @@ def test_the_world_answers_no_unsigned_request(
         assert server.untrusted > before  # refused as unsigned, nothing executed
 
 
+def test_sim_client_acts_with_the_robots_key(
+    fleet: T.Credentials,
+    secure_world: tuple[WorldServer, str],
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    from sim import client as cli
+
+    _, ep = secure_world
+    common = ["--credentials", str(fleet.root), "--plain-links", "--connect", ep,
+              "--no-multicast-scouting", "--timeout", "20"]  # fmt: skip
+    out = tmp_path / "c.png"
+    assert cli.main([*common, "camera", "3", "--out", str(out)]) == 0
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert cli.main([*common, "--as", "robot-1", "turn", "3", "10"]) == 1
+    assert "may not command robot 3" in capsys.readouterr().err
+    assert cli.main([*common, "poses"]) == 0  # the observer's key reads ground truth
+    assert "robot   3:" in capsys.readouterr().out
+
+
 # --------------------------------------------------------------------------- the demo
 
 

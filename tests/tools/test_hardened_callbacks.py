@@ -13,6 +13,7 @@ from agent.protocol import (
     MAX_PUBLICATION_BYTES,
     CameraReply,
     CameraRequest,
+    NetworkSpec,
     StatusMsg,
     TruthPosesMsg,
     encode,
@@ -101,7 +102,7 @@ def test_sim_client_truth_survives_bad_samples() -> None:
 
     t = threading.Timer(0.05, feed)
     t.start()
-    assert client.truth(session, timeout=10.0) == good
+    assert client.truth(client.Link(session, NetworkSpec()), timeout=10.0) == good
     t.join()
     assert client.GUARD.rejected - before == 3  # b"\xc1" is refused when read, and counted
 
@@ -117,5 +118,6 @@ def test_sim_client_ask_skips_bad_replies() -> None:
         SimpleNamespace(ok=SimpleNamespace(payload=zb(encode(rep)))),
     ]
     before = client.GUARD.rejected
-    got = client.ask(FakeSession(replies), key_camera(3), CameraRequest(yaw=0.0), 1.0)
+    link = client.Link(FakeSession(replies), NetworkSpec())
+    got = client.ask(link, key_camera(3), CameraRequest(yaw=0.0), 1.0)
     assert got == rep and client.GUARD.rejected - before == 2
