@@ -696,6 +696,12 @@ def summarise(
         if walls:
             phases[ph] = {"wall_max": max(walls), "sim_max": max(sims)}
     result["phases"] = phases
+    # the agreement's own cost: the last agent entering exchange -> the last one planning
+    entered = [views[i].phase_wall for i in ids]
+    if entered and all("exchange" in e and "plan" in e for e in entered):
+        result["agreement_s"] = max(e["plan"] for e in entered) - max(
+            e["exchange"] for e in entered
+        )
     result["t_sim_end"] = obs.truth[-1][0] if obs.truth else 0.0
     result["pairs"] = []
     ok_agents = all(views[i].exit_code == 0 and views[i].phase == "done" for i in ids)
