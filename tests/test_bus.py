@@ -29,6 +29,7 @@ from agent.protocol import (
     key_status,
     key_walk,
 )
+from tests.fakes import FakeZBytes
 
 pytestmark = pytest.mark.system
 
@@ -234,20 +235,6 @@ def test_decode_of_reply_helpers() -> None:
 
 
 # --------------------------------------------------------------------------- hardening
-
-
-class FakeZBytes:
-    """A zenoh payload stand-in whose copy must not happen when it is too big."""
-
-    def __init__(self, n: int, data: bytes | None = None) -> None:
-        self.n, self.data = n, data
-
-    def __len__(self) -> int:
-        return self.n
-
-    def to_bytes(self) -> bytes:
-        assert self.data is not None, "an oversized payload was copied"
-        return self.data
 
 
 def sample(key: object, payload: object, kind: object = zenoh.SampleKind.PUT) -> Any:

@@ -10,6 +10,7 @@ import msgpack
 import pytest
 
 from agent import protocol as p
+from tests.fakes import FakeZBytes
 
 SAMPLES: list[p.Message] = [
     p.NeighborRecordMsg(
@@ -313,20 +314,6 @@ def test_eight_mib_of_empty_arrays_is_rejected_fast_and_small() -> None:
         peak = tracemalloc.get_traced_memory()[1]
         tracemalloc.stop()
         assert dt < 0.5 and peak < 50 * 2**20, (dt, peak)
-
-
-class FakeZBytes:
-    """A payload whose copy must not happen: ``to_bytes`` fails the test."""
-
-    def __init__(self, n: int, data: bytes | None = None) -> None:
-        self.n, self.data = n, data
-
-    def __len__(self) -> int:
-        return self.n
-
-    def to_bytes(self) -> bytes:
-        assert self.data is not None, "an oversized payload was copied"
-        return self.data
 
 
 def test_take_payload_checks_the_size_before_the_copy() -> None:

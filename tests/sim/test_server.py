@@ -40,6 +40,7 @@ from agent.protocol import (
     key_walk,
 )
 from sim import scenarios
+from tests.fakes import FakeZBytes
 
 pytestmark = pytest.mark.system
 ROOT = Path(__file__).resolve().parents[2]
@@ -422,18 +423,6 @@ def test_concurrent_clients_are_all_served(client: Client) -> None:
 
 # --------------------------------------------------------------------------- hardening
 # The callbacks' checks and the bounded inbox, without zenoh: fake queries.
-
-
-class FakeZBytes:
-    def __init__(self, n: int, data: bytes | None = None) -> None:
-        self.n, self.data = n, data
-
-    def __len__(self) -> int:
-        return self.n
-
-    def to_bytes(self) -> bytes:
-        assert self.data is not None, "an oversized payload was copied"
-        return self.data
 
 
 class FakeQuery:

@@ -19,22 +19,7 @@ from agent.protocol import (
     encode,
     key_camera,
 )
-
-
-class FakeZBytes:
-    def __init__(self, n: int, data: bytes | None = None) -> None:
-        self.n, self.data = n, data
-
-    def __len__(self) -> int:
-        return self.n
-
-    def to_bytes(self) -> bytes:
-        assert self.data is not None, "an oversized payload was copied"
-        return self.data
-
-
-def zb(data: bytes) -> FakeZBytes:
-    return FakeZBytes(len(data), data)
+from tests.fakes import FakeZBytes, zb
 
 
 def test_demo_observer_counts_what_it_cannot_take(capsys: pytest.CaptureFixture[str]) -> None:
