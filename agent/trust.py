@@ -18,12 +18,13 @@ Three layers, each useful without the others:
    queries ``world/robot/i/**`` and ``world/register``; the world serves ``world/**``;
    observers only subscribe.
 
-3. **End to end.** Every payload travels in a :func:`seal`-ed envelope: the signer's
-   common name, its epoch (process start, ms since the Unix epoch; a restart is a newer
-   epoch), a per-signer sequence number, a timestamp and an Ed25519 signature over the
-   key expression, those numbers, an optional binding (a reply is bound to its request)
-   and the payload. :class:`Verifier` checks the signature against the roster, the age
-   (``|now - ts| <= max_age``) and replays (per signer and epoch a sliding window of
+3. **End to end.** Every payload travels in a sealed envelope (:meth:`Signer.seal`), a
+   msgpack array ``[1, signer, epoch, seq, dt, payload, signature]``: the signer's
+   :attr:`Identity.code`, its epoch (process start, ms since the Unix epoch; a restart is
+   a newer epoch), a per-signer sequence number, the time since the epoch (ms) and an
+   Ed25519 signature over the key expression, those numbers, an optional binding (a
+   reply is bound to its request) and the payload: 88-95 bytes more per message. :class:`Verifier` checks the signature against the roster, the age
+   (``|now - (epoch + dt)| <= max_age``) and replays (per signer and epoch a sliding window of
    sequence numbers, as IPsec's anti-replay window, refuses repeats while tolerating
    reordering; the newest :data:`EPOCHS_KEPT` epochs of a key are tracked, older ones
    refused). Which epoch of a key may *act* is the receiver's decision: the world binds
@@ -106,6 +107,18 @@ class Identity:
     @classmethod
     def robot(cls, robot_id: int) -> Identity:
         return cls("robot", robot_id)
+
+    @property
+    def code(self) -> int:
+        """The compact wire code of the identity: the robot id, or -1 world, -2 observer,
+        -3 router (one msgpack byte for the roles and robots up to 127)."""
+        return self.robot_id if self.role == "robot" else -ROLES.index(self.role)
+
+    @classmethod
+    def from_code(cls, code: int) -> Identity:
+        if type(code) is not int or not -len(ROLES) < code <= MAX_ROBOT_ID:
+            raise TrustError(f"signer code {str(code)[:24]} names no fleet identity")
+        return cls.robot(code) if code >= 0 else cls(ROLES[-code])
 
     @classmethod
     def parse(cls, cn: str) -> Identity:
@@ -352,8 +365,8 @@ class Credentials:
 # --------------------------------------------------------------------------- envelope
 
 
-def _signed_bytes(key: str, by: str, epoch: int, seq: int, ts: int, bind: bytes, p: bytes) -> bytes:
-    head = msgpack.packb([key, by, epoch, seq, ts, bind], use_bin_type=True)
+def _signed_bytes(key: str, by: int, epoch: int, seq: int, dt: int, bind: bytes, p: bytes) -> bytes:
+    head = msgpack.packb([key, by, epoch, seq, dt, bind], use_bin_type=True)
     assert isinstance(head, bytes)
     return SIGNATURE_CONTEXT + head + p
 
@@ -387,13 +400,12 @@ class Signer:
         with self._lock:
             self._seq += 1
             seq = self._seq
-        ts = int(self.clock() * 1000)
-        sig = self._key.sign(_signed_bytes(key, self.who.cn, self.epoch, seq, ts, bind, payload))
+        dt = max(0, int(self.clock() * 1000) - self.epoch)  # ms since the epoch: compact
+        by = self.who.code
+        sig = self._key.sign(_signed_bytes(key, by, self.epoch, seq, dt, bind, payload))
         data = msgpack.packb(
-            {"v": ENVELOPE_VERSION, "by": self.who.cn, "e": self.epoch, "n": seq, "ts": ts,
-             "p": payload, "s": sig},
-            use_bin_type=True,
-        )  # fmt: skip
+            [ENVELOPE_VERSION, by, self.epoch, seq, dt, payload, sig], use_bin_type=True
+        )
         assert isinstance(data, bytes)
         return data, _nonce(self.who.cn, self.epoch, seq)
 
@@ -443,7 +455,6 @@ class Verifier:
         if not max_age > 0:
             raise ValueError(f"max_age {max_age} must be > 0")
         self.roster = dict(roster)
-        self._by_cn = {who.cn: who for who in self.roster}
         self.max_age = max_age
         self.clock = clock
         self.window = window
@@ -458,26 +469,28 @@ class Verifier:
         makes unique).
         """
         obj = unpack_bounded(data, MAX_SEALED_BYTES, max_bin_bytes=MAX_MESSAGE_BYTES)
-        if not isinstance(obj, dict) or set(obj) != {"v", "by", "e", "n", "ts", "p", "s"}:
+        if not isinstance(obj, list) or len(obj) != 7:
             raise TrustError("not a sealed envelope (unsigned or foreign payload)")
-        v, by, e, n, ts, p, s = (obj[k] for k in ("v", "by", "e", "n", "ts", "p", "s"))
+        v, by, e, n, dt, p, s = obj
         if type(v) is not int or v != ENVELOPE_VERSION:
             raise TrustError(f"envelope version {v!r}, this build speaks {ENVELOPE_VERSION}")
-        for name, num in (("epoch", e), ("sequence", n), ("timestamp", ts)):
-            if type(num) is not int or not 0 <= num < 2**63:
+        for name, num in (("epoch", e), ("sequence", n), ("timestamp", dt)):
+            if type(num) is not int or not 0 <= num < 2**62:
                 raise TrustError(f"envelope {name} is not a non-negative int")
         if not isinstance(p, bytes) or not isinstance(s, bytes) or len(s) != 64:
             raise TrustError("envelope payload or signature malformed")
-        who = self._by_cn.get(by) if isinstance(by, str) else None
-        if who is None:
-            raise TrustError(f"signer {str(by)[:32]!r} is not in the fleet roster")
+        who = Identity.from_code(by)
+        if who not in self.roster:
+            raise TrustError(f"signer {who.cn} is not in the fleet roster")
         try:
-            self.roster[who].verify(s, _signed_bytes(key, by, e, n, ts, bind, p))
+            self.roster[who].verify(s, _signed_bytes(key, by, e, n, dt, bind, p))
         except InvalidSignature:
-            raise TrustError(f"bad signature from {by} on {key}") from None
-        age = self.clock() - ts / 1000.0
+            raise TrustError(f"bad signature from {who.cn} on {key}") from None
+        age = self.clock() - (e + dt) / 1000.0
         if abs(age) > self.max_age:
-            raise TrustError(f"stale message from {by}: {age:+.1f} s old (limit {self.max_age:g})")
+            raise TrustError(
+                f"stale message from {who.cn}: {age:+.1f} s old (limit {self.max_age:g})"
+            )
         if replay:
             self._check_replay(who, e, n)
         return Opened(who, e, n, p)

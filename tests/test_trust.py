@@ -149,9 +149,16 @@ def test_a_sealed_message_opens_with_its_signer_epoch_and_payload(fleet: T.Crede
     assert (opened.epoch, opened.seq, opened.payload) == (42, 1, b"payload")
 
 
+FIELDS = ("v", "by", "e", "n", "dt", "p", "s")
+
+
 def _tamper(data: bytes, **changes: object) -> bytes:
     obj = msgpack.unpackb(data, raw=False)
-    obj.update(changes)
+    for k, v in changes.items():
+        if k == "extra":
+            obj.append(v)
+        else:
+            obj[FIELDS.index(k)] = v
     out = msgpack.packb(obj, use_bin_type=True)
     assert isinstance(out, bytes)
     return out
@@ -161,11 +168,13 @@ def _tamper(data: bytes, **changes: object) -> bytes:
     ("change", "reason"),
     [
         ({"p": b"forged"}, "bad signature"),
-        ({"by": "robot-3"}, "bad signature"),
+        ({"by": 3}, "bad signature"),
         ({"n": 7}, "bad signature"),
         ({"e": 43}, "bad signature"),
-        ({"by": "robot-9"}, "not in the fleet roster"),
-        ({"by": 2}, "not in the fleet roster"),
+        ({"dt": 5}, "bad signature"),
+        ({"by": 9}, "not in the fleet roster"),
+        ({"by": -7}, "names no fleet identity"),
+        ({"by": "robot-2"}, "names no fleet identity"),
         ({"v": 2}, "envelope version"),
         ({"v": True}, "envelope version"),
         ({"n": -1}, "sequence"),
@@ -180,6 +189,15 @@ def test_a_tampered_envelope_is_refused(
     data = signer(fleet, "robot-2", epoch=42).seal("nao/2/record", b"payload")
     with pytest.raises(T.TrustError, match=reason):
         verifier(fleet).open("nao/2/record", _tamper(data, **change))
+
+
+def test_the_envelope_costs_under_100_bytes(fleet: T.Credentials) -> None:
+    s = fleet.signer(T.Identity.robot(2))  # a real epoch: ms since the Unix epoch
+    for _ in range(300):  # sequence numbers past 255 take 2 more bytes
+        data = s.seal("nao/2/status", b"x" * 200)
+    assert len(data) - 200 <= 100
+    w = fleet.signer(T.Identity("world")).seal("world/clock", b"")
+    assert T.Verifier(fleet.roster).open("world/clock", w).who == T.Identity("world")
 
 
 def test_an_envelope_moved_to_another_key_or_request_is_refused(fleet: T.Credentials) -> None:

@@ -87,10 +87,8 @@ def forged_messages(target: int) -> list[tuple[str, bytes]]:
 def garbage_envelope(key: str, payload: bytes, cn: str) -> bytes:
     """An envelope that names ``cn``'s key but carries a signature nobody made."""
     now = int(time.time() * 1000)
-    data = msgpack.packb(
-        {"v": 1, "by": cn, "e": now, "n": 1, "ts": now, "p": payload, "s": os.urandom(64)},
-        use_bin_type=True,
-    )
+    who = trust.Identity.parse(cn).code
+    data = msgpack.packb([1, who, now, 1, 0, payload, os.urandom(64)], use_bin_type=True)
     assert isinstance(data, bytes)
     return data
 
@@ -202,8 +200,8 @@ def classify(reply: Any) -> str:
     raw = reply.ok.payload.to_bytes()
     with contextlib.suppress(ValueError):
         obj = msgpack.unpackb(raw, raw=False)
-        if isinstance(obj, dict) and "p" in obj and "s" in obj:
-            raw = obj["p"]  # the world's sealed reply: the rogue cannot check it, only read
+        if isinstance(obj, list) and len(obj) == 7 and isinstance(obj[5], bytes):
+            raw = obj[5]  # the world's sealed reply: the rogue cannot check it, only read
     try:
         msg = decode(raw)
     except ValueError:
