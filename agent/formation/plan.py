@@ -29,6 +29,8 @@ import numpy as np
 
 from agent.formation.assignment import STRATEGIES, assign
 from agent.formation.common_frame import METHODS, build_common_frame
+from agent.formation.execution import dependencies_from_flags
+from agent.formation.fallback import banded_plan
 from agent.formation.neighbour_check import DEFAULT_EPSILON, identify_neighbours
 from agent.formation.obstacles import plan_around_obstacles
 from agent.formation.pyramid import (
@@ -40,7 +42,7 @@ from agent.formation.pyramid import (
     pyramid_frame,
 )
 from agent.formation.records import NeighborRecord
-from agent.formation.safety import Schedule, ScheduleError, schedule
+from agent.formation.safety import Schedule, ScheduleError, pair_flags, schedule
 
 #: ``default`` strategy: exact min-sum (``optimal``) up to this many robots; the paper's
 #: O(n log n) strategy above. Whatever it starts with, ``default`` falls back to the
@@ -51,12 +53,17 @@ OPTIMAL_MAX_N = 200
 FRONT_MAX_N = 2000
 
 
+#: Every strategy a plan may name: an assignment of :mod:`assignment`, ``banded`` (the
+#: plan of :mod:`fallback`, which always exists) or ``default``.
+PLAN_STRATEGIES = (*STRATEGIES, "banded", "default")
+
+
 @dataclass(frozen=True)
 class PlanParams:
     d_e: float = 0.8
     phi_e: float = math.radians(30)
     radius: float = 0.2
-    strategy: str = "default"  # "paper" | "optimal" | "capt" | "default"
+    strategy: str = "default"  # "paper" | "optimal" | "capt" | "banded" | "default"
     orientation: str = "pca"  # "pca" | "cp"
     frame_method: str = "default"  # "bfs" (paper eq. 10) | "lsq" | "default" (= lsq)
     epsilon: float = DEFAULT_EPSILON  # eq. 9 threshold, metres (see neighbour_check)
@@ -70,10 +77,8 @@ class PlanParams:
             isinstance(self.radius, int | float) and math.isfinite(self.radius) and self.radius > 0
         ):
             raise ValueError(f"radius must be a finite distance > 0, got {self.radius!r}")
-        if self.strategy not in (*STRATEGIES, "default"):
-            raise ValueError(
-                f"strategy must be one of {(*STRATEGIES, 'default')}, got {self.strategy!r}"
-            )
+        if self.strategy not in PLAN_STRATEGIES:
+            raise ValueError(f"strategy must be one of {PLAN_STRATEGIES}, got {self.strategy!r}")
         if self.orientation not in ORIENTATIONS:
             raise ValueError(f"orientation must be one of {ORIENTATIONS}, got {self.orientation!r}")
         if self.frame_method not in (*METHODS, "default"):
@@ -103,6 +108,8 @@ class PlanParams:
         from ``centroid`` to ``front``. The ``default`` strategy tries optimal (small N)
         then paper (whose top-to-bottom ranking schedules well in dense fleets).
         """
+        if self.strategy == "banded":
+            return []  # straight to the plan that always exists
         strategies = [self.resolved_strategy(n)]
         if self.strategy == "default" and "paper" not in strategies:
             strategies.append("paper")
@@ -123,6 +130,9 @@ class RobotPlan:
     distance: float  # d_i of the first leg
     via: tuple[np.ndarray, ...] = ()
     wave: int = 0
+    # robot ids (ascending) that must hold their slots before this robot starts: the
+    # dependency rule of :mod:`execution` (always in earlier waves)
+    after: tuple[int, ...] = ()
 
     def waypoints(self) -> list[np.ndarray]:
         return [*self.via, self.target]
@@ -243,12 +253,16 @@ def _schedule_with_repair(
     raise ValueError(f"no safe schedule found after {MAX_SWAPS} rounds of slot swaps")
 
 
+def _path(start: np.ndarray, via: Sequence[np.ndarray], target: np.ndarray) -> np.ndarray:
+    return np.vstack([start, *via, target])
+
+
 def _f(x: float) -> bytes:
     return struct.pack("<d", float(x))
 
 
 def plan_digest(plan_fields: dict[str, object], robots: Sequence[RobotPlan]) -> str:
-    h = hashlib.sha256(b"nao-formation/plan/v1")
+    h = hashlib.sha256(b"nao-formation/plan/v2")
     for key in sorted(plan_fields):
         h.update(key.encode())
         v = plan_fields[key]
@@ -260,6 +274,7 @@ def plan_digest(plan_fields: dict[str, object], robots: Sequence[RobotPlan]) -> 
             h.update(str(v).encode())
     for r in robots:
         h.update(struct.pack("<qqqqq", r.robot_id, r.order, r.parent, r.wave, len(r.via)))
+        h.update(struct.pack(f"<q{len(r.after)}q", len(r.after), *r.after))
         for arr in (r.start, r.target, *r.via):
             h.update(np.ascontiguousarray(arr, dtype="<f8").tobytes())
         h.update(_f(r.heading) + _f(r.distance))
@@ -289,34 +304,51 @@ def plan_from_positions(
         raise ValueError(f"obstacles must be a finite (M, 2) array, got shape {obs.shape}")
     n = len(sorted_ids)
     strategy = params.resolved_strategy(n + obs.shape[0])
+    after_rows: tuple[tuple[int, ...], ...] | None = None
     if obs.shape[0]:
+        if params.strategy == "banded":
+            raise ValueError("strategy 'banded' takes no obstacles (see fallback)")
         op = plan_around_obstacles(pos, obs, params, strategy)
         frame_origin, beta = op.origin, op.beta
         order, vias_pre, targets = op.order, op.vias, op.targets
         sched, order, targets = _schedule_with_repair(pos, targets, order, vias_pre, obs, params)
+        waves_rows, vias_rows = sched.waves, sched.vias
     else:
         frame = pyramid_frame(pos, params.orientation)
         starts_p = frame.to_pyramid(pos)
         frame_origin, beta = frame.origin, frame.beta
-        last_error: ValueError | None = None
+        found: tuple[Schedule, np.ndarray, np.ndarray] | None = None
         for strategy, placement in params.attempts(n):
             slots_p = placed_slots(n, params.d_e, params.phi_e, starts_p, placement)
             perm = assign(starts_p, slots_p, strategy, params.d_e, params.phi_e)
             try:
-                sched, order, targets = _schedule_with_repair(
+                found = _schedule_with_repair(
                     pos, frame.to_common(slots_p[perm]), perm, [() for _ in range(n)], obs, params
                 )
                 break
-            except ValueError as exc:
-                last_error = exc
+            except ValueError:
+                continue
+        if found is None:  # the plan that always exists (see fallback)
+            bp = banded_plan(pos, frame, params.d_e, params.phi_e, params.radius)
+            strategy = "banded"
+            order, targets, frame_origin = bp.order, bp.targets, bp.origin
+            waves_rows, vias_rows, after_rows = bp.waves, bp.vias, bp.after
         else:
-            assert last_error is not None
-            raise last_error
+            sched, order, targets = found
+            waves_rows, vias_rows = sched.waves, sched.vias
     leader_row = int(np.flatnonzero(order == 0)[0])
+    if after_rows is None:
+        flags = sched.flags
+        if flags is None:  # pragma: no cover - schedule() always returns its flags
+            flags = pair_flags(
+                [_path(pos[k], vias_rows[k], targets[k]) for k in range(n)], 2.0 * params.radius
+            )
+        after_rows = dependencies_from_flags(flags, waves_rows, n, leader_row)
+    dense = np.unique(waves_rows, return_inverse=True)[1].reshape(-1)
     row_of_order = {int(o): k for k, o in enumerate(order)}
     robots: list[RobotPlan] = []
     for k, rid in enumerate(sorted_ids):
-        via = tuple(np.asarray(v, dtype=np.float64) for v in sched.vias[k])
+        via = tuple(np.asarray(v, dtype=np.float64) for v in vias_rows[k])
         first = via[0] if via else targets[k]
         leg = first - pos[k]
         dist = float(math.hypot(leg[0], leg[1]))
@@ -336,30 +368,15 @@ def plan_from_positions(
                 heading=heading,
                 distance=dist,
                 via=via,
-                wave=int(sched.waves[k]),
+                wave=int(dense[k]),
+                after=tuple(sorted_ids[j] for j in after_rows[k]),
             )
         )
-    n_waves = int(sched.waves.max()) + 1
+    n_waves = int(dense.max()) + 1
     buckets: list[list[int]] = [[] for _ in range(n_waves)]
     for r in robots:
         buckets[r.wave].append(r.robot_id)
-    waves = tuple(tuple(b) for b in buckets if b)
-    # renumber waves densely (empty waves can appear after conflict bumps)
-    dense = {w: k for k, w in enumerate(sorted({r.wave for r in robots}))}
-    robots = [
-        RobotPlan(
-            r.robot_id,
-            r.start,
-            r.target,
-            r.order,
-            r.parent,
-            r.heading,
-            r.distance,
-            r.via,
-            dense[r.wave],
-        )
-        for r in robots
-    ]
+    waves = tuple(tuple(b) for b in buckets)
     leader = sorted_ids[leader_row]
     fields_ = {
         "frame_robot": int(frame_robot),

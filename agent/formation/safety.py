@@ -436,6 +436,7 @@ def check_safety(
 class Schedule:
     waves: np.ndarray  # (N,) wave of each robot row
     vias: tuple[tuple[np.ndarray, ...], ...]  # per robot row
+    flags: PairFlags | None = None  # pair flags of the final paths (robots, then obstacles)
 
 
 def _adjacency(u: np.ndarray, v: np.ndarray, n: int) -> list[list[int]]:
@@ -702,7 +703,7 @@ def schedule(
     for _ in range(max_rounds):
         waves, problems = _assign_waves(n, leader, priority, flags)
         if not problems:
-            return Schedule(waves=waves[:n], vias=tuple(vias))
+            return Schedule(waves=waves[:n], vias=tuple(vias), flags=flags)
         # Try a detour for every problem robot (the leader first, then by priority),
         # each scored against the current paths of the robots near it.
         ordered = sorted(problems, key=lambda r: (r != leader, int(priority[r])))
