@@ -6,14 +6,19 @@ input gives exit code 2 and a one-line reason on stderr.
 Input::
 
     {"robots": [{"id": 7, "x": 0.1, "y": 2.0}, ...], "d_e": 2.0,
-     "phi_e_deg": 30, "radius": 0.2, "strategy": "paper|optimal|capt|default",
+     "phi_e_deg": 30, "radius": 0.2, "strategy": "paper|optimal|capt|bottleneck|banded|default",
      "orientation": "pca|cp", "obstacles": [{"x": .., "y": ..}]}
 
 Output (everything in the input's frame)::
 
     {"leader": 7, "axis_rad": a, "targets": [{"id", "x", "y", "order", "parent"}],
-     "trajectories": [{"id", "heading_rad", "distance", "via": [[x, y], ...]}],
-     "waves": [[7], [3, 9], ...], "digest": "hex"}
+     "trajectories": [{"id", "heading_rad", "distance", "via": [[x, y], ...],
+                       "wave": k, "after": [ids]}],
+     "waves": [[7, 3], [9], ...], "digest": "hex", "strategy": "optimal"}
+
+A robot may start once every robot of its ``after`` list holds its slot (the dependency
+rule of ``agent.formation.execution``); waiting for every robot of the earlier waves is
+safe too.
 
 ``--png FILE`` also draws the plan (starts, paths coloured by wave, slots, leader, axis).
 """
@@ -124,11 +129,14 @@ def plan_to_json(plan: Plan) -> dict[str, Any]:
                 "heading_rad": r.heading,
                 "distance": r.distance,
                 "via": [[float(v[0]), float(v[1])] for v in r.via],
+                "wave": r.wave,
+                "after": list(r.after),
             }
             for r in plan.robots
         ],
         "waves": [list(w) for w in plan.waves],
         "digest": plan.digest,
+        "strategy": plan.strategy,
     }
 
 

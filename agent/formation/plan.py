@@ -27,15 +27,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from agent.formation.assignment import STRATEGIES, assign
+from agent.formation.assignment import STRATEGIES, assign, bounded_assignment, min_bottleneck
 from agent.formation.common_frame import METHODS, build_common_frame
-from agent.formation.execution import dependencies_from_flags
+from agent.formation.detours import shorten
 from agent.formation.fallback import banded_plan
 from agent.formation.neighbour_check import DEFAULT_EPSILON, identify_neighbours
 from agent.formation.obstacles import plan_around_obstacles
+from agent.formation.packing import pack
 from agent.formation.pyramid import (
     ORIENTATIONS,
     PLACEMENTS,
+    PyramidFrame,
     check_geometry,
     parent_of,
     placed_slots,
@@ -257,6 +259,154 @@ def _path(start: np.ndarray, via: Sequence[np.ndarray], target: np.ndarray) -> n
     return np.vstack([start, *via, target])
 
 
+def _length(start: np.ndarray, via: Sequence[np.ndarray], target: np.ndarray) -> float:
+    p = _path(start, via, target)
+    return float(np.sum(np.hypot(*np.diff(p, axis=0).T)))
+
+
+@dataclass(frozen=True)
+class _Scheduled:
+    """A safe plan for robot rows: slot orders, targets, via points, waves, after lists."""
+
+    order: np.ndarray
+    targets: np.ndarray
+    vias: tuple[tuple[np.ndarray, ...], ...]
+    waves: np.ndarray
+    after: tuple[tuple[int, ...], ...]
+    strategy: str
+    makespan: float = 0.0  # dependency makespan (path-length units)
+    total: float = 0.0  # total path length
+
+
+def _packed(
+    pos: np.ndarray,
+    targets: np.ndarray,
+    order: np.ndarray,
+    vias: Sequence[tuple[np.ndarray, ...]],
+    obs: np.ndarray,
+    params: PlanParams,
+    strategy: str,
+    bound: float | None = None,
+) -> _Scheduled:
+    """Schedule (slot swaps and detours until safe, see :func:`_schedule_with_repair`),
+    then pack the waves (:mod:`packing`); with a ``bound`` on the total path (no
+    obstacles), first shorten the critical chain by detours (:mod:`detours`). Raises
+    ``ValueError`` if no schedule is found."""
+    sched, order, targets = _schedule_with_repair(pos, targets, order, list(vias), obs, params)
+    n = pos.shape[0]
+    flags = sched.flags
+    vias_rows = sched.vias
+    if flags is None:  # pragma: no cover - schedule() always returns its flags
+        paths = [_path(pos[k], vias_rows[k], targets[k]) for k in range(n)]
+        flags = pair_flags(paths, 2.0 * params.radius)
+    leader_row = int(np.flatnonzero(order == 0)[0])
+    if bound is not None and not obs.shape[0]:
+        vias_rows, flags = shorten(
+            pos, targets, vias_rows, flags, leader_row, order, params.radius, bound
+        )
+    lengths = np.array(
+        [_length(pos[k], vias_rows[k], targets[k]) for k in range(n)], dtype=np.float64
+    )
+    start, after, waves = pack(flags, lengths, leader_row, order)
+    return _Scheduled(
+        order,
+        targets,
+        vias_rows,
+        waves,
+        after,
+        strategy,
+        makespan=float(np.max(start + lengths)),
+        total=float(lengths.sum()),
+    )
+
+
+#: The ``default`` strategy keeps a plan whose total path is at most this many times the
+#: smallest total (the min-sum assignment's straight paths).
+PATH_SLACK = 1.05
+
+#: Bounds on the longest path the ``default`` strategy tries (n <= OPTIMAL_MAX_N), as
+#: fractions of the way from B* (the smallest possible longest path) to the longest path
+#: of the min-sum assignment.
+BOUND_STEPS = (0.0, 0.25, 0.5, 0.75)
+
+
+#: How many of the best candidates (by makespan before detours) get detours.
+SHORTENED = 2
+
+
+def _candidates(starts_p: np.ndarray, slots_p: np.ndarray) -> list[tuple[str, np.ndarray]]:
+    """Assignments the ``default`` strategy compares: min-sum first, then min-sum under
+    bounds on the longest path between B* and min-sum's own (CAT-ORA's idea), then CAPT.
+    Duplicates are dropped (first kept)."""
+    opt = assign(starts_p, slots_p, "optimal", 1.0, 0.5)
+    longest = float(np.max(np.hypot(*(starts_p - slots_p[opt]).T)))
+    b_star = min_bottleneck(starts_p, slots_p)
+    out = [("optimal", opt)]
+    for f in BOUND_STEPS:
+        out.append(
+            ("bottleneck", bounded_assignment(starts_p, slots_p, b_star + f * (longest - b_star)))
+        )
+    out.append(("capt", assign(starts_p, slots_p, "capt", 1.0, 0.5)))
+    seen: set[bytes] = set()
+    uniq = []
+    for name, perm in out:
+        key = perm.tobytes()
+        if key not in seen:
+            seen.add(key)
+            uniq.append((name, perm))
+    return uniq
+
+
+def _choose(
+    pos: np.ndarray, frame: PyramidFrame, starts_p: np.ndarray, params: PlanParams
+) -> _Scheduled | None:
+    """The scheduled plan of the first attempt that succeeds (see PlanParams.attempts).
+
+    ``default`` with n <= OPTIMAL_MAX_N first compares the CANDIDATES assignments on the
+    centred pyramid: of those that schedule with a total path <= PATH_SLACK × the
+    min-sum total, the smallest dependency makespan wins (then the smaller total, then
+    the order of CANDIDATES). None: no attempt could be scheduled.
+    """
+    n = pos.shape[0]
+    empty: list[tuple[np.ndarray, ...]] = [() for _ in range(n)]
+    exact = params.strategy == "default" and params.placement in ("default", "centroid")
+    if exact and n <= OPTIMAL_MAX_N:
+        slots_p = placed_slots(n, params.d_e, params.phi_e, starts_p, "centroid")
+        good: list[tuple[float, float, int, _Scheduled]] = []
+        bound = math.inf
+        for k, (strat, perm) in enumerate(_candidates(starts_p, slots_p)):
+            if k == 0:
+                straight = np.hypot(*(starts_p - slots_p[perm]).T)
+                bound = PATH_SLACK * float(straight.sum()) + 1e-9
+            try:
+                sc = _packed(
+                    pos, frame.to_common(slots_p[perm]), perm, empty, _NO_OBS, params, strat
+                )
+            except ValueError:
+                continue
+            if sc.total <= bound:
+                good.append((sc.makespan, sc.total, k, sc))
+        good.sort(key=lambda g: g[:3])
+        for j, (_, _, k, sc) in enumerate(good[:SHORTENED]):  # detours for the best
+            better = _packed(
+                pos, sc.targets, sc.order, empty, _NO_OBS, params, sc.strategy, bound=bound
+            )
+            good[j] = (better.makespan, better.total, k, better)
+        if good:
+            return min(good, key=lambda g: g[:3])[3]
+    for strat, placement in params.attempts(n):
+        slots_p = placed_slots(n, params.d_e, params.phi_e, starts_p, placement)
+        perm = assign(starts_p, slots_p, strat, params.d_e, params.phi_e)
+        try:
+            return _packed(pos, frame.to_common(slots_p[perm]), perm, empty, _NO_OBS, params, strat)
+        except ValueError:
+            continue
+    return None
+
+
+_NO_OBS = np.zeros((0, 2))
+
+
 def _f(x: float) -> bytes:
     return struct.pack("<d", float(x))
 
@@ -304,46 +454,26 @@ def plan_from_positions(
         raise ValueError(f"obstacles must be a finite (M, 2) array, got shape {obs.shape}")
     n = len(sorted_ids)
     strategy = params.resolved_strategy(n + obs.shape[0])
-    after_rows: tuple[tuple[int, ...], ...] | None = None
     if obs.shape[0]:
         if params.strategy == "banded":
             raise ValueError("strategy 'banded' takes no obstacles (see fallback)")
         op = plan_around_obstacles(pos, obs, params, strategy)
         frame_origin, beta = op.origin, op.beta
-        order, vias_pre, targets = op.order, op.vias, op.targets
-        sched, order, targets = _schedule_with_repair(pos, targets, order, vias_pre, obs, params)
-        waves_rows, vias_rows = sched.waves, sched.vias
+        best = _packed(pos, op.targets, op.order, op.vias, obs, params, strategy)
     else:
         frame = pyramid_frame(pos, params.orientation)
         starts_p = frame.to_pyramid(pos)
         frame_origin, beta = frame.origin, frame.beta
-        found: tuple[Schedule, np.ndarray, np.ndarray] | None = None
-        for strategy, placement in params.attempts(n):
-            slots_p = placed_slots(n, params.d_e, params.phi_e, starts_p, placement)
-            perm = assign(starts_p, slots_p, strategy, params.d_e, params.phi_e)
-            try:
-                found = _schedule_with_repair(
-                    pos, frame.to_common(slots_p[perm]), perm, [() for _ in range(n)], obs, params
-                )
-                break
-            except ValueError:
-                continue
-        if found is None:  # the plan that always exists (see fallback)
+        chosen = _choose(pos, frame, starts_p, params)
+        if chosen is None:  # the plan that always exists (see fallback)
             bp = banded_plan(pos, frame, params.d_e, params.phi_e, params.radius)
-            strategy = "banded"
-            order, targets, frame_origin = bp.order, bp.targets, bp.origin
-            waves_rows, vias_rows, after_rows = bp.waves, bp.vias, bp.after
-        else:
-            sched, order, targets = found
-            waves_rows, vias_rows = sched.waves, sched.vias
+            frame_origin = bp.origin
+            chosen = _Scheduled(bp.order, bp.targets, bp.vias, bp.waves, bp.after, "banded")
+        best = chosen
+    strategy = best.strategy
+    order, targets, vias_rows = best.order, best.targets, best.vias
+    waves_rows, after_rows = best.waves, best.after
     leader_row = int(np.flatnonzero(order == 0)[0])
-    if after_rows is None:
-        flags = sched.flags
-        if flags is None:  # pragma: no cover - schedule() always returns its flags
-            flags = pair_flags(
-                [_path(pos[k], vias_rows[k], targets[k]) for k in range(n)], 2.0 * params.radius
-            )
-        after_rows = dependencies_from_flags(flags, waves_rows, n, leader_row)
     dense = np.unique(waves_rows, return_inverse=True)[1].reshape(-1)
     row_of_order = {int(o): k for k, o in enumerate(order)}
     robots: list[RobotPlan] = []

@@ -47,6 +47,9 @@ import numpy as np
 
 _SAME, _IK, _KI = 0, 1, 2
 
+#: Absolute rounding slack of a required distance, in clearances.
+_ABS_SLACK = 1e-12
+
 
 class ScheduleError(ValueError):
     """No safe schedule; ``pairs`` are robot-row pairs that can go in no order (or, if
@@ -314,7 +317,10 @@ def _flags_from_pairs(
     )
     d_start = np.hypot(*(starts[a] - starts[b]).T)
     d_target = np.hypot(*(targets[a] - targets[b]).T)
-    req = np.minimum(clearance, np.minimum(d_start, d_target)) * (1.0 - 1e-9)
+    # rounding slack: relative 1e-9, and 1e-12·c absolute (starts 1e-300 m apart are one)
+    req = (
+        np.minimum(clearance, np.minimum(d_start, d_target)) * (1.0 - 1e-9) - _ABS_SLACK * clearance
+    )
     return PairFlags(
         a=a,
         b=b,
@@ -593,8 +599,10 @@ def _score_paths(
     own_s, own_t = cands[0, 0], cands[0, -1]
     d_k_si = np.minimum.reduceat(point_seg_dist(own_s[None], seg_a, seg_b), first[:-1])[close]
     d_k_ti = np.minimum.reduceat(point_seg_dist(own_t[None], seg_a, seg_b), first[:-1])[close]
-    req = np.minimum(c, np.minimum(np.hypot(*(st - own_s).T), np.hypot(*(tg - own_t).T))) * (
-        1.0 - 1e-9
+    req = (
+        np.minimum(c, np.minimum(np.hypot(*(st - own_s).T), np.hypot(*(tg - own_t).T)))
+        * (1.0 - 1e-9)
+        - _ABS_SLACK * c
     )
     i_first = np.maximum(req - d_i_s, 0) + np.maximum(req - d_k_ti, 0)
     k_first = np.maximum(req - d_k_si, 0) + np.maximum(req - d_i_t, 0)

@@ -40,8 +40,20 @@ def test_plan_roundtrip_and_png(tmp_path: Path) -> None:
     out = run(doc, "--png", str(png))
     assert out.returncode == 0, out.stderr
     plan = json.loads(out.stdout)
-    assert set(plan) == {"leader", "axis_rad", "targets", "trajectories", "waves", "digest"}
-    assert plan["waves"][0] == [plan["leader"]]
+    assert set(plan) == {
+        "leader",
+        "axis_rad",
+        "targets",
+        "trajectories",
+        "waves",
+        "digest",
+        "strategy",
+    }
+    assert plan["leader"] in plan["waves"][0]
+    wave = {i: k for k, w in enumerate(plan["waves"]) for i in w}
+    for tr in plan["trajectories"]:  # a robot waits only for robots of earlier waves
+        assert tr["wave"] == wave[tr["id"]]
+        assert all(wave[j] < wave[tr["id"]] for j in tr["after"])
     assert sorted(t["id"] for t in plan["targets"]) == [3, 7, 9]
     assert sorted(t["order"] for t in plan["targets"]) == [0, 1, 2]
     by_id = {t["id"]: t for t in plan["targets"]}

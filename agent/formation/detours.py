@@ -1,0 +1,136 @@
+"""Via points instead of waiting: shorten the critical chain of a packed plan (issue 12).
+
+After :mod:`packing`, the makespan is the end of a chain of robots each waiting for the
+one before it (a close pair that may not walk together, see :mod:`safety`). A cheap
+detour can cut such a link: one via point that keeps one robot of the pair clear of the
+other, so that both may walk together. Local search, deterministic:
+
+1. pack; take the critical chain (the robot that ends last, then the robot it waits for
+   that ends last, ... ties by row);
+2. for each link (u waits for nothing but v waits for u) and each of the two robots,
+   the detour candidates of :func:`safety._detour_candidates` (one via point beside the
+   straight path) that keep the pair clear (both paths >= the pair's clearance apart)
+   are tried, shortest first, at most ``TRIES`` per robot: the pair flags are updated
+   for that robot only and the plan is packed again;
+3. the candidate with the smallest makespan (then the shorter total, then the order
+   tried) is kept if it shortens the makespan by more than 1e-9 and keeps the total
+   path within ``bound``; a candidate that leaves a pair with no safe order (or a
+   precedence cycle) is discarded. Repeat until no link improves or ``rounds`` is met.
+
+Safety is never traded: every accepted plan is packed from exact pair flags, so it
+keeps the same guarantees as the plan it started from.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Sequence
+
+import numpy as np
+
+from agent.formation.packing import pack
+from agent.formation.safety import (
+    PairFlags,
+    _detour_candidates,
+    _update_flags,
+    seg_seg_dist,
+)
+
+#: Detour candidates tried per robot of a link (shortest first).
+TRIES = 6
+
+
+def _path(start: np.ndarray, via: Sequence[np.ndarray], target: np.ndarray) -> np.ndarray:
+    return np.vstack([start, *via, target])
+
+
+def _length(p: np.ndarray) -> float:
+    return float(np.sum(np.hypot(*np.diff(p, axis=0).T)))
+
+
+def _clear(p: np.ndarray, q: np.ndarray, req: float) -> bool:
+    """Do polylines p and q stay >= req apart?"""
+    a0, a1 = p[:-1, None, :], p[1:, None, :]
+    b0, b1 = q[None, :-1, :], q[None, 1:, :]
+    return bool(np.min(seg_seg_dist(a0, a1, b0, b1)) >= req)
+
+
+def _chain(start: np.ndarray, finish: np.ndarray, after: Sequence[Sequence[int]]) -> list[int]:
+    i = int(np.argmax(finish))  # first row among equal ends
+    chain = [i]
+    while after[i]:
+        deps = list(after[i])
+        j = deps[int(np.argmax(finish[deps]))]
+        if finish[j] < start[i] - 1e-9:  # i did not wait for anyone: chain starts here
+            break
+        chain.append(j)
+        i = j
+    return chain[::-1]
+
+
+def shorten(
+    starts: np.ndarray,
+    targets: np.ndarray,
+    vias: Sequence[tuple[np.ndarray, ...]],
+    flags: PairFlags,
+    leader: int,
+    priority: np.ndarray,
+    radius: float,
+    bound: float,
+    rounds: int = 20,
+) -> tuple[tuple[tuple[np.ndarray, ...], ...], PairFlags]:
+    """Local search of the module doc; returns (vias, flags) of the best plan found."""
+    n = starts.shape[0]
+    c = 2.0 * radius
+    vias_l = [tuple(v) for v in vias]
+    paths = [_path(starts[k], vias_l[k], targets[k]) for k in range(n)]
+    lengths = np.array([_length(p) for p in paths])
+    ends = (starts, targets)
+    st, after, _ = pack(flags, lengths, leader, priority)
+    best = float(np.max(st + lengths))
+    pair_req = {
+        (int(a), int(b)): float(r) for a, b, r in zip(flags.a, flags.b, flags.required, strict=True)
+    }
+    for _ in range(rounds):
+        chain = _chain(st, st + lengths, after)
+        trial: tuple[float, float, int, int, np.ndarray, PairFlags, np.ndarray] | None = None
+        tried = 0
+        seen: set[tuple[int, int]] = set()
+        for u, v in itertools.pairwise(chain):
+            req = pair_req.get((min(u, v), max(u, v)), c)
+            for r, other in ((v, u), (u, v)):
+                if (r, other) in seen:
+                    continue
+                seen.add((r, other))
+                cands = _detour_candidates(starts[r], targets[r], c)
+                stack = [_path(starts[r], (w,), targets[r]) for w in cands]
+                stack.sort(key=_length)  # stable: ties keep the candidate order
+                kept = [p for p in stack if _clear(p, paths[other], req)][:TRIES]
+                for p in kept:
+                    new_len = lengths.copy()
+                    new_len[r] = _length(p)
+                    if float(new_len.sum()) > bound:
+                        continue
+                    new_paths = list(paths)
+                    new_paths[r] = p
+                    f2 = _update_flags(flags, new_paths, [r], c, ends)
+                    try:
+                        s2, _, _ = pack(f2, new_len, leader, priority)
+                    except ValueError:
+                        continue
+                    ms = float(np.max(s2 + new_len))
+                    key = (ms, float(new_len.sum()), tried)
+                    if ms < best - 1e-9 and (trial is None or key < trial[:3]):
+                        trial = (ms, key[1], tried, r, p, f2, new_len)
+                    tried += 1
+        if trial is None:
+            break
+        best, _, _, r, p, flags, lengths = trial
+        paths[r] = p
+        vias_l[r] = (p[1].copy(),)
+        pair_req = {
+            (int(a), int(b)): float(q)
+            for a, b, q in zip(flags.a, flags.b, flags.required, strict=True)
+        }
+        st, after, _ = pack(flags, lengths, leader, priority)
+    return tuple(vias_l), flags
