@@ -121,10 +121,9 @@ def banded_plan(
             w = 0
         else:
             w = max(int(level[a:b].max()) + 1, 1)
-            own = owner[a:b]
-            prev = np.unique(own[own >= 0]).tolist()
-            if leader not in prev:
-                prev.append(leader)  # the leader goes first, alone
+            prev = set(owner[a:b].tolist())
+            prev.discard(-1)
+            prev.add(leader)  # the leader goes first, alone
             after[i] = tuple(sorted(prev))
         waves[i] = w
         level[a:b] = w

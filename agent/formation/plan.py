@@ -39,7 +39,6 @@ from agent.formation.pyramid import (
     PLACEMENTS,
     PyramidFrame,
     check_geometry,
-    parent_of,
     placed_slots,
     pyramid_frame,
 )
@@ -50,6 +49,11 @@ from agent.formation.safety import Schedule, ScheduleError, pair_flags, schedule
 #: O(n log n) strategy above. Whatever it starts with, ``default`` falls back to the
 #: next attempt of :func:`attempts` when a plan cannot be scheduled safely.
 OPTIMAL_MAX_N = 200
+
+#: ``default`` strategy: above this many robots, the banded plan of :mod:`fallback`
+#: (O(n log n), safe by construction) instead of the scheduled ones (whose pair search
+#: grows with the total path length, ~n^1.5 for the centred pyramid: > 20 s at 2·10^4).
+SCHEDULE_MAX_N = 12_000
 
 #: The ``front`` fallback placement is only tried up to this many robots.
 FRONT_MAX_N = 2000
@@ -110,7 +114,7 @@ class PlanParams:
         from ``centroid`` to ``front``. The ``default`` strategy tries optimal (small N)
         then paper (whose top-to-bottom ranking schedules well in dense fleets).
         """
-        if self.strategy == "banded":
+        if self.strategy == "banded" or (self.strategy == "default" and n > SCHEDULE_MAX_N):
             return []  # straight to the plan that always exists
         strategies = [self.resolved_strategy(n)]
         if self.strategy == "default" and "paper" not in strategies:
@@ -253,6 +257,19 @@ def _schedule_with_repair(
                 targets[[a, b]] = targets[[b, a]]
                 vias[a], vias[b] = (), ()
     raise ValueError(f"no safe schedule found after {MAX_SWAPS} rounds of slot swaps")
+
+
+def _parents(order: np.ndarray) -> np.ndarray:
+    """Eq. 6 on an array of orders (see :func:`pyramid.parent_of`), -1 for the leader."""
+    o = np.asarray(order, dtype=np.int64)
+    t = np.floor(np.sqrt(1.0 + 8.0 * o)).astype(np.int64)
+    t = np.where((t + 1) ** 2 <= 1 + 8 * o, t + 1, t)
+    t = np.where(t * t > 1 + 8 * o, t - 1, t)
+    t = np.where(t % 2 == 0, t - 1, t)
+    layer = (t - 1) // 2 + 1
+    last = layer * (layer + 1) // 2 - 1
+    par = np.where(o == last, o - layer, o - (layer - 1))
+    return np.where(layer == 1, -1, par)
 
 
 def _path(start: np.ndarray, via: Sequence[np.ndarray], target: np.ndarray) -> np.ndarray:
@@ -412,6 +429,10 @@ def _f(x: float) -> bytes:
 
 
 def plan_digest(plan_fields: dict[str, object], robots: Sequence[RobotPlan]) -> str:
+    """sha256 over a canonical encoding: the plan fields by name, then (robots in the
+    given order, ascending id in a Plan) one little-endian record per robot (id, order,
+    parent, wave, via count, after count as int64; start, target, heading, distance as
+    float64), then every via point (float64 x, y), then every after id (int64)."""
     h = hashlib.sha256(b"nao-formation/plan/v2")
     for key in sorted(plan_fields):
         h.update(key.encode())
@@ -422,12 +443,22 @@ def plan_digest(plan_fields: dict[str, object], robots: Sequence[RobotPlan]) -> 
             h.update(np.ascontiguousarray(v, dtype="<f8").tobytes())
         else:
             h.update(str(v).encode())
-    for r in robots:
-        h.update(struct.pack("<qqqqq", r.robot_id, r.order, r.parent, r.wave, len(r.via)))
-        h.update(struct.pack(f"<q{len(r.after)}q", len(r.after), *r.after))
-        for arr in (r.start, r.target, *r.via):
-            h.update(np.ascontiguousarray(arr, dtype="<f8").tobytes())
-        h.update(_f(r.heading) + _f(r.distance))
+    m = len(robots)
+    ints = np.array(
+        [(r.robot_id, r.order, r.parent, r.wave, len(r.via), len(r.after)) for r in robots],
+        dtype="<i8",
+    ).reshape(m, 6)
+    floats = np.empty((m, 6), dtype="<f8")
+    if m:
+        floats[:, 0:2] = np.array([r.start for r in robots], dtype=np.float64).reshape(m, 2)
+        floats[:, 2:4] = np.array([r.target for r in robots], dtype=np.float64).reshape(m, 2)
+        floats[:, 4] = [r.heading for r in robots]
+        floats[:, 5] = [r.distance for r in robots]
+    h.update(ints.tobytes())
+    h.update(floats.tobytes())
+    vias = [v for r in robots for v in r.via]
+    h.update(np.array(vias, dtype="<f8").reshape(-1, 2).tobytes())
+    h.update(np.array([j for r in robots for j in r.after], dtype="<i8").tobytes())
     return h.hexdigest()
 
 
@@ -475,38 +506,43 @@ def plan_from_positions(
     waves_rows, after_rows = best.waves, best.after
     leader_row = int(np.flatnonzero(order == 0)[0])
     dense = np.unique(waves_rows, return_inverse=True)[1].reshape(-1)
-    row_of_order = {int(o): k for k, o in enumerate(order)}
-    robots: list[RobotPlan] = []
-    for k, rid in enumerate(sorted_ids):
-        via = tuple(np.asarray(v, dtype=np.float64) for v in vias_rows[k])
-        first = via[0] if via else targets[k]
-        leg = first - pos[k]
-        dist = float(math.hypot(leg[0], leg[1]))
-        heading = float(math.atan2(leg[1], leg[0])) if dist > 1e-12 else float(beta)
-        par = parent_of(int(order[k]))
-        robots.append(
-            RobotPlan(
-                robot_id=rid,
-                start=pos[k].copy(),
-                target=np.asarray(targets[k], dtype=np.float64).copy(),
-                order=int(order[k]),
-                parent=-1
-                if par < 0
-                else sorted_ids[row_of_order[par]]
-                if par in row_of_order
-                else -1,
-                heading=heading,
-                distance=dist,
-                via=via,
-                wave=int(dense[k]),
-                after=tuple(sorted_ids[j] for j in after_rows[k]),
-            )
+    # first legs, vectorised: heading/distance of (first via or target) - start
+    has_via = np.array([len(v) > 0 for v in vias_rows], dtype=bool)
+    first = np.array(targets, dtype=np.float64, copy=True)
+    if has_via.any():
+        first[has_via] = np.array([vias_rows[k][0] for k in np.flatnonzero(has_via)])
+    leg = first - pos
+    dist_a = np.hypot(leg[:, 0], leg[:, 1])
+    head_a = np.where(dist_a > 1e-12, np.arctan2(leg[:, 1], leg[:, 0]), float(beta))
+    ids_arr = np.asarray(sorted_ids, dtype=np.int64)
+    row_of_order = np.empty(n, dtype=np.int64)
+    row_of_order[order] = np.arange(n)
+    par_order = _parents(order)
+    parent_ids = np.where(par_order < 0, -1, ids_arr[row_of_order[np.maximum(par_order, 0)]])
+    starts_c = pos.copy()
+    targets_c = np.array(targets, dtype=np.float64, copy=True)
+    id_l, order_l, par_l = sorted_ids, order.tolist(), parent_ids.tolist()
+    head_l, dist_l, wave_l = head_a.tolist(), dist_a.tolist(), dense.tolist()
+    robots: list[RobotPlan] = [
+        RobotPlan(
+            robot_id=id_l[k],
+            start=starts_c[k],
+            target=targets_c[k],
+            order=order_l[k],
+            parent=par_l[k],
+            heading=head_l[k],
+            distance=dist_l[k],
+            via=tuple(np.asarray(v, dtype=np.float64) for v in vias_rows[k]),
+            wave=wave_l[k],
+            after=tuple(id_l[j] for j in after_rows[k]),
         )
+        for k in range(n)
+    ]
     n_waves = int(dense.max()) + 1
-    buckets: list[list[int]] = [[] for _ in range(n_waves)]
-    for r in robots:
-        buckets[r.wave].append(r.robot_id)
-    waves = tuple(tuple(b) for b in buckets)
+    members = np.argsort(dense, kind="stable")
+    bounds = np.searchsorted(dense[members], np.arange(n_waves + 1)).tolist()
+    ids_sorted_by_wave = ids_arr[members].tolist()
+    waves = tuple(tuple(ids_sorted_by_wave[bounds[w] : bounds[w + 1]]) for w in range(n_waves))
     leader = sorted_ids[leader_row]
     fields_ = {
         "frame_robot": int(frame_robot),
