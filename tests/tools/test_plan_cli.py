@@ -120,3 +120,27 @@ def test_bad_input_exit_2_one_line(doc: object, raw: str | None, msg: str) -> No
     assert out.stdout == ""
     lines = out.stderr.strip().splitlines()
     assert len(lines) == 1 and msg in lines[0], out.stderr
+
+
+def test_bench_plan_prints_the_table_and_draws(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from tools.bench.plan import all_fleets, main
+
+    png = tmp_path / "bench.png"
+    args = ["--sizes", "10,40", "--no-cli", "--stuck-n", "0", "--no-families", "--png", str(png)]
+    assert main(args) == 0
+    out = capsys.readouterr().out
+    for head in ("plan s", "ms/capt", "waves", "path/opt", "growth exponent"):
+        assert head in out
+    assert png.stat().st_size > 5000
+    fleets = all_fleets()
+    assert len(fleets) == 67 and {f[0] for f in fleets} == {
+        "nao",
+        "uniform",
+        "blobs",
+        "line",
+        "ring",
+        "grid",
+    }
+    assert main(["--sizes", "ten"]) == 2
