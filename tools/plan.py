@@ -110,25 +110,26 @@ def parse_scenario(
 
 
 def plan_to_json(plan: Plan) -> dict[str, Any]:
+    targets = [r.target.tolist() for r in plan.robots]
     return {
         "leader": plan.leader,
         "axis_rad": plan.axis,
         "targets": [
             {
                 "id": r.robot_id,
-                "x": float(r.target[0]),
-                "y": float(r.target[1]),
+                "x": t[0],
+                "y": t[1],
                 "order": r.order,
                 "parent": r.parent,
             }
-            for r in plan.robots
+            for r, t in zip(plan.robots, targets, strict=True)
         ],
         "trajectories": [
             {
                 "id": r.robot_id,
                 "heading_rad": r.heading,
                 "distance": r.distance,
-                "via": [[float(v[0]), float(v[1])] for v in r.via],
+                "via": [v.tolist() for v in r.via],
                 "wave": r.wave,
                 "after": list(r.after),
             }
@@ -226,8 +227,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     if args.png:
         draw_plan(plan, args.png, radius=params.radius)
-    json.dump(plan_to_json(plan), sys.stdout)
-    sys.stdout.write("\n")
+    sys.stdout.write(json.dumps(plan_to_json(plan)) + "\n")  # one write: fast at 10^5+
     return 0
 
 

@@ -7,9 +7,10 @@ other, so that both may walk together. Local search, deterministic:
 
 1. pack; take the critical chain (the robot that ends last, then the robot it waits for
    that ends last, ... ties by row);
-2. for each link (u waits for nothing but v waits for u) and each of the two robots,
-   the detour candidates of :func:`safety._detour_candidates` (one via point beside the
-   straight path) that keep the pair clear (both paths >= the pair's clearance apart)
+2. for each link (v waits for u) and each of the two robots, the detour candidates of
+   :func:`safety._detour_candidates` (one via point beside the straight path) and the
+   end candidates below (a step aside at the start, or an approach from the side) that
+   keep the pair clear (both paths >= the pair's clearance apart)
    are tried, shortest first, at most ``TRIES`` per robot: the pair flags are updated
    for that robot only and the plan is packed again;
 3. the candidate with the smallest makespan (then the shorter total, then the order
@@ -40,19 +41,34 @@ from agent.formation.safety import (
 TRIES = 6
 
 
+#: Extra via points near the ends of the path (fractions of the path, offsets in
+#: clearances): a step aside first, or an approach from the side, clears a robot standing
+#: next to the start or the target, which the middle detours of :mod:`safety` miss.
+END_FRACTIONS = (0.0, 0.1, 0.9, 1.0)
+END_OFFSETS = (1.0, 1.5, 2.0, 3.0)
+
+
+def _candidates(p: np.ndarray, q: np.ndarray, c: float) -> list[np.ndarray]:
+    """:func:`safety._detour_candidates`, then the end candidates (left before right)."""
+    out = _detour_candidates(p, q, c)
+    if not out:
+        return out
+    d = q - p
+    u = d / float(np.hypot(*d))
+    nrm = np.array([-u[1], u[0]])
+    for frac in END_FRACTIONS:
+        for off in END_OFFSETS:
+            for sign in (1.0, -1.0):
+                out.append(p + frac * d + sign * off * c * nrm)
+    return out
+
+
 def _path(start: np.ndarray, via: Sequence[np.ndarray], target: np.ndarray) -> np.ndarray:
     return np.vstack([start, *via, target])
 
 
 def _length(p: np.ndarray) -> float:
     return float(np.sum(np.hypot(*np.diff(p, axis=0).T)))
-
-
-def _clear(p: np.ndarray, q: np.ndarray, req: float) -> bool:
-    """Do polylines p and q stay >= req apart?"""
-    a0, a1 = p[:-1, None, :], p[1:, None, :]
-    b0, b1 = q[None, :-1, :], q[None, 1:, :]
-    return bool(np.min(seg_seg_dist(a0, a1, b0, b1)) >= req)
 
 
 def _chain(start: np.ndarray, finish: np.ndarray, after: Sequence[Sequence[int]]) -> list[int]:
@@ -102,10 +118,23 @@ def shorten(
                 if (r, other) in seen:
                     continue
                 seen.add((r, other))
-                cands = _detour_candidates(starts[r], targets[r], c)
-                stack = [_path(starts[r], (w,), targets[r]) for w in cands]
-                stack.sort(key=_length)  # stable: ties keep the candidate order
-                kept = [p for p in stack if _clear(p, paths[other], req)][:TRIES]
+                cands = _candidates(starts[r], targets[r], c)
+                if not cands:
+                    continue
+                k_c = len(cands)
+                stack = np.empty((k_c, 3, 2))
+                stack[:, 0], stack[:, 1], stack[:, 2] = starts[r], np.array(cands), targets[r]
+                lens_c = np.sum(np.hypot(*np.diff(stack, axis=1).transpose(2, 0, 1)), axis=1)
+                q = paths[other]
+                d = seg_seg_dist(
+                    stack[:, :-1, None, :],
+                    stack[:, 1:, None, :],
+                    q[None, None, :-1],
+                    q[None, None, 1:],
+                ).reshape(k_c, -1)
+                ok = np.flatnonzero(d.min(axis=1) >= req)
+                ok = ok[np.lexsort((ok, lens_c[ok]))][:TRIES]  # shortest first, then listed
+                kept = [stack[j] for j in ok.tolist()]
                 for p in kept:
                     new_len = lengths.copy()
                     new_len[r] = _length(p)
@@ -115,7 +144,7 @@ def shorten(
                     new_paths[r] = p
                     f2 = _update_flags(flags, new_paths, [r], c, ends)
                     try:
-                        s2, _, _ = pack(f2, new_len, leader, priority)
+                        s2, _, _ = pack(f2, new_len, leader, priority, times_only=True)
                     except ValueError:
                         continue
                     ms = float(np.max(s2 + new_len))

@@ -36,9 +36,11 @@ def pack(
     lengths: np.ndarray,
     leader: int,
     priority: np.ndarray,
+    times_only: bool = False,
 ) -> tuple[np.ndarray, tuple[tuple[int, ...], ...], np.ndarray]:
     """(start time, after lists, waves) per robot row; rows >= len(lengths) in ``flags``
-    (static obstacles) are ignored (the scheduler already kept paths clear of them)."""
+    (static obstacles) are ignored (the scheduler already kept paths clear of them).
+    ``times_only``: the start times alone (empty after lists and waves)."""
     lens = np.asarray(lengths, dtype=np.float64)
     n = lens.size
     if np.asarray(priority).shape != (n,):
@@ -94,6 +96,8 @@ def pack(
                 heapq.heappush(heap, key(j))
     if placed < n:
         raise ValueError("precedence cycle: schedule the paths first (safety)")
+    if times_only:
+        return np.array(start), (), np.zeros(0, dtype=np.int64)
     # order every close pair by its intervals: the one ending first is waited for
     after: list[set[int]] = [set() for _ in range(n)]
     for u, v in zip(src, dst, strict=True):
