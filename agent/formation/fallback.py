@@ -6,27 +6,31 @@ front-most start and ``g = 1.5·c`` (c = 2·radius). The pyramid is placed *ahea
 fleet: its last layer at ``Y0 + g`` where ``Y0 = y_max + g`` is the *corridor* line.
 
 Order and slots. Robots are sequenced front to back: y descending, then x ascending,
-then row (= id order). Slots are filled front to back too: the k-th block of robots in
-the sequence takes the k-th layer (leader = the first robot, alone on layer 1); inside a
-block the robots sorted by x (then row) take the layer's slots sorted by x. So along
-the sequence both the start y and the slot y never increase.
-
-Paths (three legs, two via points): straight up (+y) from the start to the corridor
-line, along it to below the slot, straight up to the slot (legs of length 0 dropped).
+then row (= id order). Slot columns (eq. 7 puts slots on columns ``sx = d_e sin φ_e``
+apart) are filled by a 1-D transport in x: robots sorted by x fill the columns left to
+right, each column taking as many robots as it has slots; inside a column the robots in
+sequence order take its slots front to back. So within a column, start y and slot y
+fall together along the sequence; robots of different columns have slots >= sx >= c
+apart in x. If ``sx < c``, layer blocks replace the columns: the k-th block of robots
+in the sequence takes the k-th layer (inside a block the robots sorted by x take the
+layer's slots left to right), so along the whole sequence the slot y never increases.
 
 Bands. Robot i's path stays inside the x-interval ``[min(x_i, X_i), max(x_i, X_i)]``
 (its *band*). Two robots whose bands are >= c apart never come within c of each other,
 moving or standing. Robots whose bands come closer go in sequence order (wave of the
-later one > wave of the earlier one); the leader goes alone in wave 0.
+later one > wave of the earlier one). (The leader need not go first: its column may
+hold robots ahead of it.)
 
 Why this is always safe (the clearance rule of :mod:`safety`, with
-``req = min(c, |s_i - s_k|, |t_i - t_k|)``), for robots i before k in the sequence:
+``req = min(c, |s_i - s_k|, |t_i - t_k|)``), for robots i before k in the sequence
+(y_k <= y_i):
 
-* i moves while k stands at s_k (y_k <= y_i): i's first leg goes up from s_i, so its
-  nearest point to s_k is s_i itself (distance |s_i - s_k| >= req); the corridor leg and
-  the last leg lie >= g > c above every start.
-* k moves while i stands at t_i (Y_i >= Y_k): k's first two legs lie >= g below every
-  slot; its last leg ends at t_k and rises to it, so its nearest point to t_i is t_k.
+* i moves while k stands at s_k: i's first leg goes straight up from s_i, so its nearest
+  point to s_k is s_i itself (distance |s_i - s_k| >= req); the corridor leg and the
+  last leg lie >= g > c above every start.
+* k moves while i stands at t_i: k's first two legs lie >= g below every slot; k's last
+  leg rises at x = X_k to t_k. If i and k share a slot column (or a layer block order),
+  Y_i >= Y_k and the nearest point to t_i is t_k; otherwise |X_i - X_k| >= sx >= c.
 * moving together: only when their bands are >= c apart (then every point is).
 
 Nothing here depends on the fleet's shape, spacing or size, so every valid input (n >= 1
@@ -83,18 +87,31 @@ def banded_plan(
     slots = slots + np.array([0.0, y_corr + g - float(np.min(slots[:, 1]))])
     rows = np.arange(n)
     seq = np.lexsort((rows, sp[:, 0], -sp[:, 1]))  # front to back
-    # layer blocks: slots of one layer are consecutive orders with equal y
+    rank = np.empty(n, dtype=np.int64)
+    rank[seq] = rows  # position in the sequence
     order = np.empty(n, dtype=np.int64)
-    layer_start = 0
-    layer = 1
-    while layer_start < n:
-        stop = min(layer_start + layer, n)
-        block = seq[layer_start:stop]
-        block = block[np.lexsort((block, sp[block, 0]))]
-        slot_ids = np.arange(layer_start, stop)  # eq. 7 fills a layer left to right
-        order[block] = slot_ids
-        layer_start = stop
-        layer += 1
+    sx = d_e * math.sin(phi_e)  # slot columns are sx apart (eq. 7)
+    if n > 1 and sx >= c * (1.0 - 1e-10):
+        # columns: robots by x (1-D transport, then sequence rank) fill the slot columns
+        # left to right; inside a column, sequence order takes the slots front to back
+        col = np.rint((slots[:, 0] - float(np.min(slots[:, 0]))) / sx).astype(np.int64)
+        slot_seq = np.lexsort((-slots[:, 1], col))  # by column, front to back
+        by_x = np.lexsort((rank, sp[:, 0]))
+        col_of_robot = np.empty(n, dtype=np.int64)
+        col_of_robot[by_x] = col[slot_seq]  # the k-th robot by x joins the k-th slot's column
+        robots_seq = np.lexsort((rank, col_of_robot))  # by column, then sequence
+        order[robots_seq] = slot_seq
+    else:
+        # layer blocks: slots of one layer are consecutive orders with equal y
+        layer_start = 0
+        layer = 1
+        while layer_start < n:
+            stop = min(layer_start + layer, n)
+            block = seq[layer_start:stop]
+            block = block[np.lexsort((block, sp[block, 0]))]
+            order[block] = np.arange(layer_start, stop)  # eq. 7: a layer left to right
+            layer_start = stop
+            layer += 1
     slot_p = slots[order]
     targets = frame.to_common(slot_p)
     axis = np.array([math.cos(frame.beta), math.sin(frame.beta)])
@@ -114,17 +131,12 @@ def banded_plan(
     waves = np.zeros(n, dtype=np.int64)
     after: list[tuple[int, ...]] = [() for _ in range(n)]
     c0l, c1l = c0.tolist(), c1.tolist()
-    leader = int(seq[0])
-    for k, i in enumerate(seq.tolist()):
+    for i in seq.tolist():
         a, b = c0l[i], c1l[i]
-        if k == 0:
-            w = 0
-        else:
-            w = max(int(level[a:b].max()) + 1, 1)
-            prev = set(owner[a:b].tolist())
-            prev.discard(-1)
-            prev.add(leader)  # the leader goes first, alone
-            after[i] = tuple(sorted(prev))
+        w = int(level[a:b].max()) + 1
+        prev = set(owner[a:b].tolist())
+        prev.discard(-1)
+        after[i] = tuple(sorted(prev))
         waves[i] = w
         level[a:b] = w
         owner[a:b] = i

@@ -124,7 +124,14 @@ def seg_seg_dist(a0: np.ndarray, a1: np.ndarray, b0: np.ndarray, b1: np.ndarray)
     )
     o1, o2 = _cross(a0, a1, b0), _cross(a0, a1, b1)
     o3, o4 = _cross(b0, b1, a0), _cross(b0, b1, a1)
-    crossing = (o1 * o2 < 0) & (o3 * o4 < 0)
+    # a proper crossing needs every endpoint clearly off the other line: orientations
+    # within rounding of 0 (collinear legs, e.g. on one corridor line) are no crossing -
+    # if such segments do meet, an endpoint lies on the other one and d is ~0 already
+    la = np.hypot(a1[..., 0] - a0[..., 0], a1[..., 1] - a0[..., 1])
+    lb = np.hypot(b1[..., 0] - b0[..., 0], b1[..., 1] - b0[..., 1])
+    tol = 1e-12 * (la + lb) * (la + lb + np.hypot(b0[..., 0] - a0[..., 0], b0[..., 1] - a0[..., 1]))
+    clear = (np.abs(o1) > tol) & (np.abs(o2) > tol) & (np.abs(o3) > tol) & (np.abs(o4) > tol)
+    crossing = (o1 * o2 < 0) & (o3 * o4 < 0) & clear
     return np.where(crossing, 0.0, d)
 
 
