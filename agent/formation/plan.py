@@ -2,8 +2,19 @@
 
 Pipeline: neighbour check (Algorithm 2, eq. 9) -> common frame (eq. 10 or least
 squares) -> pyramid frame (PCA eq. 12-13, or CP) -> slots (AUV eqs. 5-7) ->
-assignment (combined sub-groups + Lemma 1, or exact) -> trajectories (η_i, d_i) ->
-execution waves with via points where straight paths cannot be scheduled safely.
+assignment (combined sub-groups + Lemma 1, exact, or bottleneck-bounded) -> safe
+schedule (:mod:`safety`: slot swaps and via points until every close pair has a safe
+order) -> packing (:mod:`packing`: each robot starts once its own conflicts are clear)
+-> detours that cut the critical chain (:mod:`detours`, small fleets) -> trajectories
+(η_i, d_i), waves and ``after`` lists. Whenever no scheduled plan is found - and
+straight away above SCHEDULE_MAX_N robots - the banded plan of :mod:`fallback`, which
+always exists, is used: a valid input never ends in "no safe schedule" (obstacles
+aside: a robot walled in by obstacles has no safe path at all).
+
+Execution (:mod:`execution`): a robot may start once every robot of its ``after`` list
+holds its slot; waiting for every robot of every earlier ``wave`` is safe too (``after``
+always points to earlier waves). The leader is in wave 0 (it starts at once), but not
+necessarily alone.
 
 Every quantity of a :class:`Plan` is in the *common frame* (the fixed frame of the frame
 robot; :func:`plan_from_positions` uses the caller's frame and sets ``frame_robot=-1``).
@@ -45,10 +56,14 @@ from agent.formation.pyramid import (
 from agent.formation.records import NeighborRecord
 from agent.formation.safety import Schedule, ScheduleError, pair_flags, schedule
 
-#: ``default`` strategy: exact min-sum (``optimal``) up to this many robots; the paper's
-#: O(n log n) strategy above. Whatever it starts with, ``default`` falls back to the
-#: next attempt of :func:`attempts` when a plan cannot be scheduled safely.
-OPTIMAL_MAX_N = 200
+#: ``default`` strategy: exact min-sum (``optimal``, O(n³)) up to this many robots; the
+#: paper's O(n log n) strategy above. Whatever it starts with, ``default`` falls back to
+#: the next attempt of :func:`attempts` when a plan cannot be scheduled safely.
+OPTIMAL_MAX_N = 1500
+
+#: ``default`` strategy: up to this many robots, several assignments are scheduled and
+#: compared by makespan, and the critical chain gets detours (see :func:`_choose`).
+CANDIDATES_MAX_N = 200
 
 #: ``default`` strategy: above this many robots, the banded plan of :mod:`fallback`
 #: (O(n log n), safe by construction) instead of the scheduled ones (whose pair search
@@ -341,7 +356,7 @@ def _packed(
 #: smallest total (the min-sum assignment's straight paths).
 PATH_SLACK = 1.05
 
-#: Bounds on the longest path the ``default`` strategy tries (n <= OPTIMAL_MAX_N), as
+#: Bounds on the longest path the ``default`` strategy tries (n <= CANDIDATES_MAX_N), as
 #: fractions of the way from B* (the smallest possible longest path) to the longest path
 #: of the min-sum assignment.
 BOUND_STEPS = (0.0, 0.25, 0.5, 0.75)
@@ -379,7 +394,7 @@ def _choose(
 ) -> _Scheduled | None:
     """The scheduled plan of the first attempt that succeeds (see PlanParams.attempts).
 
-    ``default`` with n <= OPTIMAL_MAX_N first compares the CANDIDATES assignments on the
+    ``default`` with n <= CANDIDATES_MAX_N first compares the _candidates assignments on the
     centred pyramid: of those that schedule with a total path <= PATH_SLACK × the
     min-sum total, the smallest dependency makespan wins (then the smaller total, then
     the order of CANDIDATES). None: no attempt could be scheduled.
@@ -387,7 +402,7 @@ def _choose(
     n = pos.shape[0]
     empty: list[tuple[np.ndarray, ...]] = [() for _ in range(n)]
     exact = params.strategy == "default" and params.placement in ("default", "centroid")
-    if exact and n <= OPTIMAL_MAX_N:
+    if exact and n <= CANDIDATES_MAX_N:
         slots_p = placed_slots(n, params.d_e, params.phi_e, starts_p, "centroid")
         good: list[tuple[float, float, int, _Scheduled]] = []
         bound = math.inf
@@ -575,7 +590,7 @@ def plan_from_records(
 
     ``obstacles`` (M, 2), if any, are positions in the common frame (the frame robot's
     fixed frame). Raises ``ValueError`` for bad records, a fleet that is not connected
-    through identified neighbours, or (never seen in tests) no safe schedule.
+    through identified neighbours, or (with obstacles only) no safe schedule.
     """
     graph = identify_neighbours(records, params.epsilon)
     cf = build_common_frame(graph, params.frame_method)

@@ -3,7 +3,8 @@
 Scale table. Fleet: a jittered square grid with the paper's simulation spacing (d_e = 2 m,
 starts 0.9·d_e apart ± 0.15·d_e, robot radius 0.2 m), ids shuffled. Per n and strategy:
 
-* ``plan s``: wall seconds of ``plan_from_positions`` in this process;
+* ``plan s``: wall seconds of ``plan_from_positions`` in this process (``cpu s``: its
+  CPU seconds; the machine may be shared);
 * ``cli s``: wall seconds of the whole ``python -m tools.plan`` process (JSON in, JSON
   out: start-up, parsing, planning, output), with ``--cli``;
 * ``ms/capt``: makespan under the dependency rule over CAPT's (the longest straight path
@@ -421,7 +422,7 @@ def main(argv: list[str] | None = None) -> int:
         print("[bench plan] 67 fleet families ...", file=sys.stderr)
         fam = families_summary()
     # ---- print
-    head = ["n", "plan s", "cli s", "ms/capt", "wave", "waves", "path/opt", "safe", "plan"]
+    head = ["n", "plan s", "cpu s", "cli s", "ms/capt", "wave", "waves", "path/opt", "safe", "plan"]
     for s in strategies:
         print(f"strategy {s}")
         print("  " + " ".join(f"{h:>10s}" for h in head))
@@ -434,6 +435,7 @@ def main(argv: list[str] | None = None) -> int:
             row = [
                 f"{n:>10d}",
                 _fmt(r["time"]),
+                _fmt(r["cpu"]),
                 _fmt(cli) if cli is not None else "-",
                 _fmt(r["makespan"], r["exact"]),
                 _fmt(r["wave_makespan"], r["exact"]),
@@ -445,7 +447,11 @@ def main(argv: list[str] | None = None) -> int:
             print("  " + " ".join(f"{c:>10s}" for c in row))
         pts = [(n, r["time"]) for n, r in results[s].items() if "time" in r]
         cpts = [(n, r["cli"]) for n, r in results[s].items() if isinstance(r.get("cli"), float)]
-        print(f"  growth exponent 10^3..10^5: plan {_exponent(pts)}, cli {_exponent(cpts)}")
+        upts = [(n, r["cpu"]) for n, r in results[s].items() if "cpu" in r]
+        print(
+            f"  growth exponent 10^3..10^5: plan {_exponent(pts)}, cpu {_exponent(upts)}, "
+            f"cli {_exponent(cpts)}"
+        )
     if stuck is not None:
         if "error" in stuck:
             print(f"never stuck, paper n={args.stuck_n}: {stuck['error']}")
