@@ -13,6 +13,8 @@ other, so that both may walk together. Local search, deterministic:
    keep the pair clear (both paths >= the pair's clearance apart)
    are tried, shortest first, at most ``TRIES`` per robot: the pair flags are updated
    for that robot only and the plan is packed again;
+   Each link also tries the 2-opt move of Lemma 1: the two robots swap slots (straight
+   paths, both robots' pair flags updated);
 3. the candidate with the smallest makespan (then the shorter total, then the order
    tried) is kept if it shortens the makespan by more than 1e-9 and keeps the total
    path within ``bound``; a candidate that leaves a pair with no safe order (or a
@@ -26,6 +28,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -89,30 +92,74 @@ def shorten(
     targets: np.ndarray,
     vias: Sequence[tuple[np.ndarray, ...]],
     flags: PairFlags,
-    leader: int,
-    priority: np.ndarray,
+    order: np.ndarray,
     radius: float,
     bound: float,
     rounds: int = 20,
-) -> tuple[tuple[tuple[np.ndarray, ...], ...], PairFlags]:
-    """Local search of the module doc; returns (vias, flags) of the best plan found."""
+) -> tuple[np.ndarray, np.ndarray, tuple[tuple[np.ndarray, ...], ...], PairFlags]:
+    """Local search of the module doc. ``order``: the slot order of every robot (the
+    leader holds 0; also the packing priority). Returns (targets, order, vias, flags) of
+    the best plan found."""
     n = starts.shape[0]
     c = 2.0 * radius
+    targets = np.array(targets, dtype=np.float64, copy=True)
+    order = np.array(order, dtype=np.int64, copy=True)
     vias_l = [tuple(v) for v in vias]
     paths = [_path(starts[k], vias_l[k], targets[k]) for k in range(n)]
     lengths = np.array([_length(p) for p in paths])
-    ends = (starts, targets)
-    st, after, _ = pack(flags, lengths, leader, priority)
+
+    def leader_of(o: np.ndarray) -> int:
+        return int(np.flatnonzero(o == 0)[0])
+
+    st, after, _ = pack(flags, lengths, leader_of(order), order)
     best = float(np.max(st + lengths))
-    pair_req = {
-        (int(a), int(b)): float(r) for a, b, r in zip(flags.a, flags.b, flags.required, strict=True)
-    }
     for _ in range(rounds):
+        pair_req = {
+            (int(a), int(b)): float(q)
+            for a, b, q in zip(flags.a, flags.b, flags.required, strict=True)
+        }
         chain = _chain(st, st + lengths, after)
-        trial: tuple[float, float, int, int, np.ndarray, PairFlags, np.ndarray] | None = None
+        # (makespan, total, tried, changed rows, paths, targets, order, flags, lengths)
+        trial: tuple[Any, ...] | None = None
         tried = 0
+
+        def consider(
+            rows: list[int],
+            new_paths: list[np.ndarray],
+            new_t: np.ndarray,
+            new_o: np.ndarray,
+            lengths: np.ndarray = lengths,
+            flags: PairFlags = flags,
+            best: float = best,
+        ) -> None:
+            nonlocal trial, tried
+            new_len = lengths.copy()
+            for r in rows:
+                new_len[r] = _length(new_paths[r])
+            if float(new_len.sum()) > bound:
+                return
+            f2 = _update_flags(flags, new_paths, rows, c, (starts, new_t))
+            try:
+                s2, _, _ = pack(f2, new_len, leader_of(new_o), new_o, times_only=True)
+            except ValueError:
+                return
+            ms = float(np.max(s2 + new_len))
+            key = (ms, float(new_len.sum()), tried)
+            if ms < best - 1e-9 and (trial is None or key < trial[:3]):
+                trial = (*key, rows, new_paths, new_t, new_o, f2, new_len)
+            tried += 1
+
         seen: set[tuple[int, int]] = set()
         for u, v in itertools.pairwise(chain):
+            # 2-opt: the two robots swap slots (straight paths)
+            new_t = targets.copy()
+            new_t[[u, v]] = new_t[[v, u]]
+            new_o = order.copy()
+            new_o[[u, v]] = new_o[[v, u]]
+            swapped = list(paths)
+            swapped[u] = _path(starts[u], (), new_t[u])
+            swapped[v] = _path(starts[v], (), new_t[v])
+            consider([u, v], swapped, new_t, new_o)
             req = pair_req.get((min(u, v), max(u, v)), c)
             for r, other in ((v, u), (u, v)):
                 if (r, other) in seen:
@@ -134,32 +181,15 @@ def shorten(
                 ).reshape(k_c, -1)
                 ok = np.flatnonzero(d.min(axis=1) >= req)
                 ok = ok[np.lexsort((ok, lens_c[ok]))][:TRIES]  # shortest first, then listed
-                kept = [stack[j] for j in ok.tolist()]
-                for p in kept:
-                    new_len = lengths.copy()
-                    new_len[r] = _length(p)
-                    if float(new_len.sum()) > bound:
-                        continue
+                for j in ok.tolist():
                     new_paths = list(paths)
-                    new_paths[r] = p
-                    f2 = _update_flags(flags, new_paths, [r], c, ends)
-                    try:
-                        s2, _, _ = pack(f2, new_len, leader, priority, times_only=True)
-                    except ValueError:
-                        continue
-                    ms = float(np.max(s2 + new_len))
-                    key = (ms, float(new_len.sum()), tried)
-                    if ms < best - 1e-9 and (trial is None or key < trial[:3]):
-                        trial = (ms, key[1], tried, r, p, f2, new_len)
-                    tried += 1
+                    new_paths[r] = stack[j]
+                    consider([r], new_paths, targets, order)
         if trial is None:
             break
-        best, _, _, r, p, flags, lengths = trial
-        paths[r] = p
-        vias_l[r] = (p[1].copy(),)
-        pair_req = {
-            (int(a), int(b)): float(q)
-            for a, b, q in zip(flags.a, flags.b, flags.required, strict=True)
-        }
-        st, after, _ = pack(flags, lengths, leader, priority)
-    return tuple(vias_l), flags
+        best = trial[0]
+        rows, paths, targets, order, flags, lengths = trial[3:]
+        for r in rows:
+            vias_l[r] = tuple(p.copy() for p in paths[r][1:-1])
+        st, after, _ = pack(flags, lengths, leader_of(order), order)
+    return targets, order, tuple(vias_l), flags

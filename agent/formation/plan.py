@@ -333,9 +333,10 @@ def _packed(
         flags = pair_flags(paths, 2.0 * params.radius)
     leader_row = int(np.flatnonzero(order == 0)[0])
     if bound is not None and not obs.shape[0]:
-        vias_rows, flags = shorten(
-            pos, targets, vias_rows, flags, leader_row, order, params.radius, bound
+        targets, order, vias_rows, flags = shorten(
+            pos, targets, vias_rows, flags, order, params.radius, bound
         )
+        leader_row = int(np.flatnonzero(order == 0)[0])
     lengths = np.array(
         [_length(pos[k], vias_rows[k], targets[k]) for k in range(n)], dtype=np.float64
     )

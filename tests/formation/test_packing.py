@@ -96,16 +96,18 @@ def test_detour_cuts_the_critical_chain() -> None:
     targets = np.array([p[-1] for p in paths])
     f, lens, (start, _, _) = _pack(paths)
     before = float(np.max(start + lens))
-    vias, f2 = shorten(starts, targets, [(), (), ()], f, 0, np.arange(3), R, bound=1e9)
-    new_paths = [np.vstack([starts[k], *vias[k], targets[k]]) for k in range(3)]
+    t2, o2, vias, f2 = shorten(starts, targets, [(), (), ()], f, np.arange(3), R, bound=1e9)
+    new_paths = [np.vstack([starts[k], *vias[k], t2[k]]) for k in range(3)]
     lens2 = path_lengths(new_paths)
-    s2, after2, waves2 = pack(f2, lens2, 0, np.arange(3))
+    s2, after2, waves2 = pack(f2, lens2, int(np.flatnonzero(o2 == 0)[0]), o2)
     assert float(np.max(s2 + lens2)) < before - 1.0
+    assert sorted(o2.tolist()) == [0, 1, 2]
     assert check_safety(new_paths, waves2, R) == []
     assert check_dependencies(new_paths, [list(a) for a in after2], waves2, R) == []
-    # no detour is taken when the path budget forbids it
-    vias3, _ = shorten(starts, targets, [(), (), ()], f, 0, np.arange(3), R, bound=lens.sum())
-    assert vias3 == ((), (), ())
+    # the path budget holds (here: no longer than the straight paths)
+    t3, _, vias3, _ = shorten(starts, targets, [(), (), ()], f, np.arange(3), R, bound=lens.sum())
+    paths3 = [np.vstack([starts[k], *vias3[k], t3[k]]) for k in range(3)]
+    assert path_lengths(paths3).sum() <= lens.sum() + 1e-9
 
 
 def test_bottleneck_assignment_is_the_min_bottleneck_by_brute_force() -> None:
