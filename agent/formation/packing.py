@@ -25,6 +25,7 @@ the wave rule stays safe as well. The dependency makespan is at most the largest
 from __future__ import annotations
 
 import heapq
+import math
 
 import numpy as np
 
@@ -131,3 +132,52 @@ def pack(
         tuple(tuple(sorted(x)) for x in after),
         waves,
     )
+
+
+def regroup_waves(
+    lengths: np.ndarray,
+    after: tuple[tuple[int, ...], ...],
+    waves: np.ndarray,
+    pinned: int,
+    passes: int = 2,
+) -> np.ndarray:
+    """Wave numbers for the wave rule, keeping every ``after`` edge (the dependency rule is
+    unchanged): the wave rule's makespan is the sum over waves of the longest path, so a
+    robot is best placed in a wave whose longest path is already >= its own. Robots are
+    moved one by one - longest path first, then row - to the wave within their slack
+    (after every robot they wait for, before every robot waiting for them) that adds
+    the least to that sum (ties: the earliest); ``pinned`` (the leader) stays put.
+    Empty waves are then dropped."""
+    lens = np.asarray(lengths, dtype=np.float64)
+    n = lens.size
+    w = np.asarray(waves, dtype=np.int64).copy()
+    if n == 0:
+        return w
+    users: list[list[int]] = [[] for _ in range(n)]
+    for v in range(n):
+        for u in after[v]:
+            users[u].append(v)
+    lens_l = lens.tolist()
+    seq = sorted(range(n), key=lambda i: (-lens_l[i], i))
+    for _ in range(passes):
+        top = int(w.max()) + 1
+        members: list[list[int]] = [[] for _ in range(top)]
+        for i, k in enumerate(w.tolist()):
+            members[k].append(i)
+        wl = w.tolist()
+        for i in seq:
+            if i == pinned:
+                continue
+            lo = max((wl[j] + 1 for j in after[i]), default=0)
+            hi = min((wl[j] - 1 for j in users[i]), default=top - 1)
+            members[wl[i]].remove(i)
+            best_k, best_cost = wl[i], math.inf
+            for k in range(lo, hi + 1):
+                m = max((lens_l[j] for j in members[k]), default=0.0)
+                cost = max(lens_l[i] - m, 0.0)
+                if cost < best_cost - 1e-12:
+                    best_k, best_cost = k, cost
+            members[best_k].append(i)
+            wl[i] = best_k
+        w = np.array(wl, dtype=np.int64)
+    return np.unique(w, return_inverse=True)[1].reshape(-1).astype(np.int64)

@@ -44,7 +44,7 @@ from agent.formation.detours import shorten
 from agent.formation.fallback import banded_plan
 from agent.formation.neighbour_check import DEFAULT_EPSILON, identify_neighbours
 from agent.formation.obstacles import plan_around_obstacles
-from agent.formation.packing import pack
+from agent.formation.packing import pack, regroup_waves
 from agent.formation.pyramid import (
     ORIENTATIONS,
     PLACEMENTS,
@@ -341,6 +341,7 @@ def _packed(
         [_length(pos[k], vias_rows[k], targets[k]) for k in range(n)], dtype=np.float64
     )
     start, after, waves = pack(flags, lengths, leader_row, order)
+    waves = regroup_waves(lengths, after, waves, leader_row)
     return _Scheduled(
         order,
         targets,

@@ -128,3 +128,32 @@ def test_bottleneck_assignment_is_the_min_bottleneck_by_brute_force() -> None:
         total = float(np.sum(np.hypot(*(s - t[loose]).T)))
         assert total == pytest.approx(float(np.sum(np.hypot(*(s - t[opt]).T))))
         assert assign(s, t, "bottleneck", 1.0, 0.5).tolist() == perm.tolist()
+
+
+def test_regroup_waves_keeps_the_order_and_never_lengthens() -> None:
+    from agent.formation.execution import wave_makespan
+    from agent.formation.packing import regroup_waves
+
+    # 1 waits for 0; 2 (long, free) joins 0's wave... it already is; 3 (short, free)
+    # joins the wave of the longest path it can
+    lens = np.array([5.0, 4.0, 6.0, 1.0, 2.0])
+    after = ((), (0,), (), (), (1,))
+    waves = np.array([0, 1, 0, 0, 2])
+    new = regroup_waves(lens, after, waves, pinned=0)
+    for v, deps in enumerate(after):
+        assert all(new[u] < new[v] for u in deps)
+    assert wave_makespan(lens, new) <= wave_makespan(lens, waves)
+    assert new[0] == 0
+    rng = np.random.default_rng(2)
+    for _ in range(20):
+        n = 12
+        lens = rng.uniform(0.5, 5.0, n)
+        after = tuple(
+            tuple(sorted({int(j) for j in rng.integers(0, i, 2)})) if i else () for i in range(n)
+        )
+        waves = np.zeros(n, dtype=np.int64)
+        for i in range(n):
+            waves[i] = max((waves[j] + 1 for j in after[i]), default=0)
+        new = regroup_waves(lens, after, waves, pinned=0)
+        assert all(new[u] < new[v] for v in range(n) for u in after[v])
+        assert wave_makespan(lens, new) <= wave_makespan(lens, waves) + 1e-9
