@@ -95,3 +95,39 @@ def test_property_banded_plan_is_always_safe(
     pts: list[tuple[float, float]], d_e: float, radius: float
 ) -> None:
     _check(np.array(pts, dtype=np.float64), d_e, radius)
+
+
+def test_plan_falls_back_to_the_banded_plan_when_scheduling_fails(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import agent.formation.plan as plan_mod
+
+    def fail(*args: object, **kwargs: object) -> None:
+        raise ValueError("no safe schedule found after 10 rounds of slot swaps")
+
+    monkeypatch.setattr(plan_mod, "_schedule_with_repair", fail)
+    rng = np.random.default_rng(8)
+    pos = rng.uniform(0, 8.0, (25, 2))
+    ids = [int(i) for i in rng.permutation(1000)[:25]]
+    plan = plan_from_positions(ids, pos, PlanParams(d_e=2.0))
+    assert plan.strategy == "banded"
+    row = {r.robot_id: k for k, r in enumerate(plan.robots)}
+    after = [[row[j] for j in r.after] for r in plan.robots]
+    assert check_safety(plan.paths(), plan.wave_of(), R) == []
+    assert check_dependencies(plan.paths(), after, plan.wave_of(), R) == []
+    perm = rng.permutation(25)
+    again = plan_from_positions([ids[k] for k in perm], pos[perm], PlanParams(d_e=2.0))
+    assert again.digest == plan.digest
+
+
+def test_large_banded_plan_is_canonical_and_safe() -> None:
+    rng = np.random.default_rng(9)
+    n = 1500
+    g = np.stack(np.meshgrid(np.arange(39), np.arange(39)), -1).reshape(-1, 2)[:n]
+    pos = (g + rng.uniform(-0.15, 0.15, g.shape)) * 1.8
+    ids = [int(i) for i in rng.permutation(n)]
+    params = PlanParams(d_e=2.0, strategy="banded")
+    plan = plan_from_positions(ids, pos, params)
+    assert check_safety(plan.paths(), plan.wave_of(), R) == []
+    perm = rng.permutation(n)
+    assert plan_from_positions([ids[k] for k in perm], pos[perm], params).digest == plan.digest
