@@ -353,7 +353,7 @@ def draw(results: dict[str, dict[int, dict[str, Any]]], path: str) -> None:
     ax1.grid(True, which="both", alpha=0.3)
     ax1.legend(fontsize=8)
     ax2.set_xlabel("robots")
-    ax2.set_title("makespan over CAPT (dependency rule; <= above exact size), waves")
+    ax2.set_title("makespan / CAPT (dependency rule) and waves")
     ax2.grid(True, which="both", alpha=0.3)
     ax2.legend(fontsize=8)
     fig.tight_layout()
