@@ -143,30 +143,6 @@ def check_dependencies(
     return out
 
 
-def dependencies_from_flags(
-    flags: PairFlags, waves: np.ndarray, n: int, leader: int
-) -> tuple[tuple[int, ...], ...]:
-    """``after`` lists from the pair flags of a wave-safe plan: every close pair that may
-    not walk together waits earlier wave -> later wave; every robot of a wave after the
-    leader's waits for the leader (the leader goes first)."""
-    w = np.asarray(waves, dtype=np.int64)
-    sel = ~flags.same_ok & (flags.b < n)
-    a, b = flags.a[sel], flags.b[sel]
-    wa, wb = w[a], w[b]
-    src = np.where(wa < wb, a, b)
-    dst = np.where(wa < wb, b, a)
-    keep = wa != wb
-    src, dst = src[keep], dst[keep]
-    later = np.flatnonzero(w > w[leader])
-    src = np.concatenate([src, np.full(later.size, leader)])
-    dst = np.concatenate([dst, later])
-    key = np.unique(dst.astype(np.int64) * n + src)
-    d, s = key // n, key % n
-    ptr = np.searchsorted(d, np.arange(n + 1))
-    sl = s.tolist()
-    return tuple(tuple(sl[ptr[i] : ptr[i + 1]]) for i in range(n))
-
-
 def capt_assignment(starts: np.ndarray, slots: np.ndarray) -> np.ndarray:
     """perm[robot] = slot minimising the sum of squared distances (CAPT)."""
     d = starts[:, None, :] - slots[None, :, :]

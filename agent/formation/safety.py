@@ -34,6 +34,13 @@ perpendicular to the path at its middle, quarter and three-quarter points, offse
 conflicts (then the shortest) wins; this repeats until nothing is left to resolve.
 Robots are still taken one by one (a detour changes the score of the next ones), each
 scored only against the robots that can matter (found for the whole round at once).
+The waves found here certify that a safe order exists; :mod:`plan` then re-times the
+robots from the same pair flags (:mod:`packing`), so each starts as soon as its own
+conflicts are clear.
+
+Distances are compared with a rounding slack (relative 1e-9 and 1e-12·c absolute), and
+two segments only *cross* when every endpoint is clearly off the other's line (collinear
+legs are measured by their endpoint distances).
 """
 
 from __future__ import annotations
