@@ -18,7 +18,8 @@ other, so that both may walk together. Local search, deterministic:
 3. the candidate with the smallest makespan (then the shorter total, then the order
    tried) is kept if it shortens the makespan by more than 1e-9 and keeps the total
    path within ``bound``; a candidate that leaves a pair with no safe order (or a
-   precedence cycle) is discarded. Repeat until no link improves or ``rounds`` is met.
+   precedence cycle) is discarded. Repeat until no link improves, ``rounds`` is met or
+   MAX_EVALS plans were packed.
 
 Safety is never traded: every accepted plan is packed from exact pair flags, so it
 keeps the same guarantees as the plan it started from.
@@ -42,6 +43,10 @@ from agent.formation.safety import (
 
 #: Detour candidates tried per robot of a link (shortest first).
 TRIES = 6
+
+#: Plans packed per :func:`shorten` call at most (each costs a pair-flag update and a
+#: packing): bounds the time on long chains (a line of 200 robots: ~6 000 without it).
+MAX_EVALS = 2000
 
 
 #: Extra via points near the ends of the path (fractions of the path, offsets in
@@ -113,6 +118,7 @@ def shorten(
 
     st, after, _ = pack(flags, lengths, leader_of(order), order)
     best = float(np.max(st + lengths))
+    evals = 0
     for _ in range(rounds):
         pair_req = {
             (int(a), int(b)): float(q)
@@ -132,7 +138,10 @@ def shorten(
             flags: PairFlags = flags,
             best: float = best,
         ) -> None:
-            nonlocal trial, tried
+            nonlocal trial, tried, evals
+            if evals >= MAX_EVALS:
+                return
+            evals += 1
             new_len = lengths.copy()
             for r in rows:
                 new_len[r] = _length(new_paths[r])

@@ -365,7 +365,7 @@ BOUND_STEPS = (0.0, 0.25, 0.5, 0.75)
 
 
 #: How many of the best candidates (by makespan before detours) get detours.
-SHORTENED = 2
+SHORTENED = 3
 
 
 def _candidates(starts_p: np.ndarray, slots_p: np.ndarray) -> list[tuple[str, np.ndarray]]:
