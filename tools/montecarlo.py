@@ -18,7 +18,10 @@ default) of ``--robots`` robots (10) with the paper's d_e = 2 m, φ_e = 30°, r 
    axis); crossings among the planned straight start->target segments (Lemma 1);
    safety violations of the planned paths and of the executed ones (same waves);
    total planned path over the exact min-sum optimum for the same estimated starts;
-   mean error of the estimated common frame.
+   mean error of the estimated common frame; the makespan (robots at unit speed) over
+   CAPT's (the longest straight path of the min-sum-of-squares assignment to the same
+   slots), under the dependency rule (a robot starts when the robots of its ``after``
+   list hold) and under the wave rule (a wave starts when the previous one holds).
 
 Noise levels (paper 5.1.1): ``none``; ``records`` (δd_ij = 0.1·d_e, case (1));
 ``paper`` (δd_ij = δd_i = 0.1·d_e, δη_i = 0.05·φ_e, case (2)).
@@ -41,6 +44,12 @@ import numpy as np
 
 from agent.formation.assignment import optimal_assignment
 from agent.formation.common_frame import build_common_frame
+from agent.formation.execution import (
+    capt_makespan,
+    dependency_makespan,
+    path_lengths,
+    wave_makespan,
+)
 from agent.formation.neighbour_check import identify_neighbours
 from agent.formation.plan import Plan, PlanParams, plan_from_positions, plan_from_records
 from agent.formation.pyramid import parent_of
@@ -159,6 +168,8 @@ class Acc:
     ratio: list[float]
     frame_err: list[float]
     waves: list[int]
+    makespan: list[float]
+    wave_makespan: list[float]
     failures: int = 0
 
 
@@ -190,6 +201,11 @@ def _summary(acc: Acc) -> dict[str, Any]:
         "path_over_optimum": round(float(np.mean(acc.ratio)), 4) if acc.ratio else None,
         "frame_error_m": round(float(np.mean(acc.frame_err)), 4) if acc.frame_err else None,
         "waves_mean": round(float(np.mean(acc.waves)), 3) if acc.waves else None,
+        "makespan_over_capt": round(float(np.median(acc.makespan)), 4) if acc.makespan else None,
+        "makespan_over_capt_worst": round(float(np.max(acc.makespan)), 4) if acc.makespan else None,
+        "wave_makespan_over_capt": round(float(np.median(acc.wave_makespan)), 4)
+        if acc.wave_makespan
+        else None,
     }
 
 
@@ -227,6 +243,10 @@ def one_run(
     perm = optimal_assignment(s, t)
     opt = float(np.sum(np.hypot(*(s - t[perm]).T)))
     total = float(sum(r.length() for r in plan.robots))
+    lengths = path_lengths(plan.paths())
+    row = {r.robot_id: k for k, r in enumerate(plan.robots)}
+    after = [[row[j] for j in r.after] for r in plan.robots]
+    capt = capt_makespan(s, t)
     stats = {
         "rd": rd,
         "rp": rp,
@@ -236,6 +256,8 @@ def one_run(
         "ratio": total / opt if opt > 1e-9 else 1.0,
         "frame_err": frame_err,
         "waves": len(plan.waves),
+        "makespan": dependency_makespan(lengths, after, waves) / capt if capt > 1e-9 else 1.0,
+        "wave_makespan": wave_makespan(lengths, waves) / capt if capt > 1e-9 else 1.0,
     }
     return plan, true_c, executed, stats
 
@@ -249,7 +271,7 @@ def run_all(
     for level in levels:
         for strategy in strategies:
             for frame in frames:
-                acc = Acc([], [], [], [], [], [], [], [])
+                acc = Acc([], [], [], [], [], [], [], [], [], [])
                 for seed in range(runs):
                     try:
                         _, _, _, st = one_run(seed, n, level, strategy, frame)
@@ -264,6 +286,8 @@ def run_all(
                     acc.ratio.append(st["ratio"])
                     acc.frame_err.append(st["frame_err"])
                     acc.waves.append(st["waves"])
+                    acc.makespan.append(st["makespan"])
+                    acc.wave_makespan.append(st["wave_makespan"])
                 out[f"{level}/{strategy}/{frame}"] = _summary(acc)
                 done += 1
                 print(f"[montecarlo] {done}/{total} {level}/{strategy}/{frame}", file=sys.stderr)
@@ -379,14 +403,16 @@ def main(argv: list[str] | None = None) -> int:
     else:
         print(
             f"{'configuration':32s} {'rd±20%':>7s} {'rφ±30%':>7s} {'cross':>6s} {'viol':>5s} "
-            f"{'exviol':>6s} {'path/opt':>8s} {'frame m':>8s} {'fail':>4s}"
+            f"{'exviol':>6s} {'path/opt':>8s} {'frame m':>8s} {'ms/capt':>7s} {'wave ms':>7s} "
+            f"{'fail':>4s}"
         )
         for key, r in summary["results"].items():
             print(
                 f"{key:32s} {r['r_d_within_20pct']!s:>7s} {r['r_phi_within_30pct']!s:>7s} "
                 f"{r['crossings_per_run']!s:>6s} {r['planned_violations_per_run']!s:>5s} "
                 f"{r['executed_violations_per_run']!s:>6s} {r['path_over_optimum']!s:>8s} "
-                f"{r['frame_error_m']!s:>8s} {r['failures']:>4d}"
+                f"{r['frame_error_m']!s:>8s} {r['makespan_over_capt']!s:>7s} "
+                f"{r['wave_makespan_over_capt']!s:>7s} {r['failures']:>4d}"
             )
     return 0
 

@@ -30,6 +30,11 @@ Robots are given in ascending-id order; the result ``perm`` maps robot row -> sl
 Euclidean distances (all N robots; the leader is whoever gets slot 0). O(n³).
 
 ``capt`` - the same on squared distances (the CAPT assignment of Turpin et al.).
+
+``bottleneck`` - the longest path first, then the total (in the spirit of CAT-ORA, 2024):
+the smallest achievable longest distance B* (binary search over the distinct distances,
+a perfect matching on the pairs within the bound by ``maximum_bipartite_matching``), then
+the min-sum assignment among the pairs within B*. O(n² log n + n³).
 """
 
 from __future__ import annotations
@@ -39,7 +44,7 @@ import math
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-STRATEGIES = ("paper", "optimal", "capt")
+STRATEGIES = ("paper", "optimal", "capt", "bottleneck")
 
 
 def _rank(pts: np.ndarray, ids: np.ndarray) -> np.ndarray:
@@ -166,10 +171,52 @@ def optimal_assignment(starts: np.ndarray, slots: np.ndarray, squared: bool = Fa
     return perm
 
 
+def _has_perfect_matching(ok: np.ndarray) -> bool:
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import maximum_bipartite_matching
+
+    match = maximum_bipartite_matching(csr_matrix(ok), perm_type="column")
+    return bool(np.all(match >= 0))
+
+
+def _distances(starts: np.ndarray, slots: np.ndarray) -> np.ndarray:
+    return np.hypot(starts[:, None, 0] - slots[None, :, 0], starts[:, None, 1] - slots[None, :, 1])
+
+
+def min_bottleneck(starts: np.ndarray, slots: np.ndarray) -> float:
+    """The smallest longest distance B* of any assignment (see module doc)."""
+    cost = _distances(starts, slots)
+    vals = np.unique(cost)
+    lo, hi = 0, vals.size - 1  # vals[hi] (the largest) always admits a perfect matching
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if _has_perfect_matching(cost <= vals[mid]):
+            hi = mid
+        else:
+            lo = mid + 1
+    return float(vals[lo])
+
+
+def bounded_assignment(starts: np.ndarray, slots: np.ndarray, bound: float) -> np.ndarray:
+    """Min-sum assignment among the pairs no longer than ``bound`` (>= B*, else the
+    longer pairs are used as little as the min-sum allows). perm[robot] = slot."""
+    cost = _distances(starts, slots)
+    big = 1.0 + float(cost.sum())
+    rows, cols = linear_sum_assignment(np.where(cost <= bound, cost, big + cost))
+    perm = np.full(starts.shape[0], -1, dtype=np.int64)
+    perm[rows] = cols
+    return perm
+
+
+def bottleneck_assignment(starts: np.ndarray, slots: np.ndarray) -> np.ndarray:
+    """Min-sum assignment among the pairs no longer than B* (see module doc)."""
+    return bounded_assignment(starts, slots, min_bottleneck(starts, slots))
+
+
 def assign(
     starts: np.ndarray, slots: np.ndarray, strategy: str, d_e: float, phi_e: float
 ) -> np.ndarray:
-    """perm[robot row] = slot index, by ``strategy`` (paper | optimal | capt)."""
+    """perm[robot row] = slot index, by ``strategy`` (paper | optimal | capt | bottleneck)."""
     s = np.asarray(starts, dtype=np.float64)
     f = np.asarray(slots, dtype=np.float64)
     if s.ndim != 2 or s.shape[1] != 2 or f.shape != s.shape:
@@ -180,6 +227,8 @@ def assign(
         perm = optimal_assignment(s, f)
     elif strategy == "capt":
         perm = optimal_assignment(s, f, squared=True)
+    elif strategy == "bottleneck":
+        perm = bottleneck_assignment(s, f)
     else:
         raise ValueError(f"strategy must be one of {STRATEGIES}, got {strategy!r}")
     if sorted(perm.tolist()) != list(range(len(perm))):  # pragma: no cover - invariant

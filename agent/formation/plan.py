@@ -2,8 +2,19 @@
 
 Pipeline: neighbour check (Algorithm 2, eq. 9) -> common frame (eq. 10 or least
 squares) -> pyramid frame (PCA eq. 12-13, or CP) -> slots (AUV eqs. 5-7) ->
-assignment (combined sub-groups + Lemma 1, or exact) -> trajectories (η_i, d_i) ->
-execution waves with via points where straight paths cannot be scheduled safely.
+assignment (combined sub-groups + Lemma 1, exact, or bottleneck-bounded) -> safe
+schedule (:mod:`safety`: slot swaps and via points until every close pair has a safe
+order) -> packing (:mod:`packing`: each robot starts once its own conflicts are clear)
+-> detours that cut the critical chain (:mod:`detours`, small fleets) -> trajectories
+(η_i, d_i), waves and ``after`` lists. Whenever no scheduled plan is found - and
+straight away above SCHEDULE_MAX_N robots - the banded plan of :mod:`fallback`, which
+always exists, is used: a valid input never ends in "no safe schedule" (obstacles
+aside: a robot walled in by obstacles has no safe path at all).
+
+Execution (:mod:`execution`): a robot may start once every robot of its ``after`` list
+holds its slot; waiting for every robot of every earlier ``wave`` is safe too (``after``
+always points to earlier waves). The leader is in wave 0 (it starts at once), but not
+necessarily alone.
 
 Every quantity of a :class:`Plan` is in the *common frame* (the fixed frame of the frame
 robot; :func:`plan_from_positions` uses the caller's frame and sets ``frame_robot=-1``).
@@ -27,28 +38,45 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from agent.formation.assignment import STRATEGIES, assign
+from agent.formation.assignment import STRATEGIES, assign, bounded_assignment, min_bottleneck
 from agent.formation.common_frame import METHODS, build_common_frame
+from agent.formation.detours import shorten
+from agent.formation.fallback import banded_plan
 from agent.formation.neighbour_check import DEFAULT_EPSILON, identify_neighbours
 from agent.formation.obstacles import plan_around_obstacles
+from agent.formation.packing import pack, regroup_waves
 from agent.formation.pyramid import (
     ORIENTATIONS,
     PLACEMENTS,
+    PyramidFrame,
     check_geometry,
-    parent_of,
     placed_slots,
     pyramid_frame,
 )
 from agent.formation.records import NeighborRecord
-from agent.formation.safety import Schedule, ScheduleError, schedule
+from agent.formation.safety import Schedule, ScheduleError, pair_flags, schedule
 
-#: ``default`` strategy: exact min-sum (``optimal``) up to this many robots; the paper's
-#: O(n log n) strategy above. Whatever it starts with, ``default`` falls back to the
-#: next attempt of :func:`attempts` when a plan cannot be scheduled safely.
-OPTIMAL_MAX_N = 200
+#: ``default`` strategy: exact min-sum (``optimal``, O(n³)) up to this many robots; the
+#: paper's O(n log n) strategy above. Whatever it starts with, ``default`` falls back to
+#: the next attempt of :func:`attempts` when a plan cannot be scheduled safely.
+OPTIMAL_MAX_N = 1500
+
+#: ``default`` strategy: up to this many robots, several assignments are scheduled and
+#: compared by makespan, and the critical chain gets detours (see :func:`_choose`).
+CANDIDATES_MAX_N = 200
+
+#: ``default`` strategy: above this many robots, the banded plan of :mod:`fallback`
+#: (O(n log n), safe by construction) instead of the scheduled ones (whose pair search
+#: grows with the total path length, ~n^1.5 for the centred pyramid: > 20 s at 2·10^4).
+SCHEDULE_MAX_N = 12_000
 
 #: The ``front`` fallback placement is only tried up to this many robots.
 FRONT_MAX_N = 2000
+
+
+#: Every strategy a plan may name: an assignment of :mod:`assignment`, ``banded`` (the
+#: plan of :mod:`fallback`, which always exists) or ``default``.
+PLAN_STRATEGIES = (*STRATEGIES, "banded", "default")
 
 
 @dataclass(frozen=True)
@@ -56,7 +84,7 @@ class PlanParams:
     d_e: float = 0.8
     phi_e: float = math.radians(30)
     radius: float = 0.2
-    strategy: str = "default"  # "paper" | "optimal" | "capt" | "default"
+    strategy: str = "default"  # "paper" | "optimal" | "capt" | "banded" | "default"
     orientation: str = "pca"  # "pca" | "cp"
     frame_method: str = "default"  # "bfs" (paper eq. 10) | "lsq" | "default" (= lsq)
     epsilon: float = DEFAULT_EPSILON  # eq. 9 threshold, metres (see neighbour_check)
@@ -70,10 +98,8 @@ class PlanParams:
             isinstance(self.radius, int | float) and math.isfinite(self.radius) and self.radius > 0
         ):
             raise ValueError(f"radius must be a finite distance > 0, got {self.radius!r}")
-        if self.strategy not in (*STRATEGIES, "default"):
-            raise ValueError(
-                f"strategy must be one of {(*STRATEGIES, 'default')}, got {self.strategy!r}"
-            )
+        if self.strategy not in PLAN_STRATEGIES:
+            raise ValueError(f"strategy must be one of {PLAN_STRATEGIES}, got {self.strategy!r}")
         if self.orientation not in ORIENTATIONS:
             raise ValueError(f"orientation must be one of {ORIENTATIONS}, got {self.orientation!r}")
         if self.frame_method not in (*METHODS, "default"):
@@ -103,6 +129,8 @@ class PlanParams:
         from ``centroid`` to ``front``. The ``default`` strategy tries optimal (small N)
         then paper (whose top-to-bottom ranking schedules well in dense fleets).
         """
+        if self.strategy == "banded" or (self.strategy == "default" and n > SCHEDULE_MAX_N):
+            return []  # straight to the plan that always exists
         strategies = [self.resolved_strategy(n)]
         if self.strategy == "default" and "paper" not in strategies:
             strategies.append("paper")
@@ -123,6 +151,9 @@ class RobotPlan:
     distance: float  # d_i of the first leg
     via: tuple[np.ndarray, ...] = ()
     wave: int = 0
+    # robot ids (ascending) that must hold their slots before this robot starts: the
+    # dependency rule of :mod:`execution` (always in earlier waves)
+    after: tuple[int, ...] = ()
 
     def waypoints(self) -> list[np.ndarray]:
         return [*self.via, self.target]
@@ -243,12 +274,183 @@ def _schedule_with_repair(
     raise ValueError(f"no safe schedule found after {MAX_SWAPS} rounds of slot swaps")
 
 
+def _parents(order: np.ndarray) -> np.ndarray:
+    """Eq. 6 on an array of orders (see :func:`pyramid.parent_of`), -1 for the leader."""
+    o = np.asarray(order, dtype=np.int64)
+    t = np.floor(np.sqrt(1.0 + 8.0 * o)).astype(np.int64)
+    t = np.where((t + 1) ** 2 <= 1 + 8 * o, t + 1, t)
+    t = np.where(t * t > 1 + 8 * o, t - 1, t)
+    t = np.where(t % 2 == 0, t - 1, t)
+    layer = (t - 1) // 2 + 1
+    last = layer * (layer + 1) // 2 - 1
+    par = np.where(o == last, o - layer, o - (layer - 1))
+    return np.where(layer == 1, -1, par)
+
+
+def _path(start: np.ndarray, via: Sequence[np.ndarray], target: np.ndarray) -> np.ndarray:
+    return np.vstack([start, *via, target])
+
+
+def _length(start: np.ndarray, via: Sequence[np.ndarray], target: np.ndarray) -> float:
+    p = _path(start, via, target)
+    return float(np.sum(np.hypot(*np.diff(p, axis=0).T)))
+
+
+@dataclass(frozen=True)
+class _Scheduled:
+    """A safe plan for robot rows: slot orders, targets, via points, waves, after lists."""
+
+    order: np.ndarray
+    targets: np.ndarray
+    vias: tuple[tuple[np.ndarray, ...], ...]
+    waves: np.ndarray
+    after: tuple[tuple[int, ...], ...]
+    strategy: str
+    makespan: float = 0.0  # dependency makespan (path-length units)
+    total: float = 0.0  # total path length
+
+
+def _packed(
+    pos: np.ndarray,
+    targets: np.ndarray,
+    order: np.ndarray,
+    vias: Sequence[tuple[np.ndarray, ...]],
+    obs: np.ndarray,
+    params: PlanParams,
+    strategy: str,
+    bound: float | None = None,
+) -> _Scheduled:
+    """Schedule (slot swaps and detours until safe, see :func:`_schedule_with_repair`),
+    then pack the waves (:mod:`packing`); with a ``bound`` on the total path (no
+    obstacles), first shorten the critical chain by detours (:mod:`detours`). Raises
+    ``ValueError`` if no schedule is found."""
+    sched, order, targets = _schedule_with_repair(pos, targets, order, list(vias), obs, params)
+    n = pos.shape[0]
+    flags = sched.flags
+    vias_rows = sched.vias
+    if flags is None:  # pragma: no cover - schedule() always returns its flags
+        paths = [_path(pos[k], vias_rows[k], targets[k]) for k in range(n)]
+        flags = pair_flags(paths, 2.0 * params.radius)
+    leader_row = int(np.flatnonzero(order == 0)[0])
+    if bound is not None and not obs.shape[0]:
+        targets, order, vias_rows, flags = shorten(
+            pos, targets, vias_rows, flags, order, params.radius, bound
+        )
+        leader_row = int(np.flatnonzero(order == 0)[0])
+    lengths = np.array(
+        [_length(pos[k], vias_rows[k], targets[k]) for k in range(n)], dtype=np.float64
+    )
+    start, after, waves = pack(flags, lengths, leader_row, order)
+    waves = regroup_waves(lengths, after, waves, leader_row)
+    return _Scheduled(
+        order,
+        targets,
+        vias_rows,
+        waves,
+        after,
+        strategy,
+        makespan=float(np.max(start + lengths)),
+        total=float(lengths.sum()),
+    )
+
+
+#: The ``default`` strategy keeps a plan whose total path is at most this many times the
+#: smallest total (the min-sum assignment's straight paths).
+PATH_SLACK = 1.05
+
+#: Bounds on the longest path the ``default`` strategy tries (n <= CANDIDATES_MAX_N), as
+#: fractions of the way from B* (the smallest possible longest path) to the longest path
+#: of the min-sum assignment.
+BOUND_STEPS = (0.0, 0.25, 0.5, 0.75)
+
+
+#: How many of the best candidates (by makespan before detours) get detours.
+SHORTENED = 3
+
+
+def _candidates(starts_p: np.ndarray, slots_p: np.ndarray) -> list[tuple[str, np.ndarray]]:
+    """Assignments the ``default`` strategy compares: min-sum first, then min-sum under
+    bounds on the longest path between B* and min-sum's own (CAT-ORA's idea), then CAPT.
+    Duplicates are dropped (first kept)."""
+    opt = assign(starts_p, slots_p, "optimal", 1.0, 0.5)
+    longest = float(np.max(np.hypot(*(starts_p - slots_p[opt]).T)))
+    b_star = min_bottleneck(starts_p, slots_p)
+    out = [("optimal", opt)]
+    for f in BOUND_STEPS:
+        out.append(
+            ("bottleneck", bounded_assignment(starts_p, slots_p, b_star + f * (longest - b_star)))
+        )
+    out.append(("capt", assign(starts_p, slots_p, "capt", 1.0, 0.5)))
+    seen: set[bytes] = set()
+    uniq = []
+    for name, perm in out:
+        key = perm.tobytes()
+        if key not in seen:
+            seen.add(key)
+            uniq.append((name, perm))
+    return uniq
+
+
+def _choose(
+    pos: np.ndarray, frame: PyramidFrame, starts_p: np.ndarray, params: PlanParams
+) -> _Scheduled | None:
+    """The scheduled plan of the first attempt that succeeds (see PlanParams.attempts).
+
+    ``default`` with n <= CANDIDATES_MAX_N first compares the _candidates assignments on the
+    centred pyramid: of those that schedule with a total path <= PATH_SLACK × the
+    min-sum total, the smallest dependency makespan wins (then the smaller total, then
+    the order of CANDIDATES). None: no attempt could be scheduled.
+    """
+    n = pos.shape[0]
+    empty: list[tuple[np.ndarray, ...]] = [() for _ in range(n)]
+    exact = params.strategy == "default" and params.placement in ("default", "centroid")
+    if exact and n <= CANDIDATES_MAX_N:
+        slots_p = placed_slots(n, params.d_e, params.phi_e, starts_p, "centroid")
+        good: list[tuple[float, float, int, _Scheduled]] = []
+        bound = math.inf
+        for k, (strat, perm) in enumerate(_candidates(starts_p, slots_p)):
+            if k == 0:
+                straight = np.hypot(*(starts_p - slots_p[perm]).T)
+                bound = PATH_SLACK * float(straight.sum()) + 1e-9
+            try:
+                sc = _packed(
+                    pos, frame.to_common(slots_p[perm]), perm, empty, _NO_OBS, params, strat
+                )
+            except ValueError:
+                continue
+            if sc.total <= bound:
+                good.append((sc.makespan, sc.total, k, sc))
+        good.sort(key=lambda g: g[:3])
+        for j, (_, _, k, sc) in enumerate(good[:SHORTENED]):  # detours for the best
+            better = _packed(
+                pos, sc.targets, sc.order, empty, _NO_OBS, params, sc.strategy, bound=bound
+            )
+            good[j] = (better.makespan, better.total, k, better)
+        if good:
+            return min(good, key=lambda g: g[:3])[3]
+    for strat, placement in params.attempts(n):
+        slots_p = placed_slots(n, params.d_e, params.phi_e, starts_p, placement)
+        perm = assign(starts_p, slots_p, strat, params.d_e, params.phi_e)
+        try:
+            return _packed(pos, frame.to_common(slots_p[perm]), perm, empty, _NO_OBS, params, strat)
+        except ValueError:
+            continue
+    return None
+
+
+_NO_OBS = np.zeros((0, 2))
+
+
 def _f(x: float) -> bytes:
     return struct.pack("<d", float(x))
 
 
 def plan_digest(plan_fields: dict[str, object], robots: Sequence[RobotPlan]) -> str:
-    h = hashlib.sha256(b"nao-formation/plan/v1")
+    """sha256 over a canonical encoding: the plan fields by name, then (robots in the
+    given order, ascending id in a Plan) one little-endian record per robot (id, order,
+    parent, wave, via count, after count as int64; start, target, heading, distance as
+    float64), then every via point (float64 x, y), then every after id (int64)."""
+    h = hashlib.sha256(b"nao-formation/plan/v2")
     for key in sorted(plan_fields):
         h.update(key.encode())
         v = plan_fields[key]
@@ -258,11 +460,22 @@ def plan_digest(plan_fields: dict[str, object], robots: Sequence[RobotPlan]) -> 
             h.update(np.ascontiguousarray(v, dtype="<f8").tobytes())
         else:
             h.update(str(v).encode())
-    for r in robots:
-        h.update(struct.pack("<qqqqq", r.robot_id, r.order, r.parent, r.wave, len(r.via)))
-        for arr in (r.start, r.target, *r.via):
-            h.update(np.ascontiguousarray(arr, dtype="<f8").tobytes())
-        h.update(_f(r.heading) + _f(r.distance))
+    m = len(robots)
+    ints = np.array(
+        [(r.robot_id, r.order, r.parent, r.wave, len(r.via), len(r.after)) for r in robots],
+        dtype="<i8",
+    ).reshape(m, 6)
+    floats = np.empty((m, 6), dtype="<f8")
+    if m:
+        floats[:, 0:2] = np.array([r.start for r in robots], dtype=np.float64).reshape(m, 2)
+        floats[:, 2:4] = np.array([r.target for r in robots], dtype=np.float64).reshape(m, 2)
+        floats[:, 4] = [r.heading for r in robots]
+        floats[:, 5] = [r.distance for r in robots]
+    h.update(ints.tobytes())
+    h.update(floats.tobytes())
+    vias = [v for r in robots for v in r.via]
+    h.update(np.array(vias, dtype="<f8").reshape(-1, 2).tobytes())
+    h.update(np.array([j for r in robots for j in r.after], dtype="<i8").tobytes())
     return h.hexdigest()
 
 
@@ -290,76 +503,63 @@ def plan_from_positions(
     n = len(sorted_ids)
     strategy = params.resolved_strategy(n + obs.shape[0])
     if obs.shape[0]:
+        if params.strategy == "banded":
+            raise ValueError("strategy 'banded' takes no obstacles (see fallback)")
         op = plan_around_obstacles(pos, obs, params, strategy)
         frame_origin, beta = op.origin, op.beta
-        order, vias_pre, targets = op.order, op.vias, op.targets
-        sched, order, targets = _schedule_with_repair(pos, targets, order, vias_pre, obs, params)
+        best = _packed(pos, op.targets, op.order, op.vias, obs, params, strategy)
     else:
         frame = pyramid_frame(pos, params.orientation)
         starts_p = frame.to_pyramid(pos)
         frame_origin, beta = frame.origin, frame.beta
-        last_error: ValueError | None = None
-        for strategy, placement in params.attempts(n):
-            slots_p = placed_slots(n, params.d_e, params.phi_e, starts_p, placement)
-            perm = assign(starts_p, slots_p, strategy, params.d_e, params.phi_e)
-            try:
-                sched, order, targets = _schedule_with_repair(
-                    pos, frame.to_common(slots_p[perm]), perm, [() for _ in range(n)], obs, params
-                )
-                break
-            except ValueError as exc:
-                last_error = exc
-        else:
-            assert last_error is not None
-            raise last_error
+        chosen = _choose(pos, frame, starts_p, params)
+        if chosen is None:  # the plan that always exists (see fallback)
+            bp = banded_plan(pos, frame, params.d_e, params.phi_e, params.radius)
+            frame_origin = bp.origin
+            chosen = _Scheduled(bp.order, bp.targets, bp.vias, bp.waves, bp.after, "banded")
+        best = chosen
+    strategy = best.strategy
+    order, targets, vias_rows = best.order, best.targets, best.vias
+    waves_rows, after_rows = best.waves, best.after
     leader_row = int(np.flatnonzero(order == 0)[0])
-    row_of_order = {int(o): k for k, o in enumerate(order)}
-    robots: list[RobotPlan] = []
-    for k, rid in enumerate(sorted_ids):
-        via = tuple(np.asarray(v, dtype=np.float64) for v in sched.vias[k])
-        first = via[0] if via else targets[k]
-        leg = first - pos[k]
-        dist = float(math.hypot(leg[0], leg[1]))
-        heading = float(math.atan2(leg[1], leg[0])) if dist > 1e-12 else float(beta)
-        par = parent_of(int(order[k]))
-        robots.append(
-            RobotPlan(
-                robot_id=rid,
-                start=pos[k].copy(),
-                target=np.asarray(targets[k], dtype=np.float64).copy(),
-                order=int(order[k]),
-                parent=-1
-                if par < 0
-                else sorted_ids[row_of_order[par]]
-                if par in row_of_order
-                else -1,
-                heading=heading,
-                distance=dist,
-                via=via,
-                wave=int(sched.waves[k]),
-            )
-        )
-    n_waves = int(sched.waves.max()) + 1
-    buckets: list[list[int]] = [[] for _ in range(n_waves)]
-    for r in robots:
-        buckets[r.wave].append(r.robot_id)
-    waves = tuple(tuple(b) for b in buckets if b)
-    # renumber waves densely (empty waves can appear after conflict bumps)
-    dense = {w: k for k, w in enumerate(sorted({r.wave for r in robots}))}
-    robots = [
+    dense = np.unique(waves_rows, return_inverse=True)[1].reshape(-1)
+    # first legs, vectorised: heading/distance of (first via or target) - start
+    has_via = np.array([len(v) > 0 for v in vias_rows], dtype=bool)
+    first = np.array(targets, dtype=np.float64, copy=True)
+    if has_via.any():
+        first[has_via] = np.array([vias_rows[k][0] for k in np.flatnonzero(has_via)])
+    leg = first - pos
+    dist_a = np.hypot(leg[:, 0], leg[:, 1])
+    head_a = np.where(dist_a > 1e-12, np.arctan2(leg[:, 1], leg[:, 0]), float(beta))
+    ids_arr = np.asarray(sorted_ids, dtype=np.int64)
+    row_of_order = np.empty(n, dtype=np.int64)
+    row_of_order[order] = np.arange(n)
+    par_order = _parents(order)
+    parent_ids = np.where(par_order < 0, -1, ids_arr[row_of_order[np.maximum(par_order, 0)]])
+    starts_c = pos.copy()
+    targets_c = np.array(targets, dtype=np.float64, copy=True)
+    id_l, order_l, par_l = sorted_ids, order.tolist(), parent_ids.tolist()
+    head_l, dist_l, wave_l = head_a.tolist(), dist_a.tolist(), dense.tolist()
+    robots: list[RobotPlan] = [
         RobotPlan(
-            r.robot_id,
-            r.start,
-            r.target,
-            r.order,
-            r.parent,
-            r.heading,
-            r.distance,
-            r.via,
-            dense[r.wave],
+            robot_id=id_l[k],
+            start=starts_c[k],
+            target=targets_c[k],
+            order=order_l[k],
+            parent=par_l[k],
+            heading=head_l[k],
+            distance=dist_l[k],
+            via=tuple(np.asarray(v, dtype=np.float64) for v in vias_rows[k]),
+            wave=wave_l[k],
+            after=tuple(id_l[j] for j in after_rows[k]),
         )
-        for r in robots
+        for k in range(n)
     ]
+    n_waves = int(dense.max()) + 1
+    members = np.argsort(dense, kind="stable")
+    bounds = np.searchsorted(dense[members], np.arange(n_waves + 1)).tolist()
+    ids_sorted_by_wave = ids_arr[members].tolist()
+    waves = tuple(tuple(ids_sorted_by_wave[bounds[w] : bounds[w + 1]]) for w in range(n_waves))
     leader = sorted_ids[leader_row]
     fields_ = {
         "frame_robot": int(frame_robot),
@@ -392,7 +592,7 @@ def plan_from_records(
 
     ``obstacles`` (M, 2), if any, are positions in the common frame (the frame robot's
     fixed frame). Raises ``ValueError`` for bad records, a fleet that is not connected
-    through identified neighbours, or (never seen in tests) no safe schedule.
+    through identified neighbours, or (with obstacles only) no safe schedule.
     """
     graph = identify_neighbours(records, params.epsilon)
     cf = build_common_frame(graph, params.frame_method)

@@ -34,6 +34,13 @@ perpendicular to the path at its middle, quarter and three-quarter points, offse
 conflicts (then the shortest) wins; this repeats until nothing is left to resolve.
 Robots are still taken one by one (a detour changes the score of the next ones), each
 scored only against the robots that can matter (found for the whole round at once).
+The waves found here certify that a safe order exists; :mod:`plan` then re-times the
+robots from the same pair flags (:mod:`packing`), so each starts as soon as its own
+conflicts are clear.
+
+Distances are compared with a rounding slack (relative 1e-9 and 1e-12·c absolute), and
+two segments only *cross* when every endpoint is clearly off the other's line (collinear
+legs are measured by their endpoint distances).
 """
 
 from __future__ import annotations
@@ -46,6 +53,9 @@ from dataclasses import dataclass
 import numpy as np
 
 _SAME, _IK, _KI = 0, 1, 2
+
+#: Absolute rounding slack of a required distance, in clearances.
+_ABS_SLACK = 1e-12
 
 
 class ScheduleError(ValueError):
@@ -121,7 +131,14 @@ def seg_seg_dist(a0: np.ndarray, a1: np.ndarray, b0: np.ndarray, b1: np.ndarray)
     )
     o1, o2 = _cross(a0, a1, b0), _cross(a0, a1, b1)
     o3, o4 = _cross(b0, b1, a0), _cross(b0, b1, a1)
-    crossing = (o1 * o2 < 0) & (o3 * o4 < 0)
+    # a proper crossing needs every endpoint clearly off the other line: orientations
+    # within rounding of 0 (collinear legs, e.g. on one corridor line) are no crossing -
+    # if such segments do meet, an endpoint lies on the other one and d is ~0 already
+    la = np.hypot(a1[..., 0] - a0[..., 0], a1[..., 1] - a0[..., 1])
+    lb = np.hypot(b1[..., 0] - b0[..., 0], b1[..., 1] - b0[..., 1])
+    tol = 1e-12 * (la + lb) * (la + lb + np.hypot(b0[..., 0] - a0[..., 0], b0[..., 1] - a0[..., 1]))
+    clear = (np.abs(o1) > tol) & (np.abs(o2) > tol) & (np.abs(o3) > tol) & (np.abs(o4) > tol)
+    crossing = (o1 * o2 < 0) & (o3 * o4 < 0) & clear
     return np.where(crossing, 0.0, d)
 
 
@@ -314,7 +331,10 @@ def _flags_from_pairs(
     )
     d_start = np.hypot(*(starts[a] - starts[b]).T)
     d_target = np.hypot(*(targets[a] - targets[b]).T)
-    req = np.minimum(clearance, np.minimum(d_start, d_target)) * (1.0 - 1e-9)
+    # rounding slack: relative 1e-9, and 1e-12·c absolute (starts 1e-300 m apart are one)
+    req = (
+        np.minimum(clearance, np.minimum(d_start, d_target)) * (1.0 - 1e-9) - _ABS_SLACK * clearance
+    )
     return PairFlags(
         a=a,
         b=b,
@@ -436,6 +456,7 @@ def check_safety(
 class Schedule:
     waves: np.ndarray  # (N,) wave of each robot row
     vias: tuple[tuple[np.ndarray, ...], ...]  # per robot row
+    flags: PairFlags | None = None  # pair flags of the final paths (robots, then obstacles)
 
 
 def _adjacency(u: np.ndarray, v: np.ndarray, n: int) -> list[list[int]]:
@@ -592,8 +613,10 @@ def _score_paths(
     own_s, own_t = cands[0, 0], cands[0, -1]
     d_k_si = np.minimum.reduceat(point_seg_dist(own_s[None], seg_a, seg_b), first[:-1])[close]
     d_k_ti = np.minimum.reduceat(point_seg_dist(own_t[None], seg_a, seg_b), first[:-1])[close]
-    req = np.minimum(c, np.minimum(np.hypot(*(st - own_s).T), np.hypot(*(tg - own_t).T))) * (
-        1.0 - 1e-9
+    req = (
+        np.minimum(c, np.minimum(np.hypot(*(st - own_s).T), np.hypot(*(tg - own_t).T)))
+        * (1.0 - 1e-9)
+        - _ABS_SLACK * c
     )
     i_first = np.maximum(req - d_i_s, 0) + np.maximum(req - d_k_ti, 0)
     k_first = np.maximum(req - d_k_si, 0) + np.maximum(req - d_i_t, 0)
@@ -702,7 +725,7 @@ def schedule(
     for _ in range(max_rounds):
         waves, problems = _assign_waves(n, leader, priority, flags)
         if not problems:
-            return Schedule(waves=waves[:n], vias=tuple(vias))
+            return Schedule(waves=waves[:n], vias=tuple(vias), flags=flags)
         # Try a detour for every problem robot (the leader first, then by priority),
         # each scored against the current paths of the robots near it.
         ordered = sorted(problems, key=lambda r: (r != leader, int(priority[r])))

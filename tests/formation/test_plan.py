@@ -32,7 +32,7 @@ def test_three_robots_by_hand() -> None:
     for r in plan.robots:
         assert r.distance == pytest.approx(0.0, abs=1e-9)
         assert r.heading == pytest.approx(plan.axis)  # nothing to walk: face the axis
-    assert plan.waves[0] == (5,)
+    assert plan.robot(5).wave == 0 and plan.robot(5).after == ()  # the leader goes first
 
 
 @pytest.mark.parametrize("strategy", ["paper", "optimal", "capt", "default"])

@@ -158,3 +158,12 @@ def test_checker_agrees_with_brute_force_on_random_plans() -> None:
         waves = [int(w) for w in rng.integers(0, 3, n)]
         got = {(v.robot_a, v.robot_b) for v in check_safety(paths, waves, R)}
         assert got == _brute_violations(paths, waves, R)
+
+
+def test_collinear_disjoint_segments_are_not_a_crossing() -> None:
+    # two legs on one slanted line (rounding makes the orientations tiny, of any sign)
+    u = np.array([np.cos(0.7), np.sin(0.7)])
+    for k in range(50):
+        a0, a1 = 0.1 * k * u, (0.1 * k + 1.0) * u
+        b0, b1 = (0.1 * k + 3.0) * u, (0.1 * k + 5.0) * u
+        assert seg_seg_dist(a0, a1, b0, b1) == pytest.approx(2.0)

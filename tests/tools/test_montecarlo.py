@@ -46,7 +46,9 @@ def test_tiny_run_json_and_figures(tmp_path: Path) -> None:
         assert r["planned_violations_per_run"] == 0
         if key.startswith("none/"):
             assert r["r_d_within_20pct"] == 1.0 and r["r_phi_within_30pct"] == 1.0
-    assert res["none/default/lsq"]["path_over_optimum"] == 1.0
+    assert res["none/default/lsq"]["path_over_optimum"] <= 1.05  # PATH_SLACK
+    for r in res.values():
+        assert 0 < r["makespan_over_capt"] <= r["wave_makespan_over_capt"]
     for name in ("fig15_histograms.png", "fig16_fleets.png", "fig17_obstacles.png"):
         assert (tmp_path / name).stat().st_size > 5000
 

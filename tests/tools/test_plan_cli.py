@@ -40,8 +40,20 @@ def test_plan_roundtrip_and_png(tmp_path: Path) -> None:
     out = run(doc, "--png", str(png))
     assert out.returncode == 0, out.stderr
     plan = json.loads(out.stdout)
-    assert set(plan) == {"leader", "axis_rad", "targets", "trajectories", "waves", "digest"}
-    assert plan["waves"][0] == [plan["leader"]]
+    assert set(plan) == {
+        "leader",
+        "axis_rad",
+        "targets",
+        "trajectories",
+        "waves",
+        "digest",
+        "strategy",
+    }
+    assert plan["leader"] in plan["waves"][0]
+    wave = {i: k for k, w in enumerate(plan["waves"]) for i in w}
+    for tr in plan["trajectories"]:  # a robot waits only for robots of earlier waves
+        assert tr["wave"] == wave[tr["id"]]
+        assert all(wave[j] < wave[tr["id"]] for j in tr["after"])
     assert sorted(t["id"] for t in plan["targets"]) == [3, 7, 9]
     assert sorted(t["order"] for t in plan["targets"]) == [0, 1, 2]
     by_id = {t["id"]: t for t in plan["targets"]}
@@ -108,3 +120,27 @@ def test_bad_input_exit_2_one_line(doc: object, raw: str | None, msg: str) -> No
     assert out.stdout == ""
     lines = out.stderr.strip().splitlines()
     assert len(lines) == 1 and msg in lines[0], out.stderr
+
+
+def test_bench_plan_prints_the_table_and_draws(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from tools.bench.plan import all_fleets, main
+
+    png = tmp_path / "bench.png"
+    args = ["--sizes", "10,40", "--no-cli", "--stuck-n", "0", "--no-families", "--png", str(png)]
+    assert main(args) == 0
+    out = capsys.readouterr().out
+    for head in ("plan s", "ms/capt", "waves", "path/opt", "growth exponent"):
+        assert head in out
+    assert png.stat().st_size > 5000
+    fleets = all_fleets()
+    assert len(fleets) == 67 and {f[0] for f in fleets} == {
+        "nao",
+        "uniform",
+        "blobs",
+        "line",
+        "ring",
+        "grid",
+    }
+    assert main(["--sizes", "ten"]) == 2
