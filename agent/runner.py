@@ -511,11 +511,12 @@ class Runner:
         return plan
 
     def wait_for_earlier_waves(self) -> None:
+        """Start once every robot of this robot's ``after`` list holds its slot (the plan's
+        execution rule, ``agent/formation/execution.py``; the leader's list is empty)."""
         plan = self.plan
+        members = set(self.formation.members(plan))
         earlier = sorted(
-            i
-            for i in self.formation.members(plan)
-            if i != self.me and plan.robot(i).wave < self.wave
+            int(i) for i in plan.robot(self.me).after if int(i) in members and int(i) != self.me
         )
         deadline = self.clock() + self.cfg.wave_timeout
         while True:

@@ -7,6 +7,7 @@ tests/body/test_runner_phases.py, on an in-process world.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Iterator
 
@@ -114,6 +115,14 @@ def earlier(r: Runner) -> list[int]:
     return [i for i in (1, 2, 3) if r.plan.robot(i).wave < r.plan.robot(3).wave]
 
 
+def after(r: Runner, ids: tuple[int, ...]) -> None:
+    """Make robot 3 of ``r``'s plan wait for ``ids`` (its ``after`` list)."""
+    robots = tuple(
+        dataclasses.replace(rp, after=ids) if rp.robot_id == 3 else rp for rp in r.plan.robots
+    )
+    r.plan = dataclasses.replace(r.plan, robots=robots)
+
+
 def test_runner_rejects_config_for_another_robot(perception: PerceptionAdapter) -> None:
     bus = Bus(BusConfig(multicast_scouting=False))
     try:
@@ -123,15 +132,21 @@ def test_runner_rejects_config_for_another_robot(perception: PerceptionAdapter) 
         bus.close()
 
 
+def test_a_robot_with_an_empty_after_list_starts_at_once(runner: Runner) -> None:
+    after(runner, ())
+    runner.peers[1] = Peer(alive=True, phase="move", seen_alive=True)
+    runner.wait_for_earlier_waves()  # returns although robot 1 still moves
+
+
 def test_waits_pass_when_earlier_waves_hold(runner: Runner) -> None:
-    runner.wave = max(rp.wave for rp in runner.plan.robots) + 1
+    after(runner, (1, 2))
     for i in (1, 2):
         runner.peers[i] = Peer(alive=True, phase="hold", seen_alive=True)
     runner.wait_for_earlier_waves()
 
 
 def test_member_of_an_earlier_wave_that_leaves_stops_us(runner: Runner) -> None:
-    runner.wave = max(rp.wave for rp in runner.plan.robots) + 1
+    after(runner, (1, 2))
     runner.peers[1] = Peer(alive=False, phase="move", seen_alive=True)
     runner.peers[2] = Peer(alive=True, phase="hold", seen_alive=True)
     with pytest.raises(AgentFailure, match=r"robot 1 of wave .* left before holding"):
@@ -139,7 +154,7 @@ def test_member_of_an_earlier_wave_that_leaves_stops_us(runner: Runner) -> None:
 
 
 def test_failed_member_of_an_earlier_wave_stops_us(runner: Runner) -> None:
-    runner.wave = max(rp.wave for rp in runner.plan.robots) + 1
+    after(runner, (1, 2))
     runner.peers[1] = Peer(alive=True, phase="hold", seen_alive=True)
     runner.peers[2] = Peer(alive=True, phase="failed", seen_alive=True)
     with pytest.raises(AgentFailure, match=r"robot 2 of wave .* failed"):
@@ -147,7 +162,7 @@ def test_failed_member_of_an_earlier_wave_stops_us(runner: Runner) -> None:
 
 
 def test_earlier_wave_that_never_holds_times_out(runner: Runner) -> None:
-    runner.wave = max(rp.wave for rp in runner.plan.robots) + 1
+    after(runner, (1, 2))
     runner.peers[1] = Peer(alive=True, phase="move", seen_alive=True)
     runner.peers[2] = Peer(alive=True, phase="hold", seen_alive=True)
     with pytest.raises(AgentFailure, match=r"robots \[1\] of earlier waves did not hold"):
