@@ -19,7 +19,8 @@ default the first key the folder holds of ``observer``, the robots (lowest id fi
 ``world``. The router's access control decides what that identity may see: any fleet
 member may subscribe to ``world/clock``; only robots and the world see the queryable
 ``world/register``, observers only subscribe. Exits 0 (printing ``seen KEY``), 1 after
-``--timeout`` seconds with the reason on stderr, 2 on bad arguments or credentials.
+``--timeout`` seconds with the reason on stderr (an unreachable router counts as not yet
+served: it is retried until then), 2 on bad arguments or credentials.
 """
 
 from __future__ import annotations
@@ -56,17 +57,40 @@ def _check_key(credentials: str, cn: str) -> None:
         raise ValueError(f"{credentials} holds no private key for {cn}")
 
 
+def _open(cfg: zenoh.Config, end: float) -> zenoh.Session | None:
+    """A session, retrying until ``end`` (monotonic) while the router cannot be reached.
+
+    A client's ``zenoh.open`` fails when no router answers: not started yet, or a lossy
+    link that loses the TLS handshake. Either may pass, so it is retried; the last
+    error is printed when time is up (None).
+    """
+    last = ""
+    while True:
+        try:
+            return zenoh.open(cfg)
+        except zenoh.ZError as exc:
+            last = str(exc)
+        if time.monotonic() + 1.0 >= end:
+            print(f"wait_for: no session: {last}", file=sys.stderr, flush=True)
+            return None
+        time.sleep(1.0)  # a retry per second, bounded by the caller's timeout
+
+
 def wait_for(key: str, spec: NetworkSpec, timeout: float, queryable: bool = False) -> bool:
-    """True once ``key`` is served, False after ``timeout`` seconds.
+    """True once ``key`` is served, False after ``timeout`` seconds (including the time
+    it takes to reach the router: an unreachable router is retried, not an error).
 
     ``queryable``: a queryable matches ``key``; otherwise: a sample on ``key`` arrived.
     """
     cfg = zenoh_config(spec)
+    end = time.monotonic() + timeout
+    session = _open(cfg, end)
+    if session is None:
+        return False
     got: queue.Queue[str] = queue.Queue()
-    with zenoh.open(cfg) as session:
+    with session:
         if queryable:
             querier = session.declare_querier(key)
-            end = time.monotonic() + timeout
             try:
                 while time.monotonic() < end:
                     status = querier.matching_status  # a MatchingStatus (stub says bool)
@@ -78,7 +102,7 @@ def wait_for(key: str, spec: NetworkSpec, timeout: float, queryable: bool = Fals
                 querier.undeclare()
         sub = session.declare_subscriber(key, lambda s: got.put(str(s.key_expr)))
         try:
-            got.get(timeout=timeout)
+            got.get(timeout=max(0.0, end - time.monotonic()))
             return True
         except queue.Empty:
             return False

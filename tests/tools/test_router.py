@@ -215,3 +215,16 @@ def test_wait_for_secure_world_clock(tmp_path: Path) -> None:
         if proc.poll() is None:
             proc.send_signal(signal.SIGTERM)
             proc.wait(timeout=15)
+
+
+@pytest.mark.system
+def test_wait_for_retries_an_unreachable_router(capsys: pytest.CaptureFixture[str]) -> None:
+    """No router (yet, or a lossy link lost the handshake): not served within the
+    timeout (exit 1, the last connection error on stderr), not a usage error (2)."""
+    ep = f"tcp/127.0.0.1:{_free_port()}"
+    argv = ["world/clock", "--timeout", "3", "--insecure", "--mode", "client", "--connect", ep]
+    t0 = time.monotonic()
+    assert wait_for.main([*argv, "--no-multicast-scouting"]) == 1
+    assert time.monotonic() - t0 < 30
+    err = capsys.readouterr().err
+    assert "wait_for: no session:" in err and "nothing on world/clock within 3 s" in err
