@@ -1,4 +1,5 @@
-# nao-formation: one image for the router, the world and the agents (DESIGN.md §5).
+# nao-formation: one image for the router, the world, the observer and the agents
+# (DESIGN.md §5); no credentials inside (docker-compose.yml mounts them as secrets).
 #   docker compose build                      # from python:3.11-slim
 #   docker-compose build --build-arg BASE_IMAGE=localhost/nao-base:bookworm   # local base
 # The base needs python3 with the venv module and ca-certificates (Debian bookworm or
@@ -45,5 +46,6 @@ COPY tools ./tools
 RUN pip install --no-deps . && rm -rf build *.egg-info \
     && python -c "import zenoh, numpy, scipy, cv2, msgpack, pybullet, agent.protocol"
 
-# No default role: docker-compose.yml sets the command of each service.
-CMD ["python", "-m", "tools.router", "--listen", "tcp/0.0.0.0:7447"]
+# No default role: docker-compose.yml sets the command (and the credentials, mounted as
+# secrets under /run/secrets/fleet) of each service.
+CMD ["python", "-m", "tools.router", "--credentials", "/run/secrets/fleet"]

@@ -143,6 +143,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     log = logging.getLogger("agent")
     # Imported here so that `--help` and usage errors need no zenoh session.
+    from agent.bus import BusError
     from agent.config import AgentConfig
     from agent.robot import ZenohBody
     from agent.runner import Runner, report_unavailable
@@ -153,7 +154,7 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:  # usage: bad flags, no credentials (TrustError is one too)
         print(f"python -m agent: {exc}", file=sys.stderr)
         return 2
-    except BodyError as exc:
+    except (BodyError, BusError) as exc:  # no world, no robot to claim, no session
         log.error("%s", exc)
         return 1
     bus, rid = opened

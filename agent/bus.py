@@ -150,7 +150,10 @@ class Bus:
         self._closed = False
         self.guard = Guard(log.warning, on_reject=self._count_rejected)
         self._drop_log = Guard(log.warning, burst=3, per_second=0.2)  # drops: stats.dropped
-        self.session = zenoh.open(zenoh_config(self.config))
+        try:
+            self.session = zenoh.open(zenoh_config(self.config))
+        except zenoh.ZError as exc:  # no router reached (not up yet, a lossy handshake)
+            raise BusError(f"cannot open the zenoh session: {reason(exc)}") from None
 
     def _count_rejected(self) -> None:
         with self._lock:

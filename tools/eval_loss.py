@@ -70,8 +70,14 @@ def monitor(
     until_done: int = 0,
     timeout_s: float = 900.0,
     seed: int | None = None,
+    credentials: str = "",
 ) -> int:
     """Observe the bus like ``tools.demo`` does, until the run is over; judge it.
+
+    ``credentials``: a fleet credentials folder (``agent.trust``); the monitor then joins
+    as a zenoh client of the TLS router with the ``observer`` identity (observers only
+    subscribe; every message it records has passed the signature check). Empty:
+    insecure, as a peer (the caller gave ``--insecure``).
 
     Prints ``monitor ready`` once subscribed, then records statuses, records, digests and
     ground truth (``tools.demo.Observer``, MCAP recording). The run is over when the
@@ -100,7 +106,15 @@ def monitor(
     deadline = time.monotonic() + timeout_s
     rec = demo.Recorder(out / "run.mcap")
     obs = demo.Observer(time.monotonic())
-    bus = Bus(BusConfig(connect=tuple(connect), multicast_scouting=False))
+    bus = Bus(
+        BusConfig(
+            connect=tuple(connect),
+            multicast_scouting=False,
+            mode="client" if credentials else "peer",
+            credentials=credentials,
+            identity="observer" if credentials else "",
+        )
+    )
     try:
         for key in (P.KEY_STATUS_ALL, P.KEY_RECORD_ALL, P.KEY_DIGEST_ALL, P.KEY_WORLD_TRUTH_ALL):
             bus.subscribe(key)
@@ -162,6 +176,18 @@ def monitor(
     }
     if order.get("timeout"):
         result["timeout"] = order["timeout"]
+    # which phases each agent went through (did it move?), and how far each robot walked
+    # (ground truth): what tells a safe abort from a robot moving on an unshared plan
+    result["phases_visited"] = {
+        str(i): [p for p in P.PHASES if p in obs.agents[i].phase_wall]
+        for i in ids
+        if i in obs.agents
+    }
+    if obs.truth:
+        first, last = obs.truth[0][1], obs.truth[-1][1]
+        result["displacement_m"] = {
+            str(i): math.dist(first[i][:2], last[i][:2]) for i in ids if i in first and i in last
+        }
     result = demo.summarise(obs, result, out, ids, d_e, math.radians(phi_e_deg), quiet=True)
     # protocol latency: from the last agent entering exchange to the last one agreeing
     views = [obs.agents[i] for i in ids if i in obs.agents]
@@ -488,8 +514,31 @@ def main(argv: list[str] | None = None) -> int:
         "--until-done", type=int, default=0, help="with --monitor: stop when N agents finished"
     )
     ap.add_argument("--connect", action="append", default=[], help="with --monitor: endpoint")
+    ap.add_argument(
+        "--credentials",
+        metavar="DIR",
+        default=None,
+        help="with --monitor: fleet credentials folder, joins as 'observer' "
+        f"(default: ${P.CREDENTIALS_ENV})",
+    )
+    ap.add_argument(
+        "--insecure",
+        action="store_true",
+        help="with --monitor: no TLS or signatures (development only; prints a warning)",
+    )
     args = ap.parse_args(argv)
     if args.monitor:
+        # secure by default, as every process (agent.protocol.network_spec)
+        creds = "" if args.insecure else (args.credentials or os.environ.get(P.CREDENTIALS_ENV))
+        if args.insecure:
+            print(P.INSECURE_WARNING, file=sys.stderr, flush=True)
+        elif not creds:
+            print(
+                "eval_loss: --monitor needs fleet credentials: --credentials DIR (or "
+                f"${P.CREDENTIALS_ENV}); --insecure for development",
+                file=sys.stderr,
+            )
+            return 2
         return monitor(
             args.connect,
             Path(args.out),
@@ -498,6 +547,7 @@ def main(argv: list[str] | None = None) -> int:
             args.until_done,
             args.timeout,
             args.seed,
+            creds or "",
         )
     try:
         losses = [float(x) for x in args.loss.split(",") if x.strip()]

@@ -11,7 +11,6 @@ import threading
 from pathlib import Path
 
 import pytest
-import zenoh
 
 from agent import protocol as P
 from tools import eval_loss
@@ -113,19 +112,37 @@ def test_cli_rejects_bad_arguments(
     assert msg in capsys.readouterr().err
 
 
+def test_monitor_is_secure_by_default(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.delenv(P.CREDENTIALS_ENV, raising=False)
+    assert eval_loss.main(["--monitor", "--connect", "tls/127.0.0.1:7447"]) == 2
+    assert "--credentials" in capsys.readouterr().err
+
+
 @pytest.mark.system
 def test_observer_stops_when_every_agent_is_gone(tmp_path: Path) -> None:
-    """The compose observer (``--monitor --until-done N``) ends when the agents' liveliness
-    tokens are gone even if no final status arrived, and judges the run a failure."""
+    """The compose observer (``--monitor --until-done N --credentials DIR``) joins a TLS
+    router as ``observer``, records a robot's signed status, ends when the agents'
+    liveliness tokens are gone even if no final status arrived, and judges the run a
+    failure."""
+    from agent.bus import Bus, BusConfig
+    from agent.trust import create_fleet
+
+    fleet = tmp_path / "fleet"
+    create_fleet(fleet, [5])
+    out = tmp_path / "out"
     with socket.socket() as sock:
         sock.bind(("127.0.0.1", 0))
-        ep = f"tcp/127.0.0.1:{sock.getsockname()[1]}"
+        ep = f"tls/127.0.0.1:{sock.getsockname()[1]}"
     repo = Path(__file__).resolve().parents[2]
     procs = []
     try:
         router = subprocess.Popen(
-            [sys.executable, "-m", "tools.router", "--listen", ep, "--no-multicast-scouting",
-             "--insecure"],
+            [
+                sys.executable, "-m", "tools.router", "--credentials", str(fleet),
+                "--listen", ep, "--no-multicast-scouting",
+            ],
             stdout=subprocess.PIPE, text=True, cwd=str(repo),
         )  # fmt: skip
         procs.append(router)
@@ -133,23 +150,26 @@ def test_observer_stops_when_every_agent_is_gone(tmp_path: Path) -> None:
         mon = subprocess.Popen(
             [
                 sys.executable, "-m", "tools.eval_loss", "--monitor", "--until-done", "1",
-                "--timeout", "60", "--connect", ep, "--out", str(tmp_path), "--seed", "4",
+                "--timeout", "60", "--credentials", str(fleet), "--connect", ep,
+                "--out", str(out), "--seed", "4",
             ],
             stdout=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True, cwd=str(repo),
         )  # fmt: skip
         procs.append(mon)
         assert mon.stdout is not None and mon.stdout.readline().strip() == "monitor ready"
-        cfg = zenoh.Config()
-        cfg.insert_json5("connect/endpoints", json.dumps([ep]))
-        cfg.insert_json5("scouting/multicast/enabled", "false")
-        with zenoh.open(cfg) as s:
-            token = s.liveliness().declare_token(P.key_alive(5))
-            status = P.encode(P.StatusMsg(sender=5, phase="move"))
+        robot = Bus(
+            BusConfig(
+                connect=(ep,), multicast_scouting=False, mode="client",
+                credentials=str(fleet), identity="robot-5",
+            )
+        )  # fmt: skip
+        with robot:
+            robot.declare_alive(P.key_alive(5))
             stop = threading.Event()
 
             def publish() -> None:  # re-published: a fresh session may not know routes yet
                 while not stop.wait(0.2):
-                    s.put(P.key_status(5), status)
+                    robot.publish(P.key_status(5), P.StatusMsg(sender=5, phase="move"))
 
             t = threading.Thread(target=publish, daemon=True)
             t.start()
@@ -160,11 +180,11 @@ def test_observer_stops_when_every_agent_is_gone(tmp_path: Path) -> None:
             finally:
                 stop.set()
                 t.join(timeout=5)
-            token.undeclare()
-            assert mon.wait(timeout=30) == 1  # not a success: the agent never finished
-        result = json.loads((tmp_path / "result.json").read_text())
+        assert mon.wait(timeout=30) == 1  # not a success: the agent never finished
+        result = json.loads((out / "result.json").read_text())
         assert result["exit_codes"] == {"5": 1}
         assert result["final_phase"] == {"5": "move"}
+        assert result["phases_visited"] == {"5": ["move"]}
         assert result["seed"] == 4 and result["success"] is False
     finally:
         for p in procs:
