@@ -1,12 +1,13 @@
 """``python -m tools.calibrate_dbase``: calibrate the distance model, build the D-base (NAO paper 5.2.1).
 
-NAO-j is put at 20 distances 0.5-1.45 m (body centre to body centre, 0.05 m apart)
-straight ahead of NAO-i for every M-base orientation; NAO-i recognises it (Algorithm 1)
+NAO-j is put at 37 distances 0.5-3.1 m (body centre to body centre: the paper's 20
+distances 0.05 m apart up to 1.45 m, then 0.1 m apart up to 3.1 m, just past the 3 m
+range) straight ahead of NAO-i for every M-base orientation; NAO-i recognises it (Algorithm 1)
 and every sighting gives a sample (1/r_g, d) for the mask of that orientation and for
 the mask the recogniser chose (so a mask that is picked for a neighbouring orientation
 is calibrated for it too); d is from the optical centre (6.2 cm ahead of the neck axis
-at head yaw 0) to NAO-j's body centre. d = a / r_g + b (eq. 6) is fitted per mask with
-scipy; Table 1 (a, b, R², RMSE per mask) is printed and a figure like the paper's
+at head yaw 0) to NAO-j's body centre. d = a / (r_g + c) + b (eq. 6 with the pixel-rim
+offset c, see ``agent/perception/dbase.py``) is fitted per mask with scipy; Table 1 (a, b, R², RMSE per mask) is printed and a figure like the paper's
 Figure 19 is written.
 """
 
@@ -31,7 +32,9 @@ from sim.scenarios import RobotSpec, Scenario
 from sim.world import World
 
 NORTH = math.pi / 2
-DISTANCES = tuple(round(0.5 + 0.05 * i, 2) for i in range(20))
+DISTANCES = tuple(round(0.5 + 0.05 * i, 2) for i in range(20)) + tuple(
+    round(1.5 + 0.1 * i, 2) for i in range(17)
+)
 MIN_SAMPLES = 3
 
 
@@ -77,7 +80,8 @@ def collect(
 def transfer(mb: MBase, fits: list[Fit | None]) -> list[Fit | None]:
     """Give a mask without samples the fit of the fitted mask nearest in orientation with
     the same tuple count, rescaled by their heights: r_g is measured against each mask's
-    own size, so a_k = a_j · h_j / h_k (n = 0 marks a transferred entry)."""
+    own size, so a_k = a_j · h_j / h_k and c_k = c_j · h_j / h_k (n = 0 marks a
+    transferred entry)."""
     out = list(fits)
     for k, f in enumerate(fits):
         if f is not None:
@@ -98,15 +102,15 @@ def transfer(mb: MBase, fits: list[Fit | None]) -> list[Fit | None]:
         g = fits[j]
         assert g is not None
         ratio = float(mb.sizes[j, 1] / mb.sizes[k, 1])
-        out[k] = Fit(a=g.a * ratio, b=g.b, r2=g.r2, rmse=g.rmse, n=0)
+        out[k] = Fit(a=g.a * ratio, b=g.b, r2=g.r2, rmse=g.rmse, n=0, c=g.c * ratio)
     return out
 
 
 def calibrate(
-    mb: MBase, seed: int = 0
+    mb: MBase, seed: int = 0, distances: tuple[float, ...] = DISTANCES
 ) -> tuple[DBase, dict[int, list[tuple[float, float]]], dict[str, float]]:
     cam = CameraModel()
-    samples, stats = collect(mb, cam, DISTANCES, seed)
+    samples, stats = collect(mb, cam, distances, seed)
     fits: list[Fit | None] = []
     for k in range(len(mb)):
         s = samples[k]
@@ -118,7 +122,8 @@ def calibrate(
     fits = transfer(mb, fits)
     meta = {
         "paper": "Wang et al. 2019, eq. 6 and 5.2.1",
-        "distances_m": list(DISTANCES),
+        "distances_m": list(distances),
+        "model": "d = a / (r_g + c) + b",
         "distance_reference": "optical centre (head yaw 0) to the observed NAO's body centre",
         "min_samples": MIN_SAMPLES,
         "seed": seed,
@@ -131,27 +136,29 @@ def calibrate(
 def table(mb: MBase, db: DBase) -> str:
     kinds = mb.meta.get("kinds", ["main"] * len(mb))
     lines = [
-        "Table 1  D-base: d = a / r_g + b per mask",
-        f"{'θ°':>6} {'kind':>8} {'n':>3} {'a':>8} {'b':>8} {'R²':>7} {'RMSE m':>7}",
+        "Table 1  D-base: d = a / (r_g + c) + b per mask",
+        f"{'θ°':>6} {'kind':>8} {'n':>3} {'a':>8} {'b':>8} {'c':>8} {'R²':>7} {'RMSE m':>7}",
     ]
     for k, f in enumerate(db.fits):
         th = math.degrees(float(mb.orientation[k]))
         if f is None:
-            lines.append(f"{th:6.1f} {kinds[k]:>8} {0:3d} {'(median fallback)':>33}")
+            lines.append(f"{th:6.1f} {kinds[k]:>8} {0:3d} {'(median fallback)':>42}")
         elif f.n == 0:
             lines.append(
-                f"{th:6.1f} {kinds[k]:>8} {'-':>3} {f.a:8.4f} {f.b:8.4f} {'(transferred)':>15}"
+                f"{th:6.1f} {kinds[k]:>8} {'-':>3} {f.a:8.4f} {f.b:8.4f} {f.c:8.4f} "
+                f"{'(transferred)':>15}"
             )
         else:
             lines.append(
-                f"{th:6.1f} {kinds[k]:>8} {f.n:3d} {f.a:8.4f} {f.b:8.4f} {f.r2:7.4f} {f.rmse:7.4f}"
+                f"{th:6.1f} {kinds[k]:>8} {f.n:3d} {f.a:8.4f} {f.b:8.4f} {f.c:8.4f} "
+                f"{f.r2:7.4f} {f.rmse:7.4f}"
             )
     good = [f for f in db.fits if f is not None and f.n > 0]
     lines.append(
         f"fitted {len(good)}/{len(db.fits)} masks; R² median {np.median([f.r2 for f in good]):.4f} "
         f"min {min(f.r2 for f in good):.4f}; RMSE median {np.median([f.rmse for f in good]):.4f} m "
         f"max {max(f.rmse for f in good):.4f} m; a median {np.median([f.a for f in good]):.3f}, "
-        f"b median {np.median([f.b for f in good]):.3f}"
+        f"b median {np.median([f.b for f in good]):.3f}, c median {np.median([f.c for f in good]):.4f}"
     )
     return "\n".join(lines)
 
@@ -166,7 +173,12 @@ def figure(mb: MBase, db: DBase, samples: dict[int, list[tuple[float, float]]], 
         x = 1.0 / s[:, 0]
         ax1.plot(x, s[:, 1], "o", label="samples")
         xx = np.linspace(x.min(), x.max(), 50)
-        ax1.plot(xx, f.a * xx + f.b, "-", label=f"d = {f.a:.3f}/r_g + {f.b:.3f}")
+        ax1.plot(
+            xx,
+            f.a / (1.0 / xx + f.c) + f.b,
+            "-",
+            label=f"d = {f.a:.3f}/(r_g {f.c:+.4f}) + {f.b:.3f}",
+        )
     ax1.set_xlabel("1 / r_g")
     ax1.set_ylabel("d (m, from the optical centre)")
     ax1.set_title("Distance model, θ = 180° (cf. paper Fig. 19)")
