@@ -1,6 +1,7 @@
 """The integrated image-processing method of the NAO paper, section 3: image → neighbours.
 
-Segmentation (3.1.1) → cylindrical resampling (camera.py) → tuples → recognition by the
+Segmentation (3.1.1) → cylindrical resampling (camera.py) → tuples, plus the pieces of
+tuples merged by overlapping NAOs (overlap.py) → recognition by the
 M-base (Algorithm 1) → distance by the D-base (eq. 6) → bearing by the angle model
 (eq. 3: head yaw) plus the detection's offset from the image centre. The distance and
 bearing of a :class:`Detection` are of the neighbour's body centre relative to the
@@ -20,6 +21,7 @@ import numpy as np
 from agent.perception.camera import CameraModel
 from agent.perception.dbase import DBase
 from agent.perception.mbase import MBase
+from agent.perception.overlap import split_merged
 from agent.perception.recognition import LAMBDA_TH, Match, recognise
 from agent.perception.segmentation import check_image, extract_tuples, orange_mask
 
@@ -93,7 +95,10 @@ class Recogniser:
         if not mask.any():
             return []
         labels, tuples = extract_tuples(self.cylindrical(mask))
-        return recognise(labels, tuples, self.mbase, self.horizon_row, self.threshold)
+        p = split_merged(labels, tuples)
+        return recognise(
+            p.labels, p.tuples, self.mbase, self.horizon_row, self.threshold, p.atoms, p.parent
+        )
 
     def body_column(self, m: Match) -> float:
         """The cylindrical column of the matched NAO's body centre."""
