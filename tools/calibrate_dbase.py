@@ -2,7 +2,8 @@
 
 NAO-j is put at 37 distances 0.5-3.1 m (body centre to body centre: the paper's 20
 distances 0.05 m apart up to 1.45 m, then 0.1 m apart up to 3.1 m, just past the 3 m
-range) straight ahead of NAO-i for every M-base orientation; NAO-i recognises it (Algorithm 1)
+range) straight ahead of NAO-i for every M-base orientation (and, for the masks of turned
+heads and side postures, in the pose each was rendered in); NAO-i recognises it (Algorithm 1)
 and every sighting gives a sample (1/r_g, d) for the mask of that orientation and for
 the mask the recogniser chose (so a mask that is picked for a neighbouring orientation
 is calibrated for it too); d is from the optical centre (6.2 cm ahead of the neck axis
@@ -38,29 +39,48 @@ DISTANCES = tuple(round(0.5 + 0.05 * i, 2) for i in range(20)) + tuple(
 MIN_SAMPLES = 3
 
 
-def collect(
-    mb: MBase, cam: CameraModel, distances: tuple[float, ...], seed: int
-) -> tuple[dict[int, list[tuple[float, float]]], dict[str, float]]:
-    """Samples (r_g, d_cam) per mask and recognition statistics."""
-    rec = Recogniser(mb, cam)
+def calibration_poses(mb: MBase) -> list[tuple[int, float, float, list[int]]]:
+    """What to render for each mask calibrated directly: (mask, observer head yaw,
+    observed NAO's head yaw, masks sharing the view). Every "main" orientation (with its
+    "reduced" variant), and, when the M-base records the head yaws it was rendered with,
+    every "head" and "side" mask in its own pose."""
     kinds = mb.meta.get("kinds", ["main"] * len(mb))
-    mains = [k for k in range(len(mb)) if kinds[k] == "main"]
-    samples: dict[int, list[tuple[float, float]]] = {k: [] for k in range(len(mb))}
-    seen = total = 0
-    sc = Scenario(robots=(RobotSpec(1, 0.0, 0.0, NORTH), RobotSpec(2, 0.0, 1.0, NORTH)), seed=seed)
-    with World(sc, noise=False) as w:
-        for n_done, k0 in enumerate(mains):
-            rel = float(mb.orientation[k0])
+    obs = mb.meta.get("observer_head_yaw_deg")
+    tgt = mb.meta.get("observed_head_yaw_deg")
+    out: list[tuple[int, float, float, list[int]]] = []
+    for k0 in range(len(mb)):
+        rel = float(mb.orientation[k0])
+        if kinds[k0] == "main":
             same = [
                 k
                 for k in range(len(mb))
                 if kinds[k] in ("main", "reduced") and abs(mb.orientation[k] - rel) < 1e-9
             ]
+            out.append((k0, 0.0, 0.0, same))
+        elif kinds[k0] in ("head", "side") and obs is not None and tgt is not None:
+            out.append((k0, math.radians(obs[k0]), math.radians(tgt[k0]), [k0]))
+    return out
+
+
+def collect(
+    mb: MBase, cam: CameraModel, distances: tuple[float, ...], seed: int
+) -> tuple[dict[int, list[tuple[float, float]]], dict[str, float]]:
+    """Samples (r_g, d_cam) per mask and recognition statistics."""
+    rec = Recogniser(mb, cam)
+    poses = calibration_poses(mb)
+    samples: dict[int, list[tuple[float, float]]] = {k: [] for k in range(len(mb))}
+    seen = total = 0
+    sc = Scenario(robots=(RobotSpec(1, 0.0, 0.0, NORTH), RobotSpec(2, 0.0, 1.0, NORTH)), seed=seed)
+    with World(sc, noise=False) as w:
+        for n_done, (k0, yaw, head, same) in enumerate(poses):
+            rel = float(mb.orientation[k0])
+            view = NORTH + yaw
+            w.set_head_yaw(2, head)
             for d in distances:
-                w.set_pose(2, 0.0, d, NORTH + rel)
-                img = w.render(1, 0.0)
+                w.set_pose(2, d * math.cos(view), d * math.sin(view), view + rel)
+                img = w.render(1, yaw)
                 total += 1
-                ms = rec.matches(img, 0.0)
+                ms = rec.matches(img, yaw)
                 if not ms:
                     continue
                 m = min(ms, key=lambda m: abs(rec.body_column(m) - cam.cx))
@@ -72,7 +92,8 @@ def collect(
                         continue
                     rg = min(gw / mb.sizes[k, 0], gh / mb.sizes[k, 1])
                     samples[k].append((rg, d_cam))
-            print(f"\rorientation {n_done + 1}/{len(mains)}", end="", file=sys.stderr)
+            print(f"\rpose {n_done + 1}/{len(poses)}", end="", file=sys.stderr)
+        w.set_head_yaw(2, 0.0)
     print(file=sys.stderr)
     return samples, {"sightings": seen, "views": total}
 

@@ -166,11 +166,16 @@ def candidate_groups(
 
 
 def fast_scores(
-    crops: list[np.ndarray], mbase: MBase, sizes_px: list[tuple[int, int]] | None = None
+    crops: list[np.ndarray],
+    mbase: MBase,
+    sizes_px: list[tuple[int, int]] | None = None,
+    counts: list[int] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """λ and r_g of every crop against every mask, shapes (G, K), vectorised.
 
-    ``sizes_px`` are the groups' box sizes (w, h) when the crops were subsampled.
+    ``sizes_px`` are the groups' box sizes (w, h) when the crops were subsampled. With
+    ``counts`` (tuples per crop) only masks with as many tuples are correlated (λ = 0
+    for the others), which saves most of the product.
     """
     if not crops:
         return np.zeros((0, len(mbase))), np.zeros((0, len(mbase)))
@@ -184,11 +189,25 @@ def fast_scores(
         n = float(np.sqrt(np.dot(v, v)))
         vecs[i] = v / n if n > 0 else 0.0
         sizes[i] = (c.shape[1], c.shape[0]) if sizes_px is None else sizes_px[i]
-    # cv2.gemm: one small single-call product, no BLAS thread pool to wake up
-    ncc = np.asarray(
-        cv2.gemm(vecs, mbase.canon32, 1.0, None, 0.0, flags=cv2.GEMM_2_T),  # type: ignore[call-overload]
-        dtype=np.float64,
-    )
+    if counts is not None and len(counts) != len(crops):
+        raise ValueError(f"{len(counts)} counts for {len(crops)} crops")
+    ncc = np.zeros((len(crops), len(mbase)))
+    if counts is None:
+        blocks = [(np.arange(len(crops)), np.arange(len(mbase)))]
+    else:
+        cnt = np.asarray(counts)
+        blocks = [
+            (np.flatnonzero(cnt == n), np.flatnonzero(mbase.n_tuples == n))
+            for n in sorted(set(counts))
+        ]
+    for rows, cols in blocks:
+        if not len(rows) or not len(cols):
+            continue
+        # cv2.gemm: one small single-call product, no BLAS thread pool to wake up
+        part = cv2.gemm(  # type: ignore[call-overload]
+            vecs[rows], mbase.canon32[cols], 1.0, None, 0.0, flags=cv2.GEMM_2_T
+        )
+        ncc[np.ix_(rows, cols)] = part
     ar_g = (sizes[:, 0] / sizes[:, 1])[:, None]
     ar_m = (mbase.sizes[:, 0] / mbase.sizes[:, 1])[None, :]
     aspect = np.sqrt(np.minimum(ar_g / ar_m, ar_m / ar_g))
@@ -260,9 +279,7 @@ def recognise(
         return []
     crops = [group_crop(labels, tuples, g, subsample=True, atoms=atoms) for g in groups]
     boxes = [group_box(tuples, g) for g in groups]
-    lam, rg = fast_scores(crops, mbase, [(b[2], b[3]) for b in boxes])
-    counts = np.array([len(g) for g in groups])
-    lam = np.where(counts[:, None] == mbase.n_tuples[None, :], lam, 0.0)
+    lam, rg = fast_scores(crops, mbase, [(b[2], b[3]) for b in boxes], [len(g) for g in groups])
     # the box top must sit where the chosen mask's top sits at that scale
     tops = np.array([b[1] for b in boxes], dtype=np.float64)
     heights = np.array([b[3] for b in boxes], dtype=np.float64)
