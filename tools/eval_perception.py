@@ -233,9 +233,10 @@ def place(
 def visible_fractions(w: World, yaw: float, full: np.ndarray, truths: list[Truth]) -> None:
     """Measure each in-view robot's visible orange fraction (``Truth.visible``).
 
-    Every robot in view is rendered alone (the others parked behind the observer); a
-    pixel of its own orange counts as visible when the full view is orange there and no
-    nearer robot's own orange covers it. Robots with no orange in view get 0.
+    Every robot in view is rendered alone (the others parked behind the observer); its
+    own orange is what that adds to the view without robots (the clutter's orange), and
+    a pixel of it counts as visible when the full view is orange there and no nearer
+    robot's own orange covers it. Robots with no orange in view get 0.
     """
     from agent.perception.segmentation import orange_mask
 
@@ -243,18 +244,24 @@ def visible_fractions(w: World, yaw: float, full: np.ndarray, truths: list[Truth
     view = heading + yaw
     back = (-math.cos(view), -math.sin(view))  # parking spots behind the camera
     poses = {t.robot: w.pose(t.robot) for t in truths}
+
+    def park(u: Truth) -> None:
+        r = 1.5 + 0.5 * u.robot
+        w.set_pose(u.robot, ox + r * back[0], oy + r * back[1], poses[u.robot][2])
+
+    for u in truths:
+        park(u)
+    empty = orange_mask(w.render(1, yaw)) > 0  # the clutter's orange, no robot
     alone: dict[int, np.ndarray] = {}
     for t in truths:
         if not t.in_view:
             continue
         for u in truths:
-            p = poses[u.robot]
             if u is t:
-                w.set_pose(u.robot, *p)
+                w.set_pose(u.robot, *poses[u.robot])
             else:
-                r = 1.5 + 0.5 * u.robot
-                w.set_pose(u.robot, ox + r * back[0], oy + r * back[1], p[2])
-        alone[t.robot] = orange_mask(w.render(1, yaw)) > 0
+                park(u)
+        alone[t.robot] = (orange_mask(w.render(1, yaw)) > 0) & ~empty
     for u in truths:
         w.set_pose(u.robot, *poses[u.robot])
     full_mask = orange_mask(full) > 0
@@ -626,7 +633,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.view_png is not None:
         best = max(
             (v for v in views if v.image is not None),
-            key=lambda v: (len(v.pairs), len(v.detections) == len(v.pairs)),
+            key=lambda v: (
+                any(v.truths[i].role == "back" and v.truths[i].counts for i, _ in v.pairs),
+                len(v.pairs),
+                len(v.detections) == len(v.pairs),
+            ),
         )
         assert best.image is not None
         args.view_png.parent.mkdir(parents=True, exist_ok=True)
