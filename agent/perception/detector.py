@@ -2,7 +2,7 @@
 
 Segmentation (3.1.1) → cylindrical resampling (camera.py) → tuples, plus the pieces of
 tuples merged by overlapping NAOs (overlap.py) → recognition by the
-M-base (Algorithm 1) → distance by the D-base (eq. 6) → bearing by the angle model
+M-base (Algorithm 1) → distance by the D-base (eq. 6, on the box height's scale) → bearing by the angle model
 (eq. 3: head yaw) plus the detection's offset from the image centre. The distance and
 bearing of a :class:`Detection` are of the neighbour's body centre relative to the
 observer's body centre, in the observer's body frame (x forward, bearing +left), so the
@@ -137,7 +137,8 @@ class Detector:
             if box[0] < BORDER_PX or box[0] + box[2] > cam.width - BORDER_PX:
                 continue
             beta = cam.cyl_bearing(rec.body_column(m))
-            d_cam = self.dbase.distance(m.mask, m.scale)
+            rd = self.dbase.group_scale(m.scale, m.box[3], float(self.mbase.sizes[m.mask, 1]))
+            d_cam = self.dbase.distance(m.mask, rd)
             ox, oy = cam.body_offset(head_yaw)
             px = ox + d_cam * math.cos(head_yaw + beta)
             py = oy + d_cam * math.sin(head_yaw + beta)
