@@ -85,3 +85,16 @@ def test_version_1_files_read_as_the_paper_model(tmp_path) -> None:  # type: ign
     assert db.distance(0, 0.5) == pytest.approx(1.1)
     with pytest.raises(ValueError, match="model range"):
         DBase([Fit(0.5, 0.1, 1, 0, 3, c=-0.2)], "x").distance(0, 0.1)
+
+
+def test_scale_kind_height_or_algorithm_1() -> None:
+    fit = [Fit(0.5, 0.1, 1.0, 0.0, 20)]
+    paper = DBase(fit, "x")
+    assert paper.scale_kind == "min" and paper.group_scale(0.4, 80, 200) == 0.4
+    height = DBase(fit, "x", meta={"scale": "height"})
+    assert height.group_scale(0.4, 80, 200) == pytest.approx(0.4 * 1.0)
+    assert height.group_scale(0.3, 90, 200) == pytest.approx(0.45)
+    with pytest.raises(ValueError, match="heights"):
+        height.group_scale(0.3, 0, 200)
+    with pytest.raises(ValueError, match="unknown D-base scale"):
+        _ = DBase(fit, "x", meta={"scale": "area"}).scale_kind
