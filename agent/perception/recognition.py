@@ -244,6 +244,25 @@ def reference_scores(crop: np.ndarray, mbase: MBase, k: int) -> tuple[float, flo
     return min(1.0, a / np.sqrt(b * c)), rg
 
 
+def leaves_sibling_inside(
+    tuples: list[Tuple], group: tuple[int, ...], parent: list[int], box: tuple[int, int, int, int]
+) -> bool:
+    """Whether the group uses a piece of a split component but leaves out another piece
+    of it whose centre lies inside the group's box. A split is only meant to give away
+    the part of another NAO, which lies outside this NAO's box; a NAO that keeps only
+    some pieces of its own turned head cap is a wrong reading."""
+    x, y, w, h = box
+    for i in group:
+        if parent[i] == i:
+            continue
+        for j, pj in enumerate(parent):
+            if pj == parent[i] and j != pj and j not in group:
+                t = tuples[j]
+                if x <= t.cx < x + w and y <= t.cy < y + h:
+                    return True
+    return False
+
+
 def share_gap(tuples: list[Tuple], group: tuple[int, ...], mbase: MBase, k: int) -> float:
     """Largest difference between the group's and mask k's tuple area shares (each sorted
     from the largest tuple down); 1 when their tuple counts differ."""
@@ -294,15 +313,17 @@ def recognise(
             continue
         if v >= (max(threshold, LAMBDA_TH_PAIR) if len(g) == 2 else threshold):
             box = group_box(tuples, g)
+            if parent is not None and leaves_sibling_inside(tuples, g, parent, box):
+                continue
             cand.append((-v, -len(g), box[0], box[1], gi, k))
     cand.sort()
     used: set[int] = set()
     out: list[Match] = []
-    for negv, _, _, _, gi, k in cand:
+    for _, _, _, _, gi, k in cand:
         g = groups[gi]
         ga = {a for i in g for a in (atoms[i] if atoms is not None else (tuples[i].label,))}
         if used.intersection(ga):
             continue
         used.update(ga)
-        out.append(Match(g, k, -negv, float(rg[gi, k]), group_box(tuples, g)))
+        out.append(Match(g, k, float(lam[gi, k]), float(rg[gi, k]), group_box(tuples, g)))
     return out

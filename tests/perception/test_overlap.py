@@ -82,3 +82,30 @@ def test_nao_in_front_of_another_both_recognised() -> None:
     assert scales[0] == pytest.approx(0.45, abs=0.04) and scales[1] == pytest.approx(0.8, abs=0.05)
     with pytest.raises(ValueError, match="atoms and parent"):
         recognise(p.labels, p.tuples, mb, HR, atoms=p.atoms)
+
+
+def test_small_disc_half_inside_a_big_one_is_cut_at_the_concave_corners() -> None:
+    """No neck (the small disc sits half inside the big one): the outline's two concave
+    corners give the cut."""
+    m = np.zeros((120, 200), np.uint8)
+    cv2.circle(m, (90, 60), 30, 255, -1)
+    cv2.circle(m, (124, 60), 11, 255, -1)
+    labels, tuples = extract_tuples(m)
+    p = split_merged(labels, tuples)
+    assert len(p.tuples) == 3
+    small = min(p.tuples[1:], key=lambda t: t.area)
+    assert small.cx > 118 and 150 < small.area < 450
+
+
+def test_group_keeping_part_of_its_own_split_cap_is_refused() -> None:
+    from agent.perception.recognition import leaves_sibling_inside
+    from agent.perception.segmentation import Tuple
+
+    whole = Tuple(1, 50.0, 20.0, (20, 10, 60, 20), 900)
+    left = Tuple(2, 35.0, 20.0, (20, 10, 30, 20), 450)
+    right = Tuple(3, 65.0, 20.0, (50, 10, 30, 20), 450)
+    shoulder = Tuple(4, 30.0, 50.0, (20, 40, 20, 20), 300)
+    tuples, parent = [whole, shoulder, left, right], [0, 1, 0, 0]
+    assert leaves_sibling_inside(tuples, (1, 2), parent, (20, 10, 70, 50))
+    assert not leaves_sibling_inside(tuples, (1, 2), parent, (20, 10, 30, 50))
+    assert not leaves_sibling_inside(tuples, (0, 1), parent, (20, 10, 70, 50))
