@@ -635,6 +635,7 @@ def main(argv: list[str] | None = None) -> int:
             (v for v in views if v.image is not None),
             key=lambda v: (
                 any(v.truths[i].role == "back" and v.truths[i].counts for i, _ in v.pairs),
+                len({min(int(v.truths[i].distance / 0.75), 3) for i, _ in v.pairs}),
                 len(v.pairs),
                 len(v.detections) == len(v.pairs),
             ),
