@@ -624,7 +624,7 @@ def main(argv: list[str] | None = None) -> int:
         "clutter": args.clutter,
         "neighbour_heads": args.neighbour_heads,
         "max_distance": args.max_distance,
-        "overlap": args.overlap,
+        "overlap_views": args.overlap,
         **summarise(views),
     }
     if args.compass_samples:
