@@ -60,8 +60,11 @@ def build(step_deg: float = 5.0, distance: float = 0.6, seed: int = 0) -> MBase:
     tops: list[float] = []
     cents: list[float] = []
     kinds: list[str] = []
+    poses: list[tuple[float, float]] = []  # per mask: (observer head yaw, observed head yaw)
 
-    def add(cyl: np.ndarray, rel: float, kind: str, drop: bool = False) -> None:
+    def add(
+        cyl: np.ndarray, rel: float, kind: str, drop: bool = False, pose: tuple = (0.0, 0.0)
+    ) -> None:
         cut = cut_mask(cyl, horizon, cam.cx, drop_smallest=drop)
         masks.append(cut.crop)
         orient.append(rel % (2 * math.pi))
@@ -70,6 +73,7 @@ def build(step_deg: float = 5.0, distance: float = 0.6, seed: int = 0) -> MBase:
         tops.append(cut.top_offset)
         cents.append(cut.centre_offset)
         kinds.append(kind)
+        poses.append(pose)
 
     n = round(360.0 / step_deg)
     sc = Scenario(
@@ -91,13 +95,13 @@ def build(step_deg: float = 5.0, distance: float = 0.6, seed: int = 0) -> MBase:
             for hy in HEAD_YAWS_DEG:
                 w.set_head_yaw(2, math.radians(hy))
                 cyl = cylindrical(cam, orange_mask(render_target(w, cam, distance, rel, 0.0)))
-                add(cyl, rel, "head")
+                add(cyl, rel, "head", pose=(0.0, hy))
             w.set_head_yaw(2, 0.0)
         for yaw_deg in (90.0, -90.0):
             for rel_deg in (90.0, 270.0):
                 rel = math.radians(rel_deg)
                 img = render_target(w, cam, distance, rel, math.radians(yaw_deg))
-                add(cylindrical(cam, orange_mask(img)), rel, "side")
+                add(cylindrical(cam, orange_mask(img)), rel, "side", pose=(yaw_deg, 0.0))
     print(file=sys.stderr)
     meta = {
         "paper": "Wang et al. 2019, 3.1.2 and 5.2.2 (i)",
@@ -128,6 +132,10 @@ def build(step_deg: float = 5.0, distance: float = 0.6, seed: int = 0) -> MBase:
             "camera_forward": nao_model.CAMERA_FORWARD,
         },
         "kinds": kinds,
+        # per mask, for the D-base calibration: the observer's and the observed NAO's
+        # head yaw (deg) when it was rendered
+        "observer_head_yaw_deg": [p[0] for p in poses],
+        "observed_head_yaw_deg": [p[1] for p in poses],
     }
     return MBase(
         masks,

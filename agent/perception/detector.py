@@ -1,7 +1,8 @@
 """The integrated image-processing method of the NAO paper, section 3: image → neighbours.
 
-Segmentation (3.1.1) → cylindrical resampling (camera.py) → tuples → recognition by the
-M-base (Algorithm 1) → distance by the D-base (eq. 6) → bearing by the angle model
+Segmentation (3.1.1) → cylindrical resampling (camera.py) → tuples, plus the pieces of
+tuples merged by overlapping NAOs (overlap.py) → recognition by the
+M-base (Algorithm 1) → distance by the D-base (eq. 6, on the box height's scale) → bearing by the angle model
 (eq. 3: head yaw) plus the detection's offset from the image centre. The distance and
 bearing of a :class:`Detection` are of the neighbour's body centre relative to the
 observer's body centre, in the observer's body frame (x forward, bearing +left), so the
@@ -21,6 +22,7 @@ from agent.nao import HEAD_YAW_LIMIT
 from agent.perception.camera import CameraModel
 from agent.perception.dbase import DBase
 from agent.perception.mbase import MBase
+from agent.perception.overlap import split_merged
 from agent.perception.recognition import LAMBDA_TH, Match, recognise
 from agent.perception.segmentation import check_image, extract_tuples, orange_mask
 
@@ -93,7 +95,10 @@ class Recogniser:
         if not mask.any():
             return []
         labels, tuples = extract_tuples(self.cylindrical(mask))
-        return recognise(labels, tuples, self.mbase, self.horizon_row, self.threshold)
+        p = split_merged(labels, tuples)
+        return recognise(
+            p.labels, p.tuples, self.mbase, self.horizon_row, self.threshold, p.atoms, p.parent
+        )
 
     def body_column(self, m: Match) -> float:
         """The cylindrical column of the matched NAO's body centre."""
@@ -132,7 +137,8 @@ class Detector:
             if box[0] < BORDER_PX or box[0] + box[2] > cam.width - BORDER_PX:
                 continue
             beta = cam.cyl_bearing(rec.body_column(m))
-            d_cam = self.dbase.distance(m.mask, m.scale)
+            rd = self.dbase.group_scale(m.scale, m.box[3], float(self.mbase.sizes[m.mask, 1]))
+            d_cam = self.dbase.distance(m.mask, rd)
             ox, oy = cam.body_offset(head_yaw)
             px = ox + d_cam * math.cos(head_yaw + beta)
             py = oy + d_cam * math.sin(head_yaw + beta)

@@ -42,6 +42,15 @@ def canonical(binary: np.ndarray) -> np.ndarray:
     return v / n
 
 
+def part_shares(binary: np.ndarray) -> np.ndarray:
+    """Area shares of a mask's connected parts (8-connected), largest first; sums to 1."""
+    n, _, stats, _ = cv2.connectedComponentsWithStats((binary > 0).astype(np.uint8), connectivity=8)
+    areas = np.sort(stats[1:n, cv2.CC_STAT_AREA].astype(np.float64))[::-1]
+    if areas.size == 0:
+        raise ValueError("mask has no foreground pixels")
+    return areas / areas.sum()
+
+
 @dataclass
 class MBase:
     """The mask base. ``masks[k]`` is a 0/1 uint8 crop; per-mask arrays are indexed by k.
@@ -83,6 +92,7 @@ class MBase:
         self.canon = np.stack([canonical(m) for m in masks])
         self.canon32 = self.canon.astype(np.float32)
         self.areas = np.array([float(m.sum()) for m in masks])
+        self.part_shares = [part_shares(m) for m in masks]
 
     def __len__(self) -> int:
         return len(self.masks)

@@ -1,3 +1,5 @@
+import json
+
 import numpy as np
 import pytest
 
@@ -54,3 +56,45 @@ def test_bad_inputs(tmp_path) -> None:  # type: ignore[no-untyped-def]
     (tmp_path / "dbase.json").write_text('{"version": 99}')
     with pytest.raises(ValueError, match="version"):
         DBase.load(tmp_path)
+
+
+def test_offset_model_recovers_pixel_rim_over_a_wide_range() -> None:
+    """Far away a blob loses a constant rim: r_g = k/d - δ; eq. 6 with offset c = δ fits it
+    exactly, the paper's 2-parameter form does not (it is what a narrow range gives)."""
+    d = np.linspace(0.5, 3.0, 30)
+    rg = 0.45 / (d - 0.05) - 0.006
+    f = fit_distance_model(rg, d)
+    assert f.c == pytest.approx(0.006, abs=1e-4)
+    assert f.a == pytest.approx(0.45, abs=1e-3) and f.b == pytest.approx(0.05, abs=1e-3)
+    assert f.rmse < 1e-4 and f.distance(float(rg[-1])) == pytest.approx(3.0, abs=1e-3)
+    paper = fit_distance_model(rg, d, offset=False)
+    assert paper.c == 0.0 and paper.rmse > 10 * f.rmse
+    narrow = fit_distance_model(rg[:6], d[:6])  # 0.5-0.95 m: c is not identifiable
+    assert narrow.c == 0.0
+
+
+def test_version_1_files_read_as_the_paper_model(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    doc = {
+        "version": 1,
+        "mbase_digest": "abc",
+        "fits": [{"a": 0.5, "b": 0.1, "r2": 1.0, "rmse": 0.0, "n": 20}],
+    }
+    (tmp_path / "dbase.json").write_text(json.dumps(doc))
+    db = DBase.load(tmp_path)
+    assert db.fits[0] is not None and db.fits[0].c == 0.0
+    assert db.distance(0, 0.5) == pytest.approx(1.1)
+    with pytest.raises(ValueError, match="model range"):
+        DBase([Fit(0.5, 0.1, 1, 0, 3, c=-0.2)], "x").distance(0, 0.1)
+
+
+def test_scale_kind_height_or_algorithm_1() -> None:
+    fit = [Fit(0.5, 0.1, 1.0, 0.0, 20)]
+    paper = DBase(fit, "x")
+    assert paper.scale_kind == "min" and paper.group_scale(0.4, 80, 200) == 0.4
+    height = DBase(fit, "x", meta={"scale": "height"})
+    assert height.group_scale(0.4, 80, 200) == pytest.approx(0.4 * 1.0)
+    assert height.group_scale(0.3, 90, 200) == pytest.approx(0.45)
+    with pytest.raises(ValueError, match="heights"):
+        height.group_scale(0.3, 0, 200)
+    with pytest.raises(ValueError, match="unknown D-base scale"):
+        _ = DBase(fit, "x", meta={"scale": "area"}).scale_kind

@@ -10,6 +10,7 @@ from agent.perception.recognition import (
     group_crop,
     recognise,
     reference_scores,
+    share_gap,
 )
 from agent.perception.segmentation import extract_tuples
 from tests.perception.synth import draw_nao_mask, synthetic_mbase
@@ -102,3 +103,36 @@ def test_bad_inputs(mb) -> None:  # type: ignore[no-untyped-def]
     with pytest.raises(ValueError, match="crop 0"):
         fast_scores([np.ones((0,), np.uint8)], mb)
     assert recognise(labels, [], mb, HR) == []
+
+
+def test_share_gap_separates_naos_from_uneven_clutter(mb) -> None:  # type: ignore[no-untyped-def]
+    _labels, tuples = scene([(320, 0.6, 0)])
+    group = tuple(range(len(tuples)))
+    k = DEGS.index(0)
+    assert share_gap(tuples, group, mb, k) < 0.1
+    m = np.zeros((480, 640), np.uint8)
+    m[200:250, 300:350] = 255  # one big cube and two small ones
+    m[205:213, 380:388] = 255
+    m[240:247, 260:267] = 255
+    _, cubes = extract_tuples(m)
+    assert share_gap(cubes, (0, 1, 2), mb, k) > 0.5
+    assert share_gap(cubes, (0, 1), mb, k) == 1.0  # tuple counts differ
+
+
+def test_nao_floating_above_its_place_is_rejected(mb) -> None:  # type: ignore[no-untyped-def]
+    """The camera's height and pitch fix where a NAO's top is at a given scale."""
+    m = np.zeros((480, 640), np.uint8)
+    draw_nao_mask(m, 320, HR - 40 * 0.3 - 25, 0.3, 0.0)  # 25 px too high at r_g 0.3
+    labels, tuples = extract_tuples(m)
+    assert recognise(labels, tuples, mb, HR) == []
+    m[:] = 0
+    draw_nao_mask(m, 320, HR - 40 * 0.3, 0.3, 0.0)
+    labels, tuples = extract_tuples(m)
+    assert len(recognise(labels, tuples, mb, HR)) == 1
+
+
+def test_far_nao_at_small_scale_is_found(mb) -> None:  # type: ignore[no-untyped-def]
+    """r_g down to 0.15 is searched (about 3.5 m with the sim's NAO)."""
+    labels, tuples = scene([(320, 0.2, 0)])
+    (m,) = recognise(labels, tuples, mb, HR)
+    assert m.scale == pytest.approx(0.2, abs=0.02)

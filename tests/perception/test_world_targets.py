@@ -1,10 +1,12 @@
 """The issue's targets on a fixed seeded set of views rendered by the world (issue 3).
 
-Recall >= 95 %, precision >= 99 % (also with orange clutter), distance within ±0.1 m
-for >= 95 % and bearing within ±3° for >= 95 % of the robots in [0.5, 1.45] m; visual
-compass within 2° for 15° turns in the textured room and a reported failure on a
-featureless view. The third set also turns the observed NAOs' heads at random (they
-sweep their heads while being looked at). The renders are made once per session (module fixtures).
+Recall >= 95 %, precision >= 99 % (also with orange clutter), distance within 5 % of
+the distance for >= 95 % and bearing within ±3° for >= 95 % of the robots in
+[0.5, 3.0] m; recall >= 90 % on views where NAOs overlap in the image (one partly
+behind another, section 6 of the paper); visual compass within 2° for 15° turns in the
+textured room and a reported failure on a featureless view. The third set also turns
+the observed NAOs' heads at random (they sweep their heads while being looked at). The
+renders are made once per session (module fixtures).
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from agent.perception.detector import Detector
 from tools.eval_perception import run_compass, run_views, summarise
 
 VIEWS = 80
+OVERLAP_VIEWS = 40
 
 
 @pytest.fixture(scope="module")
@@ -45,12 +48,26 @@ def test_recall_and_precision(summary: dict[str, Any]) -> None:
     assert summary["precision"] >= 0.99
 
 
-def test_distance_within_10cm(summary: dict[str, Any]) -> None:
-    assert summary["distance_error_m"]["within_0.1"] >= 0.95
+def test_distance_within_5_percent(summary: dict[str, Any]) -> None:
+    assert summary["distance_error_m"]["within_5pct"] >= 0.95
+
+
+def test_far_robots_are_part_of_the_sets(summary: dict[str, Any]) -> None:
+    assert summary["bands"]["2.25-3"]["robots"] >= 15
 
 
 def test_bearing_within_3deg(summary: dict[str, Any]) -> None:
     assert summary["bearing_error_deg"]["within_3"] >= 0.95
+
+
+def test_overlapping_naos_recall(detector: Detector) -> None:
+    s = summarise(run_views(104, OVERLAP_VIEWS, True, detector, overlap=True))
+    o = s["overlap"]
+    assert o["front"]["robots"] >= 20 and o["back"]["robots"] >= 5
+    assert s["recall"] >= 0.9
+    # ~80 detections cannot resolve 99 %: one false positive is 98.8 % (the 100-view
+    # evaluations in the README measure it)
+    assert s["precision"] >= 0.98
 
 
 def test_compass_15deg_turns_and_featureless_failure() -> None:
