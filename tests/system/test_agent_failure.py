@@ -27,7 +27,7 @@ pytestmark = [pytest.mark.system, pytest.mark.slow]
 
 def test_member_killed_during_search_stops_the_others_unmoved(tmp_path: Path) -> None:
     ep = f"tcp/127.0.0.1:{free_port()}"
-    args = argparse.Namespace(d_e=0.8, phi_e_deg=30.0, agree_timeout=120.0, agent_log_level="INFO")
+    args = argparse.Namespace(d_e=0.8, phi_e_deg=30.0, agree_timeout=20.0, agent_log_level="INFO")
     bus = Bus(BusConfig(connect=(ep,), multicast_scouting=False))
     bus.subscribe(KEY_STATUS_ALL)
     bus.subscribe(KEY_WORLD_TRUTH_ALL)
@@ -56,30 +56,37 @@ def test_member_killed_during_search_stops_the_others_unmoved(tmp_path: Path) ->
                         last[rid] = (x, y)
                 elif isinstance(msg, StatusMsg):
                     final[msg.sender] = msg
-                    if (
-                        msg.sender == victim
-                        and msg.phase == "search"
-                        and msg.progress > 0
-                        and not killed
-                    ):
+                    # the first search status is always published (a phase change);
+                    # progress statuses come only every few seconds, and a fast search
+                    # may end before one is due
+                    if msg.sender == victim and msg.phase == "search" and not killed:
                         agents[victim].popen.send_signal(signal.SIGKILL)
                         killed = True
             if killed and all(agents[i].popen.poll() is not None for i in survivors):
                 break
         assert killed, "the victim never started searching"
+        named: set[int] = set()
         for i in survivors:
             assert agents[i].popen.poll() == 1, f"agent {i} did not stop with a failure"
             st = final[i]
             assert st.phase == "failed", st
-            # the reason names the victim (and possibly a survivor that stopped earlier)
+            # Why it stopped: who left (the victim, or a survivor that stopped earlier), or,
+            # when the victim was gone before this survivor's exchange began (it never
+            # counted it as a member), no agreement within the timeout without it.
             m = re.search(r"member\(s\) \[([\d, ]+)\] left before agreement", st.error)
-            assert m is not None, st.error
-            left = {int(x) for x in m.group(1).split(",")}
-            assert victim in left and left <= set(ids), st.error
+            t = re.search(r"no agreement after [\d.]+ s; (\d) of 3 members alive", st.error)
+            assert m is not None or (t is not None and t.group(1) == "2"), st.error
+            if m is not None:
+                left = {int(x) for x in m.group(1).split(",")}
+                assert left <= set(ids) - {i}, st.error
+                named |= left
+            else:
+                named.add(victim)
             assert st.plan_digest == ""  # it never planned
             dx = last[i][0] - first[i][0]
             dy = last[i][1] - first[i][1]
             assert math.hypot(dx, dy) < 0.02, f"robot {i} moved {math.hypot(dx, dy):.3f} m"
+        assert victim in named  # the first survivor to stop did so for the victim
     finally:
         for p in reversed(procs):
             stop(p)
