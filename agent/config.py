@@ -73,6 +73,7 @@ class AgentConfig:
     max_correction: float = 0.3  # m
     march: Route | None = None  # the march after hold (issue #13); None: stop at hold
     march_step: float = 0.1  # m per leader step: half a follower's 20 cm, so they keep up
+    march_pause: float = 3.0  # the leader rests this many times each step's duration
     lost_rounds: int = 3  # head searches for a lost parent before the fleet halts
 
     def agreed_params(self) -> dict[str, ParamValue]:
@@ -101,6 +102,8 @@ class AgentConfig:
                 raise ValueError(f"{name} must be finite and >= 0, got {v}")
         if not (math.isfinite(self.march_step) and 0.02 <= self.march_step <= 0.2):
             raise ValueError(f"march_step must be in [0.02, 0.2] m, got {self.march_step}")
+        if not (math.isfinite(self.march_pause) and 0.0 <= self.march_pause <= 20.0):
+            raise ValueError(f"march_pause must be in [0, 20], got {self.march_pause}")
         if self.lost_rounds < 1:
             raise ValueError(f"lost_rounds must be >= 1, got {self.lost_rounds}")
         for y in self.search_yaws:

@@ -10,11 +10,13 @@ its direction (a route at 90° to the axis moves the pyramid sideways; nobody re
 so every child keeps its parent at the plan's offset, parent target − child target.
 
 **Leader.** Walks from its planned target to target + V in steps of ``march_step``
-(10 cm, half a follower's 20 cm so that the followers, whose cycles take longer, keep
-up), with the visual compass after each step (runner's ``walk_step``), then turns to
-the axis. Before each step it reads the statuses: it waits while any follower reports
-that it has lost its parent (detail starting with :data:`LOST`), and halts if a member
-failed or left.
+(10 cm, half a follower's 20 cm), with the visual compass after each step (runner's
+``walk_step``), then turns to the axis. After each step it rests ``march_pause`` times
+as long as the step took (a duty cycle of 1 / (1 + pause)): a follower's cycle (look
+at the parent, detect, turn, step, compass) takes about three times the leader's, so
+the leader's speed is kept well below what its followers can do. Before each step it
+reads the statuses: it waits while any follower reports that it has lost its parent
+(detail starting with :data:`LOST`), and halts if a member failed or left.
 
 **Followers.** Keep station on their parent by vision alone: each cycle the head turns
 to where the parent is predicted, the detector measures it (range, bearing in the
@@ -22,8 +24,9 @@ fixed frame), :class:`~agent.control.station.StationKeeper` (PI, speed-limited) 
 displacement and :func:`~agent.control.station.unicycle_step` a turn of at most 15° and a
 walk; the prediction is the measurement less the step walked. No radio is needed for
 this; statuses go on being published for viewers. A follower's march ends when it has
-stood still for two cycles (its parent stopped) and it has covered the route less a
-margin by dead reckoning, or its parent reported ``done``.
+stood still for two cycles and its parent reported ``done`` (the radio only says when
+the march is over); without that status, when it has covered the route less a margin
+by dead reckoning and its parent has been still for ``QUIET`` seconds.
 
 **Losing sight.** A parent not found within ``GATE`` of the prediction is lost: the
 follower stops, publishes ``lost parent …``, and searches with its head only (yaw
@@ -61,6 +64,7 @@ GATE = 0.45  # m: a detection this close to the prediction is the parent
 SEARCH_GATE = 0.6  # m: wider while searching (the parent may have moved on)
 SEARCH_OFFSETS = tuple(math.radians(a) for a in (0, 20, -20, 40, -40, 60, -60))
 CLEARANCE = 2.0 * PlanParams().radius  # the safe-step rule's 2·radius
+QUIET = 20.0  # s of a still parent that end a follower's march without the radio
 
 
 class MarchHalt(RuntimeError):
@@ -156,8 +160,12 @@ class Marcher:
                 r.status("march", self._progress(origin), "a robot ahead: waiting")
                 r.pump(0.5)
                 continue
+            t0 = r.clock()
             r.walk_step(walk)
             r.status("march", self._progress(origin), f"leading: {leg.remaining:.2f} m to go")
+            rest = r.clock() + r.cfg.march_pause * (r.clock() - t0)
+            while r.clock() < rest:
+                r.pump(min(0.2, max(0.0, rest - r.clock())))
         raise MarchHalt("the leader did not reach the end of the route")
 
     def _others_ahead(self) -> np.ndarray:
@@ -185,6 +193,7 @@ class Marcher:
         origin = r.position.copy()
         margin = max(0.3, 0.15 * self.length)
         still = 0
+        still_since = r.clock()
         for _ in range(int(self.length / r.cfg.march_step) * 6 + 120):
             r.pump(0.0)
             self.check_fleet()
@@ -203,8 +212,11 @@ class Marcher:
                 f"parent {parent} at {rho:.2f} m, {math.degrees(beta):+.0f}°",
             )  # fmt: skip
             still = still + 1 if cmd.size == 0.0 else 0
+            if still <= 1:
+                still_since = r.clock()
             parent_done = getattr(r.peers.get(parent), "phase", "") == "done"
-            if still >= 2 and (travelled >= self.length - margin or parent_done):
+            quiet = r.clock() - still_since >= QUIET and travelled >= self.length - margin
+            if still >= 2 and (parent_done or quiet):
                 log.info("march over: travelled %.2f m, parent at %.2f m %+.1f°", travelled,
                          rho, math.degrees(beta))  # fmt: skip
                 return
