@@ -73,7 +73,7 @@ class AgentConfig:
     max_correction: float = 0.3  # m
     march: Route | None = None  # the march after hold (issue #13); None: stop at hold
     march_step: float = 0.1  # m per leader step: half a follower's 20 cm, so they keep up
-    march_pause: float = 3.0  # the leader rests this many times each step's duration
+    march_pause: float = 4.0  # the leader rests this many times each step's duration
     lost_rounds: int = 3  # head searches for a lost parent before the fleet halts
 
     def agreed_params(self) -> dict[str, ParamValue]:

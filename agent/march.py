@@ -13,7 +13,8 @@ so every child keeps its parent at the plan's offset, parent target − child ta
 (10 cm, half a follower's 20 cm), with the visual compass after each step (runner's
 ``walk_step``), then turns to the axis. After each step it rests ``march_pause`` times
 as long as the step took (a duty cycle of 1 / (1 + pause)): a follower's cycle (look
-at the parent, detect, turn, step, compass) takes about three times the leader's, so
+at the parent, detect, turn, step, compass) takes about three times the leader's
+(pause 4: the leader moves at most 10 cm per 5 of its step times), so
 the leader's speed is kept well below what its followers can do. Before each step it
 reads the statuses: it waits while any follower reports that it has lost its parent
 (detail starting with :data:`LOST`), and halts if a member failed or left.
@@ -21,8 +22,9 @@ reads the statuses: it waits while any follower reports that it has lost its par
 **Followers.** Keep station on their parent by vision alone: each cycle the head turns
 to where the parent is predicted, the detector measures it (range, bearing in the
 fixed frame), :class:`~agent.control.station.StationKeeper` (PI, speed-limited) gives a
-displacement and :func:`~agent.control.station.unicycle_step` a turn of at most 15° and a
-walk; the prediction is the measurement less the step walked. No radio is needed for
+displacement (with a feed-forward of the parent's own advance, kF = 0.8) and
+:func:`~agent.control.station.unicycle_step` a turn of at most 15° (none below 8°) and a
+walk; the prediction is the measurement less the step walked plus the parent's advance. No radio is needed for
 this; statuses go on being published for viewers. A follower's march ends when it has
 stood still for two cycles and its parent reported ``done`` (the radio only says when
 the march is over); without that status, when it has covered the route less a margin
@@ -49,7 +51,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from agent.control import PAPER_GAINS, STEP_GAINS, next_leg, wrap_pi
-from agent.control.station import StationKeeper, safe_walk, unicycle_step
+from agent.control.station import StationGains, StationKeeper, safe_walk, unicycle_step
 from agent.formation.plan import Plan, PlanParams
 from agent.nao import HEAD_YAW_LIMIT
 
@@ -64,6 +66,7 @@ GATE = 0.45  # m: a detection this close to the prediction is the parent
 SEARCH_GATE = 0.6  # m: wider while searching (the parent may have moved on)
 SEARCH_OFFSETS = tuple(math.radians(a) for a in (0, 20, -20, 40, -40, 60, -60))
 CLEARANCE = 2.0 * PlanParams().radius  # the safe-step rule's 2·radius
+GAINS = StationGains(kp=0.8, ki=0.2, kf=0.8)
 QUIET = 20.0  # s of a still parent that end a follower's march without the radio
 
 
@@ -188,7 +191,7 @@ class Marcher:
     def follow(self, parent: int) -> None:
         r = self.r
         offset = station_offset(self.plan, r.me)
-        keeper = StationKeeper(float(np.hypot(*offset)), math.atan2(offset[1], offset[0]))
+        keeper = StationKeeper(float(np.hypot(*offset)), math.atan2(offset[1], offset[0]), GAINS)
         predicted = offset.copy()
         origin = r.position.copy()
         margin = max(0.3, 0.15 * self.length)
@@ -203,7 +206,8 @@ class Marcher:
                 keeper.reset()
             rel, others = seen
             rho, beta = float(np.hypot(*rel)), math.atan2(float(rel[1]), float(rel[0]))
-            cmd = keeper.update(rho, beta)
+            here = (float(r.position[0]), float(r.position[1]))
+            cmd = keeper.update(rho, beta, here)
             self.worst_range = max(self.worst_range, abs(cmd.e_range) / keeper.d_ref)
             self.worst_bearing = max(self.worst_bearing, abs(cmd.e_bearing))
             travelled = self._progress(origin) * self.length
@@ -220,8 +224,9 @@ class Marcher:
                 log.info("march over: travelled %.2f m, parent at %.2f m %+.1f°", travelled,
                          rho, math.degrees(beta))  # fmt: skip
                 return
+            ahead = np.asarray(keeper.advance)  # where the parent goes meanwhile
             if cmd.size == 0.0:
-                predicted = rel
+                predicted = rel + ahead
                 r.pump(0.3)  # the parent has not moved: give it time to
                 continue
             turn, walk = unicycle_step(cmd.dx, cmd.dy, r.heading)
@@ -231,7 +236,7 @@ class Marcher:
             walk = safe_walk(walk, r.heading, others, CLEARANCE)
             if abs(walk) >= 0.01:
                 r.walk_step(walk)
-            predicted = rel - (r.position - before)
+            predicted = rel - (r.position - before) + ahead
         raise MarchHalt(f"station keeping on parent {parent} did not settle")
 
     def sight(

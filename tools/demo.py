@@ -823,6 +823,8 @@ def summarise(
             fa, plan = plan_from_agreed(obs, d_e, phi_e)
             result["evaluator_plan_digest"] = str(plan.digest)
             result["leader"] = int(plan.leader)
+            # in the common frame: where --march-to points are given
+            result["leader_target"] = [float(v) for v in plan.robot(plan.leader).target]
             axis = fa.axis_angle(plan)
             result["axis_deg"] = math.degrees(axis)
             pairs = pyramid_pairs(plan, ids)

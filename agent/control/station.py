@@ -13,14 +13,20 @@ camera measures the parent at range ρ_k and bearing β_k (fixed frame), and
     I_β,k = clip(I_β,k−1 + e_β,k, ±I_β,max)      frozen while the step saturates
     u_ρ = kP·e_ρ,k + kI·I_ρ,k                    PI on range
     u_β = kP·e_β,k + kI·I_β,k                    PI on bearing
-    Δ_k = u_ρ·r̂(β_k) + ρ_k·u_β·t̂(β_k)           the child's displacement (fixed frame)
+    a_k = (1 − λ)·a_k−1 + λ·(q_k − q_k−1)          the parent's advance per cycle, from
+                                                 its positions q = p_child + measured
+                                                 offset (filtered, λ = 0.5; |a| ≤ max_step)
+    Δ_k = u_ρ·r̂(β_k) + ρ_k·u_β·t̂(β_k) + kF·a_k   the child's displacement (fixed frame)
 
 with r̂(β) = (cos β, sin β) towards the parent and t̂(β) = (−sin β, cos β). Moving the
 child by Δ moves the parent's relative position by −Δ: the radial part shortens the
 range by u_ρ, the tangential part turns the bearing by −u_β (to first order), so
 kP = 1, kI = 0 removes a measured error in one step. The parent marches at a roughly
 constant speed (a ramp in the reference); a P loop would trail it by a constant lag,
-the integral removes that lag. The step is speed-limited: |Δ| ≤ ``max_step`` (the
+the integral removes that lag, and the feed-forward of the parent's own advance (kF)
+keeps up with it from the first cycles on instead of after the integral has grown
+(a_k is also where the parent will be next: the prediction for finding it). The
+step is speed-limited: |Δ| ≤ ``max_step`` (the
 paper's 20 cm, the longest step that walks straight, 4.2), and steps shorter than
 ``deadband`` are not walked (the measurement noise is larger).
 
@@ -61,12 +67,14 @@ class StationGains:
 
     kp: float = 0.8
     ki: float = 0.2
+    kf: float = 0.0  # feed-forward of the parent's advance (agent/march.py uses 0.8)
     i_range_max: float = 1.0  # m·cycles (kI·I must reach the parent's v)
     i_bearing_max: float = 0.6  # rad·cycles
 
     def __post_init__(self) -> None:
         _finite("kp", self.kp, 0.0, 2.0)
         _finite("ki", self.ki, 0.0, 2.0)
+        _finite("kf", self.kf, 0.0, 1.0)
         _finite("i_range_max", self.i_range_max, 0.0)
         _finite("i_bearing_max", self.i_bearing_max, 0.0)
         if self.kp == 0.0:
@@ -99,18 +107,36 @@ class StationKeeper:
     deadband: float = 0.03
     i_range: float = 0.0
     i_bearing: float = 0.0
+    smoothing: float = 0.5  # λ of the parent's advance filter
+    advance: tuple[float, float] = (0.0, 0.0)  # a_k, m per cycle (fixed frame)
+    _last_parent: tuple[float, float] | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         _finite("d_ref", self.d_ref, 1e-3)
         self.bearing_ref = wrap_pi(_finite("bearing_ref", self.bearing_ref))
         _finite("max_step", self.max_step, 1e-3, 1.0)
         _finite("deadband", self.deadband, 0.0, self.max_step)
+        _finite("smoothing", self.smoothing, 0.0, 1.0)
 
-    def update(self, rng: float, bearing: float) -> StationCommand:
-        """The displacement for a parent measured at ``rng`` (m) and ``bearing`` (rad)."""
+    def update(
+        self, rng: float, bearing: float, position: tuple[float, float] = (0.0, 0.0)
+    ) -> StationCommand:
+        """The displacement for a parent measured at ``rng`` (m) and ``bearing`` (rad)
+        from the child's (dead-reckoned) ``position`` in its fixed frame."""
         rho = _finite("range", rng, 0.0, 100.0)
         beta = _finite("bearing", bearing)
+        px, py = (_finite("position", v) for v in position)
         g = self.gains
+        q = (px + rho * math.cos(beta), py + rho * math.sin(beta))
+        if self._last_parent is not None:
+            lam = self.smoothing
+            ax = (1 - lam) * self.advance[0] + lam * (q[0] - self._last_parent[0])
+            ay = (1 - lam) * self.advance[1] + lam * (q[1] - self._last_parent[1])
+            n = math.hypot(ax, ay)
+            if n > self.max_step:
+                ax, ay = ax * self.max_step / n, ay * self.max_step / n
+            self.advance = (ax, ay)
+        self._last_parent = q
         e_r = rho - self.d_ref
         e_b = wrap_pi(beta - self.bearing_ref)
         i_r = max(-g.i_range_max, min(g.i_range_max, self.i_range + e_r))
@@ -118,8 +144,8 @@ class StationKeeper:
         u_r = g.kp * e_r + g.ki * i_r
         u_b = g.kp * e_b + g.ki * i_b
         c, s = math.cos(beta), math.sin(beta)
-        dx = u_r * c - rho * u_b * s
-        dy = u_r * s + rho * u_b * c
+        dx = u_r * c - rho * u_b * s + g.kf * self.advance[0]
+        dy = u_r * s + rho * u_b * c + g.kf * self.advance[1]
         size = math.hypot(dx, dy)
         saturated = size > self.max_step
         if saturated:
@@ -131,8 +157,10 @@ class StationKeeper:
         return StationCommand(dx, dy, e_r, e_b, saturated)
 
     def reset(self) -> None:
-        """Forget the integrals (after the parent was lost and found again)."""
+        """Forget the integrals and the parent's advance (after it was lost and found)."""
         self.i_range = self.i_bearing = 0.0
+        self.advance = (0.0, 0.0)
+        self._last_parent = None
 
 
 def unicycle_step(
@@ -140,7 +168,7 @@ def unicycle_step(
     dy: float,
     heading: float,
     max_turn: float = math.radians(15.0),
-    min_turn: float = math.radians(3.0),
+    min_turn: float = math.radians(8.0),
 ) -> tuple[float, float]:
     """(turn rad, walk m) that carries out the displacement (dx, dy) as far as one
     turn-then-walk can: with α the angle from ``heading`` to the displacement (or to its

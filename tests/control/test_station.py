@@ -77,7 +77,7 @@ def _march(gains: StationGains, v: float, cycles: int) -> list[float]:
     parent, child, errs = 0.8, 0.0, []
     for _ in range(cycles):
         parent += v
-        cmd = sk.update(parent - child, 0.0)
+        cmd = sk.update(parent - child, 0.0, (child, 0.0))
         child += cmd.dx
         errs.append(cmd.e_range)
     return errs
@@ -114,8 +114,8 @@ def test_unicycle_turn_is_limited_and_walk_projected() -> None:
     turn, walk = unicycle_step(0.0, 0.1, 0.0)
     assert turn == pytest.approx(math.radians(15))
     assert walk == pytest.approx(0.1 * math.cos(math.radians(75)))
-    # small angles are not turned: 2° → walk the projection
-    d = math.radians(2)
+    # small angles are not turned (below 8°): 5° → walk the projection
+    d = math.radians(5)
     turn, walk = unicycle_step(0.1 * math.cos(d), 0.1 * math.sin(d), 0.0)
     assert turn == 0.0 and walk == pytest.approx(0.1 * math.cos(d))
     assert unicycle_step(0.0, 0.0, 0.3) == (0.0, 0.0)
@@ -128,7 +128,7 @@ def test_command_size() -> None:
 @pytest.mark.parametrize(
     "kwargs",
     [{"kp": 0.0}, {"kp": math.nan}, {"ki": -0.1}, {"kp": 3.0}, {"i_range_max": -1.0},
-     {"i_bearing_max": math.inf}],
+     {"i_bearing_max": math.inf}, {"kf": 1.5}],
 )  # fmt: skip
 def test_bad_gains(kwargs: dict[str, float]) -> None:
     with pytest.raises(ValueError):
@@ -138,7 +138,7 @@ def test_bad_gains(kwargs: dict[str, float]) -> None:
 @pytest.mark.parametrize(
     "kwargs",
     [{"d_ref": 0.0}, {"d_ref": math.nan}, {"bearing_ref": math.inf}, {"max_step": 0.0},
-     {"max_step": 2.0}, {"deadband": -0.01}, {"deadband": 0.5}],
+     {"max_step": 2.0}, {"deadband": -0.01}, {"deadband": 0.5}, {"smoothing": 1.5}],
 )  # fmt: skip
 def test_bad_keeper(kwargs: dict[str, float]) -> None:
     args: dict[str, float] = {"d_ref": 0.8, "bearing_ref": 0.0, **kwargs}
@@ -189,3 +189,34 @@ def test_safe_walk_known_answers() -> None:
 def test_bad_safe_walk(args: tuple[float, float, np.ndarray, float]) -> None:
     with pytest.raises(ValueError):
         safe_walk(*args)
+
+
+def test_parent_advance_is_estimated_and_fed_forward() -> None:
+    # parent due east at d_ref; it advances 0.1 m east per cycle, the child stays put:
+    # a_1 = 0.5·0.1 = 0.05, a_2 = 0.5·0.05 + 0.5·0.1 = 0.075 (λ = 0.5)
+    g = StationGains(kp=1.0, ki=0.0, kf=1.0)
+    sk = StationKeeper(0.8, 0.0, g, deadband=0.0)
+    assert sk.update(0.8, 0.0, (0.0, 0.0)).dx == pytest.approx(0.0)
+    cmd = sk.update(0.9, 0.0, (0.0, 0.0))
+    assert sk.advance == pytest.approx((0.05, 0.0))
+    assert cmd.dx == pytest.approx(0.1 + 0.05)
+    sk.update(1.0, 0.0, (0.0, 0.0))
+    assert sk.advance == pytest.approx((0.075, 0.0))
+    # the child's own motion is not the parent's: child moved 0.1, parent too → a stays
+    sk2 = StationKeeper(0.8, 0.0, g, deadband=0.0)
+    sk2.update(0.8, 0.0, (0.0, 0.0))
+    sk2.update(0.8, 0.0, (0.1, 0.0))
+    assert sk2.advance == pytest.approx((0.05, 0.0))
+    sk2.reset()
+    assert sk2.advance == (0.0, 0.0)
+
+
+def test_feed_forward_keeps_up_sooner() -> None:
+    with_ff = _march(StationGains(kf=0.8), 0.1, 8)
+    without = _march(StationGains(), 0.1, 8)
+    assert sum(abs(e) for e in with_ff) < sum(abs(e) for e in without)
+
+
+def test_bad_position() -> None:
+    with pytest.raises(ValueError):
+        StationKeeper(0.8, 0.0).update(0.8, 0.0, (math.nan, 0.0))
