@@ -22,7 +22,7 @@ reads the statuses: it waits while any follower reports that it has lost its par
 **Followers.** Keep station on their parent by vision alone: each cycle the head turns
 to where the parent is predicted, the detector measures it (range, bearing in the
 fixed frame), :class:`~agent.control.station.StationKeeper` (PI, speed-limited) gives a
-displacement (with a feed-forward of the parent's own advance, kF = 0.8) and
+displacement (PI; the parent's estimated advance only feeds the prediction) and
 :func:`~agent.control.station.unicycle_step` a turn of at most 15° (none below 8°) and a
 walk; the prediction is the measurement less the step walked plus the parent's advance. No radio is needed for
 this; statuses go on being published for viewers. A follower's march ends when it has
@@ -66,7 +66,10 @@ GATE = 0.45  # m: a detection this close to the prediction is the parent
 SEARCH_GATE = 0.6  # m: wider while searching (the parent may have moved on)
 SEARCH_OFFSETS = tuple(math.radians(a) for a in (0, 20, -20, 40, -40, 60, -60))
 CLEARANCE = 2.0 * PlanParams().radius  # the safe-step rule's 2·radius
-GAINS = StationGains(kp=0.8, ki=0.2, kf=0.8)
+# kF = 0: the leader's steps come in bursts (walk, rest), so the parent's estimated
+# advance overshoots in the rests (measured: zig-zags, a lost parent at 6 robots); the
+# estimate still feeds the prediction used to find the parent.
+GAINS = StationGains(kp=0.8, ki=0.2, kf=0.0)
 QUIET = 20.0  # s of a still parent that end a follower's march without the radio
 
 
@@ -200,9 +203,9 @@ class Marcher:
         for _ in range(int(self.length / r.cfg.march_step) * 6 + 120):
             r.pump(0.0)
             self.check_fleet()
-            seen = self.sight(predicted, GATE, (0.0,))
+            seen = self.sight((predicted, offset), GATE, (0.0,))
             if seen is None:
-                seen = self.search(parent, predicted)
+                seen = self.search(parent, predicted, offset)
                 keeper.reset()
             rel, others = seen
             rho, beta = float(np.hypot(*rel)), math.atan2(float(rel[1]), float(rel[0]))
@@ -240,11 +243,14 @@ class Marcher:
         raise MarchHalt(f"station keeping on parent {parent} did not settle")
 
     def sight(
-        self, predicted: np.ndarray, gate: float, offsets: tuple[float, ...]
+        self, centres: tuple[np.ndarray, ...], gate: float, offsets: tuple[float, ...]
     ) -> tuple[np.ndarray, np.ndarray] | None:
         """The parent's relative position (fixed frame) and every robot seen, looking at
-        the prediction with the head turned by each offset in turn; None if not found."""
+        the first centre (the prediction) with the head turned by each offset in turn:
+        the detection nearest the first centre within ``gate``, else nearest the next
+        (the plan's offset: where the parent is if the pyramid holds); None if none."""
         r = self.r
+        predicted = centres[0]
         bearing = math.atan2(float(predicted[1]), float(predicted[0]))
         for off in offsets:
             yaw = wrap_pi(bearing - r.heading + off)
@@ -255,20 +261,23 @@ class Marcher:
             pts = np.asarray(pts, dtype=np.float64).reshape(-1, 2)
             if len(pts) == 0:
                 continue
-            d = np.hypot(*(pts - predicted).T)
-            k = int(np.argmin(d))
-            if d[k] <= gate:
-                return pts[k], pts
+            for c in centres:
+                d = np.hypot(*(pts - c).T)
+                k = int(np.argmin(d))
+                if d[k] <= gate:
+                    return pts[k], pts
         return None
 
-    def search(self, parent: int, predicted: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def search(
+        self, parent: int, predicted: np.ndarray, offset: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Lost: stop, say so, search with the head (never the body); halt if not found."""
         r = self.r
         for k in range(r.cfg.lost_rounds):
             r.status("march", 0.0, f"{LOST} {parent}: head search {k + 1}", force=True)
             log.warning("lost parent %d (predicted at %s): head search %d", parent,
                         predicted.round(2).tolist(), k + 1)  # fmt: skip
-            seen = self.sight(predicted, SEARCH_GATE, SEARCH_OFFSETS)
+            seen = self.sight((predicted, offset), SEARCH_GATE, SEARCH_OFFSETS)
             if seen is not None:
                 r.status("march", 0.0, f"reacquired parent {parent}", force=True)
                 return seen
