@@ -106,6 +106,7 @@ class Marcher:
         self.members = [int(i) for i in runner.formation.members(self.plan) if i != runner.me]
         self.worst_range = 0.0  # largest |e_ρ| / d_ref measured by a follower (its own view)
         self.worst_bearing = 0.0  # largest |e_β| (rad)
+        self.seen_last = np.zeros((0, 2))  # the robots in the last image (for the log)
 
     # ------------------------------------------------------------ fleet checks
 
@@ -243,12 +244,18 @@ class Marcher:
         raise MarchHalt(f"station keeping on parent {parent} did not settle")
 
     def sight(
-        self, centres: tuple[np.ndarray, ...], gate: float, offsets: tuple[float, ...]
+        self,
+        centres: tuple[np.ndarray, ...],
+        gate: float,
+        offsets: tuple[float, ...],
+        search: bool = False,
     ) -> tuple[np.ndarray, np.ndarray] | None:
         """The parent's relative position (fixed frame) and every robot seen, looking at
         the first centre (the prediction) with the head turned by each offset in turn:
         the detection nearest the first centre within ``gate``, else nearest the next
-        (the plan's offset: where the parent is if the pyramid holds); None if none."""
+        (the plan's offset: where the parent is if the pyramid holds); while
+        ``search``ing, else the detection at the predicted range (± 0.3 m) and bearing
+        (± 35°: the heading belief may have drifted); None if none."""
         r = self.r
         predicted = centres[0]
         bearing = math.atan2(float(predicted[1]), float(predicted[0]))
@@ -261,10 +268,24 @@ class Marcher:
             pts = np.asarray(pts, dtype=np.float64).reshape(-1, 2)
             if len(pts) == 0:
                 continue
+            self.seen_last = pts
             for c in centres:
                 d = np.hypot(*(pts - c).T)
                 k = int(np.argmin(d))
                 if d[k] <= gate:
+                    return pts[k], pts
+            if search:  # tolerate a heading error: range within 0.3 m, bearing 35°
+                rho_c = float(np.hypot(*predicted))
+                rho = np.hypot(pts[:, 0], pts[:, 1])
+                dbeta = np.abs(
+                    (np.arctan2(pts[:, 1], pts[:, 0]) - bearing + np.pi) % (2 * np.pi) - np.pi
+                )
+                ok = (np.abs(rho - rho_c) <= 0.3) & (dbeta <= math.radians(35))
+                if np.any(ok):
+                    score = np.where(
+                        ok, np.abs(rho - rho_c) / 0.3 + dbeta / math.radians(35), np.inf
+                    )
+                    k = int(np.argmin(score))
                     return pts[k], pts
         return None
 
@@ -275,9 +296,11 @@ class Marcher:
         r = self.r
         for k in range(r.cfg.lost_rounds):
             r.status("march", 0.0, f"{LOST} {parent}: head search {k + 1}", force=True)
-            log.warning("lost parent %d (predicted at %s): head search %d", parent,
-                        predicted.round(2).tolist(), k + 1)  # fmt: skip
-            seen = self.sight((predicted, offset), SEARCH_GATE, SEARCH_OFFSETS)
+            log.warning("lost parent %d (predicted at %s, heading %.1f°; last seen %s): "
+                        "head search %d", parent, predicted.round(2).tolist(),
+                        math.degrees(r.heading), self.seen_last.round(2).tolist(),
+                        k + 1)  # fmt: skip
+            seen = self.sight((predicted, offset), SEARCH_GATE, SEARCH_OFFSETS, search=True)
             if seen is not None:
                 r.status("march", 0.0, f"reacquired parent {parent}", force=True)
                 return seen
