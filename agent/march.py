@@ -24,7 +24,9 @@ to where the parent is predicted, the detector measures it (range, bearing in th
 fixed frame), :class:`~agent.control.station.StationKeeper` (PI, speed-limited) gives a
 displacement (PI; the parent's estimated advance only feeds the prediction) and
 :func:`~agent.control.station.unicycle_step` a turn of at most 15° (none below 8°) and a
-walk; the prediction is the measurement less the step walked plus the parent's advance. No radio is needed for
+walk, the body kept within 40° of the march direction (so that the parent, ahead at
+φ_e off the axis, stays within the head's ±119.5°, and heading drift is turned back);
+the prediction is the measurement less the step walked plus the parent's advance. No radio is needed for
 this; statuses go on being published for viewers. A follower's march ends when it has
 stood still for two cycles and its parent reported ``done`` (the radio only says when
 the march is over); without that status, when it has covered the route less a margin
@@ -70,6 +72,7 @@ CLEARANCE = 2.0 * PlanParams().radius  # the safe-step rule's 2·radius
 # advance overshoots in the rests (measured: zig-zags, a lost parent at 6 robots); the
 # estimate still feeds the prediction used to find the parent.
 GAINS = StationGains(kp=0.8, ki=0.2, kf=0.0)
+MAX_OFF = math.radians(40.0)  # a follower's body stays this close to the march direction
 QUIET = 20.0  # s of a still parent that end a follower's march without the radio
 
 
@@ -103,6 +106,7 @@ class Marcher:
         self.axis = axis
         self.v = route_vector(self.plan, route, axis)
         self.length = float(np.hypot(*self.v))
+        self.direction = math.atan2(float(self.v[1]), float(self.v[0]))
         self.members = [int(i) for i in runner.formation.members(self.plan) if i != runner.me]
         self.worst_range = 0.0  # largest |e_ρ| / d_ref measured by a follower (its own view)
         self.worst_bearing = 0.0  # largest |e_β| (rad)
@@ -233,7 +237,14 @@ class Marcher:
                 predicted = rel + ahead
                 r.pump(0.3)  # the parent has not moved: give it time to
                 continue
-            turn, walk = unicycle_step(cmd.dx, cmd.dy, r.heading)
+            turn, _ = unicycle_step(cmd.dx, cmd.dy, r.heading)
+            # keep the body within MAX_OFF of the march direction: the parent stays
+            # within the head's reach (±119.5°), and drift is turned back
+            off = wrap_pi(r.heading + turn - self.direction)
+            if abs(off) > MAX_OFF:
+                turn = wrap_pi(self.direction + math.copysign(MAX_OFF, off) - r.heading)
+            h = r.heading + turn
+            walk = cmd.dx * math.cos(h) + cmd.dy * math.sin(h)
             before = r.position.copy()
             if turn != 0.0:
                 r.rotate(turn, STEP_GAINS)
