@@ -25,7 +25,9 @@ fixed frame), :class:`~agent.control.station.StationKeeper` (PI, speed-limited) 
 displacement (PI; the parent's estimated advance only feeds the prediction) and
 :func:`~agent.control.station.unicycle_step` a turn of at most 15° (none below 8°) and a
 walk, the body kept within 40° of the march direction (so that the parent, ahead at
-φ_e off the axis, stays within the head's ±119.5°, and heading drift is turned back);
+φ_e off the axis, stays within the head's ±119.5°, and heading drift is turned back) -
+or of its opposite, walking backwards, when the parent's planned bearing is more than
+90° off the march direction (a route across the axis);
 the prediction is the measurement less the step walked plus the parent's advance. No radio is needed for
 this; statuses go on being published for viewers. A follower's march ends when it has
 stood still for two cycles and its parent reported ``done`` (the radio only says when
@@ -199,13 +201,21 @@ class Marcher:
     def follow(self, parent: int) -> None:
         r = self.r
         offset = station_offset(self.plan, r.me)
-        keeper = StationKeeper(float(np.hypot(*offset)), math.atan2(offset[1], offset[0]), GAINS)
+        beta_ref = math.atan2(offset[1], offset[0])
+        keeper = StationKeeper(float(np.hypot(*offset)), beta_ref, GAINS)
+        # face the march direction, or march backwards when the parent would be behind
+        # (a route across the axis): the parent stays within the head's reach
+        ref = self.direction
+        if abs(wrap_pi(beta_ref - ref)) > math.pi / 2:
+            ref = wrap_pi(ref + math.pi)
         predicted = offset.copy()
         origin = r.position.copy()
         margin = max(0.3, 0.15 * self.length)
         still = 0
         still_since = r.clock()
-        for _ in range(int(self.length / r.cfg.march_step) * 6 + 120):
+        moves = int(self.length / r.cfg.march_step) * 6 + 120  # steps allowed
+        deadline = r.clock() + r.cfg.wave_timeout  # waiting for the parent, bounded
+        while moves > 0 and r.clock() < deadline:
             r.pump(0.0)
             self.check_fleet()
             seen = self.sight((predicted, offset), GATE, (0.0,))
@@ -240,12 +250,13 @@ class Marcher:
             turn, _ = unicycle_step(cmd.dx, cmd.dy, r.heading)
             # keep the body within MAX_OFF of the march direction: the parent stays
             # within the head's reach (±119.5°), and drift is turned back
-            off = wrap_pi(r.heading + turn - self.direction)
+            off = wrap_pi(r.heading + turn - ref)
             if abs(off) > MAX_OFF:
-                turn = wrap_pi(self.direction + math.copysign(MAX_OFF, off) - r.heading)
+                turn = wrap_pi(ref + math.copysign(MAX_OFF, off) - r.heading)
             h = r.heading + turn
             walk = cmd.dx * math.cos(h) + cmd.dy * math.sin(h)
             before = r.position.copy()
+            moves -= 1
             if turn != 0.0:
                 r.rotate(turn, STEP_GAINS)
             walk = safe_walk(walk, r.heading, others, CLEARANCE)

@@ -179,7 +179,7 @@ def start_agent(
         *net,
         "--d-e", str(args.d_e), "--phi-e-deg", str(args.phi_e_deg), "--timeout", str(args.agree_timeout),
         *(["--march", str(args.march)] if getattr(args, "march", None) is not None else []),
-        *(["--march-to", args.march_to] if getattr(args, "march_to", None) is not None else []),
+        *([f"--march-to={args.march_to}"] if getattr(args, "march_to", None) is not None else []),
         "--log-level", args.agent_log_level,
         *(["--no-correct"] if getattr(args, "no_correct", False) else []),
         *(["--body", "naoqi", "--nao", args.nao_urls[rid]] if getattr(args, "body", "") == "naoqi" else []),
