@@ -50,6 +50,20 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         action="store_true",
         help="skip the final visual alignment to the parent (the papers' open-loop ending)",
     )
+    march = p.add_mutually_exclusive_group()
+    march.add_argument(
+        "--march",
+        type=float,
+        metavar="D",
+        default=None,
+        help="after hold, march D m along the pyramid's axis (agreed by the whole fleet)",
+    )
+    march.add_argument(
+        "--march-to",
+        metavar="X,Y",
+        default=None,
+        help="after hold, march the pyramid's leader to (X, Y) m in the common frame",
+    )
     p.add_argument(
         "--body",
         choices=("zenoh", "naoqi"),
@@ -88,6 +102,19 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         p.error("--phi-e-deg must be in (0, 90)")
     if not (math.isfinite(args.timeout) and args.timeout > 0):
         p.error("--timeout must be > 0")
+    args.route = None
+    try:
+        from agent.config import Route
+
+        if args.march is not None:
+            args.route = Route(distance=args.march)
+        elif args.march_to is not None:
+            parts = args.march_to.split(",")
+            if len(parts) != 2:
+                raise ValueError(f"--march-to wants X,Y, got {args.march_to!r}")
+            args.route = Route(to=(float(parts[0]), float(parts[1])))
+    except ValueError as exc:
+        p.error(str(exc))
     return args
 
 
@@ -188,6 +215,7 @@ def main(argv: list[str] | None = None) -> int:
                     timeout=args.timeout,
                     wave_timeout=args.wave_timeout,
                     correct=not args.no_correct,
+                    march=args.route,
                 ),
                 perception,
                 formation,

@@ -9,6 +9,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from agent.exchange import ParamValue
+from agent.formation.plan import PlanParams
 from agent.nao import HEAD_YAW_LIMIT
 from agent.perception.camera import CameraModel
 
@@ -17,6 +19,38 @@ from agent.perception.camera import CameraModel
 #: gaps where a NAO closer than about 0.8 m fell between two images and was dropped as
 #: cut by the border).
 SEARCH_YAWS = CameraModel().sweep_yaws(limit=HEAD_YAW_LIMIT)
+
+
+MAX_ROUTE = 50.0  # m: the longest march accepted (the longest walk command the world takes)
+
+
+@dataclass(frozen=True)
+class Route:
+    """The march after ``hold`` (issue #13): the leader walks ``distance`` m along the
+    pyramid's axis, or to the point ``to`` (x, y) of the common frame. Exactly one is
+    given. The pyramid translates: its axis keeps its direction (see agent/march.py)."""
+
+    distance: float | None = None
+    to: tuple[float, float] | None = None
+
+    def __post_init__(self) -> None:
+        if (self.distance is None) == (self.to is None):
+            raise ValueError("a route is a distance along the axis or a point, exactly one")
+        if self.distance is not None and not (
+            math.isfinite(self.distance) and 0.0 < self.distance <= MAX_ROUTE
+        ):
+            raise ValueError(f"march distance must be in (0, {MAX_ROUTE:g}] m, got {self.distance}")
+        if self.to is not None and not (
+            len(self.to) == 2 and all(math.isfinite(v) and abs(v) <= 1000.0 for v in self.to)
+        ):
+            raise ValueError(f"march point must be two finite coordinates (m), got {self.to}")
+
+    def key(self) -> tuple[str, float] | tuple[str, float, float]:
+        """What the agreed-parameters digest covers."""
+        if self.to is not None:
+            return ("to", float(self.to[0]), float(self.to[1]))
+        assert self.distance is not None
+        return ("axis", float(self.distance))
 
 
 @dataclass(frozen=True)
@@ -37,6 +71,23 @@ class AgentConfig:
     backoff_max: float = 16.0
     correct: bool = True  # final visual alignment to the parent (see Runner.correct)
     max_correction: float = 0.3  # m
+    march: Route | None = None  # the march after hold (issue #13); None: stop at hold
+    march_step: float = 0.1  # m per leader step: half a follower's 20 cm, so they keep up
+    march_pause: float = 4.0  # the leader rests this many times each step's duration
+    lost_rounds: int = 3  # head searches for a lost parent before the fleet halts
+
+    def agreed_params(self) -> dict[str, ParamValue]:
+        """What every agent must share to plan and march alike (digest in DigestMsg)."""
+        pp = PlanParams(d_e=self.d_e, phi_e=self.phi_e)
+        route = None if self.march is None else self.march.key()
+        return {
+            "d_e": pp.d_e,
+            "phi_e": pp.phi_e,
+            "radius": pp.radius,
+            "strategy": pp.strategy,
+            "route": route,
+            "march_step": self.march_step if self.march is not None else None,
+        }
 
     def __post_init__(self) -> None:
         if self.fleet_size is not None and self.fleet_size < 1:
@@ -49,6 +100,12 @@ class AgentConfig:
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0.0):
                 raise ValueError(f"{name} must be finite and >= 0, got {v}")
+        if not (math.isfinite(self.march_step) and 0.02 <= self.march_step <= 0.2):
+            raise ValueError(f"march_step must be in [0.02, 0.2] m, got {self.march_step}")
+        if not (math.isfinite(self.march_pause) and 0.0 <= self.march_pause <= 20.0):
+            raise ValueError(f"march_pause must be in [0, 20], got {self.march_pause}")
+        if self.lost_rounds < 1:
+            raise ValueError(f"lost_rounds must be >= 1, got {self.lost_rounds}")
         for y in self.search_yaws:
             if abs(y) > HEAD_YAW_LIMIT + 1e-9:
                 raise ValueError(

@@ -29,6 +29,13 @@ stranger cycling through 65 536 ids cannot grow it. Nothing is lost for a real m
 whose record outran its liveliness token: our digest does not list it, which makes it
 re-send its record (see the re-publishing rules above).
 
+**Agreed parameters.** Equal records are not enough: every agent must also plan with
+the same d_e, φ_e, radius and strategy, and march the same route. Each agent hashes its
+own settings (:func:`params_digest`) and sends that digest in every ``DigestMsg``
+(``params``); a member whose parameters digest differs from ours counts as disagreeing,
+and the agreement fails at once, naming it (an agent started with other settings is
+never outvoted, and nobody plans or marches differently).
+
 Tie-breaks: a record with a higher ``round`` replaces an older one; for the same round
 the latest received wins (re-publications are identical). Digests are over the
 records sorted by sender id.
@@ -37,8 +44,9 @@ records sorted by sender id.
 from __future__ import annotations
 
 import hashlib
+import json
 import math
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 from agent.protocol import DigestMsg, NeighborRecordMsg, encode
@@ -46,7 +54,32 @@ from agent.protocol import DigestMsg, NeighborRecordMsg, encode
 DigestFn = Callable[[Sequence[NeighborRecordMsg]], str]
 
 #: Phases an agent reports only after it has agreed (acknowledges our digest).
-POST_AGREE_PHASES = frozenset({"plan", "wait", "move", "hold", "done"})
+POST_AGREE_PHASES = frozenset({"plan", "wait", "move", "hold", "march", "done"})
+
+ParamValue = float | int | str | None | tuple[float | str, ...]
+
+
+def params_digest(params: Mapping[str, ParamValue]) -> str:
+    """SHA-256 of the agreed planning parameters in a canonical text form.
+
+    Keys sorted; floats by ``repr`` (shortest round-trip form, so 0.8 and 0.8000000001
+    differ and equal floats always hash alike); tuples as lists; ``None`` as null.
+    Raises ``ValueError`` for a non-finite float or a type outside :data:`ParamValue`.
+    """
+
+    def canon(v: object) -> object:
+        if isinstance(v, bool) or v is None or isinstance(v, int | str):
+            return v
+        if isinstance(v, float):
+            if not math.isfinite(v):
+                raise ValueError(f"parameter value {v} is not finite")
+            return repr(v)
+        if isinstance(v, tuple):
+            return [canon(x) for x in v]
+        raise ValueError(f"parameter value of type {type(v).__name__} cannot be agreed")
+
+    text = json.dumps({str(k): canon(v) for k, v in params.items()}, sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()
 
 
 def canonical_digest(records: Sequence[NeighborRecordMsg]) -> str:
@@ -106,6 +139,7 @@ class Agreement:
         backoff_min: float = 0.25,
         backoff_max: float = 4.0,
         digest_fn: DigestFn = canonical_digest,
+        params: str = "",
     ) -> None:
         if own_record.sender != self_id:
             raise ValueError(f"own record is from {own_record.sender}, this agent is {self_id}")
@@ -124,6 +158,8 @@ class Agreement:
         self.settle = settle
         self.started = now
         self.digest_fn = digest_fn
+        self.params = params  # our agreed-parameters digest (params_digest)
+        self.params_mismatch: dict[int, str] = {}  # member -> its differing params digest
         self.live: set[int] = {self_id}
         self.left: set[int] = set()
         self.records: dict[int, NeighborRecordMsg] = {self_id: own_record}
@@ -181,6 +217,10 @@ class Agreement:
             return
         old = self.digests.get(msg.sender)
         self.digests[msg.sender] = msg
+        if msg.params != self.params:
+            self.params_mismatch[msg.sender] = msg.params
+        else:
+            self.params_mismatch.pop(msg.sender, None)
         if old is None or (old.digest, old.members) != (msg.digest, msg.members):
             if self.self_id not in msg.members:
                 self._record_tx.reset(now)
@@ -210,7 +250,9 @@ class Agreement:
 
     def digest_msg(self, round_: int = 0) -> DigestMsg:
         members, digest = self.digest()
-        return DigestMsg(sender=self.self_id, round=round_, digest=digest, members=members)
+        return DigestMsg(
+            sender=self.self_id, round=round_, digest=digest, members=members, params=self.params
+        )
 
     def missing_records(self) -> list[int]:
         return sorted(i for i in self.live if i not in self.records)
@@ -221,7 +263,7 @@ class Agreement:
         out = []
         for i in sorted(self.live - {self.self_id}):
             d = self.digests.get(i)
-            if d is None or d.digest != digest or d.members != members:
+            if d is None or d.digest != digest or d.members != members or d.params != self.params:
                 out.append(i)
         return out
 
@@ -233,6 +275,14 @@ class Agreement:
             return self._fail(
                 f"member(s) {sorted(self.left)} left before agreement; "
                 "not moving on a plan they may not share"
+            )
+        odd = sorted(i for i in self.params_mismatch if i in self.live)
+        if odd:
+            theirs = ", ".join(f"{i}: {self.params_mismatch[i][:12] or '(none)'}" for i in odd)
+            return self._fail(
+                f"robot(s) {odd} run with different planning parameters "
+                f"(params digest {theirs}; ours {self.params[:12] or '(none)'}): "
+                "not planning or marching differently"
             )
         n = len(self.live)
         if self.fleet_size is not None and n > self.fleet_size:

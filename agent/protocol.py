@@ -65,6 +65,7 @@ PHASES = (
     "wait",
     "move",
     "hold",
+    "march",
     "done",
     "failed",
 )
@@ -497,18 +498,24 @@ class NeighborRecordMsg(Message):
 
 @dataclass(frozen=True)
 class DigestMsg(Message):
-    """The digest of the record set an agent holds, and the members it covers."""
+    """The digest of the record set an agent holds, and the members it covers.
+
+    ``params``: the digest of the agent's agreed planning parameters (d_e, φ_e,
+    radius, strategy, march route; :func:`agent.exchange.params_digest`), empty from
+    a sender that predates it. Agreement needs it equal on every member too."""
 
     TAG: ClassVar[str] = "digest"
     sender: int
     round: int
     digest: str
     members: tuple[int, ...]
+    params: str = ""
     SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {
         "sender": _ID,
         "round": _int("round", 0, 1_000_000),
         "digest": _hex("digest"),
         "members": _seq("members", _ID, MAX_MEMBERS),
+        "params": _hex("params", allow_empty=True),
     }
 
 

@@ -12,8 +12,11 @@ WAIT     for every robot of earlier waves to hold (leader first, 5.2.2 step 7).
 MOVE     rotation control to face the goal, distance control in 20 cm steps with the
          heading corrected after each (4.2, 5.2.2), then turn to the pyramid axis.
 HOLD     arrived (status ``hold``); once the whole fleet has arrived and the parent is
-         ``done``, look at the parent and step by the measured offset error (an
-         addition, see :meth:`Runner.correct`), then ``done`` and stay until all are.
+         ``done`` (``march``), look at the parent and step by the measured offset error
+         (an addition, see :meth:`Runner.correct`), then ``done`` and stay until all are.
+MARCH    with a route (issue #13, agent/march.py): after the correction, ``march`` and
+         wait until every member is marching; the leader walks the route, followers
+         keep station on their parent by vision; then ``done`` as above.
 
 Heading belief: the agent's heading in its fixed frame starts at pi/2 (every robot
 faces north at the start, 4.1.1) and changes only by visual-compass measurements of its
@@ -45,8 +48,9 @@ from agent.control import (
     next_leg,
     wrap_pi,
 )
-from agent.exchange import Agreement, Decision
+from agent.exchange import Agreement, Decision, params_digest
 from agent.formation.plan import Plan
+from agent.march import Marcher, MarchHalt
 from agent.nao import HEAD_YAW_LIMIT
 from agent.perception.detector import Detection
 from agent.protocol import (
@@ -64,11 +68,12 @@ from agent.protocol import (
     key_status,
     reason,
 )
-from agent.seams import Body, BodyError, Formation, Frame, Perception, Sightings
+from agent.seams import Body, BodyError, Formation, Frame, MotionResult, Perception, Sightings
 
 log = logging.getLogger("agent.runner")
 
 NORTH = math.pi / 2
+ARRIVED = ("hold", "march", "done", "failed")  # phases of a member that has arrived
 STATUS_MIN_INTERVAL = 3.0  # s between progress statuses of the same phase
 HEARTBEAT = 3.0  # s between statuses while waiting
 
@@ -81,6 +86,7 @@ class AgentFailure(RuntimeError):
 class Peer:
     alive: bool = False
     phase: str = ""
+    detail: str = ""
     wave: int = -1
     plan_digest: str = ""
     seen_alive: bool = False
@@ -255,6 +261,7 @@ class Runner:
             if msg.sender == self.me or member is None or not member.seen_alive:
                 return  # per-sender state only for members (their token came first)
             member.phase, member.wave, member.plan_digest = msg.phase, msg.wave, msg.plan_digest
+            member.detail = msg.detail
             if agr is not None:
                 agr.on_peer_phase(msg.sender, msg.phase)
 
@@ -359,26 +366,31 @@ class Runner:
                 self.rotate(
                     leg.turn, STEP_GAINS if abs(leg.turn) < math.radians(15) else PAPER_GAINS
                 )
-            before = self._last_frame if self._last_frame is not None else self.look(0.0)
-            h0 = self.heading
-            rep = self.body.walk(leg.walk)
-            self.pump()
-            after = self.look(0.0)
-            drift = self._compass(before, after, 0.0, walking=True)
-            self.heading = wrap_pi(self.heading + drift)
-            self._last_frame = after
-            self.position = advance(self.position, h0, self.heading, leg.walk)
-            log.debug(
-                "walk t_sim %.2f %.3f m drift %+.2f° heading %.2f° position %s",
-                rep.t_sim, leg.walk, math.degrees(drift), math.degrees(self.heading),
-                self.position.round(3).tolist(),
-            )  # fmt: skip
+            self.walk_step(leg.walk)
             progress(1.0 - max(0.0, leg.remaining - abs(leg.walk)) / total)
-            if rep.status == "contact":
-                raise AgentFailure(
-                    f"contact while walking at believed {self.position.round(2).tolist()}"
-                )
         raise AgentFailure("distance control did not converge in 200 steps")
+
+    def walk_step(self, distance: float) -> MotionResult:
+        """One straight step, the compass's drift and dead reckoning (4.2, eq. 2)."""
+        before = self._last_frame if self._last_frame is not None else self.look(0.0)
+        h0 = self.heading
+        rep = self.body.walk(distance)
+        self.pump()
+        after = self.look(0.0)
+        drift = self._compass(before, after, 0.0, walking=True)
+        self.heading = wrap_pi(self.heading + drift)
+        self._last_frame = after
+        self.position = advance(self.position, h0, self.heading, distance)
+        log.debug(
+            "walk t_sim %.2f %.3f m drift %+.2f° heading %.2f° position %s",
+            rep.t_sim, distance, math.degrees(drift), math.degrees(self.heading),
+            self.position.round(3).tolist(),
+        )  # fmt: skip
+        if rep.status == "contact":
+            raise AgentFailure(
+                f"contact while walking at believed {self.position.round(2).tolist()}"
+            )
+        return rep
 
     # ================================================================= phases
 
@@ -468,6 +480,7 @@ class Runner:
             timeout=self.cfg.timeout,
             settle=self.cfg.settle,
             backoff_max=self.cfg.backoff_max,
+            params=params_digest(self.cfg.agreed_params()),
         )
         for rid, peer in sorted(self.peers.items()):
             if rid != self.me and peer.alive:
@@ -524,7 +537,7 @@ class Runner:
             pending = []
             for i in earlier:
                 peer = self.peers.get(i, Peer())
-                if peer.phase in ("hold", "done"):
+                if peer.phase in ("hold", "march", "done"):
                     continue
                 if peer.seen_alive and not peer.alive:
                     raise AgentFailure(
@@ -558,7 +571,7 @@ class Runner:
         members = self.agreement.held_members() if self.agreement else ()
         for i in members:
             peer = self.peers.get(i, Peer())
-            if i != self.me and peer.alive and peer.phase not in ("hold", "done", "failed"):
+            if i != self.me and peer.alive and peer.phase not in ARRIVED:
                 return False
         return True
 
@@ -585,7 +598,7 @@ class Runner:
             if peer.phase == "failed" or (peer.seen_alive and not peer.alive):
                 log.warning("parent %d is gone: no correction", parent)
                 return
-            if peer.phase == "done" and self._all_arrived():
+            if peer.phase in ("done", "march") and self._all_arrived():
                 break
             if self.clock() > deadline:
                 log.warning("parent %d did not finish in time: no correction", parent)
@@ -621,12 +634,31 @@ class Runner:
             self.rotate(wrap_pi(self.final_heading - self.heading), PAPER_GAINS)
 
     def hold(self) -> None:
-        """Arrived: correct against the parent, report ``done`` and stay until all are."""
+        """Arrived: correct against the parent, march if there is a route, report
+        ``done`` and stay until all are."""
         self.status(
             "hold", 0.5, f"arrived at believed {self.position.round(2).tolist()}", force=True
         )
         self.correct()
+        if self.cfg.march is not None:
+            self.status("march", 0.0, "formation held; waiting for the fleet", force=True)
+            self._wait_all(("march", "done", "failed"), "march", "waiting for")
+            failed = [i for i, p in self.peers.items() if p.phase == "failed"]
+            if failed:
+                raise AgentFailure(f"not marching: robot(s) {sorted(failed)} failed")
+            self.status("march", 0.01, "marching", force=True)
+            marcher = Marcher(self, self.cfg.march, self.final_heading)
+            marcher.run()
+            log.info(
+                "march done at believed %s; worst seen |e_d| %.1f %%, |e_phi| %.1f°",
+                self.position.round(2).tolist(), 100 * marcher.worst_range,
+                math.degrees(marcher.worst_bearing),
+            )  # fmt: skip
         self.status("done", 1.0, "formation held", force=True)
+        self._wait_all(("done", "failed"), "done", "formation held; waiting for")
+
+    def _wait_all(self, phases: tuple[str, ...], mine: str, text: str) -> None:
+        """Stay (heartbeats) until every live member is in ``phases`` (bounded)."""
         members = self.agreement.held_members() if self.agreement else ()
         deadline = self.clock() + self.cfg.wave_timeout
         while self.clock() < deadline:
@@ -635,13 +667,15 @@ class Runner:
                 i
                 for i in members
                 if i != self.me
-                and self.peers.get(i, Peer()).phase not in ("done", "failed")
+                and self.peers.get(i, Peer()).phase not in phases
                 and self.peers.get(i, Peer()).alive
             ]
             if not waiting and (self.agreement is None or not self.agreement.due(self.clock())):
-                break
+                return
             if self.clock() - self._last_status >= HEARTBEAT:
-                self.status("done", 1.0, f"formation held; waiting for {waiting}", force=True)
+                self.status(mine, 1.0 if mine == "done" else 0.0, f"{text} {waiting}", force=True)
+        if mine == "march":
+            raise AgentFailure("the fleet did not get ready to march in time")
 
     # ================================================================= main
 
@@ -659,7 +693,7 @@ class Runner:
             self.move()
             self.hold()
             return 0
-        except (AgentFailure, BodyError, ValueError) as exc:
+        except (AgentFailure, MarchHalt, BodyError, ValueError) as exc:
             return self.fail(reason(exc))
         except Exception as exc:  # a bug or an input nobody foresaw: stop safely, never crash
             log.error(

@@ -7,7 +7,7 @@ from collections.abc import Callable
 
 import pytest
 
-from agent.exchange import Agreement, canonical_digest
+from agent.exchange import Agreement, canonical_digest, params_digest
 from agent.protocol import DigestMsg, NeighborRecordMsg
 
 Drop = Callable[[str, int, int, float], bool]
@@ -317,3 +317,43 @@ def test_record_goes_out_once_then_only_on_request() -> None:
     # a digest that lacks our record asks for it at once
     a.on_digest(DigestMsg(sender=1, round=0, digest="1" * 64, members=(1,)), 61.0)
     assert "record" in a.due(61.0)
+
+
+# ----------------------------------------------------------------- agreed parameters
+
+P_A = params_digest({"d_e": 0.8, "phi_e": 0.5235987755982988, "route": ("axis", 3.0)})
+P_B = params_digest({"d_e": 0.8, "phi_e": 0.5235987755982988, "route": ("axis", 2.0)})
+
+
+def test_params_digest_is_canonical_and_sensitive() -> None:
+    a = params_digest({"x": 1.0, "r": ("to", 1.0, 2.0), "s": "default", "n": None})
+    b = params_digest({"n": None, "s": "default", "r": ("to", 1.0, 2.0), "x": 1.0})
+    assert a == b and len(a) == 64
+    assert params_digest({"x": 1.0}) != params_digest({"x": 1.0000000001})
+    assert P_A != P_B
+
+
+@pytest.mark.parametrize("bad", [float("nan"), float("inf"), [1.0], {"a": 1}])
+def test_params_digest_rejects_what_cannot_be_agreed(bad: object) -> None:
+    with pytest.raises(ValueError):
+        params_digest({"x": bad})  # type: ignore[dict-item]
+
+
+def test_same_params_agree_and_digests_carry_them() -> None:
+    net = Net([0, 1, 2])
+    for a in net.agents.values():
+        a.params = P_A
+    net.run(3.0)
+    assert all(a.decide(net.t).kind == "agreed" for a in net.agents.values())
+    assert net.agents[0].digest_msg().params == P_A
+
+
+def test_an_agent_with_other_params_is_named_and_nobody_plans() -> None:
+    net = Net([0, 1, 2])
+    for i, a in net.agents.items():
+        a.params = P_B if i == 2 else P_A
+    net.run(3.0)
+    ds = {i: a.decide(net.t) for i, a in net.agents.items()}
+    assert all(d.kind == "failed" for d in ds.values()), ds
+    assert "robot(s) [2]" in ds[0].reason and "different planning parameters" in ds[0].reason
+    assert "robot(s) [0, 1]" in ds[2].reason

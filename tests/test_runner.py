@@ -16,7 +16,8 @@ import pytest
 
 from agent.adapters import FormationAdapter, PerceptionAdapter
 from agent.bus import Bus, BusConfig
-from agent.config import AgentConfig
+from agent.config import AgentConfig, Route
+from agent.exchange import params_digest
 from agent.protocol import NeighborRecordMsg, StatusMsg
 from agent.robot import ZenohBody
 from agent.runner import AgentFailure, Peer, Runner, report_unavailable
@@ -87,11 +88,47 @@ def test_perception_merge_keeps_best_sighting_per_neighbour() -> None:
         ({"phi_e": math.radians(95)}, "phi_e"),
         ({"timeout": -1.0}, "timeout"),
         ({"search_yaws": (math.radians(130),)}, "search yaw"),
+        ({"march_step": 0.5}, "march_step"),
+        ({"march_pause": -1.0}, "march_pause"),
+        ({"lost_rounds": 0}, "lost_rounds"),
     ],
 )
 def test_agent_config_rejects_bad_values(kwargs: dict[str, object], match: str) -> None:
     with pytest.raises(ValueError, match=match):
         AgentConfig(robot_id=1, **kwargs)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({}, "exactly one"),
+        ({"distance": 1.0, "to": (1.0, 2.0)}, "exactly one"),
+        ({"distance": 0.0}, "march distance"),
+        ({"distance": math.inf}, "march distance"),
+        ({"to": (math.nan, 0.0)}, "march point"),
+        ({"to": (1.0, 2.0, 3.0)}, "march point"),
+    ],
+)
+def test_route_rejects_bad_values(kwargs: dict[str, object], match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        Route(**kwargs)  # type: ignore[arg-type]
+
+
+def test_agreed_params_cover_the_route_and_the_geometry() -> None:
+    base = AgentConfig(robot_id=1, march=Route(distance=3.0))
+    same = AgentConfig(robot_id=2, march=Route(distance=3.0), timeout=9.0)
+    d = params_digest(base.agreed_params())
+    assert params_digest(same.agreed_params()) == d  # robot id and limits are not agreed
+    for other in (
+        AgentConfig(robot_id=1, march=Route(distance=2.0)),
+        AgentConfig(robot_id=1, march=Route(to=(3.0, 0.0))),
+        AgentConfig(robot_id=1),
+        AgentConfig(robot_id=1, march=Route(distance=3.0), d_e=0.9),
+        AgentConfig(robot_id=1, march=Route(distance=3.0), phi_e=math.radians(31)),
+    ):
+        assert params_digest(other.agreed_params()) != d, other
+    assert base.agreed_params()["route"] == ("axis", 3.0)
+    assert Route(to=(1.0, -2.0)).key() == ("to", 1.0, -2.0)
 
 
 @pytest.fixture(scope="module")

@@ -16,6 +16,16 @@ agent computed the same plan digest. Writes ``DIR/result.json``, a Fig. 16/24-li
 Success (exit 0): every agent exited 0, identical plan digests, zero contacts, and
 every pair within |r_d| <= 12.5 % and |r_φ| <= 30 %.
 
+Marching (issue #13): ``--march D`` (metres along the pyramid's axis) or ``--march-to
+X,Y`` (common frame) is given to every agent; after ``hold`` the fleet marches. The
+world's room is then enlarged by the route's length (the demo generates the seed's
+scenario, widens its room and starts the world with ``--scenario``), so the march
+never meets a wall. The pairs are judged at the end of the march; the leader's measured
+displacement (``march_distance``) must be within 10 % of the route (|displacement − V|
+<= 0.1·|V|); the worst |r_d| and |r_φ| over the truth samples of the march are
+reported (``march_worst_abs_r_d``, ``march_worst_abs_r_phi``); the figure shows the
+pyramid at the start of the march (grey) and at its end, and the tracks in between.
+
 This tool is an evaluator: it reads ground truth (``world/truth/**``); agents never do.
 """
 
@@ -168,6 +178,8 @@ def start_agent(
         sys.executable, "-m", "agent", "--id", "auto" if auto else str(rid), "--fleet-size", str(robots),
         *net,
         "--d-e", str(args.d_e), "--phi-e-deg", str(args.phi_e_deg), "--timeout", str(args.agree_timeout),
+        *(["--march", str(args.march)] if getattr(args, "march", None) is not None else []),
+        *([f"--march-to={args.march_to}"] if getattr(args, "march_to", None) is not None else []),
         "--log-level", args.agent_log_level,
         *(["--no-correct"] if getattr(args, "no_correct", False) else []),
         *(["--body", "naoqi", "--nao", args.nao_urls[rid]] if getattr(args, "body", "") == "naoqi" else []),
@@ -175,6 +187,34 @@ def start_agent(
     log = (out / (f"agent-slot{rid}.log" if auto else f"agent-{rid}.log")).open("wb")
     p = subprocess.Popen(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT)
     return Proc(f"agent {rid}", p, log)
+
+
+def route_length(args: argparse.Namespace) -> float:
+    """An upper bound of the march's length (m): 0 without a march."""
+    if getattr(args, "march", None) is not None:
+        return float(args.march)
+    if getattr(args, "march_to", None) is not None:
+        x, y = (float(v) for v in args.march_to.split(","))
+        return math.hypot(x, y) + 2.0  # the leader's target is near the fleet's centre
+    return 0.0
+
+
+def march_room(args: argparse.Namespace, n: int, seed: int, out: Path) -> list[str]:
+    """World flags giving a march room: the seed's generated scenario with its room's
+    half-size enlarged by the route's length (sim/scenarios is not changed); [] without
+    a march or when the caller chose a scenario with --world-arg."""
+    extra = route_length(args)
+    if extra <= 0.0 or any("--scenario" in a for a in (args.world_arg or [])):
+        return []
+    from dataclasses import replace
+
+    from sim import scenarios
+
+    sc = scenarios.generate(n, seed)
+    sc = replace(sc, room=min(100.0, math.ceil(2.0 * (sc.room + extra)) / 2.0))
+    path = out / "scenario.json"
+    scenarios.dump(sc, path)
+    return ["--scenario", str(path)]
 
 
 def start_router(endpoint: str, out: Path, net: list[str]) -> Proc:
@@ -315,6 +355,7 @@ class AgentView:
     plan_digest: str = ""
     wave: int = -1
     t_sim: float = 0.0
+    march_sample: int | None = None  # truth samples seen at its first ``march`` status
     phase_wall: dict[str, float] = field(default_factory=dict)
     phase_sim: dict[str, float] = field(default_factory=dict)
     bytes_by_kind: dict[str, int] = field(default_factory=lambda: defaultdict(int))
@@ -373,6 +414,8 @@ class Observer:
                 view.phase_wall[msg.phase] = now
                 view.phase_sim[msg.phase] = msg.t_sim
             view.phase, view.progress, view.detail = msg.phase, msg.progress, msg.detail
+            if msg.phase == "march" and view.march_sample is None:
+                view.march_sample = len(self.truth)
             view.error, view.plan_digest, view.wave, view.t_sim = (
                 msg.error, msg.plan_digest, msg.wave, msg.t_sim,
             )  # fmt: skip
@@ -471,6 +514,57 @@ def evaluate(
     return rows
 
 
+MARCH_TOLERANCE = 0.10  # the leader's displacement within 10 % of the route
+
+
+def judge_march(
+    obs: Observer,
+    result: dict[str, Any],
+    plan: Any,
+    axis: float,
+    pairs: list[tuple[int, int]],
+    d_e: float,
+    phi_e: float,
+) -> None:
+    """The march from ground truth: from the moment every agent was ready to march (its
+    first ``march`` status, after its correction) to the end.
+
+    Sets ``march_distance`` (the leader's displacement, m), ``march_route`` (V, m),
+    ``march_error`` (|displacement − V| / |V|), ``march_ok`` and the worst |r_d|, |r_φ|
+    over every truth sample of the march."""
+    from agent.config import Route
+    from agent.march import route_vector
+
+    rt = result["route"]
+    route = Route(distance=rt["distance"]) if "distance" in rt else Route(to=tuple(rt["to"]))
+    v = route_vector(plan, route, axis)
+    leader = int(plan.leader)
+    ready = [obs.agents[i].march_sample if i in obs.agents else None for i in plan.ids]
+    result["march_route"] = [float(v[0]), float(v[1])]
+    result["march_ok"] = False
+    if any(k is None for k in ready) or not obs.truth:
+        result["march_error_reason"] = "the march never started"
+        return
+    k0 = min(max(k for k in ready if k is not None), len(obs.truth) - 1)
+    result["march_start_t_sim"] = obs.truth[k0][0]
+    result["march_start_sample"] = k0
+    first, last = obs.truth[k0][1], obs.truth[-1][1]
+    disp = np.array(last[leader][:2]) - np.array(first[leader][:2])
+    length = float(np.hypot(*v))
+    result["march_distance"] = float(np.hypot(*disp))
+    result["march_displacement"] = [float(disp[0]), float(disp[1])]
+    result["march_error"] = float(np.hypot(*(disp - v))) / max(length, 1e-9)
+    worst_d = worst_phi = 0.0
+    for _, poses in obs.truth[k0:]:
+        if all(c in poses and p in poses for c, p in pairs):
+            for row in evaluate(poses, pairs, axis, d_e, phi_e):
+                worst_d = max(worst_d, abs(row["r_d"]))
+                worst_phi = max(worst_phi, abs(row["r_phi"]))
+    result["march_worst_abs_r_d"] = worst_d
+    result["march_worst_abs_r_phi"] = worst_phi
+    result["march_ok"] = result["march_error"] <= MARCH_TOLERANCE
+
+
 def min_separation(obs: Observer) -> float:
     best = math.inf
     for _, poses in obs.truth:
@@ -505,6 +599,17 @@ def plot(obs: Observer, result: dict[str, Any], path: Path) -> None:
         ax.text(x + 0.06, y + 0.06, str(i), fontsize=11, weight="bold")
         ax.text(xs[0] + 0.06, ys[0] - 0.12, f"{i} start", fontsize=8, color="grey")
     final = obs.truth[-1][1] if obs.truth else {}
+    k0 = result.get("march_start_sample")
+    if k0 is not None:  # the pyramid at the start of the march
+        first = obs.truth[k0][1]
+        for row in result.get("pairs", []):
+            c, p = row["child"], row["parent"]
+            if c in first and p in first:
+                ax.plot([first[c][0], first[p][0]], [first[c][1], first[p][1]], "--",
+                        color="grey", lw=0.8)  # fmt: skip
+        for i in ids:
+            if i in first:
+                ax.add_patch(plt.Circle(first[i][:2], 0.2, fill=False, ec="grey", lw=0.8))
     for row in result.get("pairs", []):
         c, p = row["child"], row["parent"]
         if c in final and p in final:
@@ -522,6 +627,13 @@ def plot(obs: Observer, result: dict[str, Any], path: Path) -> None:
         f"max |r_d| {result.get('max_abs_r_d', float('nan')):.1%}, "
         f"max |r_phi| {result.get('max_abs_r_phi', float('nan')):.1%}, "
         f"contacts {result.get('contacts')}"
+        + (
+            f"\nmarch {result['march_distance']:.2f} m (route {math.hypot(*result['march_route']):.2f} m), "
+            f"worst during: |r_d| {result['march_worst_abs_r_d']:.1%}, "
+            f"|r_phi| {result['march_worst_abs_r_phi']:.1%}"
+            if "march_distance" in result
+            else ""
+        )
     )
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -543,6 +655,10 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
     procs: list[Proc] = []
     agents: dict[int, Proc] = {}
     result: dict[str, Any] = {"robots": n, "seed": seed, "d_e": d_e, "phi_e_deg": args.phi_e_deg}
+    if getattr(args, "march", None) is not None:
+        result["route"] = {"distance": float(args.march)}
+    elif getattr(args, "march_to", None) is not None:
+        result["route"] = {"to": [float(v) for v in args.march_to.split(",")]}
     err = sys.stderr
     result["secure"] = bool(net.credentials)
     result["tls"] = net.router
@@ -556,7 +672,10 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
             bus.subscribe(key)
         bus.watch_alive(KEY_ALIVE_ALL)
         naoqi = ["--naoqi"] if getattr(args, "body", "") == "naoqi" else []
-        world = start_world(n, seed, endpoint, out, [*(args.world_arg or []), *naoqi], world_net)
+        room = march_room(args, n, seed, out)
+        world = start_world(
+            n, seed, endpoint, out, [*room, *(args.world_arg or []), *naoqi], world_net
+        )
         procs.append(world)
         deadline = time.monotonic() + args.world_timeout
         while not any("ready" in ln.lower() for ln in world.lines):
@@ -710,6 +829,8 @@ def summarise(
             fa, plan = plan_from_agreed(obs, d_e, phi_e)
             result["evaluator_plan_digest"] = str(plan.digest)
             result["leader"] = int(plan.leader)
+            # in the common frame: where --march-to points are given
+            result["leader_target"] = [float(v) for v in plan.robot(plan.leader).target]
             axis = fa.axis_angle(plan)
             result["axis_deg"] = math.degrees(axis)
             pairs = pyramid_pairs(plan, ids)
@@ -719,6 +840,8 @@ def summarise(
                 str(i): list(obs.truth[0][1][i]) for i in ids if i in obs.truth[0][1]
             }
             result["finals"] = {str(i): list(final[i]) for i in ids if i in final}
+            if result.get("route"):
+                judge_march(obs, result, plan, axis, pairs, d_e, phi_e)
         except (ValueError, KeyError, AttributeError, ImportError) as exc:
             result["evaluation_error"] = f"{type(exc).__name__}: {exc}"
     rows = result["pairs"]
@@ -746,9 +869,10 @@ def summarise(
             )
         )
         result["rogue_defeated"] = trusted
+    marched = result.get("march_ok", True)
     result["success"] = bool(
         ok_agents and within and result["identical_digests"] and result["contacts"] == 0
-        and "timeout" not in result and trusted
+        and "timeout" not in result and trusted and marched
     )  # fmt: skip
     if obs.truth:
         try:
@@ -788,6 +912,14 @@ def print_table(r: dict[str, Any]) -> None:
     if "rogues" in r:
         p(f"plan digest recomputed from the signed records: "
           f"{'same' if r['plan_matches_records'] else 'DIFFERENT'}")  # fmt: skip
+    if r.get("route"):
+        if "march_distance" in r:
+            p(f"march: leader displaced {r['march_distance']:.2f} m for a route of "
+              f"{math.hypot(*r['march_route']):.2f} m (error {r['march_error']:.1%}, "
+              f"{'ok' if r['march_ok'] else 'NOT within 10 %'}); worst during the march "
+              f"|r_d| {r['march_worst_abs_r_d']:.1%}, |r_phi| {r['march_worst_abs_r_phi']:.1%}")  # fmt: skip
+        else:
+            p(f"march: not judged ({r.get('march_error_reason', 'no plan')})")
     p(f"contacts: {r['contacts']} (robot-robot {r['robot_contacts']}), "
       f"min centre separation {r['min_separation']:.2f} m")  # fmt: skip
     p("phase       wall max (s)  sim max (s)")
@@ -825,6 +957,15 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--agree-timeout", type=float, default=120.0)
     p.add_argument("--auto-ids", action="store_true", help="agents claim robots (--id auto)")
     p.add_argument("--no-correct", action="store_true", help="agents skip the final alignment")
+    march = p.add_mutually_exclusive_group()
+    march.add_argument(
+        "--march", type=float, default=None, metavar="D",
+        help="after hold, the fleet marches D m along the pyramid's axis (issue #13)",
+    )  # fmt: skip
+    march.add_argument(
+        "--march-to", default=None, metavar="X,Y",
+        help="after hold, the leader marches to (X, Y) m in the common frame",
+    )  # fmt: skip
     p.add_argument("--agent-log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING"))
     p.add_argument("--world-timeout", type=float, default=120.0)
     p.add_argument(
@@ -873,6 +1014,18 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         p.error("--body naoqi drives the robot at a fixed URL: no --auto-ids")
     if not (math.isfinite(a.d_e) and a.d_e > 0) or not 0 < a.phi_e_deg < 90:
         p.error("--d-e must be > 0 and --phi-e-deg in (0, 90)")
+    from agent.config import Route
+
+    try:
+        if a.march is not None:
+            Route(distance=a.march)
+        if a.march_to is not None:
+            xy = a.march_to.split(",")
+            if len(xy) != 2:
+                raise ValueError(f"--march-to wants X,Y, got {a.march_to!r}")
+            Route(to=(float(xy[0]), float(xy[1])))
+    except ValueError as exc:
+        p.error(str(exc))
     return a
 
 
@@ -911,6 +1064,7 @@ def batch(args: argparse.Namespace) -> int:
             f"[batch] seed {seed}: {'ok' if r['success'] else 'FAIL'} "
             f"max|r_d| {r.get('max_abs_r_d', math.nan):.1%} max|r_phi| {r.get('max_abs_r_phi', math.nan):.1%} "
             f"contacts {r.get('contacts')} digests {'same' if r.get('identical_digests') else 'DIFFER'} "
+            f"march {r.get('march_distance', math.nan):.2f} m worst|r_d| {r.get('march_worst_abs_r_d', math.nan):.1%} "
             f"wall {r.get('wall_total', math.nan):.0f}s",
             file=sys.stderr,
         )
@@ -933,6 +1087,16 @@ def batch(args: argparse.Namespace) -> int:
         "wall_median": float(np.median(walls)) if walls else math.nan,
         "exchange_bytes_max": max(exch, default=0), "published_bytes_max": max(tot, default=0),
     }  # fmt: skip
+    if args.march is not None or args.march_to is not None:
+        md = [r["march_worst_abs_r_d"] for r in results if "march_worst_abs_r_d" in r]
+        mp = [r["march_worst_abs_r_phi"] for r in results if "march_worst_abs_r_phi" in r]
+        me = [r["march_error"] for r in results if "march_error" in r]
+        summary.update({
+            "march_worst_abs_r_d": max(md, default=math.nan),
+            "march_worst_abs_r_phi": max(mp, default=math.nan),
+            "march_error_max": max(me, default=math.nan),
+            "contacts_total": sum(r.get("contacts", 0) for r in results if r.get("contacts", 0) > 0),
+        })  # fmt: skip
     print(f"\nbatch: {args.robots} robots, seeds {args.seed}..{args.seed + args.batch - 1}")
     for name, val in summary.items():
         print(f"  {name:22s} {val:.3f}" if isinstance(val, float) else f"  {name:22s} {val}")

@@ -11,6 +11,7 @@ from tools.demo import (
     AgentView,
     Observer,
     evaluate,
+    judge_march,
     min_separation,
     robot_ids,
     summarise,
@@ -67,3 +68,47 @@ def test_summarise_failure_without_truth(tmp_path: Path) -> None:
     assert r["success"] is False
     assert r["errors"] == {"1": "no agreement"}
     assert (tmp_path / "result.json").is_file()
+
+
+class _Plan:
+    """The parts of a plan judge_march reads: a leader on the x axis, one child."""
+
+    leader = 1
+    ids = (1, 2)
+
+    class _R:
+        def __init__(self, target: tuple[float, float]) -> None:
+            self.target = target
+
+    def robot(self, i: int) -> _Plan._R:
+        return self._R((0.0, 0.0) if i == 1 else (-0.8, 0.0))
+
+
+def test_judge_march_known_answer() -> None:
+    # axis +x; a leader and a child kept 0.8 m straight behind it (φ = 0, so r_φ = -100 %
+    # against φ_e = 30°); route 2 m along the axis
+    obs = Observer(0.0)
+    obs.agents[1] = AgentView(march_sample=1)
+    obs.agents[2] = AgentView(march_sample=2)  # the last agent ready: the march starts at 2
+    obs.truth = [
+        (0.0, {1: (5.0, 5.0, 0.0), 2: (4.0, 5.0, 0.0)}),  # before: ignored
+        (1.0, {1: (0.0, 0.0, 0.0), 2: (-0.5, 0.0, 0.0)}),  # before: ignored
+        (2.0, {1: (0.0, 0.0, 0.0), 2: (-0.8, 0.0, 0.0)}),
+        (3.0, {1: (1.0, 0.0, 0.0), 2: (-0.8, 0.0, 0.0)}),  # r_d = +125 %
+        (4.0, {1: (1.9, 0.1, 0.0), 2: (1.1, 0.1, 0.0)}),
+    ]
+    result: dict[str, object] = {"route": {"distance": 2.0}}
+    judge_march(obs, result, _Plan(), 0.0, [(2, 1)], 0.8, math.radians(30))
+    assert result["march_start_sample"] == 2
+    assert result["march_route"] == pytest.approx([2.0, 0.0])
+    assert result["march_distance"] == pytest.approx(math.hypot(1.9, 0.1))
+    assert result["march_error"] == pytest.approx(math.hypot(0.1, 0.1) / 2.0)
+    assert result["march_ok"] is True
+    assert result["march_worst_abs_r_d"] == pytest.approx(1.8 / 0.8 - 1.0)
+    assert result["march_worst_abs_r_phi"] == pytest.approx(1.0)  # straight behind: -100 %
+    # --march-to: V = point − leader target; a march that never started is not ok
+    late: dict[str, object] = {"route": {"to": [0.0, 3.0]}}
+    obs.agents[2] = AgentView()
+    judge_march(obs, late, _Plan(), 0.0, [(2, 1)], 0.8, math.radians(30))
+    assert late["march_route"] == pytest.approx([0.0, 3.0])
+    assert late["march_ok"] is False and "never started" in str(late["march_error_reason"])
