@@ -55,7 +55,7 @@ from tools.packet_drop import Dropper
 
 REPO = Path(__file__).resolve().parents[1]
 ROUTER_PORT = 7447
-AGREED_PHASES = ("plan", "wait", "move", "hold", "done")
+AGREED_PHASES = ("plan", "wait", "move", "hold", "march", "done")
 TERMINAL_PHASES = ("done", "failed")
 
 
