@@ -21,7 +21,10 @@ from typing import Any
 
 import pytest
 
+from agent.adapters import PerceptionAdapter
+from agent.bus import Bus, BusConfig
 from agent.seams import Body
+from sim import scenarios
 from sim.scenarios import RobotSpec, Scenario
 from sim.world import World
 
@@ -113,3 +116,25 @@ FACING = Scenario(
 def facing(request: pytest.FixtureRequest) -> Iterator[Rig]:
     with rig(str(request.param), FACING) as r:
         yield r
+
+
+# --------------------------------------------------------------- runner-phase rigs
+#: The scenario seed of the in-process runner tests (test_runner_phases, test_march).
+RUNNER_SEED = 4
+
+
+@pytest.fixture(scope="module")
+def perception() -> PerceptionAdapter:
+    return PerceptionAdapter()
+
+
+@pytest.fixture()
+def world() -> Iterator[World]:
+    with World(scenarios.generate(3, RUNNER_SEED)) as w:
+        yield w
+
+
+@pytest.fixture()
+def bus() -> Iterator[Bus]:
+    with Bus(BusConfig(multicast_scouting=False)) as b:
+        yield b

@@ -10,14 +10,13 @@ parent 5 cm along the axis until it has marched 0.6 m, then the parent reports `
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
 
 import numpy as np
 import pytest
 
 from agent.adapters import FormationAdapter, PerceptionAdapter
 from agent.body_world import WorldBody
-from agent.bus import Bus, BusConfig
+from agent.bus import Bus
 from agent.config import AgentConfig, Route
 from agent.control import wrap_pi
 from agent.formation.plan import Plan
@@ -25,27 +24,7 @@ from agent.march import LOST, Marcher, MarchHalt, route_vector, station_offset
 from agent.protocol import NeighborRecordMsg
 from agent.runner import Peer, Runner
 from agent.seams import Frame
-from sim import scenarios
 from sim.world import World
-
-SEED = 4
-
-
-@pytest.fixture(scope="module")
-def perception() -> PerceptionAdapter:
-    return PerceptionAdapter()
-
-
-@pytest.fixture()
-def world() -> Iterator[World]:
-    with World(scenarios.generate(3, SEED)) as w:
-        yield w
-
-
-@pytest.fixture()
-def bus() -> Iterator[Bus]:
-    with Bus(BusConfig(multicast_scouting=False)) as b:
-        yield b
 
 
 def formed(world: World) -> tuple[Plan, float]:

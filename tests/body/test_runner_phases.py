@@ -11,39 +11,18 @@ the world frame moved to the robot's start.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
 
 import numpy as np
 import pytest
 
 from agent.adapters import FormationAdapter, PerceptionAdapter
 from agent.body_world import WorldBody
-from agent.bus import Bus, BusConfig
+from agent.bus import Bus
 from agent.config import AgentConfig
 from agent.control import wrap_pi
 from agent.protocol import NeighborRecordMsg
 from agent.runner import NORTH, Peer, Runner
-from sim import scenarios
 from sim.world import World
-
-SEED = 4
-
-
-@pytest.fixture(scope="module")
-def perception() -> PerceptionAdapter:
-    return PerceptionAdapter()
-
-
-@pytest.fixture()
-def world() -> Iterator[World]:
-    with World(scenarios.generate(3, SEED)) as w:
-        yield w
-
-
-@pytest.fixture()
-def bus() -> Iterator[Bus]:
-    with Bus(BusConfig(multicast_scouting=False)) as b:
-        yield b
 
 
 def runner_for(rid: int, world: World, bus: Bus, perception: PerceptionAdapter) -> Runner:
