@@ -43,6 +43,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--light", type=float, default=1.0, help="light intensity (1.0 = default)")
     p.add_argument("--no-noise", action="store_true", help="noiseless walking and turning")
     p.add_argument(
+        "--noise-scale",
+        type=float,
+        default=1.0,
+        metavar="K",
+        help="multiply the walking and turning noise by K (default 1; see sim/locomotion.py)",
+    )
+    p.add_argument(
         "--speed",
         type=float,
         default=0.0,
@@ -95,7 +102,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"sim: {exc}", file=sys.stderr)
         return 2
     try:
-        world = World(sc, gui=args.gui, noise=not args.no_noise)
+        world = World(sc, gui=args.gui, noise=not args.no_noise, noise_scale=args.noise_scale)
     except ValueError as exc:
         print(f"sim: {exc}", file=sys.stderr)
         return 2

@@ -22,6 +22,9 @@ robot id, so results do not depend on what other robots do):
   1.0 m (Table 2, one NAO: |e| 0.02-0.10 rad at 0.2 m, 0.33-0.45 rad at 0.8-1.0 m);
 - turn: actual = commanded × (1 + N(0, 0.05)) + N(0, 0.02 rad).
 
+:meth:`NoiseModel.scaled` multiplies every σ by K (``python -m sim --noise-scale K``,
+issue #10: execution noise that moves robots off their planned corridors).
+
 **Contacts.** Each robot is a disc of radius :data:`~sim.nao_model.FOOTPRINT_RADIUS`
 (0.155 m, half the NAO's 0.311 m depth); obstacles are discs of their radius; the walls
 bound the room. A step that would bring a moving robot into overlap with another body
@@ -33,7 +36,7 @@ reported and counted. A robot already touching may still move away.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Protocol
 
 import numpy as np
@@ -46,6 +49,7 @@ TURN_RATE = 0.6  # rad/s on the spot
 DT = 0.02  # s of sim time per step
 MAX_DISTANCE = 50.0  # m, longest accepted walk command
 MAX_ANGLE = 4 * math.pi  # rad, largest accepted turn command
+MAX_NOISE_SCALE = 10.0  # largest accepted multiplier of the noise
 
 
 @dataclass(frozen=True)
@@ -60,6 +64,13 @@ class NoiseModel:
     @staticmethod
     def none() -> NoiseModel:
         return NoiseModel(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+
+    def scaled(self, k: float) -> NoiseModel:
+        """Every σ multiplied by ``k`` (0: noiseless; at most :data:`MAX_NOISE_SCALE`)."""
+        k = float(k)
+        if not (math.isfinite(k) and 0.0 <= k <= MAX_NOISE_SCALE):
+            raise ValueError(f"noise scale must be in [0, {MAX_NOISE_SCALE:g}], got {k!r}")
+        return NoiseModel(*(k * getattr(self, f.name) for f in fields(self)))
 
 
 @dataclass(frozen=True)

@@ -101,12 +101,21 @@ class World:
     """A room with NAOs; poses, head yaws, the sim clock, and their forehead cameras.
 
     ``noise`` switches the seeded motion noise of :mod:`sim.locomotion` on or off;
+    ``noise_scale`` multiplies it (:meth:`~sim.locomotion.NoiseModel.scaled`);
     ``world.locomotion`` runs walk/turn commands (``walk``, ``turn``, ``step``).
     """
 
-    def __init__(self, scenario: Scenario, *, gui: bool = False, noise: bool = True) -> None:
+    def __init__(
+        self,
+        scenario: Scenario,
+        *,
+        gui: bool = False,
+        noise: bool = True,
+        noise_scale: float = 1.0,
+    ) -> None:
         self.scenario = scenario
         self.noise = noise
+        self.noise_model = NoiseModel().scaled(noise_scale) if noise else NoiseModel.none()
         if gui and sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
             # PyBullet's GUI would end the whole process on a missing X server.
             raise ValueError("the GUI needs a display, and DISPLAY is not set")
@@ -194,7 +203,7 @@ class World:
         self.locomotion = Locomotion(
             self,
             seed=sc.seed,
-            noise=NoiseModel() if self.noise else NoiseModel.none(),
+            noise=self.noise_model,
             obstacles=tuple(Obstacle(o.x, o.y, o.radius) for o in sc.obstacles),
             room=sc.room,
         )

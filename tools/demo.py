@@ -69,6 +69,7 @@ from agent.protocol import (
     id_from_key,
 )
 from agent.trust import create_fleet
+from sim.locomotion import MAX_NOISE_SCALE
 
 R_D_MAX = 0.125
 R_PHI_MAX = 0.30
@@ -655,6 +656,7 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
     procs: list[Proc] = []
     agents: dict[int, Proc] = {}
     result: dict[str, Any] = {"robots": n, "seed": seed, "d_e": d_e, "phi_e_deg": args.phi_e_deg}
+    result["noise_scale"] = float(getattr(args, "noise_scale", 1.0))
     if getattr(args, "march", None) is not None:
         result["route"] = {"distance": float(args.march)}
     elif getattr(args, "march_to", None) is not None:
@@ -672,9 +674,10 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
             bus.subscribe(key)
         bus.watch_alive(KEY_ALIVE_ALL)
         naoqi = ["--naoqi"] if getattr(args, "body", "") == "naoqi" else []
+        noise = [f"--noise-scale={getattr(args, 'noise_scale', 1.0):g}"]
         room = march_room(args, n, seed, out)
         world = start_world(
-            n, seed, endpoint, out, [*room, *(args.world_arg or []), *naoqi], world_net
+            n, seed, endpoint, out, [*room, *(args.world_arg or []), *naoqi, *noise], world_net
         )
         procs.append(world)
         deadline = time.monotonic() + args.world_timeout
@@ -969,6 +972,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--agent-log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING"))
     p.add_argument("--world-timeout", type=float, default=120.0)
     p.add_argument(
+        "--noise-scale", type=float, default=1.0, metavar="K",
+        help="the world multiplies its walking and turning noise by K (python -m sim)",
+    )  # fmt: skip
+    p.add_argument(
         "--body",
         choices=("zenoh", "naoqi"),
         default="zenoh",
@@ -1010,6 +1017,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         p.error("--robots must be in [1, 64]")
     if a.batch < 0:
         p.error("--batch must be >= 0")
+    if not (math.isfinite(a.noise_scale) and 0.0 <= a.noise_scale <= MAX_NOISE_SCALE):
+        p.error(f"--noise-scale must be in [0, {MAX_NOISE_SCALE:g}]")
     if a.body == "naoqi" and a.auto_ids:
         p.error("--body naoqi drives the robot at a fixed URL: no --auto-ids")
     if not (math.isfinite(a.d_e) and a.d_e > 0) or not 0 < a.phi_e_deg < 90:

@@ -19,6 +19,8 @@ from sim.__main__ import build_parser, main
         (["--render-workers", "17"], "render workers"),
         (["--render-workers", "-1"], "render workers"),
         (["--light", "9"], "light intensity"),
+        (["--noise-scale", "-1"], "noise scale"),
+        (["--noise-scale", "nan"], "noise scale"),
         (["--listen", "nonsense"], "endpoint"),
         (["--scenario", "/nonexistent.json"], "No such file"),
     ],
@@ -61,7 +63,7 @@ def test_dump_scenario(tmp_path: Path) -> None:
 def test_help_documents_the_stable_flags() -> None:
     text = build_parser().format_help()
     for flag in ("--robots", "--seed", "--scenario", "--connect", "--listen",
-                 "--no-multicast-scouting", "--mode", "--gui", "--speed"):  # fmt: skip
+                 "--no-multicast-scouting", "--mode", "--gui", "--speed", "--noise-scale"):  # fmt: skip
         assert flag in text
 
 

@@ -93,6 +93,36 @@ def test_noise_statistics_match_table_2_magnitudes() -> None:
     assert float(np.std(d02)) < 0.015
 
 
+def test_noise_scale_multiplies_every_sigma() -> None:
+    base = NoiseModel()
+    assert NoiseModel().scaled(1.0) == base
+    assert NoiseModel().scaled(0.0) == NoiseModel.none()
+    twice = base.scaled(2.0)
+    assert twice.curvature_bias == 2 * base.curvature_bias
+    assert twice.turn_offset == 2 * base.turn_offset
+    # the heading error after a segment grows with the scale (same seeds, same draws)
+    errs = {}
+    for k in (1.0, 2.0):
+        e = []
+        for seed in range(40):
+            st = Store({1: (0.0, 0.0, NORTH)})
+            loco = Locomotion(st, seed=seed, noise=base.scaled(k))
+            loco.walk(1, 0.5)
+            loco.run_until_idle()
+            e.append(st.pose(1)[2] - NORTH)
+        errs[k] = np.array(e)
+    # the same seeds draw the same normals: the heading errors about double (the
+    # scaled distance error changes the number of random-walk steps a little)
+    ratio = float(np.sqrt(np.mean(errs[2.0] ** 2) / np.mean(errs[1.0] ** 2)))
+    assert 1.7 < ratio < 2.3, ratio
+
+
+@pytest.mark.parametrize("k", [-0.1, math.nan, math.inf, 10.5])
+def test_noise_scale_out_of_range(k: float) -> None:
+    with pytest.raises(ValueError, match="noise scale"):
+        NoiseModel().scaled(k)
+
+
 def test_each_robot_veers_to_its_own_side() -> None:
     # Eight 0.5 m walks per robot, the heading reset to north before each: a robot's mean
     # error is its own drift x 0.5 m (sigma 0.15 rad over robots), the spread around that
