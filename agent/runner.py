@@ -48,6 +48,7 @@ from agent.control import (
     next_leg,
     wrap_pi,
 )
+from agent.control.corridor import GO, VIA, CorridorParams, Verdict, check_step, patience, plan_rank
 from agent.exchange import Agreement, Decision, params_digest
 from agent.formation.plan import Plan
 from agent.march import Marcher, MarchHalt
@@ -148,6 +149,9 @@ class Runner:
         self.compass_uses = 0
         self.compass_gain = 1.0
         self.final_heading = NORTH
+        self.corridor = CorridorParams()  # the safe-step check before each step
+        self.waits = 0  # polls spent waiting for a clear corridor
+        self.vias = 0  # via (tangent) steps taken round a blocking NAO
 
     # ================================================================= plumbing
 
@@ -356,19 +360,82 @@ class Runner:
     def walk_to(
         self, goal: np.ndarray, progress: Callable[[float], None], backward_within: float = 0.0
     ) -> None:
-        """Distance control to ``goal`` (fixed frame, m) from the dead-reckoned position."""
+        """Distance control to ``goal`` (fixed frame, m) from the dead-reckoned position,
+        each step checked first (:meth:`clear_way`): a blocked step waits, then detours by
+        tangent steps round the blocker until the way to the goal is clear again."""
         total = float(np.hypot(*(goal - self.position))) or 1.0
+        cp = self.corridor
+        side, known, at = 0, np.zeros((0, 2)), self.position.copy()  # the detour under way
         for _ in range(200):
             leg = next_leg(self.position, self.heading, goal, backward_within=backward_within)
             if leg is None:
                 return
+            if side:  # detouring: does the blocker seen before still block the goal?
+                rel = known - (self.position - at)
+                to_goal = wrap_pi(self.heading + leg.turn)
+                v = check_step(leg.walk, to_goal, rel, cp, patience(self._rank(), cp), side=side)
+                if v.action == VIA:
+                    self._via_step(v, rel)
+                    continue
+                side = 0
             if abs(leg.turn) > self.cfg.rotation_tolerance:
                 self.rotate(
                     leg.turn, STEP_GAINS if abs(leg.turn) < math.radians(15) else PAPER_GAINS
                 )
+            v = self.clear_way(leg.walk)
+            if v.action == VIA:
+                side, known, at = v.side, v.blockers, self.position.copy()
+                self._via_step(v, known)
+                continue
             self.walk_step(leg.walk)
             progress(1.0 - max(0.0, leg.remaining - abs(leg.walk)) / total)
         raise AgentFailure("distance control did not converge in 200 steps")
+
+    def _via_step(self, v: Verdict, known: np.ndarray) -> None:
+        """Turn to the via step's heading, check its corridor again (no further via), walk."""
+        turn = wrap_pi(v.heading - self.heading)
+        if abs(turn) > self.cfg.rotation_tolerance:
+            self.rotate(turn, STEP_GAINS if abs(turn) < math.radians(15) else PAPER_GAINS)
+        self.vias += 1
+        self.clear_way(v.walk, known, via=False)
+        self.walk_step(v.walk)
+
+    def clear_way(self, walk: float, known: np.ndarray | None = None, via: bool = True) -> Verdict:
+        """Check the next step's corridor in the yaw-0 image the compass takes anyway
+        (agent/control/corridor.py): returns GO, or (``via``) VIA once this robot's
+        patience (its plan rank) is spent; waits meanwhile, looking again every poll
+        (status detail ``waiting: NAO ahead at [x, y]``, fixed frame). ``known``: NAOs
+        seen before (relative to here) that the image may not show. Bounded: AgentFailure
+        after ``max_polls`` polls."""
+        cp = self.corridor
+        rank = self._rank()
+        extra = np.zeros((0, 2)) if known is None else np.asarray(known).reshape(-1, 2)
+        for waited in range(cp.max_polls + 1):
+            frame = self._last_frame if self._last_frame is not None else self.look(0.0)
+            self._last_frame = frame
+            seen, _, _ = self.perception.to_fixed(
+                self.perception.detect(frame.image, 0.0), self.heading
+            )
+            others = np.vstack([np.asarray(seen, dtype=np.float64).reshape(-1, 2), extra])
+            v = check_step(walk, self.heading, others, cp, waited if via else 0, rank)
+            if v.action == GO or (v.action == VIA and via):
+                if waited:
+                    log.info("corridor: %s after %d poll(s)", v.action, waited)
+                return v
+            where = (self.position + v.blockers[0]).round(2).tolist()
+            self.status(self.phase, detail=f"waiting: NAO ahead at {where}", force=waited == 0)
+            self.waits += 1
+            self.pump(cp.poll)
+            self._last_frame = None  # look again
+        raise AgentFailure(
+            f"way blocked for {cp.max_polls} polls at believed {self.position.round(2).tolist()}"
+        )
+
+    def _rank(self) -> int:
+        """This robot's rank in the shared plan, (wave, id) order (0 without a plan)."""
+        if self._plan is None:
+            return 0
+        return plan_rank([(int(rp.wave), int(rp.robot_id)) for rp in self._plan.robots], self.me)
 
     def walk_step(self, distance: float) -> MotionResult:
         """One straight step, the compass's drift and dead reckoning (4.2, eq. 2)."""

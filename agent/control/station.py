@@ -45,6 +45,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from agent.control.corridor import closest_approach
 from agent.control.distance import STEP_LENGTH
 from agent.control.rotation import wrap_pi
 
@@ -213,11 +214,9 @@ def safe_walk(
     u = np.array([math.cos(heading), math.sin(heading)])
     for f in fractions:
         end = walk * f * u
-        n2 = float(end @ end)
-        if n2 == 0.0:
+        if float(end @ end) == 0.0:
             return 0.0
-        t = np.clip(pts @ end / n2, 0.0, 1.0)
-        closest = np.hypot(*(pts - t[:, None] * end).T) if len(pts) else now
+        closest = closest_approach(end, pts)
         if np.all((closest >= clearance) | (closest >= now - 1e-12)):
             return walk * f
     return 0.0

@@ -1,0 +1,212 @@
+"""Safe steps under noise: check the corridor of the next step before taking it (issue #10).
+
+The project's addition to NAO paper 4.2 and 5.2.2: the paper's robots walk their planned
+segments open loop (20 cm steps, the heading corrected by the visual compass after each),
+and the plan keeps every path 2·radius from every robot it may meet (agent/formation
+safety, execution). Execution noise moves robots off those corridors, so before each
+step the robot looks at the NAOs in the image it already takes for the compass (head
+yaw 0, straight ahead) and decides:
+
+- **go** when no NAO stands within the clearance ``c = 2·radius + margin`` of the
+  step's sweep (the segment from the robot's believed position to the end of the step).
+  A NAO the step does not approach (the closest point of the segment is its start:
+  stepping away from a robot already close) does not block, as in
+  :func:`agent.control.station.safe_walk`.
+- **wait** while it is blocked and has waited fewer than :func:`patience` polls (the
+  caller re-looks after each poll: the other NAO may be walking through).
+- **via** after that: a step of the same length along the tangent to the circle of
+  radius ``c + via_extra`` around the blocking NAO(s), on the side the blockers are not
+  (the smaller detour); the other side if that step is blocked or would turn more
+  than 90° off the way, else wait. The caller
+  re-checks before every step, so a detour of several tangent steps follows the circle
+  round the blocker (closed loop, a fresh image each step).
+
+**Deadlock rule** (two robots waiting on each other forever, e.g. head-on): waiting is
+bounded, and the bound depends on the robot's rank in the shared plan, the index of
+(wave, robot id) in the sorted list of planned robots, which every agent computes alike:
+:func:`patience` = ``base_polls + rank`` polls. Of two robots that block each other, the
+one ranked earlier runs out of patience first and steps aside while the other still
+waits and then finds its corridor clear. Should both step aside (the later one's patience
+ran out too), the side rule has each pass the other on its right: each sees the other on
+the same side of its own line (head-on: both see the other on their left up to the
+noise; a tie within ``tie`` metres of the line is passed on the right), so the tangent
+steps diverge.
+
+Backward steps (``walk`` < 0: the final correction's small moves back) are not checked:
+the camera looks ahead. NAOs outside the image (beside the robot) are not seen; a step
+of 20 cm only approaches those within ~0.2 m of the clearance, which the plan's slot
+spacing (>= d_e) and the searched starts keep away.
+
+Pure: arrays in, a :class:`Verdict` out; the runner (agent/runner.py) looks and moves.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from agent.control.rotation import wrap_pi
+from agent.formation.plan import PlanParams
+
+GO, WAIT, VIA = "go", "wait", "via"
+RIGHT, LEFT = -1, 1  # the side of a via step: the sign of the normal (left of the heading)
+MAX_VIA_TURN = math.pi / 2  # a via step turns at most this far off the way
+
+
+def _finite(name: str, v: float, lo: float = -math.inf, hi: float = math.inf) -> float:
+    f = float(v)
+    if not (math.isfinite(f) and lo <= f <= hi):
+        raise ValueError(f"{name} must be finite and in [{lo}, {hi}], got {v!r}")
+    return f
+
+
+@dataclass(frozen=True)
+class CorridorParams:
+    """The check's settings; ``radius`` is the planner's (PlanParams, one home)."""
+
+    radius: float = field(default_factory=lambda: PlanParams().radius)
+    margin: float = 0.05  # m added to 2·radius (the detector's range error at ~0.6 m)
+    via_extra: float = 0.1  # m more than the clearance for a via step's tangent circle
+    poll: float = 1.0  # s between looks while waiting
+    base_polls: int = 1  # polls every robot waits before a via step (plus its rank)
+    max_polls: int = 60  # polls of one blocking episode before the robot gives up
+    tie: float = 0.05  # m: a blocker this close to the line is passed on the right
+
+    def __post_init__(self) -> None:
+        _finite("radius", self.radius, 1e-3, 5.0)
+        _finite("margin", self.margin, 0.0, 1.0)
+        _finite("via_extra", self.via_extra, 0.0, 1.0)
+        _finite("poll", self.poll, 0.0, 60.0)
+        _finite("tie", self.tie, 0.0, 1.0)
+        if not 0 <= self.base_polls <= self.max_polls:
+            raise ValueError(
+                f"base_polls must be in [0, max_polls={self.max_polls}], got {self.base_polls}"
+            )
+
+    @property
+    def clearance(self) -> float:
+        """c = 2·radius + margin: the distance a step's sweep keeps from every NAO."""
+        return 2.0 * self.radius + self.margin
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """What to do before a step: ``action`` go / wait / via.
+
+    ``blockers``: the NAOs blocking the step (k, 2), relative to the robot in the fixed
+    frame, nearest first; ``heading``/``walk``: the via step (rad, m); ``side``: its side
+    (RIGHT/LEFT, 0 without a via)."""
+
+    action: str
+    blockers: np.ndarray
+    heading: float = 0.0
+    walk: float = 0.0
+    side: int = 0
+
+
+def patience(rank: int, params: CorridorParams) -> int:
+    """Polls a robot of plan rank ``rank`` waits before stepping aside (the deadlock rule)."""
+    if rank < 0:
+        raise ValueError(f"rank must be >= 0, got {rank}")
+    return min(params.base_polls + rank, params.max_polls)
+
+
+def plan_rank(order: list[tuple[int, int]], me: int) -> int:
+    """The index of robot ``me`` in ``order`` = [(wave, robot id), ...] sorted."""
+    ranked = sorted(order)
+    for k, (_, rid) in enumerate(ranked):
+        if rid == me:
+            return k
+    raise ValueError(f"robot {me} is not in the plan")
+
+
+def _points(others: np.ndarray) -> np.ndarray:
+    pts = np.asarray(others, dtype=np.float64).reshape(-1, 2)
+    if not np.all(np.isfinite(pts)):
+        raise ValueError("NAO positions must be finite")
+    return pts
+
+
+def closest_approach(end: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """Per point of ``pts`` (k, 2), its distance to the segment from the origin to ``end``."""
+    e = np.asarray(end, dtype=np.float64).reshape(2)
+    n2 = float(e @ e)
+    if n2 == 0.0:
+        return np.asarray(np.hypot(pts[:, 0], pts[:, 1]), dtype=np.float64)
+    t = np.clip(pts @ e / n2, 0.0, 1.0)
+    return np.asarray(np.hypot(*(pts - t[:, None] * e).T), dtype=np.float64)
+
+
+def blocking(walk: float, heading: float, others: np.ndarray, clearance: float) -> np.ndarray:
+    """Mask of the NAOs at ``others`` (relative, fixed frame) that block a straight step of
+    ``walk`` m along ``heading``: the sweep comes within ``clearance`` of them and closer
+    than they are now."""
+    _finite("walk", walk, -1.0, 1.0)
+    _finite("heading", heading)
+    _finite("clearance", clearance, 0.0)
+    pts = _points(others)
+    end = walk * np.array([math.cos(heading), math.sin(heading)])
+    closest = closest_approach(end, pts)
+    now = np.hypot(pts[:, 0], pts[:, 1])
+    return np.asarray((closest < clearance) & (closest < now - 1e-9), dtype=bool)
+
+
+def _tangent(heading: float, blockers: np.ndarray, radius: float, side: int) -> float:
+    """The heading that passes every blocker on ``side`` at >= ``radius`` (to first
+    order): the most deviated of the tangents to their circles (or the perpendicular to
+    one already within ``radius``: moving along it never comes closer)."""
+    best = 0.0
+    for x, y in blockers:
+        rho = math.hypot(x, y)
+        bearing = wrap_pi(math.atan2(y, x) - heading)
+        half = math.asin(min(1.0, radius / rho)) if rho > 0 else math.pi / 2
+        dev = wrap_pi(bearing + side * half)  # the tangent's offset from the heading
+        if side * dev > side * best:
+            best = dev
+    return wrap_pi(heading + best)
+
+
+def check_step(
+    walk: float,
+    heading: float,
+    others: np.ndarray,
+    params: CorridorParams,
+    waited: int = 0,
+    rank: int = 0,
+    side: int = 0,
+) -> Verdict:
+    """Go, wait or via for a step of ``walk`` m along ``heading`` (believed, fixed frame)
+    with NAOs at ``others`` (k, 2; relative to the robot, fixed-frame axes), after
+    ``waited`` polls blocked, for the robot of plan rank ``rank``. ``side`` (RIGHT/LEFT)
+    keeps a detour on the side it started; 0 chooses (see the module docstring)."""
+    _finite("walk", walk, -1.0, 1.0)
+    _finite("heading", heading)
+    if waited < 0:
+        raise ValueError(f"waited must be >= 0, got {waited}")
+    if side not in (0, RIGHT, LEFT):
+        raise ValueError(f"side must be RIGHT (-1), LEFT (1) or 0, got {side}")
+    pts = _points(others)
+    if walk <= 0.0:  # backwards: the camera does not see that way
+        return Verdict(GO, np.zeros((0, 2)))
+    c = params.clearance
+    mask = blocking(walk, heading, pts, c)
+    if not mask.any():
+        return Verdict(GO, np.zeros((0, 2)))
+    blockers = pts[mask]
+    blockers = blockers[np.argsort(np.hypot(blockers[:, 0], blockers[:, 1]), kind="stable")]
+    if waited < patience(rank, params):
+        return Verdict(WAIT, blockers)
+    if side == 0:
+        # pass on the side the nearest blocker is not; a tie on the right
+        x, y = blockers[0]
+        lateral = -math.sin(heading) * x + math.cos(heading) * y  # > 0: on the left
+        side = LEFT if lateral < -params.tie else RIGHT
+    for s in (side, -side):
+        h = _tangent(heading, blockers, c + params.via_extra, s)
+        if abs(wrap_pi(h - heading)) > MAX_VIA_TURN:
+            continue  # not a step round the blocker but away from the way
+        if not blocking(walk, h, pts, c).any():
+            return Verdict(VIA, blockers, h, walk, s)
+    return Verdict(WAIT, blockers)

@@ -1,0 +1,183 @@
+"""The corridor check before each step (agent/control/corridor.py): known answers,
+hypothesis invariants, one test per error branch."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from agent.control.corridor import (
+    GO,
+    LEFT,
+    MAX_VIA_TURN,
+    RIGHT,
+    VIA,
+    WAIT,
+    CorridorParams,
+    blocking,
+    check_step,
+    closest_approach,
+    patience,
+    plan_rank,
+)
+from agent.formation.plan import PlanParams
+
+NORTH = math.pi / 2
+CP = CorridorParams()  # radius 0.2, margin 0.05: clearance 0.45 m
+
+
+def test_clearance_is_twice_the_planners_radius_plus_the_margin() -> None:
+    assert CP.radius == PlanParams().radius
+    assert CP.clearance == pytest.approx(2 * 0.2 + 0.05)
+
+
+def test_closest_approach_known_answers() -> None:
+    pts = np.array([[0.0, 0.5], [0.3, 0.1], [0.0, -0.4], [3.0, 4.0]])
+    d = closest_approach(np.array([0.0, 0.2]), pts)
+    assert d == pytest.approx([0.3, 0.3, 0.4, math.hypot(3.0, 3.8)])
+    assert closest_approach(np.zeros(2), pts) == pytest.approx(np.hypot(*pts.T))
+
+
+def test_free_corridor_goes() -> None:
+    # a NAO 1 m ahead: a 20 cm step ends 0.8 m from it
+    v = check_step(0.2, NORTH, np.array([[0.0, 1.0], [-1.0, 0.0]]), CP)
+    assert v.action == GO and len(v.blockers) == 0
+    assert check_step(0.2, NORTH, np.zeros((0, 2)), CP).action == GO
+
+
+def test_nao_ahead_makes_the_robot_wait_then_step_aside() -> None:
+    # a NAO 0.6 m ahead: the step ends 0.4 m from it (< 0.45)
+    ahead = np.array([[0.0, 0.6]])
+    assert blocking(0.2, NORTH, ahead, CP.clearance).tolist() == [True]
+    w = check_step(0.2, NORTH, ahead, CP, waited=0, rank=0)
+    assert w.action == WAIT
+    assert w.blockers == pytest.approx(ahead)
+    # rank 0: one poll of patience, then a via step, on the right on a tie
+    v = check_step(0.2, NORTH, ahead, CP, waited=1, rank=0)
+    assert v.action == VIA and v.side == RIGHT and v.walk == 0.2
+    # the tangent to the circle of 0.55 m round the NAO: asin(0.55 / 0.6) to the right
+    assert v.heading == pytest.approx(NORTH - math.asin(0.55 / 0.6))
+    assert not blocking(0.2, v.heading, ahead, CP.clearance).any()
+
+
+def test_via_passes_on_the_side_the_blocker_is_not() -> None:
+    # the NAO stands a little to the right of the line (x > 0 while facing north)
+    v = check_step(0.2, NORTH, np.array([[0.1, 0.55]]), CP, waited=5)
+    assert v.action == VIA and v.side == LEFT and v.heading > NORTH
+    v = check_step(0.2, NORTH, np.array([[-0.1, 0.55]]), CP, waited=5)
+    assert v.action == VIA and v.side == RIGHT and v.heading < NORTH
+
+
+def test_head_on_both_pass_on_their_right() -> None:
+    # A at the origin facing north, B 0.6 m ahead facing south, 2 cm to A's left
+    a_sees_b = np.array([[-0.02, 0.6]])
+    b_sees_a = -a_sees_b
+    va = check_step(0.2, NORTH, a_sees_b, CP, waited=10)
+    vb = check_step(0.2, -NORTH, b_sees_a, CP, waited=10)
+    assert va.side == RIGHT and vb.side == RIGHT
+    # the two via steps move the robots apart sideways (x): A east, B west
+    assert math.cos(va.heading) > 0 > math.cos(vb.heading)
+
+
+def test_a_detour_keeps_its_side_and_falls_back_to_the_other() -> None:
+    ahead = np.array([[0.0, 0.6]])
+    assert check_step(0.2, NORTH, ahead, CP, waited=5, side=LEFT).side == LEFT
+    # a second NAO on the right blocks the right tangent: the left one is taken
+    both = np.array([[0.0, 0.6], [0.35, 0.35]])
+    v = check_step(0.2, NORTH, both, CP, waited=5, side=RIGHT)
+    assert v.action == VIA and v.side == LEFT
+    # walled in on both sides: wait
+    walled = np.array([[0.0, 0.6], [0.35, 0.35], [-0.35, 0.35]])
+    assert check_step(0.2, NORTH, walled, CP, waited=5).action == WAIT
+
+
+def test_stepping_away_from_a_close_nao_goes() -> None:
+    # a NAO 0.3 m behind-left: the step north takes us away from it
+    assert check_step(0.2, NORTH, np.array([[-0.2, -0.2]]), CP).action == GO
+    # backward steps are not checked (the camera looks ahead)
+    assert check_step(-0.1, NORTH, np.array([[0.0, -0.3]]), CP).action == GO
+
+
+def test_patience_grows_with_the_plan_rank() -> None:
+    assert [patience(k, CP) for k in range(4)] == [1, 2, 3, 4]
+    assert patience(1000, CP) == CP.max_polls
+    order = [(1, 5), (0, 3), (1, 2), (2, 1)]  # (wave, id)
+    assert [plan_rank(order, r) for r in (3, 2, 5, 1)] == [0, 1, 2, 3]
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"radius": 0.0}, "radius"),
+        ({"margin": -0.1}, "margin"),
+        ({"via_extra": math.nan}, "via_extra"),
+        ({"poll": math.inf}, "poll"),
+        ({"tie": -1.0}, "tie"),
+        ({"base_polls": 61}, "base_polls"),
+    ],
+)
+def test_bad_params(kwargs: dict[str, float], match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        CorridorParams(**kwargs)  # type: ignore[arg-type]
+
+
+def test_bad_inputs() -> None:
+    with pytest.raises(ValueError, match="rank"):
+        patience(-1, CP)
+    with pytest.raises(ValueError, match="not in the plan"):
+        plan_rank([(0, 1)], 2)
+    with pytest.raises(ValueError, match="finite"):
+        check_step(0.2, NORTH, np.array([[math.nan, 1.0]]), CP)
+    with pytest.raises(ValueError, match="walk"):
+        check_step(2.0, NORTH, np.zeros((0, 2)), CP)
+    with pytest.raises(ValueError, match="heading"):
+        check_step(0.2, math.inf, np.zeros((0, 2)), CP)
+    with pytest.raises(ValueError, match="waited"):
+        check_step(0.2, NORTH, np.zeros((0, 2)), CP, waited=-1)
+    with pytest.raises(ValueError, match="side"):
+        check_step(0.2, NORTH, np.zeros((0, 2)), CP, side=2)
+    with pytest.raises(ValueError, match="clearance"):
+        blocking(0.2, NORTH, np.zeros((0, 2)), -1.0)
+
+
+coord = st.floats(-3.0, 3.0, allow_nan=False)
+points = st.lists(st.tuples(coord, coord), min_size=0, max_size=6)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    walk=st.floats(0.01, 0.2),
+    heading=st.floats(-math.pi, math.pi),
+    pts=points,
+    waited=st.integers(0, 10),
+    rank=st.integers(0, 9),
+)
+def test_invariants(
+    walk: float, heading: float, pts: list[tuple[float, float]], waited: int, rank: int
+) -> None:
+    others = np.array(pts, dtype=np.float64).reshape(-1, 2)
+    v = check_step(walk, heading, others, CP, waited, rank)
+    # deterministic
+    again = check_step(walk, heading, others.copy(), CP, waited, rank)
+    assert (again.action, again.heading, again.side) == (v.action, v.heading, v.side)
+    c = CP.clearance
+    if v.action in (GO, VIA):
+        # the step taken never comes within the clearance of a NAO unless it moves away
+        h = heading if v.action == GO else v.heading
+        end = walk * np.array([math.cos(h), math.sin(h)])
+        closest = closest_approach(end, others)
+        now = np.hypot(*others.T) if len(others) else np.zeros(0)
+        assert np.all((closest >= c) | (closest >= now - 1e-9))
+    if v.action == VIA:
+        assert abs(math.remainder(v.heading - heading, 2 * math.pi)) <= MAX_VIA_TURN + 1e-9
+    if v.action == GO:
+        assert len(v.blockers) == 0
+    else:
+        assert len(v.blockers) >= 1
+        assert np.all(blocking(walk, heading, v.blockers, c))
+    if waited < patience(rank, CP):
+        assert v.action != VIA  # the rank's patience comes first
