@@ -48,11 +48,20 @@ from agent.control import (
     next_leg,
     wrap_pi,
 )
-from agent.control.corridor import GO, VIA, CorridorParams, Verdict, check_step, patience, plan_rank
+from agent.control.corridor import (
+    GO,
+    VIA,
+    CorridorParams,
+    Verdict,
+    check_step,
+    in_view,
+    patience,
+    plan_rank,
+)
 from agent.exchange import Agreement, Decision, params_digest
 from agent.formation.plan import Plan
 from agent.march import Marcher, MarchHalt
-from agent.nao import HEAD_YAW_LIMIT
+from agent.nao import CAMERA_HFOV, HEAD_YAW_LIMIT
 from agent.perception.detector import Detection
 from agent.protocol import (
     KEY_ALIVE_ALL,
@@ -152,6 +161,8 @@ class Runner:
         self.corridor = CorridorParams()  # the safe-step check before each step
         self.waits = 0  # polls spent waiting for a clear corridor
         self.vias = 0  # via (tangent) steps taken round a blocking NAO
+        self.steps = 0  # straight steps walked (the age of a sighting)
+        self._seen: list[tuple[np.ndarray, int]] = []  # (NAO seen, fixed frame; at step)
 
     # ================================================================= plumbing
 
@@ -365,59 +376,74 @@ class Runner:
         tangent steps round the blocker until the way to the goal is clear again."""
         total = float(np.hypot(*(goal - self.position))) or 1.0
         cp = self.corridor
-        side, known, at = 0, np.zeros((0, 2)), self.position.copy()  # the detour under way
+        side = 0  # the side of the detour under way (0: none)
         for _ in range(200):
             leg = next_leg(self.position, self.heading, goal, backward_within=backward_within)
             if leg is None:
                 return
-            if side:  # detouring: does the blocker seen before still block the goal?
-                rel = known - (self.position - at)
+            if side:  # detouring: do the NAOs seen lately still block the way to the goal?
                 to_goal = wrap_pi(self.heading + leg.turn)
-                v = check_step(leg.walk, to_goal, rel, cp, patience(self._rank(), cp), side=side)
+                wait = patience(self._rank(), cp)
+                rel = self._remembered()
+                v = check_step(
+                    leg.walk, to_goal, rel, cp, wait, side=side, goal=goal - self.position
+                )
                 if v.action == VIA:
-                    self._via_step(v, rel)
+                    self._via_step(v)
                     continue
                 side = 0
             if abs(leg.turn) > self.cfg.rotation_tolerance:
                 self.rotate(
                     leg.turn, STEP_GAINS if abs(leg.turn) < math.radians(15) else PAPER_GAINS
                 )
-            v = self.clear_way(leg.walk)
+            v = self.clear_way(leg.walk, goal=goal)
             if v.action == VIA:
-                side, known, at = v.side, v.blockers, self.position.copy()
-                self._via_step(v, known)
+                side = v.side
+                self._via_step(v)
                 continue
             self.walk_step(leg.walk)
             progress(1.0 - max(0.0, leg.remaining - abs(leg.walk)) / total)
         raise AgentFailure("distance control did not converge in 200 steps")
 
-    def _via_step(self, v: Verdict, known: np.ndarray) -> None:
+    def _via_step(self, v: Verdict) -> None:
         """Turn to the via step's heading, check its corridor again (no further via), walk."""
         turn = wrap_pi(v.heading - self.heading)
         if abs(turn) > self.cfg.rotation_tolerance:
             self.rotate(turn, STEP_GAINS if abs(turn) < math.radians(15) else PAPER_GAINS)
         self.vias += 1
-        self.clear_way(v.walk, known, via=False)
+        self.clear_way(v.walk, via=False)
         self.walk_step(v.walk)
 
-    def clear_way(self, walk: float, known: np.ndarray | None = None, via: bool = True) -> Verdict:
-        """Check the next step's corridor in the yaw-0 image the compass takes anyway
-        (agent/control/corridor.py): returns GO, or (``via``) VIA once this robot's
-        patience (its plan rank) is spent; waits meanwhile, looking again every poll
-        (status detail ``waiting: NAO ahead at [x, y]``, fixed frame). ``known``: NAOs
-        seen before (relative to here) that the image may not show. Bounded: AgentFailure
-        after ``max_polls`` polls."""
+    def _remembered(self) -> np.ndarray:
+        """The NAOs seen in the last ``memory_steps`` steps, relative to here (fixed frame):
+        a NAO closer than the detector's range, or beside the robot, is not in the image
+        but is still there."""
+        keep = [(p, k) for p, k in self._seen if self.steps - k <= self.corridor.memory_steps]
+        self._seen = keep
+        if not keep:
+            return np.zeros((0, 2))
+        return np.array([p for p, _ in keep]) - self.position
+
+    def clear_way(self, walk: float, via: bool = True, goal: np.ndarray | None = None) -> Verdict:
+        """Check the next step's corridor (agent/control/corridor.py) against the NAOs in
+        the yaw-0 image the compass takes anyway and those seen lately: returns GO, or
+        (``via``) VIA once this robot's patience (its plan rank) is spent; waits
+        meanwhile, looking again every poll (status detail ``waiting: NAO ahead at
+        [x, y]``, fixed frame). Bounded: AgentFailure after ``max_polls`` polls."""
         cp = self.corridor
         rank = self._rank()
-        extra = np.zeros((0, 2)) if known is None else np.asarray(known).reshape(-1, 2)
         for waited in range(cp.max_polls + 1):
             frame = self._last_frame if self._last_frame is not None else self.look(0.0)
             self._last_frame = frame
             seen, _, _ = self.perception.to_fixed(
                 self.perception.detect(frame.image, 0.0), self.heading
             )
-            others = np.vstack([np.asarray(seen, dtype=np.float64).reshape(-1, 2), extra])
-            v = check_step(walk, self.heading, others, cp, waited if via else 0, rank)
+            for p in np.asarray(seen, dtype=np.float64).reshape(-1, 2):
+                self._seen.append((self.position + p, self.steps))
+            v = check_step(
+                walk, self.heading, self._remembered(), cp, waited if via else 0, rank,
+                goal=None if goal is None else goal - self.position,
+            )  # fmt: skip
             if v.action == GO or (v.action == VIA and via):
                 if waited:
                     log.info("corridor: %s after %d poll(s)", v.action, waited)
@@ -427,6 +453,11 @@ class Runner:
             self.waits += 1
             self.pump(cp.poll)
             self._last_frame = None  # look again
+            # what the next image shows is seen afresh: a NAO that walked on is forgotten
+            if self._seen:
+                rel = np.array([p for p, _ in self._seen]) - self.position
+                shown = in_view(rel, self.heading, CAMERA_HFOV)
+                self._seen = [e for e, gone in zip(self._seen, shown, strict=True) if not gone]
         raise AgentFailure(
             f"way blocked for {cp.max_polls} polls at believed {self.position.round(2).tolist()}"
         )
@@ -442,6 +473,7 @@ class Runner:
         before = self._last_frame if self._last_frame is not None else self.look(0.0)
         h0 = self.heading
         rep = self.body.walk(distance)
+        self.steps += 1
         self.pump()
         after = self.look(0.0)
         drift = self._compass(before, after, 0.0, walking=True)
@@ -622,6 +654,7 @@ class Runner:
     def move(self) -> None:
         plan = self.plan
         self._last_frame = None  # others moved meanwhile: a fresh compass reference
+        self._seen = []  # and the NAOs seen before are elsewhere now
         goals, final_heading = self.formation.goals(plan, self.me)
         self.final_heading = final_heading
         self.status("move", 0.0, f"{len(goals)} leg(s)")

@@ -32,6 +32,13 @@ the same side of its own line (head-on: both see the other on their left up to t
 noise; a tie within ``tie`` metres of the line is passed on the right), so the tangent
 steps diverge.
 
+**Memory** (the runner's): a NAO closer than about 0.5 m is cut by the image border and
+not detected, and one beside the robot is outside the image; so the runner checks
+against every NAO seen in the last ``memory_steps`` steps too (dead-reckoned, relative to
+its believed position), and against those alone to decide whether a detour is over.
+While it waits, a sighting that the next image would show again (:func:`in_view`) is
+forgotten before that image is taken, so a NAO that walked on no longer blocks.
+
 Backward steps (``walk`` < 0: the final correction's small moves back) are not checked:
 the camera looks ahead. NAOs outside the image (beside the robot) are not seen; a step
 of 20 cm only approaches those within ~0.2 m of the clearance, which the plan's slot
@@ -73,6 +80,7 @@ class CorridorParams:
     base_polls: int = 1  # polls every robot waits before a via step (plus its rank)
     max_polls: int = 60  # polls of one blocking episode before the robot gives up
     tie: float = 0.05  # m: a blocker this close to the line is passed on the right
+    memory_steps: int = 6  # steps a sighting is remembered (the runner's, see below)
 
     def __post_init__(self) -> None:
         _finite("radius", self.radius, 1e-3, 5.0)
@@ -80,6 +88,8 @@ class CorridorParams:
         _finite("via_extra", self.via_extra, 0.0, 1.0)
         _finite("poll", self.poll, 0.0, 60.0)
         _finite("tie", self.tie, 0.0, 1.0)
+        if not 0 <= self.memory_steps <= 100:
+            raise ValueError(f"memory_steps must be in [0, 100], got {self.memory_steps}")
         if not 0 <= self.base_polls <= self.max_polls:
             raise ValueError(
                 f"base_polls must be in [0, max_polls={self.max_polls}], got {self.base_polls}"
@@ -153,6 +163,20 @@ def blocking(walk: float, heading: float, others: np.ndarray, clearance: float) 
     return np.asarray((closest < clearance) & (closest < now - 1e-9), dtype=bool)
 
 
+def in_view(
+    rel: np.ndarray, heading: float, hfov: float, near: float = 0.6, far: float = 1.4
+) -> np.ndarray:
+    """Mask of the points ``rel`` (k, 2; relative, fixed frame) that a yaw-0 image along
+    ``heading`` shows wholly and the detector finds (5° inside the field of view
+    ``hfov``, range in [near, far]): a sighting there is seen again if it is still there."""
+    _finite("heading", heading)
+    _finite("hfov", hfov, 0.0, 2 * math.pi)
+    pts = _points(rel)
+    rng = np.hypot(pts[:, 0], pts[:, 1])
+    off = np.abs(np.angle(np.exp(1j * (np.arctan2(pts[:, 1], pts[:, 0]) - heading))))
+    return np.asarray((off <= hfov / 2 - math.radians(5)) & (rng >= near) & (rng <= far))
+
+
 def _tangent(heading: float, blockers: np.ndarray, radius: float, side: int) -> float:
     """The heading that passes every blocker on ``side`` at >= ``radius`` (to first
     order): the most deviated of the tangents to their circles (or the perpendicular to
@@ -176,11 +200,14 @@ def check_step(
     waited: int = 0,
     rank: int = 0,
     side: int = 0,
+    goal: np.ndarray | None = None,
 ) -> Verdict:
     """Go, wait or via for a step of ``walk`` m along ``heading`` (believed, fixed frame)
     with NAOs at ``others`` (k, 2; relative to the robot, fixed-frame axes), after
     ``waited`` polls blocked, for the robot of plan rank ``rank``. ``side`` (RIGHT/LEFT)
-    keeps a detour on the side it started; 0 chooses (see the module docstring)."""
+    keeps a detour on the side it started; 0 chooses (see the module docstring).
+    ``goal`` (relative): a blocker within the clearance of it cannot be walked round:
+    wait."""
     _finite("walk", walk, -1.0, 1.0)
     _finite("heading", heading)
     if waited < 0:
@@ -198,6 +225,8 @@ def check_step(
     blockers = blockers[np.argsort(np.hypot(blockers[:, 0], blockers[:, 1]), kind="stable")]
     if waited < patience(rank, params):
         return Verdict(WAIT, blockers)
+    if goal is not None and np.any(closest_approach(np.zeros(2), blockers - _points(goal)) < c):
+        return Verdict(WAIT, blockers)  # it stands on the goal: no step round it helps
     if side == 0:
         # pass on the side the nearest blocker is not; a tie on the right
         x, y = blockers[0]

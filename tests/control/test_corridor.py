@@ -95,6 +95,14 @@ def test_a_detour_keeps_its_side_and_falls_back_to_the_other() -> None:
     assert check_step(0.2, NORTH, walled, CP, waited=5).action == WAIT
 
 
+def test_a_nao_on_the_goal_is_waited_for_not_walked_round() -> None:
+    ahead = np.array([[0.0, 0.6]])
+    v = check_step(0.2, NORTH, ahead, CP, waited=5, goal=np.array([0.0, 0.9]))
+    assert v.action == WAIT
+    v = check_step(0.2, NORTH, ahead, CP, waited=5, goal=np.array([0.0, 1.2]))
+    assert v.action == VIA
+
+
 def test_stepping_away_from_a_close_nao_goes() -> None:
     # a NAO 0.3 m behind-left: the step north takes us away from it
     assert check_step(0.2, NORTH, np.array([[-0.2, -0.2]]), CP).action == GO
