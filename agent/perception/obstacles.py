@@ -32,6 +32,7 @@ bearing +left), so :func:`agent.perception.localise.to_fixed_frame` takes it as 
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -96,7 +97,9 @@ class _Run:
 def _runs(mask: np.ndarray) -> list[tuple[_Run, bool, bool]]:
     """Runs of every component with flags (left edge true, right edge true)."""
     h, w = mask.shape
-    n, labels, stats, _ = cv2.connectedComponentsWithStats((mask > 0).astype(np.uint8), 8)
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(
+        (mask > 0).astype(np.uint8), connectivity=8
+    )
     rows = np.arange(h)[:, None]
     out: list[tuple[_Run, bool, bool]] = []
     for lab in range(1, n):
@@ -111,10 +114,12 @@ def _runs(mask: np.ndarray) -> list[tuple[_Run, bool, bool]]:
         # cut at empty columns and at bottom jumps
         cuts = [0]
         for c in range(1, sub.shape[1]):
-            if has[c] != has[c - 1] or (has[c] and abs(int(bottom[c]) - int(bottom[c - 1])) > JUMP_PX):
+            if has[c] != has[c - 1] or (
+                has[c] and abs(int(bottom[c]) - int(bottom[c - 1])) > JUMP_PX
+            ):
                 cuts.append(c)
         cuts.append(sub.shape[1])
-        pieces = [(a, b) for a, b in zip(cuts[:-1], cuts[1:], strict=True) if has[a]]
+        pieces = [(a, b) for a, b in itertools.pairwise(cuts) if has[a]]
         for k, (a, b) in enumerate(pieces):
             run = _Run(x0 + a, x0 + b - 1, bottom[a:b].copy(), int(top[a:b].min()))
             # an edge is false at the image border or against a nearer (lower) run
