@@ -159,3 +159,18 @@ def test_bad_inputs_raise(det: ObstacleDetector, img: np.ndarray, yaw: float, ms
 def test_bad_radius_raises() -> None:
     with pytest.raises(ValueError, match="radius"):
         ObstacleDetector(radius=0.0)
+
+
+def test_adapter_merges_a_robots_sightings_and_bounds_them() -> None:
+    from agent.adapters import PerceptionAdapter
+    from agent.protocol import MAX_OBSTACLES
+
+    a = np.array([[1.0, 0.0], [0.0, 2.0]])
+    b = np.array([[1.04, 0.02]])
+    merged = PerceptionAdapter.merge_obstacles([a, b, np.zeros((0, 2))])
+    assert merged.shape == (2, 2)
+    assert PerceptionAdapter.merge_obstacles([]).shape == (0, 2)
+    many = np.array([[0.5 * k, 0.0] for k in range(1, MAX_OBSTACLES + 6)])
+    kept = PerceptionAdapter.merge_obstacles([many])
+    assert kept.shape == (MAX_OBSTACLES, 2)
+    assert kept[:, 0].max() == pytest.approx(0.5 * MAX_OBSTACLES)  # the nearest are kept
