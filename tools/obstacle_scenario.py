@@ -26,6 +26,7 @@ from sim.nao_model import FOOTPRINT_RADIUS
 from sim.scenarios import ObstacleSpec, Scenario, dump, generate
 
 OBSTACLE_COLOUR = OBSTACLE_RGBA[:3]
+CONTACT_SLACK = 0.005  # m: a footprint gap this small is a contact (the world stops it)
 
 #: Where on a path an obstacle may stand, tried in turn (0 = start, 1 = target).
 FRACTIONS = (0.5, 0.6, 0.4, 0.7, 0.8, 0.3, 0.9, 1.0)
@@ -34,6 +35,9 @@ START_GAP = 0.5
 OBSTACLE_GAP = 0.6  # m between obstacle centres
 SEED_STRIDE = 7919  # derived seeds (a prime: they do not meet the next runs' seeds)
 MAX_TRIES = 50
+#: The plan moves the pattern sideways out of the obstacle area (5.1.2), and the agents
+#: know no walls: the room's half-size grows by this much (m) over the generated one.
+ROOM_EXTRA = 1.5
 
 
 def blocking_points(
@@ -82,7 +86,8 @@ def blocking_scenario(n: int, seed: int, k: int, d_e: float, phi_e: float) -> Sc
         except ValueError as exc:
             last = str(exc)
             continue
-        return replace(sc, seed=seed, obstacles=tuple(ObstacleSpec(x, y) for x, y in pts))
+        obstacles = tuple(ObstacleSpec(x, y) for x, y in pts)
+        return replace(sc, seed=seed, obstacles=obstacles, room=sc.room + ROOM_EXTRA)
     raise ValueError(f"no scenario of {MAX_TRIES} seeds takes {k} obstacles ({last})")
 
 
@@ -104,18 +109,22 @@ def judge_obstacles(
     contacts: list[tuple[float, int, int]],
     plan: Any,
 ) -> None:
-    """Obstacle numbers of a demo run into ``result``: contacts with obstacles (the world
-    reports them as b = -1; walls stand metres away), the smallest gap (m) between a
-    robot's footprint and an obstacle over the recorded truth, and the obstacles the
-    fleet planned around (perceived, merged; world frame) with their position errors."""
+    """Obstacle numbers of a demo run into ``result``: contacts with obstacles (robot and
+    obstacle footprints touching in the recorded truth, each pair once; the world's own
+    b = -1 contacts count walls too: ``wall_or_obstacle_contacts``), the smallest gap (m)
+    between a robot's footprint and an obstacle, and the obstacles the fleet planned
+    around (perceived, merged; world frame) with their position errors."""
     obs = np.array(result.get("obstacles", []), dtype=np.float64).reshape(-1, 3)
-    result["obstacle_contacts"] = sum(1 for c in contacts if c[2] < 0)
+    result["wall_or_obstacle_contacts"] = sum(1 for c in contacts if c[2] < 0)
     gap = math.inf
+    touching: set[tuple[int, int]] = set()
     for _, poses in truth:
-        for x, y, _h in poses.values():
+        for rid, (x, y, _h) in poses.items():
             if obs.size:
                 d = np.hypot(obs[:, 0] - x, obs[:, 1] - y) - obs[:, 2] - FOOTPRINT_RADIUS
                 gap = min(gap, float(d.min()))
+                touching.update((rid, int(k)) for k in np.flatnonzero(d <= CONTACT_SLACK))
+    result["obstacle_contacts"] = len(touching)
     result["min_obstacle_gap"] = gap
     if plan is None or not truth or plan.frame_robot not in truth[0][1]:
         return
