@@ -13,12 +13,14 @@ import math
 
 import numpy as np
 
+from agent.formation.obstacle_map import merge_sightings as merge_obstacle_sightings
 from agent.formation.plan import Plan, PlanParams, plan_from_records
 from agent.formation.records import NeighborRecord
 from agent.perception.compass import CompassResult, VisualCompass
 from agent.perception.detector import Detection, Detector
 from agent.perception.localise import cluster_sightings, merge_sightings, to_fixed_frame
-from agent.protocol import NeighborRecordMsg
+from agent.perception.obstacles import ObstacleDetection, ObstacleDetector
+from agent.protocol import MAX_OBSTACLES, NeighborRecordMsg
 from agent.seams import Neighbours, Sightings
 
 
@@ -37,10 +39,32 @@ class PerceptionAdapter:
         # drift errors with σ ≈ 0.15° (max 0.4°) over 0.2 m steps, against 0 of 120
         # steps accepted by the default compass.
         self.walk_compass = VisualCompass(min_inlier_ratio=0.1, tol=math.radians(1.0))
+        self.obstacle_detector = ObstacleDetector()
 
     def detect(self, image: np.ndarray, yaw: float) -> list[Detection]:
         """NAOs in one forehead image taken at head yaw ``yaw`` (§3.1–3.2)."""
         return self.detector.detect(image, yaw)
+
+    def detect_obstacles(self, image: np.ndarray, yaw: float) -> list[ObstacleDetection]:
+        """Obstacle cylinders in one forehead image taken at head yaw ``yaw`` (5.1.2)."""
+        return self.obstacle_detector.detect(image, yaw)
+
+    @staticmethod
+    def obstacles_fixed(dets: list[ObstacleDetection], heading: float) -> np.ndarray:
+        """Obstacle sightings (k, 2) in the fixed frame (eqs. 7-8, as for neighbours)."""
+        return to_fixed_frame(dets, heading).reshape(-1, 2)
+
+    @staticmethod
+    def merge_obstacles(sightings: list[np.ndarray]) -> np.ndarray:
+        """One (x, y) per obstacle seen (fixed frame), the nearest MAX_OBSTACLES at most."""
+        pts = np.concatenate([np.reshape(s, (-1, 2)) for s in sightings]) if sightings else None
+        if pts is None or pts.shape[0] == 0:
+            return np.zeros((0, 2))
+        merged = merge_obstacle_sightings(pts, np.hypot(pts[:, 0], pts[:, 1]))
+        if merged.shape[0] > MAX_OBSTACLES:
+            near = np.argsort(np.hypot(merged[:, 0], merged[:, 1]), kind="stable")
+            merged = merged[np.sort(near[:MAX_OBSTACLES])]
+        return merged
 
     def measure_turn(self, before: np.ndarray, after: np.ndarray) -> CompassResult:
         """Visual compass (§3.2.1) between two head-yaw-0 images around a turn."""
@@ -123,8 +147,18 @@ class FormationAdapter:
             )
         return out
 
+    @staticmethod
+    def obstacle_sightings(msgs: tuple[NeighborRecordMsg, ...]) -> dict[int, np.ndarray]:
+        """The obstacles each record reports, (k, 2) in its sender's fixed frame."""
+        return {m.sender: np.array(m.obstacles, dtype=np.float64) for m in msgs if m.obstacles}
+
     def plan(self, msgs: tuple[NeighborRecordMsg, ...], d_e: float, phi_e: float) -> Plan:
-        return plan_from_records(self.records(msgs), PlanParams(d_e=d_e, phi_e=phi_e))
+        """The plan of the agreed records, around the obstacles they report (5.1.2)."""
+        return plan_from_records(
+            self.records(msgs),
+            PlanParams(d_e=d_e, phi_e=phi_e),
+            sightings=self.obstacle_sightings(msgs),
+        )
 
     @staticmethod
     def members(plan: Plan) -> list[int]:

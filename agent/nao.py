@@ -1,7 +1,8 @@
 """Facts of the NAO robot (H25 V4–V6) that the agent and the simulated world share.
 
 DESIGN.md §4 and the NAO paper (§3, Fig. 1; §5.2.2): the forehead ("top") camera, the
-head-yaw range and the walking speeds. This module is the one home of these numbers:
+head-yaw range and the walking speeds; and the static obstacles of the arena (§5.1.2),
+whose colour and size the world draws and the obstacle detector looks for. This module is the one home of these numbers:
 the agent imports it directly, ``sim/`` imports it through :mod:`agent.protocol`
 (``from agent.protocol import nao``), which is the only agent module ``sim/`` may import.
 Standard library only, so both sides can import it without pulling anything else in.
@@ -35,6 +36,20 @@ NECK_FORWARD = 0.0  # m, head-yaw axis ahead of the body centre
 WALK_SPEED = 0.095  # m/s forwards (NAO default gait)
 BACK_SPEED = 0.06  # m/s backwards
 MAX_SEGMENT = 0.2  # m: the paper walks straight segments of at most 20 cm (§4.2)
+
+# ------------------------------------------------------------------ obstacles (§5.1.2)
+#: Static obstacles are upright cylinders of one distinctive colour: a saturated rose
+#: (RGB 1.0, 0.0, 0.5 -> HSV hue 330°, OpenCV H 165, S 255). It is neither the NAO
+#: orange (OpenCV H 2-10) nor in the room textures' palette (saturated hues only in
+#: H 22-160; reds and pinks beyond are kept pale, S <= 90), and shading scales all
+#: channels alike, so hue and saturation survive the lighting.
+OBSTACLE_RGBA = (1.0, 0.0, 0.5, 1.0)
+#: OpenCV HSV range of obstacle pixels (the detector's threshold; textures avoid it).
+OBSTACLE_HSV_LO = (158, 150, 30)
+OBSTACLE_HSV_HI = (172, 255, 255)
+#: Cylinder radius (m): a NAO's footprint (the paper regards obstacles as robots).
+OBSTACLE_RADIUS = 0.15
+OBSTACLE_HEIGHT = 0.6  # m, taller than the camera (0.5 m): the top is seen from below
 
 # ------------------------------------------------------------------ NAOqi
 NAOQI_PORT = 9559  # a NAO's qi service directory: tcp://nao.local:9559

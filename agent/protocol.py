@@ -35,6 +35,7 @@ from agent import nao as nao  # NAO facts, shared with sim/ through this module
 SCHEMA_VERSION = 1
 MAX_ROBOT_ID = 65535
 MAX_NEIGHBOURS = 64
+MAX_OBSTACLES = 32  # obstacles one robot may report in its record
 MAX_MEMBERS = 1024
 MAX_TEXT = 512
 MAX_IMAGE_BYTES = 8 * 1024 * 1024
@@ -471,6 +472,8 @@ class NeighborRecordMsg(Message):
     ``neighbours`` are (x, y) in metres; ``orientations`` (rad, the matched mask's
     relative orientation) and ``confidences`` (λ) are empty or one per neighbour.
     ``round`` counts search rounds (a robot that found nobody searches again).
+    ``obstacles`` (x, y) in metres are the static obstacles it saw (5.1.2), in the same
+    fixed frame; empty from a sender that saw none or predates them.
     """
 
     TAG: ClassVar[str] = "record"
@@ -479,12 +482,14 @@ class NeighborRecordMsg(Message):
     neighbours: tuple[tuple[float, float], ...]
     orientations: tuple[float, ...] = ()
     confidences: tuple[float, ...] = ()
+    obstacles: tuple[tuple[float, float], ...] = ()
     SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {
         "sender": _ID,
         "round": _int("round", 0, 1_000_000),
         "neighbours": _seq("neighbours", _XY, MAX_NEIGHBOURS),
         "orientations": _seq("orientations", _float("orientation", -10.0, 10.0), MAX_NEIGHBOURS),
         "confidences": _seq("confidences", _float("confidence", 0.0, 1.0), MAX_NEIGHBOURS),
+        "obstacles": _seq("obstacles", _XY, MAX_OBSTACLES),
     }
 
     def __post_init__(self) -> None:

@@ -64,6 +64,7 @@ from agent.formation.plan import Plan
 from agent.march import Marcher, MarchHalt
 from agent.nao import CAMERA_HFOV, HEAD_YAW_LIMIT
 from agent.perception.detector import Detection
+from agent.perception.obstacles import ObstacleDetection
 from agent.protocol import (
     KEY_ALIVE_ALL,
     KEY_DIGEST_ALL,
@@ -152,6 +153,7 @@ class Runner:
         self.plan_digest = ""
         self.wave = -1
         self.record_round = 0
+        self.obstacle_sightings: list[np.ndarray] = []  # fixed frame, one array per image
         self.timeline = Timeline()
         self._last_status = -math.inf
         self._last_frame: Frame | None = None
@@ -507,6 +509,7 @@ class Runner:
         self.status("search", 0.0, "sweep at θ = 0°")
         n = 2 * len(self.cfg.search_yaws)
         raw: list[tuple[int, list[Detection]]] = []
+        obst: list[tuple[int, list[ObstacleDetection]]] = []  # 5.1.2: obstacles seen
         done = 0
         origin: Frame | None = None
         turned = [0.0, 0.0]
@@ -520,6 +523,7 @@ class Runner:
                     if sweep == 0:
                         origin = frame
                 raw.append((sweep, self.perception.detect(frame.image, yaw)))
+                obst.append((sweep, self.perception.detect_obstacles(frame.image, yaw)))
                 done += 1
                 self.status(
                     "search", done / n, f"θ = {180 * sweep}°, head {math.degrees(yaw):+.0f}°"
@@ -534,6 +538,10 @@ class Runner:
         self._calibrate(origin, self._last_frame, turned)
         if self.compass_gain != 1.0:
             heading_180 = wrap_pi(NORTH + self.compass_gain * turned[0])
+        self.obstacle_sightings = [
+            self.perception.obstacles_fixed(o, NORTH if sweep == 0 else heading_180)
+            for sweep, o in obst
+        ]
         return [
             self.perception.to_fixed(dets, NORTH if sweep == 0 else heading_180)
             for sweep, dets in raw
@@ -560,14 +568,16 @@ class Runner:
     def localise(self, sightings: list[Sightings]) -> NeighborRecordMsg:
         self.status("localise", 0.0)
         pts, ori, conf = self.perception.merge(sightings)
+        obstacles = self.perception.merge_obstacles(self.obstacle_sightings)
         rec = NeighborRecordMsg(
             sender=self.me,
             round=self.record_round,
             neighbours=tuple((float(x), float(y)) for x, y in pts),
             orientations=tuple(float(o) for o in ori),
             confidences=tuple(float(c) for c in conf),
+            obstacles=tuple((float(x), float(y)) for x, y in obstacles),
         )
-        self.status("localise", 1.0, f"{len(pts)} neighbours")
+        self.status("localise", 1.0, f"{len(pts)} neighbours, {len(obstacles)} obstacles")
         return rec
 
     def agree(self, record: NeighborRecordMsg) -> Decision:

@@ -7,7 +7,7 @@ The phase machine (:mod:`agent.runner`) depends only on these three protocols:
   :class:`agent.body_naoqi.NaoqiBody` over the qi protocol of a real or virtual NAO,
   and :class:`agent.body_world.WorldBody` on an in-process :class:`sim.world.World`);
 - :class:`Perception`: detector, fixed-frame conversion, merging and the visual compass
-  (NAO paper §3; :class:`agent.adapters.PerceptionAdapter`);
+  (NAO paper §3), and the same for the static obstacles (§5.1.2; :class:`agent.adapters.PerceptionAdapter`);
 - :class:`Formation`: agreed records → plan → this robot's goals (§4;
   :class:`agent.adapters.FormationAdapter`).
 
@@ -26,6 +26,7 @@ import numpy as np
 from agent.formation.plan import Plan
 from agent.perception.compass import CompassResult
 from agent.perception.detector import Detection
+from agent.perception.obstacles import ObstacleDetection
 from agent.protocol import NeighborRecordMsg
 
 #: (points (k, 2) in the fixed frame, confidences (k,), orientations (k,))
@@ -112,6 +113,12 @@ class Perception(Protocol):
     def measure_turn(self, before: np.ndarray, after: np.ndarray) -> CompassResult: ...
 
     def measure_walk(self, before: np.ndarray, after: np.ndarray) -> CompassResult: ...
+
+    def detect_obstacles(self, image: np.ndarray, yaw: float) -> list[ObstacleDetection]: ...
+
+    def obstacles_fixed(self, dets: list[ObstacleDetection], heading: float) -> np.ndarray: ...
+
+    def merge_obstacles(self, sightings: list[np.ndarray]) -> np.ndarray: ...
 
 
 class Formation(Protocol):

@@ -3,11 +3,11 @@
 PyBullet in DIRECT mode (GUI opt-in) holds a square room whose floor and four walls are
 each one textured quad with a rich, seeded texture (rectangles, discs, lines and
 text-like marks in many colours) so that feature matching -- the visual compass of the
-NAO paper §3.3 -- has plenty to hold on to; optional static obstacles (grey cylinders),
+NAO paper §3.3 -- has plenty to hold on to; optional static obstacles (cylinders in the obstacle rose of :mod:`agent.nao`),
 optional orange lookalike clutter and a light whose strength and direction vary for the
 detector's hard cases. No wall or floor colour falls in (or near) the detector's orange
-range: hues near orange are desaturated, and every texture is checked with
-``cv2.inRange`` before use.
+range nor in the obstacle range: hues near orange and rose are desaturated, and every
+texture is checked with ``cv2.inRange`` before use.
 
 Robots are kinematic NAO bodies (:mod:`sim.nao_model`); their poses are held here and
 moved by :mod:`sim.locomotion`. Rendering costs no sim time. :class:`World` is the
@@ -27,6 +27,7 @@ import cv2
 import numpy as np
 import pybullet as pb
 
+from agent.protocol import nao
 from sim import camera
 from sim.locomotion import Locomotion, NoiseModel, Obstacle
 from sim.nao_model import HEAD_JOINT, NaoBodyFactory
@@ -37,7 +38,7 @@ MAX_TEXTURE = 4096  # texels along a texture's longer side (memory and build tim
 # The detector's orange (OpenCV HSV) widened by a margin: no room texel may fall in it.
 GUARD_LO = (0, 110, 40)
 GUARD_HI = (16, 255, 255)
-OBSTACLE_HEIGHT = 0.6
+OBSTACLE_HEIGHT = nao.OBSTACLE_HEIGHT
 TILE = 1.0  # metres: edge of the triangles the floor and walls are cut into
 
 
@@ -83,6 +84,7 @@ def make_texture(rng: np.random.Generator, width: int, height: int) -> np.ndarra
     hsv = cv2.cvtColor(img, cv2.COLOR_BGR2HSV)
     bad = cv2.inRange(hsv, GUARD_LO, GUARD_HI) > 0
     bad |= cv2.inRange(hsv, (170, 110, 40), (180, 255, 255)) > 0
+    bad |= cv2.inRange(hsv, nao.OBSTACLE_HSV_LO, nao.OBSTACLE_HSV_HI) > 0
     if bad.any():
         grey = img[bad].mean(axis=1, keepdims=True)
         img[bad] = np.clip(grey, 0, 255).astype(np.uint8)
@@ -176,7 +178,7 @@ class World:
                 pb.GEOM_CYLINDER,
                 radius=ob.radius,
                 length=OBSTACLE_HEIGHT,
-                rgbaColor=(0.45, 0.47, 0.5, 1.0),
+                rgbaColor=nao.OBSTACLE_RGBA,
                 specularColor=(0.0, 0.0, 0.0),
                 physicsClientId=cid,
             )

@@ -276,6 +276,13 @@ def test_digest_is_order_independent_and_content_sensitive() -> None:
     assert len(canonical_digest([])) == 64
 
 
+def test_digest_covers_the_obstacles_of_a_record() -> None:
+    seen = NeighborRecordMsg(sender=1, round=0, neighbours=((0.1, 2.0),), obstacles=((1.0, 0.5),))
+    moved = NeighborRecordMsg(sender=1, round=0, neighbours=((0.1, 2.0),), obstacles=((1.0, 0.6),))
+    assert canonical_digest([rec(0), seen]) != canonical_digest([rec(0), rec(1)])
+    assert canonical_digest([rec(0), seen]) != canonical_digest([rec(0), moved])
+
+
 @pytest.mark.parametrize(
     "kwargs, match",
     [

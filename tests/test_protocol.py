@@ -21,6 +21,7 @@ SAMPLES: list[p.Message] = [
         confidences=(0.9, 0.7),
     ),
     p.NeighborRecordMsg(sender=0, round=3, neighbours=()),
+    p.NeighborRecordMsg(sender=4, round=0, neighbours=((1.0, 0.0),), obstacles=((0.4, -1.2),)),
     p.DigestMsg(sender=1, round=0, digest="a" * 64, members=(0, 1, 2)),
     p.StatusMsg(
         sender=1,
@@ -83,6 +84,15 @@ def _raw(**obj: object) -> bytes:
                 v=1, t="record", sender=1, round=0, neighbours=[[0.0, 1.0]], confidences=[0.5, 0.5]
             ),
             "2 values for 1",
+        ),
+        (_raw(v=1, t="record", sender=1, round=0, neighbours=[], obstacles=[[0.0]]), "list of 2"),
+        (
+            _raw(v=1, t="record", sender=1, round=0, neighbours=[], obstacles=[[0.0, 1.0]] * 33),
+            "obstacles: 33 items",
+        ),
+        (
+            _raw(v=1, t="record", sender=1, round=0, neighbours=[], obstacles=[[1e9, 0.0]]),
+            "outside",
         ),
         (_raw(v=1, t="digest", sender=1, round=0, digest="xyz", members=[]), "hex"),
         (_raw(v=1, t="status", sender=1, phase="dancing"), "not one of"),

@@ -615,6 +615,10 @@ def plot(obs: Observer, result: dict[str, Any], path: Path) -> None:
         c, p = row["child"], row["parent"]
         if c in final and p in final:
             ax.plot([final[c][0], final[p][0]], [final[c][1], final[p][1]], "k--", lw=0.8)
+    if "obstacles" in result:
+        from tools.obstacle_scenario import draw_obstacles
+
+        draw_obstacles(ax, result)
     leader = result.get("leader")
     if leader in final:
         ax.plot(final[leader][0], final[leader][1], "*", color="green", ms=16)
@@ -676,6 +680,10 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
         naoqi = ["--naoqi"] if getattr(args, "body", "") == "naoqi" else []
         noise = [f"--noise-scale={getattr(args, 'noise_scale', 1.0):g}"]
         room = march_room(args, n, seed, out)
+        if getattr(args, "obstacles", 0) > 0:  # 5.1.2: obstacles on the straight paths
+            from tools.obstacle_scenario import obstacle_world_args
+
+            room = obstacle_world_args(n, seed, args.obstacles, d_e, phi_e, out, result)
         world = start_world(
             n, seed, endpoint, out, [*room, *(args.world_arg or []), *naoqi, *noise], world_net
         )
@@ -845,6 +853,10 @@ def summarise(
             result["finals"] = {str(i): list(final[i]) for i in ids if i in final}
             if result.get("route"):
                 judge_march(obs, result, plan, axis, pairs, d_e, phi_e)
+            if "obstacles" in result:
+                from tools.obstacle_scenario import judge_obstacles
+
+                judge_obstacles(result, obs.truth, obs.contacts, plan)
         except (ValueError, KeyError, AttributeError, ImportError) as exc:
             result["evaluation_error"] = f"{type(exc).__name__}: {exc}"
     rows = result["pairs"]
@@ -925,6 +937,11 @@ def print_table(r: dict[str, Any]) -> None:
             p(f"march: not judged ({r.get('march_error_reason', 'no plan')})")
     p(f"contacts: {r['contacts']} (robot-robot {r['robot_contacts']}), "
       f"min centre separation {r['min_separation']:.2f} m")  # fmt: skip
+    if "obstacle_contacts" in r:
+        err = r.get("obstacle_position_error", [])
+        p(f"obstacles: {len(r['obstacles'])} in the way, {r.get('obstacles_seen', 0)} planned "
+          f"around (position error {', '.join(f'{e:.2f}' for e in err) or '-'} m), "
+          f"contacts {r['obstacle_contacts']}, min gap {r['min_obstacle_gap']:.2f} m")  # fmt: skip
     p("phase       wall max (s)  sim max (s)")
     for ph, t in r["phases"].items():
         p(f"  {ph:9s} {t['wall_max']:12.1f} {t['sim_max']:12.1f}")
@@ -954,6 +971,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--out", type=Path, default=Path("out/demo"))
     p.add_argument("--json", type=Path, default=None, help="also write the result JSON here")
     p.add_argument("--batch", type=int, default=0, help="run seeds seed..seed+K-1, print totals")
+    p.add_argument(
+        "--obstacles", type=int, default=0,
+        help="K obstacles on the straight paths of the fleet's plan (tools.obstacle_scenario)",
+    )  # fmt: skip
     p.add_argument("--d-e", type=float, default=0.8)
     p.add_argument("--phi-e-deg", type=float, default=30.0)
     p.add_argument("--timeout", type=float, default=600.0, help="wall limit for the agents (s)")

@@ -33,7 +33,7 @@ from __future__ import annotations
 import hashlib
 import math
 import struct
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -43,6 +43,7 @@ from agent.formation.common_frame import METHODS, build_common_frame
 from agent.formation.detours import shorten
 from agent.formation.fallback import banded_plan
 from agent.formation.neighbour_check import DEFAULT_EPSILON, identify_neighbours
+from agent.formation.obstacle_map import common_frame_obstacles
 from agent.formation.obstacles import plan_around_obstacles
 from agent.formation.packing import pack, regroup_waves
 from agent.formation.pyramid import (
@@ -587,13 +588,21 @@ def plan_from_records(
     records: Sequence[NeighborRecord],
     params: PlanParams = PlanParams(),
     obstacles: np.ndarray | None = None,
+    sightings: Mapping[int, np.ndarray] | None = None,
 ) -> Plan:
     """The whole pipeline on a record set (any order): the same records -> the same plan.
 
     ``obstacles`` (M, 2), if any, are positions in the common frame (the frame robot's
-    fixed frame). Raises ``ValueError`` for bad records, a fleet that is not connected
-    through identified neighbours, or (with obstacles only) no safe schedule.
+    fixed frame). ``sightings`` maps a robot id to the obstacles it saw, in its fixed
+    frame: they are placed in the common frame and merged (:mod:`obstacle_map`), then
+    planned around with the others. Raises ``ValueError`` for bad records, a fleet that
+    is not connected through identified neighbours, or (with obstacles only) no safe
+    schedule.
     """
     graph = identify_neighbours(records, params.epsilon)
     cf = build_common_frame(graph, params.frame_method)
+    if sightings:
+        seen = common_frame_obstacles(cf.ids, cf.positions, sightings)
+        given = np.zeros((0, 2)) if obstacles is None else np.asarray(obstacles, dtype=np.float64)
+        obstacles = np.vstack([given.reshape(-1, 2), seen]) if seen.size else obstacles
     return plan_from_positions(cf.ids, cf.positions, params, obstacles, frame_robot=cf.frame_robot)

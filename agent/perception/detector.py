@@ -32,6 +32,21 @@ BORDER_PX = 2
 TWO_PI = 2.0 * math.pi
 
 
+def check_view(camera: CameraModel, image_bgr: object, head_yaw: float) -> np.ndarray:
+    """Validate an image of ``camera`` and a head yaw (``ValueError``); return the image."""
+    img = check_image(image_bgr)
+    if img.shape[:2] != (camera.height, camera.width):
+        raise ValueError(
+            f"image is {img.shape[1]}x{img.shape[0]}, the camera model expects "
+            f"{camera.width}x{camera.height}"
+        )
+    if not isinstance(head_yaw, int | float) or not math.isfinite(head_yaw):
+        raise ValueError(f"head yaw must be a finite number, got {head_yaw!r}")
+    if abs(head_yaw) > HEAD_YAW_LIMIT + 1e-9:
+        raise ValueError(f"head yaw {math.degrees(head_yaw):.1f}° outside ±119.5°")
+    return img
+
+
 @dataclass(frozen=True)
 class Detection:
     """One recognised neighbour.
@@ -76,17 +91,7 @@ class Recogniser:
 
     def check(self, image_bgr: object, head_yaw: float) -> np.ndarray:
         """Validate an image and a head yaw; return the image."""
-        img = check_image(image_bgr)
-        if img.shape[:2] != (self.camera.height, self.camera.width):
-            raise ValueError(
-                f"image is {img.shape[1]}x{img.shape[0]}, the camera model expects "
-                f"{self.camera.width}x{self.camera.height}"
-            )
-        if not isinstance(head_yaw, int | float) or not math.isfinite(head_yaw):
-            raise ValueError(f"head yaw must be a finite number, got {head_yaw!r}")
-        if abs(head_yaw) > HEAD_YAW_LIMIT + 1e-9:
-            raise ValueError(f"head yaw {math.degrees(head_yaw):.1f}° outside ±119.5°")
-        return img
+        return check_view(self.camera, image_bgr, head_yaw)
 
     def matches(self, image_bgr: np.ndarray, head_yaw: float = 0.0) -> list[Match]:
         """Accepted tuple groups of one image (boxes in the cylindrical image)."""

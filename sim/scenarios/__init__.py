@@ -2,7 +2,7 @@
 
 A scenario fixes everything the world needs to start (issue 3, DESIGN.md §4): robot ids
 and initial poses ``(x, y, heading)`` in world metres/radians, static obstacles (cylinders,
-radius 0.2 m by default), optional orange lookalike clutter for the detector's hard
+radius :data:`agent.nao.OBSTACLE_RADIUS` by default), optional orange lookalike clutter for the detector's hard
 cases, the light, the seed of the textures and of the motion noise, and the half-size of
 the square room.
 
@@ -21,6 +21,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from agent.protocol import nao
 
 NORTH = math.pi / 2
 MIN_SPACING = 0.6
@@ -44,11 +46,11 @@ class RobotSpec:
 
 @dataclass(frozen=True)
 class ObstacleSpec:
-    """A static cylinder standing on the floor (grey, 0.6 m tall)."""
+    """A static cylinder standing on the floor (obstacle rose, 0.6 m tall; agent/nao.py)."""
 
     x: float
     y: float
-    radius: float = 0.2
+    radius: float = nao.OBSTACLE_RADIUS
 
 
 @dataclass(frozen=True)
