@@ -123,8 +123,8 @@ class FormationAdapter:
             )
         return out
 
-    def plan(self, msgs: tuple[NeighborRecordMsg, ...], d_e: float, phi_e: float) -> Plan:
-        return plan_from_records(self.records(msgs), PlanParams(d_e=d_e, phi_e=phi_e))
+    def plan(self, msgs: tuple[NeighborRecordMsg, ...], params: PlanParams) -> Plan:
+        return plan_from_records(self.records(msgs), params)
 
     @staticmethod
     def members(plan: Plan) -> list[int]:

@@ -18,6 +18,7 @@ from agent.adapters import FormationAdapter, PerceptionAdapter
 from agent.bus import Bus, BusConfig
 from agent.config import AgentConfig, Route
 from agent.exchange import params_digest
+from agent.formation.plan import PlanParams
 from agent.protocol import NeighborRecordMsg, StatusMsg
 from agent.robot import ZenohBody
 from agent.runner import AgentFailure, Peer, Runner, report_unavailable
@@ -36,7 +37,7 @@ def records() -> tuple[NeighborRecordMsg, ...]:
 
 def test_formation_adapter_goals_are_plan_targets_in_own_fixed_frame() -> None:
     fa = FormationAdapter()
-    plan = fa.plan(records(), 0.8, math.radians(30))
+    plan = fa.plan(records(), PlanParams())
     assert fa.members(plan) == [1, 2, 3]
     for i in (1, 2, 3):
         rp = plan.robot(i)
@@ -54,8 +55,8 @@ def test_formation_adapter_goals_are_plan_targets_in_own_fixed_frame() -> None:
 
 def test_formation_adapter_is_order_independent() -> None:
     fa = FormationAdapter()
-    a = fa.plan(records(), 0.8, math.radians(30))
-    b = fa.plan(tuple(reversed(records())), 0.8, math.radians(30))
+    a = fa.plan(records(), PlanParams())
+    b = fa.plan(tuple(reversed(records())), PlanParams())
     assert a.digest == b.digest
 
 
@@ -141,7 +142,7 @@ def runner(perception: PerceptionAdapter) -> Iterator[Runner]:
     bus = Bus(BusConfig(multicast_scouting=False))
     cfg = AgentConfig(robot_id=3, fleet_size=3, wave_timeout=2.0)
     r = Runner(bus, ZenohBody(bus, 3), cfg, perception, FormationAdapter())
-    r.plan = r.formation.plan(records(), 0.8, math.radians(30))
+    r.plan = r.formation.plan(records(), PlanParams())
     try:
         yield r
     finally:
