@@ -146,8 +146,8 @@ def generate(
     to, and the fleet is connected. ``isolated`` (n >= 2): the last robot (id n) is
     placed the same way but at [ISOLATED_MIN, DETECT_MAX] = [2, 3] m from the robot it is
     attached to and at least ISOLATED_MIN from every other, so its nearest neighbour is
-    2-3 m away (the robots 1..n-1 are those of ``generate(n - 1, seed)``). The fleet is
-    then centred on the room's centre (rounded to mm). ``obstacles`` cylinders and
+    2-3 m away (the robots 1..n-1 stand as in ``generate(n - 1, seed)``, up to the
+    centring). The fleet is then centred on the room's centre (rounded to mm). ``obstacles`` cylinders and
     ``clutter`` orange cubes are put at least 0.8 m from every robot.
     """
     if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= 200:
