@@ -334,9 +334,7 @@ class Agreement:
         """None while every known parameters digest equals ours; else ``failed``, naming
         the odd robots (:func:`odd_params`) once every member's digest is known or at the
         timeout, and ``wait`` until then."""
-        known = {
-            i: p for i, p in self.params_of.items() if i in self.live or i in self.left
-        }
+        known = {i: p for i, p in self.params_of.items() if i in self.live or i in self.left}
         if all(p == self.params for p in known.values()):
             return None
         known[self.self_id] = self.params

@@ -371,7 +371,9 @@ def test_an_agent_with_other_params_is_named_and_nobody_plans() -> None:
         ({4: "a", 7: "a"}, [], [4, 7]),
     ],
 )
-def test_odd_params_known_answers(params_of: dict[int, str], odd: list[int], ref: list[int]) -> None:
+def test_odd_params_known_answers(
+    params_of: dict[int, str], odd: list[int], ref: list[int]
+) -> None:
     assert odd_params(params_of) == (odd, ref)
 
 
