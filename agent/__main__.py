@@ -28,8 +28,7 @@ import math
 import sys
 from typing import TYPE_CHECKING
 
-from agent.formation.plan import PLAN_STRATEGIES
-from agent.formation.pyramid import ORIENTATIONS
+from agent.config import add_plan_arguments
 from agent.nao import NAOQI_PORT
 from agent.protocol import MAX_ROBOT_ID, add_network_arguments, network_spec
 
@@ -46,19 +45,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument(
         "--phi-e-deg", type=float, default=30.0, help="expected parent-child angle (deg)"
     )
-    p.add_argument(
-        "--orientation",
-        choices=ORIENTATIONS,
-        default="pca",
-        help="pyramid orientation: pca (the fleet's principal axis, NAO paper eq. 12) or "
-        "cp (the AUV paper's fixed direction, north of the common frame)",
-    )
-    p.add_argument(
-        "--strategy",
-        choices=PLAN_STRATEGIES,
-        default="default",
-        help="slot assignment strategy of the planner (agent/formation/plan.py)",
-    )
+    add_plan_arguments(p)
     p.add_argument(
         "--timeout", type=float, default=120.0, help="agreement timeout after the search (s)"
     )

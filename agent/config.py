@@ -6,11 +6,13 @@ builds it from the command line.
 
 from __future__ import annotations
 
+import argparse
 import math
 from dataclasses import dataclass
 
 from agent.exchange import ParamValue
-from agent.formation.plan import PlanParams
+from agent.formation.plan import PLAN_STRATEGIES, PlanParams
+from agent.formation.pyramid import ORIENTATIONS
 from agent.nao import HEAD_YAW_LIMIT
 from agent.perception.camera import CameraModel
 
@@ -19,6 +21,24 @@ from agent.perception.camera import CameraModel
 #: gaps where a NAO closer than about 0.8 m fell between two images and was dropped as
 #: cut by the border).
 SEARCH_YAWS = CameraModel().sweep_yaws(limit=HEAD_YAW_LIMIT)
+
+
+def add_plan_arguments(p: argparse.ArgumentParser) -> None:
+    """``--orientation`` and ``--strategy`` (the agent's and the demo's, which gives them to
+    every agent): part of the agreed parameters (:meth:`AgentConfig.agreed_params`)."""
+    p.add_argument(
+        "--orientation",
+        choices=ORIENTATIONS,
+        default="pca",
+        help="pyramid orientation: pca (the fleet's principal axis, NAO paper eq. 12) or "
+        "cp (the AUV paper's fixed direction, north of the common frame)",
+    )
+    p.add_argument(
+        "--strategy",
+        choices=PLAN_STRATEGIES,
+        default="default",
+        help="slot assignment strategy of the planner (agent/formation/plan.py)",
+    )
 
 
 MAX_ROUTE = 50.0  # m: the longest march accepted (the longest walk command the world takes)

@@ -58,8 +58,7 @@ from typing import IO, Any
 import numpy as np
 
 from agent.bus import Bus, BusConfig
-from agent.formation.plan import PLAN_STRATEGIES
-from agent.formation.pyramid import ORIENTATIONS
+from agent.config import add_plan_arguments
 from agent.protocol import (
     INSECURE_WARNING,
     KEY_ALIVE_ALL,
@@ -992,23 +991,20 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--batch", type=int, default=0, help="run seeds seed..seed+K-1, print totals")
     p.add_argument("--d-e", type=float, default=0.8)
     p.add_argument("--phi-e-deg", type=float, default=30.0)
-    p.add_argument(
-        "--orientation", choices=ORIENTATIONS, default="pca",
-        help="pyramid orientation every agent plans with: pca (eq. 12) or cp (AUV paper)",
-    )  # fmt: skip
-    p.add_argument(
-        "--strategy", choices=PLAN_STRATEGIES, default="default",
-        help="slot assignment strategy every agent plans with",
-    )  # fmt: skip
+    add_plan_arguments(p)  # given to every agent
     where = p.add_mutually_exclusive_group()
     where.add_argument(
-        "--scenario", type=Path, default=None, metavar="FILE",
+        "--scenario",
+        type=Path,
+        default=None,
+        metavar="FILE",
         help="world scenario JSON (sim/scenarios): robot count and ids from the file",
-    )  # fmt: skip
+    )
     where.add_argument(
-        "--isolated", action="store_true",
+        "--isolated",
+        action="store_true",
         help="generated scenario with one robot 2-3 m from every other",
-    )  # fmt: skip
+    )
     p.add_argument("--timeout", type=float, default=600.0, help="wall limit for the agents (s)")
     p.add_argument("--agree-timeout", type=float, default=120.0)
     p.add_argument("--auto-ids", action="store_true", help="agents claim robots (--id auto)")

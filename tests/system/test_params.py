@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import subprocess
 import sys
 import time
@@ -23,10 +22,9 @@ from pathlib import Path
 
 import pytest
 
-from agent.bus import Bus, BusConfig
-from agent.protocol import KEY_STATUS_ALL, KEY_WORLD_TRUTH_ALL, StatusMsg, TruthPosesMsg
 from sim import scenarios
-from tools.demo import free_port, robot_ids, start_agent, start_world, stop
+from tests.system.world import Watch, watched_world
+from tools.demo import start_agent
 
 pytestmark = [pytest.mark.system, pytest.mark.slow]
 
@@ -41,53 +39,30 @@ def agent_args(orientation: str) -> argparse.Namespace:
 
 
 def test_agent_with_other_parameters_is_named_and_nobody_walks(tmp_path: Path) -> None:
-    ep = f"tcp/127.0.0.1:{free_port()}"
-    bus = Bus(BusConfig(connect=(ep,), multicast_scouting=False))
-    bus.subscribe(KEY_STATUS_ALL)
-    bus.subscribe(KEY_WORLD_TRUTH_ALL)
-    world = start_world(3, 1, ep, tmp_path, [])
-    procs = [world]
-    try:
-        deadline = time.monotonic() + 120
-        while not any("ready" in ln for ln in world.lines):
-            assert world.popen.poll() is None and time.monotonic() < deadline, "world not ready"
-            bus.drain(0.1)
-        ids = robot_ids(world.lines, 3)
+    with watched_world(tmp_path, 3, 1) as (ep, bus, ids, procs):
         odd = ids[1]
         agents = {
             i: start_agent(i, 3, ep, tmp_path, agent_args("cp" if i == odd else "pca")) for i in ids
         }
         procs += list(agents.values())
-        first: dict[int, tuple[float, float]] = {}
-        last: dict[int, tuple[float, float]] = {}
-        final: dict[int, StatusMsg] = {}
+        w = Watch()
         deadline = time.monotonic() + 300
         while time.monotonic() < deadline:
             for ev in bus.drain(0.1):
-                msg = ev.msg
-                if isinstance(msg, TruthPosesMsg):
-                    for rid, x, y, _ in msg.poses:
-                        first.setdefault(rid, (x, y))
-                        last[rid] = (x, y)
-                elif isinstance(msg, StatusMsg):
-                    final[msg.sender] = msg
+                w.take(ev.msg)
             if all(a.popen.poll() is not None for a in agents.values()):
                 break
         for _ in range(10):  # the last truth after the agents stopped
-            bus.drain(0.1)
+            for ev in bus.drain(0.1):
+                w.take(ev.msg)
         for i in ids:
             assert agents[i].popen.poll() == 1, f"agent {i} did not stop with a failure"
-            st = final[i]
+            st = w.final[i]
             assert st.phase == "failed", st
             assert f"robot(s) [{odd}] plan with different parameters" in st.error, (i, st.error)
             assert ("this robot among them" in st.error) == (i == odd), st.error
             assert st.plan_digest == "" and st.wave == -1  # it never planned
-            moved = math.hypot(last[i][0] - first[i][0], last[i][1] - first[i][1])
-            assert moved < 0.02, f"robot {i} moved {moved:.3f} m"
-    finally:
-        for p in reversed(procs):
-            stop(p)
-        bus.close()
+            assert w.moved(i) < 0.02, f"robot {i} moved {w.moved(i):.3f} m"
 
 
 def test_demo_on_a_scenario_file_plans_the_cp_pyramid(tmp_path: Path) -> None:
