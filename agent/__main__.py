@@ -2,12 +2,17 @@
 
     python -m agent --id N|auto [--fleet-size N] [--connect EP]... [--listen EP]...
                     [--no-multicast-scouting] [--mode peer|client] [--d-e 0.8]
-                    [--phi-e-deg 30] [--timeout S] [--body zenoh|naoqi]
+                    [--phi-e-deg 30] [--orientation pca|cp] [--strategy S]
+                    [--timeout S] [--body zenoh|naoqi]
                     [--nao tcp://HOST:9559]
 
 The body is the simulated world over zenoh (``--body zenoh``, the default) or a NAO
 over its qi protocol (``--body naoqi --nao tcp://nao.local:9559``: a real robot, or a
 virtual one served by ``python -m sim --naoqi``). Agents always talk zenoh to each other.
+
+Every agent of a fleet must be started with the same planning parameters (``--d-e``,
+``--phi-e-deg``, ``--orientation``, ``--strategy``, the route): the agreement compares
+their digests and stops the whole fleet, naming the odd robot, when they differ.
 
 Exit status: 0 when the robot holds its place in the pyramid, 1 on a safe stop
 (failed agreement, planning or motion; the reason is logged and published), 2 on a
@@ -23,6 +28,7 @@ import math
 import sys
 from typing import TYPE_CHECKING
 
+from agent.config import add_plan_arguments
 from agent.nao import NAOQI_PORT
 from agent.protocol import MAX_ROBOT_ID, add_network_arguments, network_spec
 
@@ -39,6 +45,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument(
         "--phi-e-deg", type=float, default=30.0, help="expected parent-child angle (deg)"
     )
+    add_plan_arguments(p)
     p.add_argument(
         "--timeout", type=float, default=120.0, help="agreement timeout after the search (s)"
     )
@@ -212,6 +219,8 @@ def main(argv: list[str] | None = None) -> int:
                     fleet_size=args.fleet_size,
                     d_e=args.d_e,
                     phi_e=math.radians(args.phi_e_deg),
+                    orientation=args.orientation,
+                    strategy=args.strategy,
                     timeout=args.timeout,
                     wave_timeout=args.wave_timeout,
                     correct=not args.no_correct,

@@ -152,12 +152,10 @@ class FormationAdapter:
         """The obstacles each record reports, (k, 2) in its sender's fixed frame."""
         return {m.sender: np.array(m.obstacles, dtype=np.float64) for m in msgs if m.obstacles}
 
-    def plan(self, msgs: tuple[NeighborRecordMsg, ...], d_e: float, phi_e: float) -> Plan:
+    def plan(self, msgs: tuple[NeighborRecordMsg, ...], params: PlanParams) -> Plan:
         """The plan of the agreed records, around the obstacles they report (5.1.2)."""
         return plan_from_records(
-            self.records(msgs),
-            PlanParams(d_e=d_e, phi_e=phi_e),
-            sightings=self.obstacle_sightings(msgs),
+            self.records(msgs), params, sightings=self.obstacle_sightings(msgs)
         )
 
     @staticmethod

@@ -6,11 +6,13 @@ builds it from the command line.
 
 from __future__ import annotations
 
+import argparse
 import math
 from dataclasses import dataclass
 
 from agent.exchange import ParamValue
-from agent.formation.plan import PlanParams
+from agent.formation.plan import PLAN_STRATEGIES, PlanParams
+from agent.formation.pyramid import ORIENTATIONS
 from agent.nao import HEAD_YAW_LIMIT
 from agent.perception.camera import CameraModel
 
@@ -19,6 +21,24 @@ from agent.perception.camera import CameraModel
 #: gaps where a NAO closer than about 0.8 m fell between two images and was dropped as
 #: cut by the border).
 SEARCH_YAWS = CameraModel().sweep_yaws(limit=HEAD_YAW_LIMIT)
+
+
+def add_plan_arguments(p: argparse.ArgumentParser) -> None:
+    """``--orientation`` and ``--strategy`` (the agent's and the demo's, which gives them to
+    every agent): part of the agreed parameters (:meth:`AgentConfig.agreed_params`)."""
+    p.add_argument(
+        "--orientation",
+        choices=ORIENTATIONS,
+        default="pca",
+        help="pyramid orientation: pca (the fleet's principal axis, NAO paper eq. 12) or "
+        "cp (the AUV paper's fixed direction, north of the common frame)",
+    )
+    p.add_argument(
+        "--strategy",
+        choices=PLAN_STRATEGIES,
+        default="default",
+        help="slot assignment strategy of the planner (agent/formation/plan.py)",
+    )
 
 
 MAX_ROUTE = 50.0  # m: the longest march accepted (the longest walk command the world takes)
@@ -55,12 +75,15 @@ class Route:
 
 @dataclass(frozen=True)
 class AgentConfig:
-    """What one agent is told: its robot, the fleet, the pyramid (d_e, phi_e) and limits."""
+    """What one agent is told: its robot, the fleet, the pyramid (d_e, phi_e, orientation,
+    strategy) and limits."""
 
     robot_id: int
     fleet_size: int | None = None
     d_e: float = 0.8
     phi_e: float = math.radians(30.0)
+    orientation: str = "pca"  # pyramid orientation: "pca" (NAO eq. 12) | "cp" (AUV III.B)
+    strategy: str = "default"  # assignment strategy, one of formation.plan.PLAN_STRATEGIES
     timeout: float = 120.0  # s from the end of the search to agreement
     wave_timeout: float = 600.0  # s to wait for earlier waves, and for the fleet to hold
     settle: float = 3.0  # s of unchanged membership when no fleet size is given
@@ -76,14 +99,21 @@ class AgentConfig:
     march_pause: float = 4.0  # the leader rests this many times each step's duration
     lost_rounds: int = 3  # head searches for a lost parent before the fleet halts
 
+    def plan_params(self) -> PlanParams:
+        """The planning parameters this agent plans with (the formation seam takes them)."""
+        return PlanParams(
+            d_e=self.d_e, phi_e=self.phi_e, orientation=self.orientation, strategy=self.strategy
+        )
+
     def agreed_params(self) -> dict[str, ParamValue]:
         """What every agent must share to plan and march alike (digest in DigestMsg)."""
-        pp = PlanParams(d_e=self.d_e, phi_e=self.phi_e)
+        pp = self.plan_params()
         route = None if self.march is None else self.march.key()
         return {
             "d_e": pp.d_e,
             "phi_e": pp.phi_e,
             "radius": pp.radius,
+            "orientation": pp.orientation,
             "strategy": pp.strategy,
             "route": route,
             "march_step": self.march_step if self.march is not None else None,
@@ -96,6 +126,7 @@ class AgentConfig:
             raise ValueError(f"d_e must be > 0 m, got {self.d_e}")
         if not (math.isfinite(self.phi_e) and 0.0 < self.phi_e < math.pi / 2):
             raise ValueError(f"phi_e must be in (0°, 90°), got {math.degrees(self.phi_e)}°")
+        self.plan_params()  # orientation and strategy: ValueError when unknown
         for name in ("timeout", "wave_timeout", "settle"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0.0):

@@ -19,7 +19,8 @@ the same record set, and moves only then:
 
 Re-publishing (what :meth:`Agreement.due` returns): the record once, again when a member
 joins, and while some member's latest digest does not list this agent; the digest while some member's digest differs from
-ours, and after agreement until every member has reported a post-agreement phase.
+ours, after agreement until every member has reported a post-agreement phase, and after
+a failure on parameters (as long as the caller pumps).
 Intervals back off exponentially from ``backoff_min`` to ``backoff_max`` and reset when
 something new arrives. Pure: the caller passes the time and does the I/O.
 
@@ -30,11 +31,15 @@ whose record outran its liveliness token: our digest does not list it, which mak
 re-send its record (see the re-publishing rules above).
 
 **Agreed parameters.** Equal records are not enough: every agent must also plan with
-the same d_e, φ_e, radius and strategy, and march the same route. Each agent hashes its
-own settings (:func:`params_digest`) and sends that digest in every ``DigestMsg``
-(``params``); a member whose parameters digest differs from ours counts as disagreeing,
-and the agreement fails at once, naming it (an agent started with other settings is
-never outvoted, and nobody plans or marches differently).
+the same d_e, φ_e, radius, orientation and strategy, and march the same route. Each agent
+hashes its own settings (:func:`params_digest`) and sends that digest in every
+``DigestMsg`` (``params``); a member whose parameters digest differs from ours counts as
+disagreeing, and the agreement fails (an agent started with other settings is never
+outvoted, and nobody plans or marches differently). To name the odd robot alike on every
+agent, the failure waits until the parameters digest of every member is known (the
+fleet complete when ``fleet_size`` is given; members that left count with their last
+digest), or until ``timeout``; then the robots outside the largest group of equal
+digests are named (:func:`odd_params`; a tie goes to the group holding the smallest id).
 
 Tie-breaks: a record with a higher ``round`` replaces an older one; for the same round
 the latest received wins (re-publications are identical). Digests are over the
@@ -80,6 +85,20 @@ def params_digest(params: Mapping[str, ParamValue]) -> str:
 
     text = json.dumps({str(k): canon(v) for k, v in params.items()}, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()
+
+
+def odd_params(params_of: Mapping[int, str]) -> tuple[list[int], list[int]]:
+    """(odd robots, reference robots) by their parameters digests, ids sorted.
+
+    The reference is the largest group of robots with equal digests; between groups of
+    the same size, the one holding the smallest id. Every other robot is odd. A pure
+    function of the digests, so agents holding the same digests name the same robots.
+    """
+    groups: dict[str, list[int]] = {}
+    for rid in sorted(params_of):
+        groups.setdefault(params_of[rid], []).append(rid)
+    ref = min(groups.values(), key=lambda g: (-len(g), g[0]))
+    return sorted(i for i in params_of if i not in ref), ref
 
 
 def canonical_digest(records: Sequence[NeighborRecordMsg]) -> str:
@@ -159,7 +178,7 @@ class Agreement:
         self.started = now
         self.digest_fn = digest_fn
         self.params = params  # our agreed-parameters digest (params_digest)
-        self.params_mismatch: dict[int, str] = {}  # member -> its differing params digest
+        self.params_of: dict[int, str] = {}  # member (live or left) -> its params digest
         self.live: set[int] = {self_id}
         self.left: set[int] = set()
         self.records: dict[int, NeighborRecordMsg] = {self_id: own_record}
@@ -172,6 +191,7 @@ class Agreement:
         self._record_pending = True  # publish at least once (again after a newcomer)
         self._digest_tx = _Backoff(backoff_min, backoff_max)
         self._final: Decision | None = None
+        self._params_failed = False  # failed on parameters: the digest is still answered
         self._digest_cache: tuple[tuple[int, ...], str] | None = None
 
     # ----------------------------------------------------------------- inputs
@@ -212,15 +232,15 @@ class Agreement:
     def on_digest(self, msg: DigestMsg, now: float) -> None:
         if msg.sender == self.self_id:
             return
+        if msg.sender in self.left:  # its parameters still help to name the odd robot
+            self.params_of[msg.sender] = msg.params
+            return
         if msg.sender not in self.live:
             self.ignored += 1
             return
         old = self.digests.get(msg.sender)
         self.digests[msg.sender] = msg
-        if msg.params != self.params:
-            self.params_mismatch[msg.sender] = msg.params
-        else:
-            self.params_mismatch.pop(msg.sender, None)
+        self.params_of[msg.sender] = msg.params
         if old is None or (old.digest, old.members) != (msg.digest, msg.members):
             if self.self_id not in msg.members:
                 self._record_tx.reset(now)
@@ -271,18 +291,13 @@ class Agreement:
         """Wait, agreed or failed. Agreed and failed are final."""
         if self._final is not None:
             return self._final
+        params_wait = self._params_decision(now)
+        if params_wait is not None:
+            return params_wait
         if self.left:
             return self._fail(
                 f"member(s) {sorted(self.left)} left before agreement; "
                 "not moving on a plan they may not share"
-            )
-        odd = sorted(i for i in self.params_mismatch if i in self.live)
-        if odd:
-            theirs = ", ".join(f"{i}: {self.params_mismatch[i][:12] or '(none)'}" for i in odd)
-            return self._fail(
-                f"robot(s) {odd} run with different planning parameters "
-                f"(params digest {theirs}; ours {self.params[:12] or '(none)'}): "
-                "not planning or marching differently"
             )
         n = len(self.live)
         if self.fleet_size is not None and n > self.fleet_size:
@@ -315,6 +330,34 @@ class Agreement:
             return self._fail("; ".join(parts))
         return Decision("wait", self._wait_reason(missing, disagree))
 
+    def _params_decision(self, now: float) -> Decision | None:
+        """None while every known parameters digest equals ours; else ``failed``, naming
+        the odd robots (:func:`odd_params`) once every member's digest is known or at the
+        timeout, and ``wait`` until then."""
+        known = {i: p for i, p in self.params_of.items() if i in self.live or i in self.left}
+        if all(p == self.params for p in known.values()):
+            return None
+        known[self.self_id] = self.params
+        unknown = sorted(i for i in self.live if i not in known)
+        complete = self.fleet_size is None or len(self.live | self.left) >= self.fleet_size
+        timed_out = now - self.started > self.timeout
+        odd, ref = odd_params(known)
+        if (unknown or not complete) and not timed_out:
+            return Decision(
+                "wait",
+                f"planning parameters differ (robots {odd} from {ref} so far); "
+                f"waiting for the parameters of {unknown or 'the whole fleet'} to name who",
+            )
+        names = ", ".join(f"{i}: {known[i][:12] or '(none)'}" for i in odd)
+        self._params_failed = True
+        mine = " (this robot among them)" if self.self_id in odd else ""
+        return self._fail(
+            f"robot(s) {odd} plan with different parameters{mine}: params digest {names}; "
+            f"robots {ref}: {known[ref[0]][:12] or '(none)'}"
+            + (f"; parameters unknown for {unknown}" if unknown else "")
+            + "; nobody plans or marches"
+        )
+
     def _wait_reason(self, missing: list[int], disagree: list[int]) -> str:
         if self.fleet_size is not None and len(self.live) < self.fleet_size:
             return f"{len(self.live)} of {self.fleet_size} members"
@@ -341,6 +384,10 @@ class Agreement:
         """
         out: list[str] = []
         if self._final is not None and self._final.kind == "failed":
+            # after a parameters failure our digest (our parameters) still goes out, so
+            # that members that have not heard it yet name the same odd robot
+            if self._params_failed and self._digest_tx.due(now):
+                out.append("digest")
             return out
         others = self.live - {self.self_id}
         if self.agreed:

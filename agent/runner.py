@@ -621,7 +621,7 @@ class Runner:
     def make_plan(self, decision: Decision) -> Plan:
         self.status("plan", 0.0, decision.reason)
         try:
-            plan = self.formation.plan(decision.records, self.cfg.d_e, self.cfg.phi_e)
+            plan = self.formation.plan(decision.records, self.cfg.plan_params())
         except ValueError as exc:
             raise AgentFailure(f"planning failed on the agreed records: {exc}") from None
         self.plan = plan

@@ -23,7 +23,7 @@ from typing import Literal, Protocol
 
 import numpy as np
 
-from agent.formation.plan import Plan
+from agent.formation.plan import Plan, PlanParams
 from agent.perception.compass import CompassResult
 from agent.perception.detector import Detection
 from agent.perception.obstacles import ObstacleDetection
@@ -124,7 +124,10 @@ class Perception(Protocol):
 class Formation(Protocol):
     """The formation core (NAO paper §4, AUV III): records → plan → goals."""
 
-    def plan(self, msgs: tuple[NeighborRecordMsg, ...], d_e: float, phi_e: float) -> Plan: ...
+    def plan(self, msgs: tuple[NeighborRecordMsg, ...], params: PlanParams) -> Plan:
+        """The plan of the agreed records with the agreed parameters (d_e, φ_e,
+        orientation, strategy: :meth:`agent.config.AgentConfig.plan_params`)."""
+        ...
 
     def members(self, plan: Plan) -> list[int]: ...
 

@@ -36,10 +36,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=7, help="seed of the scenario, textures and noise")
     p.add_argument(
         "--scenario",
-        help="scenario JSON file (replaces --robots/--seed/--obstacles/--clutter/--light)",
+        help="scenario JSON file (replaces --robots/--seed/--obstacles/--clutter/--light/--isolated)",
     )
     p.add_argument("--obstacles", type=int, default=0, help="static cylinders (generated)")
     p.add_argument("--clutter", type=int, default=0, help="orange lookalike cubes (generated)")
+    p.add_argument(
+        "--isolated",
+        action="store_true",
+        help="the last robot (generated) stands 2-3 m from every other (far end of sight)",
+    )
     p.add_argument("--light", type=float, default=1.0, help="light intensity (1.0 = default)")
     p.add_argument("--no-noise", action="store_true", help="noiseless walking and turning")
     p.add_argument(
@@ -93,7 +98,12 @@ def main(argv: list[str] | None = None) -> int:
         else:
             light = scenarios.LightSpec(intensity=args.light)
             sc = scenarios.generate(
-                args.robots, args.seed, obstacles=args.obstacles, clutter=args.clutter, light=light
+                args.robots,
+                args.seed,
+                obstacles=args.obstacles,
+                clutter=args.clutter,
+                light=light,
+                isolated=args.isolated,
             )
         if args.dump_scenario:
             scenarios.dump(sc, args.dump_scenario)

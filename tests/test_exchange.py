@@ -7,7 +7,7 @@ from collections.abc import Callable
 
 import pytest
 
-from agent.exchange import Agreement, canonical_digest, params_digest
+from agent.exchange import Agreement, canonical_digest, odd_params, params_digest
 from agent.protocol import DigestMsg, NeighborRecordMsg
 
 Drop = Callable[[str, int, int, float], bool]
@@ -362,5 +362,57 @@ def test_an_agent_with_other_params_is_named_and_nobody_plans() -> None:
     net.run(3.0)
     ds = {i: a.decide(net.t) for i, a in net.agents.items()}
     assert all(d.kind == "failed" for d in ds.values()), ds
-    assert "robot(s) [2]" in ds[0].reason and "different planning parameters" in ds[0].reason
-    assert "robot(s) [0, 1]" in ds[2].reason
+    for i, d in ds.items():  # every agent names robot 2, the odd one itself included
+        assert "robot(s) [2] plan with different parameters" in d.reason, (i, d.reason)
+        assert "robots [0, 1]: " + P_A[:12] in d.reason
+        assert ("this robot among them" in d.reason) == (i == 2)
+
+
+@pytest.mark.parametrize(
+    "params_of, odd, ref",
+    [
+        ({0: "a", 1: "a", 2: "b"}, [2], [0, 1]),
+        ({0: "b", 1: "a", 2: "a"}, [0], [1, 2]),
+        ({3: "b", 1: "a"}, [3], [1]),  # a tie: the group with the smallest id
+        ({5: "x", 2: "y", 9: "z"}, [5, 9], [2]),
+        ({4: "a", 7: "a"}, [], [4, 7]),
+    ],
+)
+def test_odd_params_known_answers(
+    params_of: dict[int, str], odd: list[int], ref: list[int]
+) -> None:
+    assert odd_params(params_of) == (odd, ref)
+
+
+def test_odd_robot_is_named_only_once_every_member_is_heard() -> None:
+    # 1's digests do not reach 0 for 2 s: 0 holds only its own and 2's (a 1-1 tie) and
+    # waits instead of naming a robot from half the fleet
+    net = Net([0, 1, 2], drop=lambda kind, s, d, t: kind == "digest" and s == 1 and t < 2.0)
+    for i, a in net.agents.items():
+        a.params = P_B if i == 2 else P_A
+    net.run(1.5)
+    d0 = net.agents[0].decide(net.t)
+    assert d0.kind == "wait" and "waiting for the parameters of [1]" in d0.reason
+    net.run(4.0)
+    d0 = net.agents[0].decide(net.t)
+    assert d0.kind == "failed" and "robot(s) [2] plan with different parameters" in d0.reason
+
+
+def test_a_member_that_left_still_counts_for_naming() -> None:
+    a = Agreement(0, rec(0), 0.0, fleet_size=3, params=P_A)
+    for i in (1, 2):
+        a.member_joined(i, 0.0)
+    a.on_digest(DigestMsg(sender=2, round=0, digest="a" * 64, members=(2,), params=P_B), 0.1)
+    a.member_left(1, 0.2)
+    a.on_digest(DigestMsg(sender=1, round=0, digest="b" * 64, members=(1,), params=P_A), 0.3)
+    d = a.decide(0.4)
+    assert d.kind == "failed" and "robot(s) [2] plan with different parameters" in d.reason
+
+
+def test_params_mismatch_names_what_is_known_at_the_timeout() -> None:
+    a = Agreement(0, rec(0), 0.0, fleet_size=3, timeout=5.0, params=P_A)
+    a.member_joined(1, 0.0)
+    a.on_digest(DigestMsg(sender=1, round=0, digest="a" * 64, members=(1,), params=P_B), 0.1)
+    assert a.decide(1.0).kind == "wait"  # robot 2 has not even joined
+    d = a.decide(6.0)
+    assert d.kind == "failed" and "robot(s) [1] plan with different parameters" in d.reason

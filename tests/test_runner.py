@@ -17,7 +17,8 @@ import pytest
 from agent.adapters import FormationAdapter, PerceptionAdapter
 from agent.bus import Bus, BusConfig
 from agent.config import AgentConfig, Route
-from agent.exchange import params_digest
+from agent.exchange import Decision, params_digest
+from agent.formation.plan import PlanParams
 from agent.protocol import NeighborRecordMsg, StatusMsg
 from agent.robot import ZenohBody
 from agent.runner import AgentFailure, Peer, Runner, report_unavailable
@@ -36,7 +37,7 @@ def records() -> tuple[NeighborRecordMsg, ...]:
 
 def test_formation_adapter_goals_are_plan_targets_in_own_fixed_frame() -> None:
     fa = FormationAdapter()
-    plan = fa.plan(records(), 0.8, math.radians(30))
+    plan = fa.plan(records(), PlanParams())
     assert fa.members(plan) == [1, 2, 3]
     for i in (1, 2, 3):
         rp = plan.robot(i)
@@ -54,8 +55,8 @@ def test_formation_adapter_goals_are_plan_targets_in_own_fixed_frame() -> None:
 
 def test_formation_adapter_is_order_independent() -> None:
     fa = FormationAdapter()
-    a = fa.plan(records(), 0.8, math.radians(30))
-    b = fa.plan(tuple(reversed(records())), 0.8, math.radians(30))
+    a = fa.plan(records(), PlanParams())
+    b = fa.plan(tuple(reversed(records())), PlanParams())
     assert a.digest == b.digest
 
 
@@ -125,10 +126,39 @@ def test_agreed_params_cover_the_route_and_the_geometry() -> None:
         AgentConfig(robot_id=1),
         AgentConfig(robot_id=1, march=Route(distance=3.0), d_e=0.9),
         AgentConfig(robot_id=1, march=Route(distance=3.0), phi_e=math.radians(31)),
+        AgentConfig(robot_id=1, march=Route(distance=3.0), orientation="cp"),
+        AgentConfig(robot_id=1, march=Route(distance=3.0), strategy="paper"),
     ):
         assert params_digest(other.agreed_params()) != d, other
     assert base.agreed_params()["route"] == ("axis", 3.0)
     assert Route(to=(1.0, -2.0)).key() == ("to", 1.0, -2.0)
+
+
+def test_plan_params_carry_orientation_and_strategy() -> None:
+    cfg = AgentConfig(robot_id=1, d_e=0.9, orientation="cp", strategy="capt")
+    pp = cfg.plan_params()
+    assert (pp.d_e, pp.phi_e, pp.orientation, pp.strategy) == (0.9, cfg.phi_e, "cp", "capt")
+    assert cfg.agreed_params()["orientation"] == "cp"
+    assert cfg.agreed_params()["strategy"] == "capt"
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [({"orientation": "north"}, "orientation must be one of"), ({"strategy": "x"}, "strategy")],
+)
+def test_config_rejects_unknown_orientation_and_strategy(
+    kwargs: dict[str, str], match: str
+) -> None:
+    with pytest.raises(ValueError, match=match):
+        AgentConfig(robot_id=1, **kwargs)  # type: ignore[arg-type]
+
+
+def test_cp_plan_faces_north_of_the_common_frame() -> None:
+    fa = FormationAdapter()
+    pca = fa.plan(records(), PlanParams())
+    cp = fa.plan(records(), AgentConfig(robot_id=1, orientation="cp").plan_params())
+    assert fa.axis_angle(cp) == pytest.approx(math.pi / 2)
+    assert cp.digest != pca.digest
 
 
 @pytest.fixture(scope="module")
@@ -141,11 +171,23 @@ def runner(perception: PerceptionAdapter) -> Iterator[Runner]:
     bus = Bus(BusConfig(multicast_scouting=False))
     cfg = AgentConfig(robot_id=3, fleet_size=3, wave_timeout=2.0)
     r = Runner(bus, ZenohBody(bus, 3), cfg, perception, FormationAdapter())
-    r.plan = r.formation.plan(records(), 0.8, math.radians(30))
+    r.plan = r.formation.plan(records(), PlanParams())
     try:
         yield r
     finally:
         bus.close()
+
+
+def test_make_plan_plans_with_the_agents_parameters(perception: PerceptionAdapter) -> None:
+    bus = Bus(BusConfig(multicast_scouting=False))
+    try:
+        cfg = AgentConfig(robot_id=3, fleet_size=3, orientation="cp", strategy="paper")
+        r = Runner(bus, ZenohBody(bus, 3), cfg, perception, FormationAdapter())
+        plan = r.make_plan(Decision("agreed", records=records()))
+    finally:
+        bus.close()
+    assert plan.axis == pytest.approx(math.pi / 2)
+    assert plan.digest == FormationAdapter().plan(records(), cfg.plan_params()).digest
 
 
 def earlier(r: Runner) -> list[int]:

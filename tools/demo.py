@@ -2,6 +2,8 @@
 
     python -m tools.demo --robots 3 --seed 1 [--json FILE] [--out DIR]
     python -m tools.demo --robots 3 --seed 1 --batch 20 [--out DIR]   (seeds 1..20)
+    python -m tools.demo --scenario sim/scenarios/paper3.json    (robots from the file)
+    python -m tools.demo --robots 4 --orientation cp [--strategy S] [--isolated]
 
 Starts ``python -m sim`` and N ``python -m agent`` processes (peers over loopback
 TCP, no multicast so that concurrent runs never mix), shows one live status line per
@@ -25,6 +27,11 @@ displacement (``march_distance``) must be within 10 % of the route (|displacemen
 <= 0.1·|V|); the worst |r_d| and |r_φ| over the truth samples of the march are
 reported (``march_worst_abs_r_d``, ``march_worst_abs_r_phi``); the figure shows the
 pyramid at the start of the march (grey) and at its end, and the tracks in between.
+
+Fleet parameters: ``--d-e``, ``--phi-e-deg``, ``--orientation pca|cp`` and ``--strategy``
+are given to every agent and used by the evaluator's plan. ``--scenario FILE`` starts the
+world on a scenario file (robot count and ids from the file); ``--isolated`` generates
+the seed's scenario with one robot 2-3 m from every other (``sim.scenarios.generate``).
 
 This tool is an evaluator: it reads ground truth (``world/truth/**``); agents never do.
 """
@@ -51,6 +58,7 @@ from typing import IO, Any
 import numpy as np
 
 from agent.bus import Bus, BusConfig
+from agent.config import add_plan_arguments
 from agent.protocol import (
     INSECURE_WARNING,
     KEY_ALIVE_ALL,
@@ -179,6 +187,7 @@ def start_agent(
         sys.executable, "-m", "agent", "--id", "auto" if auto else str(rid), "--fleet-size", str(robots),
         *net,
         "--d-e", str(args.d_e), "--phi-e-deg", str(args.phi_e_deg), "--timeout", str(args.agree_timeout),
+        "--orientation", getattr(args, "orientation", "pca"), "--strategy", getattr(args, "strategy", "default"),
         *(["--march", str(args.march)] if getattr(args, "march", None) is not None else []),
         *([f"--march-to={args.march_to}"] if getattr(args, "march_to", None) is not None else []),
         "--log-level", args.agent_log_level,
@@ -201,18 +210,27 @@ def route_length(args: argparse.Namespace) -> float:
 
 
 def march_room(args: argparse.Namespace, n: int, seed: int, out: Path) -> list[str]:
-    """World flags giving a march room: the seed's generated scenario with its room's
-    half-size enlarged by the route's length (sim/scenarios is not changed); [] without
-    a march or when the caller chose a scenario with --world-arg."""
+    """World flags for the run's scenario, written to ``out/scenario.json``: the file of
+    ``--scenario``, or the seed's generated one (with ``--isolated``: one robot 2-3 m
+    from every other); with a march, its room's half-size enlarged by the route's length
+    (sim/scenarios is not changed). [] when the world generates the default scenario
+    itself, or when the caller chose a scenario with --world-arg."""
     extra = route_length(args)
-    if extra <= 0.0 or any("--scenario" in a for a in (args.world_arg or [])):
+    scenario = getattr(args, "scenario", None)
+    isolated = bool(getattr(args, "isolated", False))
+    if (extra <= 0.0 and scenario is None and not isolated) or any(
+        "--scenario" in a for a in (args.world_arg or [])
+    ):
         return []
     from dataclasses import replace
 
     from sim import scenarios
 
-    sc = scenarios.generate(n, seed)
-    sc = replace(sc, room=min(100.0, math.ceil(2.0 * (sc.room + extra)) / 2.0))
+    sc = scenarios.load(scenario) if scenario is not None else None
+    if sc is None:
+        sc = scenarios.generate(n, seed, isolated=isolated)
+    if extra > 0.0:
+        sc = replace(sc, room=min(100.0, math.ceil(2.0 * (sc.room + extra)) / 2.0))
     path = out / "scenario.json"
     scenarios.dump(sc, path)
     return ["--scenario", str(path)]
@@ -260,13 +278,15 @@ class FleetNet:
         )
 
 
-def fleet_network(args: argparse.Namespace, out: Path, robots: int) -> FleetNet:
+def fleet_network(
+    args: argparse.Namespace, out: Path, robots: int, ids: list[int] | None = None
+) -> FleetNet:
     """One run's network: secure by default.
 
     Secure: a throwaway fleet in ``out/fleet`` unless ``--credentials`` names one, a TLS
     router on a free loopback port, every process a client of it. ``--plain-links``
     (tests): the same signatures over plain TCP, the world listening. ``--insecure``:
-    plain TCP, no signatures.
+    plain TCP, no signatures. ``ids``: the robots' ids (default 1..robots).
     """
     port = free_port()
     if args.insecure:
@@ -275,7 +295,8 @@ def fleet_network(args: argparse.Namespace, out: Path, robots: int) -> FleetNet:
     if creds is None:
         creds = out / "fleet"  # throwaway: made anew for every run
         shutil.rmtree(creds, ignore_errors=True)
-        create_fleet(creds, range(1, robots + 2))  # one spare robot key: --rogue's insider
+        fleet = sorted(ids) if ids else list(range(1, robots + 1))
+        create_fleet(creds, [*fleet, fleet[-1] + 1])  # one spare robot key: --rogue's insider
     flags = ["--no-multicast-scouting", "--credentials", str(creds)]
     if getattr(args, "plain_links", False):
         return FleetNet(f"tcp/127.0.0.1:{port}", [*flags, "--plain-links"], str(creds), False)
@@ -473,13 +494,18 @@ class LiveView:
 # ===================================================================== evaluation
 
 
-def plan_from_agreed(obs: Observer, d_e: float, phi_e: float) -> Any:
-    """The plan recomputed by the evaluator from the records the agents exchanged."""
+def plan_from_agreed(
+    obs: Observer, d_e: float, phi_e: float, orientation: str = "pca", strategy: str = "default"
+) -> Any:
+    """The plan recomputed by the evaluator from the records the agents exchanged, with
+    the fleet's planning parameters."""
     from agent.adapters import FormationAdapter
+    from agent.formation.plan import PlanParams
 
     fa = FormationAdapter()
     recs = tuple(obs.records[i] for i in sorted(obs.records))
-    return fa, fa.plan(recs, d_e, phi_e)
+    params = PlanParams(d_e=d_e, phi_e=phi_e, orientation=orientation, strategy=strategy)
+    return fa, fa.plan(recs, params)
 
 
 def pyramid_pairs(plan: Any, ids: list[int]) -> list[tuple[int, int]]:
@@ -652,7 +678,7 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
     out.mkdir(parents=True, exist_ok=True)
     n = args.robots
     d_e, phi_e = args.d_e, math.radians(args.phi_e_deg)
-    net = fleet_network(args, out, n)
+    net = fleet_network(args, out, n, getattr(args, "scenario_ids", None))
     endpoint = net.endpoint
     t0 = time.monotonic()
     rec = Recorder(out / "run.mcap")
@@ -661,6 +687,12 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
     agents: dict[int, Proc] = {}
     result: dict[str, Any] = {"robots": n, "seed": seed, "d_e": d_e, "phi_e_deg": args.phi_e_deg}
     result["noise_scale"] = float(getattr(args, "noise_scale", 1.0))
+    result["orientation"] = getattr(args, "orientation", "pca")
+    result["strategy"] = getattr(args, "strategy", "default")
+    if getattr(args, "scenario", None) is not None:
+        result["scenario"] = str(args.scenario)
+    if getattr(args, "isolated", False):
+        result["isolated"] = True
     if getattr(args, "march", None) is not None:
         result["route"] = {"distance": float(args.march)}
     elif getattr(args, "march_to", None) is not None:
@@ -837,7 +869,13 @@ def summarise(
     ok_agents = all(views[i].exit_code == 0 and views[i].phase == "done" for i in ids)
     if obs.truth and len(obs.records) == n:
         try:
-            fa, plan = plan_from_agreed(obs, d_e, phi_e)
+            fa, plan = plan_from_agreed(
+                obs,
+                d_e,
+                phi_e,
+                result.get("orientation", "pca"),
+                result.get("strategy", "default"),
+            )
             result["evaluator_plan_digest"] = str(plan.digest)
             result["leader"] = int(plan.leader)
             # in the common frame: where --march-to points are given
@@ -977,6 +1015,20 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     )  # fmt: skip
     p.add_argument("--d-e", type=float, default=0.8)
     p.add_argument("--phi-e-deg", type=float, default=30.0)
+    add_plan_arguments(p)  # given to every agent
+    where = p.add_mutually_exclusive_group()
+    where.add_argument(
+        "--scenario",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="world scenario JSON (sim/scenarios): robot count and ids from the file",
+    )
+    where.add_argument(
+        "--isolated",
+        action="store_true",
+        help="generated scenario with one robot 2-3 m from every other",
+    )
     p.add_argument("--timeout", type=float, default=600.0, help="wall limit for the agents (s)")
     p.add_argument("--agree-timeout", type=float, default=120.0)
     p.add_argument("--auto-ids", action="store_true", help="agents claim robots (--id auto)")
@@ -1034,8 +1086,22 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="tests: signatures over plain TCP links (no TLS/ACL), as behind a bad router",
     )
     a = p.parse_args(argv)
+    a.scenario_ids = None
+    if a.scenario is not None:
+        from sim import scenarios
+
+        try:
+            sc = scenarios.load(a.scenario)
+        except (OSError, ValueError) as exc:
+            p.error(f"--scenario {a.scenario}: {exc}")
+        if a.batch:
+            p.error("--scenario fixes the robots and the seed: no --batch")
+        a.scenario_ids = sorted(r.id for r in sc.robots)
+        a.robots, a.seed = len(a.scenario_ids), sc.seed
     if not 1 <= a.robots <= 64:
         p.error("--robots must be in [1, 64]")
+    if a.isolated and a.robots < 2:
+        p.error("--isolated needs at least 2 robots")
     if a.batch < 0:
         p.error("--batch must be >= 0")
     if not (math.isfinite(a.noise_scale) and 0.0 <= a.noise_scale <= MAX_NOISE_SCALE):

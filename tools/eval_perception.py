@@ -44,6 +44,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from agent.perception import SIGHT_MAX, SIGHT_MIN
 from agent.perception.camera import CameraModel
 from agent.perception.compass import VisualCompass
 from agent.perception.detector import Detection, Detector
@@ -52,7 +53,7 @@ from sim.world import World
 
 YAW_LIMIT = math.radians(119.5)
 HALF_WIDTH = 0.15  # m: half the shoulder width of a NAO plus a margin
-RANGE = (0.5, 3.0)
+RANGE = (SIGHT_MIN, SIGHT_MAX)
 BANDS = ((0.5, 1.5), (1.5, 2.25), (2.25, 3.0))
 VISIBLE_MIN = 0.8  # --overlap: share of a robot's orange that must be visible to count
 BAND = (0.34, 0.62)  # m: heights of the orange parts (shoulder covers to head cap) + margin

@@ -8,8 +8,10 @@ the square room.
 
 :func:`generate` draws the paper-like starts of the NAO paper's experiments (§5.2.2):
 every robot faces the same "north" (world +y, heading pi/2), nearest spacing 0.6-1.2 m,
-every robot within [0.5, 1.45] m (the detection range) of at least one other, the whole
-fleet connected by that relation. Scenario files are JSON (:func:`load`, :func:`dump`).
+every robot within the range of sight [DETECT_MIN, DETECT_MAX] = [0.5, 3.0] m (the
+perception's, :data:`agent.perception.SIGHT_MAX`) of at least one other, the whole fleet
+connected by that relation. With ``isolated`` one robot stands 2-3 m from every other
+(at the far end of sight). Scenario files are JSON (:func:`load`, :func:`dump`).
 """
 
 from __future__ import annotations
@@ -22,13 +24,15 @@ from typing import Any
 
 import numpy as np
 
+from agent.perception import SIGHT_MAX, SIGHT_MIN
 from agent.protocol import nao
 
 NORTH = math.pi / 2
 MIN_SPACING = 0.6
 MAX_SPACING = 1.2
-DETECT_MIN = 0.5
-DETECT_MAX = 1.45
+DETECT_MIN = SIGHT_MIN
+DETECT_MAX = SIGHT_MAX
+ISOLATED_MIN = 2.0  # m: ``generate(isolated=True)``'s robot is 2 m to DETECT_MAX from the others
 ROOM_MARGIN = 1.8  # metres between the outermost robot and a wall
 MIN_ROOM = 3.0  # smallest room half-size (a 6 m x 6 m room)
 MIN_BODY_GAP = 0.31  # two NAO footprints (radius 0.155 m) must not overlap
@@ -132,21 +136,27 @@ def generate(
     obstacles: int = 0,
     clutter: int = 0,
     light: LightSpec | None = None,
+    isolated: bool = False,
 ) -> Scenario:
     """Paper-like starts for ``n`` robots (ids 1..n), all facing north, seeded.
 
     Robots are placed one after another: each new robot picks an already placed one
     (uniformly), a direction (uniform) and a distance in [0.6, 1.2] m from it, and is kept
     if it is at least 0.6 m from every robot placed so far (else redrawn). Every robot is
-    therefore within [0.6, 1.2] ⊂ [0.5, 1.45] m of the robot it was attached to, and the
-    fleet is connected. The fleet is then centred on the room's centre (rounded to mm).
-    ``obstacles`` cylinders and ``clutter`` orange cubes are put at least 0.8 m from
-    every robot.
+    therefore within [0.6, 1.2] ⊂ [DETECT_MIN, DETECT_MAX] m of the robot it was attached
+    to, and the fleet is connected. ``isolated`` (n >= 2): the last robot (id n) is
+    placed the same way but at [ISOLATED_MIN, DETECT_MAX] = [2, 3] m from the robot it is
+    attached to and at least ISOLATED_MIN from every other, so its nearest neighbour is
+    2-3 m away (the robots 1..n-1 stand as in ``generate(n - 1, seed)``, up to the
+    centring). The fleet is then centred on the room's centre (rounded to mm). ``obstacles`` cylinders and
+    ``clutter`` orange cubes are put at least 0.8 m from every robot.
     """
     if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= 200:
         raise ValueError(f"robot count {n!r} must be an int in [1, 200]")
     if obstacles < 0 or clutter < 0:
         raise ValueError("obstacle and clutter counts must be >= 0")
+    if isolated and n < 2:
+        raise ValueError("an isolated robot needs at least 2 robots")
     rng = np.random.default_rng(seed)
     pts: list[tuple[float, float]] = [(0.0, 0.0)]
     tries = 0
@@ -154,11 +164,13 @@ def generate(
         tries += 1
         if tries > 100_000:
             raise ValueError(f"could not place {n} robots")
+        lone = isolated and len(pts) == n - 1
+        lo, hi = (ISOLATED_MIN, DETECT_MAX) if lone else (MIN_SPACING, MAX_SPACING)
         px, py = pts[int(rng.integers(len(pts)))]
         a = float(rng.uniform(0.0, 2 * math.pi))
-        d = float(rng.uniform(MIN_SPACING, MAX_SPACING))
+        d = float(rng.uniform(lo, hi))
         q = (px + d * math.cos(a), py + d * math.sin(a))
-        if all(math.hypot(q[0] - x, q[1] - y) >= MIN_SPACING for x, y in pts):
+        if all(math.hypot(q[0] - x, q[1] - y) >= lo for x, y in pts):
             pts.append(q)
     arr = np.array(pts)
     arr -= (arr.max(axis=0) + arr.min(axis=0)) / 2.0

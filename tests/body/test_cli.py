@@ -28,6 +28,17 @@ def test_body_defaults_to_the_zenoh_world() -> None:
     assert a.body == "zenoh" and a.nao is None
 
 
+def test_planning_parameters_default_and_choices(capsys: pytest.CaptureFixture[str]) -> None:
+    a = parse_args(["--id", "2"])
+    assert (a.orientation, a.strategy) == ("pca", "default")
+    a = parse_args(["--id", "2", "--orientation", "cp", "--strategy", "paper"])
+    assert (a.orientation, a.strategy) == ("cp", "paper")
+    for bad in (["--orientation", "north"], ["--strategy", "fastest"]):
+        with pytest.raises(SystemExit) as exc:
+            parse_args(["--id", "2", *bad])
+        assert exc.value.code == 2 and "invalid choice" in capsys.readouterr().err
+
+
 def test_naoqi_body_takes_the_robot_url() -> None:
     a = parse_args(["--id", "2", "--body", "naoqi", "--nao", "tcp://10.0.0.12:9559"])
     assert a.body == "naoqi" and a.nao == "tcp://10.0.0.12:9559"

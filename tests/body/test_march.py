@@ -19,7 +19,7 @@ from agent.body_world import WorldBody
 from agent.bus import Bus
 from agent.config import AgentConfig, Route
 from agent.control import wrap_pi
-from agent.formation.plan import Plan
+from agent.formation.plan import Plan, PlanParams
 from agent.march import LOST, Marcher, MarchHalt, route_vector, station_offset
 from agent.protocol import NeighborRecordMsg
 from agent.runner import Peer, Runner
@@ -38,7 +38,7 @@ def formed(world: World) -> tuple[Plan, float]:
         for i in pos
     )  # fmt: skip
     fa = FormationAdapter()
-    plan = fa.plan(recs, 0.8, math.radians(30))
+    plan = fa.plan(recs, PlanParams())
     origin = pos[plan.frame_robot] - np.asarray(plan.robot(plan.frame_robot).start)
     axis = fa.axis_angle(plan)
     for rp in plan.robots:

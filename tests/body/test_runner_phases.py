@@ -20,6 +20,7 @@ from agent.body_world import WorldBody
 from agent.bus import Bus
 from agent.config import AgentConfig
 from agent.control import wrap_pi
+from agent.formation.plan import PlanParams
 from agent.protocol import NeighborRecordMsg
 from agent.runner import NORTH, Peer, Runner
 from sim.world import World
@@ -89,7 +90,7 @@ def test_correct_steps_towards_the_planned_offset_to_the_parent(
     world: World, bus: Bus, perception: PerceptionAdapter
 ) -> None:
     fa = FormationAdapter()
-    plan = fa.plan(_true_records(world), 0.8, math.radians(30))
+    plan = fa.plan(_true_records(world), PlanParams())
     origin = np.asarray(world.pose(plan.frame_robot)[:2]) - np.asarray(
         plan.robot(plan.frame_robot).start
     )

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import pytest
 
+from sim import scenarios
 from sim.__main__ import build_parser, main
 
 
@@ -58,6 +59,13 @@ def test_dump_scenario(tmp_path: Path) -> None:
         == 2
     )
     assert out.exists()
+
+
+def test_dump_isolated_scenario(tmp_path: Path) -> None:
+    out = tmp_path / "sc.json"
+    argv = ["--robots", "4", "--seed", "2", "--isolated", "--dump-scenario", str(out)]
+    assert main([*argv, "--listen", "x", "--insecure"]) == 2  # stops after writing it
+    assert scenarios.load(out) == scenarios.generate(4, 2, isolated=True)
 
 
 def test_help_documents_the_stable_flags() -> None:

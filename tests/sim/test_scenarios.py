@@ -9,8 +9,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from agent.perception import SIGHT_MAX, SIGHT_MIN
 from sim import scenarios
 from sim.scenarios import (
+    DETECT_MAX,
+    DETECT_MIN,
+    ISOLATED_MIN,
     ClutterSpec,
     LightSpec,
     ObstacleSpec,
@@ -50,9 +54,38 @@ def test_generated_starts_are_paper_like(n: int, seed: int) -> None:
         assert d.min() >= 0.6 - 1e-3  # rounding to mm
         nearest = d.min(axis=1)
         assert np.all(nearest <= 1.2 + 1e-3)
-        assert np.all((nearest >= 0.5) & (nearest <= 1.45))
-        assert _connected(pts, 0.5, 1.45)
+        assert np.all((nearest >= DETECT_MIN) & (nearest <= DETECT_MAX))
+        assert _connected(pts, DETECT_MIN, DETECT_MAX)
+        assert _connected(pts, 0.5, 1.45)  # the paper's range too: spacing 0.6-1.2 m
     assert np.abs(pts).max() <= sc.room - 1.5
+
+
+def test_detection_range_is_perceptions() -> None:
+    assert (DETECT_MIN, DETECT_MAX) == (SIGHT_MIN, SIGHT_MAX) == (0.5, 3.0)
+
+
+@pytest.mark.parametrize("n", [2, 3, 4, 6, 10])
+@pytest.mark.parametrize("seed", range(6))
+def test_isolated_robot_is_2_to_3_m_from_everyone(n: int, seed: int) -> None:
+    sc = generate(n, seed, isolated=True)
+    pts = np.array([(r.x, r.y) for r in sc.robots])
+    d = np.linalg.norm(pts[:, None] - pts[None], axis=2)
+    np.fill_diagonal(d, np.inf)
+    lone = d[-1]  # robot n
+    assert ISOLATED_MIN - 1e-3 <= lone.min() <= DETECT_MAX + 1e-3
+    assert _connected(pts, DETECT_MIN, DETECT_MAX)  # it still sees the fleet
+    rest = generate(n - 1, seed)
+    if n > 2:  # the others as generated without it (up to the centring)
+        q = np.array([(r.x, r.y) for r in rest.robots])
+        shift = pts[: n - 1] - q
+        assert np.allclose(shift, shift[0], atol=2e-3)
+    assert np.abs(pts).max() <= sc.room - 1.5
+    assert sc == generate(n, seed, isolated=True)
+
+
+def test_isolated_needs_two_robots() -> None:
+    with pytest.raises(ValueError, match="at least 2 robots"):
+        generate(1, 0, isolated=True)
 
 
 def test_generate_is_deterministic_and_seeded() -> None:
