@@ -72,9 +72,10 @@ def child_runner(
     world: World, bus: Bus, perception: PerceptionAdapter, body: WorldBody, plan: Plan,
     axis: float, **cfg: object,
 ) -> Runner:  # fmt: skip
+    settings: dict[str, object] = {"wave_timeout": 5.0, **cfg}
     config = AgentConfig(
-        robot_id=body.robot_id, fleet_size=3, wave_timeout=5.0,
-        march=Route(distance=0.6), **cfg,  # type: ignore[arg-type]
+        robot_id=body.robot_id, fleet_size=3,
+        march=Route(distance=0.6), **settings,  # type: ignore[arg-type]
     )  # fmt: skip
     r = Runner(bus, body, config, perception, FormationAdapter())
     r.plan = plan
@@ -107,7 +108,9 @@ def test_follower_keeps_station_on_a_marching_parent(
     plan, axis = formed(world)
     child = next(rp for rp in plan.robots if rp.parent >= 0)
     body = MovingParent(world, child.robot_id, child.parent, axis, 0.6)
-    r = child_runner(world, bus, perception, body, plan, axis)
+    # the bound on waiting for the parent is wall time: generous, so that a loaded
+    # machine (slow renders) never ends the march early; the parent's moves end it
+    r = child_runner(world, bus, perception, body, plan, axis, wave_timeout=120.0)
     body.on_arrival.append(r.peers[child.parent])
     want = station_offset(plan, child.robot_id)
     start = np.asarray(world.pose(child.robot_id)[:2])
