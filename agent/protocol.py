@@ -592,22 +592,39 @@ class CameraReply(Message):
     }
 
 
+#: Motion request ids (issue #9): 0 is "no id" (executed every time); 1..MAX_REQUEST_ID
+#: are executed once per (robot, id) by the world, which answers a repeat with the
+#: first result, so a client may retry a timed-out motion with the same id.
+MAX_REQUEST_ID = 2**53 - 1
+_REQUEST_ID = _int("request_id", 0, MAX_REQUEST_ID)
+
+
 @dataclass(frozen=True)
 class WalkRequest(Message):
-    """Walk straight ahead ``distance`` metres (negative: backwards)."""
+    """Walk straight ahead ``distance`` metres (negative: backwards); ``request_id``:
+    see :data:`MAX_REQUEST_ID`."""
 
     TAG: ClassVar[str] = "walk"
     distance: float
-    SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {"distance": _float("distance")}
+    request_id: int = 0
+    SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {
+        "distance": _float("distance"),
+        "request_id": _REQUEST_ID,
+    }
 
 
 @dataclass(frozen=True)
 class TurnRequest(Message):
-    """Turn on the spot by ``angle`` radians (positive: counter-clockwise)."""
+    """Turn on the spot by ``angle`` radians (positive: counter-clockwise); ``request_id``:
+    see :data:`MAX_REQUEST_ID`."""
 
     TAG: ClassVar[str] = "turn"
     angle: float
-    SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {"angle": _float("angle")}
+    request_id: int = 0
+    SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {
+        "angle": _float("angle"),
+        "request_id": _REQUEST_ID,
+    }
 
 
 @dataclass(frozen=True)

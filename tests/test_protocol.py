@@ -38,8 +38,8 @@ SAMPLES: list[p.Message] = [
     p.CameraReply(
         robot_id=1, yaw=-1.0, t_sim=3.0, width=640, height=480, encoding="png", data=b"\x89PNG..."
     ),
-    p.WalkRequest(distance=0.2),
-    p.TurnRequest(angle=-0.26),
+    p.WalkRequest(distance=0.2, request_id=12),
+    p.TurnRequest(angle=-0.26, request_id=p.MAX_REQUEST_ID),
     p.CommandReply(robot_id=1, status="done", t_sim=4.0),
     p.ErrorReply(reason="unknown robot 9"),
     p.ClockMsg(t_sim=1.0),
@@ -129,6 +129,18 @@ def test_expect_restricts_type() -> None:
 def test_construction_validates() -> None:
     with pytest.raises(p.ProtocolError):
         p.WalkRequest(distance=math.inf)
+
+
+@pytest.mark.parametrize(
+    ("rid", "reason"),
+    [(-1, "outside"), (p.MAX_REQUEST_ID + 1, "outside"), (1.5, "expected int"), (True, "int")],
+)
+def test_motion_request_ids_are_bounded_ints(rid: object, reason: str) -> None:
+    for cls, field in ((p.WalkRequest, "distance"), (p.TurnRequest, "angle")):
+        wire = {"v": p.SCHEMA_VERSION, "t": cls.TAG, field: 0.1, "request_id": rid}
+        with pytest.raises(p.ProtocolError, match=f"request_id: .*{reason}"):
+            p.decode(msgpack.packb(wire))
+    assert p.decode(p.encode(p.WalkRequest(distance=0.1))) == p.WalkRequest(0.1, request_id=0)
 
 
 def test_keys_and_ids() -> None:
