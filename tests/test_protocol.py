@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import queue
 import threading
@@ -158,8 +159,10 @@ def test_keys_and_ids() -> None:
 
 def test_network_spec_json5_items() -> None:
     spec = p.NetworkSpec(connect=("tcp/10.0.0.1:7447",), multicast_scouting=False, mode="client")
+    lossy = list(p.LOSSY_LINK_SETTINGS)
     assert spec.json5_items() == [
         ("mode", '"client"'),
+        *lossy,
         ("connect/endpoints", '["tcp/10.0.0.1:7447"]'),
         ("scouting/multicast/enabled", "false"),
     ]
@@ -167,8 +170,19 @@ def test_network_spec_json5_items() -> None:
     assert ("listen/endpoints", '["tcp/0.0.0.0:7447"]') in router.json5_items()
     assert p.NetworkSpec().json5_items() == [
         ("mode", '"peer"'),
+        *lossy,
         ("scouting/multicast/enabled", "true"),
     ]
+
+
+def test_lossy_link_settings_are_accepted_by_zenoh() -> None:
+    import zenoh
+
+    cfg = zenoh.Config()
+    for key, value in p.LOSSY_LINK_SETTINGS:
+        cfg.insert_json5(key, value)
+    assert json.loads(cfg.get_json("transport/link/tx/lease")) == 30000
+    assert json.loads(cfg.get_json("connect"))["timeout_ms"]["client"] == 60000
 
 
 @pytest.mark.parametrize(
