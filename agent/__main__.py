@@ -2,7 +2,8 @@
 
     python -m agent --id N|auto [--fleet-size N] [--connect EP]... [--listen EP]...
                     [--no-multicast-scouting] [--mode peer|client] [--d-e 0.8]
-                    [--phi-e-deg 30] [--timeout S] [--body zenoh|naoqi]
+                    [--phi-e-deg 30] [--timeout S] [--research-rounds K]
+                    [--explore-step M] [--body zenoh|naoqi]
                     [--nao tcp://HOST:9559]
 
 The body is the simulated world over zenoh (``--body zenoh``, the default) or a NAO
@@ -44,6 +45,18 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     )
     p.add_argument(
         "--wave-timeout", type=float, default=600.0, help="wait limit for earlier waves (s)"
+    )
+    p.add_argument(
+        "--research-rounds",
+        type=int,
+        default=2,
+        help="re-search rounds (NAO paper 4.1.3 rule 2) before the fleet stops (agreed)",
+    )
+    p.add_argument(
+        "--explore-step",
+        type=float,
+        default=1.5,
+        help="first exploration leg of a robot that searches again (m)",
     )
     p.add_argument(
         "--no-correct",
@@ -102,6 +115,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         p.error("--phi-e-deg must be in (0, 90)")
     if not (math.isfinite(args.timeout) and args.timeout > 0):
         p.error("--timeout must be > 0")
+    if not 0 <= args.research_rounds <= 10:
+        p.error("--research-rounds must be in [0, 10]")
+    if not (math.isfinite(args.explore_step) and 0.2 <= args.explore_step <= 5.0):
+        p.error("--explore-step must be in [0.2, 5] m")
     args.route = None
     try:
         from agent.config import Route
@@ -216,6 +233,8 @@ def main(argv: list[str] | None = None) -> int:
                     wave_timeout=args.wave_timeout,
                     correct=not args.no_correct,
                     march=args.route,
+                    research_rounds=args.research_rounds,
+                    explore_step=args.explore_step,
                 ),
                 perception,
                 formation,

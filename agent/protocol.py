@@ -61,6 +61,7 @@ PHASES = (
     "localise",
     "exchange",
     "agree",
+    "explore",
     "plan",
     "wait",
     "move",

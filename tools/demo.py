@@ -182,6 +182,7 @@ def start_agent(
         *([f"--march-to={args.march_to}"] if getattr(args, "march_to", None) is not None else []),
         "--log-level", args.agent_log_level,
         *(["--no-correct"] if getattr(args, "no_correct", False) else []),
+        *(["--research-rounds", str(args.research_rounds)] if getattr(args, "research_rounds", None) is not None else []),
         *(["--body", "naoqi", "--nao", args.nao_urls[rid]] if getattr(args, "body", "") == "naoqi" else []),
     ]  # fmt: skip
     log = (out / (f"agent-slot{rid}.log" if auto else f"agent-{rid}.log")).open("wb")
@@ -957,6 +958,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--agree-timeout", type=float, default=120.0)
     p.add_argument("--auto-ids", action="store_true", help="agents claim robots (--id auto)")
     p.add_argument("--no-correct", action="store_true", help="agents skip the final alignment")
+    p.add_argument(
+        "--research-rounds", type=int, default=None, metavar="K",
+        help="re-search rounds (NAO paper 4.1.3 rule 2) before the agents stop (agent default 2)",
+    )  # fmt: skip
     march = p.add_mutually_exclusive_group()
     march.add_argument(
         "--march", type=float, default=None, metavar="D",
