@@ -49,14 +49,15 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument(
         "--research-rounds",
         type=int,
-        default=2,
-        help="re-search rounds (NAO paper 4.1.3 rule 2) before the fleet stops (agreed)",
+        default=None,
+        help="re-search rounds (NAO paper 4.1.3 rule 2) before the fleet stops (agreed; "
+        "default 2)",
     )
     p.add_argument(
         "--explore-step",
         type=float,
-        default=1.5,
-        help="first exploration leg of a robot that searches again (m)",
+        default=None,
+        help="first exploration leg of a robot that searches again (m, default 2)",
     )
     p.add_argument(
         "--no-correct",
@@ -115,9 +116,11 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         p.error("--phi-e-deg must be in (0, 90)")
     if not (math.isfinite(args.timeout) and args.timeout > 0):
         p.error("--timeout must be > 0")
-    if not 0 <= args.research_rounds <= 10:
+    if args.research_rounds is not None and not 0 <= args.research_rounds <= 10:
         p.error("--research-rounds must be in [0, 10]")
-    if not (math.isfinite(args.explore_step) and 0.2 <= args.explore_step <= 5.0):
+    if args.explore_step is not None and not (
+        math.isfinite(args.explore_step) and 0.2 <= args.explore_step <= 5.0
+    ):
         p.error("--explore-step must be in [0.2, 5] m")
     args.route = None
     try:
@@ -233,8 +236,14 @@ def main(argv: list[str] | None = None) -> int:
                     wave_timeout=args.wave_timeout,
                     correct=not args.no_correct,
                     march=args.route,
-                    research_rounds=args.research_rounds,
-                    explore_step=args.explore_step,
+                    **{
+                        k: v
+                        for k, v in (
+                            ("research_rounds", args.research_rounds),
+                            ("explore_step", args.explore_step),
+                        )
+                        if v is not None
+                    },
                 ),
                 perception,
                 formation,

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 from agent.exchange import ParamValue
 from agent.formation.plan import PlanParams
+from agent.formation.research import DEFAULT_STEP
 from agent.nao import HEAD_YAW_LIMIT
 from agent.perception.camera import CameraModel
 
@@ -79,7 +80,7 @@ class AgentConfig:
     # fleet stops, the first exploration leg (m), and how long the robots that keep their
     # place wait for the others to explore and search again (s).
     research_rounds: int = 2
-    explore_step: float = 1.5
+    explore_step: float = DEFAULT_STEP
     research_timeout: float = 300.0
 
     @property

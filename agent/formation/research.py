@@ -56,7 +56,9 @@ from agent.formation.records import NeighborRecord
 
 NORTH = math.pi / 2
 GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))  # 137.5°
-DEFAULT_STEP = 1.5  # m, the first spiral leg: half the 3 m perception range
+#: m, the first spiral leg: two thirds of the 3 m perception range, so the discs seen
+#: from successive stops overlap, and a robot up to ~5 m from the fleet can come in sight
+DEFAULT_STEP = 2.0
 DEFAULT_APPROACH = 1.0  # m left to a one-sided sighting after the move (within d_e..1.2 m)
 MATE_RADIUS = 0.5  # m: a detection this close to a member of the component is that member
 
