@@ -825,6 +825,11 @@ def summarise(
     result["t_sim_end"] = obs.truth[-1][0] if obs.truth else 0.0
     result["pairs"] = []
     ok_agents = all(views[i].exit_code == 0 and views[i].phase == "done" for i in ids)
+    # the (re-)search round of each robot's last record (NAO 4.1.3 rule 2)
+    result["record_rounds"] = {str(i): obs.records[i].round for i in ids if i in obs.records}
+    if obs.truth:
+        result["starts"] = {str(i): list(obs.truth[0][1][i]) for i in ids if i in obs.truth[0][1]}
+        result["finals"] = {str(i): list(obs.truth[-1][1][i]) for i in ids if i in obs.truth[-1][1]}
     if obs.truth and len(obs.records) == n:
         try:
             fa, plan = plan_from_agreed(obs, d_e, phi_e)
@@ -837,10 +842,6 @@ def summarise(
             pairs = pyramid_pairs(plan, ids)
             final = obs.truth[-1][1]
             result["pairs"] = evaluate(final, pairs, axis, d_e, phi_e)
-            result["starts"] = {
-                str(i): list(obs.truth[0][1][i]) for i in ids if i in obs.truth[0][1]
-            }
-            result["finals"] = {str(i): list(final[i]) for i in ids if i in final}
             if result.get("route"):
                 judge_march(obs, result, plan, axis, pairs, d_e, phi_e)
         except (ValueError, KeyError, AttributeError, ImportError) as exc:
