@@ -50,8 +50,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--research-rounds",
         type=int,
         default=None,
-        help="re-search rounds (NAO paper 4.1.3 rule 2) before the fleet stops (agreed; "
-        "default 2)",
+        help="re-search rounds (NAO paper 4.1.3 rule 2) before the fleet stops (agreed; default 2)",
     )
     p.add_argument(
         "--explore-step",
