@@ -421,7 +421,9 @@ class Observer:
                 msg.error, msg.plan_digest, msg.wave, msg.t_sim,
             )  # fmt: skip
         elif isinstance(msg, NeighborRecordMsg):
-            self.records[msg.sender] = msg
+            old = self.records.get(msg.sender)
+            if old is None or old.round <= msg.round:  # the newest (re-)search round
+                self.records[msg.sender] = msg
         elif isinstance(msg, DigestMsg):
             self.digests[msg.sender] = msg
 
