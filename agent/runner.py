@@ -40,6 +40,7 @@ import time
 import traceback
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TypeVar
 
 import numpy as np
 
@@ -83,6 +84,16 @@ NORTH = math.pi / 2
 ARRIVED = ("hold", "march", "done", "failed")  # phases of a member that has arrived
 STATUS_MIN_INTERVAL = 3.0  # s between progress statuses of the same phase
 HEARTBEAT = 3.0  # s between statuses while waiting
+
+
+_Round = TypeVar("_Round", NeighborRecordMsg, DigestMsg)
+
+
+def _keep_newest(store: dict[int, _Round], msg: _Round) -> None:
+    """Keep ``msg`` for its sender unless a message of a newer round is held."""
+    old = store.get(msg.sender)
+    if old is None or old.round <= msg.round:
+        store[msg.sender] = msg
 
 
 class AgentFailure(RuntimeError):
@@ -254,22 +265,19 @@ class Runner:
             return
         if not self._current_session(ev, msg.sender):
             return
-        # kept for the next round: before our agreement, or newer than its round
-        early = (agr is None or msg.round > agr.round) if not isinstance(msg, StatusMsg) else False
-        if isinstance(msg, NeighborRecordMsg):
+        if isinstance(msg, NeighborRecordMsg | DigestMsg):
             for a in self._agreements():
-                a.on_record(msg, now)
+                if isinstance(msg, NeighborRecordMsg):
+                    a.on_record(msg, now)
+                else:
+                    a.on_digest(msg, now)
+            # kept for the next round: before our agreement, or newer than its round
+            early = agr is None or msg.round > agr.round
             if early and msg.sender != self.me and self._member(msg.sender):
-                old = self.early_records.get(msg.sender)
-                if old is None or old.round <= msg.round:
-                    self.early_records[msg.sender] = msg
-        elif isinstance(msg, DigestMsg):
-            for a in self._agreements():
-                a.on_digest(msg, now)
-            if early and msg.sender != self.me and self._member(msg.sender):
-                old_d = self.early_digests.get(msg.sender)
-                if old_d is None or old_d.round <= msg.round:
-                    self.early_digests[msg.sender] = msg
+                if isinstance(msg, NeighborRecordMsg):
+                    _keep_newest(self.early_records, msg)
+                else:
+                    _keep_newest(self.early_digests, msg)
         elif isinstance(msg, StatusMsg):
             member = self.peers.get(msg.sender)
             if msg.sender == self.me or member is None or not member.seen_alive:
