@@ -4,7 +4,8 @@
                     [--world-connect EP]...
                     [--no-multicast-scouting] [--mode peer|client] [--d-e 0.8]
                     [--phi-e-deg 30] [--orientation pca|cp] [--strategy S]
-                    [--timeout S] [--body zenoh|naoqi]
+                    [--timeout S] [--research-rounds K] [--explore-step M]
+                    [--body zenoh|naoqi]
                     [--nao tcp://HOST:9559]
 
 The body is the simulated world over zenoh (``--body zenoh``, the default) or a NAO
@@ -73,6 +74,18 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--wave-timeout", type=float, default=600.0, help="wait limit for earlier waves (s)"
     )
     p.add_argument(
+        "--research-rounds",
+        type=int,
+        default=None,
+        help="re-search rounds (NAO paper 4.1.3 rule 2) before the fleet stops (agreed; default 2)",
+    )
+    p.add_argument(
+        "--explore-step",
+        type=float,
+        default=None,
+        help="first exploration leg of a robot that searches again (m, default 2)",
+    )
+    p.add_argument(
         "--no-correct",
         action="store_true",
         help="skip the final visual alignment to the parent (the papers' open-loop ending)",
@@ -131,6 +144,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         p.error("--timeout must be > 0")
     if not (math.isfinite(args.member_grace) and args.member_grace >= 0):
         p.error("--member-grace must be >= 0")
+    if args.research_rounds is not None and not 0 <= args.research_rounds <= 10:
+        p.error("--research-rounds must be in [0, 10]")
+    if args.explore_step is not None and not (
+        math.isfinite(args.explore_step) and 0.2 <= args.explore_step <= 5.0
+    ):
+        p.error("--explore-step must be in [0.2, 5] m")
     args.route = None
     try:
         from agent.config import Route
@@ -267,6 +286,14 @@ def main(argv: list[str] | None = None) -> int:
                     member_grace=args.member_grace,
                     correct=not args.no_correct,
                     march=args.route,
+                    **{
+                        k: v
+                        for k, v in (
+                            ("research_rounds", args.research_rounds),
+                            ("explore_step", args.explore_step),
+                        )
+                        if v is not None
+                    },
                 ),
                 perception,
                 formation,

@@ -16,6 +16,7 @@ import numpy as np
 from agent.formation.obstacle_map import merge_sightings as merge_obstacle_sightings
 from agent.formation.plan import Plan, PlanParams, plan_from_records
 from agent.formation.records import NeighborRecord
+from agent.formation.research import Research, decide_research
 from agent.perception.compass import CompassResult, VisualCompass
 from agent.perception.detector import Detection, Detector
 from agent.perception.localise import cluster_sightings, merge_sightings, to_fixed_frame
@@ -157,6 +158,10 @@ class FormationAdapter:
         return plan_from_records(
             self.records(msgs), params, sightings=self.obstacle_sightings(msgs)
         )
+
+    def research(self, msgs: tuple[NeighborRecordMsg, ...], round_: int, step: float) -> Research:
+        """Re-search decision (4.1.3 rule 2) with the plan's ε (same neighbour graph)."""
+        return decide_research(self.records(msgs), round_, PlanParams().epsilon, step)
 
     @staticmethod
     def members(plan: Plan) -> list[int]:

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from agent.exchange import ParamValue
 from agent.formation.plan import PLAN_STRATEGIES, PlanParams
 from agent.formation.pyramid import ORIENTATIONS
+from agent.formation.research import DEFAULT_STEP
 from agent.nao import HEAD_YAW_LIMIT
 from agent.perception.camera import CameraModel
 
@@ -102,6 +103,17 @@ class AgentConfig:
     march_step: float = 0.1  # m per leader step: half a follower's 20 cm, so they keep up
     march_pause: float = 4.0  # the leader rests this many times each step's duration
     lost_rounds: int = 3  # head searches for a lost parent before the fleet halts
+    # Re-search (NAO paper 4.1.3 rule 2, agent/formation/research.py): rounds before the
+    # fleet stops, the first exploration leg (m), and how long the robots that keep their
+    # place wait for the others to explore and search again (s).
+    research_rounds: int = 2
+    explore_step: float = DEFAULT_STEP
+    research_timeout: float = 300.0
+
+    @property
+    def radius(self) -> float:
+        """The robots' safety radius (m), the planner's."""
+        return PlanParams(d_e=self.d_e, phi_e=self.phi_e).radius
 
     def plan_params(self) -> PlanParams:
         """The planning parameters this agent plans with (the formation seam takes them)."""
@@ -121,6 +133,7 @@ class AgentConfig:
             "strategy": pp.strategy,
             "route": route,
             "march_step": self.march_step if self.march is not None else None,
+            "research_rounds": self.research_rounds,
         }
 
     def __post_init__(self) -> None:
@@ -139,6 +152,12 @@ class AgentConfig:
             raise ValueError(f"march_step must be in [0.02, 0.2] m, got {self.march_step}")
         if not (math.isfinite(self.march_pause) and 0.0 <= self.march_pause <= 20.0):
             raise ValueError(f"march_pause must be in [0, 20], got {self.march_pause}")
+        if not 0 <= self.research_rounds <= 10:
+            raise ValueError(f"research_rounds must be in [0, 10], got {self.research_rounds}")
+        if not (math.isfinite(self.explore_step) and 0.2 <= self.explore_step <= 5.0):
+            raise ValueError(f"explore_step must be in [0.2, 5] m, got {self.explore_step}")
+        if not (math.isfinite(self.research_timeout) and self.research_timeout > 0.0):
+            raise ValueError(f"research_timeout must be > 0 s, got {self.research_timeout}")
         if self.lost_rounds < 1:
             raise ValueError(f"lost_rounds must be >= 1, got {self.lost_rounds}")
         for y in self.search_yaws:

@@ -52,6 +52,12 @@ with what :meth:`Grace.expired` returns.
 Tie-breaks: a record with a higher ``round`` replaces an older one; for the same round
 the latest received wins (re-publications are identical). Digests are over the
 records sorted by sender id.
+
+**Rounds** (re-search, NAO paper 4.1.3 rule 2, :mod:`agent.formation.research`): an
+agreement belongs to the round of its own record (``round``). Records and digests of an
+older round are stale and ignored (counted in ``stale``); a record or digest of a newer
+round from a member proves that member agreed on ours and moved on, so it acknowledges
+our digest (no more re-publication for it) and is left to the next round's agreement.
 """
 
 from __future__ import annotations
@@ -231,6 +237,8 @@ class Agreement:
         self.peer_agreed: set[int] = set()
         self.rejected: list[str] = []
         self.ignored = 0  # records, digests and phases from non-members, not kept
+        self.round = own_record.round  # the (re-)search round this agreement is about
+        self.stale = 0  # records and digests of an older round, not kept
         self.membership_changed = now
         self._record_tx = _Backoff(backoff_min, backoff_max)
         self._record_pending = True  # publish at least once (again after a newcomer)
@@ -266,6 +274,8 @@ class Agreement:
         if msg.sender not in self.live:
             self.ignored += 1
             return False
+        if not self._this_round(msg.sender, msg.round):
+            return False
         old = self.records.get(msg.sender)
         if old is not None and (old.round > msg.round or old == msg):
             return False
@@ -283,6 +293,8 @@ class Agreement:
         if msg.sender not in self.live:
             self.ignored += 1
             return
+        if not self._this_round(msg.sender, msg.round):
+            return
         old = self.digests.get(msg.sender)
         self.digests[msg.sender] = msg
         self.params_of[msg.sender] = msg.params
@@ -291,6 +303,18 @@ class Agreement:
                 self._record_tx.reset(now)
             if msg.digest != self.digest()[1]:
                 self._digest_tx.reset(now)
+
+    def _this_round(self, sender: int, round_: int) -> bool:
+        """Whether a member's record or digest of ``round_`` belongs to this agreement;
+        a newer round acknowledges our digest (see Rounds in the module doc)."""
+        if round_ < self.round:
+            self.stale += 1
+            return False
+        if round_ > self.round:
+            if self.agreed:
+                self.peer_agreed.add(sender)
+            return False
+        return True
 
     def on_peer_phase(self, robot_id: int, phase: str) -> None:
         """A member's status: a post-agreement phase acknowledges our digest."""
@@ -313,11 +337,13 @@ class Agreement:
             self._digest_cache = (members, self.digest_fn(recs))
         return self._digest_cache
 
-    def digest_msg(self, round_: int = 0) -> DigestMsg:
+    def digest_msg(self) -> DigestMsg:
+        """Our digest message, of this agreement's round."""
         members, digest = self.digest()
         return DigestMsg(
-            sender=self.self_id, round=round_, digest=digest, members=members, params=self.params
-        )
+            sender=self.self_id, round=self.round, digest=digest, members=members,
+            params=self.params,
+        )  # fmt: skip
 
     def missing_records(self) -> list[int]:
         return sorted(i for i in self.live if i not in self.records)

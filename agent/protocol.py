@@ -62,6 +62,7 @@ PHASES = (
     "localise",
     "exchange",
     "agree",
+    "explore",
     "plan",
     "wait",
     "move",

@@ -7,6 +7,12 @@ LOCALISE detections → fixed frame (eqs. 7–8) with the compass-estimated head
          merged across images.
 EXCHANGE/AGREE publish the record, collect every member's, move only once every live
          member published the same digest (agent/exchange.py).
+EXPLORE  re-search (4.1.3 rule 2, agent/formation/research.py): when the agreed records
+         leave robots outside the connected fleet, those robots make a deterministic
+         exploration move (camera check before each step), and then every robot
+         searches again and a new exchange round is agreed; after
+         ``research_rounds`` rounds the fleet stops with the reason
+         (:meth:`Runner.research`).
 PLAN     formation core on the agreed records (4.1.2–4.2): identical on every agent.
 WAIT     for every robot of earlier waves to hold (leader first, 5.2.2 step 7).
 MOVE     rotation control to face the goal, distance control in 20 cm steps with the
@@ -35,6 +41,7 @@ import time
 import traceback
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TypeVar
 
 import numpy as np
 
@@ -61,6 +68,7 @@ from agent.control.corridor import (
 )
 from agent.exchange import Agreement, Decision, Grace, params_digest
 from agent.formation.plan import Plan
+from agent.formation.research import step_blocked
 from agent.march import Marcher, MarchHalt
 from agent.nao import CAMERA_HFOV, HEAD_YAW_LIMIT
 from agent.perception.detector import Detection
@@ -88,6 +96,16 @@ NORTH = math.pi / 2
 ARRIVED = ("hold", "march", "done", "failed")  # phases of a member that has arrived
 STATUS_MIN_INTERVAL = 3.0  # s between progress statuses of the same phase
 HEARTBEAT = 3.0  # s between statuses while waiting
+
+
+_Round = TypeVar("_Round", NeighborRecordMsg, DigestMsg)
+
+
+def _keep_newest(store: dict[int, _Round], msg: _Round) -> None:
+    """Keep ``msg`` for its sender unless a message of a newer round is held."""
+    old = store.get(msg.sender)
+    if old is None or old.round <= msg.round:
+        store[msg.sender] = msg
 
 
 class AgentFailure(RuntimeError):
@@ -150,6 +168,7 @@ class Runner:
         self.agreed_epochs: dict[int, int] = {}  # the sessions the agreement was made with
         self.early_digests: dict[int, DigestMsg] = {}
         self.agreement: Agreement | None = None
+        self.retired: list[Agreement] = []  # agreed earlier rounds, still acknowledged
         self._plan: Plan | None = None
         self.plan_digest = ""
         self.wave = -1
@@ -224,18 +243,20 @@ class Runner:
             except Exception as exc:  # one bad event is counted and skipped, never fatal
                 self.bus.guard.reject(f"event on {ev.key}", exc)
         self._expire_members()
-        agr = self.agreement
-        if agr is not None:
+        for agr in self._agreements():
             now = self.clock()
             due = agr.due(now)
             for what in due:
                 if what == "record":
                     self.bus.publish(key_record(self.me), agr.records[self.me], "record")
                 else:
-                    self.bus.publish(
-                        key_digest(self.me), agr.digest_msg(self.record_round), "digest"
-                    )
+                    self.bus.publish(key_digest(self.me), agr.digest_msg(), "digest")
             agr.sent(due, now)
+
+    def _agreements(self) -> list[Agreement]:
+        """The current agreement and the agreed ones of earlier re-search rounds (their
+        digests are re-published until every member has moved on)."""
+        return [*self.retired, *([self.agreement] if self.agreement is not None else [])]
 
     def _handle(self, ev: Event) -> None:
         now = self.clock()
@@ -263,26 +284,27 @@ class Runner:
         if not self._current_session(ev, msg.sender):
             return
         self.grace.heard(msg.sender, now)  # a member's publication is a heartbeat
-        if isinstance(msg, NeighborRecordMsg):
-            if agr is not None:
-                agr.on_record(msg, now)
-            elif msg.sender != self.me and self._member(msg.sender):
-                old = self.early_records.get(msg.sender)
-                if old is None or old.round <= msg.round:
-                    self.early_records[msg.sender] = msg
-        elif isinstance(msg, DigestMsg):
-            if agr is not None:
-                agr.on_digest(msg, now)
-            elif msg.sender != self.me and self._member(msg.sender):
-                self.early_digests[msg.sender] = msg
+        if isinstance(msg, NeighborRecordMsg | DigestMsg):
+            for a in self._agreements():
+                if isinstance(msg, NeighborRecordMsg):
+                    a.on_record(msg, now)
+                else:
+                    a.on_digest(msg, now)
+            # kept for the next round: before our agreement, or newer than its round
+            early = agr is None or msg.round > agr.round
+            if early and msg.sender != self.me and self._member(msg.sender):
+                if isinstance(msg, NeighborRecordMsg):
+                    _keep_newest(self.early_records, msg)
+                else:
+                    _keep_newest(self.early_digests, msg)
         elif isinstance(msg, StatusMsg):
             member = self.peers.get(msg.sender)
             if msg.sender == self.me or member is None or not member.seen_alive:
                 return  # per-sender state only for members (their token came first)
             member.phase, member.wave, member.plan_digest = msg.phase, msg.wave, msg.plan_digest
             member.detail = msg.detail
-            if agr is not None:
-                agr.on_peer_phase(msg.sender, msg.phase)
+            for a in self._agreements():
+                a.on_peer_phase(msg.sender, msg.phase)
 
     def _expire_members(self) -> None:
         """Members whose token vanished and who stayed silent for the grace period are gone."""
@@ -520,6 +542,7 @@ class Runner:
         θ = 180° sweep and from every later turn, and the heading is known absolutely.
         """
         self.status("search", 0.0, "sweep at θ = 0°")
+        h0 = self.heading  # north at the start; kept from the compass in re-search rounds
         n = 2 * len(self.cfg.search_yaws)
         raw: list[tuple[int, list[Detection]]] = []
         obst: list[tuple[int, list[ObstacleDetection]]] = []  # 5.1.2: obstacles seen
@@ -548,19 +571,20 @@ class Runner:
         heading_180 = self.heading
         turned[1] = self.rotate(math.pi, PAPER_GAINS, "complete the circle to θ = 0°")
         assert origin is not None and self._last_frame is not None
-        self._calibrate(origin, self._last_frame, turned)
+        self._calibrate(origin, self._last_frame, turned, h0)
         if self.compass_gain != 1.0:
-            heading_180 = wrap_pi(NORTH + self.compass_gain * turned[0])
+            heading_180 = wrap_pi(h0 + self.compass_gain * turned[0])
         self.obstacle_sightings = [
-            self.perception.obstacles_fixed(o, NORTH if sweep == 0 else heading_180)
+            self.perception.obstacles_fixed(o, h0 if sweep == 0 else heading_180)
             for sweep, o in obst
         ]
         return [
-            self.perception.to_fixed(dets, NORTH if sweep == 0 else heading_180)
-            for sweep, dets in raw
+            self.perception.to_fixed(dets, h0 if sweep == 0 else heading_180) for sweep, dets in raw
         ]
 
-    def _calibrate(self, origin: Frame, final: Frame, turned: list[float]) -> None:
+    def _calibrate(
+        self, origin: Frame, final: Frame, turned: list[float], h0: float = NORTH
+    ) -> None:
         """Compass gain and absolute heading from the full circle (see :meth:`search`)."""
         res = self.perception.measure_turn(origin.image, final.image)
         total = turned[0] + turned[1]
@@ -573,7 +597,7 @@ class Runner:
             log.warning("compass gain %.4f implausible: kept 1.0", gain)
             return
         self.compass_gain = gain
-        self.heading = wrap_pi(NORTH + r)
+        self.heading = wrap_pi(h0 + r)
         log.info(
             "compass calibrated over the circle: gain %.4f, residual %+.2f°", gain, math.degrees(r)
         )
@@ -616,6 +640,8 @@ class Runner:
             agr.on_record(msg, now)
         for dmsg in self.early_digests.values():
             agr.on_digest(dmsg, now)
+        self.early_records = {i: m for i, m in self.early_records.items() if m.round > agr.round}
+        self.early_digests = {i: m for i, m in self.early_digests.items() if m.round > agr.round}
         for rid, peer in self.peers.items():
             agr.on_peer_phase(rid, peer.phase)
         self.agreement = agr
@@ -630,6 +656,103 @@ class Runner:
             agreeing = n - len(agr.disagreeing())
             phase = "exchange" if agr.missing_records() else "agree"
             self.status(phase, (held + agreeing) / (2 * n), d.reason)
+
+    def research(self, decision: Decision) -> NeighborRecordMsg | None:
+        """Re-search (NAO paper 4.1.3 rule 2) on the agreed records: ``None`` when the
+        fleet is connected, else this robot's record of the next round.
+
+        Every agent decides alike from the agreed records (agent/formation/research.py).
+        The robots outside the kept group make their exploration move, checked with the
+        camera before each step (:meth:`explore`); the others wait until each of them
+        has published a record or digest of the new round (it has walked and searched),
+        so that the robots it now sees look again too (eq. 9 needs both sides). Then
+        every robot searches again with its record's origin where it stands (the fixed
+        frame moves with it, 4.1.1; the heading belief is kept from the compass), and
+        the caller agrees the new round. After ``research_rounds`` rounds the fleet
+        stops: the reason names who is still outside.
+        """
+        k = self.record_round + 1
+        verdict = self.formation.research(decision.records, k, self.cfg.explore_step)
+        if verdict.connected:
+            return None
+        if k > self.cfg.research_rounds:
+            raise AgentFailure(
+                f"{verdict.reason} after {self.cfg.research_rounds} re-search round(s): "
+                "stopping (4.1.3 rule 2)"
+            )
+        log.info("re-search round %d: %s", k, verdict.reason)
+        self.record_round = k
+        if self.agreement is not None:
+            self.retired.append(self.agreement)
+        self.agreement = None
+        if self.me in verdict.searchers:
+            self.status("explore", 0.0, f"round {k}: {verdict.reason}", force=True)
+            self.explore(verdict.move(self.me))
+        else:
+            self._wait_for_searchers(verdict.searchers)
+        self.position = np.zeros(2)  # the new record's origin: here
+        self._last_frame = None
+        return self.localise(self.search())
+
+    def explore(self, move: np.ndarray) -> None:
+        """Walk the exploration ``move`` (fixed frame, m) in steps; before each step the
+        yaw-0 image is checked: a NAO inside the step's sweep (2·radius + 0.1 m wide,
+        :func:`~agent.formation.research.step_blocked`) ends the move there."""
+        goal = self.position + np.asarray(move, dtype=np.float64)
+        total = float(np.hypot(*move)) or 1.0
+        clearance = 2.0 * self.cfg.radius + 0.1
+        self._last_frame = None
+        for _ in range(200):
+            leg = next_leg(self.position, self.heading, goal)
+            if leg is None:
+                return
+            if abs(leg.turn) > self.cfg.rotation_tolerance:
+                self.rotate(leg.turn, PAPER_GAINS, "explore: turn")
+            frame = self._last_frame if self._last_frame is not None else self.look(0.0)
+            self._last_frame = frame
+            pts, _, _ = self.perception.to_fixed(
+                self.perception.detect(frame.image, frame.yaw), self.heading
+            )
+            hit = step_blocked(pts, self.heading, leg.walk, clearance)
+            if hit is not None:
+                log.info(
+                    "explore: a NAO at %s blocks the next step: move ends at believed %s",
+                    pts[hit].round(2).tolist(), self.position.round(2).tolist(),
+                )  # fmt: skip
+                self.status("explore", 1.0, "a NAO ahead: move ended", force=True)
+                return
+            self.walk_step(leg.walk)
+            done = 1.0 - max(0.0, leg.remaining - abs(leg.walk)) / total
+            self.status("explore", done, f"round {self.record_round}: exploring")
+        raise AgentFailure("exploration move did not converge in 200 steps")
+
+    def _wait_for_searchers(self, searchers: tuple[int, ...]) -> None:
+        """Stand still until every searcher published a record or digest of this round."""
+        k = self.record_round
+        deadline = self.clock() + self.cfg.research_timeout
+        text = f"round {k}: waiting for robots {list(searchers)} to explore and search"
+        self.status("explore", 0.0, text, force=True)
+        while True:
+            self.pump(0.1)
+            pending = []
+            for i in searchers:
+                rec, dig = self.early_records.get(i), self.early_digests.get(i)
+                if (rec is not None and rec.round >= k) or (dig is not None and dig.round >= k):
+                    continue
+                peer = self.peers.get(i, Peer())
+                if peer.phase == "failed":
+                    raise AgentFailure(f"robot {i} failed in re-search round {k}")
+                if peer.seen_alive and not peer.alive:
+                    raise AgentFailure(f"robot {i} left in re-search round {k}")
+                pending.append(i)
+            if not pending:
+                return
+            if self.clock() > deadline:
+                raise AgentFailure(
+                    f"robots {pending} did not search again within "
+                    f"{self.cfg.research_timeout:g} s (re-search round {k})"
+                )
+            self.status("explore", 0.0, text)
 
     def make_plan(self, decision: Decision) -> Plan:
         self.status("plan", 0.0, decision.reason)
@@ -808,10 +931,12 @@ class Runner:
             self.start_bus()
             self.status("start", 0.0, "joined", force=True)
             sightings = self.search()
-            record = self.localise(sightings)
-            decision = self.agree(record)
-            if decision.kind != "agreed":
-                raise AgentFailure(decision.reason)
+            record: NeighborRecordMsg | None = self.localise(sightings)
+            while record is not None:
+                decision = self.agree(record)
+                if decision.kind != "agreed":
+                    raise AgentFailure(decision.reason)
+                record = self.research(decision)
             self.make_plan(decision)
             self.wait_for_earlier_waves()
             self.move()

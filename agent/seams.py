@@ -7,8 +7,10 @@ The phase machine (:mod:`agent.runner`) depends only on these three protocols:
   :class:`agent.body_naoqi.NaoqiBody` over the qi protocol of a real or virtual NAO,
   and :class:`agent.body_world.WorldBody` on an in-process :class:`sim.world.World`);
 - :class:`Perception`: detector, fixed-frame conversion, merging and the visual compass
-  (NAO paper §3), and the same for the static obstacles (§5.1.2; :class:`agent.adapters.PerceptionAdapter`);
-- :class:`Formation`: agreed records → plan → this robot's goals (§4;
+  (NAO paper §3), and the same for the static obstacles (§5.1.2;
+  :class:`agent.adapters.PerceptionAdapter`);
+- :class:`Formation`: agreed records → plan → this robot's goals, or who searches
+  again (§4;
   :class:`agent.adapters.FormationAdapter`).
 
 Results and errors are dataclasses. A body raises :class:`BodyError` when the robot or
@@ -24,6 +26,7 @@ from typing import Literal, Protocol
 import numpy as np
 
 from agent.formation.plan import Plan, PlanParams
+from agent.formation.research import Research
 from agent.perception.compass import CompassResult
 from agent.perception.detector import Detection
 from agent.perception.obstacles import ObstacleDetection
@@ -132,3 +135,7 @@ class Formation(Protocol):
     def members(self, plan: Plan) -> list[int]: ...
 
     def goals(self, plan: Plan, me: int) -> tuple[list[np.ndarray], float]: ...
+
+    def research(self, msgs: tuple[NeighborRecordMsg, ...], round_: int, step: float) -> Research:
+        """Who searches again in re-search round ``round_`` (4.1.3 rule 2), and where."""
+        ...

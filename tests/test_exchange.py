@@ -221,17 +221,37 @@ def test_backoff_doubles_and_caps() -> None:
     assert all(g == 1.0 for g in gaps[3:])
 
 
-def test_newer_round_replaces_older_and_echo_is_ignored() -> None:
-    a = Agreement(0, rec(0), 0.0)
+def test_rounds_older_is_stale_newer_is_left_to_the_next_round() -> None:
+    a = Agreement(0, rec(0, 1), 0.0)
+    assert a.round == 1 and a.digest_msg().round == 1
     a.member_joined(1, 0.0)
+    assert not a.on_record(rec(1, 0), 0.0)  # an older round: stale
+    assert a.stale == 1 and 1 not in a.records
+    assert not a.on_record(rec(1, 2), 0.0)  # a newer round: for the next agreement
     assert a.on_record(rec(1, 1), 0.0)
-    assert not a.on_record(rec(1, 0), 0.0)  # older round
     assert not a.on_record(rec(1, 1), 0.0)  # duplicate
     assert a.records[1].round == 1
-    assert a.on_record(rec(1, 2), 0.0)
+    a.on_digest(DigestMsg(sender=1, round=0, digest="0" * 64, members=(0, 1)), 0.0)
+    assert 1 not in a.digests and a.stale == 2
     impostor = NeighborRecordMsg(sender=0, round=5, neighbours=())
     assert not a.on_record(impostor, 0.0)
-    assert a.records[0] == rec(0)
+    assert a.records[0] == rec(0, 1)
+
+
+def test_a_newer_round_acknowledges_an_agreed_digest() -> None:
+    a = Agreement(0, rec(0), 0.0, fleet_size=2)
+    a.member_joined(1, 0.0)
+    a.on_record(rec(1), 0.0)
+    members, digest = a.digest()
+    # before agreement a newer round proves nothing about ours
+    a.on_digest(DigestMsg(sender=1, round=1, digest=digest, members=members), 0.0)
+    assert a.peer_agreed == set() and 1 not in a.digests
+    a.on_digest(DigestMsg(sender=1, round=0, digest=digest, members=members), 0.0)
+    assert a.decide(0.0).kind == "agreed"
+    assert a.due(0.1) == ["digest"]
+    a.sent(["digest"], 0.1)
+    a.on_record(rec(1, 1), 0.2)  # peer 1 moved on to re-search round 1
+    assert a.peer_agreed == {1} and a.due(20.0) == []
 
 
 def test_nothing_is_kept_for_non_members() -> None:

@@ -315,3 +315,57 @@ def test_a_vanished_token_is_a_departure_only_after_the_grace_period(
         assert r.peers[2].alive and r.agreement.left == {1}
     finally:
         bus.close()
+
+
+# ---------------------------------------------------------------- re-search (4.1.3 rule 2)
+
+
+def _lost_records() -> tuple[NeighborRecordMsg, ...]:
+    """Robots 1 and 2 see each other; robot 3 sees nobody and nobody sees it."""
+    return (
+        NeighborRecordMsg(sender=1, round=0, neighbours=((-1.0, 0.1),)),
+        NeighborRecordMsg(sender=2, round=0, neighbours=((1.0, -0.1),)),
+        NeighborRecordMsg(sender=3, round=0, neighbours=()),
+    )
+
+
+def test_research_returns_nothing_for_a_connected_fleet(runner: Runner) -> None:
+    assert runner.research(Decision("agreed", records=records())) is None
+    assert runner.record_round == 0
+
+
+def test_research_stops_the_fleet_after_the_last_round(runner: Runner) -> None:
+    runner.cfg = dataclasses.replace(runner.cfg, research_rounds=0)
+    with pytest.raises(AgentFailure, match=r"robots \[3\] outside .* after 0 re-search round"):
+        runner.research(Decision("agreed", records=_lost_records()))
+    assert runner.record_round == 0  # nobody moved on to another round
+
+
+def test_a_waiting_robot_stops_when_a_searcher_failed(runner: Runner) -> None:
+    runner.record_round = 1
+    runner.peers[1] = Peer(alive=True, phase="failed", seen_alive=True)
+    with pytest.raises(AgentFailure, match="robot 1 failed in re-search round 1"):
+        runner._wait_for_searchers((1,))
+    runner.peers[1] = Peer(alive=False, phase="explore", seen_alive=True)
+    with pytest.raises(AgentFailure, match="robot 1 left in re-search round 1"):
+        runner._wait_for_searchers((1,))
+    runner.peers[1] = Peer(alive=True, phase="explore", seen_alive=True)
+    runner.cfg = dataclasses.replace(runner.cfg, research_timeout=0.3)
+    with pytest.raises(AgentFailure, match=r"robots \[1\] did not search again within 0.3 s"):
+        runner._wait_for_searchers((1,))
+    # a record of the round from the searcher ends the wait
+    runner.early_records[1] = NeighborRecordMsg(sender=1, round=1, neighbours=())
+    runner._wait_for_searchers((1,))
+
+
+def test_research_config_is_validated() -> None:
+    for kw, match in (
+        ({"research_rounds": -1}, "research_rounds"),
+        ({"research_rounds": 11}, "research_rounds"),
+        ({"explore_step": 0.1}, "explore_step"),
+        ({"explore_step": math.inf}, "explore_step"),
+        ({"research_timeout": 0.0}, "research_timeout"),
+    ):
+        with pytest.raises(ValueError, match=match):
+            AgentConfig(robot_id=1, **kw)  # type: ignore[arg-type]
+    assert AgentConfig(robot_id=1).agreed_params()["research_rounds"] == 2

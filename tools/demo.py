@@ -192,6 +192,7 @@ def start_agent(
         *([f"--march-to={args.march_to}"] if getattr(args, "march_to", None) is not None else []),
         "--log-level", args.agent_log_level,
         *(["--no-correct"] if getattr(args, "no_correct", False) else []),
+        *(["--research-rounds", str(args.research_rounds)] if getattr(args, "research_rounds", None) is not None else []),
         *(["--body", "naoqi", "--nao", args.nao_urls[rid]] if getattr(args, "body", "") == "naoqi" else []),
     ]  # fmt: skip
     log = (out / (f"agent-slot{rid}.log" if auto else f"agent-{rid}.log")).open("wb")
@@ -442,7 +443,9 @@ class Observer:
                 msg.error, msg.plan_digest, msg.wave, msg.t_sim,
             )  # fmt: skip
         elif isinstance(msg, NeighborRecordMsg):
-            self.records[msg.sender] = msg
+            old = self.records.get(msg.sender)
+            if old is None or old.round <= msg.round:  # the newest (re-)search round
+                self.records[msg.sender] = msg
         elif isinstance(msg, DigestMsg):
             self.digests[msg.sender] = msg
 
@@ -867,6 +870,11 @@ def summarise(
     result["t_sim_end"] = obs.truth[-1][0] if obs.truth else 0.0
     result["pairs"] = []
     ok_agents = all(views[i].exit_code == 0 and views[i].phase == "done" for i in ids)
+    # the (re-)search round of each robot's last record (NAO 4.1.3 rule 2)
+    result["record_rounds"] = {str(i): obs.records[i].round for i in ids if i in obs.records}
+    if obs.truth:
+        result["starts"] = {str(i): list(obs.truth[0][1][i]) for i in ids if i in obs.truth[0][1]}
+        result["finals"] = {str(i): list(obs.truth[-1][1][i]) for i in ids if i in obs.truth[-1][1]}
     if obs.truth and len(obs.records) == n:
         try:
             fa, plan = plan_from_agreed(
@@ -885,10 +893,6 @@ def summarise(
             pairs = pyramid_pairs(plan, ids)
             final = obs.truth[-1][1]
             result["pairs"] = evaluate(final, pairs, axis, d_e, phi_e)
-            result["starts"] = {
-                str(i): list(obs.truth[0][1][i]) for i in ids if i in obs.truth[0][1]
-            }
-            result["finals"] = {str(i): list(final[i]) for i in ids if i in final}
             if result.get("route"):
                 judge_march(obs, result, plan, axis, pairs, d_e, phi_e)
             if "obstacles" in result:
@@ -1033,6 +1037,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--agree-timeout", type=float, default=120.0)
     p.add_argument("--auto-ids", action="store_true", help="agents claim robots (--id auto)")
     p.add_argument("--no-correct", action="store_true", help="agents skip the final alignment")
+    p.add_argument(
+        "--research-rounds", type=int, default=None, metavar="K",
+        help="re-search rounds (NAO paper 4.1.3 rule 2) before the agents stop (agent default 2)",
+    )  # fmt: skip
     march = p.add_mutually_exclusive_group()
     march.add_argument(
         "--march", type=float, default=None, metavar="D",

@@ -51,6 +51,8 @@ def test_naoqi_body_takes_the_robot_url() -> None:
         (["--id", "auto", "--body", "naoqi", "--nao", "tcp://h:9559"], "fixed --id"),
         (["--id", "2", "--body", "naoqi", "--nao", "nao.local"], "not a URL"),
         (["--id", "2", "--nao", "tcp://h:9559"], "needs --body naoqi"),
+        (["--id", "2", "--research-rounds", "11"], "--research-rounds must be"),
+        (["--id", "2", "--explore-step", "0.1"], "--explore-step must be"),
     ],
 )
 def test_body_usage_errors(
