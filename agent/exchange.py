@@ -13,9 +13,14 @@ the same record set, and moves only then:
 * **Agreed** when the agent holds a record from every member, the members are exactly
   the live set, and every member's latest digest equals its own (same digest, same
   members). Then all of them hold bit-identical inputs and compute the same plan.
-* **Failed** (a safe stop, never a move on an unshared plan) when a member leaves
-  before agreement, the live set exceeds ``fleet_size``, or ``timeout`` expires; the
-  reason names who is missing.
+* **Failed** (a safe stop, never a move on an unshared plan) when a member whose
+  record we do not hold (or that reported ``failed``) leaves before agreement, the live
+  set exceeds ``fleet_size``,
+  or ``timeout`` expires; the reason names who is missing. A member that leaves after
+  its record arrived is out of reach, not gone (issue #9: at 50 % loss a session stays
+  cut for longer than any sensible grace): the agreement waits for it to come back
+  (:meth:`Agreement.member_joined`) until ``timeout``, and nobody moves meanwhile,
+  since agreement needs every member's matching digest.
 
 Re-publishing (what :meth:`Agreement.due` returns): the record once, again when a member
 joins, and while some member's latest digest does not list this agent; the digest while some member's digest differs from
@@ -232,6 +237,7 @@ class Agreement:
         self.params_of: dict[int, str] = {}  # member (live or left) -> its params digest
         self.live: set[int] = {self_id}
         self.left: set[int] = set()
+        self.stopped: set[int] = set()  # members that reported ``failed``
         self.records: dict[int, NeighborRecordMsg] = {self_id: own_record}
         self.digests: dict[int, DigestMsg] = {}
         self.peer_agreed: set[int] = set()
@@ -322,6 +328,8 @@ class Agreement:
             self.ignored += 1
         elif phase in POST_AGREE_PHASES:
             self.peer_agreed.add(robot_id)
+        elif phase == "failed":
+            self.stopped.add(robot_id)  # when it leaves, it will not return
 
     # ----------------------------------------------------------------- state
 
@@ -365,10 +373,10 @@ class Agreement:
         params_wait = self._params_decision(now)
         if params_wait is not None:
             return params_wait
-        if self.left:
+        gone = sorted(i for i in self.left if i not in self.records or i in self.stopped)
+        if gone:
             return self._fail(
-                f"member(s) {sorted(self.left)} left before agreement; "
-                "not moving on a plan they may not share"
+                f"member(s) {gone} left before agreement; not moving on a plan they may not share"
             )
         n = len(self.live)
         if self.fleet_size is not None and n > self.fleet_size:
@@ -430,6 +438,8 @@ class Agreement:
         )
 
     def _wait_reason(self, missing: list[int], disagree: list[int]) -> str:
+        if self.left:
+            return f"member(s) {sorted(self.left)} out of reach; waiting for them to return"
         if self.fleet_size is not None and len(self.live) < self.fleet_size:
             return f"{len(self.live)} of {self.fleet_size} members"
         if missing:

@@ -630,16 +630,17 @@ class Runner:
             params=params_digest(self.cfg.agreed_params()),
         )
         for rid, peer in sorted(self.peers.items()):
-            if rid != self.me and peer.alive:
+            if rid != self.me and peer.seen_alive:
                 agr.member_joined(rid, now)
-            elif rid != self.me and peer.seen_alive:
-                # it was a member and left while we searched: that is a departure too
-                agr.member_joined(rid, now)
-                agr.member_left(rid, now)
         for msg in self.early_records.values():
             agr.on_record(msg, now)
         for dmsg in self.early_digests.values():
             agr.on_digest(dmsg, now)
+        for rid, peer in sorted(self.peers.items()):
+            if rid != self.me and peer.seen_alive and not peer.alive:
+                # it was a member and left while we searched: a departure too (with its
+                # record held, one it may return from, agent.exchange)
+                agr.member_left(rid, now)
         self.early_records = {i: m for i, m in self.early_records.items() if m.round > agr.round}
         self.early_digests = {i: m for i, m in self.early_digests.items() if m.round > agr.round}
         for rid, peer in self.peers.items():
@@ -902,20 +903,32 @@ class Runner:
                 math.degrees(marcher.worst_bearing),
             )  # fmt: skip
         self.status("done", 1.0, "formation held", force=True)
-        self._wait_all(("done", "failed"), "done", "formation held; waiting for")
+        self._wait_all(
+            ("done", "failed"), "done", "formation held; waiting for", self.cfg.member_grace
+        )
 
-    def _wait_all(self, phases: tuple[str, ...], mine: str, text: str) -> None:
-        """Stay (heartbeats) until every live member is in ``phases`` (bounded)."""
-        members = self.agreement.held_members() if self.agreement else ()
-        deadline = self.clock() + self.cfg.wave_timeout
+    def _wait_all(self, phases: tuple[str, ...], mine: str, text: str, linger: float = 0.0) -> None:
+        """Stay (heartbeats) until every live member is in ``phases`` (bounded).
+
+        ``linger``: a member out of reach (its token gone) not yet seen in ``phases`` is
+        waited for too, for up to ``linger`` s, while our heartbeats repeat our status: on
+        a lossy link (issue #9) a session can stay cut for longer than the membership
+        grace, and a final ``done`` published once into a cut session reaches nobody.
+        """
+        # the plan's members (a member out of reach has left the live set since)
+        plan = self._plan
+        members = tuple(self.formation.members(plan)) if plan is not None else ()
+        start = self.clock()
+        deadline = start + self.cfg.wave_timeout
         while self.clock() < deadline:
             self.pump(0.2)
+            patient = self.clock() - start < linger
             waiting = [
                 i
                 for i in members
                 if i != self.me
                 and self.peers.get(i, Peer()).phase not in phases
-                and self.peers.get(i, Peer()).alive
+                and (self.peers.get(i, Peer()).alive or patient)
             ]
             if not waiting and (self.agreement is None or not self.agreement.due(self.clock())):
                 return

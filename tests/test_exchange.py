@@ -469,3 +469,40 @@ def test_grace_zero_expires_at_once_and_bad_grace_is_refused() -> None:
     for bad in (-1.0, math.inf, math.nan):
         with pytest.raises(ValueError, match="grace"):
             Grace(bad)
+
+
+def test_a_member_out_of_reach_after_its_record_is_waited_for_until_it_returns() -> None:
+    net = Net([0, 1, 2], drop=lambda kind, s, d, t: s == 2 and kind == "digest")
+    net.run(1.0)  # every record held; 2's digests lost: no agreement yet
+    a = net.agents[0]
+    a.member_left(2, net.t)  # its session cut (grace expired), its record held
+    d = a.decide(net.t)
+    assert d.kind == "wait" and "[2] out of reach" in d.reason
+    a.member_joined(2, net.t + 5.0)  # reconnected
+    net.drop = lambda kind, s, d, t: False
+    net.run(net.t + 10.0)
+    assert {x.decide(net.t).kind for x in net.agents.values()} == {"agreed"}
+    assert len({x.decide(net.t).digest for x in net.agents.values()}) == 1
+
+
+def test_a_member_out_of_reach_that_never_returns_times_out_safely() -> None:
+    net = Net([0, 1, 2], timeout=5.0, drop=lambda kind, s, d, t: s == 2 and kind == "digest")
+    net.run(1.0)
+    net.kill(2)
+    net.run(4.0)
+    assert net.agents[0].decide(net.t).kind == "wait"  # nobody agrees without 2
+    net.run(7.0)
+    for a in net.agents.values():
+        d = a.decide(net.t)
+        assert d.kind == "failed" and "2 of 3 members alive [0, 1]" in d.reason
+
+
+def test_a_member_that_failed_and_left_fails_the_agreement_at_once() -> None:
+    net = Net([0, 1, 2], drop=lambda kind, s, d, t: s == 2 and kind == "digest")
+    net.run(1.0)
+    a = net.agents[0]
+    a.on_peer_phase(2, "failed")
+    assert a.decide(net.t).kind == "wait"  # still a member until it leaves
+    a.member_left(2, net.t)
+    d = a.decide(net.t)
+    assert d.kind == "failed" and "[2] left before agreement" in d.reason

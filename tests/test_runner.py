@@ -369,3 +369,65 @@ def test_research_config_is_validated() -> None:
         with pytest.raises(ValueError, match=match):
             AgentConfig(robot_id=1, **kw)  # type: ignore[arg-type]
     assert AgentConfig(robot_id=1).agreed_params()["research_rounds"] == 2
+
+
+def _lingering(perception: PerceptionAdapter, peers: dict[int, Peer]) -> tuple[Runner, Bus]:
+    """Robot 3 in ``done`` with a fake clock that advances 0.25 s per reading."""
+    t = [0.0]
+
+    def clock() -> float:
+        t[0] += 0.25
+        return t[0]
+
+    bus = Bus(BusConfig(multicast_scouting=False))
+    cfg = AgentConfig(robot_id=3, fleet_size=3, wave_timeout=60.0, member_grace=10.0)
+    r = Runner(bus, ZenohBody(bus, 3), cfg, perception, FormationAdapter(), clock=clock)
+    r.plan = r.formation.plan(records(), PlanParams())
+    r.peers.update(peers)
+    return r, bus
+
+
+def test_done_lingers_with_heartbeats_for_members_out_of_reach(
+    perception: PerceptionAdapter,
+) -> None:
+    out_of_reach = {i: Peer(alive=False, phase="hold", seen_alive=True) for i in (1, 2)}
+    r, bus = _lingering(perception, out_of_reach)
+    try:
+        r.status("done", 1.0, force=True)
+        r._wait_all(("done", "failed"), "done", "waiting for", linger=r.cfg.member_grace)
+        # returned once the linger passed, having re-published ``done`` meanwhile
+        assert r.clock() >= r.cfg.member_grace
+        assert bus.stats.published_count["status"] >= 3
+    finally:
+        bus.close()
+
+
+def test_done_does_not_linger_once_every_member_is_seen_done(
+    perception: PerceptionAdapter,
+) -> None:
+    r, bus = _lingering(
+        perception,
+        {
+            1: Peer(alive=False, phase="done", seen_alive=True),
+            2: Peer(alive=True, phase="done", seen_alive=True),
+        },
+    )
+    try:
+        r.status("done", 1.0, force=True)
+        r._wait_all(("done", "failed"), "done", "waiting for", linger=r.cfg.member_grace)
+        assert r.clock() < 3.0  # no heartbeat was due
+        assert bus.stats.published_count["status"] == 1
+    finally:
+        bus.close()
+
+
+def test_without_linger_members_out_of_reach_are_not_waited_for(
+    perception: PerceptionAdapter,
+) -> None:
+    out_of_reach = {i: Peer(alive=False, phase="hold", seen_alive=True) for i in (1, 2)}
+    r, bus = _lingering(perception, out_of_reach)
+    try:
+        r._wait_all(("done", "failed"), "done", "waiting for")
+        assert r.clock() < 3.0
+    finally:
+        bus.close()
