@@ -167,6 +167,7 @@ def monitor(
     for i in ids:
         code = order.get("exit_codes", {}).get(str(i))
         obs.agents.setdefault(i, demo.AgentView()).exit_code = code
+    lost = done_by_exit_code(obs, ids)
     result: dict[str, Any] = {
         "robots": len(ids),
         "seed": seed,
@@ -176,6 +177,8 @@ def monitor(
     }
     if order.get("timeout"):
         result["timeout"] = order["timeout"]
+    if lost:
+        result["final_status_unheard"] = lost
     # which phases each agent went through (did it move?), and how far each robot walked
     # (ground truth): what tells a safe abort from a robot moving on an unshared plan
     result["phases_visited"] = {
@@ -205,6 +208,24 @@ def monitor(
         demo.print_table(result)
     print("monitor done", flush=True)
     return 0 if result.get("success") else 1
+
+
+def done_by_exit_code(obs: Any, ids: list[int]) -> list[int]:
+    """Agents that exited 0 but whose final ``done`` status the monitor never heard (sorted);
+    their phase in ``obs`` (a ``tools.demo.Observer``) is set to ``done``.
+
+    ``Runner.run`` returns 0 only after it published ``done`` (the exit code is the
+    authority, not one status packet that a cut session may swallow); the rest of the
+    judgement stays with what the monitor saw: the plan digests of the agents' statuses
+    and the world's ground truth.
+    """
+    out = []
+    for i in ids:
+        view = obs.agents.get(i)
+        if view is not None and view.exit_code == 0 and view.phase not in TERMINAL_PHASES:
+            view.phase = "done"
+            out.append(i)
+    return sorted(out)
 
 
 # =========================================================================== one run
