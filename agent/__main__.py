@@ -4,7 +4,8 @@
                     [--world-connect EP]...
                     [--no-multicast-scouting] [--mode peer|client] [--d-e 0.8]
                     [--phi-e-deg 30] [--orientation pca|cp] [--strategy S]
-                    [--timeout S] [--research-rounds K] [--explore-step M]
+                    [--timeout S] [--member-grace S] [--join-timeout S]
+                    [--research-rounds K] [--explore-step M]
                     [--body zenoh|naoqi]
                     [--nao tcp://HOST:9559]
 
@@ -72,6 +73,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     )
     p.add_argument(
         "--wave-timeout", type=float, default=600.0, help="wait limit for earlier waves (s)"
+    )
+    p.add_argument(
+        "--join-timeout",
+        type=float,
+        default=300.0,
+        help="s to keep trying to open the zenoh sessions while starting (lossy links)",
     )
     p.add_argument(
         "--research-rounds",
@@ -144,6 +151,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         p.error("--timeout must be > 0")
     if not (math.isfinite(args.member_grace) and args.member_grace >= 0):
         p.error("--member-grace must be >= 0")
+    if not (math.isfinite(args.join_timeout) and args.join_timeout >= 0):
+        p.error("--join-timeout must be >= 0")
     if args.research_rounds is not None and not 0 <= args.research_rounds <= 10:
         p.error("--research-rounds must be in [0, 10]")
     if args.explore_step is not None and not (
@@ -176,17 +185,22 @@ def open_bus(args: argparse.Namespace, log: logging.Logger) -> tuple[Bus, Bus, i
     with it and ask the world for that id; the world grants an id only to the key that
     owns it, so the first free one wins. Insecure: ``--id auto`` takes the lowest free id.
     """
-    from agent.bus import Bus
+    from agent.bus import Bus, BusConfig, open_retrying
     from agent.robot import register
+
+    def session(spec: BusConfig) -> Bus:
+        """A session, tried again for ``--join-timeout`` s (a lossy start only delays)."""
+        return open_retrying(lambda: Bus(spec), args.join_timeout)
+
     from agent.seams import BodyError
     from agent.trust import Credentials
 
     def opened(spec: NetworkSpec, world: Bus | None, rid: int) -> tuple[Bus, Bus, int]:
         if world is None:  # one session for both
-            bus = Bus(spec)
+            bus = session(spec)
             return bus, bus, rid
         try:
-            return Bus(spec), world, rid
+            return session(spec), world, rid
         except BaseException:
             world.close()
             raise
@@ -194,7 +208,7 @@ def open_bus(args: argparse.Namespace, log: logging.Logger) -> tuple[Bus, Bus, i
     def world_bus(spec: NetworkSpec) -> Bus | None:
         if not args.world_connect:
             return None
-        return Bus(dataclasses.replace(spec, connect=tuple(args.world_connect), listen=()))
+        return session(dataclasses.replace(spec, connect=tuple(args.world_connect), listen=()))
 
     if args.id != "auto":
         rid = int(args.id)
@@ -208,7 +222,7 @@ def open_bus(args: argparse.Namespace, log: logging.Logger) -> tuple[Bus, Bus, i
     for want in candidates:
         mine = dataclasses.replace(spec, identity=f"robot-{want}") if want >= 0 else spec
         wbus = world_bus(mine)
-        asker = wbus if wbus is not None else Bus(mine)
+        asker = wbus if wbus is not None else session(mine)
         try:
             got = register(asker, want, timeout=30.0)
         except BodyError as exc:

@@ -22,11 +22,12 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import math
 import queue
 import threading
 import time
 from collections import Counter
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
@@ -91,6 +92,47 @@ class QueryTimeout(BusError):
     """A query whose reply did not come within its timeout (the request, or its reply,
     may have been lost, or the queryable is slow). A motion may have been executed:
     repeat it only with the same request id (``agent.robot.ZenohBody``)."""
+
+
+class SessionUnavailable(BusError):
+    """The zenoh session could not be opened (no router reached within zenoh's connect
+    window, or a TLS handshake that a lossy link did not let through)."""
+
+
+_T = TypeVar("_T")
+
+
+def open_retrying(
+    open_fn: Callable[[], _T],
+    give_up_s: float,
+    clock: Callable[[], float] = time.monotonic,
+    sleep: Callable[[float], None] = time.sleep,
+    wait: tuple[float, float] = (1.0, 8.0),
+) -> _T:
+    """``open_fn()``, called again after :class:`SessionUnavailable` until ``give_up_s``
+    seconds have passed (then the last error is raised).
+
+    Issue #9: at 50 % loss per direction a TLS session may not open within zenoh's own
+    connect window (``connect/timeout_ms`` of ``agent.protocol.LOSSY_LINK_SETTINGS``); a
+    lossy start should only delay the agent. Waits between attempts double from
+    ``wait[0]`` to ``wait[1]`` s and never pass the deadline.
+    """
+    if not (math.isfinite(give_up_s) and give_up_s >= 0.0):
+        raise ValueError(f"give_up_s must be finite and >= 0, got {give_up_s}")
+    if not 0.0 < wait[0] <= wait[1]:
+        raise ValueError(f"need 0 < wait[0] <= wait[1], got {wait}")
+    deadline = clock() + give_up_s
+    pause = wait[0]
+    while True:
+        try:
+            return open_fn()
+        except SessionUnavailable as exc:
+            left = deadline - clock()
+            if left <= 0.0:
+                raise
+            log.warning("%s; trying again (%.0f s left)", exc, left)
+            sleep(min(pause, left))
+            pause = min(wait[1], 2.0 * pause)
 
 
 #: How the agent joins the bus: the shared :class:`agent.protocol.NetworkSpec`.
@@ -159,7 +201,7 @@ class Bus:
         try:
             self.session = zenoh.open(zenoh_config(self.config))
         except zenoh.ZError as exc:  # no router reached (not up yet, a lossy handshake)
-            raise BusError(f"cannot open the zenoh session: {reason(exc)}") from None
+            raise SessionUnavailable(f"cannot open the zenoh session: {reason(exc)}") from None
 
     def _count_rejected(self) -> None:
         with self._lock:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import socket
 import time
 from collections.abc import Iterator
@@ -14,7 +15,17 @@ import msgpack
 import pytest
 import zenoh
 
-from agent.bus import EVENT_CAPS, EVENT_MAX_BYTES, Bus, BusConfig, BusError, Event, NoRoute
+from agent.bus import (
+    EVENT_CAPS,
+    EVENT_MAX_BYTES,
+    Bus,
+    BusConfig,
+    BusError,
+    Event,
+    NoRoute,
+    SessionUnavailable,
+    open_retrying,
+)
 from agent.protocol import (
     MAX_MESSAGE_BYTES,
     MAX_PUBLICATION_BYTES,
@@ -400,3 +411,56 @@ def test_event_queue_is_bounded_in_payload_bytes_too(pair: tuple[Bus, Bus, str])
     kept = EVENT_MAX_BYTES["msg"] // len(big)
     assert b.events.weights()["msg"] <= EVENT_MAX_BYTES["msg"]
     assert b.stats.dropped == n - kept and len(b.drain()) == kept
+
+
+class _Flaky:
+    """Fails to open ``fails`` times, then returns "session"; a fake clock and sleep."""
+
+    def __init__(self, fails: int) -> None:
+        self.fails, self.calls, self.t = fails, 0, 0.0
+        self.sleeps: list[float] = []
+
+    def open(self) -> str:
+        self.calls += 1
+        if self.calls <= self.fails:
+            raise SessionUnavailable(f"cannot open the zenoh session: attempt {self.calls}")
+        return "session"
+
+    def sleep(self, s: float) -> None:
+        self.sleeps.append(s)
+        self.t += s
+
+
+def test_open_retrying_backs_off_until_the_session_opens() -> None:
+    f = _Flaky(fails=5)
+    got = open_retrying(f.open, 100.0, clock=lambda: f.t, sleep=f.sleep, wait=(1.0, 4.0))
+    assert got == "session" and f.calls == 6
+    assert f.sleeps == [1.0, 2.0, 4.0, 4.0, 4.0]
+
+
+def test_open_retrying_gives_up_at_the_deadline_with_the_last_error() -> None:
+    f = _Flaky(fails=100)
+    with pytest.raises(SessionUnavailable, match="attempt 5"):
+        open_retrying(f.open, 10.0, clock=lambda: f.t, sleep=f.sleep, wait=(1.0, 4.0))
+    assert f.sleeps == [1.0, 2.0, 4.0, 3.0]  # the last wait ends at the deadline, one more try
+    assert sum(f.sleeps) == 10.0
+
+
+def test_open_retrying_does_not_retry_other_errors() -> None:
+    def broken() -> str:
+        raise BusError("not a session problem")
+
+    with pytest.raises(BusError, match="not a session problem"):
+        open_retrying(broken, 100.0, sleep=lambda s: pytest.fail("retried"))
+
+
+@pytest.mark.parametrize(
+    "give_up, wait, match",
+    [(-1.0, (1.0, 2.0), "give_up_s"), (math.inf, (1.0, 2.0), "give_up_s"),
+     (1.0, (0.0, 2.0), "wait"), (1.0, (3.0, 2.0), "wait")],
+)  # fmt: skip
+def test_open_retrying_rejects_bad_bounds(
+    give_up: float, wait: tuple[float, float], match: str
+) -> None:
+    with pytest.raises(ValueError, match=match):
+        open_retrying(lambda: "x", give_up, wait=wait)

@@ -53,6 +53,7 @@ def test_naoqi_body_takes_the_robot_url() -> None:
         (["--id", "2", "--nao", "tcp://h:9559"], "needs --body naoqi"),
         (["--id", "2", "--research-rounds", "11"], "--research-rounds must be"),
         (["--id", "2", "--explore-step", "0.1"], "--explore-step must be"),
+        (["--id", "2", "--join-timeout", "-1"], "--join-timeout must be >= 0"),
     ],
 )
 def test_body_usage_errors(
