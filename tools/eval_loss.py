@@ -228,6 +228,27 @@ def done_by_exit_code(obs: Any, ids: list[int]) -> list[int]:
     return sorted(out)
 
 
+#: Bounds of Linux's ``net.ipv4.tcp_rto_max_ms`` (kernel >= 6.15; ms).
+TCP_RTO_MAX_RANGE = (1000, 120000)
+
+
+def cap_tcp_rto(fab: netns.Fabric, ms: int) -> None:
+    """Cap TCP's retransmission timeout at ``ms`` on every host of ``fab``.
+
+    TCP doubles its retransmission timeout after every lost retransmission, up to 120 s by
+    default: at 50 % loss per direction (a segment and its ACK both get through with
+    probability 1/4) six losses in a row, probability 0.75^6 ≈ 18 %, already stall a zenoh
+    session for about 25 s, longer than the membership grace. With a cap the session
+    keeps probing every ``ms``. ``net.ipv4.tcp_rto_max_ms`` is per network namespace, so
+    only the test hosts change; on robots it is a deployment setting of their kernels.
+    """
+    lo, hi = TCP_RTO_MAX_RANGE
+    if not lo <= ms <= hi:
+        raise ValueError(f"tcp_rto_max_ms must be in [{lo}, {hi}], got {ms}")
+    for i in range(1, fab.n + 1):
+        fab.run(i, ["sysctl", "-q", "-w", f"net.ipv4.tcp_rto_max_ms={ms}"])
+
+
 # =========================================================================== one run
 
 
@@ -309,17 +330,21 @@ def run_once(
     phi_e_deg: float = 30.0,
     agent_mode: str = "client",
     credentials: str = "",
+    tcp_rto_max_ms: int = 0,
 ) -> RunResult:
     """One formation run with ``loss`` on every agent host; logs and results in ``workdir``.
 
     ``credentials``: a fleet folder made for ``robots`` robots and the router's address
-    (secure: TLS links, signatures); empty: insecure."""
+    (secure: TLS links, signatures); empty: insecure. ``tcp_rto_max_ms``: when > 0, every
+    host's kernel caps TCP's retransmission timeout there (see :func:`cap_tcp_rto`)."""
     workdir.mkdir(parents=True, exist_ok=True)
     py = sys.executable
     env = dict(os.environ, PYTHONUNBUFFERED="1", MPLBACKEND="Agg")
     t_start = time.monotonic()
     proto = "tls" if credentials else "tcp"
     with netns.Fabric(robots + 3, prefix=prefix) as fab, contextlib.ExitStack() as files:
+        if tcp_rto_max_ms:
+            cap_tcp_rto(fab, tcp_rto_max_ms)
         router_ep = f"{proto}/{fab.address(1)}:{P.BUS_PORT}"
         world_ep = f"{proto}/{fab.address(1)}:{P.WORLD_PORT}"
         sec = ["--credentials", credentials] if credentials else ["--insecure"]
@@ -541,6 +566,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--prefix", default="nel", help="namespace prefix (tools.netns)")
     ap.add_argument("--lossy-world", action="store_true", help="drop world traffic too")
     ap.add_argument(
+        "--tcp-rto-max-ms",
+        type=int,
+        default=0,
+        metavar="MS",
+        help="cap TCP's retransmission timeout on every test host (net.ipv4.tcp_rto_max_ms, "
+        f"{TCP_RTO_MAX_RANGE[0]}-{TCP_RTO_MAX_RANGE[1]}; default 0: the kernel's 120 s)",
+    )
+    ap.add_argument(
         "--agent-mode",
         choices=("peer", "client"),
         default="client",
@@ -608,6 +641,10 @@ def main(argv: list[str] | None = None) -> int:
             "eval_loss: --robots must be in [1, 20], --seeds >= 1, --seed-start >= 0",
             file=sys.stderr,
         )
+        return 2
+    lo, hi = TCP_RTO_MAX_RANGE
+    if args.tcp_rto_max_ms and not lo <= args.tcp_rto_max_ms <= hi:
+        print(f"eval_loss: --tcp-rto-max-ms must be 0 or in [{lo}, {hi}]", file=sys.stderr)
         return 2
     if args.agent_mode == "peer" and not args.insecure:
         print("eval_loss: --agent-mode peer needs --insecure (secure runs use a router)",
@@ -705,7 +742,7 @@ def _evaluate(args: argparse.Namespace, losses: list[float], out: Path) -> int:
                 r = run_once(
                     loss, seed, args.robots, args.timeout,
                     out / f"loss{loss:g}_seed{seed}", args.prefix, args.lossy_world,
-                    args.d_e, args.phi_e_deg, args.agent_mode, creds,
+                    args.d_e, args.phi_e_deg, args.agent_mode, creds, args.tcp_rto_max_ms,
                 )  # fmt: skip
             except (RuntimeError, netns.NetnsError, OSError) as exc:
                 print(f"eval_loss: run failed to start: {exc}", file=sys.stderr)
@@ -729,6 +766,7 @@ def _evaluate(args: argparse.Namespace, losses: list[float], out: Path) -> int:
         "seeds": args.seeds,
         "lossy_world": args.lossy_world,
         "agent_mode": args.agent_mode,
+        "tcp_rto_max_ms": args.tcp_rto_max_ms,
         "summary": summary,
         "runs": [asdict(r) for r in results],
     }
@@ -739,7 +777,8 @@ def _evaluate(args: argparse.Namespace, losses: list[float], out: Path) -> int:
         out / "outcomes.png",
         f"{args.robots} robots, seeds {args.seed_start}..{args.seed_start + args.seeds - 1}, "
         f"{'insecure' if args.insecure else 'TLS router'}, world traffic "
-        f"{'lossy' if args.lossy_world else 'exempt'}",
+        f"{'lossy' if args.lossy_world else 'exempt'}"
+        + (f", TCP RTO <= {args.tcp_rto_max_ms} ms" if args.tcp_rto_max_ms else ""),
     )
     print(f"{'loss':>6} {'seed':>5} {'outcome':>11} {'contacts':>8} {'wall s':>7}  detail")
     for row in rows:

@@ -105,6 +105,8 @@ def test_fmt_pads_missing_values() -> None:
         (["--seeds", "0"], "--seeds"),
         (["--seed-start", "-1"], "--seed-start"),
         (["--agent-mode", "peer"], "needs --insecure"),
+        (["--tcp-rto-max-ms", "999"], "--tcp-rto-max-ms must be 0 or in [1000, 120000]"),
+        (["--tcp-rto-max-ms", "120001"], "--tcp-rto-max-ms must be 0 or in [1000, 120000]"),
     ],
 )
 def test_cli_rejects_bad_arguments(
@@ -231,3 +233,25 @@ def test_exit_code_zero_is_done_when_the_final_status_went_unheard() -> None:
     assert {i: v.phase for i, v in obs.agents.items()} == {
         1: "done", 2: "done", 3: "hold", 4: "failed", 5: "done", 6: "hold",
     }  # fmt: skip
+
+
+class _Hosts:
+    """Records the commands a fabric of ``n`` hosts would run."""
+
+    def __init__(self, n: int) -> None:
+        self.n = n
+        self.ran: list[tuple[int, list[str]]] = []
+
+    def run(self, index: int, argv: list[str]) -> None:
+        self.ran.append((index, argv))
+
+
+def test_cap_tcp_rto_sets_the_sysctl_on_every_host() -> None:
+    hosts = _Hosts(3)
+    eval_loss.cap_tcp_rto(hosts, 1000)  # type: ignore[arg-type]
+    assert hosts.ran == [
+        (i, ["sysctl", "-q", "-w", "net.ipv4.tcp_rto_max_ms=1000"]) for i in (1, 2, 3)
+    ]
+    for bad in (999, 120001):
+        with pytest.raises(ValueError, match="tcp_rto_max_ms must be in"):
+            eval_loss.cap_tcp_rto(_Hosts(1), bad)  # type: ignore[arg-type]
