@@ -58,6 +58,12 @@ Tie-breaks: a record with a higher ``round`` replaces an older one; for the same
 the latest received wins (re-publications are identical). Digests are over the
 records sorted by sender id.
 
+**Adopting** (issue #9, :meth:`Agreement.adopt`): agreement is asymmetric (two
+generals); a member may agree and move while its matching digest never reaches us (its
+session cut until it exits). The runner then lets us agree too when such a member,
+with our parameters digest, reports the plan digest of exactly the records we hold:
+it planned from the same inputs, so moving on that plan is moving on a shared plan.
+
 **Rounds** (re-search, NAO paper 4.1.3 rule 2, :mod:`agent.formation.research`): an
 agreement belongs to the round of its own record (``round``). Records and digests of an
 older round are stale and ignored (counted in ``stale``); a record or digest of a newer
@@ -408,6 +414,25 @@ class Agreement:
                 parts.append(f"digest differs or missing from {disagree}")
             return self._fail("; ".join(parts))
         return Decision("wait", self._wait_reason(missing, disagree))
+
+    def adopt(self, now: float, why: str) -> Decision:
+        """Agreed on the records held, without every member's matching digest: the caller
+        saw a member act on the plan of exactly these records (``agent.runner``, issue #9:
+        that member's digest may never reach us). Needs a record from every member of a
+        fleet of known size (members out of reach included); final like :meth:`decide`.
+        """
+        if self._final is not None:
+            return self._final
+        members = tuple(sorted(self.records))
+        if self.fleet_size is None or len(members) != self.fleet_size:
+            raise ValueError(
+                f"adopting needs a record from each of the fleet's {self.fleet_size} members, "
+                f"holding {list(members)}"
+            )
+        recs = tuple(self.records[i] for i in members)
+        self._final = Decision("agreed", why, self.digest_fn(recs), members, recs)
+        self._digest_tx.reset(now)
+        return self._final
 
     def _params_decision(self, now: float) -> Decision | None:
         """None while every known parameters digest equals ours; else ``failed``, naming

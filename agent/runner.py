@@ -186,6 +186,8 @@ class Runner:
         self.vias = 0  # via (tangent) steps taken round a blocking NAO
         self.steps = 0  # straight steps walked (the age of a sighting)
         self._seen: list[tuple[np.ndarray, int]] = []  # (NAO seen, fixed frame; at step)
+        # (records held, digest of their plan) for adopting a member's plan (_adopt_plan)
+        self._candidate: tuple[tuple[NeighborRecordMsg, ...], str] | None = None
 
     # ================================================================= plumbing
 
@@ -650,6 +652,8 @@ class Runner:
         while True:
             self.pump(0.05)
             d = agr.decide(self.clock())
+            if d.kind == "wait":
+                d = self._adopt_plan(agr) or d
             if d.kind != "wait":
                 return d
             n = max(1, len(agr.live))
@@ -657,6 +661,44 @@ class Runner:
             agreeing = n - len(agr.disagreeing())
             phase = "exchange" if agr.missing_records() else "agree"
             self.status(phase, (held + agreeing) / (2 * n), d.reason)
+
+    def _adopt_plan(self, agr: Agreement) -> Decision | None:
+        """Agreed, when a member already acts on the plan of exactly our records (issue #9).
+
+        Agreement is asymmetric: a member agrees once it holds every matching digest, and
+        ours may reach it while its own never reaches us (a session cut until it exits).
+        A member whose status carries a plan digest has agreed; when it plans with our
+        parameters (its digest's ``params``) and that plan digest is the digest of the
+        plan we compute from the records we hold (a record from every fleet member), it
+        planned from the same inputs: we adopt (:meth:`Agreement.adopt`). The candidate
+        plan is computed once per record set.
+        """
+        if self.cfg.fleet_size is None or len(agr.records) != self.cfg.fleet_size:
+            return None
+        claims = {
+            i: self.peers[i].plan_digest
+            for i in sorted(agr.records)
+            if i != self.me
+            and i in self.peers
+            and self.peers[i].plan_digest
+            and agr.params_of.get(i) == agr.params
+        }
+        if not claims:
+            return None
+        recs = tuple(agr.records[i] for i in sorted(agr.records))
+        if self._candidate is None or self._candidate[0] != recs:
+            try:
+                digest = str(self.formation.plan(recs, self.cfg.plan_params()).digest)
+            except ValueError:
+                digest = ""
+            self._candidate = (recs, digest)
+        digest = self._candidate[1]
+        same = [i for i, d in claims.items() if d == digest]
+        if not digest or not same:
+            return None
+        why = f"robot(s) {same} act on the plan of the records held here (plan {digest[:12]})"
+        log.info("agreed by adoption: %s", why)
+        return agr.adopt(self.clock(), why)
 
     def research(self, decision: Decision) -> NeighborRecordMsg | None:
         """Re-search (NAO paper 4.1.3 rule 2) on the agreed records: ``None`` when the

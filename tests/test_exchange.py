@@ -506,3 +506,26 @@ def test_a_member_that_failed_and_left_fails_the_agreement_at_once() -> None:
     a.member_left(2, net.t)
     d = a.decide(net.t)
     assert d.kind == "failed" and "[2] left before agreement" in d.reason
+
+
+def test_adopt_agrees_on_every_record_held_even_of_a_member_out_of_reach() -> None:
+    net = Net([0, 1, 2], drop=lambda kind, s, d, t: kind == "digest")  # no digest arrives
+    net.run(1.0)
+    a = net.agents[0]
+    a.member_left(2, net.t)
+    assert a.decide(net.t).kind == "wait"
+    d = a.adopt(net.t, "robot 1 moves on our plan")
+    assert d.kind == "agreed" and d.members == (0, 1, 2) and d.reason == "robot 1 moves on our plan"
+    assert d.digest == canonical_digest([rec(0), rec(1), rec(2)])
+    assert d.records == (rec(0), rec(1), rec(2))
+    assert a.decide(net.t + 1.0) is d and a.adopt(net.t, "again") is d  # final
+
+
+def test_adopt_needs_a_record_from_every_member() -> None:
+    net = Net([0, 1], drop=lambda kind, s, d, t: True)
+    net.run(1.0)
+    with pytest.raises(ValueError, match="a record from each of the fleet's 3 members"):
+        net.agents[0].adopt(net.t, "x")
+    b = Agreement(0, rec(0), 0.0, fleet_size=None)
+    with pytest.raises(ValueError, match="fleet's None members"):
+        b.adopt(0.0, "x")

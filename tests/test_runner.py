@@ -17,7 +17,7 @@ import pytest
 from agent.adapters import FormationAdapter, PerceptionAdapter
 from agent.bus import Bus, BusConfig
 from agent.config import AgentConfig, Route
-from agent.exchange import Decision, params_digest
+from agent.exchange import Agreement, Decision, params_digest
 from agent.formation.plan import PlanParams
 from agent.protocol import NeighborRecordMsg, StatusMsg
 from agent.robot import ZenohBody
@@ -429,5 +429,67 @@ def test_without_linger_members_out_of_reach_are_not_waited_for(
     try:
         r._wait_all(("done", "failed"), "done", "waiting for")
         assert r.clock() < 3.0
+    finally:
+        bus.close()
+
+
+def _waiting(perception: PerceptionAdapter) -> tuple[Runner, Bus]:
+    """Robot 3 holding every record, no matching digest from 1 and 2 yet."""
+    from agent.bus import Event
+
+    bus = Bus(BusConfig(multicast_scouting=False))
+    r = Runner(bus, ZenohBody(bus, 3), AgentConfig(robot_id=3, fleet_size=3), perception,
+               FormationAdapter())  # fmt: skip
+    r.agreement = Agreement(3, records()[2], 0.0, fleet_size=3,
+                            params=params_digest(r.cfg.agreed_params()))  # fmt: skip
+    for i in (1, 2):
+        r._handle(Event("alive", f"nao/alive/{i}", robot_id=i))
+        r.agreement.on_record(records()[i - 1], 0.0)
+    return r, bus
+
+
+def _claim(r: Runner, i: int, plan_digest: str, params: str) -> None:
+    from agent.bus import Event
+    from agent.protocol import DigestMsg
+
+    assert r.agreement is not None
+    r.agreement.on_digest(
+        DigestMsg(sender=i, round=0, digest="0" * 64, members=(i,), params=params), 0.0
+    )
+    r._handle(Event("msg", f"nao/{i}/status", StatusMsg(sender=i, phase="move",
+                                                        plan_digest=plan_digest)))  # fmt: skip
+
+
+def test_a_member_moving_on_the_plan_of_our_records_is_adopted(
+    perception: PerceptionAdapter,
+) -> None:
+    r, bus = _waiting(perception)
+    try:
+        agr = r.agreement
+        assert agr is not None and agr.decide(0.0).kind == "wait"
+        assert r._adopt_plan(agr) is None  # nobody has a plan yet
+        ours = str(r.formation.plan(records(), r.cfg.plan_params()).digest)
+        _claim(r, 2, ours, agr.params)
+        d = r._adopt_plan(agr)
+        assert d is not None and d.kind == "agreed" and d.members == (1, 2, 3)
+        assert "robot(s) [2] act on the plan" in d.reason
+        assert agr.decide(1.0) is d
+    finally:
+        bus.close()
+
+
+@pytest.mark.parametrize("other", ["plan", "params"])
+def test_a_member_on_another_plan_or_with_other_params_is_not_adopted(
+    perception: PerceptionAdapter, other: str
+) -> None:
+    r, bus = _waiting(perception)
+    try:
+        agr = r.agreement
+        assert agr is not None
+        ours = str(r.formation.plan(records(), r.cfg.plan_params()).digest)
+        _claim(r, 2, "f" * 64 if other == "plan" else ours,
+               agr.params if other == "plan" else "e" * 64)  # fmt: skip
+        assert r._adopt_plan(agr) is None
+        assert agr.decide(0.0).kind != "agreed"
     finally:
         bus.close()
