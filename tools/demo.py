@@ -194,6 +194,7 @@ def start_agent(
         *(["--no-correct"] if getattr(args, "no_correct", False) else []),
         *(["--research-rounds", str(args.research_rounds)] if getattr(args, "research_rounds", None) is not None else []),
         *(["--body", "naoqi", "--nao", args.nao_urls[rid]] if getattr(args, "body", "") == "naoqi" else []),
+        *(a for i, a in getattr(args, "agent_arg", None) or [] if i == rid),
     ]  # fmt: skip
     log = (out / (f"agent-slot{rid}.log" if auto else f"agent-{rid}.log")).open("wb")
     p = subprocess.Popen(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT)
@@ -696,6 +697,8 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
         result["scenario"] = str(args.scenario)
     if getattr(args, "isolated", False):
         result["isolated"] = True
+    if getattr(args, "agent_arg", None):
+        result["agent_args"] = [f"{i}:{a}" for i, a in args.agent_arg]
     if getattr(args, "march", None) is not None:
         result["route"] = {"distance": float(args.march)}
     elif getattr(args, "march_to", None) is not None:
@@ -1006,6 +1009,14 @@ def print_table(r: dict[str, Any]) -> None:
 # ===================================================================== CLI
 
 
+def agent_arg(text: str) -> tuple[int, str]:
+    """``ID:ARG`` of ``--agent-arg``: (robot id, one argument of its agent)."""
+    rid, sep, arg = text.partition(":")
+    if not sep or not rid.isdigit() or not arg.startswith("--"):
+        raise argparse.ArgumentTypeError(f"expected ID:--flag[=value], got {text!r}")
+    return int(rid), arg
+
+
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="python -m tools.demo", description=__doc__.split("\n\n")[0])
     p.add_argument("--robots", type=int, default=3)
@@ -1064,6 +1075,14 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     )
     p.add_argument(
         "--world-arg", action="append", default=[], help="extra argument for python -m sim"
+    )
+    p.add_argument(
+        "--agent-arg",
+        action="append",
+        default=[],
+        type=agent_arg,
+        metavar="ID:ARG",
+        help="extra argument for robot ID's agent only, e.g. 3:--orientation=cp (an odd agent)",
     )
     p.add_argument(
         "--credentials",
