@@ -9,7 +9,9 @@ order) -> packing (:mod:`packing`: each robot starts once its own conflicts are 
 (η_i, d_i), waves and ``after`` lists. Whenever no scheduled plan is found - and
 straight away above SCHEDULE_MAX_N robots - the banded plan of :mod:`fallback`, which
 always exists, is used: a valid input never ends in "no safe schedule" (obstacles
-aside: a robot walled in by obstacles has no safe path at all).
+aside: a robot walled in by obstacles has no safe path at all). With obstacles, the
+``near`` placement (:func:`_near_obstacles`) is tried first, the paper's 5.1.2
+procedure (:mod:`obstacles`) after it (``PlanParams.obstacle_method``).
 
 Execution (:mod:`execution`): a robot may start once every robot of its ``after`` list
 holds its slot; waiting for every robot of every earlier ``wave`` is safe too (``after``

@@ -112,9 +112,7 @@ def test_obstacles_take_part_and_the_pyramid_moves_out() -> None:
     robots, obstacles = pts[:8], pts[8:]
     params = PlanParams(d_e=0.8, obstacle_method="paper")
     plan = plan_from_positions(list(range(8)), robots, params, obstacles=obstacles)
-    paths = plan.paths() + [np.vstack([o, o]) for o in obstacles]
-    waves = list(plan.wave_of()) + [10**6] * len(obstacles)  # obstacles never move
-    assert check_safety(paths, waves, 0.2) == []
+    assert _safe_with(plan, obstacles)
     t = plan.targets()
     d = np.hypot(*(t[:, None, :] - obstacles[None, :, :]).T)
     assert d.min() >= 0.8 - 1e-9  # final pyramid clear of obstacles (4·radius)
