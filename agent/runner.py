@@ -56,6 +56,7 @@ from agent.control import (
     next_leg,
     wrap_pi,
 )
+from agent.control.alignment import look_yaws, match_parent
 from agent.control.corridor import (
     GO,
     VIA,
@@ -830,8 +831,10 @@ class Runner:
         is defined by parent–child offsets (AUV II: robots follow the robot in front
         by visual servoing), so once the whole fleet has arrived and the parent has
         finished its own correction (``done``), the child looks at where the plan puts
-        its parent, measures it and steps by the difference. Corrections larger than
-        ``max_correction`` (a wrong match) or below 3 cm are not walked.
+        its parent, measures it and steps by the difference (twice at most). The head
+        fans out around the expected bearing until it finds a NAO within
+        ``max_correction`` of the planned offset (:meth:`_find_parent`); a NAO farther
+        off is another robot or a wrong match, and corrections below 3 cm are not walked.
         """
         plan = self.plan
         rp = plan.robot(self.me)
@@ -855,30 +858,47 @@ class Runner:
             rp.target, dtype=np.float64
         )
         for attempt in range(2):
-            bearing = math.atan2(float(expected[1]), float(expected[0]))
-            yaw = float(np.clip(wrap_pi(bearing - self.heading), -HEAD_YAW_LIMIT, HEAD_YAW_LIMIT))
-            frame = self.look(yaw)
-            dets = self.perception.detect(frame.image, yaw)
-            pts, _, _ = self.perception.to_fixed(dets, self.heading)
-            if len(pts) == 0:
-                log.warning("correction: parent %d not seen", parent)
+            seen = self._find_parent(expected, parent)
+            if seen is None:
                 return
-            k = int(np.argmin(np.hypot(*(pts - expected).T)))
-            err = pts[k] - expected
+            err = seen - expected
             size = float(np.hypot(*err))
             log.info(
                 "correction %d: parent %d seen at %s, planned %s, step %.3f m",
-                attempt + 1, parent, pts[k].round(3).tolist(), expected.round(3).tolist(), size,
+                attempt + 1, parent, seen.round(3).tolist(), expected.round(3).tolist(), size,
             )  # fmt: skip
             if size < 0.03:
-                break
-            if size > self.cfg.max_correction:
-                log.warning("correction of %.2f m is implausible: not walked", size)
                 break
             self.status("hold", 0.75, f"correcting {size:.2f} m towards parent {parent}")
             self._last_frame = None
             self.walk_to(self.position + err, lambda p: None, backward_within=0.5)
             self.rotate(wrap_pi(self.final_heading - self.heading), PAPER_GAINS)
+
+    def _find_parent(self, expected: np.ndarray, parent: int) -> np.ndarray | None:
+        """The parent's measured offset (fixed frame), or None: the head looks at the
+        expected bearing, then fans out (agent/control/alignment.py look_yaws) until an
+        image shows a NAO within ``max_correction`` of the expected offset (match_parent;
+        a NAO farther off is another robot, or a wrong match)."""
+        bearing = math.atan2(float(expected[1]), float(expected[0]))
+        nearest = math.inf
+        for yaw in look_yaws(bearing, self.heading, CAMERA_HFOV / 3.0, HEAD_YAW_LIMIT):
+            frame = self.look(yaw)
+            dets = self.perception.detect(frame.image, yaw)
+            pts, _, _ = self.perception.to_fixed(dets, self.heading)
+            pts = np.asarray(pts, dtype=np.float64).reshape(-1, 2)
+            k = match_parent(pts, expected, self.cfg.max_correction)
+            if k is not None:
+                return np.asarray(pts[k], dtype=np.float64)
+            if len(pts):
+                nearest = min(nearest, float(np.min(np.hypot(*(pts - expected).T))))
+        if math.isfinite(nearest):
+            log.warning(
+                "correction: parent %d not seen within %.2f m of %s (nearest NAO %.2f m off)",
+                parent, self.cfg.max_correction, expected.round(3).tolist(), nearest,
+            )  # fmt: skip
+        else:
+            log.warning("correction: parent %d not seen", parent)
+        return None
 
     def hold(self) -> None:
         """Arrived: correct against the parent, march if there is a route, report

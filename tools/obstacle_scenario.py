@@ -35,8 +35,10 @@ START_GAP = 0.5
 OBSTACLE_GAP = 0.6  # m between obstacle centres
 SEED_STRIDE = 7919  # derived seeds (a prime: they do not meet the next runs' seeds)
 MAX_TRIES = 50
-#: The plan moves the pattern sideways out of the obstacle area (5.1.2), and the agents
-#: know no walls: the room's half-size grows by this much (m) over the generated one.
+#: The plan moves the pattern out of the obstacles (the default "near" placement by
+#: 0.4-1.6 m in the 6-robot, 3-obstacle demos; the paper's sideways shift by 2-3 m), and
+#: the agents know no walls: the room's half-size grows by this much (m) over the
+#: generated one.
 ROOM_EXTRA = 1.5
 
 
