@@ -12,7 +12,7 @@ from typing import Any
 
 from agent.bus import Bus, BusConfig
 from agent.protocol import KEY_STATUS_ALL, KEY_WORLD_TRUTH_ALL, StatusMsg, TruthPosesMsg
-from tools.demo import Proc, free_port, robot_ids, start_world, stop
+from tools.harness.procs import Proc, free_port, robot_ids, start_world, stop
 
 
 @contextmanager
