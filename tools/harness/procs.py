@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import os
 import shutil
 import signal
 import socket
@@ -18,6 +19,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
@@ -45,21 +47,31 @@ class Proc:
     lines: list[str] = field(default_factory=list)
 
 
+def world_command(robots: int, seed: int, net: list[str], extra: list[str]) -> list[str]:
+    """The argv of ``python -m sim`` (``extra``: e.g. ``--scenario FILE``, which replaces
+    ``--robots``/``--seed``); :func:`start_world` runs it here, ``tools.eval_loss`` inside a
+    network namespace."""
+    return [
+        sys.executable, "-m", "sim", "--robots", str(robots), "--seed", str(seed), *net, *extra,
+    ]  # fmt: skip
+
+
 def start_world(
     robots: int,
     seed: int,
     endpoint: str,
-    out: Path,
+    out: Path | None,
     extra: list[str],
     net: list[str] | None = None,
 ) -> Proc:
-    """``python -m sim``; ``net``: its join flags (default: listen on ``endpoint``, insecure)."""
+    """``python -m sim``; ``net``: its join flags (default: listen on ``endpoint``, insecure).
+
+    Its stdout and stderr go to ``out/world.log`` (``out`` None: nowhere, as the benches
+    want); its stdout lines also to ``Proc.lines`` (see :func:`wait_ready`)."""
     if net is None:
         net = ["--listen", endpoint, "--no-multicast-scouting", "--insecure"]
-    cmd = [
-        sys.executable, "-m", "sim", "--robots", str(robots), "--seed", str(seed), *net, *extra,
-    ]  # fmt: skip
-    log = (out / "world.log").open("wb")
+    cmd = world_command(robots, seed, net, extra)
+    log = (out / "world.log").open("wb") if out is not None else open(os.devnull, "wb")  # noqa: SIM115
     p = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=log)
     proc = Proc("world", p, log)
 
@@ -71,6 +83,25 @@ def start_world(
 
     threading.Thread(target=pump, daemon=True).start()
     return proc
+
+
+def wait_ready(world: Proc, timeout: float, idle: Callable[[], object] | None = None) -> str:
+    """Wait for the world's ready line (``sim ready robots=1,2,3 ...``) and return it.
+
+    ``idle`` is called between looks (default: sleep 0.1 s; ``tools.demo`` drains its bus
+    there). ``RuntimeError`` when the world exits first or ``timeout`` seconds pass."""
+    deadline = time.monotonic() + timeout
+    while not any("ready" in ln.lower() for ln in world.lines):
+        if world.popen.poll() is not None:
+            see = f"; see {world.log.name}" if world.log.name != os.devnull else ""
+            raise RuntimeError(f"world exited with {world.popen.returncode}{see}")
+        if time.monotonic() > deadline:
+            raise RuntimeError(f"world not ready after {timeout:g} s")
+        if idle is None:
+            time.sleep(0.1)  # polling the world's stdout lines, bounded by the deadline
+        else:
+            idle()
+    return next(ln for ln in world.lines if "ready" in ln.lower())
 
 
 def start_agent(
@@ -104,9 +135,14 @@ def start_agent(
     return Proc(f"agent {rid}", p, log)
 
 
+def router_command(endpoint: str, net: list[str]) -> list[str]:
+    """The argv of ``python -m tools.router`` listening on ``endpoint`` (``net``: more flags)."""
+    return [sys.executable, "-m", "tools.router", "--listen", endpoint, *net]
+
+
 def start_router(endpoint: str, out: Path, net: list[str]) -> Proc:
     """``python -m tools.router`` listening on ``endpoint``; waits for its ready line."""
-    cmd = [sys.executable, "-m", "tools.router", "--listen", endpoint, *net]
+    cmd = router_command(endpoint, net)
     log = (out / "router.log").open("wb")
     p = subprocess.Popen(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT)
     proc = Proc("router", p, log)

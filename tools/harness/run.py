@@ -34,6 +34,7 @@ from tools.harness.procs import (
     start_router,
     start_world,
     stop,
+    wait_ready,
 )
 
 
@@ -125,16 +126,12 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
             n, seed, endpoint, out, [*room, *(args.world_arg or []), *naoqi, *noise], world_net
         )
         procs.append(world)
-        deadline = time.monotonic() + args.world_timeout
-        while not any("ready" in ln.lower() for ln in world.lines):
-            if world.popen.poll() is not None:
-                raise RuntimeError(
-                    f"world exited with {world.popen.returncode}; see {out / 'world.log'}"
-                )
-            if time.monotonic() > deadline:
-                raise RuntimeError(f"world not ready after {args.world_timeout:g} s")
+
+        def take() -> None:
             for ev in bus.drain(0.1):
                 obs.take_event(ev, rec)
+
+        wait_ready(world, args.world_timeout, take)
         result["wall_world_ready"] = time.monotonic() - t0
         ids = robot_ids(world.lines, n)
         result["ids"] = ids
