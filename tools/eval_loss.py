@@ -293,6 +293,8 @@ def run_once(
 
     ``credentials``: a fleet folder made for ``robots`` robots and the router's address
     (secure: TLS links, signatures); empty: insecure."""
+    from tools.harness.procs import robot_ids, router_command, world_command
+
     workdir.mkdir(parents=True, exist_ok=True)
     py = sys.executable
     env = dict(os.environ, PYTHONUNBUFFERED="1", MPLBACKEND="Agg")
@@ -310,17 +312,7 @@ def run_once(
 
         router = fab.popen(
             1,
-            [
-                py,
-                "-m",
-                "tools.router",
-                "--listen",
-                router_ep,
-                "--listen",
-                world_ep,
-                "--no-multicast-scouting",
-                *sec,
-            ],
+            router_command(router_ep, ["--listen", world_ep, "--no-multicast-scouting", *sec]),
             stderr=log("router"),
             env=env,
             cwd=str(REPO),
@@ -345,7 +337,7 @@ def run_once(
                 raise RuntimeError(f"monitor did not start; see {workdir / 'monitor.log'}")
             world = fab.popen(
                 2,
-                [py, "-m", "sim", "--robots", str(robots), "--seed", str(seed), *world_net],
+                world_command(robots, seed, world_net, []),
                 stderr=log("world"),
                 env=env,
                 cwd=str(REPO),
@@ -353,8 +345,6 @@ def run_once(
             world_lines = _Lines(world)
             if not world_lines.wait_for("ready", 180.0):
                 raise RuntimeError(f"world not ready; see {workdir / 'world.log'}")
-            from tools.harness.procs import robot_ids
-
             ids = robot_ids(world_lines.lines, robots)
             droppers = []
             for i in range(robots):
