@@ -1,7 +1,7 @@
 """Scenarios with obstacles in the way (NAO paper 5.1.2; ``tools.demo --obstacles K``).
 
 Also the demo's obstacle numbers (:func:`judge_obstacles`) and drawing
-(:func:`draw_obstacles`), so that ``tools/demo.py`` only calls them.
+(:func:`draw_obstacles`), so that the harness (``tools/harness``) only calls them.
 
 :func:`sim.scenarios.generate` keeps its obstacles 0.8 m from every robot, so they rarely
 stand on anybody's way. :func:`blocking_scenario` instead plans the pyramid from the

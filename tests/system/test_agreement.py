@@ -9,7 +9,6 @@ re-sent; a member that dies before agreement stops everyone safely.
 from __future__ import annotations
 
 import functools
-import socket
 import threading
 from collections.abc import Callable, Iterator
 from typing import Any
@@ -23,6 +22,7 @@ from agent.exchange import Decision
 from agent.protocol import Message, NeighborRecordMsg, StatusMsg
 from agent.robot import ZenohBody
 from agent.runner import Runner
+from tools.harness.procs import free_port
 
 
 @functools.cache
@@ -32,12 +32,6 @@ def _perception() -> PerceptionAdapter:
 
 
 pytestmark = pytest.mark.system
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def record(i: int) -> NeighborRecordMsg:

@@ -8,7 +8,8 @@ from pathlib import Path
 import pytest
 
 from sim import scenarios
-from tools.demo import march_room, parse_args
+from tools.demo import parse_args
+from tools.harness.run import march_room
 
 
 def test_fleet_parameters_default_and_pass_through() -> None:
@@ -19,7 +20,7 @@ def test_fleet_parameters_default_and_pass_through() -> None:
 
 
 def test_agent_arg_goes_to_that_agent_only(tmp_path: Path) -> None:
-    from tools.demo import start_agent
+    from tools.harness.procs import start_agent
 
     a = parse_args(["--agent-arg", "3:--orientation=cp", "--agent-arg", "3:--d-e=0.9"])
     assert a.agent_arg == [(3, "--orientation=cp"), (3, "--d-e=0.9")]

@@ -1,4 +1,4 @@
-"""tools/demo.py evaluation helpers: known answers worked by hand."""
+"""tools/harness evaluation helpers: known answers worked by hand."""
 
 from __future__ import annotations
 
@@ -7,15 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from tools.demo import (
-    AgentView,
-    Observer,
-    evaluate,
-    judge_march,
-    min_separation,
-    robot_ids,
-    summarise,
-)
+from tools.harness.judge import evaluate, judge_march, min_separation, summarise
+from tools.harness.observe import AgentView, Observer
+from tools.harness.procs import robot_ids
 
 
 def test_evaluate_perfect_pyramid_facing_north() -> None:
