@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import math
+import textwrap
 from pathlib import Path
 from typing import Any
 
@@ -139,6 +140,14 @@ def min_separation(obs: Observer) -> float:
     return best
 
 
+def moved(result: dict[str, Any]) -> float:
+    """The longest straight-line displacement start → final of any robot (m), from truth."""
+    starts, finals = result.get("starts") or {}, result.get("finals") or {}
+    return max(
+        (math.dist(starts[i][:2], finals[i][:2]) for i in starts if i in finals), default=0.0
+    )
+
+
 def plot(obs: Observer, result: dict[str, Any], path: Path) -> None:
     import matplotlib
 
@@ -172,7 +181,10 @@ def plot(obs: Observer, result: dict[str, Any], path: Path) -> None:
         for i in ids:
             if i in first:
                 ax.add_patch(plt.Circle(first[i][:2], 0.2, fill=False, ec="grey", lw=0.8))
-    for row in result.get("pairs", []):
+    # no agent made a plan (a safe stop before planning): the pairs of the evaluator's
+    # plan would only mislead; the reason and how far anybody moved say what happened
+    unplanned = not any(result.get("plan_digests", {}).values())
+    for row in [] if unplanned else result.get("pairs", []):
         c, p = row["child"], row["parent"]
         if c in final and p in final:
             ax.plot([final[c][0], final[p][0]], [final[c][1], final[p][1]], "k--", lw=0.8)
@@ -188,11 +200,22 @@ def plot(obs: Observer, result: dict[str, Any], path: Path) -> None:
     ax.set_xlabel("world x (m)")
     ax.set_ylabel("world y (m), north")
     ok = "success" if result.get("success") else "FAILED"
-    ax.set_title(
-        f"{len(ids)} NAOs, seed {result.get('seed')}: {ok}\n"
+    detail = (
         f"max |r_d| {result.get('max_abs_r_d', float('nan')):.1%}, "
         f"max |r_phi| {result.get('max_abs_r_phi', float('nan')):.1%}, "
         f"contacts {result.get('contacts')}"
+    )
+    if unplanned and not result.get("success"):
+        ok = "stopped safely before any plan"
+        errors = result.get("errors") or {}
+        why = str(errors[min(errors)]) if errors else "no agent planned"
+        detail = (
+            f"{textwrap.shorten(why.removeprefix('AgentFailure: '), 90)}\n"
+            f"moved at most {moved(result):.2f} m, contacts {result.get('contacts')}"
+        )
+    ax.set_title(
+        f"{len(ids)} NAOs, seed {result.get('seed')}: {ok}\n"
+        + detail
         + (
             f"\nmarch {result['march_distance']:.2f} m (route {math.hypot(*result['march_route']):.2f} m), "
             f"worst during: |r_d| {result['march_worst_abs_r_d']:.1%}, "
