@@ -192,7 +192,7 @@ def plot(obs: Observer, result: dict[str, Any], path: Path) -> None:
         from tools.obstacle_scenario import draw_obstacles
 
         draw_obstacles(ax, result)
-    leader = result.get("leader")
+    leader = None if unplanned else result.get("leader")
     if leader in final:
         ax.plot(final[leader][0], final[leader][1], "*", color="green", ms=16)
     ax.set_aspect("equal")
@@ -210,7 +210,7 @@ def plot(obs: Observer, result: dict[str, Any], path: Path) -> None:
         errors = result.get("errors") or {}
         why = str(errors[min(errors)]) if errors else "no agent planned"
         detail = (
-            f"{textwrap.shorten(why.removeprefix('AgentFailure: '), 90)}\n"
+            f"{textwrap.shorten(why.removeprefix('AgentFailure: '), 64)}\n"
             f"moved at most {moved(result):.2f} m, contacts {result.get('contacts')}"
         )
     ax.set_title(
