@@ -43,6 +43,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--timeout", type=float, default=120.0, help="agreement timeout after the search (s)"
     )
     p.add_argument(
+        "--member-grace",
+        type=float,
+        default=20.0,
+        help="s a member whose liveliness token vanished still counts (lossy links)",
+    )
+    p.add_argument(
         "--wave-timeout", type=float, default=600.0, help="wait limit for earlier waves (s)"
     )
     p.add_argument(
@@ -102,6 +108,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         p.error("--phi-e-deg must be in (0, 90)")
     if not (math.isfinite(args.timeout) and args.timeout > 0):
         p.error("--timeout must be > 0")
+    if not (math.isfinite(args.member_grace) and args.member_grace >= 0):
+        p.error("--member-grace must be >= 0")
     args.route = None
     try:
         from agent.config import Route
@@ -214,6 +222,7 @@ def main(argv: list[str] | None = None) -> int:
                     phi_e=math.radians(args.phi_e_deg),
                     timeout=args.timeout,
                     wave_timeout=args.wave_timeout,
+                    member_grace=args.member_grace,
                     correct=not args.no_correct,
                     march=args.route,
                 ),

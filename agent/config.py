@@ -64,6 +64,10 @@ class AgentConfig:
     timeout: float = 120.0  # s from the end of the search to agreement
     wave_timeout: float = 600.0  # s to wait for earlier waves, and for the fleet to hold
     settle: float = 3.0  # s of unchanged membership when no fleet size is given
+    # s a member whose liveliness token vanished, and who published nothing since, still
+    # counts as a member (agent.exchange.Grace): a lossy link's lease expiry and
+    # reconnection is no departure; a crashed agent is noticed this much later.
+    member_grace: float = 20.0
     search_yaws: tuple[float, ...] = SEARCH_YAWS
     rotation_tolerance: float = math.radians(2.0)
     # Re-publication backoff cap: a peer that lacks our record says so in its digest,
@@ -96,7 +100,7 @@ class AgentConfig:
             raise ValueError(f"d_e must be > 0 m, got {self.d_e}")
         if not (math.isfinite(self.phi_e) and 0.0 < self.phi_e < math.pi / 2):
             raise ValueError(f"phi_e must be in (0°, 90°), got {math.degrees(self.phi_e)}°")
-        for name in ("timeout", "wave_timeout", "settle"):
+        for name in ("timeout", "wave_timeout", "settle", "member_grace"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0.0):
                 raise ValueError(f"{name} must be finite and >= 0, got {v}")

@@ -48,7 +48,7 @@ from agent.control import (
     next_leg,
     wrap_pi,
 )
-from agent.exchange import Agreement, Decision, params_digest
+from agent.exchange import Agreement, Decision, Grace, params_digest
 from agent.formation.plan import Plan
 from agent.march import Marcher, MarchHalt
 from agent.nao import HEAD_YAW_LIMIT
@@ -132,6 +132,7 @@ class Runner:
         self.position = np.zeros(2)
         self.phase = "start"
         self.peers: dict[int, Peer] = {}
+        self.grace = Grace(config.member_grace)  # a vanished token is gone only after it
         self.early_records: dict[int, NeighborRecordMsg] = {}
         self.epochs: dict[int, int] = {}  # newest session (epoch) heard per sender
         self.agreed_epochs: dict[int, int] = {}  # the sessions the agreement was made with
@@ -204,6 +205,7 @@ class Runner:
                 self._handle(ev)
             except Exception as exc:  # one bad event is counted and skipped, never fatal
                 self.bus.guard.reject(f"event on {ev.key}", exc)
+        self._expire_members()
         agr = self.agreement
         if agr is not None:
             now = self.clock()
@@ -222,13 +224,11 @@ class Runner:
         agr = self.agreement
         if ev.kind in ("alive", "gone"):
             peer = self.peers.setdefault(ev.robot_id, Peer())
-            peer.alive = ev.kind == "alive"
-            peer.seen_alive = peer.seen_alive or peer.alive
-            if agr is not None and ev.robot_id != self.me:
-                if peer.alive:
+            self.grace.token(ev.robot_id, ev.kind == "alive", now)
+            if ev.kind == "alive":  # a vanished token counts as gone in _expire_members
+                peer.alive = peer.seen_alive = True
+                if agr is not None and ev.robot_id != self.me:
                     agr.member_joined(ev.robot_id, now)
-                else:
-                    agr.member_left(ev.robot_id, now)
             return
         msg = ev.msg
         if not isinstance(msg, NeighborRecordMsg | DigestMsg | StatusMsg):
@@ -244,6 +244,7 @@ class Runner:
             return
         if not self._current_session(ev, msg.sender):
             return
+        self.grace.heard(msg.sender, now)  # a member's publication is a heartbeat
         if isinstance(msg, NeighborRecordMsg):
             if agr is not None:
                 agr.on_record(msg, now)
@@ -264,6 +265,18 @@ class Runner:
             member.detail = msg.detail
             if agr is not None:
                 agr.on_peer_phase(msg.sender, msg.phase)
+
+    def _expire_members(self) -> None:
+        """Members whose token vanished and who stayed silent for the grace period are gone."""
+        now = self.clock()
+        for rid in self.grace.expired(now):
+            peer = self.peers.get(rid)
+            if peer is None or not peer.alive:
+                continue
+            peer.alive = False
+            log.warning("robot %d is gone (token lost, silent for %g s)", rid, self.grace.grace)
+            if self.agreement is not None and rid != self.me:
+                self.agreement.member_left(rid, now)
 
     def _member(self, rid: int) -> bool:
         peer = self.peers.get(rid)

@@ -87,6 +87,7 @@ def test_perception_merge_keeps_best_sighting_per_neighbour() -> None:
         ({"d_e": 0.0}, "d_e"),
         ({"phi_e": math.radians(95)}, "phi_e"),
         ({"timeout": -1.0}, "timeout"),
+        ({"member_grace": -1.0}, "member_grace"),
         ({"search_yaws": (math.radians(130),)}, "search yaw"),
         ({"march_step": 0.5}, "march_step"),
         ({"march_pause": -1.0}, "march_pause"),
@@ -237,3 +238,38 @@ def test_only_the_current_session_of_a_member_counts(runner: Runner) -> None:
     runner.agreed_epochs = {2: 200}
     runner._handle(Event("msg", "nao/2/status", StatusMsg(sender=2, phase="done"), epoch=300))
     assert runner.peers[2].phase != "done"  # after agreement only the agreed session counts
+
+
+def test_a_vanished_token_is_a_departure_only_after_the_grace_period(
+    perception: PerceptionAdapter,
+) -> None:
+    from agent.bus import Event
+    from agent.exchange import Agreement
+
+    now = [0.0]
+    bus = Bus(BusConfig(multicast_scouting=False))
+    try:
+        cfg = AgentConfig(robot_id=3, fleet_size=3, member_grace=10.0)
+        r = Runner(
+            bus, ZenohBody(bus, 3), cfg, perception, FormationAdapter(), clock=lambda: now[0]
+        )
+        r.agreement = Agreement(3, records()[2], 0.0, fleet_size=3)
+        for i in (1, 2):
+            r._handle(Event("alive", f"nao/alive/{i}", robot_id=i))
+        r._handle(Event("gone", "nao/alive/1", robot_id=1))
+        r._handle(Event("gone", "nao/alive/2", robot_id=2))
+        now[0] = 8.0  # robot 2 is heard from: a heartbeat
+        r._handle(Event("msg", "nao/2/status", StatusMsg(sender=2, phase="agree")))
+        now[0] = 9.9
+        r.pump()
+        assert r.peers[1].alive and r.peers[2].alive and r.agreement.left == set()
+        now[0] = 10.0
+        r.pump()
+        assert not r.peers[1].alive and r.agreement.left == {1}
+        assert r.peers[2].alive  # its grace runs from its last status
+        r._handle(Event("alive", "nao/alive/2", robot_id=2))  # reconnected
+        now[0] = 30.0
+        r.pump()
+        assert r.peers[2].alive and r.agreement.left == {1}
+    finally:
+        bus.close()
