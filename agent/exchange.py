@@ -219,6 +219,40 @@ class Agreement:
         self._final: Decision | None = None
         self._digest_cache: tuple[tuple[int, ...], str] | None = None
 
+    @classmethod
+    def restored(
+        cls,
+        self_id: int,
+        records: Sequence[NeighborRecordMsg],
+        now: float,
+        params: str = "",
+        backoff_max: float = 4.0,
+    ) -> Agreement:
+        """The agreement of an agent restarted after it had agreed (issue #9): the agreed
+        ``records`` (its own among them), every member live, the decision ``agreed``.
+
+        It re-publishes its digest until every member reports a post-agreement phase
+        (see :meth:`due`), which tells the others that its new session holds the same
+        set. Raises ``ValueError`` when ``records`` lack this agent's or repeat a sender.
+        """
+        by_id = {r.sender: r for r in records}
+        if len(by_id) != len(records):
+            raise ValueError("the agreed records repeat a sender")
+        if self_id not in by_id:
+            raise ValueError(f"the agreed records hold none of robot {self_id}")
+        agr = cls(self_id, by_id[self_id], now, params=params, backoff_max=backoff_max)
+        agr.live = set(by_id)
+        agr.records = dict(by_id)
+        members, digest = agr.digest()
+        agr._final = Decision(
+            "agreed",
+            f"restored: {len(members)} members agreed on digest {digest[:12]}",
+            digest,
+            members,
+            tuple(by_id[i] for i in members),
+        )
+        return agr
+
     # ----------------------------------------------------------------- inputs
 
     def member_joined(self, robot_id: int, now: float) -> None:
