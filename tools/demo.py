@@ -168,9 +168,12 @@ def start_agent(
     out: Path,
     args: argparse.Namespace,
     net: list[str] | None = None,
+    extra: list[str] | None = None,
+    append: bool = False,
 ) -> Proc:
     """Agent process for robot ``rid`` (with ``--auto-ids`` it claims a robot itself);
-    ``net``: its join flags (default: connect to ``endpoint``, insecure)."""
+    ``net``: its join flags (default: connect to ``endpoint``, insecure); ``extra``: more
+    agent flags (``--state-dir``); ``append``: add to the agent's log (a restart)."""
     auto = bool(getattr(args, "auto_ids", False))
     if net is None:
         net = ["--connect", endpoint, "--no-multicast-scouting", "--insecure"]
@@ -183,8 +186,11 @@ def start_agent(
         "--log-level", args.agent_log_level,
         *(["--no-correct"] if getattr(args, "no_correct", False) else []),
         *(["--body", "naoqi", "--nao", args.nao_urls[rid]] if getattr(args, "body", "") == "naoqi" else []),
+        *(extra or []),
     ]  # fmt: skip
-    log = (out / (f"agent-slot{rid}.log" if auto else f"agent-{rid}.log")).open("wb")
+    log = (out / (f"agent-slot{rid}.log" if auto else f"agent-{rid}.log")).open(
+        "ab" if append else "wb"
+    )
     p = subprocess.Popen(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT)
     return Proc(f"agent {rid}", p, log)
 
