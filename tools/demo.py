@@ -683,16 +683,7 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
             n, seed, endpoint, out, [*room, *(args.world_arg or []), *naoqi], world_net
         )
         procs.append(world)
-        deadline = time.monotonic() + args.world_timeout
-        while not any("ready" in ln.lower() for ln in world.lines):
-            if world.popen.poll() is not None:
-                raise RuntimeError(
-                    f"world exited with {world.popen.returncode}; see {out / 'world.log'}"
-                )
-            if time.monotonic() > deadline:
-                raise RuntimeError(f"world not ready after {args.world_timeout:g} s")
-            for ev in bus.drain(0.1):
-                obs.take_event(ev, rec)
+        wait_world_ready(world, bus, obs, rec, args.world_timeout, out)
         result["wall_world_ready"] = time.monotonic() - t0
         ids = robot_ids(world.lines, n)
         result["ids"] = ids
@@ -749,6 +740,23 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
     for i, p in agents.items():
         obs.agents.setdefault(i, AgentView()).exit_code = p.popen.returncode
     return summarise(obs, result, out, sorted(agents), d_e, phi_e, quiet)
+
+
+def wait_world_ready(
+    world: Proc, bus: Bus, obs: Observer, rec: Recorder | None, timeout: float, out: Path
+) -> None:
+    """Observe the bus until the world prints its ready line; ``RuntimeError`` if it exits
+    or is not ready within ``timeout`` s."""
+    deadline = time.monotonic() + timeout
+    while not any("ready" in ln.lower() for ln in world.lines):
+        if world.popen.poll() is not None:
+            raise RuntimeError(
+                f"world exited with {world.popen.returncode}; see {out / 'world.log'}"
+            )
+        if time.monotonic() > deadline:
+            raise RuntimeError(f"world not ready after {timeout:g} s")
+        for ev in bus.drain(0.1):
+            obs.take_event(ev, rec)
 
 
 def claimed_ids(agents: dict[int, Proc], out: Path) -> dict[int, Proc]:
