@@ -478,8 +478,6 @@ class Runner:
                     self._last_frame = frame
                     if sweep == 0:
                         origin = frame
-                        if self.journal is not None:  # the view that defines the fixed frame
-                            self.journal.save_reference(frame.image)
                 raw.append((sweep, self.perception.detect(frame.image, yaw)))
                 done += 1
                 self.status(
@@ -489,6 +487,11 @@ class Runner:
             self._last_frame = self.look(0.0)
             if origin is None:
                 origin = self._last_frame
+            if sweep == 0 and self.journal is not None:  # the view that defines the fixed frame
+                try:
+                    self.journal.save_reference(origin.image)
+                except (OSError, ValueError) as exc:
+                    log.error("reference view not journaled: %s", reason(exc))
         heading_180 = self.heading
         turned[1] = self.rotate(math.pi, PAPER_GAINS, "complete the circle to θ = 0°")
         assert origin is not None and self._last_frame is not None
