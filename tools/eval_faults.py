@@ -224,12 +224,13 @@ def print_table(runs: list[Run]) -> None:
     for r in runs:
         print(f"{r.fault:20s} {r.seed:4d} {r.outcome:10s} {r.contacts:8d} {r.wall_s:8.0f}  "
               f"{r.detail[:90]}")  # fmt: skip
-    print(f"\n{'fault':20s} {'complete':>8} {'safe_abort':>10} {'unsafe':>6}")
-    for fault in dict.fromkeys(r.fault for r in runs):
-        c = Counter(r.outcome for r in runs if r.fault == fault)
-        print(f"{fault:20s} {c['complete']:8d} {c['safe_abort']:10d} {c['unsafe']:6d}")
-    c = Counter(r.outcome for r in runs)
-    print(f"{'all':20s} {c['complete']:8d} {c['safe_abort']:10d} {c['unsafe']:6d}")
+    print(f"\n{'fault (injected runs)':22s} {'complete':>8} {'safe_abort':>10} {'unsafe':>6} "
+          f"{'not injected':>12}")  # fmt: skip
+    for fault in [*dict.fromkeys(r.fault for r in runs), "all"]:
+        mine = [r for r in runs if fault in ("all", r.fault)]
+        c = Counter(r.outcome for r in mine if r.injected_at_s is not None)
+        missed = sum(1 for r in mine if r.injected_at_s is None)
+        print(f"{fault:22s} {c['complete']:8d} {c['safe_abort']:10d} {c['unsafe']:6d} {missed:12d}")
 
 
 def plot(runs: list[Run], path: Path) -> None:
@@ -243,7 +244,7 @@ def plot(runs: list[Run], path: Path) -> None:
     fig, ax = plt.subplots(figsize=(8, 0.5 + 0.45 * len(faults) + 1))
     for y, fault in enumerate(faults):
         left = 0
-        c = Counter(r.outcome for r in runs if r.fault == fault)
+        c = Counter(r.outcome for r in runs if r.fault == fault and r.injected_at_s is not None)
         for o in OUTCOMES:
             if c[o]:
                 ax.barh(y, c[o], left=left, color=colours[o], label=o if y == 0 else None)
@@ -253,10 +254,11 @@ def plot(runs: list[Run], path: Path) -> None:
     ax.legend(handles, OUTCOMES, loc="lower right", fontsize=8)
     ax.set_yticks(range(len(faults)), faults)
     ax.invert_yaxis()
-    ax.set_xlabel("runs (seeds)")
-    total = Counter(r.outcome for r in runs)
+    ax.set_xlabel("runs (seeds) in which the fault was injected")
+    done = [r for r in runs if r.injected_at_s is not None]
+    total = Counter(r.outcome for r in done)
     ax.set_title(
-        f"Faults, {len(runs)} runs: {total['complete']} complete, "
+        f"Faults injected in {len(done)} runs: {total['complete']} complete, "
         f"{total['safe_abort']} safe abort, {total['unsafe']} unsafe; "
         f"contacts {sum(r.contacts for r in runs)}"
     )
@@ -288,6 +290,14 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--agent-log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING"))
     p.add_argument("--credentials", type=Path, default=None)
     p.add_argument("--insecure", action="store_true", help="no TLS/router (kill-router needs one)")
+    p.add_argument(
+        "--report",
+        type=Path,
+        nargs="+",
+        default=None,
+        metavar="JSON",
+        help="run nothing: the table and figure (under --out) of earlier --json files together",
+    )
     a = p.parse_args(argv)
     a.faults = [f.strip() for v in a.fault for f in v.split(",") if f.strip()] or list(FAULTS)
     bad = [f for f in a.faults if f not in FAULTS]
@@ -305,6 +315,12 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     os.environ.setdefault("PYTHONUNBUFFERED", "1")
     runs: list[Run] = []
+    if args.report:
+        for path in args.report:
+            runs += [Run(**r) for r in json.loads(path.read_text())["runs"]]
+        write(args, runs)
+        print_table(runs)
+        return 0
     for fault in args.faults:
         for seed in range(args.seed_start, args.seed_start + args.seeds):
             print(f"[eval_faults] {fault} seed {seed}", file=sys.stderr)

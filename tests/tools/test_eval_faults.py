@@ -90,17 +90,23 @@ def test_report_table_json_and_figure(tmp_path: Path, capsys: pytest.CaptureFixt
     runs = [
         Run(1, "kill-agent@move", "complete", 0, 80.0, "done", 2, 30.0, True),
         Run(2, "kill-agent@move", "safe_abort", 0, 90.0, "x", 3, 31.0, False),
-        Run(1, "kill-router@agree", "complete", 0, 70.0, "done"),
+        Run(1, "kill-router@agree", "complete", 0, 70.0, "done", -1, 20.0),
+        Run(1, "kill-agent@wait", "complete", 0, 70.0, "fault never injected"),
     ]
     args = eval_faults.parse_args(["--out", str(tmp_path), "--json", str(tmp_path / "f.json")])
     eval_faults.write(args, runs)
     doc = json.loads((tmp_path / "f.json").read_text())
-    assert [r["outcome"] for r in doc["runs"]] == ["complete", "safe_abort", "complete"]
+    outcomes = [r["outcome"] for r in doc["runs"]]
+    assert outcomes == ["complete", "safe_abort", "complete", "complete"]
     assert set(doc["runs"][0]) >= {"seed", "fault", "outcome", "contacts", "wall_s", "detail"}
     assert (tmp_path / "faults.png").stat().st_size > 0
     eval_faults.print_table(runs)
     out = capsys.readouterr().out
     assert "kill-agent@move" in out and "all" in out
+    merged = tmp_path / "merged"
+    argv = ["--report", str(tmp_path / "f.json"), str(tmp_path / "f.json"), "--out", str(merged)]
+    assert eval_faults.main(argv) == 0
+    assert len(json.loads((merged / "results.json").read_text())["runs"]) == 8
 
 
 def test_command_line() -> None:
