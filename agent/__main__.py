@@ -1,6 +1,7 @@
 """``python -m agent``: one identical agent process per NAO (DESIGN.md §1–3).
 
     python -m agent --id N|auto [--fleet-size N] [--connect EP]... [--listen EP]...
+                    [--world-connect EP]...
                     [--no-multicast-scouting] [--mode peer|client] [--d-e 0.8]
                     [--phi-e-deg 30] [--timeout S] [--body zenoh|naoqi]
                     [--nao tcp://HOST:9559] [--state-dir DIR]
@@ -8,6 +9,11 @@
 The body is the simulated world over zenoh (``--body zenoh``, the default) or a NAO
 over its qi protocol (``--body naoqi --nao tcp://nao.local:9559``: a real robot, or a
 virtual one served by ``python -m sim --naoqi``). Agents always talk zenoh to each other.
+
+``--world-connect EP`` (issue #9): the body's queries to the world (register, camera,
+walk, turn) go through a second zenoh session connected to ``EP`` (the router's world
+port, ``agent.protocol.WORLD_PORT``); records, digests, statuses and liveliness stay on
+the first. Without it one session carries both.
 
 Exit status: 0 when the robot holds its place in the pyramid, 1 on a safe stop
 (failed agreement, planning or motion; the reason is logged and published), 2 on a
@@ -17,6 +23,7 @@ usage error.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import logging
 import math
@@ -24,7 +31,7 @@ import sys
 from typing import TYPE_CHECKING
 
 from agent.nao import NAOQI_PORT
-from agent.protocol import MAX_ROBOT_ID, add_network_arguments, network_spec
+from agent.protocol import MAX_ROBOT_ID, NetworkSpec, add_network_arguments, network_spec
 
 if TYPE_CHECKING:
     from agent.bus import Bus
@@ -35,6 +42,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--id", required=True, help="robot id, or 'auto' to claim one from the world")
     p.add_argument("--fleet-size", type=int, default=None, help="require exactly N members")
     add_network_arguments(p, ("peer", "client"))
+    p.add_argument(
+        "--world-connect",
+        action="append",
+        default=[],
+        metavar="EP",
+        help="a second session for the world (body) connects here (the router's world port)",
+    )
     p.add_argument("--d-e", type=float, default=0.8, help="expected parent-child distance (m)")
     p.add_argument(
         "--phi-e-deg", type=float, default=30.0, help="expected parent-child angle (deg)"
@@ -132,47 +146,64 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return args
 
 
-def open_bus(args: argparse.Namespace, log: logging.Logger) -> tuple[Bus, int]:
-    """The agent's bus and robot id.
+def open_bus(args: argparse.Namespace, log: logging.Logger) -> tuple[Bus, Bus, int]:
+    """The agent's bus, its world (body) bus and its robot id.
 
-    Secure, ``--id N``: the session opens with robot N's key. Secure, ``--id auto``: for
-    each robot key in the credentials folder (sorted), open a session with it and ask the
-    world for that id; the world grants an id only to the key that owns it, so the first
-    free one wins. Insecure: ``--id auto`` takes the lowest free id.
+    The world bus is the bus itself unless ``--world-connect`` gives the world's own
+    endpoints (then it is a second session, opened first, that registers and drives the
+    body). Secure, ``--id N``: the sessions open with robot N's key. Secure, ``--id
+    auto``: for each robot key in the credentials folder (sorted), open a world session
+    with it and ask the world for that id; the world grants an id only to the key that
+    owns it, so the first free one wins. Insecure: ``--id auto`` takes the lowest free id.
     """
     from agent.bus import Bus
     from agent.robot import register
     from agent.seams import BodyError
     from agent.trust import Credentials
 
+    def opened(spec: NetworkSpec, world: Bus | None, rid: int) -> tuple[Bus, Bus, int]:
+        if world is None:  # one session for both
+            bus = Bus(spec)
+            return bus, bus, rid
+        try:
+            return Bus(spec), world, rid
+        except BaseException:
+            world.close()
+            raise
+
+    def world_bus(spec: NetworkSpec) -> Bus | None:
+        if not args.world_connect:
+            return None
+        return Bus(dataclasses.replace(spec, connect=tuple(args.world_connect), listen=()))
+
     if args.id != "auto":
         rid = int(args.id)
-        return Bus(network_spec(args, f"robot-{rid}")), rid
+        spec = network_spec(args, f"robot-{rid}")
+        return opened(spec, world_bus(spec), rid)
     spec = network_spec(args, "robot-0")
-    if not spec.secure:
-        bus = Bus(spec)
-        try:
-            rid = register(bus, -1, timeout=30.0)
-        except BodyError:
-            bus.close()
-            raise
-        log.info("claimed robot %d", rid)
-        return bus, rid
-    keys = Credentials(spec.credentials).own_robot_keys()
-    if not keys:
+    candidates = [-1] if not spec.secure else Credentials(spec.credentials).own_robot_keys()
+    if not candidates:
         raise ValueError(f"{spec.credentials} holds no robot key to claim a robot with")
     reasons = []
-    for rid in keys:
-        bus = Bus(dataclasses.replace(spec, identity=f"robot-{rid}"))
+    for want in candidates:
+        mine = dataclasses.replace(spec, identity=f"robot-{want}") if want >= 0 else spec
+        wbus = world_bus(mine)
+        asker = wbus if wbus is not None else Bus(mine)
         try:
-            got = register(bus, rid, timeout=30.0)
+            got = register(asker, want, timeout=30.0)
         except BodyError as exc:
-            bus.close()
+            asker.close()
             reasons.append(str(exc))
             continue
-        log.info("claimed robot %d with its key", got)
-        return bus, got
-    raise BodyError("register", f"no robot could be claimed with keys {keys}: {'; '.join(reasons)}")
+        log.info("claimed robot %d%s", got, " with its key" if want >= 0 else "")
+        if wbus is None:
+            return asker, asker, got
+        return opened(mine, wbus, got)
+    if not spec.secure:
+        raise BodyError("register", reasons[0])
+    raise BodyError(
+        "register", f"no robot could be claimed with keys {candidates}: {'; '.join(reasons)}"
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -198,8 +229,10 @@ def main(argv: list[str] | None = None) -> int:
     except (BodyError, BusError) as exc:  # no world, no robot to claim, no session
         log.error("%s", exc)
         return 1
-    bus, rid = opened
-    with bus:
+    bus, world_bus, rid = opened
+    with bus, contextlib.ExitStack() as stack:
+        if world_bus is not bus:
+            stack.enter_context(world_bus)
         try:
             from agent.adapters import FormationAdapter, PerceptionAdapter
 
@@ -216,7 +249,7 @@ def main(argv: list[str] | None = None) -> int:
             except BodyError as exc:
                 return report_unavailable(bus, rid, str(exc))
         else:
-            body = ZenohBody(bus, rid)
+            body = ZenohBody(world_bus, rid)
         try:
             runner = Runner(
                 bus,

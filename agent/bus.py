@@ -88,6 +88,12 @@ class NoRoute(BusError):
     """
 
 
+class QueryTimeout(BusError):
+    """A query whose reply did not come within its timeout (the request, or its reply,
+    may have been lost, or the queryable is slow). A motion may have been executed:
+    repeat it only with the same request id (``agent.robot.ZenohBody``)."""
+
+
 #: How the agent joins the bus: the shared :class:`agent.protocol.NetworkSpec`.
 BusConfig = NetworkSpec
 
@@ -396,7 +402,7 @@ class Bus:
         elapsed = time.monotonic() - started
         if elapsed < min(NO_ROUTE_WINDOW, timeout / 2):
             raise NoRoute(f"{key}: no reply: no queryable reachable (ended after {elapsed:.3f} s)")
-        raise BusError(f"{key}: no reply within {timeout:g} s")
+        raise QueryTimeout(f"{key}: no reply within {timeout:g} s")
 
     def _first_reply(
         self,

@@ -159,6 +159,24 @@ def _short(v: Any, limit: int = 40) -> str:
 ZENOH_MODES = ("peer", "client", "router")
 
 
+#: zenoh settings for lossy radio links (issue #9), for every process. zenoh's defaults
+#: (10 s lease, 10 s to open a TLS session, a client that gives up after its first
+#: failed connection) break at 30 % loss per direction, where TCP retransmission stalls
+#: for seconds. Measured with ``tools.eval_loss`` (README "Fault injection and
+#: containers"): a 30 s lease with a keep-alive every 5 s (lease / 6), 30 s to open or
+#: accept a session, and a client that keeps trying to connect for 60 s (retries from
+#: 0.5 s, backing off to 4 s). A session that still breaks reconnects; the agents'
+#: membership grace (``agent.exchange.Grace``) bridges its vanished tokens.
+LOSSY_LINK_SETTINGS: tuple[tuple[str, str], ...] = (
+    ("transport/link/tx/lease", "30000"),
+    ("transport/link/tx/keep_alive", "6"),
+    ("transport/unicast/open_timeout", "30000"),
+    ("transport/unicast/accept_timeout", "30000"),
+    ("connect/timeout_ms", "{router: -1, peer: -1, client: 60000}"),
+    ("connect/retry", "{period_init_ms: 500, period_max_ms: 4000, period_increase_factor: 2}"),
+)
+
+
 @dataclass(frozen=True)
 class NetworkSpec:
     """How a process joins the bus (DESIGN.md §3): zenoh mode, endpoints, scouting.
@@ -211,7 +229,7 @@ class NetworkSpec:
 
     def json5_items(self) -> list[tuple[str, str]]:
         """(key, JSON5 value) pairs for ``zenoh.Config.insert_json5``."""
-        items = [("mode", json.dumps(self.mode))]
+        items = [("mode", json.dumps(self.mode)), *LOSSY_LINK_SETTINGS]
         if self.connect:
             items.append(("connect/endpoints", json.dumps(list(self.connect))))
         if self.listen:
@@ -231,6 +249,14 @@ class NetworkSpec:
     def secure(self) -> bool:
         return bool(self.credentials)
 
+
+#: The router's port for robot-to-robot traffic (records, digests, statuses, tokens).
+BUS_PORT = 7447
+#: The router's second port (issue #9): world links and the agents' body sessions
+#: (``python -m agent --world-connect``). On a real NAO camera and legs are on board, so
+#: fault injection (``tools.packet_drop --exempt-port``) spares this port and drops only
+#: robot-to-robot traffic.
+WORLD_PORT = 7448
 
 #: Environment variable naming the credentials folder (containers: a mounted secret).
 CREDENTIALS_ENV = "NAO_CREDENTIALS"
@@ -630,22 +656,39 @@ class CameraReply(Message):
     }
 
 
+#: Motion request ids (issue #9): 0 is "no id" (executed every time); 1..MAX_REQUEST_ID
+#: are executed once per (robot, id) by the world, which answers a repeat with the
+#: first result, so a client may retry a timed-out motion with the same id.
+MAX_REQUEST_ID = 2**53 - 1
+_REQUEST_ID = _int("request_id", 0, MAX_REQUEST_ID)
+
+
 @dataclass(frozen=True)
 class WalkRequest(Message):
-    """Walk straight ahead ``distance`` metres (negative: backwards)."""
+    """Walk straight ahead ``distance`` metres (negative: backwards); ``request_id``:
+    see :data:`MAX_REQUEST_ID`."""
 
     TAG: ClassVar[str] = "walk"
     distance: float
-    SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {"distance": _float("distance")}
+    request_id: int = 0
+    SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {
+        "distance": _float("distance"),
+        "request_id": _REQUEST_ID,
+    }
 
 
 @dataclass(frozen=True)
 class TurnRequest(Message):
-    """Turn on the spot by ``angle`` radians (positive: counter-clockwise)."""
+    """Turn on the spot by ``angle`` radians (positive: counter-clockwise); ``request_id``:
+    see :data:`MAX_REQUEST_ID`."""
 
     TAG: ClassVar[str] = "turn"
     angle: float
-    SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {"angle": _float("angle")}
+    request_id: int = 0
+    SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {
+        "angle": _float("angle"),
+        "request_id": _REQUEST_ID,
+    }
 
 
 @dataclass(frozen=True)

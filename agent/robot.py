@@ -3,12 +3,21 @@
 Forehead camera at a head yaw, walk, turn. Each action is a query to the world's
 queryables (``world/robot/{id}/camera|walk|turn``, DESIGN.md §3); walk and turn replies
 arrive when the motion has finished in sim time.
+
+Lost replies (issue #9): every walk and turn carries a request id, unique to this body
+(a random 40-bit start, then counting up, so that a restarted agent does not reuse its
+predecessor's ids); a query that times out is asked again with the same id, and the
+world executes each (robot, id) once and answers a repeat with the first result. A
+camera query that times out is asked again as it is (a picture moves nothing but the
+head, to the same yaw).
 The body reports no pose: the agent knows only what it commanded and what it sees.
 """
 
 from __future__ import annotations
 
+import logging
 import math
+import secrets
 import time
 from collections.abc import Callable
 from typing import TypeVar
@@ -16,7 +25,7 @@ from typing import TypeVar
 import cv2
 import numpy as np
 
-from agent.bus import Bus, BusError, NoRoute
+from agent.bus import Bus, BusError, NoRoute, QueryTimeout
 from agent.nao import HEAD_YAW_LIMIT
 from agent.protocol import (
     KEY_WORLD_REGISTER,
@@ -24,6 +33,7 @@ from agent.protocol import (
     CameraReply,
     CameraRequest,
     CommandReply,
+    Message,
     RegisterReply,
     RegisterRequest,
     TurnRequest,
@@ -38,6 +48,15 @@ from agent.seams import BodyError, Frame, MotionResult
 RobotError = BodyError
 
 T = TypeVar("T")
+M = TypeVar("M", bound=Message)
+
+log = logging.getLogger("agent.robot")
+
+#: Seconds one attempt of a motion query waits for its reply before asking again with
+#: the same request id (a repeat of a running motion waits for that motion in the world).
+MOTION_ATTEMPT_S = 60.0
+#: ... and of a camera query.
+CAMERA_ATTEMPT_S = 15.0
 
 
 def retry_no_route(call: Callable[[], T], deadline_s: float, first_wait: float = 0.05) -> T:
@@ -57,6 +76,27 @@ def retry_no_route(call: Callable[[], T], deadline_s: float, first_wait: float =
                 raise
             time.sleep(wait)  # back off before asking the network again
             wait = min(wait * 2.0, 1.0)
+
+
+def retry_timeout(
+    call: Callable[[float], T], total_s: float, attempt_s: float, what: str
+) -> tuple[T, int]:
+    """``call(timeout)`` asked again while it raises :class:`QueryTimeout`, each attempt
+    waiting at most ``attempt_s``, all of them ``total_s``; (result, attempts).
+
+    Only for calls that are safe to repeat (idempotent, or carrying a request id). Any
+    other error, and a timeout past ``total_s``, is raised."""
+    end = time.monotonic() + total_s
+    attempts = 0
+    while True:
+        left = end - time.monotonic()
+        attempts += 1
+        try:
+            return call(max(0.1, min(attempt_s, left))), attempts
+        except QueryTimeout as exc:
+            if time.monotonic() >= end - 0.05:
+                raise
+            log.warning("%s: %s; asking again (attempt %d)", what, exc, attempts + 1)
 
 
 def register(bus: Bus, want: int = -1, timeout: float = 10.0) -> int:
@@ -93,6 +133,8 @@ class ZenohBody:
         self.motion_timeout = motion_timeout
         self._t_sim = 0.0
         self.contacts = 0
+        self._next_request = secrets.randbits(40) + 1
+        self.retries = 0  # queries asked again after a timeout
 
     @property
     def robot_id(self) -> int:
@@ -106,15 +148,10 @@ class ZenohBody:
         """The forehead image with the head at ``yaw`` (rad, + left, |yaw| <= 119.5°)."""
         if not math.isfinite(yaw) or abs(yaw) > HEAD_YAW_LIMIT + 1e-9:
             raise ValueError(f"head yaw {yaw} rad outside ±{math.degrees(HEAD_YAW_LIMIT):.1f}°")
+        req = CameraRequest(yaw=yaw)
         try:
-            rep = retry_no_route(
-                lambda: self.bus.query(
-                    key_camera(self.robot_id),
-                    CameraRequest(yaw=yaw),
-                    CameraReply,
-                    self.camera_timeout,
-                ),
-                self.camera_timeout,
+            rep = self._ask(
+                key_camera(self.robot_id), req, CameraReply, self.camera_timeout, CAMERA_ATTEMPT_S
             )
         except BusError as exc:
             raise BodyError(f"camera at yaw {math.degrees(yaw):.1f}°", str(exc)) from None
@@ -129,11 +166,13 @@ class ZenohBody:
         """Walk ``distance`` m straight ahead; returns when done (status done|contact)."""
         if not math.isfinite(distance) or abs(distance) > MAX_STEP:
             raise ValueError(f"walk distance {distance} m outside ±{MAX_STEP:g} m")
-        return self._motion(key_walk(self.robot_id), WalkRequest(distance=distance), "walk")
+        req = WalkRequest(distance=distance, request_id=self._request_id())
+        return self._motion(key_walk(self.robot_id), req, "walk")
 
     def turn(self, angle: float) -> MotionResult:
         """Turn on the spot by ``angle`` rad (+ CCW); returns when done."""
-        return self._motion(key_turn(self.robot_id), TurnRequest(angle=angle), "turn")
+        req = TurnRequest(angle=angle, request_id=self._request_id())
+        return self._motion(key_turn(self.robot_id), req, "turn")
 
     def stop(self) -> None:
         """Nothing to stop: the world ends each motion itself (it has no cancel)."""
@@ -141,13 +180,25 @@ class ZenohBody:
     def close(self) -> None:
         """Nothing to release: the bus is the caller's."""
 
+    def _request_id(self) -> int:
+        rid = self._next_request
+        self._next_request += 1
+        return rid
+
+    def _ask(self, key: str, req: Message, expect: type[M], total_s: float, attempt_s: float) -> M:
+        """The query, asked again after a timeout (same request, so the same request id)
+        and while it meets no queryable (NoRoute: nothing was executed)."""
+
+        def once(timeout: float) -> M:
+            return retry_no_route(lambda: self.bus.query(key, req, expect, timeout), 30.0)
+
+        rep, attempts = retry_timeout(once, total_s, attempt_s, key)
+        self.retries += attempts - 1
+        return rep
+
     def _motion(self, key: str, req: WalkRequest | TurnRequest, what: str) -> MotionResult:
         try:
-            # Safe to repeat: NoRoute means the command reached no queryable (it ended
-            # within bus.NO_ROUTE_WINDOW with no reply), so the world never started it.
-            rep = retry_no_route(
-                lambda: self.bus.query(key, req, CommandReply, self.motion_timeout), 30.0
-            )
+            rep = self._ask(key, req, CommandReply, self.motion_timeout, MOTION_ATTEMPT_S)
         except BusError as exc:
             raise BodyError(what, str(exc)) from None
         self._t_sim = max(self._t_sim, rep.t_sim)

@@ -11,6 +11,10 @@ Queryables (payloads are :mod:`agent.protocol` messages):
   payload, the selector parameter ``yaw`` (radians) is read instead.
 - ``world/robot/{id}/walk`` / ``turn``: ``WalkRequest`` / ``TurnRequest`` -> a
   ``CommandReply(done|contact)`` sent when the motion has finished in sim time.
+  A request with a ``request_id`` (> 0) is executed once per (robot, id): a repeat
+  while it runs waits for the same motion, a repeat after it is answered with the first
+  result (the last ``MOTION_CACHE`` results per robot are kept), so a client may retry
+  a motion whose reply it lost (issue #9).
 
 Anything malformed or impossible (unknown robot, NaN, yaw out of range, wrong schema
 version, busy robot) gets an ``ErrorReply`` with the reason; the world keeps serving.
@@ -48,8 +52,8 @@ import queue
 import sys
 import threading
 import time
-from collections import Counter, defaultdict
-from dataclasses import dataclass
+from collections import Counter, OrderedDict, defaultdict
+from dataclasses import dataclass, field
 from typing import Any
 
 import cv2
@@ -157,6 +161,8 @@ INBOX_CAPS = {"rendered": 256, "alive": 1024, "valid": 256, "malformed": 1024}
 MALFORMED_MAX_BYTES = 16 * 1024 * 1024
 #: Camera requests handed to render workers and not yet answered.
 MAX_RENDER_PENDING = 64
+#: Results of motions with a request id kept per robot, for repeats (oldest dropped).
+MOTION_CACHE = 32
 #: Longest ``yaw`` selector parameter read (a float needs a few dozen characters).
 MAX_PARAM_CHARS = 64
 
@@ -166,6 +172,8 @@ class _Pending:
     query: Request
     kind: str
     robot_id: int
+    request_id: int = 0
+    waiters: list[Request] = field(default_factory=list)  # repeats of request_id
 
 
 @dataclass
@@ -221,6 +229,9 @@ class WorldServer:
         self.counts: Counter[str] = Counter()  # requests handled, by kind
         self.busy_s: dict[str, float] = defaultdict(float)  # wall seconds on them, by kind
         self._pending: dict[int, _Pending] = {}
+        # robot -> request id -> (kind, first result), at most MOTION_CACHE per robot
+        self._results: dict[int, OrderedDict[int, tuple[str, CommandReply]]] = {}
+        self.repeats = 0  # motion requests answered without executing them again
         if isinstance(render_workers, bool) or not 0 <= render_workers <= 16:
             raise ValueError(f"render workers {render_workers!r} must be in [0, 16]")
         self.render_workers = render_workers
@@ -387,7 +398,8 @@ class WorldServer:
         if self.session is not None:
             self._log(self.summary())
         for p in list(self._pending.values()):
-            self._reply(p.query, ErrorReply(reason="world shutting down"))
+            for q in (p.query, *p.waiters):
+                self._reply(q, ErrorReply(reason="world shutting down"))
         self._pending.clear()
         for q, *_ in list(self._cam_pending.values()):
             self._reply(q, ErrorReply(reason="world shutting down"))
@@ -511,10 +523,14 @@ class WorldServer:
                     self._reply(q, rep)
             elif req.kind == "walk":
                 d = req.msg.distance
-                self._start(q, rid, "walk", lambda: self.world.locomotion.walk(rid, d))
+                self._motion(
+                    q, rid, "walk", req.msg.request_id, lambda: self.world.locomotion.walk(rid, d)
+                )
             elif req.kind == "turn":
                 a = req.msg.angle
-                self._start(q, rid, "turn", lambda: self.world.locomotion.turn(rid, a))
+                self._motion(
+                    q, rid, "turn", req.msg.request_id, lambda: self.world.locomotion.turn(rid, a)
+                )
         except ValueError as exc:  # ProtocolError is a ValueError
             self.errors += 1
             self.guard.reject(f"{req.kind} {q.key}", exc)
@@ -627,11 +643,33 @@ class WorldServer:
                     if left is not None:
                         self._reply(left[0], self._render_here(job.robot_id, job.yaw, left[3]))
 
-    def _start(self, q: Request, rid: int, kind: str, start: Any) -> None:
+    def _motion(self, q: Request, rid: int, kind: str, request_id: int, start: Any) -> None:
+        """Start a motion, or answer a repeat of ``request_id`` without executing it."""
+        if request_id:
+            done = self._results.get(rid, OrderedDict()).get(request_id)
+            p = self._pending.get(rid)
+            first = (
+                done[0] if done is not None else p.kind if p and p.request_id == request_id else ""
+            )
+            if first and first != kind:
+                raise ValueError(
+                    f"request id {request_id} of robot {rid} was a {first}, not a {kind}"
+                )
+            if done is not None:
+                self.repeats += 1
+                self._reply(q, done[1])
+                return
+            if p is not None and p.request_id == request_id:
+                self.repeats += 1
+                p.waiters.append(q)  # answered with the running motion's result
+                return
+        self._start(q, rid, kind, start, request_id)
+
+    def _start(self, q: Request, rid: int, kind: str, start: Any, request_id: int = 0) -> None:
         if rid in self._pending or self.world.locomotion.busy(rid):
             raise ValueError(f"robot {rid} is busy with a motion")
         start()
-        self._pending[rid] = _Pending(q, kind, rid)
+        self._pending[rid] = _Pending(q, kind, rid, request_id)
 
     def _finish(self, done: list[Done], contacts: list[Contact]) -> None:
         for c in contacts:
@@ -640,12 +678,16 @@ class WorldServer:
         for d in done:
             p = self._pending.pop(d.robot_id, None)
             if p is not None:
-                self._reply(
-                    p.query,
-                    CommandReply(
-                        robot_id=d.robot_id, status=d.status, t_sim=d.t_sim, detail=d.detail
-                    ),
+                rep = CommandReply(
+                    robot_id=d.robot_id, status=d.status, t_sim=d.t_sim, detail=d.detail
                 )
+                if p.request_id:
+                    cache = self._results.setdefault(d.robot_id, OrderedDict())
+                    cache[p.request_id] = (p.kind, rep)
+                    while len(cache) > MOTION_CACHE:
+                        cache.popitem(last=False)
+                for q in (p.query, *p.waiters):
+                    self._reply(q, rep)
         self._publish_truth()
 
     # ------------------------------------------------------------------ output

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import queue
 import threading
@@ -38,8 +39,8 @@ SAMPLES: list[p.Message] = [
     p.CameraReply(
         robot_id=1, yaw=-1.0, t_sim=3.0, width=640, height=480, encoding="png", data=b"\x89PNG..."
     ),
-    p.WalkRequest(distance=0.2),
-    p.TurnRequest(angle=-0.26),
+    p.WalkRequest(distance=0.2, request_id=12),
+    p.TurnRequest(angle=-0.26, request_id=p.MAX_REQUEST_ID),
     p.CommandReply(robot_id=1, status="done", t_sim=4.0),
     p.ErrorReply(reason="unknown robot 9"),
     p.ClockMsg(t_sim=1.0),
@@ -133,6 +134,18 @@ def test_construction_validates() -> None:
         p.WalkRequest(distance=math.inf)
 
 
+@pytest.mark.parametrize(
+    ("rid", "reason"),
+    [(-1, "outside"), (p.MAX_REQUEST_ID + 1, "outside"), (1.5, "expected int"), (True, "int")],
+)
+def test_motion_request_ids_are_bounded_ints(rid: object, reason: str) -> None:
+    for cls, field in ((p.WalkRequest, "distance"), (p.TurnRequest, "angle")):
+        wire = {"v": p.SCHEMA_VERSION, "t": cls.TAG, field: 0.1, "request_id": rid}
+        with pytest.raises(p.ProtocolError, match=f"request_id: .*{reason}"):
+            p.decode(msgpack.packb(wire))
+    assert p.decode(p.encode(p.WalkRequest(distance=0.1))) == p.WalkRequest(0.1, request_id=0)
+
+
 def test_keys_and_ids() -> None:
     assert p.key_record(3) == "nao/3/record"
     assert p.key_camera(7) == "world/robot/7/camera"
@@ -148,8 +161,10 @@ def test_keys_and_ids() -> None:
 
 def test_network_spec_json5_items() -> None:
     spec = p.NetworkSpec(connect=("tcp/10.0.0.1:7447",), multicast_scouting=False, mode="client")
+    lossy = list(p.LOSSY_LINK_SETTINGS)
     assert spec.json5_items() == [
         ("mode", '"client"'),
+        *lossy,
         ("connect/endpoints", '["tcp/10.0.0.1:7447"]'),
         ("scouting/multicast/enabled", "false"),
     ]
@@ -157,8 +172,19 @@ def test_network_spec_json5_items() -> None:
     assert ("listen/endpoints", '["tcp/0.0.0.0:7447"]') in router.json5_items()
     assert p.NetworkSpec().json5_items() == [
         ("mode", '"peer"'),
+        *lossy,
         ("scouting/multicast/enabled", "true"),
     ]
+
+
+def test_lossy_link_settings_are_accepted_by_zenoh() -> None:
+    import zenoh
+
+    cfg = zenoh.Config()
+    for key, value in p.LOSSY_LINK_SETTINGS:
+        cfg.insert_json5(key, value)
+    assert json.loads(cfg.get_json("transport/link/tx/lease")) == 30000
+    assert json.loads(cfg.get_json("connect"))["timeout_ms"]["client"] == 60000
 
 
 @pytest.mark.parametrize(

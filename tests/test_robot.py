@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import pytest
 
-from agent.bus import BusError, NoRoute
-from agent.robot import retry_no_route
+from agent.bus import BusError, NoRoute, QueryTimeout
+from agent.protocol import CommandReply, TurnRequest
+from agent.robot import ZenohBody, retry_no_route, retry_timeout
+from agent.seams import BodyError, MotionResult
 
 
 def flaky(failures: list[Exception], value: int = 7) -> tuple[list[int], object]:
@@ -38,3 +40,69 @@ def test_no_route_past_the_deadline_is_raised() -> None:
     with pytest.raises(NoRoute):
         retry_no_route(call, deadline_s=0.05, first_wait=0.02)  # type: ignore[arg-type]
     assert 1 < len(calls) < 100
+
+
+class LossyBus:
+    """A bus whose first ``lost`` queries time out (a lost request or reply)."""
+
+    def __init__(self, lost: int, error: BusError | None = None) -> None:
+        self.lost = lost
+        self.error = error
+        self.asked: list[tuple[str, object, float]] = []
+
+    def query(self, key: str, msg: object, expect: type, timeout: float) -> object:
+        self.asked.append((key, msg, timeout))
+        if self.error is not None:
+            raise self.error
+        if self.lost > 0:
+            self.lost -= 1
+            raise QueryTimeout(f"{key}: no reply within {timeout:g} s")
+        return CommandReply(robot_id=3, status="done", t_sim=2.0)
+
+
+def test_a_timed_out_motion_is_asked_again_with_the_same_request_id() -> None:
+    bus = LossyBus(lost=2)
+    body = ZenohBody(bus, 3)  # type: ignore[arg-type]
+    assert body.walk(0.2) == MotionResult("done", 2.0, "")
+    msgs = [m for _, m, _ in bus.asked]
+    assert len(msgs) == 3 and len({m.request_id for m in msgs}) == 1  # type: ignore[attr-defined]
+    assert body.retries == 2
+    body.turn(0.1)  # the next motion has a new id
+    ids = [m.request_id for _, m, _ in bus.asked]  # type: ignore[attr-defined]
+    assert ids[-1] == ids[0] + 1 and isinstance(bus.asked[-1][1], TurnRequest)
+    assert all(t <= 60.0 for _, _, t in bus.asked)  # one attempt waits MOTION_ATTEMPT_S
+
+
+def test_a_motion_that_never_answers_fails_after_the_motion_timeout() -> None:
+    bus = LossyBus(lost=10**6)
+    body = ZenohBody(bus, 3, motion_timeout=0.3)  # type: ignore[arg-type]
+    with pytest.raises(BodyError, match="no reply"):
+        body.turn(0.1)
+    assert len(bus.asked) >= 1
+
+
+def test_an_error_reply_to_a_motion_is_not_retried() -> None:
+    bus = LossyBus(lost=0, error=BusError("robot 3 is busy with a motion"))
+    body = ZenohBody(bus, 3)  # type: ignore[arg-type]
+    with pytest.raises(BodyError, match="busy"):
+        body.walk(0.1)
+    assert len(bus.asked) == 1
+
+
+def test_retry_timeout_counts_attempts_and_raises_past_the_total() -> None:
+    calls: list[float] = []
+
+    def call(timeout: float) -> int:
+        calls.append(timeout)
+        if len(calls) < 3:
+            raise QueryTimeout("lost")
+        return 5
+
+    assert retry_timeout(call, total_s=100.0, attempt_s=2.0, what="x") == (5, 3)
+    assert calls == [2.0, 2.0, 2.0]
+
+    def never(timeout: float) -> int:
+        raise QueryTimeout("lost")
+
+    with pytest.raises(QueryTimeout):
+        retry_timeout(never, total_s=0.05, attempt_s=2.0, what="x")

@@ -54,7 +54,7 @@ from tools import netns
 from tools.packet_drop import Dropper
 
 REPO = Path(__file__).resolve().parents[1]
-ROUTER_PORT = 7447
+OUTCOMES = ("complete", "safe_abort", "unsafe")
 AGREED_PHASES = ("plan", "wait", "move", "hold", "march", "done")
 TERMINAL_PHASES = ("done", "failed")
 
@@ -286,16 +286,24 @@ def run_once(
     lossy_world: bool = False,
     d_e: float = 0.8,
     phi_e_deg: float = 30.0,
-    agent_mode: str = "peer",
+    agent_mode: str = "client",
+    credentials: str = "",
 ) -> RunResult:
-    """One formation run with ``loss`` on every agent host; logs and results in ``workdir``."""
+    """One formation run with ``loss`` on every agent host; logs and results in ``workdir``.
+
+    ``credentials``: a fleet folder made for ``robots`` robots and the router's address
+    (secure: TLS links, signatures); empty: insecure."""
     workdir.mkdir(parents=True, exist_ok=True)
     py = sys.executable
     env = dict(os.environ, PYTHONUNBUFFERED="1", MPLBACKEND="Agg")
     t_start = time.monotonic()
+    proto = "tls" if credentials else "tcp"
     with netns.Fabric(robots + 3, prefix=prefix) as fab, contextlib.ExitStack() as files:
-        router_ep = f"tcp/{fab.address(1)}:{ROUTER_PORT}"
-        common = ["--connect", router_ep, "--no-multicast-scouting", "--insecure"]
+        router_ep = f"{proto}/{fab.address(1)}:{P.BUS_PORT}"
+        world_ep = f"{proto}/{fab.address(1)}:{P.WORLD_PORT}"
+        sec = ["--credentials", credentials] if credentials else ["--insecure"]
+        common = ["--connect", router_ep, "--no-multicast-scouting", *sec]
+        world_net = ["--connect", world_ep, "--no-multicast-scouting", *sec]
 
         def log(name: str) -> Any:
             return files.enter_context(open(workdir / f"{name}.log", "w"))
@@ -308,8 +316,10 @@ def run_once(
                 "tools.router",
                 "--listen",
                 router_ep,
+                "--listen",
+                world_ep,
                 "--no-multicast-scouting",
-                "--insecure",
+                *sec,
             ],
             stderr=log("router"),
             env=env,
@@ -323,7 +333,7 @@ def run_once(
                 [
                     py, "-m", "tools.eval_loss", "--monitor", "--connect", router_ep,
                     "--out", str(workdir), "--d-e", str(d_e), "--phi-e-deg", str(phi_e_deg),
-                    "--seed", str(seed),
+                    "--seed", str(seed), *sec,
                 ],
             ),
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=log("monitor"),
@@ -335,7 +345,7 @@ def run_once(
                 raise RuntimeError(f"monitor did not start; see {workdir / 'monitor.log'}")
             world = fab.popen(
                 2,
-                [py, "-m", "sim", "--robots", str(robots), "--seed", str(seed), *common],
+                [py, "-m", "sim", "--robots", str(robots), "--seed", str(seed), *world_net],
                 stderr=log("world"),
                 env=env,
                 cwd=str(REPO),
@@ -349,7 +359,8 @@ def run_once(
             droppers = []
             for i in range(robots):
                 d = Dropper(fab.name(4 + i))
-                d.install(loss, "both", exempt=[] if lossy_world else [fab.address(2)])
+                # the body sessions and the world's link use the router's world port
+                d.install(loss, "both", exempt_ports=[] if lossy_world else [P.WORLD_PORT])
                 droppers.append(d)
             agents = [
                 fab.popen(
@@ -365,6 +376,7 @@ def run_once(
                         "--mode",
                         agent_mode,
                         *common,
+                        *([] if agent_mode == "peer" else ["--world-connect", world_ep]),
                     ],
                     stdout=log(f"agent-{rid}"),
                     stderr=subprocess.STDOUT,
@@ -493,7 +505,15 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument("--loss", default="0,0.1,0.3", help="comma-separated drop probabilities")
     ap.add_argument("--robots", type=int, default=3)
-    ap.add_argument("--seeds", type=int, default=3, help="seeds 1..S per loss rate")
+    ap.add_argument("--seeds", type=int, default=3, help="seeds per loss rate")
+    ap.add_argument("--seed-start", type=int, default=1, help="first seed (seeds S..S+K-1)")
+    ap.add_argument(
+        "--json",
+        metavar="FILE",
+        default=None,
+        help='outcomes as {"runs": [{seed, loss, outcome, contacts, wall_s, detail}]} '
+        "(default: OUT/runs.json)",
+    )
     ap.add_argument("--seed", type=int, default=None, help="with --monitor: the run's seed")
     ap.add_argument("--timeout", type=float, default=300.0, help="seconds per run")
     ap.add_argument("--out", default="out/eval_loss")
@@ -502,8 +522,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--agent-mode",
         choices=("peer", "client"),
-        default="peer",
-        help="zenoh mode of the agents: peer (mesh, DESIGN.md §3) or client (via the router)",
+        default="client",
+        help="zenoh mode of the agents: client (via the router, the default) or peer "
+        "(mesh, DESIGN.md §3; only with --insecure)",
     )
     ap.add_argument("--d-e", type=float, default=0.8, help="pyramid distance (m)")
     ap.add_argument("--phi-e-deg", type=float, default=30.0, help="pyramid angle (deg)")
@@ -524,7 +545,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--insecure",
         action="store_true",
-        help="with --monitor: no TLS or signatures (development only; prints a warning)",
+        help="no TLS or signatures (development only; prints a warning); runs are secure "
+        "by default (a fleet made under OUT/fleet, a TLS router)",
     )
     args = ap.parse_args(argv)
     if args.monitor:
@@ -560,8 +582,15 @@ def main(argv: list[str] | None = None) -> int:
     if not losses or any(not 0.0 <= x <= 1.0 for x in losses):
         print("eval_loss: every --loss value must be a probability in [0, 1]", file=sys.stderr)
         return 2
-    if not 1 <= args.robots <= 20 or args.seeds < 1:
-        print("eval_loss: --robots must be in [1, 20] and --seeds >= 1", file=sys.stderr)
+    if not 1 <= args.robots <= 20 or args.seeds < 1 or args.seed_start < 0:
+        print(
+            "eval_loss: --robots must be in [1, 20], --seeds >= 1, --seed-start >= 0",
+            file=sys.stderr,
+        )
+        return 2
+    if args.agent_mode == "peer" and not args.insecure:
+        print("eval_loss: --agent-mode peer needs --insecure (secure runs use a router)",
+              file=sys.stderr)  # fmt: skip
         return 2
     try:
         netns.preflight()
@@ -582,23 +611,90 @@ def main(argv: list[str] | None = None) -> int:
         return 130
 
 
+def outcome(res: dict[str, Any], success: bool) -> str:
+    """``complete``, ``safe_abort`` or ``unsafe`` of a monitor result (``result.json``).
+
+    Unsafe: a contact, or some robot moved (its phases include ``move``) while the agents'
+    plan digests were not all identical (it moved on a plan another did not share).
+    """
+    moved = any("move" in ph for ph in res.get("phases_visited", {}).values())
+    if res.get("contacts", 0) or (moved and not res.get("identical_digests")):
+        return "unsafe"
+    return "complete" if success else "safe_abort"
+
+
+def run_row(r: RunResult, res_outcome: str) -> dict[str, Any]:
+    """One run in the JSON schema shared with ``tools.eval_faults``."""
+    return {
+        "seed": r.seed,
+        "loss": r.loss,
+        "outcome": res_outcome,
+        "contacts": r.contacts,
+        "wall_s": round(r.wall_s, 1),
+        "detail": r.reason,
+    }
+
+
+def plot_outcomes(rows: list[dict[str, Any]], path: Path, title: str) -> None:
+    """Stacked bars: runs per loss rate by outcome (complete, safe abort, unsafe)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    losses = sorted({float(r["loss"]) for r in rows})
+    colours = {"complete": "tab:green", "safe_abort": "tab:orange", "unsafe": "tab:red"}
+    fig, ax = plt.subplots(figsize=(5.5, 3.6))
+    bottom = [0] * len(losses)
+    xs = [f"{100 * x:g} %" for x in losses]
+    for oc in OUTCOMES:
+        n = [sum(1 for r in rows if r["loss"] == x and r["outcome"] == oc) for x in losses]
+        ax.bar(xs, n, bottom=bottom, color=colours[oc], label=oc.replace("_", " "))
+        bottom = [b + k for b, k in zip(bottom, n)]
+    ax.set_xlabel("packet loss per direction on every agent host")
+    ax.set_ylabel("runs")
+    ax.set_title(title, fontsize=9)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _fleet(out: Path, robots: int) -> str:
+    """A fleet for ``robots`` robots whose router is reached at test host 1 (made once)."""
+    from agent.trust import create_fleet
+
+    root = out / f"fleet-{robots}"
+    if not (root / "ca.pem").exists():
+        create_fleet(root, range(1, robots + 1), hosts=[netns.address(1)])
+    return str(root)
+
+
 def _evaluate(args: argparse.Namespace, losses: list[float], out: Path) -> int:
     results: list[RunResult] = []
+    rows: list[dict[str, Any]] = []
     total = len(losses) * args.seeds
+    creds = "" if args.insecure else _fleet(out, args.robots)
+    json_path = Path(args.json) if args.json else out / "runs.json"
     for loss in losses:
-        for seed in range(1, args.seeds + 1):
+        for seed in range(args.seed_start, args.seed_start + args.seeds):
             n = len(results) + 1
             print(f"[{n}/{total}] loss {loss:g} seed {seed} ...", file=sys.stderr, flush=True)
             try:
                 r = run_once(
                     loss, seed, args.robots, args.timeout,
                     out / f"loss{loss:g}_seed{seed}", args.prefix, args.lossy_world,
-                    args.d_e, args.phi_e_deg, args.agent_mode,
+                    args.d_e, args.phi_e_deg, args.agent_mode, creds,
                 )  # fmt: skip
             except (RuntimeError, netns.NetnsError, OSError) as exc:
                 print(f"eval_loss: run failed to start: {exc}", file=sys.stderr)
                 return 1
             results.append(r)
+            res_path = Path(r.out) / "result.json"
+            res = json.loads(res_path.read_text()) if res_path.exists() else {}
+            rows.append(run_row(r, outcome(res, r.success)))
+            # written after every run: a long evaluation can be read while it goes on
+            json_path.write_text(json.dumps({"runs": rows}, indent=2))
             print(
                 f"[{n}/{total}] {'OK  ' if r.success else 'FAIL'} {r.reason}; agree "
                 f"{_fmt(r.agree_s, '.2f')} s, bytes/agent {r.bytes_per_agent}, "
@@ -606,29 +702,42 @@ def _evaluate(args: argparse.Namespace, losses: list[float], out: Path) -> int:
                 file=sys.stderr,
                 flush=True,
             )
-    rows = summarise(results)
+    summary = summarise(results)
     doc = {
         "robots": args.robots,
         "seeds": args.seeds,
         "lossy_world": args.lossy_world,
         "agent_mode": args.agent_mode,
-        "summary": rows,
+        "summary": summary,
         "runs": [asdict(r) for r in results],
     }
     (out / "results.json").write_text(json.dumps(doc, indent=2))
-    plot(rows, out / "loss.png")
+    plot(summary, out / "loss.png")
+    plot_outcomes(
+        rows,
+        out / "outcomes.png",
+        f"{args.robots} robots, seeds {args.seed_start}..{args.seed_start + args.seeds - 1}, "
+        f"{'insecure' if args.insecure else 'TLS router'}, world traffic "
+        f"{'lossy' if args.lossy_world else 'exempt'}",
+    )
+    print(f"{'loss':>6} {'seed':>5} {'outcome':>11} {'contacts':>8} {'wall s':>7}  detail")
+    for row in rows:
+        print(
+            f"{row['loss']:6.2f} {row['seed']:5d} {row['outcome']:>11} {row['contacts']:8d} "
+            f"{row['wall_s']:7.0f}  {row['detail'][:70]}"
+        )
     print(
         f"{'loss':>6} {'runs':>5} {'success':>8} {'agree s':>8} {'max s':>7} {'B/agent':>9} "
         f"{'exch B':>8} {'dropped':>8}"
     )
-    for row in rows:
+    for srow in summary:
         print(
-            f"{row['loss']:6.2f} {row['runs']:5d} {row['success_rate']:8.0%} "
-            f"{_fmt(row['agree_s_mean'], '8.2f')} {_fmt(row['agree_s_max'], '7.2f')} "
-            f"{_fmt(row['bytes_per_agent_mean'], '9.0f')} "
-            f"{_fmt(row['exchange_bytes_per_agent_mean'], '8.0f')} {row['dropped_packets_mean']:8.0f}"
+            f"{srow['loss']:6.2f} {srow['runs']:5d} {srow['success_rate']:8.0%} "
+            f"{_fmt(srow['agree_s_mean'], '8.2f')} {_fmt(srow['agree_s_max'], '7.2f')} "
+            f"{_fmt(srow['bytes_per_agent_mean'], '9.0f')} "
+            f"{_fmt(srow['exchange_bytes_per_agent_mean'], '8.0f')} {srow['dropped_packets_mean']:8.0f}"
         )
-    print(f"wrote {out / 'results.json'} and {out / 'loss.png'}")
+    print(f"wrote {json_path}, {out / 'results.json'}, {out / 'loss.png'}, {out / 'outcomes.png'}")
     return 0 if all(r.success for r in results) else 3
 
 

@@ -24,6 +24,13 @@ compose service ``world``) spares the traffic to and from one peer: in the
 project's loss evaluation the world host is exempt, because on a real NAO the camera and
 the legs are on board and only the robot-to-robot exchange crosses WiFi.
 
+``--exempt-port PORT`` (repeatable) spares TCP and UDP packets whose source or
+destination port is ``PORT``. Behind a router every agent link goes to the router, so an
+address cannot tell world traffic from robot-to-robot traffic; the router's second port
+(``agent.protocol.WORLD_PORT``, 7448) carries the world's link and the agents' body
+sessions, and ``--exempt-port 7448`` spares exactly that (what ``tools.eval_loss`` and
+the compose ``LOSS`` setting do).
+
 By default the tool acts inside ``--netns NAME``. Acting on the caller's own network
 namespace needs ``--here`` as a guard, because a lossy host namespace breaks everything
 else on the machine.
@@ -31,6 +38,7 @@ else on the machine.
 Examples::
 
     python -m tools.packet_drop --netns nao-h2 --loss 0.2 --direction in --port 7447
+    python -m tools.packet_drop --netns nao-h4 --loss 0.3 --exempt-port 7448
     python -m tools.packet_drop --netns nao-h2 --show          # rules + packet counters
     python -m tools.packet_drop --netns nao-h2 --show --json   # same, machine-readable
     python -m tools.packet_drop --netns nao-h2 --clear
@@ -157,15 +165,18 @@ class Dropper:
         direction: str = "both",
         port: int | None = None,
         exempt: Sequence[str] = (),
+        exempt_ports: Sequence[int] = (),
     ) -> None:
         """Drop each packet with probability ``loss`` in ``direction``; replaces earlier rules.
 
-        Packets from (in) or to (out) an address in ``exempt`` are never dropped.
+        Packets from (in) or to (out) an address in ``exempt``, and TCP/UDP packets from
+        or to a port in ``exempt_ports``, are never dropped.
         """
         p = _check_loss(loss)
         dirs = _directions(direction)
         _check_port(port)
         spared = [_check_addr(a) for a in exempt]
+        spared_ports = [str(_check_port(int(x))) for x in exempt_ports]
         self.preflight()
         self.clear()
         for d in dirs:
@@ -173,6 +184,11 @@ class Dropper:
             self._ipt("-N", chain)
             for addr in spared:
                 self._ipt("-A", chain, "-s" if d == "in" else "-d", addr, "-j", "RETURN")
+            for sp in spared_ports:
+                for proto in ("tcp", "udp"):
+                    self._ipt(
+                        "-A", chain, "-p", proto, "-m", "multiport", "--ports", sp, "-j", "RETURN"
+                    )
             if p > 0.0:
                 stat = ["-m", "statistic", "--mode", "random", "--probability", f"{p:.6f}"]
                 tag = ["-m", "comment", "--comment", COMMENT]
@@ -241,6 +257,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--exempt", action="append", default=[], help="never drop traffic with this address"
     )
+    ap.add_argument(
+        "--exempt-port",
+        type=int,
+        action="append",
+        default=[],
+        help="never drop TCP/UDP traffic from or to this port (the router's world port)",
+    )
     ap.add_argument("--clear", action="store_true", help="remove the rules")
     ap.add_argument("--show", action="store_true", help="print rules and packet counters")
     ap.add_argument("--json", action="store_true", help="with --show: print JSON")
@@ -265,10 +288,11 @@ def main(argv: list[str] | None = None) -> int:
                 for r in rows:
                     print(f"{r.direction:3s} {r.packets:10d} pkts {r.bytes:12d} bytes  {r.rule}")
         else:
-            dropper.install(args.loss, args.direction, args.port, args.exempt)
+            dropper.install(args.loss, args.direction, args.port, args.exempt, args.exempt_port)
             scope = f"port {args.port} (tcp+udp)" if args.port else "all packets"
-            if args.exempt:
-                scope += f" except {', '.join(args.exempt)}"
+            spared = [*args.exempt, *(f"port {x}" for x in args.exempt_port)]
+            if spared:
+                scope += f" except {', '.join(spared)}"
             print(f"installed loss {args.loss:g} direction {args.direction} on {scope} in {where}")
     except (PacketDropError, ValueError) as exc:
         print(f"packet_drop: {exc}", file=sys.stderr)

@@ -1,14 +1,18 @@
 """A zenoh router: the rendezvous of agents and world on separate hosts (DESIGN.md §3, §5).
 
 Secure (the default, DESIGN.md §8): ``--credentials DIR`` (or ``$NAO_CREDENTIALS``); the
-router listens on ``tls/0.0.0.0:7447``, accepts only links with a certificate of the
+router listens on ``tls/0.0.0.0:7447`` and ``tls/0.0.0.0:7448``, accepts only links with a certificate of the
 fleet CA (mutual TLS) and enforces the fleet's access control by common name
 (``agent.trust.acl_settings``). Every other process then runs with ``--credentials DIR
 --connect tls/ROUTER:7447`` as a zenoh client. ``--insecure`` (development only): plain
-TCP on ``tcp/0.0.0.0:7447``, anyone may connect. This router (a zenoh-python session in
+TCP on ``tcp/0.0.0.0:7447`` and ``:7448``, anyone may connect. Port 7447
+(``agent.protocol.BUS_PORT``) carries robot-to-robot traffic, port 7448
+(``WORLD_PORT``) the world's link and the agents' body sessions (``python -m agent
+--world-connect``): one router, two ports, so that fault injection can spare the
+world's traffic by port (``tools.packet_drop --exempt-port 7448``). This router (a zenoh-python session in
 ``mode: "router"``; no separate binary) forwards the traffic. It prints one ready line::
 
-    router ready zid=<hex> listen=tls/0.0.0.0:7447
+    router ready zid=<hex> listen=tls/0.0.0.0:7447,tls/0.0.0.0:7448
 
 and runs until SIGTERM or SIGINT, then closes the session and exits 0.
 
@@ -28,10 +32,16 @@ from types import FrameType
 import zenoh
 
 from agent.bus import zenoh_config
-from agent.protocol import CREDENTIALS_ENV, add_network_arguments, network_spec
+from agent.protocol import (
+    BUS_PORT,
+    CREDENTIALS_ENV,
+    WORLD_PORT,
+    add_network_arguments,
+    network_spec,
+)
 
-DEFAULT_LISTEN = "tcp/0.0.0.0:7447"
-DEFAULT_LISTEN_TLS = "tls/0.0.0.0:7447"
+DEFAULT_LISTEN = [f"tcp/0.0.0.0:{BUS_PORT}", f"tcp/0.0.0.0:{WORLD_PORT}"]
+DEFAULT_LISTEN_TLS = [f"tls/0.0.0.0:{BUS_PORT}", f"tls/0.0.0.0:{WORLD_PORT}"]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -40,7 +50,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if not args.listen:
         secure = not args.insecure and (args.credentials or os.environ.get(CREDENTIALS_ENV))
-        args.listen = [DEFAULT_LISTEN_TLS if secure else DEFAULT_LISTEN]
+        args.listen = list(DEFAULT_LISTEN_TLS if secure else DEFAULT_LISTEN)
     listen = args.listen
     try:
         cfg = zenoh_config(network_spec(args, "router", default_mode="router"))

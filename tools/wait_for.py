@@ -66,6 +66,9 @@ def _open(cfg: zenoh.Config, end: float) -> zenoh.Session | None:
     """
     last = ""
     while True:
+        # zenoh's own connect retries (agent.protocol.LOSSY_LINK_SETTINGS) within our limit
+        left_ms = max(1000, int(1000 * (end - time.monotonic())))
+        cfg.insert_json5("connect/timeout_ms", f"{{router: -1, peer: -1, client: {left_ms}}}")
         try:
             return zenoh.open(cfg)
         except zenoh.ZError as exc:

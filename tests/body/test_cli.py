@@ -61,3 +61,26 @@ def test_an_unreachable_nao_is_a_safe_stop_with_the_reason(tmp_path: Path) -> No
     assert res.returncode == 1, res.stderr[-2000:]
     assert "no NAOqi at tcp://127.0.0.1:9" in res.stderr
     assert "terminate called" not in res.stderr
+
+
+def test_world_connect_opens_a_second_session_for_the_body() -> None:
+    import logging
+
+    from agent.__main__ import open_bus
+
+    args = parse_args(
+        ["--id", "2", "--insecure", "--no-multicast-scouting", "--mode", "peer",
+         "--connect", "tcp/127.0.0.1:9", "--world-connect", "tcp/127.0.0.1:10"]
+    )  # fmt: skip
+    bus, world, rid = open_bus(args, logging.getLogger("test"))
+    try:
+        assert rid == 2 and world is not bus
+        assert bus.config.connect == ("tcp/127.0.0.1:9",)
+        assert world.config.connect == ("tcp/127.0.0.1:10",) and world.config.listen == ()
+    finally:
+        world.close()
+        bus.close()
+    one = parse_args(["--id", "3", "--insecure", "--no-multicast-scouting", "--mode", "peer"])
+    bus, world, rid = open_bus(one, logging.getLogger("test"))
+    with bus:
+        assert world is bus and rid == 3  # without --world-connect: one session for both

@@ -564,3 +564,89 @@ def test_a_flood_of_malformed_requests_against_the_running_world(client: Client)
     assert isinstance(rep, CameraReply)
     rep = client.raw(key_camera(3), b"\xc1")
     assert isinstance(rep, ErrorReply) and "not msgpack" in rep.reason
+
+
+class FakeLegs:
+    """Locomotion that records what it was told and finishes only when told to."""
+
+    def __init__(self) -> None:
+        self.started: list[tuple[str, int, float]] = []
+        self.moving: set[int] = set()
+
+    def walk(self, rid: int, d: float) -> None:
+        self.started.append(("walk", rid, d))
+        self.moving.add(rid)
+
+    def turn(self, rid: int, a: float) -> None:
+        self.started.append(("turn", rid, a))
+        self.moving.add(rid)
+
+    def busy(self, rid: int) -> bool:
+        return rid in self.moving
+
+
+@pytest.fixture()
+def legs(server: Any) -> FakeLegs:
+    legs = FakeLegs()
+    server.world.locomotion = legs
+    server._publish_truth = lambda: None
+    return legs
+
+
+def _ask(server: Any, kind: str, msg: Any, rid: int = 3) -> FakeQuery:
+    q = FakeQuery(f"world/robot/{rid}/{kind}", encode(msg))
+    server.admit(kind, q)
+    server._drain(block=False)
+    return q
+
+
+def _finish(server: Any, legs: FakeLegs, rid: int, kind: str, t: float) -> None:
+    from sim.locomotion import Done
+
+    legs.moving.discard(rid)
+    server._finish([Done(rid, kind, "done", t)], [])
+
+
+def test_a_motion_request_id_is_executed_once_and_a_repeat_gets_the_first_result(
+    server: Any, legs: FakeLegs
+) -> None:
+    first = _ask(server, "walk", WalkRequest(distance=0.2, request_id=7))
+    again = _ask(server, "walk", WalkRequest(distance=0.2, request_id=7))  # while it runs
+    assert legs.started == [("walk", 3, 0.2)] and first.replies == again.replies == []
+    _finish(server, legs, 3, "walk", 1.5)
+    want = CommandReply(robot_id=3, status="done", t_sim=1.5)
+    assert first.replies == again.replies == [want]
+    late = _ask(server, "walk", WalkRequest(distance=0.2, request_id=7))  # after it ended
+    assert late.replies == [want] and legs.started == [("walk", 3, 0.2)]
+    assert server.repeats == 2
+    other = _ask(server, "walk", WalkRequest(distance=0.2, request_id=7), rid=2)  # per robot
+    assert legs.started[-1] == ("walk", 2, 0.2) and other.replies == []
+
+
+def test_without_a_request_id_every_motion_is_executed(server: Any, legs: FakeLegs) -> None:
+    for t in (1.0, 2.0):
+        q = _ask(server, "turn", TurnRequest(angle=0.1))
+        _finish(server, legs, 3, "turn", t)
+        assert q.replies == [CommandReply(robot_id=3, status="done", t_sim=t)]
+    assert len(legs.started) == 2 and server.repeats == 0
+
+
+def test_a_request_id_reused_for_another_motion_is_refused(server: Any, legs: FakeLegs) -> None:
+    _ask(server, "turn", TurnRequest(angle=0.1, request_id=9))
+    running = _ask(server, "walk", WalkRequest(distance=0.1, request_id=9))
+    assert "was a turn, not a walk" in running.replies[0].reason
+    _finish(server, legs, 3, "turn", 1.0)
+    done = _ask(server, "walk", WalkRequest(distance=0.1, request_id=9))
+    assert "was a turn, not a walk" in done.replies[0].reason
+    assert len(legs.started) == 1
+
+
+def test_the_motion_cache_is_bounded_per_robot(server: Any, legs: FakeLegs) -> None:
+    from sim.server import MOTION_CACHE
+
+    for i in range(1, MOTION_CACHE + 2):
+        _ask(server, "turn", TurnRequest(angle=0.1, request_id=i))
+        _finish(server, legs, 3, "turn", float(i))
+    assert len(server._results[3]) == MOTION_CACHE
+    _ask(server, "turn", TurnRequest(angle=0.1, request_id=1))  # forgotten: executed again
+    assert len(legs.started) == MOTION_CACHE + 2

@@ -103,6 +103,8 @@ def test_fmt_pads_missing_values() -> None:
         (["--loss", "0,1.5"], "probability"),
         (["--robots", "0"], "--robots"),
         (["--seeds", "0"], "--seeds"),
+        (["--seed-start", "-1"], "--seed-start"),
+        (["--agent-mode", "peer"], "needs --insecure"),
     ],
 )
 def test_cli_rejects_bad_arguments(
@@ -191,3 +193,27 @@ def test_observer_stops_when_every_agent_is_gone(tmp_path: Path) -> None:
             if p.poll() is None:
                 p.kill()
                 p.wait(timeout=10)
+
+
+def test_outcome_complete_safe_abort_unsafe() -> None:
+    moved = {"1": ["search", "move", "done"], "2": ["search", "failed"]}
+    assert eval_loss.outcome({"identical_digests": True, "contacts": 0}, True) == "complete"
+    assert eval_loss.outcome({"phases_visited": {"1": ["search", "failed"]}}, False) == (
+        "safe_abort"
+    )
+    shared = {"phases_visited": moved, "identical_digests": True, "contacts": 0}
+    assert eval_loss.outcome(shared, False) == "safe_abort"  # moved, on the shared plan
+    unshared = {"phases_visited": moved, "identical_digests": False, "contacts": 0}
+    assert eval_loss.outcome(unshared, False) == "unsafe"
+    assert eval_loss.outcome({"identical_digests": True, "contacts": 1}, True) == "unsafe"
+
+
+def test_run_rows_have_the_shared_schema_and_the_outcomes_plot(tmp_path: Path) -> None:
+    row = eval_loss.run_row(_run(0.3, True, 2.0, [500, 600]), "complete")
+    assert row == {
+        "seed": 1, "loss": 0.3, "outcome": "complete", "contacts": 0, "wall_s": 10.0,
+        "detail": "ok",
+    }  # fmt: skip
+    bad = dict(row, seed=2, outcome="safe_abort", detail="x")
+    eval_loss.plot_outcomes([row, bad], tmp_path / "outcomes.png", "test")
+    assert (tmp_path / "outcomes.png").stat().st_size > 1000

@@ -53,6 +53,11 @@ def test_bad_exempt_address() -> None:
         Dropper("x").install(0.1, exempt=["no-such-host.invalid"])
 
 
+def test_bad_exempt_port() -> None:
+    with pytest.raises(ValueError, match="port 0 outside"):
+        Dropper("x").install(0.1, exempt_ports=[0])
+
+
 def test_exempt_host_name_is_resolved() -> None:
     assert packet_drop._check_addr("localhost") == "127.0.0.1/32"
     assert packet_drop._check_addr("10.77.0.0/24") == "10.77.0.0/24"
@@ -147,24 +152,40 @@ def test_loss_one_drops_everything_and_counts(host: str) -> None:
     assert d.dropped_packets() == 5
 
 
-@needs_root
-@pytest.mark.netns
-def test_exempt_address_is_never_dropped(host: str) -> None:
-    d = Dropper(host)
-    d.install(1.0, direction="out", exempt=["10.77.0.1"])
+def _send_udp(host: str, dests: list[tuple[str, int]]) -> None:
+    """One datagram to each (address, port) from inside ``host``."""
     script = (
-        "import socket\ns = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)\n"
-        "for dst in ['10.77.0.1'] * 4 + ['10.77.0.9'] * 3:\n"
-        "    try:\n        s.sendto(b'x', (dst, 9))\n"
+        "import socket, sys\ns = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)\n"
+        f"for dst in {dests!r}:\n"
+        "    try:\n        s.sendto(b'x', dst)\n"
         "    except OSError:\n        pass\n"
     )
     proc = subprocess.run(
         netns.netns_cmd(host, ["python3", "-c", script]), capture_output=True, timeout=30
     )
     assert proc.returncode == 0, proc.stderr
+
+
+@needs_root
+@pytest.mark.netns
+def test_exempt_address_is_never_dropped(host: str) -> None:
+    d = Dropper(host)
+    d.install(1.0, direction="out", exempt=["10.77.0.1"])
+    _send_udp(host, [("10.77.0.1", 9)] * 4 + [("10.77.0.9", 9)] * 3)
     # only the three datagrams to the non-exempt address were dropped
     assert d.dropped_packets() == 3
     assert "-d 10.77.0.1/32 -j RETURN" in _iptables_s(host)
+
+
+@needs_root
+@pytest.mark.netns
+def test_exempt_port_is_never_dropped(host: str) -> None:
+    d = Dropper(host)
+    d.install(1.0, direction="out", exempt_ports=[7448])
+    _send_udp(host, [("10.77.0.9", 7448)] * 4 + [("10.77.0.9", 7447)] * 3)
+    # only the three datagrams to the robot-to-robot port were dropped
+    assert d.dropped_packets() == 3
+    assert "-p tcp -m multiport --ports 7448 -j RETURN" in _iptables_s(host)
 
 
 @needs_root
