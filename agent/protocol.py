@@ -585,11 +585,14 @@ MAX_RECORD_BYTES = 4096
 @dataclass(frozen=True)
 class RecordSetRequest(Message):
     """Ask the agents for the agreed record set whose digest is ``digest`` (issue #9:
-    a restarted agent fetches what it agreed on). Only agents holding it answer."""
+    a restarted agent fetches what it agreed on); empty: whatever set they agreed on.
+    Only agents holding it answer."""
 
     TAG: ClassVar[str] = "recordset?"
     digest: str
-    SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {"digest": _hex("digest")}
+    SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {
+        "digest": _hex("digest", allow_empty=True)
+    }
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,9 @@ its state (:mod:`agent.journal`); restarted after a crash it resumes where it wa
   (§3.2.1), instead of assuming it faces north.
 * **Before agreement** (a record, no agreement): it rejoins the exchange with its
   journaled record (no new search); the others keep it as a member through the
-  membership grace period (:class:`agent.exchange.Grace`).
+  membership grace period (:class:`agent.exchange.Grace`). If the others agreed while it
+  was down (its digest had matched theirs before the crash), it asks for any agreed set
+  and adopts it when that set holds its own record exactly as journaled.
 * **After agreement**: it asks the fleet for the agreed record set by its digest (every
   agent serves ``nao/{id}/records``: :func:`answer`), checks the set against the
   digest and the members (:func:`records_of`), recomputes the plan (identical: the same
@@ -79,10 +81,11 @@ def record_set(me: int, decision: Decision) -> RecordSetReply:
 
 
 def answer(served: RecordSetReply | None, request: Message) -> RecordSetReply | None:
-    """The reply to a record-set query: the set when it is the one asked for, else none."""
+    """The reply to a record-set query: the set when it is the one asked for (or any was
+    asked for: an empty digest), else none."""
     if not isinstance(request, RecordSetRequest) or served is None:
         return None
-    return served if served.digest == request.digest else None
+    return served if request.digest in ("", served.digest) else None
 
 
 def records_of(
@@ -103,6 +106,40 @@ def records_of(
     if got != digest:
         raise ValueError(f"record set hashes to {got[:12]}, not {digest[:12]}")
     return recs
+
+
+def agreed_by_others(runner: Runner, own: NeighborRecordMsg) -> tuple[str, tuple[int, ...]] | None:
+    """(digest, members) of a record set the others agreed on while this agent was down
+    (after its digest had matched theirs), holding its record exactly as journaled; None
+    when nobody has agreed. Asks once for any agreed set (``RecordSetRequest("")``)."""
+
+    def check(rep: RecordSetReply) -> tuple[NeighborRecordMsg, ...]:
+        try:
+            senders = tuple(sorted(decode(r, NeighborRecordMsg).sender for r in rep.records))
+        except ProtocolError as exc:
+            raise ValueError(str(exc)) from None
+        recs = records_of(rep, rep.digest, senders)
+        if own not in recs:
+            raise ValueError(f"record set {rep.digest[:12]} lacks this robot's record")
+        return recs
+
+    def accept(rep: RecordSetReply) -> str:
+        try:
+            check(rep)
+        except ValueError as exc:
+            return str(exc)
+        return ""
+
+    try:
+        rep = retry_no_route(
+            lambda: runner.bus.query(
+                KEY_RECORDS_ALL, RecordSetRequest(digest=""), RecordSetReply, QUERY_TIMEOUT, accept
+            ),
+            QUERY_TIMEOUT,
+        )
+    except BusError:
+        return None
+    return rep.digest, tuple(r.sender for r in check(rep))
 
 
 def fetch_records(
@@ -197,10 +234,16 @@ def _resume(
         return "search", None
     runner.record_round = st.record.round
     runner.own_record = st.record
-    if not st.agreed_digest:
-        return "agree", st.record
+    digest, members, phase = st.agreed_digest, st.agreed_members, st.phase
+    if not digest:
+        found = agreed_by_others(runner, st.record)
+        if found is None:
+            return "agree", st.record
+        digest, members = found
+        phase = "plan"
+        log.info("the others agreed on %s with this robot's record: adopted", digest[:12])
     runner.status("plan", 0.0, "resumed: fetching the agreed records", force=True)
-    records = fetch_records(runner, st.agreed_digest, st.agreed_members)
+    records = fetch_records(runner, digest, members)
     agr = Agreement.restored(
         runner.me,
         records,
@@ -216,7 +259,7 @@ def _resume(
             f"recomputed plan {runner.plan_digest[:12]} differs from the journaled "
             f"{st.plan_digest[:12]}: not moving"
         )
-    stage = AGREED_STAGES.get(st.phase, "wait")
+    stage = AGREED_STAGES.get(phase, "wait")
     if stage in ("move", "hold") and (moved or st.command):
         remeasure_heading(runner, journal)
     runner.leg = st.leg

@@ -14,6 +14,7 @@ import sys
 import time
 from pathlib import Path
 from types import SimpleNamespace
+from typing import cast
 
 import pytest
 
@@ -29,7 +30,7 @@ from agent.protocol import (
     encode,
     key_records,
 )
-from agent.resume import answer, record_set, records_of
+from agent.resume import agreed_by_others, answer, record_set, records_of
 from agent.runner import Runner
 from agent.trust import Identity, TrustError, create_fleet
 from tests.fakes import zb
@@ -69,6 +70,7 @@ def test_answer_only_the_set_asked_for() -> None:
     served = record_set(3, d)
     assert answer(served, RecordSetRequest(digest=d.digest)) is served
     assert answer(served, RecordSetRequest(digest="0" * 64)) is None
+    assert answer(served, RecordSetRequest(digest="")) is served  # any agreed set
     assert answer(None, RecordSetRequest(digest=d.digest)) is None
     assert answer(served, StatusMsg(sender=1, phase="done")) is None
     assert records_of(served, d.digest, d.members) == records()
@@ -190,6 +192,11 @@ def test_record_set_query_over_plain_sessions() -> None:
         a.serve(key_records(3), lambda req: answer(served, req))
         rep = _fetch(b, d.digest, d.members)
         assert rep == served
+        # a restarted agent whose record the others agreed on adopts their set
+        asker = cast("Runner", SimpleNamespace(bus=b))
+        assert agreed_by_others(asker, records()[0]) == (d.digest, (1, 2, 3))
+        stranger = NeighborRecordMsg(sender=1, round=0, neighbours=((3.0, 3.0),))
+        assert agreed_by_others(asker, stranger) is None  # not with another record of ours
         # an unknown digest: nobody answers (no reply), never a wrong set
         with pytest.raises(BusError):
             b.query(KEY_RECORDS_ALL, RecordSetRequest(digest="0" * 64), RecordSetReply, 1.0)

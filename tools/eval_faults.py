@@ -6,7 +6,7 @@ zenoh client of it; every agent with ``--state-dir``, its durable journal), inje
 the fault, and judges the run from ground truth:
 
 * ``kill-agent@P`` (P = search, agree, wait, move, hold): the first agent seen in phase
-  P (search: while turning; move: after its first step) is killed (SIGKILL, no goodbye)
+  P (search: while turning; move: as it starts, turning or walking) is killed (SIGKILL, no goodbye)
   and started again, same id, same state folder, ``--restart-after`` s later; it
   resumes from its journal (agent/resume.py).
 * ``kill-router@P`` (P = agree, move): the router is killed when the first agent is in
@@ -81,8 +81,6 @@ def triggered(view: demo.AgentView, phase: str) -> bool:
         return False
     if phase == "search":  # during a turn: the heading is then in doubt
         return view.detail.startswith("turn to")
-    if phase == "move":  # after its first step
-        return view.progress > 0.0
     return True
 
 

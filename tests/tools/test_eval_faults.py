@@ -27,7 +27,7 @@ def view(phase: str, detail: str = "", progress: float = 0.0, digest: str = "") 
         ("agree", view("agree"), True),
         ("agree", view("search"), False),
         ("wait", view("wait"), True),
-        ("move", view("move", progress=0.0), False),
+        ("move", view("move", progress=0.0), True),
         ("move", view("move", progress=0.2), True),
         ("hold", view("hold"), True),
         ("hold", view("done"), False),
