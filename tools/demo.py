@@ -671,12 +671,8 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
     if net.router:
         procs.append(start_router(endpoint, out, net.flags))
     world_net = ["--connect" if net.router else "--listen", endpoint, *net.flags]
-    observer_net = net.observer()
-    bus = Bus(observer_net)
+    bus = observer_bus(net)
     try:
-        for key in (KEY_STATUS_ALL, KEY_RECORD_ALL, KEY_DIGEST_ALL, KEY_WORLD_TRUTH_ALL):
-            bus.subscribe(key)
-        bus.watch_alive(KEY_ALIVE_ALL)
         naoqi = ["--naoqi"] if getattr(args, "body", "") == "naoqi" else []
         room = march_room(args, n, seed, out)
         world = start_world(
@@ -712,11 +708,7 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
             if time.monotonic() > deadline:
                 result["timeout"] = f"agents still running after {args.timeout:g} s"
                 break
-        # the last truth after the motions: drain a little longer (poll, bounded)
-        settle_end = time.monotonic() + 1.5
-        while time.monotonic() < settle_end:
-            for ev in bus.drain(0.1):
-                obs.take_event(ev, rec)
+        observe_for(bus, obs, rec, 1.5)  # the last truth after the motions
         if live is not None:
             live.update(obs, time.monotonic() - t0, force=True)
         result["wall_total"] = time.monotonic() - t0
@@ -740,6 +732,23 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
     for i, p in agents.items():
         obs.agents.setdefault(i, AgentView()).exit_code = p.popen.returncode
     return summarise(obs, result, out, sorted(agents), d_e, phi_e, quiet)
+
+
+def observer_bus(net: FleetNet) -> Bus:
+    """The observer's bus: statuses, records, digests, ground truth and membership."""
+    bus = Bus(net.observer())
+    for key in (KEY_STATUS_ALL, KEY_RECORD_ALL, KEY_DIGEST_ALL, KEY_WORLD_TRUTH_ALL):
+        bus.subscribe(key)
+    bus.watch_alive(KEY_ALIVE_ALL)
+    return bus
+
+
+def observe_for(bus: Bus, obs: Observer, rec: Recorder | None, seconds: float) -> None:
+    """Hand what arrives on ``bus`` to ``obs`` for ``seconds`` (polls, bounded)."""
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        for ev in bus.drain(0.1):
+            obs.take_event(ev, rec)
 
 
 def wait_world_ready(
