@@ -37,9 +37,6 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from agent.bus import Bus
-from agent.protocol import KEY_ALIVE_ALL, KEY_DIGEST_ALL, KEY_RECORD_ALL, KEY_STATUS_ALL
-from agent.protocol import KEY_WORLD_TRUTH_ALL as KEY_TRUTH
 from tools import demo
 
 FAULTS = (
@@ -126,11 +123,8 @@ def run_one(args: argparse.Namespace, fault: str, seed: int, out: Path) -> Run:
     if net.router:
         router = demo.start_router(net.endpoint, out, net.flags)
     world_net = ["--connect" if net.router else "--listen", net.endpoint, *net.flags]
-    bus = Bus(net.observer())
+    bus = demo.observer_bus(net)
     try:
-        for key in (KEY_STATUS_ALL, KEY_RECORD_ALL, KEY_DIGEST_ALL, KEY_TRUTH):
-            bus.subscribe(key)
-        bus.watch_alive(KEY_ALIVE_ALL)
         world = demo.start_world(n, seed, net.endpoint, out, [], world_net)
         procs.append(world)
         demo.wait_world_ready(world, bus, obs, rec, args.world_timeout, out)
@@ -178,10 +172,7 @@ def run_one(args: argparse.Namespace, fault: str, seed: int, out: Path) -> Run:
             if now > deadline:
                 result["timeout"] = f"agents still running after {args.timeout:g} s"
                 break
-        settle_end = time.monotonic() + 1.5
-        while time.monotonic() < settle_end:
-            for ev in bus.drain(0.1):
-                obs.take_event(ev, rec)
+        demo.observe_for(bus, obs, rec, 1.5)  # the last truth after the motions
         result["wall_total"] = time.monotonic() - t0
     except RuntimeError as exc:
         result["timeout"] = f"harness: {exc}"
