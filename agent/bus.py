@@ -8,6 +8,9 @@ counted, never raised into the caller's loop.
 
 Callbacks only hand samples to thread-safe queues (zenoh must not be called, and
 nothing may block, inside a callback); the caller drains them with :meth:`Bus.drain`.
+The one exception is :meth:`Bus.serve` (issue #9: the agreed record set by digest): it
+replies from within the queryable's callback, as zenoh's own queryable examples do, with
+an answer computed from an immutable snapshot (no lock, no I/O but the reply).
 
 Hardening (issue #8): a payload's size is checked before it is copied out of zenoh
 (``MAX_PUBLICATION_BYTES`` for subscriptions, ``MAX_MESSAGE_BYTES`` for query replies);
