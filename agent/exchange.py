@@ -243,14 +243,7 @@ class Agreement:
         agr = cls(self_id, by_id[self_id], now, params=params, backoff_max=backoff_max)
         agr.live = set(by_id)
         agr.records = dict(by_id)
-        members, digest = agr.digest()
-        agr._final = Decision(
-            "agreed",
-            f"restored: {len(members)} members agreed on digest {digest[:12]}",
-            digest,
-            members,
-            tuple(by_id[i] for i in members),
-        )
+        agr._final = agr._agreed("restored: ")
         return agr
 
     # ----------------------------------------------------------------- inputs
@@ -373,14 +366,7 @@ class Agreement:
         size_ok = n == self.fleet_size if self.fleet_size is not None else n >= 1
         settled = self.fleet_size is not None or now - self.membership_changed >= self.settle
         if size_ok and settled and not missing and not disagree:
-            members, digest = self.digest()
-            self._final = Decision(
-                "agreed",
-                f"{len(members)} members agree on digest {digest[:12]}",
-                digest,
-                members,
-                tuple(self.records[i] for i in members),
-            )
+            self._final = self._agreed()
             self._digest_tx.reset(now)  # tell the others once more, promptly
             return self._final
         if now - self.started > self.timeout:
@@ -402,6 +388,17 @@ class Agreement:
         if disagree:
             return f"waiting for matching digests from {disagree}"
         return "waiting for membership to settle"
+
+    def _agreed(self, prefix: str = "") -> Decision:
+        """The ``agreed`` decision on the records held now."""
+        members, digest = self.digest()
+        return Decision(
+            "agreed",
+            f"{prefix}{len(members)} members agree on digest {digest[:12]}",
+            digest,
+            members,
+            tuple(self.records[i] for i in members),
+        )
 
     def _fail(self, reason: str) -> Decision:
         self._final = Decision("failed", reason)
