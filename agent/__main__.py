@@ -6,7 +6,7 @@
                     [--phi-e-deg 30] [--orientation pca|cp] [--strategy S]
                     [--timeout S] [--research-rounds K] [--explore-step M]
                     [--body zenoh|naoqi]
-                    [--nao tcp://HOST:9559]
+                    [--nao tcp://HOST:9559] [--state-dir DIR]
 
 The body is the simulated world over zenoh (``--body zenoh``, the default) or a NAO
 over its qi protocol (``--body naoqi --nao tcp://nao.local:9559``: a real robot, or a
@@ -115,6 +115,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         metavar="URL",
         default=None,
         help=f"qi URL of the NAO for --body naoqi (e.g. tcp://nao.local:{NAOQI_PORT})",
+    )
+    p.add_argument(
+        "--state-dir",
+        metavar="DIR",
+        default=None,
+        help="keep a durable journal here and resume from it after a crash (issue #9)",
     )
     p.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
     args = p.parse_args(argv)
@@ -298,6 +304,13 @@ def main(argv: list[str] | None = None) -> int:
                 perception,
                 formation,
             )
+            if args.state_dir:
+                from agent.journal import Journal
+
+                try:
+                    runner.journal = Journal(args.state_dir, rid)
+                except (OSError, ValueError) as exc:
+                    log.error("no journal in %s: %s", args.state_dir, exc)
             code = runner.run()
         finally:
             body.close()

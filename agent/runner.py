@@ -70,6 +70,7 @@ from agent.control.corridor import (
 from agent.exchange import Agreement, Decision, Grace, params_digest
 from agent.formation.plan import Plan
 from agent.formation.research import step_blocked
+from agent.journal import Journal
 from agent.march import Marcher, MarchHalt
 from agent.nao import CAMERA_HFOV, HEAD_YAW_LIMIT
 from agent.perception.detector import Detection
@@ -81,11 +82,13 @@ from agent.protocol import (
     KEY_STATUS_ALL,
     DigestMsg,
     NeighborRecordMsg,
+    RecordSetReply,
     StatusMsg,
     id_from_key,
     key_alive,
     key_digest,
     key_record,
+    key_records,
     key_status,
     reason,
 )
@@ -187,6 +190,11 @@ class Runner:
         self.vias = 0  # via (tangent) steps taken round a blocking NAO
         self.steps = 0  # straight steps walked (the age of a sighting)
         self._seen: list[tuple[np.ndarray, int]] = []  # (NAO seen, fixed frame; at step)
+        # issue #9: the durable journal (None: not kept), what it holds, what we serve
+        self.journal: Journal | None = None
+        self.own_record: NeighborRecordMsg | None = None
+        self.leg = 0  # the move's current leg
+        self._served: RecordSetReply | None = None
 
     # ================================================================= plumbing
 
@@ -206,6 +214,22 @@ class Runner:
             self.bus.subscribe(key)
         self.bus.watch_alive(KEY_ALIVE_ALL)
         self.bus.declare_alive(key_alive(self.me))
+        from agent.resume import answer
+
+        self.bus.serve(key_records(self.me), lambda req: answer(self._served, req))
+
+    def _journal(self, command: str = "", value: float = 0.0) -> None:
+        """Write the journal (issue #9), before ``command`` is sent; a failing disk is
+        logged and the journal given up, never fatal."""
+        if self.journal is None:
+            return
+        from agent.resume import journal_state
+
+        try:
+            self.journal.save(journal_state(self, command, value))
+        except (OSError, ValueError) as exc:
+            log.error("journal write failed, journal given up: %s", reason(exc))
+            self.journal = None
 
     def status(
         self,
@@ -220,6 +244,8 @@ class Runner:
         if changed:
             self.timeline.mark(phase, self.body.t_sim)
         self.phase = phase
+        if changed:
+            self._journal()
         if not (changed or force or now - self._last_status >= STATUS_MIN_INTERVAL):
             return
         self._last_status = now
@@ -319,6 +345,20 @@ class Runner:
             if self.agreement is not None and rid != self.me:
                 self.agreement.member_left(rid, now)
 
+    def _proves_agreement(self, msg: object) -> bool:
+        """Whether ``msg`` shows the record-set digest (or plan digest) we agreed on."""
+        agr = self.agreement
+        if agr is None or not agr.agreed:
+            return False
+        if isinstance(msg, DigestMsg):
+            members, digest = agr.digest()
+            return msg.digest == digest and msg.members == members and msg.params == agr.params
+        return (
+            isinstance(msg, StatusMsg)
+            and bool(self.plan_digest)
+            and (msg.plan_digest == self.plan_digest)
+        )
+
     def _member(self, rid: int) -> bool:
         peer = self.peers.get(rid)
         return peer is not None and peer.alive
@@ -335,7 +375,11 @@ class Runner:
             return True
         pinned = self.agreed_epochs.get(sender)
         if pinned is not None:
-            return ev.epoch == pinned
+            if ev.epoch > pinned and self._proves_agreement(ev.msg):
+                # a member restarted after agreeing (issue #9): its new session counts
+                log.info("robot %d resumed in a new session with the agreed digest", sender)
+                self.agreed_epochs[sender] = self.epochs[sender] = ev.epoch
+            return ev.epoch == self.agreed_epochs[sender]
         if ev.epoch < self.epochs.get(sender, -1):
             return False
         self.epochs[sender] = ev.epoch
@@ -356,6 +400,7 @@ class Runner:
         before = self._last_frame if self._last_frame is not None else self.look(0.0)
         while not (rc.done or rc.exhausted):
             u = rc.next_step()
+            self._journal("turn", u)
             rep = self.body.turn(u)
             self.pump()
             after = self.look(0.0)
@@ -511,6 +556,7 @@ class Runner:
         """One straight step, the compass's drift and dead reckoning (4.2, eq. 2)."""
         before = self._last_frame if self._last_frame is not None else self.look(0.0)
         h0 = self.heading
+        self._journal("walk", distance)
         rep = self.body.walk(distance)
         self.steps += 1
         self.pump()
@@ -569,6 +615,11 @@ class Runner:
             self._last_frame = self.look(0.0)
             if origin is None:
                 origin = self._last_frame
+            if sweep == 0 and self.journal is not None:  # the view that defines the fixed frame
+                try:
+                    self.journal.save_reference(origin.image)
+                except (OSError, ValueError) as exc:
+                    log.error("reference view not journaled: %s", reason(exc))
         heading_180 = self.heading
         turned[1] = self.rotate(math.pi, PAPER_GAINS, "complete the circle to θ = 0°")
         assert origin is not None and self._last_frame is not None
@@ -615,6 +666,7 @@ class Runner:
             confidences=tuple(float(c) for c in conf),
             obstacles=tuple((float(x), float(y)) for x, y in obstacles),
         )
+        self.own_record = rec
         self.status("localise", 1.0, f"{len(pts)} neighbours, {len(obstacles)} obstacles")
         return rec
 
@@ -763,6 +815,9 @@ class Runner:
             raise AgentFailure(f"planning failed on the agreed records: {exc}") from None
         self.plan = plan
         self.plan_digest = str(plan.digest)
+        from agent.resume import record_set
+
+        self._served = record_set(self.me, decision)
         members = {int(r) for r in self.formation.members(plan)}
         self.agreed_epochs = {r: e for r, e in self.epochs.items() if r in members}
         rp = plan.robot(self.me)
@@ -808,6 +863,9 @@ class Runner:
         self.status("move", 0.0, f"{len(goals)} leg(s)")
         n = len(goals)
         for k, goal in enumerate(goals):
+            if k < self.leg:
+                continue  # walked before a restart (issue #9)
+            self.leg = k
 
             def progress(p: float, k: int = k) -> None:
                 self.status("move", (k + p) / n, f"leg {k + 1}/{n}")
@@ -921,6 +979,10 @@ class Runner:
                 self.position.round(2).tolist(), 100 * marcher.worst_range,
                 math.degrees(marcher.worst_bearing),
             )  # fmt: skip
+        self.finish()
+
+    def finish(self) -> None:
+        """``done``, and stay until every member is."""
         self.status("done", 1.0, "formation held", force=True)
         self._wait_all(("done", "failed"), "done", "formation held; waiting for")
 
@@ -949,18 +1011,29 @@ class Runner:
     def run(self) -> int:
         try:
             self.start_bus()
-            self.status("start", 0.0, "joined", force=True)
-            sightings = self.search()
-            record: NeighborRecordMsg | None = self.localise(sightings)
-            while record is not None:
-                decision = self.agree(record)
-                if decision.kind != "agreed":
-                    raise AgentFailure(decision.reason)
-                record = self.research(decision)
-            self.make_plan(decision)
-            self.wait_for_earlier_waves()
-            self.move()
-            self.hold()
+            stage, record = self.resume()
+            if stage == "search":
+                self.status("start", 0.0, "joined", force=True)
+                record = self.localise(self.search())
+            if stage in ("search", "agree"):
+                assert record is not None
+                while True:  # re-search rounds (4.1.3 rule 2) until the fleet is connected
+                    decision = self.agree(record)
+                    if decision.kind != "agreed":
+                        raise AgentFailure(decision.reason)
+                    again = self.research(decision)
+                    if again is None:
+                        break
+                    record = again
+                self.make_plan(decision)
+            if stage in ("search", "agree", "wait"):
+                self.wait_for_earlier_waves()
+            if stage in ("search", "agree", "wait", "move"):
+                self.move()
+            if stage == "done":
+                self.finish()
+            else:
+                self.hold()
             return 0
         except (AgentFailure, MarchHalt, BodyError, ValueError) as exc:
             return self.fail(reason(exc))
@@ -979,6 +1052,19 @@ class Runner:
         finally:
             with contextlib.suppress(BodyError):
                 self.body.stop()
+
+    def resume(self) -> tuple[str, NeighborRecordMsg | None]:
+        """Where to start: ``search`` afresh, or what the journal says (agent/resume.py)."""
+        if self.journal is None:
+            return "search", None
+        from agent import resume
+
+        st = resume.load(self.journal)
+        if st is None:
+            return "search", None
+        stage, record = resume.resume(self, st)
+        log.info("robot %d resumes at %s (journaled phase %s)", self.me, stage, st.phase)
+        return stage, record
 
     def fail(self, reason: str) -> int:
         """Stop safely: publish ``failed`` with ``reason``, let it reach the others; 1."""

@@ -114,6 +114,17 @@ def valid_samples() -> dict[str, list[P.Message]]:
             P.TruthPosesMsg(t_sim=9.0, poses=tuple((i, 0.1 * i, 1.0, 0.0) for i in range(200))),
         ],
         "contact": [P.ContactMsg(t_sim=2.0, a=1, b=-1)],
+        "recordset?": [P.RecordSetRequest(digest="ab" * 32)],
+        "recordset": [
+            P.RecordSetReply(
+                sender=2,
+                digest="ab" * 32,
+                records=tuple(
+                    P.encode(P.NeighborRecordMsg(sender=i, round=0, neighbours=((1.0, 0.5),)))
+                    for i in (1, 2)
+                ),
+            )
+        ],
     }
     assert set(out) == set(P.message_types()), "every message type needs a sample"
     return out

@@ -14,7 +14,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
+from agent.bus import Bus
 from agent.protocol import (
+    KEY_ALIVE_ALL,
+    KEY_DIGEST_ALL,
+    KEY_RECORD_ALL,
+    KEY_STATUS_ALL,
+    KEY_WORLD_TRUTH_ALL,
     ContactMsg,
     DigestMsg,
     Guard,
@@ -24,6 +30,7 @@ from agent.protocol import (
     encode,
     id_from_key,
 )
+from tools.harness.procs import FleetNet
 
 # ===================================================================== recording
 
@@ -190,3 +197,20 @@ class LiveView:
                 self.last[i] = key
                 self.stream.write(f"[{elapsed:6.1f}s]{self.line(i, v, elapsed)}\n")
                 self.stream.flush()
+
+
+def observer_bus(net: FleetNet) -> Bus:
+    """The observer's bus: statuses, records, digests, ground truth and membership."""
+    bus = Bus(net.observer())
+    for key in (KEY_STATUS_ALL, KEY_RECORD_ALL, KEY_DIGEST_ALL, KEY_WORLD_TRUTH_ALL):
+        bus.subscribe(key)
+    bus.watch_alive(KEY_ALIVE_ALL)
+    return bus
+
+
+def observe_for(bus: Bus, obs: Observer, rec: Recorder | None, seconds: float) -> None:
+    """Hand what arrives on ``bus`` to ``obs`` for ``seconds`` (polls, bounded)."""
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        for ev in bus.drain(0.1):
+            obs.take_event(ev, rec)

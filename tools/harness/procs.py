@@ -111,9 +111,12 @@ def start_agent(
     out: Path,
     args: argparse.Namespace,
     net: list[str] | None = None,
+    extra: list[str] | None = None,
+    append: bool = False,
 ) -> Proc:
     """Agent process for robot ``rid`` (with ``--auto-ids`` it claims a robot itself);
-    ``net``: its join flags (default: connect to ``endpoint``, insecure)."""
+    ``net``: its join flags (default: connect to ``endpoint``, insecure); ``extra``: more
+    agent flags (``--state-dir``); ``append``: add to the agent's log (a restart)."""
     auto = bool(getattr(args, "auto_ids", False))
     if net is None:
         net = ["--connect", endpoint, "--no-multicast-scouting", "--insecure"]
@@ -129,8 +132,11 @@ def start_agent(
         *(["--research-rounds", str(args.research_rounds)] if getattr(args, "research_rounds", None) is not None else []),
         *(["--body", "naoqi", "--nao", args.nao_urls[rid]] if getattr(args, "body", "") == "naoqi" else []),
         *(a for i, a in getattr(args, "agent_arg", None) or [] if i == rid),
+        *(extra or []),
     ]  # fmt: skip
-    log = (out / (f"agent-slot{rid}.log" if auto else f"agent-{rid}.log")).open("wb")
+    log = (out / (f"agent-slot{rid}.log" if auto else f"agent-{rid}.log")).open(
+        "ab" if append else "wb"
+    )
     p = subprocess.Popen(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT)
     return Proc(f"agent {rid}", p, log)
 

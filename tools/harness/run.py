@@ -14,16 +14,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from agent.bus import Bus
-from agent.protocol import (
-    KEY_ALIVE_ALL,
-    KEY_DIGEST_ALL,
-    KEY_RECORD_ALL,
-    KEY_STATUS_ALL,
-    KEY_WORLD_TRUTH_ALL,
-)
 from tools.harness.judge import summarise
-from tools.harness.observe import AgentView, LiveView, Observer, Recorder
+from tools.harness.observe import AgentView, LiveView, Observer, Recorder, observe_for, observer_bus
 from tools.harness.procs import (
     Proc,
     claimed_ids,
@@ -109,12 +101,8 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
     if net.router:
         procs.append(start_router(endpoint, out, net.flags))
     world_net = ["--connect" if net.router else "--listen", endpoint, *net.flags]
-    observer_net = net.observer()
-    bus = Bus(observer_net)
+    bus = observer_bus(net)
     try:
-        for key in (KEY_STATUS_ALL, KEY_RECORD_ALL, KEY_DIGEST_ALL, KEY_WORLD_TRUTH_ALL):
-            bus.subscribe(key)
-        bus.watch_alive(KEY_ALIVE_ALL)
         naoqi = ["--naoqi"] if getattr(args, "body", "") == "naoqi" else []
         noise = [f"--noise-scale={getattr(args, 'noise_scale', 1.0):g}"]
         room = march_room(args, n, seed, out)
@@ -160,11 +148,7 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
             if time.monotonic() > deadline:
                 result["timeout"] = f"agents still running after {args.timeout:g} s"
                 break
-        # the last truth after the motions: drain a little longer (poll, bounded)
-        settle_end = time.monotonic() + 1.5
-        while time.monotonic() < settle_end:
-            for ev in bus.drain(0.1):
-                obs.take_event(ev, rec)
+        observe_for(bus, obs, rec, 1.5)  # the last truth after the motions
         if live is not None:
             live.update(obs, time.monotonic() - t0, force=True)
         result["wall_total"] = time.monotonic() - t0
