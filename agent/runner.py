@@ -17,7 +17,9 @@ PLAN     formation core on the agreed records (4.1.2–4.2): identical on every 
 WAIT     for every robot of earlier waves to hold (leader first, 5.2.2 step 7).
 MOVE     rotation control to face the goal, distance control in 20 cm steps with the
          heading corrected after each (4.2, 5.2.2), then turn to the pyramid axis;
-         each step's corridor checked first (an addition, agent/control/corridor.py).
+         each step's corridor checked first (an addition, agent/control/corridor.py);
+         a step's drift too large to be plausible is re-measured, not discarded
+         (an addition, :meth:`Runner._confirm_drift`).
 HOLD     arrived (status ``hold``); once the whole fleet has arrived and the parent is
          ``done`` (``march``), look at the parent and step by the measured offset error
          (an addition, see :meth:`Runner.correct`), then ``done`` and stay until all are.
