@@ -123,3 +123,35 @@ def test_a_wrong_match_is_found_out_by_the_re_measurement(
     assert true == pytest.approx(math.radians(30.0), abs=math.radians(2))
     assert wrap_pi(r.heading - NORTH) == pytest.approx(true, abs=math.radians(2))
     assert r.position == pytest.approx([0.0, 0.2], abs=0.01)
+
+
+class _Unconfirmed(PerceptionAdapter):
+    """A -30° match after the step, then ``second`` for the re-measurement."""
+
+    def __init__(self, real: PerceptionAdapter, second: CompassResult) -> None:
+        self.__dict__.update(real.__dict__)
+        self.results = [CompassResult(True, math.radians(-30.0), 100, 80, 0.8, "ok"), second]
+
+    def measure_walk(self, before: np.ndarray, after: np.ndarray) -> CompassResult:
+        return self.results.pop(0)
+
+
+@pytest.mark.parametrize(
+    "second",
+    [
+        CompassResult(False, 0.0, 3, 0, 0.0, "too few matches (3 < 15)"),  # fails
+        CompassResult(True, math.radians(80.0), 100, 80, 0.8, "ok"),  # fits neither case
+    ],
+)
+def test_an_unconfirmed_drift_counts_as_none(
+    alone: World, bus: Bus, perception: PerceptionAdapter, second: CompassResult
+) -> None:
+    r = Runner(
+        bus, WorldBody(alone, 1), AgentConfig(robot_id=1), _Unconfirmed(perception, second),
+        FormationAdapter(),
+    )  # fmt: skip
+    r.walk_step(0.2)
+    # the behaviour without the re-measurement: no drift, and the turn as commanded
+    assert r.heading == pytest.approx(NORTH + math.radians(30.0), abs=1e-9)
+    assert r.position == pytest.approx([0.0, 0.2], abs=1e-9)
+    assert r.drift_checks == 0 and r.compass_failures == 2
