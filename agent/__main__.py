@@ -317,7 +317,7 @@ def main(argv: list[str] | None = None) -> int:
         st = bus.stats
         log.info(
             "robot %d exit %d: published %d B (%s), compass %d/%d failed, "
-            "rejected %d (untrusted %d), dropped %d",
+            "%d drift(s) re-measured, rejected %d (untrusted %d), dropped %d",
             rid,
             code,
             st.total_published,
@@ -326,6 +326,7 @@ def main(argv: list[str] | None = None) -> int:
             ),
             runner.compass_failures,
             runner.compass_uses,
+            runner.drift_checks,
             st.rejected,
             st.untrusted,
             st.dropped,

@@ -17,7 +17,9 @@ PLAN     formation core on the agreed records (4.1.2–4.2): identical on every 
 WAIT     for every robot of earlier waves to hold (leader first, 5.2.2 step 7).
 MOVE     rotation control to face the goal, distance control in 20 cm steps with the
          heading corrected after each (4.2, 5.2.2), then turn to the pyramid axis;
-         each step's corridor checked first (an addition, agent/control/corridor.py).
+         each step's corridor checked first (an addition, agent/control/corridor.py);
+         a step's drift too large to be plausible is re-measured, not discarded
+         (an addition, :meth:`Runner._confirm_drift`).
 HOLD     arrived (status ``hold``); once the whole fleet has arrived and the parent is
          ``done`` (``march``), look at the parent and step by the measured offset error
          (an addition, see :meth:`Runner.correct`), then ``done`` and stay until all are.
@@ -98,11 +100,23 @@ log = logging.getLogger("agent.runner")
 
 NORTH = math.pi / 2
 ARRIVED = ("hold", "march", "done", "failed")  # phases of a member that has arrived
+MAX_TURN_STEP = math.radians(40.0)  # largest turn taken to re-measure a step's drift
 STATUS_MIN_INTERVAL = 3.0  # s between progress statuses of the same phase
 HEARTBEAT = 3.0  # s between statuses while waiting
 
 
 _Round = TypeVar("_Round", NeighborRecordMsg, DigestMsg)
+
+
+def _plausible(measured: float, commanded: float, walking: bool) -> bool:
+    """Whether a compass rotation is believable against the command (rad).
+
+    A measurement far from the command is more likely a mismatch than a fall: 10° (or
+    60 % of the command) for a turn; 20° for a step, whose drift reaches ~9° in the
+    simulator at noise 1 (a larger one is re-measured, :meth:`Runner._confirm_drift`).
+    """
+    limit = math.radians(20.0 if walking else 10.0)
+    return abs(measured - commanded) <= max(limit, 0.6 * abs(commanded))
 
 
 def _keep_newest(store: dict[int, _Round], msg: _Round) -> None:
@@ -186,6 +200,7 @@ class Runner:
         self.compass_gain = 1.0
         self.final_heading = NORTH
         self.corridor = CorridorParams()  # the safe-step check before each step
+        self.drift_checks = 0  # implausible step drifts re-measured (_confirm_drift)
         self.waits = 0  # polls spent waiting for a clear corridor
         self.vias = 0  # via (tangent) steps taken round a blocking NAO
         self.steps = 0  # straight steps walked (the age of a sighting)
@@ -422,10 +437,21 @@ class Runner:
     def _compass(
         self, before: Frame, after: Frame, commanded: float, walking: bool = False
     ) -> float:
-        """The rotation between two head-yaw-0 frames; the command when the compass fails.
+        """The rotation between two head-yaw-0 frames; the command when the compass fails
+        or its match is implausible (:meth:`_read`)."""
+        value, _ = self._read(before, after, commanded, walking)
+        return value
+
+    def _read(
+        self, before: Frame, after: Frame, commanded: float, walking: bool = False
+    ) -> tuple[float, float | None]:
+        """(rotation to believe, suspect): the compass between two head-yaw-0 frames.
 
         ``walking``: the frames are 20 cm apart, so only the central band of the image
-        is matched (see :meth:`agent.adapters.PerceptionAdapter.measure_walk`)."""
+        is matched (see :meth:`agent.adapters.PerceptionAdapter.measure_walk`). When the
+        compass fails, the command is believed; when it matches but far from the
+        command, the command is believed and the match is returned as ``suspect``
+        (a step's real drift may be that large: :meth:`_confirm_drift`)."""
         if walking:
             res = self.perception.measure_walk(before.image, after.image)
         else:
@@ -438,19 +464,51 @@ class Runner:
                 res.reason, "drift" if walking else "command",
                 math.degrees(commanded),
             )  # fmt: skip
-            return commanded
+            return commanded, None
         dtheta = float(res.dtheta) * self.compass_gain
-        # A measurement far from the command is more likely a mismatch than a fall.
-        # (a step's drift reaches ~9° in the simulator: allow 20° when walking)
-        limit = math.radians(20.0 if walking else 10.0)
-        if abs(dtheta - commanded) > max(limit, 0.6 * abs(commanded)):
+        if not _plausible(dtheta, commanded, walking):
             self.compass_failures += 1
             log.warning(
                 "compass %+.1f° implausible against %+.1f°: ignored",
                 math.degrees(dtheta), math.degrees(commanded),
             )  # fmt: skip
-            return commanded
-        return dtheta
+            return commanded, dtheta
+        return dtheta, None
+
+    def _confirm_drift(self, before: Frame, h0: float, suspect: float) -> tuple[Frame, float]:
+        """Re-measure a step's drift that the compass reported implausibly large.
+
+        A large drift may be real (a NAO veering strongly: ~9° per 20 cm step in the
+        paper's Table 2, several times that under heavy noise) or a wrong match. The
+        robot turns by ``-suspect``, the turn the distance control would make next if
+        the drift were real, and measures the rotation between the image *before the
+        step* and the new one: close to 0 if the drift was real, close to the turn if it
+        was a mismatch. Either way that net rotation is the new heading's measurement
+        against ``h0``, taken with little image shift in the likely case. Returns (the
+        new image, the net rotation since ``before``); when the re-measurement fails or
+        fits neither case, the drift is taken as 0 and the turn as commanded (the
+        behaviour without this check)."""
+        u = float(np.clip(-suspect, -MAX_TURN_STEP, MAX_TURN_STEP))
+        self.body.turn(u)
+        self.pump()
+        after = self.look(0.0)
+        res = self.perception.measure_walk(before.image, after.image)
+        self.compass_uses += 1
+        net = float(res.dtheta) * self.compass_gain if res.ok else math.nan
+        if res.ok and (_plausible(net, 0.0, True) or _plausible(net, u, True)):
+            self.drift_checks += 1
+            log.info(
+                "drift %+.1f° re-measured after a %+.1f° turn: net %+.1f° (%s)",
+                math.degrees(suspect), math.degrees(u), math.degrees(net),
+                "real" if abs(net) < abs(net - u) else "mismatch",
+            )  # fmt: skip
+            return after, net
+        self.compass_failures += 1
+        log.warning(
+            "drift %+.1f° not confirmed (%s): assuming none",
+            math.degrees(suspect), res.reason if not res.ok else f"net {math.degrees(net):+.1f}°",
+        )  # fmt: skip
+        return after, u
 
     def walk_to(
         self, goal: np.ndarray, progress: Callable[[float], None], backward_within: float = 0.0
@@ -553,7 +611,8 @@ class Runner:
         return plan_rank([(int(rp.wave), int(rp.robot_id)) for rp in self._plan.robots], self.me)
 
     def walk_step(self, distance: float) -> MotionResult:
-        """One straight step, the compass's drift and dead reckoning (4.2, eq. 2)."""
+        """One straight step, the compass's drift and dead reckoning (4.2, eq. 2); a
+        drift too large to be plausible is re-measured (:meth:`_confirm_drift`)."""
         before = self._last_frame if self._last_frame is not None else self.look(0.0)
         h0 = self.heading
         self._journal("walk", distance)
@@ -561,10 +620,15 @@ class Runner:
         self.steps += 1
         self.pump()
         after = self.look(0.0)
-        drift = self._compass(before, after, 0.0, walking=True)
-        self.heading = wrap_pi(self.heading + drift)
+        drift, suspect = self._read(before, after, 0.0, walking=True)
+        turned = 0.0
+        if suspect is not None and rep.status != "contact":
+            after, net = self._confirm_drift(before, h0, suspect)
+            turned = float(np.clip(-suspect, -MAX_TURN_STEP, MAX_TURN_STEP))
+            drift = net - turned  # the turn taken as commanded, for dead reckoning
+        self.heading = wrap_pi(h0 + drift + turned)
         self._last_frame = after
-        self.position = advance(self.position, h0, self.heading, distance)
+        self.position = advance(self.position, h0, wrap_pi(h0 + drift), distance)
         log.debug(
             "walk t_sim %.2f %.3f m drift %+.2f° heading %.2f° position %s",
             rep.t_sim, distance, math.degrees(drift), math.degrees(self.heading),
