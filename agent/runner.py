@@ -64,6 +64,7 @@ from agent.control.corridor import (
     VIA,
     CorridorParams,
     Verdict,
+    back_off,
     check_step,
     in_view,
     patience,
@@ -594,6 +595,12 @@ class Runner:
             self.status(self.phase, detail=f"waiting: NAO ahead at {where}", force=waited == 0)
             self.waits += 1
             self.pump(cp.poll)
+            back = back_off(v.blockers[:1], seen, self.heading, CAMERA_HFOV, cp) if waited else 0.0
+            if back > 0.01:  # remembered too near to be seen: step back so the image decides
+                log.info(
+                    "corridor: NAO remembered at %s, too near to see: %.2f m back", where, back
+                )
+                self.walk_step(-back)
             self._last_frame = None  # look again
             # what the next image shows is seen afresh: a NAO that walked on is forgotten
             if self._seen:
