@@ -66,6 +66,7 @@ from agent.control.corridor import (
     Verdict,
     back_off,
     check_step,
+    confirmed,
     in_view,
     patience,
     plan_rank,
@@ -595,12 +596,8 @@ class Runner:
             self.status(self.phase, detail=f"waiting: NAO ahead at {where}", force=waited == 0)
             self.waits += 1
             self.pump(cp.poll)
-            back = back_off(v.blockers[:1], seen, self.heading, CAMERA_HFOV, cp) if waited else 0.0
-            if back > 0.01:  # remembered too near to be seen: step back so the image decides
-                log.info(
-                    "corridor: NAO remembered at %s, too near to see: %.2f m back", where, back
-                )
-                self.walk_step(-back)
+            if waited and not confirmed(v.blockers[0], seen, cp):
+                self._recheck(v.blockers[0], seen, where)
             self._last_frame = None  # look again
             # what the next image shows is seen afresh: a NAO that walked on is forgotten
             if self._seen:
@@ -610,6 +607,36 @@ class Runner:
         raise AgentFailure(
             f"way blocked for {cp.max_polls} polls at believed {self.position.round(2).tolist()}"
         )
+
+    def _recheck(self, blocker: np.ndarray, seen: np.ndarray, where: list[float]) -> None:
+        """A blocker only remembered, not in the yaw-0 image: find out whether it is still
+        there. Too near ahead to be seen (< VIEW_NEAR): step back (``back_off``); out of
+        the yaw-0 image (beside the robot): look at it with the head, forget what that
+        image should show and does not, remember what it shows. Otherwise the memory
+        would keep a NAO that walked away until this robot's patience ran out."""
+        back = back_off(blocker[None, :], seen, self.heading, CAMERA_HFOV, self.corridor)
+        if back > 0.01:
+            log.info("corridor: NAO remembered at %s, too near to see: %.2f m back", where, back)
+            self.walk_step(-back)
+            return
+        if bool(in_view(blocker[None, :], self.heading, CAMERA_HFOV, near=0.0)[0]):
+            return  # the yaw-0 image covers it: the loop's own look decides
+        bearing = math.atan2(float(blocker[1]), float(blocker[0]))
+        yaw = float(np.clip(wrap_pi(bearing - self.heading), -HEAD_YAW_LIMIT, HEAD_YAW_LIMIT))
+        frame = self.look(yaw)
+        fresh, _, _ = self.perception.to_fixed(
+            self.perception.detect(frame.image, yaw), self.heading
+        )
+        if self._seen:
+            rel = np.array([p for p, _ in self._seen]) - self.position
+            shown = in_view(rel, self.heading + yaw, CAMERA_HFOV)
+            self._seen = [e for e, gone in zip(self._seen, shown, strict=True) if not gone]
+        for p in np.asarray(fresh, dtype=np.float64).reshape(-1, 2):
+            self._seen.append((self.position + p, self.steps))
+        log.info(
+            "corridor: looked at the NAO remembered at %s (head %+.0f°): %d NAO(s) in view",
+            where, math.degrees(yaw), len(fresh),
+        )  # fmt: skip
 
     def _rank(self) -> int:
         """This robot's rank in the shared plan, (wave, id) order (0 without a plan)."""

@@ -183,32 +183,44 @@ def in_view(
     return np.asarray((off <= hfov / 2 - math.radians(5)) & (rng >= near) & (rng <= far))
 
 
+def confirmed(blocker: np.ndarray, seen: np.ndarray, params: CorridorParams) -> bool:
+    """Whether a NAO of the current image (``seen``, (k, 2), relative) stands within
+    ``2·margin`` of ``blocker`` (relative): the blocker is seen, not only remembered."""
+    b = _points(blocker).reshape(-1)
+    fresh = _points(seen)
+    return bool(fresh.shape[0]) and float(np.min(np.hypot(*(fresh - b).T))) < 2.0 * params.margin
+
+
 def back_off(
     blocker: np.ndarray, seen: np.ndarray, heading: float, hfov: float, params: CorridorParams
 ) -> float:
     """How far to step back (m, >= 0) to see a blocker that is only remembered.
 
-    A NAO closer than :data:`VIEW_NEAR` ahead is cut by the image and not detected, so a
-    waiting robot cannot tell whether a NAO it remembers there has walked away, and would
-    wait for it to the end of its patience (seen with 15 robots: two robots ended a via
-    0.52-0.56 m from a NAO that left 18 s later). When the first ``blocker`` (relative,
-    fixed frame) is confirmed by no NAO of the current image (``seen``, (k, 2), within
-    ``2·margin``), lies within the field of view ``hfov`` along ``heading`` and nearer
-    than ``VIEW_NEAR``, the robot steps back until it would be ``VIEW_NEAR + margin`` away,
-    at most ``params.back_max``: the ground it has just walked, so the image decides
-    again. 0 otherwise."""
+    A NAO nearer than :data:`VIEW_NEAR` is cut by the image and not detected, so a waiting
+    robot cannot tell whether a NAO it remembers there has walked away, and would wait
+    for it to the end of its patience (seen with 15 robots: two robots ended a via
+    0.52-0.58 m from NAOs that left 18 s later). When the first ``blocker`` (relative,
+    fixed frame) is confirmed by no NAO of the current image (``seen``, (k, 2)), is not
+    behind the robot (along ``heading``) and is nearer than ``VIEW_NEAR``, the robot steps
+    back until it would be ``VIEW_NEAR + margin`` away, at most ``params.back_max`` per
+    call: the image (yaw 0, or the head turned to it) then decides again. 0 otherwise.
+    ``hfov`` is validated only (the field of view that decides is the caller's)."""
     _finite("heading", heading)
+    _finite("hfov", hfov, 0.0, 2 * math.pi)
     b = _points(blocker)
     if b.shape[0] != 1:
         raise ValueError(f"one blocker expected, got {b.shape[0]}")
     rng = float(np.hypot(*b[0]))
-    fresh = _points(seen)
-    if fresh.shape[0] and float(np.min(np.hypot(*(fresh - b[0]).T))) < 2.0 * params.margin:
-        return 0.0  # the image shows it: it is there, wait for it
-    ahead = in_view(b, heading, hfov, near=0.0, far=VIEW_NEAR)
-    if not bool(ahead[0]):
-        return 0.0
-    return min(params.back_max, VIEW_NEAR + params.margin - rng)
+    if confirmed(b[0], seen, params) or rng >= VIEW_NEAR:
+        return 0.0  # the image shows it (wait for it), or it can be seen where it is
+    u = np.array([math.cos(heading), math.sin(heading)])
+    along = float(b[0] @ u)
+    if along < 0.0:
+        return 0.0  # behind: stepping back would come nearer
+    want = VIEW_NEAR + params.margin
+    # |b + d·u| = want: the robot moves -d·u, the blocker's relative position +d·u
+    d = -along + math.sqrt(along * along - rng * rng + want * want)
+    return min(params.back_max, d)
 
 
 def _tangent(heading: float, blockers: np.ndarray, radius: float, side: int) -> float:

@@ -23,6 +23,7 @@ from agent.control.corridor import (
     blocking,
     check_step,
     closest_approach,
+    confirmed,
     patience,
     plan_rank,
 )
@@ -208,9 +209,21 @@ def test_back_off_known_answers() -> None:
     assert back_off(np.array([[0.0, 0.35]]), np.zeros((0, 2)), NORTH, HFOV, CP) == 0.15
     # the image shows it (within 2·margin): it is there, no need to look again
     assert back_off(ahead, np.array([[0.05, 0.55]]), NORTH, HFOV, CP) == 0.0
-    # far enough to be seen, or beside the robot (outside the field of view): 0
+    # far enough to be seen, or behind the robot (stepping back comes nearer): 0
     assert back_off(np.array([[0.0, VIEW_NEAR + 0.1]]), np.zeros((0, 2)), NORTH, HFOV, CP) == 0
-    assert back_off(np.array([[0.5, 0.1]]), np.zeros((0, 2)), NORTH, HFOV, CP) == 0.0
+    assert back_off(np.array([[0.3, -0.1]]), np.zeros((0, 2)), NORTH, HFOV, CP) == 0.0
+    # beside and a little ahead, 0.57 m at 36° off the heading: back until 0.65 m away
+    b = 0.57 * np.array([[math.cos(NORTH - math.radians(36)), math.sin(NORTH - math.radians(36))]])
+    d = back_off(b, np.zeros((0, 2)), NORTH, HFOV, CP)
+    assert math.hypot(b[0, 0], b[0, 1] + d) == pytest.approx(VIEW_NEAR + CP.margin)
+    assert 0.09 < d < 0.1
+
+
+def test_confirmed_known_answers() -> None:
+    b = np.array([0.0, 0.52])
+    assert confirmed(b, np.array([[0.05, 0.55]]), CP)  # 5.8 cm < 2·margin
+    assert not confirmed(b, np.array([[0.2, 0.52]]), CP)
+    assert not confirmed(b, np.zeros((0, 2)), CP)
 
 
 def test_back_off_errors() -> None:
@@ -232,5 +245,7 @@ def test_back_off_never_exceeds_back_max_and_ends_at_the_view_range(
     b = back_off(np.array([[x, y]]), np.zeros((0, 2)), h, HFOV, CP)
     assert 0.0 <= b <= CP.back_max + 1e-12
     if b > 0.0:
-        assert math.hypot(x, y) <= VIEW_NEAR
-        assert b == CP.back_max or math.hypot(x, y) + b == pytest.approx(VIEW_NEAR + CP.margin)
+        assert math.hypot(x, y) < VIEW_NEAR
+        assert x * math.cos(h) + y * math.sin(h) >= 0.0  # never backs towards it
+        after = math.hypot(x + b * math.cos(h), y + b * math.sin(h))
+        assert b == CP.back_max or after == pytest.approx(VIEW_NEAR + CP.margin)
