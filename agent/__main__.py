@@ -7,7 +7,7 @@
                     [--timeout S] [--member-grace S] [--join-timeout S]
                     [--research-rounds K] [--explore-step M]
                     [--body zenoh|naoqi]
-                    [--nao tcp://HOST:9559]
+                    [--nao tcp://HOST:9559] [--state-dir DIR]
 
 The body is the simulated world over zenoh (``--body zenoh``, the default) or a NAO
 over its qi protocol (``--body naoqi --nao tcp://nao.local:9559``: a real robot, or a
@@ -122,6 +122,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         metavar="URL",
         default=None,
         help=f"qi URL of the NAO for --body naoqi (e.g. tcp://nao.local:{NAOQI_PORT})",
+    )
+    p.add_argument(
+        "--state-dir",
+        metavar="DIR",
+        default=None,
+        help="keep a durable journal here and resume from it after a crash (issue #9)",
     )
     p.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
     args = p.parse_args(argv)
@@ -312,13 +318,20 @@ def main(argv: list[str] | None = None) -> int:
                 perception,
                 formation,
             )
+            if args.state_dir:
+                from agent.journal import Journal
+
+                try:
+                    runner.journal = Journal(args.state_dir, rid)
+                except (OSError, ValueError) as exc:
+                    log.error("no journal in %s: %s", args.state_dir, exc)
             code = runner.run()
         finally:
             body.close()
         st = bus.stats
         log.info(
             "robot %d exit %d: published %d B (%s), compass %d/%d failed, "
-            "rejected %d (untrusted %d), dropped %d",
+            "%d drift(s) re-measured, rejected %d (untrusted %d), dropped %d",
             rid,
             code,
             st.total_published,
@@ -327,6 +340,7 @@ def main(argv: list[str] | None = None) -> int:
             ),
             runner.compass_failures,
             runner.compass_uses,
+            runner.drift_checks,
             st.rejected,
             st.untrusted,
             st.dropped,

@@ -8,6 +8,9 @@ counted, never raised into the caller's loop.
 
 Callbacks only hand samples to thread-safe queues (zenoh must not be called, and
 nothing may block, inside a callback); the caller drains them with :meth:`Bus.drain`.
+The one exception is :meth:`Bus.serve` (issue #9: the agreed record set by digest): it
+replies from within the queryable's callback, as zenoh's own queryable examples do, with
+an answer computed from an immutable snapshot (no lock, no I/O but the reply).
 
 Hardening (issue #8): a payload's size is checked before it is copied out of zenoh
 (``MAX_PUBLICATION_BYTES`` for subscriptions, ``MAX_MESSAGE_BYTES`` for query replies);
@@ -36,6 +39,7 @@ import zenoh
 from agent.protocol import (
     MAX_MESSAGE_BYTES,
     MAX_PUBLICATION_BYTES,
+    MAX_REQUEST_BYTES,
     ErrorReply,
     Guard,
     Inbox,
@@ -145,6 +149,11 @@ def zenoh_config(spec: NetworkSpec) -> zenoh.Config:
     for key, value in spec.json5_items():
         cfg.insert_json5(key, value)
     return cfg
+
+
+def key_owner(key: str) -> Identity:
+    """Who may sign on ``key``: the world on ``world/...``, robot i on ``nao/i/...``."""
+    return Identity("world") if key.startswith("world/") else Identity.robot(id_from_key(key))
 
 
 @dataclass(frozen=True)
@@ -301,7 +310,7 @@ class Bus:
         if self.verifier is None:
             return "", -1, data
         opened = self.verifier.open(key, data)
-        owner = Identity("world") if key.startswith("world/") else Identity.robot(id_from_key(key))
+        owner = key_owner(key)
         if opened.who != owner:
             raise TrustError(f"{opened.who.cn} signed a message on {key}, owned by {owner.cn}")
         return opened.who.cn, opened.epoch, opened.payload
@@ -348,13 +357,64 @@ class Bus:
             except queue.Empty:
                 return out
 
+    # ----------------------------------------------------------------- serving
+
+    def serve(self, key: str, answer: Callable[[Message], Message | None]) -> None:
+        """Answer queries on ``key`` (one of this robot's own ``nao/{id}/...`` keys).
+
+        ``answer(request)`` returns the reply, or None to stay silent (zenoh then ends
+        the query for the asker without a reply from here). It runs in zenoh's callback
+        thread: it must be quick and must not use the bus. Requests are bounded
+        (``MAX_REQUEST_BYTES``), opened (secure: any fleet member may ask, the reply is
+        sealed on ``key`` and bound to the request) and decoded; whatever fails is
+        counted in ``stats.rejected`` and gets no reply.
+        """
+
+        def on_query(q: zenoh.Query) -> None:
+            self._on_query(q, key, answer)
+
+        self._keep.append(self.session.declare_queryable(key, on_query))
+
+    def _on_query(self, q: Any, key: str, answer: Callable[[Message], Message | None]) -> None:
+        """The queryable callback: never raises."""
+        try:
+            raw = q.payload
+            if raw is None:
+                raise ProtocolError("query without a payload")
+            data = take_payload(raw, MAX_REQUEST_BYTES + 1024)
+            nonce = b""
+            if self.verifier is not None:
+                opened = self.verifier.open(str(q.key_expr), data)
+                data, nonce = opened.payload, opened.nonce
+            rep = answer(decode(data, max_bytes=MAX_REQUEST_BYTES))
+            if rep is not None:
+                out = encode(rep)
+                if self.signer is not None:
+                    out = self.signer.seal(key, out, bind=nonce)
+                q.reply(key, out)
+        except Exception as exc:
+            self._reject(f"query on {key}", exc)
+        finally:
+            with contextlib.suppress(Exception):
+                q.drop()
+
     # ----------------------------------------------------------------- queries
 
-    def query(self, key: str, msg: Message, expect: type[M], timeout: float = 10.0) -> M:
+    def query(
+        self,
+        key: str,
+        msg: Message,
+        expect: type[M],
+        timeout: float = 10.0,
+        accept: Callable[[M], str] | None = None,
+    ) -> M:
         """Send ``msg`` to the queryable on ``key`` and return its reply of type ``expect``.
 
         Raises :class:`BusError` with the reason on timeout, an ``ErrorReply`` or a reply
-        that does not decode.
+        that does not decode. ``accept(reply)``: a reason to skip the reply ("" takes
+        it), for queries several peers answer (the first acceptable reply wins).
+        Replies on ``world/...`` must be sealed by the world, on ``nao/{i}/...`` by
+        robot i, on the key the reply names.
         """
         data = encode(msg)
         nonce = b""
@@ -376,7 +436,7 @@ class Bus:
         except Exception as exc:  # zenoh refused the query (bad key, closed session)
             raise BusError(f"{key}: query failed: {reason(exc)}") from None
         errors: list[str] = []
-        out = self._first_reply(key, replies, expect, errors, nonce)
+        out = self._first_reply(key, replies, expect, errors, nonce, accept)
         if out is not None:
             return out
         if errors:
@@ -396,6 +456,7 @@ class Bus:
         expect: type[M],
         errors: list[str],
         nonce: bytes = b"",
+        accept: Callable[[M], str] | None = None,
     ) -> M | None:
         """The first reply of type ``expect``; the reasons the others were refused go to
         ``errors``. An ``ErrorReply`` raises :class:`BusError`. Never raises anything else:
@@ -418,6 +479,11 @@ class Bus:
                     errors.append(why)
                     self.guard.reject(f"reply on {key}", why)
                     continue
+                why = accept(out) if accept is not None else ""
+                if why:
+                    errors.append(why)
+                    self.guard.reject(f"reply on {key}", why)
+                    continue
                 return out
         except BusError:
             raise
@@ -429,7 +495,8 @@ class Bus:
     def _reply_message(self, key: str, reply: Any, nonce: bytes) -> Any:
         """The decoded message of one reply, or an exception saying why not.
 
-        Secure: the reply must be sealed by the world and bound to this request."""
+        Secure: the reply must be bound to this request and sealed by the world
+        (``world/...``), or by the robot owning the key the reply names (``nao/i/...``)."""
         ok = reply.ok
         if ok is None:
             err = reply.err
@@ -439,9 +506,11 @@ class Bus:
             raise BusError(f"error reply: {text!r}")
         raw = take_payload(ok.payload, MAX_SEALED_BYTES if self.verifier else MAX_MESSAGE_BYTES)
         if self.verifier is not None:
-            opened = self.verifier.open(key, raw, bind=nonce, replay=False)
-            if opened.who != Identity("world"):
-                raise TrustError(f"reply signed by {opened.who.cn}, not the world")
+            rkey = key if key.startswith("world/") else str(ok.key_expr)
+            owner = key_owner(rkey)
+            opened = self.verifier.open(rkey, raw, bind=nonce, replay=False)
+            if opened.who != owner:
+                raise TrustError(f"reply signed by {opened.who.cn}, not {owner.cn}")
             raw = opened.payload
         try:
             return decode(raw)

@@ -259,6 +259,33 @@ class Agreement:
         self._params_failed = False  # failed on parameters: the digest is still answered
         self._digest_cache: tuple[tuple[int, ...], str] | None = None
 
+    @classmethod
+    def restored(
+        cls,
+        self_id: int,
+        records: Sequence[NeighborRecordMsg],
+        now: float,
+        params: str = "",
+        backoff_max: float = 4.0,
+    ) -> Agreement:
+        """The agreement of an agent restarted after it had agreed (issue #9): the agreed
+        ``records`` (its own among them), every member live, the decision ``agreed``.
+
+        It re-publishes its digest until every member reports a post-agreement phase
+        (see :meth:`due`), which tells the others that its new session holds the same
+        set. Raises ``ValueError`` when ``records`` lack this agent's or repeat a sender.
+        """
+        by_id = {r.sender: r for r in records}
+        if len(by_id) != len(records):
+            raise ValueError("the agreed records repeat a sender")
+        if self_id not in by_id:
+            raise ValueError(f"the agreed records hold none of robot {self_id}")
+        agr = cls(self_id, by_id[self_id], now, params=params, backoff_max=backoff_max)
+        agr.live = set(by_id)
+        agr.records = dict(by_id)
+        agr._final = agr._agreed("restored: ")
+        return agr
+
     # ----------------------------------------------------------------- inputs
 
     def member_joined(self, robot_id: int, now: float) -> None:
@@ -394,14 +421,7 @@ class Agreement:
         size_ok = n == self.fleet_size if self.fleet_size is not None else n >= 1
         settled = self.fleet_size is not None or now - self.membership_changed >= self.settle
         if size_ok and settled and not missing and not disagree:
-            members, digest = self.digest()
-            self._final = Decision(
-                "agreed",
-                f"{len(members)} members agree on digest {digest[:12]}",
-                digest,
-                members,
-                tuple(self.records[i] for i in members),
-            )
+            self._final = self._agreed()
             self._digest_tx.reset(now)  # tell the others once more, promptly
             return self._final
         if now - self.started > self.timeout:
@@ -472,6 +492,17 @@ class Agreement:
         if disagree:
             return f"waiting for matching digests from {disagree}"
         return "waiting for membership to settle"
+
+    def _agreed(self, prefix: str = "") -> Decision:
+        """The ``agreed`` decision on the records held now."""
+        members, digest = self.digest()
+        return Decision(
+            "agreed",
+            f"{prefix}{len(members)} members agree on digest {digest[:12]}",
+            digest,
+            members,
+            tuple(self.records[i] for i in members),
+        )
 
     def _fail(self, reason: str) -> Decision:
         self._final = Decision("failed", reason)

@@ -79,6 +79,8 @@ KEY_ALIVE_ALL = "nao/alive/*"
 KEY_RECORD_ALL = "nao/*/record"
 KEY_DIGEST_ALL = "nao/*/digest"
 KEY_STATUS_ALL = "nao/*/status"
+#: Every agent's record-set queryable (issue #9): the agreed records by digest.
+KEY_RECORDS_ALL = "nao/*/records"
 KEY_WORLD_REGISTER = "world/register"
 KEY_WORLD_CLOCK = "world/clock"
 KEY_WORLD_TRUTH_POSES = "world/truth/poses"
@@ -100,6 +102,10 @@ def key_digest(robot_id: int) -> str:
 
 def key_status(robot_id: int) -> str:
     return f"nao/{_check_id(robot_id)}/status"
+
+
+def key_records(robot_id: int) -> str:
+    return f"nao/{_check_id(robot_id)}/records"
 
 
 def key_camera(robot_id: int) -> str:
@@ -575,6 +581,41 @@ class StatusMsg(Message):
         "error": _str("error"),
         "t_sim": _float("t_sim", 0.0),
         "bytes_sent": _int("bytes_sent", 0, 2**62),
+    }
+
+
+#: A neighbour record's wire form in a :class:`RecordSetReply` (64 neighbours: ~2.5 KB).
+MAX_RECORD_BYTES = 4096
+
+
+@dataclass(frozen=True)
+class RecordSetRequest(Message):
+    """Ask the agents for the agreed record set whose digest is ``digest`` (issue #9:
+    a restarted agent fetches what it agreed on); empty: whatever set they agreed on.
+    Only agents holding it answer."""
+
+    TAG: ClassVar[str] = "recordset?"
+    digest: str
+    SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {
+        "digest": _hex("digest", allow_empty=True)
+    }
+
+
+@dataclass(frozen=True)
+class RecordSetReply(Message):
+    """The agreed record set ``digest`` as held by ``sender``: each record's wire form
+    (:func:`encode` of a :class:`NeighborRecordMsg`), sorted by sender, exactly the
+    bytes :func:`agent.exchange.canonical_digest` hashes, so the asker checks the set
+    against the digest before using it."""
+
+    TAG: ClassVar[str] = "recordset"
+    sender: int
+    digest: str
+    records: tuple[bytes, ...]
+    SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {
+        "sender": _ID,
+        "digest": _hex("digest"),
+        "records": _seq("records", _bytes("record", MAX_RECORD_BYTES), MAX_MEMBERS),
     }
 
 

@@ -17,7 +17,9 @@ PLAN     formation core on the agreed records (4.1.2–4.2): identical on every 
 WAIT     for every robot of earlier waves to hold (leader first, 5.2.2 step 7).
 MOVE     rotation control to face the goal, distance control in 20 cm steps with the
          heading corrected after each (4.2, 5.2.2), then turn to the pyramid axis;
-         each step's corridor checked first (an addition, agent/control/corridor.py).
+         each step's corridor checked first (an addition, agent/control/corridor.py);
+         a step's drift too large to be plausible is re-measured, not discarded
+         (an addition, :meth:`Runner._confirm_drift`).
 HOLD     arrived (status ``hold``); once the whole fleet has arrived and the parent is
          ``done`` (``march``), look at the parent and step by the measured offset error
          (an addition, see :meth:`Runner.correct`), then ``done`` and stay until all are.
@@ -56,12 +58,15 @@ from agent.control import (
     next_leg,
     wrap_pi,
 )
+from agent.control.alignment import look_yaws, match_parent
 from agent.control.corridor import (
     GO,
     VIA,
     CorridorParams,
     Verdict,
+    back_off,
     check_step,
+    confirmed,
     in_view,
     patience,
     plan_rank,
@@ -69,6 +74,7 @@ from agent.control.corridor import (
 from agent.exchange import Agreement, Decision, Grace, params_digest
 from agent.formation.plan import Plan
 from agent.formation.research import step_blocked
+from agent.journal import Journal
 from agent.march import Marcher, MarchHalt
 from agent.nao import CAMERA_HFOV, HEAD_YAW_LIMIT
 from agent.perception.detector import Detection
@@ -80,11 +86,13 @@ from agent.protocol import (
     KEY_STATUS_ALL,
     DigestMsg,
     NeighborRecordMsg,
+    RecordSetReply,
     StatusMsg,
     id_from_key,
     key_alive,
     key_digest,
     key_record,
+    key_records,
     key_status,
     reason,
 )
@@ -94,11 +102,23 @@ log = logging.getLogger("agent.runner")
 
 NORTH = math.pi / 2
 ARRIVED = ("hold", "march", "done", "failed")  # phases of a member that has arrived
+MAX_TURN_STEP = math.radians(40.0)  # largest turn taken to re-measure a step's drift
 STATUS_MIN_INTERVAL = 3.0  # s between progress statuses of the same phase
 HEARTBEAT = 3.0  # s between statuses while waiting
 
 
 _Round = TypeVar("_Round", NeighborRecordMsg, DigestMsg)
+
+
+def _plausible(measured: float, commanded: float, walking: bool) -> bool:
+    """Whether a compass rotation is believable against the command (rad).
+
+    A measurement far from the command is more likely a mismatch than a fall: 10° (or
+    60 % of the command) for a turn; 20° for a step, whose drift reaches ~9° in the
+    simulator at noise 1 (a larger one is re-measured, :meth:`Runner._confirm_drift`).
+    """
+    limit = math.radians(20.0 if walking else 10.0)
+    return abs(measured - commanded) <= max(limit, 0.6 * abs(commanded))
 
 
 def _keep_newest(store: dict[int, _Round], msg: _Round) -> None:
@@ -182,12 +202,18 @@ class Runner:
         self.compass_gain = 1.0
         self.final_heading = NORTH
         self.corridor = CorridorParams()  # the safe-step check before each step
+        self.drift_checks = 0  # implausible step drifts re-measured (_confirm_drift)
         self.waits = 0  # polls spent waiting for a clear corridor
         self.vias = 0  # via (tangent) steps taken round a blocking NAO
         self.steps = 0  # straight steps walked (the age of a sighting)
         self._seen: list[tuple[np.ndarray, int]] = []  # (NAO seen, fixed frame; at step)
         # (records held, digest of their plan) for adopting a member's plan (_adopt_plan)
         self._candidate: tuple[tuple[NeighborRecordMsg, ...], str] | None = None
+        # issue #9: the durable journal (None: not kept), what it holds, what we serve
+        self.journal: Journal | None = None
+        self.own_record: NeighborRecordMsg | None = None
+        self.leg = 0  # the move's current leg
+        self._served: RecordSetReply | None = None
 
     # ================================================================= plumbing
 
@@ -207,6 +233,22 @@ class Runner:
             self.bus.subscribe(key)
         self.bus.watch_alive(KEY_ALIVE_ALL)
         self.bus.declare_alive(key_alive(self.me))
+        from agent.resume import answer
+
+        self.bus.serve(key_records(self.me), lambda req: answer(self._served, req))
+
+    def _journal(self, command: str = "", value: float = 0.0) -> None:
+        """Write the journal (issue #9), before ``command`` is sent; a failing disk is
+        logged and the journal given up, never fatal."""
+        if self.journal is None:
+            return
+        from agent.resume import journal_state
+
+        try:
+            self.journal.save(journal_state(self, command, value))
+        except (OSError, ValueError) as exc:
+            log.error("journal write failed, journal given up: %s", reason(exc))
+            self.journal = None
 
     def status(
         self,
@@ -221,6 +263,8 @@ class Runner:
         if changed:
             self.timeline.mark(phase, self.body.t_sim)
         self.phase = phase
+        if changed:
+            self._journal()
         if not (changed or force or now - self._last_status >= STATUS_MIN_INTERVAL):
             return
         self._last_status = now
@@ -320,6 +364,20 @@ class Runner:
             if self.agreement is not None and rid != self.me:
                 self.agreement.member_left(rid, now)
 
+    def _proves_agreement(self, msg: object) -> bool:
+        """Whether ``msg`` shows the record-set digest (or plan digest) we agreed on."""
+        agr = self.agreement
+        if agr is None or not agr.agreed:
+            return False
+        if isinstance(msg, DigestMsg):
+            members, digest = agr.digest()
+            return msg.digest == digest and msg.members == members and msg.params == agr.params
+        return (
+            isinstance(msg, StatusMsg)
+            and bool(self.plan_digest)
+            and (msg.plan_digest == self.plan_digest)
+        )
+
     def _member(self, rid: int) -> bool:
         peer = self.peers.get(rid)
         return peer is not None and peer.alive
@@ -336,7 +394,11 @@ class Runner:
             return True
         pinned = self.agreed_epochs.get(sender)
         if pinned is not None:
-            return ev.epoch == pinned
+            if ev.epoch > pinned and self._proves_agreement(ev.msg):
+                # a member restarted after agreeing (issue #9): its new session counts
+                log.info("robot %d resumed in a new session with the agreed digest", sender)
+                self.agreed_epochs[sender] = self.epochs[sender] = ev.epoch
+            return ev.epoch == self.agreed_epochs[sender]
         if ev.epoch < self.epochs.get(sender, -1):
             return False
         self.epochs[sender] = ev.epoch
@@ -357,6 +419,7 @@ class Runner:
         before = self._last_frame if self._last_frame is not None else self.look(0.0)
         while not (rc.done or rc.exhausted):
             u = rc.next_step()
+            self._journal("turn", u)
             rep = self.body.turn(u)
             self.pump()
             after = self.look(0.0)
@@ -378,10 +441,21 @@ class Runner:
     def _compass(
         self, before: Frame, after: Frame, commanded: float, walking: bool = False
     ) -> float:
-        """The rotation between two head-yaw-0 frames; the command when the compass fails.
+        """The rotation between two head-yaw-0 frames; the command when the compass fails
+        or its match is implausible (:meth:`_read`)."""
+        value, _ = self._read(before, after, commanded, walking)
+        return value
+
+    def _read(
+        self, before: Frame, after: Frame, commanded: float, walking: bool = False
+    ) -> tuple[float, float | None]:
+        """(rotation to believe, suspect): the compass between two head-yaw-0 frames.
 
         ``walking``: the frames are 20 cm apart, so only the central band of the image
-        is matched (see :meth:`agent.adapters.PerceptionAdapter.measure_walk`)."""
+        is matched (see :meth:`agent.adapters.PerceptionAdapter.measure_walk`). When the
+        compass fails, the command is believed; when it matches but far from the
+        command, the command is believed and the match is returned as ``suspect``
+        (a step's real drift may be that large: :meth:`_confirm_drift`)."""
         if walking:
             res = self.perception.measure_walk(before.image, after.image)
         else:
@@ -394,19 +468,51 @@ class Runner:
                 res.reason, "drift" if walking else "command",
                 math.degrees(commanded),
             )  # fmt: skip
-            return commanded
+            return commanded, None
         dtheta = float(res.dtheta) * self.compass_gain
-        # A measurement far from the command is more likely a mismatch than a fall.
-        # (a step's drift reaches ~9° in the simulator: allow 20° when walking)
-        limit = math.radians(20.0 if walking else 10.0)
-        if abs(dtheta - commanded) > max(limit, 0.6 * abs(commanded)):
+        if not _plausible(dtheta, commanded, walking):
             self.compass_failures += 1
             log.warning(
                 "compass %+.1f° implausible against %+.1f°: ignored",
                 math.degrees(dtheta), math.degrees(commanded),
             )  # fmt: skip
-            return commanded
-        return dtheta
+            return commanded, dtheta
+        return dtheta, None
+
+    def _confirm_drift(self, before: Frame, h0: float, suspect: float) -> tuple[Frame, float]:
+        """Re-measure a step's drift that the compass reported implausibly large.
+
+        A large drift may be real (a NAO veering strongly: ~9° per 20 cm step in the
+        paper's Table 2, several times that under heavy noise) or a wrong match. The
+        robot turns by ``-suspect``, the turn the distance control would make next if
+        the drift were real, and measures the rotation between the image *before the
+        step* and the new one: close to 0 if the drift was real, close to the turn if it
+        was a mismatch. Either way that net rotation is the new heading's measurement
+        against ``h0``, taken with little image shift in the likely case. Returns (the
+        new image, the net rotation since ``before``); when the re-measurement fails or
+        fits neither case, the drift is taken as 0 and the turn as commanded (the
+        behaviour without this check)."""
+        u = float(np.clip(-suspect, -MAX_TURN_STEP, MAX_TURN_STEP))
+        self.body.turn(u)
+        self.pump()
+        after = self.look(0.0)
+        res = self.perception.measure_walk(before.image, after.image)
+        self.compass_uses += 1
+        net = float(res.dtheta) * self.compass_gain if res.ok else math.nan
+        if res.ok and (_plausible(net, 0.0, True) or _plausible(net, u, True)):
+            self.drift_checks += 1
+            log.info(
+                "drift %+.1f° re-measured after a %+.1f° turn: net %+.1f° (%s)",
+                math.degrees(suspect), math.degrees(u), math.degrees(net),
+                "real" if abs(net) < abs(net - u) else "mismatch",
+            )  # fmt: skip
+            return after, net
+        self.compass_failures += 1
+        log.warning(
+            "drift %+.1f° not confirmed (%s): assuming none",
+            math.degrees(suspect), res.reason if not res.ok else f"net {math.degrees(net):+.1f}°",
+        )  # fmt: skip
+        return after, u
 
     def walk_to(
         self, goal: np.ndarray, progress: Callable[[float], None], backward_within: float = 0.0
@@ -492,6 +598,8 @@ class Runner:
             self.status(self.phase, detail=f"waiting: NAO ahead at {where}", force=waited == 0)
             self.waits += 1
             self.pump(cp.poll)
+            if waited and not confirmed(v.blockers[0], seen, cp):
+                self._recheck(v.blockers[0], seen, where)
             self._last_frame = None  # look again
             # what the next image shows is seen afresh: a NAO that walked on is forgotten
             if self._seen:
@@ -502,6 +610,36 @@ class Runner:
             f"way blocked for {cp.max_polls} polls at believed {self.position.round(2).tolist()}"
         )
 
+    def _recheck(self, blocker: np.ndarray, seen: np.ndarray, where: list[float]) -> None:
+        """A blocker only remembered, not in the yaw-0 image: find out whether it is still
+        there. Too near ahead to be seen (< VIEW_NEAR): step back (``back_off``); out of
+        the yaw-0 image (beside the robot): look at it with the head, forget what that
+        image should show and does not, remember what it shows. Otherwise the memory
+        would keep a NAO that walked away until this robot's patience ran out."""
+        back = back_off(blocker[None, :], seen, self.heading, CAMERA_HFOV, self.corridor)
+        if back > 0.01:
+            log.info("corridor: NAO remembered at %s, too near to see: %.2f m back", where, back)
+            self.walk_step(-back)
+            return
+        if bool(in_view(blocker[None, :], self.heading, CAMERA_HFOV, near=0.0)[0]):
+            return  # the yaw-0 image covers it: the loop's own look decides
+        bearing = math.atan2(float(blocker[1]), float(blocker[0]))
+        yaw = float(np.clip(wrap_pi(bearing - self.heading), -HEAD_YAW_LIMIT, HEAD_YAW_LIMIT))
+        frame = self.look(yaw)
+        fresh, _, _ = self.perception.to_fixed(
+            self.perception.detect(frame.image, yaw), self.heading
+        )
+        if self._seen:
+            rel = np.array([p for p, _ in self._seen]) - self.position
+            shown = in_view(rel, self.heading + yaw, CAMERA_HFOV)
+            self._seen = [e for e, gone in zip(self._seen, shown, strict=True) if not gone]
+        for p in np.asarray(fresh, dtype=np.float64).reshape(-1, 2):
+            self._seen.append((self.position + p, self.steps))
+        log.info(
+            "corridor: looked at the NAO remembered at %s (head %+.0f°): %d NAO(s) in view",
+            where, math.degrees(yaw), len(fresh),
+        )  # fmt: skip
+
     def _rank(self) -> int:
         """This robot's rank in the shared plan, (wave, id) order (0 without a plan)."""
         if self._plan is None:
@@ -509,17 +647,24 @@ class Runner:
         return plan_rank([(int(rp.wave), int(rp.robot_id)) for rp in self._plan.robots], self.me)
 
     def walk_step(self, distance: float) -> MotionResult:
-        """One straight step, the compass's drift and dead reckoning (4.2, eq. 2)."""
+        """One straight step, the compass's drift and dead reckoning (4.2, eq. 2); a
+        drift too large to be plausible is re-measured (:meth:`_confirm_drift`)."""
         before = self._last_frame if self._last_frame is not None else self.look(0.0)
         h0 = self.heading
+        self._journal("walk", distance)
         rep = self.body.walk(distance)
         self.steps += 1
         self.pump()
         after = self.look(0.0)
-        drift = self._compass(before, after, 0.0, walking=True)
-        self.heading = wrap_pi(self.heading + drift)
+        drift, suspect = self._read(before, after, 0.0, walking=True)
+        turned = 0.0
+        if suspect is not None and rep.status != "contact":
+            after, net = self._confirm_drift(before, h0, suspect)
+            turned = float(np.clip(-suspect, -MAX_TURN_STEP, MAX_TURN_STEP))
+            drift = net - turned  # the turn taken as commanded, for dead reckoning
+        self.heading = wrap_pi(h0 + drift + turned)
         self._last_frame = after
-        self.position = advance(self.position, h0, self.heading, distance)
+        self.position = advance(self.position, h0, wrap_pi(h0 + drift), distance)
         log.debug(
             "walk t_sim %.2f %.3f m drift %+.2f° heading %.2f° position %s",
             rep.t_sim, distance, math.degrees(drift), math.degrees(self.heading),
@@ -570,6 +715,11 @@ class Runner:
             self._last_frame = self.look(0.0)
             if origin is None:
                 origin = self._last_frame
+            if sweep == 0 and self.journal is not None:  # the view that defines the fixed frame
+                try:
+                    self.journal.save_reference(origin.image)
+                except (OSError, ValueError) as exc:
+                    log.error("reference view not journaled: %s", reason(exc))
         heading_180 = self.heading
         turned[1] = self.rotate(math.pi, PAPER_GAINS, "complete the circle to θ = 0°")
         assert origin is not None and self._last_frame is not None
@@ -616,6 +766,7 @@ class Runner:
             confidences=tuple(float(c) for c in conf),
             obstacles=tuple((float(x), float(y)) for x, y in obstacles),
         )
+        self.own_record = rec
         self.status("localise", 1.0, f"{len(pts)} neighbours, {len(obstacles)} obstacles")
         return rec
 
@@ -805,6 +956,9 @@ class Runner:
             raise AgentFailure(f"planning failed on the agreed records: {exc}") from None
         self.plan = plan
         self.plan_digest = str(plan.digest)
+        from agent.resume import record_set
+
+        self._served = record_set(self.me, decision)
         members = {int(r) for r in self.formation.members(plan)}
         self.agreed_epochs = {r: e for r, e in self.epochs.items() if r in members}
         rp = plan.robot(self.me)
@@ -850,6 +1004,9 @@ class Runner:
         self.status("move", 0.0, f"{len(goals)} leg(s)")
         n = len(goals)
         for k, goal in enumerate(goals):
+            if k < self.leg:
+                continue  # walked before a restart (issue #9)
+            self.leg = k
 
             def progress(p: float, k: int = k) -> None:
                 self.status("move", (k + p) / n, f"leg {k + 1}/{n}")
@@ -873,8 +1030,10 @@ class Runner:
         is defined by parent–child offsets (AUV II: robots follow the robot in front
         by visual servoing), so once the whole fleet has arrived and the parent has
         finished its own correction (``done``), the child looks at where the plan puts
-        its parent, measures it and steps by the difference. Corrections larger than
-        ``max_correction`` (a wrong match) or below 3 cm are not walked.
+        its parent, measures it and steps by the difference (twice at most). The head
+        fans out around the expected bearing until it finds a NAO within
+        ``max_correction`` of the planned offset (:meth:`_find_parent`); a NAO farther
+        off is another robot or a wrong match, and corrections below 3 cm are not walked.
         """
         plan = self.plan
         rp = plan.robot(self.me)
@@ -898,30 +1057,47 @@ class Runner:
             rp.target, dtype=np.float64
         )
         for attempt in range(2):
-            bearing = math.atan2(float(expected[1]), float(expected[0]))
-            yaw = float(np.clip(wrap_pi(bearing - self.heading), -HEAD_YAW_LIMIT, HEAD_YAW_LIMIT))
-            frame = self.look(yaw)
-            dets = self.perception.detect(frame.image, yaw)
-            pts, _, _ = self.perception.to_fixed(dets, self.heading)
-            if len(pts) == 0:
-                log.warning("correction: parent %d not seen", parent)
+            seen = self._find_parent(expected, parent)
+            if seen is None:
                 return
-            k = int(np.argmin(np.hypot(*(pts - expected).T)))
-            err = pts[k] - expected
+            err = seen - expected
             size = float(np.hypot(*err))
             log.info(
                 "correction %d: parent %d seen at %s, planned %s, step %.3f m",
-                attempt + 1, parent, pts[k].round(3).tolist(), expected.round(3).tolist(), size,
+                attempt + 1, parent, seen.round(3).tolist(), expected.round(3).tolist(), size,
             )  # fmt: skip
             if size < 0.03:
-                break
-            if size > self.cfg.max_correction:
-                log.warning("correction of %.2f m is implausible: not walked", size)
                 break
             self.status("hold", 0.75, f"correcting {size:.2f} m towards parent {parent}")
             self._last_frame = None
             self.walk_to(self.position + err, lambda p: None, backward_within=0.5)
             self.rotate(wrap_pi(self.final_heading - self.heading), PAPER_GAINS)
+
+    def _find_parent(self, expected: np.ndarray, parent: int) -> np.ndarray | None:
+        """The parent's measured offset (fixed frame), or None: the head looks at the
+        expected bearing, then fans out (agent/control/alignment.py look_yaws) until an
+        image shows a NAO within ``max_correction`` of the expected offset (match_parent;
+        a NAO farther off is another robot, or a wrong match)."""
+        bearing = math.atan2(float(expected[1]), float(expected[0]))
+        nearest = math.inf
+        for yaw in look_yaws(bearing, self.heading, CAMERA_HFOV / 3.0, HEAD_YAW_LIMIT):
+            frame = self.look(yaw)
+            dets = self.perception.detect(frame.image, yaw)
+            pts, _, _ = self.perception.to_fixed(dets, self.heading)
+            pts = np.asarray(pts, dtype=np.float64).reshape(-1, 2)
+            k = match_parent(pts, expected, self.cfg.max_correction)
+            if k is not None:
+                return np.asarray(pts[k], dtype=np.float64)
+            if len(pts):
+                nearest = min(nearest, float(np.min(np.hypot(*(pts - expected).T))))
+        if math.isfinite(nearest):
+            log.warning(
+                "correction: parent %d not seen within %.2f m of %s (nearest NAO %.2f m off)",
+                parent, self.cfg.max_correction, expected.round(3).tolist(), nearest,
+            )  # fmt: skip
+        else:
+            log.warning("correction: parent %d not seen", parent)
+        return None
 
     def hold(self) -> None:
         """Arrived: correct against the parent, march if there is a route, report
@@ -944,6 +1120,10 @@ class Runner:
                 self.position.round(2).tolist(), 100 * marcher.worst_range,
                 math.degrees(marcher.worst_bearing),
             )  # fmt: skip
+        self.finish()
+
+    def finish(self) -> None:
+        """``done``, and stay until every member is."""
         self.status("done", 1.0, "formation held", force=True)
         self._wait_all(
             ("done", "failed"), "done", "formation held; waiting for", self.cfg.member_grace
@@ -984,18 +1164,29 @@ class Runner:
     def run(self) -> int:
         try:
             self.start_bus()
-            self.status("start", 0.0, "joined", force=True)
-            sightings = self.search()
-            record: NeighborRecordMsg | None = self.localise(sightings)
-            while record is not None:
-                decision = self.agree(record)
-                if decision.kind != "agreed":
-                    raise AgentFailure(decision.reason)
-                record = self.research(decision)
-            self.make_plan(decision)
-            self.wait_for_earlier_waves()
-            self.move()
-            self.hold()
+            stage, record = self.resume()
+            if stage == "search":
+                self.status("start", 0.0, "joined", force=True)
+                record = self.localise(self.search())
+            if stage in ("search", "agree"):
+                assert record is not None
+                while True:  # re-search rounds (4.1.3 rule 2) until the fleet is connected
+                    decision = self.agree(record)
+                    if decision.kind != "agreed":
+                        raise AgentFailure(decision.reason)
+                    again = self.research(decision)
+                    if again is None:
+                        break
+                    record = again
+                self.make_plan(decision)
+            if stage in ("search", "agree", "wait"):
+                self.wait_for_earlier_waves()
+            if stage in ("search", "agree", "wait", "move"):
+                self.move()
+            if stage == "done":
+                self.finish()
+            else:
+                self.hold()
             return 0
         except (AgentFailure, MarchHalt, BodyError, ValueError) as exc:
             return self.fail(reason(exc))
@@ -1014,6 +1205,19 @@ class Runner:
         finally:
             with contextlib.suppress(BodyError):
                 self.body.stop()
+
+    def resume(self) -> tuple[str, NeighborRecordMsg | None]:
+        """Where to start: ``search`` afresh, or what the journal says (agent/resume.py)."""
+        if self.journal is None:
+            return "search", None
+        from agent import resume
+
+        st = resume.load(self.journal)
+        if st is None:
+            return "search", None
+        stage, record = resume.resume(self, st)
+        log.info("robot %d resumes at %s (journaled phase %s)", self.me, stage, st.phase)
+        return stage, record
 
     def fail(self, reason: str) -> int:
         """Stop safely: publish ``failed`` with ``reason``, let it reach the others; 1."""

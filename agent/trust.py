@@ -14,7 +14,8 @@ Three layers, each useful without the others:
 
 2. **Transport.** Every zenoh link is TLS with mutual authentication against the fleet
    CA (:func:`tls_settings`), and the router's access control (:func:`acl_settings`) gives
-   each common name its role: robot i publishes ``nao/i/**``, declares ``nao/alive/i`` and
+   each common name its role: robot i publishes ``nao/i/**``, declares ``nao/alive/i``,
+   serves ``nao/i/records`` (the agreed record sets, any member may ask) and
    queries ``world/robot/i/**`` and ``world/register``; the world serves ``world/**``;
    observers only subscribe.
 
@@ -59,7 +60,13 @@ from cryptography.hazmat.primitives import serialization
 from cryptography.hazmat.primitives.asymmetric import ed25519
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
-from agent.protocol import MAX_MESSAGE_BYTES, MAX_ROBOT_ID, ProtocolError, unpack_bounded
+from agent.protocol import (
+    KEY_RECORDS_ALL,
+    MAX_MESSAGE_BYTES,
+    MAX_ROBOT_ID,
+    ProtocolError,
+    unpack_bounded,
+)
 
 ROLES = ("robot", "world", "observer", "router")
 ENVELOPE_VERSION = 1
@@ -576,6 +583,14 @@ def acl_settings(roster: Iterable[Identity]) -> dict[str, Any]:
             ["egress"],
             ["nao/**", "world/clock"],
         ),
+        # the agreed record sets (issue #9): any member asks, every robot serves its own
+        _rule("ask-records", ["query"], ["ingress"], [KEY_RECORDS_ALL]),
+        _rule(
+            "deliver-records",
+            ["query", "reply", "declare_queryable"],
+            ["egress"],
+            [KEY_RECORDS_ALL],
+        ),
         # the world: serves and publishes world/**, hears membership
         _rule("world-serve", ["declare_queryable", "reply", "put"], ["ingress"], ["world/**"]),
         _rule("world-take", ["query", "declare_subscriber"], ["egress"], ["world/**"]),
@@ -591,7 +606,13 @@ def acl_settings(roster: Iterable[Identity]) -> dict[str, Any]:
     policies = [
         {
             "id": "members",
-            "rules": ["hear-fleet", "watch-alive", "deliver-fleet"],
+            "rules": [
+                "hear-fleet",
+                "watch-alive",
+                "deliver-fleet",
+                "ask-records",
+                "deliver-records",
+            ],
             "subjects": ["members"],
         },
         {"id": "world", "rules": ["world-serve", "world-take"], "subjects": ["world"]},
@@ -604,6 +625,7 @@ def acl_settings(roster: Iterable[Identity]) -> dict[str, Any]:
         rules += [
             _rule(f"r{i}-out", ["put"], ["ingress"], [f"nao/{i}/**"]),
             _rule(f"r{i}-alive", ["liveliness_token"], ["ingress"], [f"nao/alive/{i}"]),
+            _rule(f"r{i}-serve", ["declare_queryable", "reply"], ["ingress"], [f"nao/{i}/records"]),
             _rule(f"r{i}-ask", ["query"], ["ingress"], [f"world/robot/{i}/**", "world/register"]),
             _rule(
                 f"r{i}-answer",
@@ -616,7 +638,13 @@ def acl_settings(roster: Iterable[Identity]) -> dict[str, Any]:
         policies.append(
             {
                 "id": who.cn,
-                "rules": [f"r{i}-out", f"r{i}-alive", f"r{i}-ask", f"r{i}-answer"],
+                "rules": [
+                    f"r{i}-out",
+                    f"r{i}-alive",
+                    f"r{i}-serve",
+                    f"r{i}-ask",
+                    f"r{i}-answer",
+                ],
                 "subjects": [who.cn],
             }
         )

@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import logging
 import math
-import socket
 import time
 from collections.abc import Iterator
 from types import SimpleNamespace
@@ -41,14 +40,9 @@ from agent.protocol import (
     key_walk,
 )
 from tests.fakes import FakeZBytes
+from tools.harness.procs import free_port
 
 pytestmark = pytest.mark.system
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 @pytest.fixture()

@@ -47,6 +47,8 @@ SAMPLES: list[p.Message] = [
     p.ClockMsg(t_sim=1.0),
     p.TruthPosesMsg(t_sim=1.0, poses=((1, 0.0, 0.5, 1.57),), contacts=0),
     p.ContactMsg(t_sim=2.0, a=1, b=-1),
+    p.RecordSetRequest(digest="ab" * 32),
+    p.RecordSetReply(sender=2, digest="ab" * 32, records=(b"\x80",)),
 ]
 
 

@@ -17,7 +17,7 @@ import pytest
 from agent.adapters import FormationAdapter, PerceptionAdapter
 from agent.bus import Bus, BusConfig
 from agent.config import AgentConfig, Route
-from agent.exchange import Agreement, Decision, params_digest
+from agent.exchange import Agreement, Decision, canonical_digest, params_digest
 from agent.formation.plan import PlanParams
 from agent.protocol import NeighborRecordMsg, StatusMsg
 from agent.robot import ZenohBody
@@ -184,7 +184,9 @@ def test_make_plan_plans_with_the_agents_parameters(perception: PerceptionAdapte
     try:
         cfg = AgentConfig(robot_id=3, fleet_size=3, orientation="cp", strategy="paper")
         r = Runner(bus, ZenohBody(bus, 3), cfg, perception, FormationAdapter())
-        plan = r.make_plan(Decision("agreed", records=records()))
+        plan = r.make_plan(
+            Decision("agreed", records=records(), digest=canonical_digest(records()))
+        )
     finally:
         bus.close()
     assert plan.axis == pytest.approx(math.pi / 2)

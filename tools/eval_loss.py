@@ -17,8 +17,8 @@ host :mod:`tools.packet_drop` drops packets with probability ``loss`` in both di
 except traffic with the world host: on a real NAO the camera and the legs are on board,
 only the robot-to-robot exchange crosses the radio (``--lossy-world`` drops that too).
 
-A monitor on its own (lossless) host observes the bus with ``tools.demo``'s observer and
-judges each run with ``tools.demo``'s criteria (every agent exits 0 in ``done``, identical
+A monitor on its own (lossless) host observes the bus with ``tools.harness``'s observer and
+judges each run with ``tools.harness``'s criteria (every agent exits 0 in ``done``, identical
 plan digests, no contact, every pair within |r_d| <= 12.5 % and |r_φ| <= 30 %). Per run
 it also records the agreement time (wall seconds from the last agent entering
 ``exchange`` to the last agent leaving ``agree``: the cost of the protocol, not of the
@@ -80,7 +80,7 @@ def monitor(
     insecure, as a peer (the caller gave ``--insecure``).
 
     Prints ``monitor ready`` once subscribed, then records statuses, records, digests and
-    ground truth (``tools.demo.Observer``, MCAP recording). The run is over when the
+    ground truth (``tools.harness.observe.Observer``, MCAP recording). The run is over when the
     orchestrator writes one JSON line to stdin, ``{"ids": [...], "exit_codes": {...},
     "timeout": str|null}``, or, with ``until_done=N`` (the compose ``observer``, which
     cannot see exit codes), when N agents have reached ``done`` or ``failed``, or N agents
@@ -88,10 +88,10 @@ def monitor(
     dead link), or ``timeout_s`` has passed; the exit code is taken as 0 for an agent in
     ``done``, 1 otherwise. It then drains
     1.5 s more and writes ``out/result.json`` (and the formation figure) with
-    ``tools.demo.summarise``. Returns 0 when the run succeeded.
+    ``tools.harness.judge.summarise``. Returns 0 when the run succeeded.
     """
     from agent.bus import Bus, BusConfig
-    from tools import demo
+    from tools.harness import judge, observe
 
     out.mkdir(parents=True, exist_ok=True)
     lines: queue.Queue[str] = queue.Queue()
@@ -104,8 +104,8 @@ def monitor(
     if not until_done:
         threading.Thread(target=read_stdin, daemon=True).start()
     deadline = time.monotonic() + timeout_s
-    rec = demo.Recorder(out / "run.mcap")
-    obs = demo.Observer(time.monotonic())
+    rec = observe.Recorder(out / "run.mcap")
+    obs = observe.Observer(time.monotonic())
     bus = Bus(
         BusConfig(
             connect=tuple(connect),
@@ -166,7 +166,7 @@ def monitor(
     ids = [int(i) for i in order.get("ids", [])]
     for i in ids:
         code = order.get("exit_codes", {}).get(str(i))
-        obs.agents.setdefault(i, demo.AgentView()).exit_code = code
+        obs.agents.setdefault(i, observe.AgentView()).exit_code = code
     lost = done_by_exit_code(obs, ids)
     result: dict[str, Any] = {
         "robots": len(ids),
@@ -191,7 +191,7 @@ def monitor(
         result["displacement_m"] = {
             str(i): math.dist(first[i][:2], last[i][:2]) for i in ids if i in first and i in last
         }
-    result = demo.summarise(obs, result, out, ids, d_e, math.radians(phi_e_deg), quiet=True)
+    result = judge.summarise(obs, result, out, ids, d_e, math.radians(phi_e_deg), quiet=True)
     # protocol latency: from the last agent entering exchange to the last one agreeing
     views = [obs.agents[i] for i in ids if i in obs.agents]
     entered = [v.phase_wall.get("exchange") for v in views]
@@ -205,7 +205,7 @@ def monitor(
         )
     (out / "result.json").write_text(json.dumps(result, indent=2, default=float))
     if until_done:
-        demo.print_table(result)
+        judge.print_table(result)
     print("monitor done", flush=True)
     return 0 if result.get("success") else 1
 
@@ -337,6 +337,8 @@ def run_once(
     ``credentials``: a fleet folder made for ``robots`` robots and the router's address
     (secure: TLS links, signatures); empty: insecure. ``tcp_rto_max_ms``: when > 0, every
     host's kernel caps TCP's retransmission timeout there (see :func:`cap_tcp_rto`)."""
+    from tools.harness.procs import robot_ids, router_command, world_command
+
     workdir.mkdir(parents=True, exist_ok=True)
     py = sys.executable
     env = dict(os.environ, PYTHONUNBUFFERED="1", MPLBACKEND="Agg")
@@ -356,17 +358,7 @@ def run_once(
 
         router = fab.popen(
             1,
-            [
-                py,
-                "-m",
-                "tools.router",
-                "--listen",
-                router_ep,
-                "--listen",
-                world_ep,
-                "--no-multicast-scouting",
-                *sec,
-            ],
+            router_command(router_ep, ["--listen", world_ep, "--no-multicast-scouting", *sec]),
             stderr=log("router"),
             env=env,
             cwd=str(REPO),
@@ -391,7 +383,7 @@ def run_once(
                 raise RuntimeError(f"monitor did not start; see {workdir / 'monitor.log'}")
             world = fab.popen(
                 2,
-                [py, "-m", "sim", "--robots", str(robots), "--seed", str(seed), *world_net],
+                world_command(robots, seed, world_net, []),
                 stderr=log("world"),
                 env=env,
                 cwd=str(REPO),
@@ -399,8 +391,6 @@ def run_once(
             world_lines = _Lines(world)
             if not world_lines.wait_for("ready", 180.0):
                 raise RuntimeError(f"world not ready; see {workdir / 'world.log'}")
-            from tools.demo import robot_ids
-
             ids = robot_ids(world_lines.lines, robots)
             droppers = []
             for i in range(robots):

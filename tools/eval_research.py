@@ -3,7 +3,7 @@
     python -m tools.eval_research [--scenario sim/scenarios/research_found.json]
                                   [--seeds 1,2,3] [--research-rounds K] [--out DIR]
 
-Runs ``tools.demo`` (world + one agent process per robot) on a scenario file once per
+Runs the demo (``tools.harness.run``: world + one agent process per robot) on a scenario file once per
 seed, with the scenario's ``seed`` (textures and the world's motion noise) replaced.
 Prints per seed the outcome, the (re-)search round of the agreed records, the robots'
 exit codes, the wall time in total and in the ``explore`` phase, and the stop reason;
@@ -20,7 +20,8 @@ from pathlib import Path
 from typing import Any
 
 from sim import scenarios
-from tools import demo
+from tools.demo import parse_args
+from tools.harness.run import run_once
 
 
 def run(scenario: Path, seeds: list[int], rounds: int | None, out: Path) -> list[dict[str, Any]]:
@@ -36,7 +37,7 @@ def run(scenario: Path, seeds: list[int], rounds: int | None, out: Path) -> list
         if rounds is not None:
             argv += ["--research-rounds", str(rounds)]
         try:
-            r = demo.run_once(demo.parse_args(argv), seed, d, quiet=True)
+            r = run_once(parse_args(argv), seed, d, quiet=True)
         except RuntimeError as exc:
             r = {"success": False, "errors": {"demo": str(exc)}}
         rows.append(

@@ -30,9 +30,8 @@ import argparse
 import json
 import math
 import random
-import socket
+import shutil
 import statistics
-import subprocess
 import sys
 import threading
 import time
@@ -45,8 +44,8 @@ from typing import Any
 import msgpack
 
 from agent import protocol as P
+from tools.harness.procs import free_port, start_world, stop, wait_ready
 
-ROOT = Path(__file__).resolve().parents[1]
 MEMORY_TARGET = 50 * 1024 * 1024
 FLOOD_TARGET_S = 1.0
 
@@ -115,6 +114,17 @@ def valid_samples() -> dict[str, list[P.Message]]:
             P.TruthPosesMsg(t_sim=9.0, poses=tuple((i, 0.1 * i, 1.0, 0.0) for i in range(200))),
         ],
         "contact": [P.ContactMsg(t_sim=2.0, a=1, b=-1)],
+        "recordset?": [P.RecordSetRequest(digest="ab" * 32)],
+        "recordset": [
+            P.RecordSetReply(
+                sender=2,
+                digest="ab" * 32,
+                records=tuple(
+                    P.encode(P.NeighborRecordMsg(sender=i, round=0, neighbours=((1.0, 0.5),)))
+                    for i in (1, 2)
+                ),
+            )
+        ],
     }
     assert set(out) == set(P.message_types()), "every message type needs a sample"
     return out
@@ -388,29 +398,6 @@ def memory(names: list[str] | None = None) -> list[MemoryResult]:
 # ===================================================================== flood
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-def start_world(endpoint: str, log: Any) -> subprocess.Popen[str]:
-    cmd = [sys.executable, "-m", "sim", "--robots", "3", "--seed", "7", "--listen", endpoint,
-           "--no-multicast-scouting", "--insecure"]  # fmt: skip
-    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=log, text=True)
-    deadline = time.monotonic() + 120.0
-    assert proc.stdout is not None
-    while time.monotonic() < deadline:
-        line = proc.stdout.readline()
-        if not line:
-            break
-        if line.startswith("sim ready"):
-            threading.Thread(target=proc.stdout.read, daemon=True).start()
-            return proc
-    proc.kill()
-    raise RuntimeError("the world did not start")
-
-
 def _world_accepts(key: str, payload: bytes | None) -> bool:
     """Whether the world's callback would take this request as well-formed (the flood
     must be malformed only: a valid camera request costs a render)."""
@@ -484,15 +471,14 @@ def flood(endpoint: str | None, n: int = 10_000, seed: int = 1) -> FloodResult:
     camera request timed while they are served. Starts a world when ``endpoint`` is None."""
     import zenoh
 
-    proc = None
-    log_path = None
+    world = None
+    log_dir = None
     if endpoint is None:
-        endpoint = f"tcp/127.0.0.1:{_free_port()}"
+        endpoint = f"tcp/127.0.0.1:{free_port()}"
         import tempfile
 
-        log_path = Path(tempfile.mkstemp(prefix="fuzz-world-", suffix=".log")[1])
-        log = log_path.open("w")
-        proc = start_world(endpoint, log)
+        log_dir = Path(tempfile.mkdtemp(prefix="fuzz-world-"))
+        world = start_world(3, 7, endpoint, log_dir, [])
     cfg = zenoh.Config()
     cfg.insert_json5("connect/endpoints", json.dumps([endpoint]))
     cfg.insert_json5("scouting/multicast/enabled", "false")
@@ -512,6 +498,8 @@ def flood(endpoint: str | None, n: int = 10_000, seed: int = 1) -> FloodResult:
             last_done[0] = time.perf_counter()
 
     try:
+        if world is not None:
+            wait_ready(world, 120.0)
         with zenoh.open(cfg) as s:
             deadline = time.monotonic() + 60.0
             while True:  # until the route to the world exists
@@ -537,17 +525,13 @@ def flood(endpoint: str | None, n: int = 10_000, seed: int = 1) -> FloodResult:
             n, baseline, send, during, after, counts["error"], counts["done"], last_done[0] - t0
         )
     finally:
-        if proc is not None:
-            proc.terminate()
-            try:
-                proc.wait(30)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
-    if log_path is not None:
+        if world is not None:
+            stop(world, 30.0)
+    if log_dir is not None:
+        log_path = log_dir / "world.log"
         lines = [ln for ln in log_path.read_text(errors="replace").splitlines() if "served" in ln]
         result.world_summary = lines[-1] if lines else ""
-        log_path.unlink()
+        shutil.rmtree(log_dir)
     return result
 
 

@@ -1,7 +1,7 @@
 """Scenarios with obstacles in the way (NAO paper 5.1.2; ``tools.demo --obstacles K``).
 
 Also the demo's obstacle numbers (:func:`judge_obstacles`) and drawing
-(:func:`draw_obstacles`), so that ``tools/demo.py`` only calls them.
+(:func:`draw_obstacles`), so that the harness (``tools/harness``) only calls them.
 
 :func:`sim.scenarios.generate` keeps its obstacles 0.8 m from every robot, so they rarely
 stand on anybody's way. :func:`blocking_scenario` instead plans the pyramid from the
@@ -35,8 +35,10 @@ START_GAP = 0.5
 OBSTACLE_GAP = 0.6  # m between obstacle centres
 SEED_STRIDE = 7919  # derived seeds (a prime: they do not meet the next runs' seeds)
 MAX_TRIES = 50
-#: The plan moves the pattern sideways out of the obstacle area (5.1.2), and the agents
-#: know no walls: the room's half-size grows by this much (m) over the generated one.
+#: The plan moves the pattern out of the obstacles (the default "near" placement by
+#: 0.4-1.6 m in the 6-robot, 3-obstacle demos; the paper's sideways shift by 2-3 m), and
+#: the agents know no walls: the room's half-size grows by this much (m) over the
+#: generated one.
 ROOM_EXTRA = 1.5
 
 

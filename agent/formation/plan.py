@@ -9,7 +9,9 @@ order) -> packing (:mod:`packing`: each robot starts once its own conflicts are 
 (η_i, d_i), waves and ``after`` lists. Whenever no scheduled plan is found - and
 straight away above SCHEDULE_MAX_N robots - the banded plan of :mod:`fallback`, which
 always exists, is used: a valid input never ends in "no safe schedule" (obstacles
-aside: a robot walled in by obstacles has no safe path at all).
+aside: a robot walled in by obstacles has no safe path at all). With obstacles, the
+``near`` placement (:func:`_near_obstacles`) is tried first, the paper's 5.1.2
+procedure (:mod:`obstacles`) after it (``PlanParams.obstacle_method``).
 
 Execution (:mod:`execution`): a robot may start once every robot of its ``after`` list
 holds its slot; waiting for every robot of every earlier ``wave`` is safe too (``after``
@@ -44,7 +46,7 @@ from agent.formation.detours import shorten
 from agent.formation.fallback import banded_plan
 from agent.formation.neighbour_check import DEFAULT_EPSILON, identify_neighbours
 from agent.formation.obstacle_map import common_frame_obstacles
-from agent.formation.obstacles import plan_around_obstacles
+from agent.formation.obstacles import SLOT_CLEARANCE, clear_shifts, plan_around_obstacles
 from agent.formation.packing import pack, regroup_waves
 from agent.formation.pyramid import (
     ORIENTATIONS,
@@ -75,6 +77,12 @@ SCHEDULE_MAX_N = 12_000
 FRONT_MAX_N = 2000
 
 
+#: How a plan meets obstacles: ``near`` (the obstacle-free pattern moved by the smallest
+#: clear translation, paths bent by the scheduler; :func:`_near_obstacles`), ``paper``
+#: (5.1.2: obstacles as robots, sideways shift, layer correction;
+#: :func:`obstacles.plan_around_obstacles`), ``default`` (near, else paper).
+OBSTACLE_METHODS = ("near", "paper", "default")
+
 #: Every strategy a plan may name: an assignment of :mod:`assignment`, ``banded`` (the
 #: plan of :mod:`fallback`, which always exists) or ``default``.
 PLAN_STRATEGIES = (*STRATEGIES, "banded", "default")
@@ -92,6 +100,7 @@ class PlanParams:
     # "centroid" (slots centred on the starts) | "front" (pyramid ahead of the fleet) |
     # "default": centroid, or front when the centroid placement cannot be scheduled safely
     placement: str = "default"
+    obstacle_method: str = "default"  # see OBSTACLE_METHODS
 
     def __post_init__(self) -> None:
         check_geometry(self.d_e, self.phi_e)
@@ -110,6 +119,10 @@ class PlanParams:
         if self.placement not in (*PLACEMENTS, "default"):
             raise ValueError(
                 f"placement must be one of {(*PLACEMENTS, 'default')}, got {self.placement!r}"
+            )
+        if self.obstacle_method not in OBSTACLE_METHODS:
+            raise ValueError(
+                f"obstacle_method must be one of {OBSTACLE_METHODS}, got {self.obstacle_method!r}"
             )
         if not (
             isinstance(self.epsilon, int | float)
@@ -442,6 +455,47 @@ def _choose(
 _NO_OBS = np.zeros((0, 2))
 
 
+def _near_obstacles(
+    pos: np.ndarray, obs: np.ndarray, params: PlanParams, strategy: str
+) -> tuple[_Scheduled, np.ndarray, float] | None:
+    """The ``near`` obstacle plan: (scheduled plan, origin, beta), or None.
+
+    The pyramid frame and centred slots of the robots alone (as without obstacles),
+    moved by each translation of :func:`obstacles.clear_shifts` (slots
+    ``SLOT_CLEARANCE``·radius from the obstacles, step d_e/4, the first clear ring and
+    the next); each is matched (``strategy``) and scheduled with the obstacles standing
+    (detours bend the paths that pass too close). The shortest longest path wins, then
+    the smallest total, then the candidate order (ring, direction). Above
+    CANDIDATES_MAX_N robots only the first clear translation is tried. None when no
+    candidate can be scheduled safely.
+    """
+    n = pos.shape[0]
+    frame = pyramid_frame(pos, params.orientation)
+    starts_p = frame.to_pyramid(pos)
+    slots = placed_slots(n, params.d_e, params.phi_e, starts_p, "centroid")
+    obs_p = frame.to_pyramid(obs)
+    shifts = clear_shifts(slots, obs_p, params.d_e / 4.0, SLOT_CLEARANCE * params.radius)
+    if n > CANDIDATES_MAX_N:
+        shifts = shifts[:1]
+    empty: list[tuple[np.ndarray, ...]] = [() for _ in range(n)]
+    best: tuple[float, float, int, _Scheduled, np.ndarray] | None = None
+    for k, shift in enumerate(shifts):
+        moved = slots + shift
+        perm = assign(starts_p, moved, strategy, params.d_e, params.phi_e)
+        try:
+            sc = _packed(pos, frame.to_common(moved[perm]), perm, empty, obs, params, strategy)
+        except ValueError:
+            continue
+        lengths = [_length(pos[r], sc.vias[r], sc.targets[r]) for r in range(n)]
+        key = (max(lengths), sc.total, k)
+        if best is None or key < best[:3]:
+            best = (*key, sc, shift)
+    if best is None:
+        return None
+    shift_c = frame.to_common(best[4]) - frame.to_common(np.zeros(2))
+    return best[3], frame.origin + shift_c, frame.beta
+
+
 def _f(x: float) -> bytes:
     return struct.pack("<d", float(x))
 
@@ -506,9 +560,17 @@ def plan_from_positions(
     if obs.shape[0]:
         if params.strategy == "banded":
             raise ValueError("strategy 'banded' takes no obstacles (see fallback)")
-        op = plan_around_obstacles(pos, obs, params, strategy)
-        frame_origin, beta = op.origin, op.beta
-        best = _packed(pos, op.targets, op.order, op.vias, obs, params, strategy)
+        near = None
+        if params.obstacle_method != "paper":
+            near = _near_obstacles(pos, obs, params, params.resolved_strategy(n))
+            if near is None and params.obstacle_method == "near":
+                raise ValueError("obstacles: no safe schedule for the near placement")
+        if near is not None:
+            best, frame_origin, beta = near
+        else:
+            op = plan_around_obstacles(pos, obs, params, strategy)
+            frame_origin, beta = op.origin, op.beta
+            best = _packed(pos, op.targets, op.order, op.vias, obs, params, strategy)
     else:
         frame = pyramid_frame(pos, params.orientation)
         starts_p = frame.to_pyramid(pos)

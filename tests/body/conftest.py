@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import contextlib
 import math
-import socket
 import threading
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -27,14 +26,9 @@ from agent.seams import Body
 from sim import scenarios
 from sim.scenarios import RobotSpec, Scenario
 from sim.world import World
+from tools.harness.procs import free_port
 
 KINDS = ("world", "zenoh", "naoqi")
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 @dataclass

@@ -16,15 +16,19 @@ from agent.control.corridor import (
     MAX_VIA_TURN,
     RIGHT,
     VIA,
+    VIEW_NEAR,
     WAIT,
     CorridorParams,
+    back_off,
     blocking,
     check_step,
     closest_approach,
+    confirmed,
     patience,
     plan_rank,
 )
 from agent.formation.plan import PlanParams
+from agent.nao import CAMERA_HFOV
 
 NORTH = math.pi / 2
 CP = CorridorParams()  # radius 0.2, margin 0.05: clearance 0.45 m
@@ -189,3 +193,59 @@ def test_invariants(
         assert np.all(blocking(walk, heading, v.blockers, c))
     if waited < patience(rank, CP):
         assert v.action != VIA  # the rank's patience comes first
+
+
+# ------------------------------------------------------------------ back_off
+
+
+HFOV = CAMERA_HFOV
+
+
+def test_back_off_known_answers() -> None:
+    ahead = np.array([[0.0, 0.52]])  # remembered 0.52 m straight ahead, facing north
+    # not in the image: step back to VIEW_NEAR + margin = 0.65 m, i.e. 0.13 m
+    assert back_off(ahead, np.zeros((0, 2)), NORTH, HFOV, CP) == pytest.approx(0.13)
+    # much nearer: at most back_max
+    assert back_off(np.array([[0.0, 0.35]]), np.zeros((0, 2)), NORTH, HFOV, CP) == 0.15
+    # the image shows it (within 2·margin): it is there, no need to look again
+    assert back_off(ahead, np.array([[0.05, 0.55]]), NORTH, HFOV, CP) == 0.0
+    # far enough to be seen, or behind the robot (stepping back comes nearer): 0
+    assert back_off(np.array([[0.0, VIEW_NEAR + 0.1]]), np.zeros((0, 2)), NORTH, HFOV, CP) == 0
+    assert back_off(np.array([[0.3, -0.1]]), np.zeros((0, 2)), NORTH, HFOV, CP) == 0.0
+    # beside and a little ahead, 0.57 m at 36° off the heading: back until 0.65 m away
+    b = 0.57 * np.array([[math.cos(NORTH - math.radians(36)), math.sin(NORTH - math.radians(36))]])
+    d = back_off(b, np.zeros((0, 2)), NORTH, HFOV, CP)
+    assert math.hypot(b[0, 0], b[0, 1] + d) == pytest.approx(VIEW_NEAR + CP.margin)
+    assert 0.09 < d < 0.1
+
+
+def test_confirmed_known_answers() -> None:
+    b = np.array([0.0, 0.52])
+    assert confirmed(b, np.array([[0.05, 0.55]]), CP)  # 5.8 cm < 2·margin
+    assert not confirmed(b, np.array([[0.2, 0.52]]), CP)
+    assert not confirmed(b, np.zeros((0, 2)), CP)
+
+
+def test_back_off_errors() -> None:
+    with pytest.raises(ValueError, match="one blocker"):
+        back_off(np.zeros((2, 2)), np.zeros((0, 2)), NORTH, HFOV, CP)
+    with pytest.raises(ValueError, match="heading"):
+        back_off(np.zeros((1, 2)), np.zeros((0, 2)), math.nan, HFOV, CP)
+    with pytest.raises(ValueError, match="finite"):
+        back_off(np.array([[math.inf, 0.0]]), np.zeros((0, 2)), NORTH, HFOV, CP)
+    with pytest.raises(ValueError, match="back_max"):
+        CorridorParams(back_max=-0.1)
+
+
+@settings(max_examples=200, deadline=None)
+@given(x=st.floats(-1.0, 1.0), y=st.floats(-1.0, 1.0), h=st.floats(-math.pi, math.pi))
+def test_back_off_never_exceeds_back_max_and_ends_at_the_view_range(
+    x: float, y: float, h: float
+) -> None:
+    b = back_off(np.array([[x, y]]), np.zeros((0, 2)), h, HFOV, CP)
+    assert 0.0 <= b <= CP.back_max + 1e-12
+    if b > 0.0:
+        assert math.hypot(x, y) < VIEW_NEAR
+        assert x * math.cos(h) + y * math.sin(h) >= 0.0  # never backs towards it
+        after = math.hypot(x + b * math.cos(h), y + b * math.sin(h))
+        assert b == CP.back_max or after == pytest.approx(VIEW_NEAR + CP.margin)

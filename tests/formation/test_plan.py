@@ -7,7 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from agent.formation.plan import PlanParams, plan_from_positions, plan_from_records
+from agent.formation import plan as plan_module
+from agent.formation.obstacles import SLOT_CLEARANCE, clear_shifts
+from agent.formation.plan import Plan, PlanParams, plan_from_positions, plan_from_records
 from agent.formation.pyramid import parent_of
 from agent.formation.records import NeighborRecord
 from agent.formation.safety import check_safety
@@ -104,17 +106,103 @@ def test_collinear_and_clustered_fleets() -> None:
 
 
 def test_obstacles_take_part_and_the_pyramid_moves_out() -> None:
+    # the paper's procedure (5.1.2): obstacles as robots, then the sideways shift
     rng = np.random.default_rng(2)
     pts = random_fleet(rng, 11, spacing=0.8)
     robots, obstacles = pts[:8], pts[8:]
-    plan = plan_from_positions(list(range(8)), robots, PlanParams(d_e=0.8), obstacles=obstacles)
-    paths = plan.paths() + [np.vstack([o, o]) for o in obstacles]
-    waves = list(plan.wave_of()) + [10**6] * len(obstacles)  # obstacles never move
-    assert check_safety(paths, waves, 0.2) == []
+    params = PlanParams(d_e=0.8, obstacle_method="paper")
+    plan = plan_from_positions(list(range(8)), robots, params, obstacles=obstacles)
+    assert _safe_with(plan, obstacles)
     t = plan.targets()
     d = np.hypot(*(t[:, None, :] - obstacles[None, :, :]).T)
     assert d.min() >= 0.8 - 1e-9  # final pyramid clear of obstacles (4·radius)
     assert sorted(r.order for r in plan.robots) == list(range(8))
+
+
+def _safe_with(plan: Plan, obstacles: np.ndarray) -> bool:
+    paths = plan.paths() + [np.vstack([o, o]) for o in obstacles]
+    waves = list(plan.wave_of()) + [10**6] * len(obstacles)  # obstacles never move
+    return check_safety(paths, waves, 0.2) == []
+
+
+def test_near_keeps_the_pattern_when_the_obstacle_is_only_in_the_way() -> None:
+    # three robots, one 4 m south of the two others; an obstacle on the middle of the
+    # longest straight path, > 0.6 m (SLOT_CLEARANCE) from every slot: the pattern of the
+    # obstacle-free plan is already clear (ring 0); ring 1 (d_e/4 = 0.25 m) shortens the
+    # bent path, so the pattern moves by one ring at most, the paper's shift much more
+    pos = np.array([[0.0, -4.0], [-0.5, 0.0], [0.5, 0.0]])
+    free = plan_from_positions([1, 2, 3], pos, PlanParams(d_e=1.0))
+    longest = max(free.robots, key=lambda r: r.length())
+    assert longest.robot_id == 1
+    obstacle = ((longest.start + longest.target) / 2)[None, :]
+    assert np.hypot(*(free.targets() - obstacle).T).min() > 0.7
+    assert np.hypot(*(pos - obstacle).T).min() > 0.5
+    plan = plan_from_positions([1, 2, 3], pos, PlanParams(d_e=1.0), obstacles=obstacle)
+    shift = plan.targets() - free.targets()
+    np.testing.assert_allclose(shift, np.repeat(shift[:1], 3, axis=0), atol=1e-12)
+    assert np.hypot(*shift[0]) <= 0.25 + 1e-9
+    np.testing.assert_allclose(plan.origin - free.origin, shift[0], atol=1e-12)
+    assert _safe_with(plan, obstacle)
+    assert not plan.robot(2).via and not plan.robot(3).via
+    paper = plan_from_positions(
+        [1, 2, 3], pos, PlanParams(d_e=1.0, obstacle_method="paper"), obstacles=obstacle
+    )
+    assert sum(r.length() for r in plan.robots) < sum(r.length() for r in paper.robots)
+    assert np.hypot(*(paper.origin - free.origin)) > 0.5
+
+
+def test_near_moves_the_pattern_by_the_smallest_clear_ring() -> None:
+    rng = np.random.default_rng(2)
+    pts = random_fleet(rng, 11, spacing=0.8)
+    robots, obstacles = pts[:8], pts[8:]
+    params = PlanParams(d_e=0.8, obstacle_method="near")
+    free = plan_from_positions(list(range(8)), robots, PlanParams(d_e=0.8))
+    plan = plan_from_positions(list(range(8)), robots, params, obstacles=obstacles)
+    assert _safe_with(plan, obstacles)
+    t = plan.targets()
+    d = np.hypot(*(t[:, None, :] - obstacles[None, :, :]).T)
+    assert d.min() >= SLOT_CLEARANCE * 0.2 - 1e-9
+    shift = plan.origin - free.origin  # a ring of step d_e/4
+    assert np.hypot(*shift) / 0.2 == pytest.approx(round(np.hypot(*shift) / 0.2), abs=1e-9)
+    assert plan.axis == free.axis  # the pattern of the robots alone, only translated
+    assert sorted(r.order for r in plan.robots) == list(range(8))
+    # bit-identical whatever the order of the robots
+    perm = rng.permutation(8)
+    again = plan_from_positions(perm.tolist(), robots[perm], params, obstacles=obstacles)
+    assert again.digest == plan.digest
+
+
+def test_default_falls_back_to_the_paper_procedure(monkeypatch: pytest.MonkeyPatch) -> None:
+    rng = np.random.default_rng(2)
+    pts = random_fleet(rng, 11, spacing=0.8)
+    robots, obstacles = pts[:8], pts[8:]
+    near = plan_from_positions(list(range(8)), robots, obstacles=obstacles)
+    monkeypatch.setattr(plan_module, "_near_obstacles", lambda *a: None)
+    fallback = plan_from_positions(list(range(8)), robots, obstacles=obstacles)
+    paper = plan_from_positions(
+        list(range(8)), robots, PlanParams(obstacle_method="paper"), obstacles=obstacles
+    )
+    assert fallback.digest == paper.digest != near.digest
+    with pytest.raises(ValueError, match="near placement"):
+        plan_from_positions(
+            list(range(8)), robots, PlanParams(obstacle_method="near"), obstacles=obstacles
+        )
+
+
+def test_clear_shifts_known_answer() -> None:
+    # one slot at 0, an obstacle 0.1 m east, step 0.2, clearance 0.6: ring 3 (0.6 m) is
+    # clear where cos(angle) <= 1/12 (directions 90°..270°: 9 of 16), ring 4 everywhere
+    shifts = clear_shifts(np.zeros((1, 2)), np.array([[0.1, 0.0]]), 0.2, 0.6)
+    assert len(shifts) == 9 + 16
+    np.testing.assert_allclose(shifts[0], [0.0, 0.6], atol=1e-12)
+    np.testing.assert_allclose(shifts[8], [0.0, -0.6], atol=1e-12)
+    np.testing.assert_allclose(shifts[9], [0.8, 0.0], atol=1e-12)
+    far = clear_shifts(np.zeros((1, 2)), np.array([[5.0, 0.0]]), 0.2, 0.6)
+    assert len(far) == 1 + 16 and not far[0].any()  # ring 0 (no move), then ring 1
+    none = clear_shifts(np.zeros((1, 2)), np.zeros((0, 2)), 0.2, 0.6)
+    assert len(none) == 1 and not none[0].any()
+    with pytest.raises(ValueError, match="no obstacle-free place"):
+        clear_shifts(np.zeros((1, 2)), np.zeros((1, 2)), 0.01, 100.0)
 
 
 def test_plan_errors() -> None:
@@ -143,6 +231,7 @@ def test_plan_errors() -> None:
         ({"frame_method": "x"}, "frame_method"),
         ({"epsilon": -1.0}, "epsilon"),
         ({"placement": "x"}, "placement"),
+        ({"obstacle_method": "x"}, "obstacle_method"),
     ):
         with pytest.raises(ValueError, match=msg):
             PlanParams(**kw)  # type: ignore[arg-type]

@@ -5,9 +5,7 @@ from __future__ import annotations
 import json
 import math
 import queue
-import socket
 import subprocess
-import sys
 import threading
 import time
 from collections.abc import Iterator
@@ -41,9 +39,9 @@ from agent.protocol import (
 )
 from sim import scenarios
 from tests.fakes import FakeZBytes
+from tools.harness.procs import free_port, start_world, stop, wait_ready
 
 pytestmark = pytest.mark.system
-ROOT = Path(__file__).resolve().parents[2]
 NORTH = math.pi / 2
 
 
@@ -51,12 +49,6 @@ def png(data: bytes) -> np.ndarray:
     img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
     assert img is not None, "reply data is not a PNG"
     return img
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 class Client:
@@ -107,7 +99,7 @@ class Client:
 @pytest.fixture(scope="module", params=[0, 2], ids=["render-in-process", "render-workers-2"])
 def world(
     request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
-) -> Iterator[tuple[subprocess.Popen[str], str]]:
+) -> Iterator[tuple[subprocess.Popen[bytes], str]]:
     # The whole module runs twice: camera images rendered by the world process itself,
     # and by a pool of two render workers (python -m sim --render-workers 2).
     # Robots 1 and 2 face each other 0.7 m apart (contact test); robot 3 stands apart.
@@ -123,59 +115,18 @@ def world(
     path = tmp_path_factory.mktemp("sim") / "scenario.json"
     scenarios.dump(sc, path)
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "sim",
-            "--scenario",
-            str(path),
-            "--listen",
-            endpoint,
-            "--no-multicast-scouting",
-            "--insecure",
-            "--speed",
-            "4",
-            "--render-workers",
-            str(request.param),
-        ],
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.DEVNULL,
-        text=True,
-    )
-    lines: queue.Queue[str] = queue.Queue()
-
-    def pump() -> None:
-        assert proc.stdout is not None
-        for line in proc.stdout:
-            lines.put(line)
-
-    threading.Thread(target=pump, daemon=True).start()
-    deadline = time.monotonic() + 60.0
-    ready = ""
-    while time.monotonic() < deadline and proc.poll() is None:
-        try:
-            line = lines.get(timeout=0.5)
-        except queue.Empty:
-            continue
-        if line.startswith("sim ready"):
-            ready = line
-            break
-    assert "robots=1,2,3" in ready, f"world did not start: {ready!r}"
+    extra = ["--scenario", str(path), "--speed", "4", "--render-workers", str(request.param)]
+    world = start_world(3, sc.seed, endpoint, path.parent, extra)  # the file sets the robots
     try:
-        yield proc, endpoint
+        ready = wait_ready(world, 60.0)
+        assert "robots=1,2,3" in ready, f"world did not start: {ready!r}"
+        yield world.popen, endpoint
     finally:
-        proc.terminate()
-        try:
-            proc.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+        stop(world, 20.0)
 
 
 @pytest.fixture(scope="module")
-def client(world: tuple[subprocess.Popen[str], str]) -> Iterator[Client]:
+def client(world: tuple[subprocess.Popen[bytes], str]) -> Iterator[Client]:
     c = Client(world[1])
     # Poll until the link is up: a register query answered.
     deadline = time.monotonic() + 20.0
@@ -359,7 +310,7 @@ def test_two_robots_walking_into_each_other_get_contact(client: Client) -> None:
 
 
 def test_snapshot_joins_a_running_world(
-    world: tuple[subprocess.Popen[str], str], client: Client, tmp_path: Path
+    world: tuple[subprocess.Popen[bytes], str], client: Client, tmp_path: Path
 ) -> None:
     from tools import snapshot
 
@@ -374,7 +325,7 @@ def test_snapshot_joins_a_running_world(
 
 
 def test_client_cli(
-    world: tuple[subprocess.Popen[str], str],
+    world: tuple[subprocess.Popen[bytes], str],
     client: Client,
     tmp_path: Path,
     capsys: pytest.CaptureFixture[str],

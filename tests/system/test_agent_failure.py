@@ -19,7 +19,7 @@ import pytest
 
 from agent.protocol import StatusMsg
 from tests.system.world import Watch, watched_world
-from tools.demo import start_agent
+from tools.harness.procs import start_agent
 
 pytestmark = [pytest.mark.system, pytest.mark.slow]
 

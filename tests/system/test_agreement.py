@@ -9,7 +9,6 @@ re-sent; a member that dies before agreement stops everyone safely.
 from __future__ import annotations
 
 import functools
-import socket
 import threading
 from collections.abc import Callable, Iterator
 from typing import Any
@@ -23,6 +22,7 @@ from agent.exchange import Decision
 from agent.protocol import Message, NeighborRecordMsg, StatusMsg
 from agent.robot import ZenohBody
 from agent.runner import Runner
+from tools.harness.procs import free_port
 
 
 @functools.cache
@@ -32,12 +32,6 @@ def _perception() -> PerceptionAdapter:
 
 
 pytestmark = pytest.mark.system
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def record(i: int) -> NeighborRecordMsg:
@@ -113,10 +107,12 @@ def test_three_peers_agree_on_one_digest(endpoint: str) -> None:
     assert len({d.digest for d in ds}) == 1
     assert ds[0].members == (1, 2, 3)
     assert [r.sender for r in ds[0].records] == [1, 2, 3]
-    # one exchange, a few re-publications: well under 2 kB of records and digests each
+    # one exchange and a few re-publications: the number of backoff re-sends grows with
+    # the wall time the agreement takes (a loaded machine), so this is a sanity bound
+    # against a run-away re-sender; the measured bytes are tools.bench agent's (~310 B)
     for p in peers:
         st = p.bus.stats
-        assert st.published_bytes["record"] + st.published_bytes["digest"] < 2000
+        assert st.published_bytes["record"] + st.published_bytes["digest"] < 8000
 
 
 def test_late_joiner_is_waited_for(endpoint: str) -> None:

@@ -24,7 +24,7 @@ import pytest
 
 from sim import scenarios
 from tests.system.world import Watch, watched_world
-from tools.demo import start_agent
+from tools.harness.procs import start_agent
 
 pytestmark = [pytest.mark.system, pytest.mark.slow]
 

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import json
 import queue
-import socket
 import subprocess
 import sys
 import time
@@ -32,15 +31,10 @@ from agent.bus import Bus, BusConfig, BusError, NoRoute
 from sim import scenarios
 from sim.server import WorldServer
 from sim.world import World
+from tools.harness.procs import free_port
 
 pytestmark = pytest.mark.system
 ROOT = Path(__file__).resolve().parents[2]
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 @pytest.fixture(scope="module")

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -12,7 +11,7 @@ from typing import Any
 
 from agent.bus import Bus, BusConfig
 from agent.protocol import KEY_STATUS_ALL, KEY_WORLD_TRUTH_ALL, StatusMsg, TruthPosesMsg
-from tools.demo import Proc, free_port, robot_ids, start_world, stop
+from tools.harness.procs import Proc, free_port, robot_ids, start_world, stop, wait_ready
 
 
 @contextmanager
@@ -30,10 +29,7 @@ def watched_world(
     world = start_world(robots, seed, ep, tmp_path, [])
     procs = [world]
     try:
-        deadline = time.monotonic() + 120
-        while not any("ready" in ln for ln in world.lines):
-            assert world.popen.poll() is None and time.monotonic() < deadline, "world not ready"
-            bus.drain(0.1)
+        wait_ready(world, 120, lambda: bus.drain(0.1))
         yield ep, bus, robot_ids(world.lines, robots), procs
     finally:
         for p in reversed(procs):

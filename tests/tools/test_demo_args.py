@@ -8,7 +8,8 @@ from pathlib import Path
 import pytest
 
 from sim import scenarios
-from tools.demo import march_room, parse_args
+from tools.demo import parse_args
+from tools.harness.run import march_room
 
 
 def test_fleet_parameters_default_and_pass_through() -> None:
@@ -16,6 +17,24 @@ def test_fleet_parameters_default_and_pass_through() -> None:
     assert (a.orientation, a.strategy, a.scenario, a.isolated) == ("pca", "default", None, False)
     a = parse_args(["--orientation", "cp", "--strategy", "capt"])
     assert (a.orientation, a.strategy) == ("cp", "capt")
+
+
+def test_agent_arg_goes_to_that_agent_only(tmp_path: Path) -> None:
+    from tools.harness.procs import start_agent
+
+    a = parse_args(["--agent-arg", "3:--orientation=cp", "--agent-arg", "3:--d-e=0.9"])
+    assert a.agent_arg == [(3, "--orientation=cp"), (3, "--d-e=0.9")]
+    cmds: dict[int, list[str]] = {}
+    for rid in (2, 3):
+        proc = start_agent(rid, 3, "tcp/127.0.0.1:9", tmp_path, a, ["--insecure", "--help"])
+        proc.popen.wait(60)
+        proc.log.close()
+        cmds[rid] = [str(c) for c in proc.popen.args]  # type: ignore[union-attr]
+    assert cmds[3][-2:] == ["--orientation=cp", "--d-e=0.9"]
+    assert not any(c.startswith("--orientation=") for c in cmds[2])
+    for bad in ("x:--a", "3--a", "3:a"):
+        with pytest.raises(SystemExit):
+            parse_args(["--agent-arg", bad])
 
 
 def test_scenario_file_gives_the_robots_and_the_seed(tmp_path: Path) -> None:

@@ -1,4 +1,4 @@
-"""tools/demo.py evaluation helpers: known answers worked by hand."""
+"""tools/harness evaluation helpers: known answers worked by hand."""
 
 from __future__ import annotations
 
@@ -7,15 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from tools.demo import (
-    AgentView,
-    Observer,
-    evaluate,
-    judge_march,
-    min_separation,
-    robot_ids,
-    summarise,
-)
+from tools.harness.judge import evaluate, judge_march, min_separation, moved, plot, summarise
+from tools.harness.observe import AgentView, Observer
+from tools.harness.procs import robot_ids
 
 
 def test_evaluate_perfect_pyramid_facing_north() -> None:
@@ -68,6 +62,44 @@ def test_summarise_failure_without_truth(tmp_path: Path) -> None:
     assert r["success"] is False
     assert r["errors"] == {"1": "no agreement"}
     assert (tmp_path / "result.json").is_file()
+
+
+def test_moved_is_the_longest_start_to_final_displacement() -> None:
+    r = {"starts": {"1": [0, 0, 0], "2": [1, 1, 0]}, "finals": {"1": [0.3, 0.4, 1], "2": [1, 1, 2]}}
+    assert moved(r) == pytest.approx(0.5)
+    assert moved({}) == 0.0
+
+
+def test_a_safe_stop_before_any_plan_is_drawn_with_its_reason(tmp_path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib import pyplot as plt
+
+    titles: list[str] = []
+    orig = plt.Axes.set_title
+
+    def spy(ax: plt.Axes, text: str, *a: object, **k: object) -> object:
+        titles.append(text)
+        return orig(ax, text, *a, **k)  # type: ignore[arg-type]
+
+    obs = Observer(0.0)
+    obs.truth = [(0.0, {1: (0.0, 0.0, 1.57), 2: (1.0, 0.0, 1.57)})]
+    result = {
+        "seed": 1, "success": False, "contacts": 0, "plan_digests": {"1": "", "2": ""},
+        "errors": {"2": "AgentFailure: robot(s) [2] plan with different parameters"},
+        "starts": {"1": [0, 0, 0], "2": [1, 0, 0]}, "finals": {"1": [0, 0, 0], "2": [1, 0, 0]},
+        "pairs": [{"child": 2, "parent": 1}],
+    }  # fmt: skip
+    plt.Axes.set_title = spy  # type: ignore[method-assign]
+    try:
+        plot(obs, result, tmp_path / "f.png")
+    finally:
+        plt.Axes.set_title = orig  # type: ignore[method-assign]
+    assert (tmp_path / "f.png").is_file()
+    assert "stopped safely before any plan" in titles[-1]
+    assert "robot(s) [2] plan with different parameters" in titles[-1]
+    assert "moved at most 0.00 m" in titles[-1]
 
 
 class _Plan:

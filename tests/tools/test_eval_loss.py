@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import math
-import socket
 import subprocess
 import sys
 import threading
@@ -15,6 +14,8 @@ import pytest
 from agent import protocol as P
 from tools import eval_loss
 from tools.eval_loss import RunResult, _fmt, _reason, summarise
+from tools.harness.procs import free_port, start_router
+from tools.harness.procs import stop as stop_proc
 
 
 def _ok_result() -> dict[str, object]:
@@ -136,21 +137,11 @@ def test_observer_stops_when_every_agent_is_gone(tmp_path: Path) -> None:
     fleet = tmp_path / "fleet"
     create_fleet(fleet, [5])
     out = tmp_path / "out"
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        ep = f"tls/127.0.0.1:{sock.getsockname()[1]}"
+    ep = f"tls/127.0.0.1:{free_port()}"
     repo = Path(__file__).resolve().parents[2]
     procs = []
+    router = start_router(ep, tmp_path, ["--credentials", str(fleet), "--no-multicast-scouting"])
     try:
-        router = subprocess.Popen(
-            [
-                sys.executable, "-m", "tools.router", "--credentials", str(fleet),
-                "--listen", ep, "--no-multicast-scouting",
-            ],
-            stdout=subprocess.PIPE, text=True, cwd=str(repo),
-        )  # fmt: skip
-        procs.append(router)
-        assert router.stdout is not None and "router ready" in router.stdout.readline()
         mon = subprocess.Popen(
             [
                 sys.executable, "-m", "tools.eval_loss", "--monitor", "--until-done", "1",
@@ -195,6 +186,7 @@ def test_observer_stops_when_every_agent_is_gone(tmp_path: Path) -> None:
             if p.poll() is None:
                 p.kill()
                 p.wait(timeout=10)
+        stop_proc(router)
 
 
 def test_outcome_complete_safe_abort_unsafe() -> None:

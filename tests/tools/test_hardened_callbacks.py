@@ -23,7 +23,7 @@ from tests.fakes import FakeZBytes, zb
 
 
 def test_demo_observer_counts_what_it_cannot_take(capsys: pytest.CaptureFixture[str]) -> None:
-    from tools.demo import Observer
+    from tools.harness.observe import Observer
 
     class BrokenRecorder:
         def write(self, *a: Any) -> None:
@@ -40,7 +40,7 @@ def test_demo_observer_counts_what_it_cannot_take(capsys: pytest.CaptureFixture[
 
 
 def test_replay_counts_undecodable_messages(tmp_path: Path) -> None:
-    from tools.demo import Recorder
+    from tools.harness.observe import Recorder
     from tools.replay import load
 
     rec = Recorder(tmp_path / "r.mcap")

@@ -10,7 +10,6 @@ from __future__ import annotations
 import json
 import queue
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -23,14 +22,9 @@ import zenoh
 
 from agent.protocol import NetworkSpec
 from tools import router, wait_for
+from tools.harness.procs import free_port
 
 REPO = Path(__file__).resolve().parents[2]
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def _session(endpoint: str) -> zenoh.Session:
@@ -42,7 +36,7 @@ def _session(endpoint: str) -> zenoh.Session:
 
 @pytest.fixture
 def running_router() -> Iterator[tuple[str, str, subprocess.Popen[str]]]:
-    ep = f"tcp/127.0.0.1:{_free_port()}"
+    ep = f"tcp/127.0.0.1:{free_port()}"
     proc = subprocess.Popen(
         [
             sys.executable,
@@ -176,7 +170,7 @@ def test_wait_for_secure_world_clock(tmp_path: Path) -> None:
 
     fleet = tmp_path / "fleet"
     create_fleet(fleet, [1, 2])
-    ep = f"tls/127.0.0.1:{_free_port()}"
+    ep = f"tls/127.0.0.1:{free_port()}"
     proc = subprocess.Popen(
         [
             sys.executable, "-m", "tools.router", "--credentials", str(fleet), "--listen", ep,
@@ -226,7 +220,7 @@ def test_wait_for_secure_world_clock(tmp_path: Path) -> None:
 def test_wait_for_retries_an_unreachable_router(capsys: pytest.CaptureFixture[str]) -> None:
     """No router (yet, or a lossy link lost the handshake): not served within the
     timeout (exit 1, the last connection error on stderr), not a usage error (2)."""
-    ep = f"tcp/127.0.0.1:{_free_port()}"
+    ep = f"tcp/127.0.0.1:{free_port()}"
     argv = ["world/clock", "--timeout", "3", "--insecure", "--mode", "client", "--connect", ep]
     t0 = time.monotonic()
     assert wait_for.main([*argv, "--no-multicast-scouting"]) == 1

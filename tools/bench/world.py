@@ -25,8 +25,6 @@ import argparse
 import json
 import math
 import queue
-import socket
-import subprocess
 import sys
 import threading
 import time
@@ -36,59 +34,22 @@ from typing import Any
 import cv2
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[2]
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+from tools.harness.procs import free_port, start_world, stop, wait_ready
 
 
 class WorldProcess:
-    """``python -m sim`` on a loopback port, waited for until it prints its ready line."""
+    """``python -m sim`` on a loopback port (``tools.harness``), waited for until it prints
+    its ready line; its logs go nowhere."""
 
     def __init__(self, robots: int, seed: int, render_workers: int = 0) -> None:
-        self.endpoint = f"tcp/127.0.0.1:{_free_port()}"
-        self.proc = subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "sim",
-                "--robots",
-                str(robots),
-                "--seed",
-                str(seed),
-                "--listen",
-                self.endpoint,
-                "--no-multicast-scouting",
-                "--insecure",
-                "--render-workers",
-                str(render_workers),
-            ],
-            cwd=ROOT,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.DEVNULL,
-            text=True,
-        )
-        lines: queue.Queue[str] = queue.Queue()
-
-        def pump() -> None:
-            assert self.proc.stdout is not None
-            for line in self.proc.stdout:
-                lines.put(line)
-
-        threading.Thread(target=pump, daemon=True).start()
-        deadline = time.monotonic() + 60.0
-        while time.monotonic() < deadline:
-            try:
-                if lines.get(timeout=0.5).startswith("sim ready"):
-                    return
-            except queue.Empty:
-                if self.proc.poll() is not None:
-                    raise RuntimeError("the world exited before it was ready") from None
-        self.stop()
-        raise RuntimeError("the world did not get ready within 60 s")
+        self.endpoint = f"tcp/127.0.0.1:{free_port()}"
+        extra = ["--render-workers", str(render_workers)]
+        self.world = start_world(robots, seed, self.endpoint, None, extra)
+        try:
+            wait_ready(self.world, 60.0)
+        except RuntimeError:
+            self.stop()
+            raise
 
     def session(self) -> Any:
         import zenoh
@@ -99,11 +60,7 @@ class WorldProcess:
         return zenoh.open(cfg)
 
     def stop(self) -> None:
-        self.proc.terminate()
-        try:
-            self.proc.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
+        stop(self.world, 20.0)
 
 
 def camera_latency(requests: int, seed: int) -> list[float]:

@@ -1,0 +1,157 @@
+"""A step's drift the compass reports implausibly large is re-measured
+(:meth:`agent.runner.Runner._confirm_drift`, issue #10).
+
+At ``--noise-scale 2`` a NAO that veers strongly drifts 20–30° in one 20 cm step; the
+compass measured it correctly, the runner took it for a mismatch and believed 0°, and
+the robot ended its walk with its heading that far off, so its final offset from its
+parent was rotated by as much (pairs off by 70–80 % in r_φ). Real renders and the real
+compass on an in-process world; the drift is the world's, set per robot.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+
+from agent.adapters import FormationAdapter, PerceptionAdapter
+from agent.body_world import WorldBody
+from agent.bus import Bus
+from agent.config import AgentConfig
+from agent.control import wrap_pi
+from agent.perception.compass import CompassResult
+from agent.runner import NORTH, Runner, _plausible
+from sim.locomotion import NoiseModel
+from sim.scenarios import RobotSpec, Scenario
+from sim.world import World
+
+#: one robot at the origin facing north, in the textured room
+ALONE = Scenario(robots=(RobotSpec(1, 0.0, -0.6, math.pi / 2),), seed=7, room=3.0)
+
+
+@pytest.fixture()
+def alone() -> Iterator[World]:
+    with World(ALONE) as w:
+        w.locomotion.noise = NoiseModel.none()  # only the drift set by each test
+        w.locomotion.drift[1] = 0.0
+        yield w
+
+
+def _runner(world: World, bus: Bus, perception: PerceptionAdapter) -> Runner:
+    return Runner(bus, WorldBody(world, 1), AgentConfig(robot_id=1), perception, FormationAdapter())
+
+
+def _true_heading_change(world: World, h0: float) -> float:
+    return wrap_pi(world.pose(1)[2] - h0)
+
+
+@pytest.mark.parametrize(
+    ("measured", "commanded", "walking", "expected"),
+    [
+        (math.radians(19.9), 0.0, True, True),
+        (math.radians(-20.1), 0.0, True, False),
+        (math.radians(9.9), 0.0, False, True),
+        (math.radians(10.1), 0.0, False, False),
+        (math.radians(40.0 + 23.9), math.radians(40.0), False, True),  # 60 % of 40° = 24°
+        (math.radians(40.0 + 24.1), math.radians(40.0), False, False),
+    ],
+)
+def test_plausibility_of_a_compass_rotation(
+    measured: float, commanded: float, walking: bool, expected: bool
+) -> None:
+    assert _plausible(measured, commanded, walking) is expected
+
+
+def test_a_real_large_drift_is_confirmed_and_believed(
+    alone: World, bus: Bus, perception: PerceptionAdapter
+) -> None:
+    # 2.0 rad/m: about -23° in every 20 cm step, beyond the 20° plausibility limit
+    alone.locomotion.drift[1] = -2.0
+    r = _runner(alone, bus, perception)
+    h0 = alone.pose(1)[2]
+    r.walk_step(0.2)
+    true = _true_heading_change(alone, h0)
+    assert r.drift_checks == 1
+    assert wrap_pi(r.heading - NORTH) == pytest.approx(true, abs=math.radians(2))
+    # after the re-measuring turn the robot faces about where it faced before the step
+    assert abs(true) < math.radians(8)
+
+
+def test_walking_to_a_goal_with_large_drifts_keeps_the_heading(
+    alone: World, bus: Bus, perception: PerceptionAdapter
+) -> None:
+    alone.locomotion.drift[1] = 2.2
+    r = _runner(alone, bus, perception)
+    x0, y0, h0 = alone.pose(1)
+    goal = np.array([0.0, 0.8])  # four steps north
+    r.walk_to(goal, lambda p: None)
+    r.rotate(wrap_pi(NORTH - r.heading))
+    x, y, _ = alone.pose(1)
+    assert r.drift_checks >= 2
+    assert abs(_true_heading_change(alone, h0)) < math.radians(4)  # faces north again
+    assert math.hypot(x - x0 - goal[0], y - y0 - goal[1]) < 0.1
+
+
+class _OneMismatch(PerceptionAdapter):
+    """The first walking measurement is a wrong match of -30°; the rest are real."""
+
+    def __init__(self, real: PerceptionAdapter) -> None:
+        self.__dict__.update(real.__dict__)
+        self.fooled = False
+
+    def measure_walk(self, before: np.ndarray, after: np.ndarray) -> CompassResult:
+        if not self.fooled:
+            self.fooled = True
+            return CompassResult(True, math.radians(-30.0), 100, 80, 0.8, "ok")
+        return super().measure_walk(before, after)
+
+
+def test_a_wrong_match_is_found_out_by_the_re_measurement(
+    alone: World, bus: Bus, perception: PerceptionAdapter
+) -> None:
+    r = Runner(
+        bus, WorldBody(alone, 1), AgentConfig(robot_id=1), _OneMismatch(perception),
+        FormationAdapter(),
+    )  # fmt: skip
+    h0 = alone.pose(1)[2]
+    r.walk_step(0.2)
+    # no drift at all: the re-measuring turn of +30° is all the robot turned, and the
+    # compass between the images before the step and after the turn says so
+    true = _true_heading_change(alone, h0)
+    assert true == pytest.approx(math.radians(30.0), abs=math.radians(2))
+    assert wrap_pi(r.heading - NORTH) == pytest.approx(true, abs=math.radians(2))
+    assert r.position == pytest.approx([0.0, 0.2], abs=0.01)
+
+
+class _Unconfirmed(PerceptionAdapter):
+    """A -30° match after the step, then ``second`` for the re-measurement."""
+
+    def __init__(self, real: PerceptionAdapter, second: CompassResult) -> None:
+        self.__dict__.update(real.__dict__)
+        self.results = [CompassResult(True, math.radians(-30.0), 100, 80, 0.8, "ok"), second]
+
+    def measure_walk(self, before: np.ndarray, after: np.ndarray) -> CompassResult:
+        return self.results.pop(0)
+
+
+@pytest.mark.parametrize(
+    "second",
+    [
+        CompassResult(False, 0.0, 3, 0, 0.0, "too few matches (3 < 15)"),  # fails
+        CompassResult(True, math.radians(80.0), 100, 80, 0.8, "ok"),  # fits neither case
+    ],
+)
+def test_an_unconfirmed_drift_counts_as_none(
+    alone: World, bus: Bus, perception: PerceptionAdapter, second: CompassResult
+) -> None:
+    r = Runner(
+        bus, WorldBody(alone, 1), AgentConfig(robot_id=1), _Unconfirmed(perception, second),
+        FormationAdapter(),
+    )  # fmt: skip
+    r.walk_step(0.2)
+    # the behaviour without the re-measurement: no drift, and the turn as commanded
+    assert r.heading == pytest.approx(NORTH + math.radians(30.0), abs=1e-9)
+    assert r.position == pytest.approx([0.0, 0.2], abs=1e-9)
+    assert r.drift_checks == 0 and r.compass_failures == 2

@@ -1,0 +1,414 @@
+"""A run judged from ground truth: per child-parent pair of the pyramid r_d = (d - d_e)/d_e
+and r_φ = (φ - φ_e)/φ_e (NAO paper 5.1.1), contacts, the march, phase times, bytes,
+identical plan digests; the result table and the formation figure (Fig. 16/24-like).
+
+Success: every agent exited 0 in ``done``, identical plan digests, zero contacts, and
+every pair within |r_d| <= 12.5 % and |r_φ| <= 30 % (and, with a march, the leader's
+displacement within 10 % of the route; with rogues, none of their attacks worked).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import textwrap
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agent.protocol import PHASES
+from tools.harness.observe import AgentView, Observer
+from tools.harness.procs import rogue_reports
+
+R_D_MAX = 0.125
+R_PHI_MAX = 0.30
+#: The phases of DESIGN.md §1 in order (the wire's list, less the terminal "failed").
+PHASE_ORDER = tuple(p for p in PHASES if p != "failed")
+
+
+# ===================================================================== evaluation
+
+
+def plan_from_agreed(
+    obs: Observer, d_e: float, phi_e: float, orientation: str = "pca", strategy: str = "default"
+) -> Any:
+    """The plan recomputed by the evaluator from the records the agents exchanged, with
+    the fleet's planning parameters."""
+    from agent.adapters import FormationAdapter
+    from agent.formation.plan import PlanParams
+
+    fa = FormationAdapter()
+    recs = tuple(obs.records[i] for i in sorted(obs.records))
+    params = PlanParams(d_e=d_e, phi_e=phi_e, orientation=orientation, strategy=strategy)
+    return fa, fa.plan(recs, params)
+
+
+def pyramid_pairs(plan: Any, ids: list[int]) -> list[tuple[int, int]]:
+    """(child, parent) ids of the planned pyramid (AUV eq. 6 via ``RobotPlan.parent``)."""
+    return sorted((i, int(plan.robot(i).parent)) for i in ids if int(plan.robot(i).parent) >= 0)
+
+
+def evaluate(
+    final: dict[int, tuple[float, float, float]],
+    pairs: list[tuple[int, int]],
+    axis: float,
+    d_e: float,
+    phi_e: float,
+) -> list[dict[str, float]]:
+    """Per pair: distance, angle off the backward axis, r_d, r_φ (NAO paper 5.1.1)."""
+    back = np.array([-math.cos(axis), -math.sin(axis)])
+    rows = []
+    for child, parent in pairs:
+        v = np.array(final[child][:2]) - np.array(final[parent][:2])
+        d = float(np.hypot(*v))
+        cosang = float(np.clip(np.dot(v, back) / max(d, 1e-12), -1.0, 1.0))
+        phi = math.acos(cosang)
+        rows.append(
+            {
+                "child": child,
+                "parent": parent,
+                "distance": d,
+                "angle_deg": math.degrees(phi),
+                "r_d": (d - d_e) / d_e,
+                "r_phi": (phi - phi_e) / phi_e,
+            }
+        )
+    return rows
+
+
+MARCH_TOLERANCE = 0.10  # the leader's displacement within 10 % of the route
+
+
+def judge_march(
+    obs: Observer,
+    result: dict[str, Any],
+    plan: Any,
+    axis: float,
+    pairs: list[tuple[int, int]],
+    d_e: float,
+    phi_e: float,
+) -> None:
+    """The march from ground truth: from the moment every agent was ready to march (its
+    first ``march`` status, after its correction) to the end.
+
+    Sets ``march_distance`` (the leader's displacement, m), ``march_route`` (V, m),
+    ``march_error`` (|displacement − V| / |V|), ``march_ok`` and the worst |r_d|, |r_φ|
+    over every truth sample of the march."""
+    from agent.config import Route
+    from agent.march import route_vector
+
+    rt = result["route"]
+    route = Route(distance=rt["distance"]) if "distance" in rt else Route(to=tuple(rt["to"]))
+    v = route_vector(plan, route, axis)
+    leader = int(plan.leader)
+    ready = [obs.agents[i].march_sample if i in obs.agents else None for i in plan.ids]
+    result["march_route"] = [float(v[0]), float(v[1])]
+    result["march_ok"] = False
+    if any(k is None for k in ready) or not obs.truth:
+        result["march_error_reason"] = "the march never started"
+        return
+    k0 = min(max(k for k in ready if k is not None), len(obs.truth) - 1)
+    result["march_start_t_sim"] = obs.truth[k0][0]
+    result["march_start_sample"] = k0
+    first, last = obs.truth[k0][1], obs.truth[-1][1]
+    disp = np.array(last[leader][:2]) - np.array(first[leader][:2])
+    length = float(np.hypot(*v))
+    result["march_distance"] = float(np.hypot(*disp))
+    result["march_displacement"] = [float(disp[0]), float(disp[1])]
+    result["march_error"] = float(np.hypot(*(disp - v))) / max(length, 1e-9)
+    worst_d = worst_phi = 0.0
+    for _, poses in obs.truth[k0:]:
+        if all(c in poses and p in poses for c, p in pairs):
+            for row in evaluate(poses, pairs, axis, d_e, phi_e):
+                worst_d = max(worst_d, abs(row["r_d"]))
+                worst_phi = max(worst_phi, abs(row["r_phi"]))
+    result["march_worst_abs_r_d"] = worst_d
+    result["march_worst_abs_r_phi"] = worst_phi
+    result["march_ok"] = result["march_error"] <= MARCH_TOLERANCE
+
+
+def min_separation(obs: Observer) -> float:
+    best = math.inf
+    for _, poses in obs.truth:
+        pts = np.array([p[:2] for p in poses.values()])
+        if len(pts) < 2:
+            continue
+        dd = np.hypot(*(pts[:, None, :] - pts[None, :, :]).transpose(2, 0, 1))
+        dd[np.diag_indices(len(pts))] = np.inf
+        best = min(best, float(dd.min()))
+    return best
+
+
+def moved(result: dict[str, Any]) -> float:
+    """The longest straight-line displacement start → final of any robot (m), from truth."""
+    starts, finals = result.get("starts") or {}, result.get("finals") or {}
+    return max(
+        (math.dist(starts[i][:2], finals[i][:2]) for i in starts if i in finals), default=0.0
+    )
+
+
+def plot(obs: Observer, result: dict[str, Any], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 7))
+    ids = sorted(obs.truth[-1][1]) if obs.truth else []
+    colours = plt.get_cmap("tab10")
+    for k, i in enumerate(ids):
+        xs = [poses[i][0] for _, poses in obs.truth if i in poses]
+        ys = [poses[i][1] for _, poses in obs.truth if i in poses]
+        c = colours(k % 10)
+        ax.plot(xs, ys, "-", color=c, lw=1.2, alpha=0.8)
+        ax.plot(xs[0], ys[0], "o", mfc="white", mec=c, ms=10)
+        x, y, h = obs.truth[-1][1][i]
+        ax.add_patch(plt.Circle((x, y), 0.2, color=c, alpha=0.35))
+        ax.annotate("", (x + 0.25 * math.cos(h), y + 0.25 * math.sin(h)), (x, y),
+                    arrowprops={"arrowstyle": "->", "color": c})  # fmt: skip
+        ax.text(x + 0.06, y + 0.06, str(i), fontsize=11, weight="bold")
+        ax.text(xs[0] + 0.06, ys[0] - 0.12, f"{i} start", fontsize=8, color="grey")
+    final = obs.truth[-1][1] if obs.truth else {}
+    k0 = result.get("march_start_sample")
+    if k0 is not None:  # the pyramid at the start of the march
+        first = obs.truth[k0][1]
+        for row in result.get("pairs", []):
+            c, p = row["child"], row["parent"]
+            if c in first and p in first:
+                ax.plot([first[c][0], first[p][0]], [first[c][1], first[p][1]], "--",
+                        color="grey", lw=0.8)  # fmt: skip
+        for i in ids:
+            if i in first:
+                ax.add_patch(plt.Circle(first[i][:2], 0.2, fill=False, ec="grey", lw=0.8))
+    # no agent made a plan (a safe stop before planning): the pairs of the evaluator's
+    # plan would only mislead; the reason and how far anybody moved say what happened
+    unplanned = not any(result.get("plan_digests", {}).values())
+    for row in [] if unplanned else result.get("pairs", []):
+        c, p = row["child"], row["parent"]
+        if c in final and p in final:
+            ax.plot([final[c][0], final[p][0]], [final[c][1], final[p][1]], "k--", lw=0.8)
+    if "obstacles" in result:
+        from tools.obstacle_scenario import draw_obstacles
+
+        draw_obstacles(ax, result)
+    leader = None if unplanned else result.get("leader")
+    if leader in final:
+        ax.plot(final[leader][0], final[leader][1], "*", color="green", ms=16)
+    ax.set_aspect("equal")
+    ax.grid(True, alpha=0.3)
+    ax.set_xlabel("world x (m)")
+    ax.set_ylabel("world y (m), north")
+    ok = "success" if result.get("success") else "FAILED"
+    detail = (
+        f"max |r_d| {result.get('max_abs_r_d', float('nan')):.1%}, "
+        f"max |r_phi| {result.get('max_abs_r_phi', float('nan')):.1%}, "
+        f"contacts {result.get('contacts')}"
+    )
+    if unplanned and not result.get("success"):
+        ok = "stopped safely before any plan"
+        errors = result.get("errors") or {}
+        why = str(errors[min(errors)]) if errors else "no agent planned"
+        detail = (
+            f"{textwrap.shorten(why.removeprefix('AgentFailure: '), 64)}\n"
+            f"moved at most {moved(result):.2f} m, contacts {result.get('contacts')}"
+        )
+    ax.set_title(
+        f"{len(ids)} NAOs, seed {result.get('seed')}: {ok}\n"
+        + detail
+        + (
+            f"\nmarch {result['march_distance']:.2f} m (route {math.hypot(*result['march_route']):.2f} m), "
+            f"worst during: |r_d| {result['march_worst_abs_r_d']:.1%}, "
+            f"|r_phi| {result['march_worst_abs_r_phi']:.1%}"
+            if "march_distance" in result
+            else ""
+        )
+    )
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def summarise(
+    obs: Observer,
+    result: dict[str, Any],
+    out: Path,
+    ids: list[int],
+    d_e: float,
+    phi_e: float,
+    quiet: bool,
+) -> dict[str, Any]:
+    n = len(ids)
+    views = {i: obs.agents.get(i, AgentView()) for i in ids}
+    result["exit_codes"] = {str(i): views[i].exit_code for i in ids}
+    result["final_phase"] = {str(i): views[i].phase for i in ids}
+    result["errors"] = {str(i): views[i].error for i in ids if views[i].error}
+    digests = {views[i].plan_digest for i in ids}
+    result["plan_digests"] = {str(i): views[i].plan_digest for i in ids}
+    result["identical_digests"] = len(digests) == 1 and "" not in digests
+    result["bytes"] = {
+        str(i): {**dict(views[i].bytes_by_kind), "total": sum(views[i].bytes_by_kind.values())}
+        for i in ids
+    }
+    result["exchange_bytes"] = {
+        str(i): views[i].bytes_by_kind.get("record", 0) + views[i].bytes_by_kind.get("digest", 0)
+        for i in ids
+    }
+    robot_contacts = [c for c in obs.contacts if c[2] >= 0]
+    result["contacts"] = max(len(obs.contacts), obs.truth_contacts)
+    result["robot_contacts"] = len(robot_contacts)
+    result["min_separation"] = min_separation(obs)
+    # phases: the slowest agent's duration of each phase, wall and sim
+    phases: dict[str, dict[str, float]] = {}
+    for k, ph in enumerate(PHASE_ORDER[:-1]):
+        walls, sims = [], []
+        for v in views.values():
+            if ph in v.phase_wall:
+                later = [v.phase_wall[q] for q in PHASE_ORDER[k + 1 :] if q in v.phase_wall]
+                later_s = [v.phase_sim[q] for q in PHASE_ORDER[k + 1 :] if q in v.phase_sim]
+                if later:
+                    walls.append(min(later) - v.phase_wall[ph])
+                    sims.append(min(later_s) - v.phase_sim[ph])
+        if walls:
+            phases[ph] = {"wall_max": max(walls), "sim_max": max(sims)}
+    result["phases"] = phases
+    # the agreement's own cost: the last agent entering exchange -> the last one planning
+    entered = [views[i].phase_wall for i in ids]
+    if entered and all("exchange" in e and "plan" in e for e in entered):
+        result["agreement_s"] = max(e["plan"] for e in entered) - max(
+            e["exchange"] for e in entered
+        )
+    result["t_sim_end"] = obs.truth[-1][0] if obs.truth else 0.0
+    result["pairs"] = []
+    ok_agents = all(views[i].exit_code == 0 and views[i].phase == "done" for i in ids)
+    # the (re-)search round of each robot's last record (NAO 4.1.3 rule 2)
+    result["record_rounds"] = {str(i): obs.records[i].round for i in ids if i in obs.records}
+    if obs.truth:
+        result["starts"] = {str(i): list(obs.truth[0][1][i]) for i in ids if i in obs.truth[0][1]}
+        result["finals"] = {str(i): list(obs.truth[-1][1][i]) for i in ids if i in obs.truth[-1][1]}
+    if obs.truth and len(obs.records) == n:
+        try:
+            fa, plan = plan_from_agreed(
+                obs,
+                d_e,
+                phi_e,
+                result.get("orientation", "pca"),
+                result.get("strategy", "default"),
+            )
+            result["evaluator_plan_digest"] = str(plan.digest)
+            result["leader"] = int(plan.leader)
+            # in the common frame: where --march-to points are given
+            result["leader_target"] = [float(v) for v in plan.robot(plan.leader).target]
+            axis = fa.axis_angle(plan)
+            result["axis_deg"] = math.degrees(axis)
+            pairs = pyramid_pairs(plan, ids)
+            final = obs.truth[-1][1]
+            result["pairs"] = evaluate(final, pairs, axis, d_e, phi_e)
+            if result.get("route"):
+                judge_march(obs, result, plan, axis, pairs, d_e, phi_e)
+            if "obstacles" in result:
+                from tools.obstacle_scenario import judge_obstacles
+
+                judge_obstacles(result, obs.truth, obs.contacts, plan)
+        except (ValueError, KeyError, AttributeError, ImportError) as exc:
+            result["evaluation_error"] = f"{type(exc).__name__}: {exc}"
+    rows = result["pairs"]
+    result["max_abs_r_d"] = max((abs(r["r_d"]) for r in rows), default=math.nan)
+    result["max_abs_r_phi"] = max((abs(r["r_phi"]) for r in rows), default=math.nan)
+    within = bool(rows) and all(
+        abs(r["r_d"]) <= R_D_MAX and abs(r["r_phi"]) <= R_PHI_MAX for r in rows
+    )
+    result["within_tolerance"] = within
+    # The agents planned from exactly the records the robots signed: the evaluator, which
+    # accepts only verified envelopes, recomputes the same plan digest from them.
+    result["plan_matches_records"] = bool(digests) and digests == {
+        result.get("evaluator_plan_digest")
+    }
+    trusted = True
+    rogues = rogue_reports(out)
+    if result.get("rogues_started"):
+        result["rogues"] = rogues
+        trusted = (
+            result["plan_matches_records"]
+            and len(rogues) == len(result["rogues_started"])
+            and all(
+                r.get("commands_executed", 0) == 0 and r.get("claims_granted", 0) == 0
+                for r in rogues.values()
+            )
+        )
+        result["rogue_defeated"] = trusted
+    marched = result.get("march_ok", True)
+    result["success"] = bool(
+        ok_agents and within and result["identical_digests"] and result["contacts"] == 0
+        and "timeout" not in result and trusted and marched
+    )  # fmt: skip
+    if obs.truth:
+        try:
+            plot(obs, result, out / "formation.png")
+            result["figure"] = str(out / "formation.png")
+        except (ValueError, KeyError) as exc:
+            result["figure_error"] = str(exc)
+    result["recording"] = str(out / "run.mcap")
+    (out / "result.json").write_text(json.dumps(result, indent=2, default=float))
+    if not quiet:
+        print_table(result)
+    return result
+
+
+def print_table(r: dict[str, Any]) -> None:
+    p = print
+    p(f"\nnao-formation demo: {r['robots']} robots, seed {r['seed']}, "
+      f"d_e {r['d_e']:.2f} m, phi_e {r['phi_e_deg']:.0f} deg")  # fmt: skip
+    p(f"{'child':>5} {'parent':>6} {'dist (m)':>9} {'angle (deg)':>11} {'r_d':>8} {'r_phi':>8}  ok")
+    for row in r["pairs"]:
+        ok = abs(row["r_d"]) <= R_D_MAX and abs(row["r_phi"]) <= R_PHI_MAX
+        p(f"{row['child']:>5} {row['parent']:>6} {row['distance']:9.3f} {row['angle_deg']:11.1f} "
+          f"{row['r_d']:+8.1%} {row['r_phi']:+8.1%}  {'yes' if ok else 'NO'}")  # fmt: skip
+    if not r["pairs"]:
+        p(
+            "  (no pairs evaluated"
+            + (f": {r['evaluation_error']}" if "evaluation_error" in r else "")
+            + ")"
+        )
+    for name, rep in r.get("rogues", {}).items():
+        if not rep.get("connected"):
+            p(f"rogue {name}: could not connect ({rep.get('reason', '')[:70]})")
+        else:
+            p(f"rogue {name}: sent {sum(rep.get('sent', {}).values())} messages/requests, "
+              f"{rep.get('commands_executed')} commands executed, "
+              f"{rep.get('claims_granted')} claims granted")  # fmt: skip
+    if "rogues" in r:
+        p(f"plan digest recomputed from the signed records: "
+          f"{'same' if r['plan_matches_records'] else 'DIFFERENT'}")  # fmt: skip
+    if r.get("route"):
+        if "march_distance" in r:
+            p(f"march: leader displaced {r['march_distance']:.2f} m for a route of "
+              f"{math.hypot(*r['march_route']):.2f} m (error {r['march_error']:.1%}, "
+              f"{'ok' if r['march_ok'] else 'NOT within 10 %'}); worst during the march "
+              f"|r_d| {r['march_worst_abs_r_d']:.1%}, |r_phi| {r['march_worst_abs_r_phi']:.1%}")  # fmt: skip
+        else:
+            p(f"march: not judged ({r.get('march_error_reason', 'no plan')})")
+    p(f"contacts: {r['contacts']} (robot-robot {r['robot_contacts']}), "
+      f"min centre separation {r['min_separation']:.2f} m")  # fmt: skip
+    if "obstacle_contacts" in r:
+        err = r.get("obstacle_position_error", [])
+        p(f"obstacles: {len(r['obstacles'])} in the way, {r.get('obstacles_seen', 0)} planned "
+          f"around (position error {', '.join(f'{e:.2f}' for e in err) or '-'} m), "
+          f"contacts {r['obstacle_contacts']}, min gap {r['min_obstacle_gap']:.2f} m")  # fmt: skip
+    p("phase       wall max (s)  sim max (s)")
+    for ph, t in r["phases"].items():
+        p(f"  {ph:9s} {t['wall_max']:12.1f} {t['sim_max']:12.1f}")
+    p(f"wall total {r.get('wall_total', float('nan')):.1f} s, sim end {r['t_sim_end']:.1f} s")
+    p("bytes published per agent (record + digest = exchange; status for viewers):")
+    for i, b in r["bytes"].items():
+        p(f"  robot {i}: total {b['total']} B, exchange {r['exchange_bytes'][i]} B, "
+          f"status {b.get('status', 0)} B")  # fmt: skip
+    same = "yes" if r["identical_digests"] else "NO"
+    p(f"identical plan digests: {same} ({next(iter(r['plan_digests'].values()))[:12]})")
+    for i, e in r["errors"].items():
+        p(f"  robot {i} error: {e}")
+    if "timeout" in r:
+        p(f"  {r['timeout']}")
+    p(f"exit codes: {r['exit_codes']}")
+    p(f"figure: {r.get('figure', '-')}   recording: {r['recording']}")
+    p("RESULT: " + ("SUCCESS" if r["success"] else "FAILURE"))
