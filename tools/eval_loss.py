@@ -212,7 +212,7 @@ def monitor(
 
 def done_by_exit_code(obs: Any, ids: list[int]) -> list[int]:
     """Agents that exited 0 but whose final ``done`` status the monitor never heard (sorted);
-    their phase in ``obs`` (a ``tools.demo.Observer``) is set to ``done``.
+    their phase in ``obs`` (a ``tools.harness.observe.Observer``) is set to ``done``.
 
     ``Runner.run`` returns 0 only after it published ``done`` (the exit code is the
     authority, not one status packet that a cut session may swallow); the rest of the

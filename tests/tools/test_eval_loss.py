@@ -214,7 +214,7 @@ def test_run_rows_have_the_shared_schema_and_the_outcomes_plot(tmp_path: Path) -
 
 
 def test_exit_code_zero_is_done_when_the_final_status_went_unheard() -> None:
-    from tools.demo import AgentView, Observer
+    from tools.harness.observe import AgentView, Observer
 
     obs = Observer(0.0)
     phases = {1: ("done", 0), 2: ("hold", 0), 3: ("hold", 1), 4: ("failed", 1), 5: ("march", 0)}
