@@ -45,16 +45,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from agent.control.corridor import closest_approach
+from agent.control.corridor import _finite, closest_approach
 from agent.control.distance import STEP_LENGTH
 from agent.control.rotation import wrap_pi
-
-
-def _finite(name: str, v: float, lo: float = -math.inf, hi: float = math.inf) -> float:
-    f = float(v)
-    if not (math.isfinite(f) and lo <= f <= hi):
-        raise ValueError(f"{name} must be finite and in [{lo}, {hi}], got {v!r}")
-    return f
 
 
 @dataclass(frozen=True)
