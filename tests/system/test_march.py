@@ -6,26 +6,18 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
-pytestmark = [pytest.mark.system, pytest.mark.slow]
+from tests.system.world import run_demo
 
-ROOT = Path(__file__).resolve().parents[2]
+pytestmark = [pytest.mark.system, pytest.mark.slow]
 
 
 def test_three_robots_march_two_metres_in_formation(tmp_path: Path) -> None:
-    out = tmp_path / "demo"
-    res = subprocess.run(
-        [sys.executable, "-m", "tools.demo", "--robots", "3", "--seed", "1", "--march", "2",
-         "--out", str(out), "--json", str(tmp_path / "result.json"), "--timeout", "400"],
-        cwd=ROOT, capture_output=True, text=True, timeout=480,
-    )  # fmt: skip
+    res, r = run_demo(tmp_path, "--robots", "3", "--seed", "1", "--march", "2")
     assert "march: leader displaced" in res.stdout, (res.stdout[-2000:], res.stderr[-2000:])
-    r = json.loads((tmp_path / "result.json").read_text())
     assert r["exit_codes"] == {"1": 0, "2": 0, "3": 0}, r.get("errors")
     assert set(r["final_phase"].values()) == {"done"}
     assert r["identical_digests"] is True
@@ -43,5 +35,5 @@ def test_three_robots_march_two_metres_in_formation(tmp_path: Path) -> None:
     assert r["contacts"] == 0
     assert r["phases"]["march"]["sim_max"] > 10.0  # 2 m at <= 0.095 m/s
     assert r["success"] is True and res.returncode == 0
-    assert (out / "formation.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    assert json.loads((out / "scenario.json").read_text())["room"] >= 5.0
+    assert (tmp_path / "demo" / "formation.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert json.loads((tmp_path / "demo" / "scenario.json").read_text())["room"] >= 5.0

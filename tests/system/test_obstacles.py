@@ -7,19 +7,15 @@ limits."""
 from __future__ import annotations
 
 import itertools
-import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from sim.nao_model import FOOTPRINT_RADIUS
+from tests.system.world import run_demo
 
 pytestmark = [pytest.mark.system, pytest.mark.slow]
-
-ROOT = Path(__file__).resolve().parents[2]
 
 
 def _gap(path: np.ndarray, centre: np.ndarray) -> float:
@@ -33,14 +29,8 @@ def _gap(path: np.ndarray, centre: np.ndarray) -> float:
 
 
 def test_four_robots_route_around_one_obstacle(tmp_path: Path) -> None:
-    out = tmp_path / "demo"
-    res = subprocess.run(
-        [sys.executable, "-m", "tools.demo", "--robots", "4", "--seed", "1", "--obstacles", "1",
-         "--out", str(out), "--json", str(tmp_path / "result.json"), "--timeout", "400"],
-        cwd=ROOT, capture_output=True, text=True, timeout=480,
-    )  # fmt: skip
+    res, r = run_demo(tmp_path, "--robots", "4", "--seed", "1", "--obstacles", "1")
     assert "obstacles: 1 in the way" in res.stdout, (res.stdout[-2000:], res.stderr[-2000:])
-    r = json.loads((tmp_path / "result.json").read_text())
     assert set(r["final_phase"].values()) == {"done"}, r.get("errors")
     assert r["identical_digests"] is True
     ((ox, oy, radius),) = r["obstacles"]
@@ -56,4 +46,4 @@ def test_four_robots_route_around_one_obstacle(tmp_path: Path) -> None:
     assert r["obstacle_contacts"] == 0 and r["contacts"] == 0
     assert r["min_obstacle_gap"] > 0.0
     assert r["success"] is True and res.returncode == 0
-    assert (out / "formation.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert (tmp_path / "demo" / "formation.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

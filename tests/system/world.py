@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import json
 import math
+import subprocess
+import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -11,7 +14,20 @@ from typing import Any
 
 from agent.bus import Bus, BusConfig
 from agent.protocol import KEY_STATUS_ALL, KEY_WORLD_TRUTH_ALL, StatusMsg, TruthPosesMsg
-from tools.harness.procs import Proc, free_port, robot_ids, start_world, stop, wait_ready
+from tools.harness.procs import ROOT, Proc, free_port, robot_ids, start_world, stop, wait_ready
+
+
+def run_demo(tmp_path: Path, *args: str) -> tuple[subprocess.CompletedProcess[str], dict[str, Any]]:
+    """``python -m tools.demo ARGS`` into ``tmp_path/demo`` (bounded: 400 s for the agents,
+    480 s in all); its completed process and ``result.json``."""
+    out, path = tmp_path / "demo", tmp_path / "result.json"
+    res = subprocess.run(
+        [sys.executable, "-m", "tools.demo", *args, "--out", str(out), "--json", str(path),
+         "--timeout", "400"],
+        cwd=ROOT, capture_output=True, text=True, timeout=480,
+    )  # fmt: skip
+    result = json.loads(path.read_text()) if path.is_file() else {}
+    return res, result
 
 
 @contextmanager
