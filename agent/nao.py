@@ -30,6 +30,11 @@ CAMERA_VFOV = math.radians(47.6)  # vertical field of view (square pixels: 2·at
 CAMERA_HEIGHT_M = 0.50  # m above the floor, robot standing
 CAMERA_PITCH_DOWN = math.radians(1.2)  # optical axis below the horizontal
 CAMERA_FORWARD = 0.062  # m, optical centre ahead of the head-yaw axis
+#: The range of sight (m, optical centre to body centre): recognition, the D-base (eq. 6
+#: with the pixel-rim offset) and the bearing model are calibrated and measured from 0.5 m
+#: to 3.0 m (``python -m tools.eval_perception --max-distance 3.0``; the paper: 0.5-1.45 m).
+SIGHT_MIN = 0.5
+SIGHT_MAX = 3.0
 NECK_FORWARD = 0.0  # m, head-yaw axis ahead of the body centre
 
 # ------------------------------------------------------------------ walking

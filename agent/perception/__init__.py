@@ -8,8 +8,5 @@ Public API: :class:`~agent.perception.detector.Detector` / ``Detection``,
 rebuilt by ``python -m tools.build_mbase`` and ``python -m tools.calibrate_dbase``.
 """
 
-#: The range of sight (m, optical centre to body centre): recognition, the D-base (eq. 6
-#: with the pixel-rim offset) and the bearing model are calibrated and measured from 0.5 m
-#: to 3.0 m (``python -m tools.eval_perception --max-distance 3.0``; the paper: 0.5-1.45 m).
-SIGHT_MIN = 0.5
-SIGHT_MAX = 3.0
+from agent.nao import SIGHT_MAX as SIGHT_MAX  # the range of sight (one home: agent/nao.py)
+from agent.nao import SIGHT_MIN as SIGHT_MIN

@@ -9,7 +9,7 @@ the square room.
 :func:`generate` draws the paper-like starts of the NAO paper's experiments (§5.2.2):
 every robot faces the same "north" (world +y, heading pi/2), nearest spacing 0.6-1.2 m,
 every robot within the range of sight [DETECT_MIN, DETECT_MAX] = [0.5, 3.0] m (the
-perception's, :data:`agent.perception.SIGHT_MAX`) of at least one other, the whole fleet
+perception's, :data:`agent.nao.SIGHT_MAX`) of at least one other, the whole fleet
 connected by that relation. With ``isolated`` one robot stands 2-3 m from every other
 (at the far end of sight). Scenario files are JSON (:func:`load`, :func:`dump`).
 """
@@ -24,14 +24,13 @@ from typing import Any
 
 import numpy as np
 
-from agent.perception import SIGHT_MAX, SIGHT_MIN
 from agent.protocol import nao
 
 NORTH = math.pi / 2
 MIN_SPACING = 0.6
 MAX_SPACING = 1.2
-DETECT_MIN = SIGHT_MIN
-DETECT_MAX = SIGHT_MAX
+DETECT_MIN = nao.SIGHT_MIN
+DETECT_MAX = nao.SIGHT_MAX
 ISOLATED_MIN = 2.0  # m: ``generate(isolated=True)``'s robot is 2 m to DETECT_MAX from the others
 ROOM_MARGIN = 1.8  # metres between the outermost robot and a wall
 MIN_ROOM = 3.0  # smallest room half-size (a 6 m x 6 m room)
