@@ -44,7 +44,7 @@ COPY agent ./agent
 COPY sim ./sim
 COPY tools ./tools
 RUN pip install --no-deps . && rm -rf build *.egg-info \
-    && python -c "import zenoh, numpy, scipy, cv2, msgpack, pybullet, agent.protocol"
+    && python -c "import zenoh, numpy, scipy, cv2, msgpack, pybullet, agent.wire"
 
 # No default role: docker-compose.yml sets the command (and the credentials, mounted as
 # secrets under /run/secrets/fleet) of each service.

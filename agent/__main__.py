@@ -19,7 +19,7 @@ their digests and stops the whole fleet, naming the odd robot, when they differ.
 
 ``--world-connect EP`` (issue #9): the body's queries to the world (register, camera,
 walk, turn) go through a second zenoh session connected to ``EP`` (the router's world
-port, ``agent.protocol.WORLD_PORT``); records, digests, statuses and liveliness stay on
+port, ``agent.wire.WORLD_PORT``); records, digests, statuses and liveliness stay on
 the first. Without it one session carries both.
 
 Exit status: 0 when the robot holds its place in the pyramid, 1 on a safe stop
@@ -37,12 +37,12 @@ import math
 import sys
 from typing import TYPE_CHECKING
 
-from agent.config import add_plan_arguments
-from agent.nao import NAOQI_PORT
-from agent.protocol import MAX_ROBOT_ID, NetworkSpec, add_network_arguments, network_spec
+from agent.core.nao import NAOQI_PORT
+from agent.phases.config import add_plan_arguments
+from agent.wire import MAX_ROBOT_ID, NetworkSpec, add_network_arguments, network_spec
 
 if TYPE_CHECKING:
-    from agent.bus import Bus
+    from agent.net.bus import Bus
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -167,7 +167,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         p.error("--explore-step must be in [0.2, 5] m")
     args.route = None
     try:
-        from agent.config import Route
+        from agent.phases.config import Route
 
         if args.march is not None:
             args.route = Route(distance=args.march)
@@ -191,15 +191,15 @@ def open_bus(args: argparse.Namespace, log: logging.Logger) -> tuple[Bus, Bus, i
     with it and ask the world for that id; the world grants an id only to the key that
     owns it, so the first free one wins. Insecure: ``--id auto`` takes the lowest free id.
     """
-    from agent.bus import Bus, BusConfig, open_retrying
-    from agent.robot import register
+    from agent.body.zenoh_world import register
+    from agent.net.bus import Bus, BusConfig, open_retrying
 
     def session(spec: BusConfig) -> Bus:
         """A session, tried again for ``--join-timeout`` s (a lossy start only delays)."""
         return open_retrying(lambda: Bus(spec), args.join_timeout)
 
-    from agent.seams import BodyError
-    from agent.trust import Credentials
+    from agent.body.base import BodyError
+    from agent.wire.trust import Credentials
 
     def opened(spec: NetworkSpec, world: Bus | None, rid: int) -> tuple[Bus, Bus, int]:
         if world is None:  # one session for both
@@ -255,11 +255,11 @@ def main(argv: list[str] | None = None) -> int:
     )
     log = logging.getLogger("agent")
     # Imported here so that `--help` and usage errors need no zenoh session.
-    from agent.bus import BusError
-    from agent.config import AgentConfig
-    from agent.robot import ZenohBody
-    from agent.runner import Runner, report_unavailable
-    from agent.seams import Body, BodyError
+    from agent.body.base import Body, BodyError
+    from agent.body.zenoh_world import ZenohBody
+    from agent.net.bus import BusError
+    from agent.phases.config import AgentConfig
+    from agent.phases.runner import Runner, report_unavailable
 
     try:
         opened = open_bus(args, log)
@@ -274,7 +274,7 @@ def main(argv: list[str] | None = None) -> int:
         if world_bus is not bus:
             stack.enter_context(world_bus)
         try:
-            from agent.adapters import FormationAdapter, PerceptionAdapter
+            from agent.phases.adapters import FormationAdapter, PerceptionAdapter
 
             perception = PerceptionAdapter()
             formation = FormationAdapter()
@@ -282,7 +282,7 @@ def main(argv: list[str] | None = None) -> int:
             return report_unavailable(bus, rid, f"perception or formation unavailable: {exc}")
         body: Body
         if args.body == "naoqi":
-            from agent.body_naoqi import NaoqiBody
+            from agent.body.naoqi import NaoqiBody
 
             try:
                 body = NaoqiBody(args.nao, rid)
@@ -319,7 +319,7 @@ def main(argv: list[str] | None = None) -> int:
                 formation,
             )
             if args.state_dir:
-                from agent.journal import Journal
+                from agent.phases.journal import Journal
 
                 try:
                     runner.journal = Journal(args.state_dir, rid)

@@ -15,7 +15,7 @@ import signal
 import sys
 from typing import Any
 
-from agent.protocol import add_network_arguments, network_spec
+from agent.wire import add_network_arguments, network_spec
 from sim import scenarios
 from sim.server import WorldServer
 from sim.world import World

@@ -18,9 +18,9 @@ import math
 import numpy as np
 import pybullet as pb
 
-from agent.protocol import nao
+from agent.wire import nao
 
-# The NAO's numbers have one home, agent/nao.py (reached through agent.protocol).
+# The NAO's numbers have one home, agent/core/nao.py (reached through agent.wire).
 CAMERA_Z = nao.CAMERA_HEIGHT_M
 CAMERA_FORWARD = nao.CAMERA_FORWARD
 WIDTH = nao.CAMERA_WIDTH

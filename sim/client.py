@@ -1,7 +1,7 @@
 """``python -m sim.client``: poke a running world by hand (camera, walk, turn, poses).
 
 A small command-line client of the world's bus contract (DESIGN.md §3), for people
-trying the world and for debugging; agents use ``agent/robot.py`` instead::
+trying the world and for debugging; agents use ``agent/body/zenoh_world.py`` instead::
 
     python -m sim.client --credentials fleet/ --connect tls/127.0.0.1:7447 camera 1 --yaw 30
     python -m sim.client --credentials fleet/ --connect tls/127.0.0.1:7447 walk 1 0.2 --times 5
@@ -30,7 +30,7 @@ from typing import Any
 
 import zenoh
 
-from agent.protocol import (
+from agent.wire import (
     KEY_WORLD_REGISTER,
     KEY_WORLD_TRUTH_POSES,
     MAX_PUBLICATION_BYTES,

@@ -39,7 +39,7 @@ import cv2
 import numpy as np
 import qi
 
-from agent.protocol import (
+from agent.wire import (
     CameraReply,
     CameraRequest,
     CommandReply,

@@ -1,6 +1,6 @@
 """The world on the bus: zenoh queryables and publications of DESIGN.md §3 (issue 3).
 
-Queryables (payloads are :mod:`agent.protocol` messages):
+Queryables (payloads are :mod:`agent.wire` messages):
 
 - ``world/register``: ``RegisterRequest(want)`` -> ``RegisterReply(robot_id)``: the lowest
   free robot id of the scenario (or ``want`` if it is free). An id is taken while it is
@@ -59,7 +59,7 @@ from typing import Any
 import cv2
 import zenoh
 
-from agent.protocol import (
+from agent.wire import (
     KEY_ALIVE_ALL,
     KEY_WORLD_CLOCK,
     KEY_WORLD_REGISTER,
@@ -94,12 +94,12 @@ from sim.locomotion import Contact, Done
 from sim.render_pool import PNG_PARAMS, Job, RenderPool, Result
 from sim.world import World
 
-#: How the world joins the bus: the shared :class:`agent.protocol.NetworkSpec`.
+#: How the world joins the bus: the shared :class:`agent.wire.NetworkSpec`.
 NetConfig = NetworkSpec
 
 
 def zenoh_config(spec: NetworkSpec) -> zenoh.Config:
-    """The zenoh config of ``spec`` (the world may not import ``agent.bus``)."""
+    """The zenoh config of ``spec`` (the world may not import ``agent.net.bus``)."""
     cfg = zenoh.Config()
     for key, value in spec.json5_items():
         cfg.insert_json5(key, value)
@@ -109,7 +109,7 @@ def zenoh_config(spec: NetworkSpec) -> zenoh.Config:
 class Request:
     """One query to the world, authenticated when the world runs with credentials.
 
-    Secure: the payload is the :mod:`agent.trust` envelope's, ``signer`` is who sealed
+    Secure: the payload is the :mod:`agent.wire.trust` envelope's, ``signer`` is who sealed
     it, and replies are sealed by the world and bound to the request (``nonce``), so a
     reply can neither be forged nor replayed to another request. Insecure: the query's
     own payload, no signer.

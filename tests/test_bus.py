@@ -1,4 +1,4 @@
-"""agent/bus.py with real zenoh sessions on loopback (tcp, no multicast)."""
+"""agent/net/bus.py with real zenoh sessions on loopback (tcp, no multicast)."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ import msgpack
 import pytest
 import zenoh
 
-from agent.bus import (
+from agent.net.bus import (
     EVENT_CAPS,
     EVENT_MAX_BYTES,
     Bus,
@@ -25,7 +25,7 @@ from agent.bus import (
     SessionUnavailable,
     open_retrying,
 )
-from agent.protocol import (
+from agent.wire import (
     MAX_MESSAGE_BYTES,
     MAX_PUBLICATION_BYTES,
     ClockMsg,
@@ -255,7 +255,7 @@ def test_callbacks_survive_everything_and_count_it(
     pair: tuple[Bus, Bus, str], caplog: pytest.LogCaptureFixture
 ) -> None:
     _, b, _ = pair
-    caplog.set_level(logging.WARNING, "agent.bus")
+    caplog.set_level(logging.WARNING, "agent.net.bus")
     good = encode(StatusMsg(sender=1, phase="hold"))
     b._on_sample(sample("nao/1/status", FakeZBytes(MAX_PUBLICATION_BYTES + 1)))  # not copied
     b._on_sample(sample("nao/1/status", FakeZBytes(len(good), good)), max_bytes=10)
@@ -282,7 +282,7 @@ def test_long_exception_text_is_cut_in_the_log(
     pair: tuple[Bus, Bus, str], caplog: pytest.LogCaptureFixture
 ) -> None:
     _, b, _ = pair
-    caplog.set_level(logging.WARNING, "agent.bus")
+    caplog.set_level(logging.WARNING, "agent.net.bus")
 
     class Huge:
         def __len__(self) -> int:

@@ -1,4 +1,4 @@
-"""The agreement state machine (agent/exchange.py): every branch, with an in-memory bus."""
+"""The agreement state machine (agent/core/agreement.py): every branch, with an in-memory bus."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ from collections.abc import Callable
 
 import pytest
 
-from agent.exchange import Agreement, Grace, canonical_digest, odd_params, params_digest
-from agent.protocol import DigestMsg, NeighborRecordMsg
+from agent.core.agreement import Agreement, Grace, canonical_digest, odd_params, params_digest
+from agent.wire import DigestMsg, NeighborRecordMsg
 
 Drop = Callable[[str, int, int, float], bool]
 

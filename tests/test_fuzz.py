@@ -1,7 +1,7 @@
 """Property-based fuzz of the wire codec (issue #8): nothing but ProtocolError leaves decode.
 
 Each hypothesis example draws a seed and runs a batch of ``BATCH`` mutants of one message
-type through :func:`agent.protocol.decode` (generators shared with ``python -m
+type through :func:`agent.wire.decode` (generators shared with ``python -m
 tools.fuzz``), so that CI sees ``EXAMPLES * BATCH`` = 20 000 hostile payloads per type in
 a few seconds; pure-hypothesis strategies add structures hypothesis can shrink.
 Derandomized: the same inputs on every run, no flakiness.
@@ -16,7 +16,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from agent import protocol as P
+from agent import wire as P
 from tools import fuzz
 
 BATCH = 500

@@ -1,4 +1,4 @@
-"""agent/journal.py: round trips, corruption and every error branch (issue #9)."""
+"""agent/phases/journal.py: round trips, corruption and every error branch (issue #9)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent.journal import (
+from agent.phases.journal import (
     MAGIC_STATE,
     MAX_STATE_BYTES,
     Journal,
@@ -23,7 +23,7 @@ from agent.journal import (
     encode_reference,
     encode_state,
 )
-from agent.protocol import NeighborRecordMsg
+from agent.wire import NeighborRecordMsg
 
 D1 = "ab" * 32
 D2 = "cd" * 32
@@ -206,7 +206,7 @@ def test_corrupt_reference_views(tmp_path: Path) -> None:
     body = (4).to_bytes(2, "big") + (5).to_bytes(2, "big") + b"\0" * 10
     import hashlib
 
-    from agent.journal import MAGIC_REFERENCE
+    from agent.phases.journal import MAGIC_REFERENCE
 
     short = MAGIC_REFERENCE + len(body).to_bytes(4, "big") + hashlib.sha256(body).digest() + body
     with pytest.raises(JournalError, match="pixel bytes"):

@@ -1,4 +1,4 @@
-"""Round trips and rejections of the wire codec (agent/protocol.py)."""
+"""Round trips and rejections of the wire codec (agent/wire/)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import threading
 import msgpack
 import pytest
 
-from agent import protocol as p
+from agent import wire as p
 from tests.fakes import FakeZBytes
 
 SAMPLES: list[p.Message] = [

@@ -1,6 +1,6 @@
 """The agreed record set by digest (issue #9): served by every agent, checked by the asker.
 
-Pure checks (agent/resume.py), the restored agreement (agent/exchange.py), the runner's
+Pure checks (agent/phases/resume.py), the restored agreement (agent/core/agreement.py), the runner's
 acceptance of a restarted member's new session, and the query over real zenoh sessions:
 plain, and through a TLS router with the fleet's access control.
 """
@@ -18,9 +18,11 @@ from typing import cast
 
 import pytest
 
-from agent.bus import Bus, BusConfig, BusError, Event
-from agent.exchange import Agreement, canonical_digest
-from agent.protocol import (
+from agent.core.agreement import Agreement, canonical_digest
+from agent.net.bus import Bus, BusConfig, BusError, Event
+from agent.phases.resume import agreed_by_others, answer, record_set, records_of
+from agent.phases.runner import Runner
+from agent.wire import (
     KEY_RECORDS_ALL,
     DigestMsg,
     NeighborRecordMsg,
@@ -30,9 +32,7 @@ from agent.protocol import (
     encode,
     key_records,
 )
-from agent.resume import agreed_by_others, answer, record_set, records_of
-from agent.runner import Runner
-from agent.trust import Identity, TrustError, create_fleet
+from agent.wire.trust import Identity, TrustError, create_fleet
 from tests.fakes import zb
 from tests.test_runner import perception, records, runner  # noqa: F401  (fixtures)
 
@@ -139,7 +139,7 @@ def test_a_restarted_member_counts_once_it_shows_the_agreed_digest(runner: Runne
 
 def test_reply_signed_by_another_robot_than_the_key_names_is_refused(tmp_path: Path) -> None:
     create_fleet(tmp_path / "fleet", [1, 2])
-    from agent.trust import Credentials
+    from agent.wire.trust import Credentials
 
     creds = Credentials(tmp_path / "fleet")
     bus = Bus.__new__(Bus)  # only the reply check, no session

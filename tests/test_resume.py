@@ -1,4 +1,4 @@
-"""agent/resume.py and the runner's journal hooks, without the world (issue #9).
+"""agent/phases/resume.py and the runner's journal hooks, without the world (issue #9).
 
 The runner of tests/test_runner.py (robot 3, an unconnected zenoh session): what is
 journaled, what a corrupt journal does, and where each journaled phase resumes.
@@ -14,10 +14,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agent import resume
-from agent.journal import Journal, JournalState
-from agent.protocol import NeighborRecordMsg
-from agent.runner import NORTH, AgentFailure, Runner
+from agent.phases import resume
+from agent.phases.journal import Journal, JournalState
+from agent.phases.runner import NORTH, AgentFailure, Runner
+from agent.wire import NeighborRecordMsg
 from tests.test_runner import perception, records, runner  # noqa: F401  (fixtures)
 
 

@@ -1,13 +1,13 @@
-"""agent/robot.py: retrying queries that met no queryable (lossy links, fresh sessions)."""
+"""agent/body/zenoh_world.py: retrying queries that met no queryable (lossy links, fresh sessions)."""
 
 from __future__ import annotations
 
 import pytest
 
-from agent.bus import BusError, NoRoute, QueryTimeout
-from agent.protocol import CommandReply, TurnRequest
-from agent.robot import ZenohBody, retry_no_route, retry_timeout
-from agent.seams import BodyError, MotionResult
+from agent.body.base import BodyError, MotionResult
+from agent.body.zenoh_world import ZenohBody, retry_no_route, retry_timeout
+from agent.net.bus import BusError, NoRoute, QueryTimeout
+from agent.wire import CommandReply, TurnRequest
 
 
 def flaky(failures: list[Exception], value: int = 7) -> tuple[list[int], object]:

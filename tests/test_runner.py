@@ -14,14 +14,14 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from agent.adapters import FormationAdapter, PerceptionAdapter
-from agent.bus import Bus, BusConfig
-from agent.config import AgentConfig, Route
-from agent.exchange import Agreement, Decision, canonical_digest, params_digest
-from agent.formation.plan import PlanParams
-from agent.protocol import NeighborRecordMsg, StatusMsg
-from agent.robot import ZenohBody
-from agent.runner import AgentFailure, Peer, Runner, report_unavailable
+from agent.body.zenoh_world import ZenohBody
+from agent.core.agreement import Agreement, Decision, canonical_digest, params_digest
+from agent.core.formation.plan import PlanParams
+from agent.net.bus import Bus, BusConfig
+from agent.phases.adapters import FormationAdapter, PerceptionAdapter
+from agent.phases.config import AgentConfig, Route
+from agent.phases.runner import AgentFailure, Peer, Runner, report_unavailable
+from agent.wire import NeighborRecordMsg, StatusMsg
 
 # robots 1, 2, 3 at known world positions; every robot sees every other one
 WORLD = {1: (0.0, 0.0), 2: (-1.0, 0.1), 3: (0.9, -0.2)}
@@ -258,7 +258,7 @@ def test_unavailable_perception_fails_safely_with_reason() -> None:
 
 
 def test_messages_whose_sender_does_not_own_the_key_are_dropped(runner: Runner) -> None:
-    from agent.bus import Event
+    from agent.net.bus import Event
 
     impostor = NeighborRecordMsg(sender=2, round=0, neighbours=((1.0, 0.0),))
     runner._handle(Event("msg", "nao/1/record", impostor))
@@ -271,7 +271,7 @@ def test_messages_whose_sender_does_not_own_the_key_are_dropped(runner: Runner) 
 
 
 def test_only_the_current_session_of_a_member_counts(runner: Runner) -> None:
-    from agent.bus import Event
+    from agent.net.bus import Event
 
     runner._handle(Event("alive", "nao/alive/2", robot_id=2))
     new = NeighborRecordMsg(sender=2, round=0, neighbours=((1.0, 0.0),))
@@ -287,8 +287,8 @@ def test_only_the_current_session_of_a_member_counts(runner: Runner) -> None:
 def test_a_vanished_token_is_a_departure_only_after_the_grace_period(
     perception: PerceptionAdapter,
 ) -> None:
-    from agent.bus import Event
-    from agent.exchange import Agreement
+    from agent.core.agreement import Agreement
+    from agent.net.bus import Event
 
     now = [0.0]
     bus = Bus(BusConfig(multicast_scouting=False))
@@ -437,7 +437,7 @@ def test_without_linger_members_out_of_reach_are_not_waited_for(
 
 def _waiting(perception: PerceptionAdapter) -> tuple[Runner, Bus]:
     """Robot 3 holding every record, no matching digest from 1 and 2 yet."""
-    from agent.bus import Event
+    from agent.net.bus import Event
 
     bus = Bus(BusConfig(multicast_scouting=False))
     r = Runner(bus, ZenohBody(bus, 3), AgentConfig(robot_id=3, fleet_size=3), perception,
@@ -451,8 +451,8 @@ def _waiting(perception: PerceptionAdapter) -> tuple[Runner, Bus]:
 
 
 def _claim(r: Runner, i: int, plan_digest: str, params: str) -> None:
-    from agent.bus import Event
-    from agent.protocol import DigestMsg
+    from agent.net.bus import Event
+    from agent.wire import DigestMsg
 
     assert r.agreement is not None
     r.agreement.on_digest(

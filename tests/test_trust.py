@@ -1,4 +1,4 @@
-"""agent/trust.py: identities, the credentials folder, the signed envelope, zenoh settings."""
+"""agent/wire/trust.py: identities, the credentials folder, the signed envelope, zenoh settings."""
 
 from __future__ import annotations
 
@@ -11,8 +11,8 @@ from pathlib import Path
 import msgpack
 import pytest
 
-from agent import protocol as P
-from agent import trust as T
+from agent import wire as P
+from agent.wire import trust as T
 
 FIXED = 1_800_000_000.0  # a fixed "now" (s) for the envelope tests
 

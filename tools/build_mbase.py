@@ -10,7 +10,7 @@ sweep their heads as well, every 30° of orientation also gets masks with the ob
 NAO's head turned by ±45° and ±90° ("head"; an addition to the paper).
 
 The result (``mbase.npz`` + ``mbase.json`` with the parameters and a content digest) is
-written to ``agent/perception/data`` unless ``--out`` says otherwise; the renderer is
+written to ``agent/core/perception/data`` unless ``--out`` says otherwise; the renderer is
 deterministic, so regenerating gives the same digest.
 """
 
@@ -24,9 +24,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from agent.perception.camera import CameraModel
-from agent.perception.mbase import CANON_H, CANON_W, DATA_DIR, MBase, cut_mask
-from agent.perception.segmentation import HSV_HIGH, HSV_LOW, extract_tuples, orange_mask
+from agent.core.perception.camera import CameraModel
+from agent.core.perception.mbase import CANON_H, CANON_W, DATA_DIR, MBase, cut_mask
+from agent.core.perception.segmentation import HSV_HIGH, HSV_LOW, extract_tuples, orange_mask
 from sim import nao_model
 from sim.scenarios import RobotSpec, Scenario
 from sim.world import World

@@ -8,7 +8,7 @@ and every sighting gives a sample (1/r_g, d) for the mask of that orientation an
 the mask the recogniser chose (so a mask that is picked for a neighbouring orientation
 is calibrated for it too); d is from the optical centre (6.2 cm ahead of the neck axis
 at head yaw 0) to NAO-j's body centre. d = a / (r_g + c) + b (eq. 6 with the pixel-rim
-offset c, see ``agent/perception/dbase.py``; r_g measured on the box height) is fitted
+offset c, see ``agent/core/perception/dbase.py``; r_g measured on the box height) is fitted
 per mask with scipy; Table 1 (a, b, R², RMSE per mask) is printed and a figure like the paper's
 Figure 19 is written.
 """
@@ -26,10 +26,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from agent.perception.camera import CameraModel
-from agent.perception.dbase import DBase, Fit, fit_distance_model
-from agent.perception.detector import Recogniser
-from agent.perception.mbase import DATA_DIR, MBase
+from agent.core.perception.camera import CameraModel
+from agent.core.perception.dbase import DBase, Fit, fit_distance_model
+from agent.core.perception.detector import Recogniser
+from agent.core.perception.mbase import DATA_DIR, MBase
 from sim.scenarios import RobotSpec, Scenario
 from sim.world import World
 
@@ -38,7 +38,9 @@ DISTANCES = tuple(round(0.5 + 0.05 * i, 2) for i in range(20)) + tuple(
     round(1.5 + 0.1 * i, 2) for i in range(17)
 )
 MIN_SAMPLES = 3
-SCALE = "height"  # the D-base's scale: box height / mask height (see agent/perception/dbase.py)
+SCALE = (
+    "height"  # the D-base's scale: box height / mask height (see agent/core/perception/dbase.py)
+)
 
 
 def distance_scale(mb: MBase, k: int, box: tuple[int, int, int, int]) -> float:

@@ -49,7 +49,7 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
-from agent import protocol as P
+from agent import wire as P
 from tools import netns
 from tools.packet_drop import Dropper
 
@@ -74,7 +74,7 @@ def monitor(
 ) -> int:
     """Observe the bus like ``tools.demo`` does, until the run is over; judge it.
 
-    ``credentials``: a fleet credentials folder (``agent.trust``); the monitor then joins
+    ``credentials``: a fleet credentials folder (``agent.wire.trust``); the monitor then joins
     as a zenoh client of the TLS router with the ``observer`` identity (observers only
     subscribe; every message it records has passed the signature check). Empty:
     insecure, as a peer (the caller gave ``--insecure``).
@@ -90,7 +90,7 @@ def monitor(
     1.5 s more and writes ``out/result.json`` (and the formation figure) with
     ``tools.harness.judge.summarise``. Returns 0 when the run succeeded.
     """
-    from agent.bus import Bus, BusConfig
+    from agent.net.bus import Bus, BusConfig
     from tools.harness import judge, observe
 
     out.mkdir(parents=True, exist_ok=True)
@@ -598,7 +598,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = ap.parse_args(argv)
     if args.monitor:
-        # secure by default, as every process (agent.protocol.network_spec)
+        # secure by default, as every process (agent.wire.network_spec)
         creds = "" if args.insecure else (args.credentials or os.environ.get(P.CREDENTIALS_ENV))
         if args.insecure:
             print(P.INSECURE_WARNING, file=sys.stderr, flush=True)
@@ -714,7 +714,7 @@ def plot_outcomes(rows: list[dict[str, Any]], path: Path, title: str) -> None:
 
 def _fleet(out: Path, robots: int) -> str:
     """A fleet for ``robots`` robots whose router is reached at test host 1 (made once)."""
-    from agent.trust import create_fleet
+    from agent.wire.trust import create_fleet
 
     root = out / f"fleet-{robots}"
     if not (root / "ca.pem").exists():

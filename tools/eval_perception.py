@@ -4,7 +4,7 @@ Renders N labelled views in the simulated world (issue 3): an observer with a ra
 heading and head yaw across ±119.5°, 1-3 other NAOs at 0.4 m to ``--max-distance`` +
 0.15 m (default 3.0 m) with any orientation in its field of view, optionally orange
 lookalike clutter in the room; runs the
-:class:`~agent.perception.detector.Detector` on each view and prints recall, precision,
+:class:`~agent.core.perception.detector.Detector` on each view and prints recall, precision,
 distance and bearing errors (median, p95, share within 0.1 m, within 5 % of the distance
 and within 3°, overall and per distance band), the recognition time per frame, and the
 visual compass error per turn step in the textured room.
@@ -44,10 +44,10 @@ from typing import Any
 import cv2
 import numpy as np
 
-from agent.perception import SIGHT_MAX, SIGHT_MIN
-from agent.perception.camera import CameraModel
-from agent.perception.compass import VisualCompass
-from agent.perception.detector import Detection, Detector
+from agent.core.perception import SIGHT_MAX, SIGHT_MIN
+from agent.core.perception.camera import CameraModel
+from agent.core.perception.compass import VisualCompass
+from agent.core.perception.detector import Detection, Detector
 from sim.scenarios import ClutterSpec, RobotSpec, Scenario
 from sim.world import World
 
@@ -239,7 +239,7 @@ def visible_fractions(w: World, yaw: float, full: np.ndarray, truths: list[Truth
     a pixel of it counts as visible when the full view is orange there and no nearer
     robot's own orange covers it. Robots with no orange in view get 0.
     """
-    from agent.perception.segmentation import orange_mask
+    from agent.core.perception.segmentation import orange_mask
 
     ox, oy, heading = w.pose(1)
     view = heading + yaw

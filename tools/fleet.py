@@ -8,7 +8,7 @@
 
 ``export`` copies the public part (``ca.pem``, ``certs/``) and exactly one private key:
 that is what one host gets. The CA's private key (``ca-private/``) never leaves the
-machine that made the fleet. See ``agent/trust.py`` for the layout and the checks.
+machine that made the fleet. See ``agent/wire/trust.py`` for the layout and the checks.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ import shutil
 import sys
 from pathlib import Path
 
-from agent.trust import Credentials, FleetPaths, Identity, TrustError, create_fleet
+from agent.wire.trust import Credentials, FleetPaths, Identity, TrustError, create_fleet
 
 
 def _ids(args: argparse.Namespace) -> list[int]:

@@ -10,7 +10,7 @@ Three measurements:
    valid message of its type (structure mutations: wrong types, extra and missing
    fields, odd versions and tags, long sequences, text/binary keys; byte mutations:
    flips, truncation, insertion, msgpack type bytes; random bytes) and fed to
-   :func:`agent.protocol.decode`. Prints per type: accepted / rejected (ProtocolError) /
+   :func:`agent.wire.decode`. Prints per type: accepted / rejected (ProtocolError) /
    crashed (any other exception: a bug) and the time. Target: 0 crashes in 10^6.
 2. **Memory** (``--no-memory`` skips it): the peak memory of decoding each of the worst
    payloads under the size limit (8 MiB of empty arrays, nesting, 8 MiB of short
@@ -43,7 +43,7 @@ from typing import Any
 
 import msgpack
 
-from agent import protocol as P
+from agent import wire as P
 from tools.harness.procs import free_port, start_world, stop, wait_ready
 
 MEMORY_TARGET = 50 * 1024 * 1024

@@ -42,19 +42,19 @@ from typing import Any
 
 import numpy as np
 
-from agent.formation.assignment import optimal_assignment
-from agent.formation.common_frame import build_common_frame
-from agent.formation.execution import (
+from agent.core.formation.assignment import optimal_assignment
+from agent.core.formation.common_frame import build_common_frame
+from agent.core.formation.execution import (
     capt_makespan,
     dependency_makespan,
     path_lengths,
     wave_makespan,
 )
-from agent.formation.neighbour_check import identify_neighbours
-from agent.formation.plan import Plan, PlanParams, plan_from_positions, plan_from_records
-from agent.formation.pyramid import parent_of
-from agent.formation.records import NeighborRecord
-from agent.formation.safety import check_safety, paths_cross
+from agent.core.formation.neighbour_check import identify_neighbours
+from agent.core.formation.plan import Plan, PlanParams, plan_from_positions, plan_from_records
+from agent.core.formation.pyramid import parent_of
+from agent.core.formation.records import NeighborRecord
+from agent.core.formation.safety import check_safety, paths_cross
 
 D_E = 2.0
 PHI_E = math.radians(30)

@@ -27,7 +27,7 @@ the legs are on board and only the robot-to-robot exchange crosses WiFi.
 ``--exempt-port PORT`` (repeatable) spares TCP and UDP packets whose source or
 destination port is ``PORT``. Behind a router every agent link goes to the router, so an
 address cannot tell world traffic from robot-to-robot traffic; the router's second port
-(``agent.protocol.WORLD_PORT``, 7448) carries the world's link and the agents' body
+(``agent.wire.WORLD_PORT``, 7448) carries the world's link and the agents' body
 sessions, and ``--exempt-port 7448`` spares exactly that (what ``tools.eval_loss`` and
 the compose ``LOSS`` setting do).
 

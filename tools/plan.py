@@ -17,7 +17,7 @@ Output (everything in the input's frame)::
      "waves": [[7, 3], [9], ...], "digest": "hex", "strategy": "optimal"}
 
 A robot may start once every robot of its ``after`` list holds its slot (the dependency
-rule of ``agent.formation.execution``); waiting for every robot of the earlier waves is
+rule of ``agent.core.formation.execution``); waiting for every robot of the earlier waves is
 safe too.
 
 ``--png FILE`` also draws the plan (starts, paths coloured by wave, slots, leader, axis).
@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from agent.formation.plan import Plan, PlanParams, plan_from_positions
+from agent.core.formation.plan import Plan, PlanParams, plan_from_positions
 
 _KEYS = {"robots", "d_e", "phi_e_deg", "radius", "strategy", "orientation", "obstacles"}
 

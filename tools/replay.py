@@ -1,6 +1,6 @@
 """``python -m tools.replay FILE.mcap [--out DIR] [--frames K]``: replay a demo recording.
 
-Reads the MCAP written by ``tools.demo`` (msgpack wire messages of agent/protocol.py,
+Reads the MCAP written by ``tools.demo`` (msgpack wire messages of agent/wire/,
 one channel per key), validates every message with the protocol codec, prints the
 timeline (phase changes of every agent, records and digests exchanged, contacts) and
 writes ``DIR/replay.png`` (paths walked from the truth stream, final poses) and ``K``
@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from agent.protocol import (
+from agent.wire import (
     ContactMsg,
     DigestMsg,
     NeighborRecordMsg,

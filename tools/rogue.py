@@ -45,7 +45,7 @@ from typing import Any
 import msgpack
 import zenoh
 
-from agent.protocol import (
+from agent.wire import (
     KEY_WORLD_REGISTER,
     CameraReply,
     CommandReply,

@@ -3,10 +3,10 @@
 Secure (the default, DESIGN.md §8): ``--credentials DIR`` (or ``$NAO_CREDENTIALS``); the
 router listens on ``tls/0.0.0.0:7447`` and ``tls/0.0.0.0:7448``, accepts only links with a certificate of the
 fleet CA (mutual TLS) and enforces the fleet's access control by common name
-(``agent.trust.acl_settings``). Every other process then runs with ``--credentials DIR
+(``agent.wire.trust.acl_settings``). Every other process then runs with ``--credentials DIR
 --connect tls/ROUTER:7447`` as a zenoh client. ``--insecure`` (development only): plain
 TCP on ``tcp/0.0.0.0:7447`` and ``:7448``, anyone may connect. Port 7447
-(``agent.protocol.BUS_PORT``) carries robot-to-robot traffic, port 7448
+(``agent.wire.BUS_PORT``) carries robot-to-robot traffic, port 7448
 (``WORLD_PORT``) the world's link and the agents' body sessions (``python -m agent
 --world-connect``): one router, two ports, so that fault injection can spare the
 world's traffic by port (``tools.packet_drop --exempt-port 7448``). This router (a zenoh-python session in
@@ -31,8 +31,8 @@ from types import FrameType
 
 import zenoh
 
-from agent.bus import zenoh_config
-from agent.protocol import (
+from agent.net.bus import zenoh_config
+from agent.wire import (
     BUS_PORT,
     CREDENTIALS_ENV,
     WORLD_PORT,

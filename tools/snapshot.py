@@ -19,7 +19,7 @@ from pathlib import Path
 
 import cv2
 
-from agent.protocol import add_network_arguments
+from agent.wire import add_network_arguments
 from sim import scenarios
 from sim.camera import HFOV
 from sim.nao_model import FOOTPRINT_RADIUS
@@ -111,7 +111,7 @@ def run_remote(args: argparse.Namespace, out: Path) -> int:
     """Ask a running world (``sim.client``'s link: sealed with credentials, or not)."""
     import zenoh
 
-    from agent.protocol import CameraReply, CameraRequest, key_camera, network_spec
+    from agent.wire import CameraReply, CameraRequest, key_camera, network_spec
     from sim.client import Link, WorldError, ask, truth
 
     spec = network_spec(args, "observer" if args.top_down else f"robot-{args.robot}")

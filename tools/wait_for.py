@@ -12,7 +12,7 @@ Without ``--queryable`` it waits until the first publication on KEY arrives (the
 publishes ``world/clock`` once it serves); with ``--queryable``, until a querier on KEY
 has a matching queryable (zenoh's matching status: nothing is sent, no id is claimed).
 
-It joins like every process (``agent.protocol.add_network_arguments``): secure by default
+It joins like every process (``agent.wire.add_network_arguments``): secure by default
 with ``--credentials DIR`` (or ``$NAO_CREDENTIALS``) as a zenoh client of the TLS router,
 ``--insecure`` for development. ``--identity CN`` picks whose key opens the link; by
 default the first key the folder holds of ``observer``, the robots (lowest id first),
@@ -34,13 +34,13 @@ from pathlib import Path
 
 import zenoh
 
-from agent.bus import zenoh_config
-from agent.protocol import Guard, NetworkSpec, add_network_arguments, network_spec
+from agent.net.bus import zenoh_config
+from agent.wire import Guard, NetworkSpec, add_network_arguments, network_spec
 
 
 def default_identity(credentials: str) -> str:
     """The identity whose key a credentials folder holds: observer, robots, then world."""
-    from agent.trust import Credentials, Identity
+    from agent.wire.trust import Credentials, Identity
 
     creds = Credentials(credentials)
     who = [Identity("observer"), *(Identity.robot(r) for r in creds.own_robot_keys())]
@@ -51,7 +51,7 @@ def default_identity(credentials: str) -> str:
 
 
 def _check_key(credentials: str, cn: str) -> None:
-    from agent.trust import FleetPaths, Identity
+    from agent.wire.trust import FleetPaths, Identity
 
     if not FleetPaths(Path(credentials)).key(Identity.parse(cn)).is_file():
         raise ValueError(f"{credentials} holds no private key for {cn}")
@@ -66,7 +66,7 @@ def _open(cfg: zenoh.Config, end: float) -> zenoh.Session | None:
     """
     last = ""
     while True:
-        # zenoh's own connect retries (agent.protocol.LOSSY_LINK_SETTINGS) within our limit
+        # zenoh's own connect retries (agent.wire.LOSSY_LINK_SETTINGS) within our limit
         left_ms = max(1000, int(1000 * (end - time.monotonic())))
         cfg.insert_json5("connect/timeout_ms", f"{{router: -1, peer: -1, client: {left_ms}}}")
         try:

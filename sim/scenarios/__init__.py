@@ -2,14 +2,14 @@
 
 A scenario fixes everything the world needs to start (issue 3, DESIGN.md §4): robot ids
 and initial poses ``(x, y, heading)`` in world metres/radians, static obstacles (cylinders,
-radius :data:`agent.nao.OBSTACLE_RADIUS` by default), optional orange lookalike clutter for the detector's hard
+radius :data:`agent.core.nao.OBSTACLE_RADIUS` by default), optional orange lookalike clutter for the detector's hard
 cases, the light, the seed of the textures and of the motion noise, and the half-size of
 the square room.
 
 :func:`generate` draws the paper-like starts of the NAO paper's experiments (§5.2.2):
 every robot faces the same "north" (world +y, heading pi/2), nearest spacing 0.6-1.2 m,
 every robot within the range of sight [DETECT_MIN, DETECT_MAX] = [0.5, 3.0] m (the
-perception's, :data:`agent.nao.SIGHT_MAX`) of at least one other, the whole fleet
+perception's, :data:`agent.core.nao.SIGHT_MAX`) of at least one other, the whole fleet
 connected by that relation. With ``isolated`` one robot stands 2-3 m from every other
 (at the far end of sight). Scenario files are JSON (:func:`load`, :func:`dump`).
 """
@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from agent.protocol import nao
+from agent.wire import nao
 
 NORTH = math.pi / 2
 MIN_SPACING = 0.6
@@ -49,7 +49,7 @@ class RobotSpec:
 
 @dataclass(frozen=True)
 class ObstacleSpec:
-    """A static cylinder standing on the floor (obstacle rose, 0.6 m tall; agent/nao.py)."""
+    """A static cylinder standing on the floor (obstacle rose, 0.6 m tall; agent/core/nao.py)."""
 
     x: float
     y: float

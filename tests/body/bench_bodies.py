@@ -20,7 +20,7 @@ import statistics
 import time
 from collections.abc import Callable
 
-from agent.seams import Body
+from agent.body.base import Body
 from tests.body.conftest import FACING, KINDS, rig
 
 

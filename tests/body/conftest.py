@@ -1,9 +1,9 @@
-"""The three bodies of :class:`agent.seams.Body` on one simulated world each (issue #11).
+"""The three bodies of :class:`agent.phases.seams.Body` on one simulated world each (issue #11).
 
-- ``world``: :class:`agent.body_world.WorldBody`, the world in this process;
-- ``zenoh``: :class:`agent.robot.ZenohBody` over a real zenoh session (loopback) to a
+- ``world``: :class:`agent.body.in_process.WorldBody`, the world in this process;
+- ``zenoh``: :class:`agent.body.zenoh_world.ZenohBody` over a real zenoh session (loopback) to a
   :class:`sim.server.WorldServer` whose loop runs in a thread of this process;
-- ``naoqi``: :class:`agent.body_naoqi.NaoqiBody` over the real qi protocol (loopback) to
+- ``naoqi``: :class:`agent.body.naoqi.NaoqiBody` over the real qi protocol (loopback) to
   the virtual NAOs of :class:`sim.naoqi_gateway.NaoqiGateway` on that same world loop.
 
 Every image is a real render; nothing is mocked.
@@ -20,9 +20,9 @@ from typing import Any
 
 import pytest
 
-from agent.adapters import PerceptionAdapter
-from agent.bus import Bus, BusConfig
-from agent.seams import Body
+from agent.body.base import Body
+from agent.net.bus import Bus, BusConfig
+from agent.phases.adapters import PerceptionAdapter
 from sim import scenarios
 from sim.scenarios import RobotSpec, Scenario
 from sim.world import World
@@ -56,11 +56,11 @@ def rig(kind: str, scenario: Scenario, noise: bool = False) -> Iterator[Rig]:
 
         stack.callback(lambda: [b.close() for b in bodies])
         if kind == "world":
-            from agent.body_world import WorldBody
+            from agent.body.in_process import WorldBody
 
             yield Rig(kind, world, lambda rid: keep(WorldBody(world, rid)))
             return
-        from agent.bus import Bus, BusConfig
+        from agent.net.bus import Bus, BusConfig
         from sim.server import NetConfig, WorldServer
 
         ep = f"tcp/127.0.0.1:{free_port()}"
@@ -72,7 +72,7 @@ def rig(kind: str, scenario: Scenario, noise: bool = False) -> Iterator[Rig]:
         stack.callback(thread.join, 10.0)
         stack.callback(server.stop)
         if kind == "zenoh":
-            from agent.robot import ZenohBody
+            from agent.body.zenoh_world import ZenohBody
 
             bus = Bus(BusConfig(connect=(ep,), multicast_scouting=False))
             stack.callback(bus.close)
@@ -80,7 +80,7 @@ def rig(kind: str, scenario: Scenario, noise: bool = False) -> Iterator[Rig]:
                 kind, world, lambda rid: keep(ZenohBody(bus, rid, camera_timeout=5.0)), server
             )
             return
-        from agent.body_naoqi import NaoqiBody
+        from agent.body.naoqi import NaoqiBody
         from sim.naoqi_gateway import NaoqiGateway
 
         gateway = NaoqiGateway(server)

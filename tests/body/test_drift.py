@@ -1,5 +1,5 @@
 """A step's drift the compass reports implausibly large is re-measured
-(:meth:`agent.runner.Runner._confirm_drift`, issue #10).
+(:meth:`agent.phases.runner.Runner._confirm_drift`, issue #10).
 
 At ``--noise-scale 2`` a NAO that veers strongly drifts 20–30° in one 20 cm step; the
 compass measured it correctly, the runner took it for a mismatch and believed 0°, and
@@ -16,13 +16,13 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from agent.adapters import FormationAdapter, PerceptionAdapter
-from agent.body_world import WorldBody
-from agent.bus import Bus
-from agent.config import AgentConfig
-from agent.control import wrap_pi
-from agent.perception.compass import CompassResult
-from agent.runner import NORTH, Runner, _plausible
+from agent.body.in_process import WorldBody
+from agent.core.control import wrap_pi
+from agent.core.perception.compass import CompassResult
+from agent.net.bus import Bus
+from agent.phases.adapters import FormationAdapter, PerceptionAdapter
+from agent.phases.config import AgentConfig
+from agent.phases.runner import NORTH, Runner, _plausible
 from sim.locomotion import NoiseModel
 from sim.scenarios import RobotSpec, Scenario
 from sim.world import World

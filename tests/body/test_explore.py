@@ -1,6 +1,6 @@
 """The exploration move of a re-search round (NAO paper 4.1.3 rule 2) on an in-process world.
 
-:meth:`agent.runner.Runner.explore` walks the move in 20 cm steps and checks the yaw-0
+:meth:`agent.phases.runner.Runner.explore` walks the move in 20 cm steps and checks the yaw-0
 image before each one: a NAO inside the step's sweep ends the move there.
 """
 
@@ -12,11 +12,11 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from agent.adapters import FormationAdapter, PerceptionAdapter
-from agent.body_world import WorldBody
-from agent.bus import Bus
-from agent.config import AgentConfig
-from agent.runner import Runner
+from agent.body.in_process import WorldBody
+from agent.net.bus import Bus
+from agent.phases.adapters import FormationAdapter, PerceptionAdapter
+from agent.phases.config import AgentConfig
+from agent.phases.runner import Runner
 from sim.scenarios import RobotSpec, Scenario
 from sim.world import World
 

@@ -1,4 +1,4 @@
-"""The march (agent/march.py) on an in-process world: a follower keeps station on a
+"""The march (agent/phases/march.py) on an in-process world: a follower keeps station on a
 parent that the test moves, a lost parent halts it with the reason, a failed member
 halts the fleet, the leader waits for a follower that lost its parent (issue #13).
 
@@ -14,16 +14,16 @@ import math
 import numpy as np
 import pytest
 
-from agent.adapters import FormationAdapter, PerceptionAdapter
-from agent.body_world import WorldBody
-from agent.bus import Bus
-from agent.config import AgentConfig, Route
-from agent.control import wrap_pi
-from agent.formation.plan import Plan, PlanParams
-from agent.march import LOST, Marcher, MarchHalt, route_vector, station_offset
-from agent.protocol import NeighborRecordMsg
-from agent.runner import Peer, Runner
-from agent.seams import Frame
+from agent.body.base import Frame
+from agent.body.in_process import WorldBody
+from agent.core.control import wrap_pi
+from agent.core.formation.plan import Plan, PlanParams
+from agent.net.bus import Bus
+from agent.phases.adapters import FormationAdapter, PerceptionAdapter
+from agent.phases.config import AgentConfig, Route
+from agent.phases.march import LOST, Marcher, MarchHalt, route_vector, station_offset
+from agent.phases.runner import Peer, Runner
+from agent.wire import NeighborRecordMsg
 from sim.world import World
 
 

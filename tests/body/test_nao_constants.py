@@ -1,6 +1,6 @@
-"""The NAO's numbers have one home (agent/nao.py), and sim and agent agree on them.
+"""The NAO's numbers have one home (agent/core/nao.py), and sim and agent agree on them.
 
-``sim/`` reaches agent.nao through agent.protocol; the few sim modules that keep a copy
+``sim/`` reaches agent.core.nao through agent.wire; the few sim modules that keep a copy
 (the body model and locomotion, owned elsewhere) are pinned equal here, and the two
 camera models (sim's renderer, the agent's angle model) must put a point on the same
 pixel column.
@@ -13,9 +13,10 @@ import math
 import numpy as np
 import pytest
 
-from agent import nao, protocol
-from agent.perception import detector
-from agent.perception.camera import CameraModel
+from agent import wire as protocol
+from agent.core import nao
+from agent.core.perception import detector
+from agent.core.perception.camera import CameraModel
 from sim import camera as sim_camera
 from sim import locomotion, nao_model
 

@@ -17,8 +17,8 @@ from pathlib import Path
 import pytest
 import qi
 
-from agent.nao import COLORSPACE_BGR, HEAD_YAW_LIMIT, RESOLUTION_VGA, TOP_CAMERA
-from agent.seams import BodyError
+from agent.body.base import BodyError
+from agent.core.nao import COLORSPACE_BGR, HEAD_YAW_LIMIT, RESOLUTION_VGA, TOP_CAMERA
 from tests.body.conftest import FACING, Rig, rig
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -121,7 +121,7 @@ def test_an_agent_process_exits_cleanly_with_a_live_session(nao: Rig) -> None:
     """No close by the caller: the body closes its session at exit (a qi session left to
     the interpreter's finalisation can end the process with "terminate called...")."""
     code = (
-        "from agent.body_naoqi import NaoqiBody\n"
+        "from agent.body.naoqi import NaoqiBody\n"
         f"b = NaoqiBody({nao.urls[1]!r}, 1)\n"
         "print(b.camera(0.1).yaw)\n"
     )

@@ -1,6 +1,6 @@
 """The runner's moving phases, one by one, on an in-process world (issue #11).
 
-:class:`agent.body_world.WorldBody` gives real renders and the world's seeded motion
+:class:`agent.body.in_process.WorldBody` gives real renders and the world's seeded motion
 noise without a network; the bus is a real zenoh session with no peers (the phases
 publish statuses). Ground truth comes from the world, which the agent never reads.
 
@@ -15,14 +15,14 @@ import math
 import numpy as np
 import pytest
 
-from agent.adapters import FormationAdapter, PerceptionAdapter
-from agent.body_world import WorldBody
-from agent.bus import Bus
-from agent.config import AgentConfig
-from agent.control import wrap_pi
-from agent.formation.plan import PlanParams
-from agent.protocol import NeighborRecordMsg
-from agent.runner import NORTH, Peer, Runner
+from agent.body.in_process import WorldBody
+from agent.core.control import wrap_pi
+from agent.core.formation.plan import PlanParams
+from agent.net.bus import Bus
+from agent.phases.adapters import FormationAdapter, PerceptionAdapter
+from agent.phases.config import AgentConfig
+from agent.phases.runner import NORTH, Peer, Runner
+from agent.wire import NeighborRecordMsg
 from sim.world import World
 
 

@@ -1,4 +1,4 @@
-"""Safe steps (agent/control/corridor.py in Runner.walk_to) on an in-process world: a NAO
+"""Safe steps (agent/core/control/corridor.py in Runner.walk_to) on an in-process world: a NAO
 stands in the robot's corridor; the robot sees it in the compass image, waits, then
 walks round it by via steps and reaches its goal without contact (issue #10).
 
@@ -14,12 +14,12 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from agent.adapters import FormationAdapter, PerceptionAdapter
-from agent.body_world import WorldBody
-from agent.bus import Bus
-from agent.config import AgentConfig
-from agent.control.corridor import CorridorParams
-from agent.runner import AgentFailure, Runner
+from agent.body.in_process import WorldBody
+from agent.core.control.corridor import CorridorParams
+from agent.net.bus import Bus
+from agent.phases.adapters import FormationAdapter, PerceptionAdapter
+from agent.phases.config import AgentConfig
+from agent.phases.runner import AgentFailure, Runner
 from sim.nao_model import FOOTPRINT_RADIUS
 from sim.scenarios import RobotSpec, Scenario
 from sim.world import World

@@ -1,4 +1,4 @@
-"""Where the child looks for its parent and which NAO it takes (agent/control/alignment.py)."""
+"""Where the child looks for its parent and which NAO it takes (agent/core/control/alignment.py)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from agent.control.alignment import look_yaws, match_parent
+from agent.core.control.alignment import look_yaws, match_parent
 
 
 def test_look_yaws_fan_out_around_the_expected_bearing() -> None:

@@ -1,4 +1,4 @@
-"""The corridor check before each step (agent/control/corridor.py): known answers,
+"""The corridor check before each step (agent/core/control/corridor.py): known answers,
 hypothesis invariants, one test per error branch."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent.control.corridor import (
+from agent.core.control.corridor import (
     GO,
     LEFT,
     MAX_VIA_TURN,
@@ -27,8 +27,8 @@ from agent.control.corridor import (
     patience,
     plan_rank,
 )
-from agent.formation.plan import PlanParams
-from agent.nao import CAMERA_HFOV
+from agent.core.formation.plan import PlanParams
+from agent.core.nao import CAMERA_HFOV
 
 NORTH = math.pi / 2
 CP = CorridorParams()  # radius 0.2, margin 0.05: clearance 0.45 m

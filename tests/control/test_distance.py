@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from agent.control.distance import STEP_LENGTH, advance, next_leg, split_distance
+from agent.core.control.distance import STEP_LENGTH, advance, next_leg, split_distance
 
 
 def test_split_known_answers() -> None:

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from agent.control.rotation import (
+from agent.core.control.rotation import (
     MAX_STEP,
     PAPER_GAINS,
     STEP_GAINS,

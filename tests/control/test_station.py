@@ -1,4 +1,4 @@
-"""Station keeping on the parent (agent/control/station.py): known answers, invariants,
+"""Station keeping on the parent (agent/core/control/station.py): known answers, invariants,
 one test per error branch."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from agent.control.station import (
+from agent.core.control.station import (
     StationCommand,
     StationGains,
     StationKeeper,

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent.formation.execution import (
+from agent.core.formation.execution import (
     capt_makespan,
     check_dependencies,
     dependency_makespan,
@@ -15,8 +15,8 @@ from agent.formation.execution import (
     path_lengths,
     wave_makespan,
 )
-from agent.formation.plan import Plan, PlanParams, plan_from_positions
-from agent.formation.safety import check_safety
+from agent.core.formation.plan import Plan, PlanParams, plan_from_positions
+from agent.core.formation.safety import check_safety
 
 R = 0.2
 

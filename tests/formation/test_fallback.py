@@ -9,11 +9,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent.formation.execution import check_dependencies
-from agent.formation.fallback import banded_plan
-from agent.formation.plan import PlanParams, plan_from_positions
-from agent.formation.pyramid import pyramid_frame
-from agent.formation.safety import check_safety
+from agent.core.formation.execution import check_dependencies
+from agent.core.formation.fallback import banded_plan
+from agent.core.formation.plan import PlanParams, plan_from_positions
+from agent.core.formation.pyramid import pyramid_frame
+from agent.core.formation.safety import check_safety
 
 R = 0.2
 
@@ -100,7 +100,7 @@ def test_property_banded_plan_is_always_safe(
 def test_plan_falls_back_to_the_banded_plan_when_scheduling_fails(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    import agent.formation.plan as plan_mod
+    import agent.core.formation.plan as plan_mod
 
     def fail(*args: object, **kwargs: object) -> None:
         raise ValueError("no safe schedule found after 10 rounds of slot swaps")

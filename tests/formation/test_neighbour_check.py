@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agent.formation.common_frame import build_common_frame, choose_frame_robot
-from agent.formation.neighbour_check import identify_neighbours, meets_eq9
-from agent.formation.records import NeighborRecord
+from agent.core.formation.common_frame import build_common_frame, choose_frame_robot
+from agent.core.formation.neighbour_check import identify_neighbours, meets_eq9
+from agent.core.formation.records import NeighborRecord
 from tests.formation.conftest import random_fleet, records_from_positions
 
 # Three robots worked by hand: 0 at (0, 0), 1 at (1, 0), 2 at (0, 1); fixed frames parallel.

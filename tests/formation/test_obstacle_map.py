@@ -1,4 +1,4 @@
-"""Merging perceived obstacles into the common frame (agent/formation/obstacle_map.py)
+"""Merging perceived obstacles into the common frame (agent/core/formation/obstacle_map.py)
 and planning around them from records (plan_from_records ``sightings``)."""
 
 from __future__ import annotations
@@ -10,9 +10,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent.formation.obstacle_map import MERGE_RADIUS, common_frame_obstacles, merge_sightings
-from agent.formation.plan import PlanParams, plan_from_records
-from agent.formation.records import NeighborRecord
+from agent.core.formation.obstacle_map import MERGE_RADIUS, common_frame_obstacles, merge_sightings
+from agent.core.formation.plan import PlanParams, plan_from_records
+from agent.core.formation.records import NeighborRecord
 
 
 def test_two_robots_see_one_obstacle() -> None:

@@ -7,16 +7,16 @@ import itertools
 import numpy as np
 import pytest
 
-from agent.formation.assignment import (
+from agent.core.formation.assignment import (
     assign,
     bottleneck_assignment,
     bounded_assignment,
     min_bottleneck,
 )
-from agent.formation.detours import shorten
-from agent.formation.execution import check_dependencies, dependency_makespan, path_lengths
-from agent.formation.packing import pack
-from agent.formation.safety import PairFlags, check_safety, pair_flags
+from agent.core.formation.detours import shorten
+from agent.core.formation.execution import check_dependencies, dependency_makespan, path_lengths
+from agent.core.formation.packing import pack
+from agent.core.formation.safety import PairFlags, check_safety, pair_flags
 
 R = 0.2
 
@@ -131,8 +131,8 @@ def test_bottleneck_assignment_is_the_min_bottleneck_by_brute_force() -> None:
 
 
 def test_regroup_waves_keeps_the_order_and_never_lengthens() -> None:
-    from agent.formation.execution import wave_makespan
-    from agent.formation.packing import regroup_waves
+    from agent.core.formation.execution import wave_makespan
+    from agent.core.formation.packing import regroup_waves
 
     # 1 waits for 0; 2 (long, free) joins 0's wave... it already is; 3 (short, free)
     # joins the wave of the longest path it can

@@ -7,12 +7,12 @@ import math
 import numpy as np
 import pytest
 
-from agent.formation import plan as plan_module
-from agent.formation.obstacles import SLOT_CLEARANCE, clear_shifts
-from agent.formation.plan import Plan, PlanParams, plan_from_positions, plan_from_records
-from agent.formation.pyramid import parent_of
-from agent.formation.records import NeighborRecord
-from agent.formation.safety import check_safety
+from agent.core.formation import plan as plan_module
+from agent.core.formation.obstacles import SLOT_CLEARANCE, clear_shifts
+from agent.core.formation.plan import Plan, PlanParams, plan_from_positions, plan_from_records
+from agent.core.formation.pyramid import parent_of
+from agent.core.formation.records import NeighborRecord
+from agent.core.formation.safety import check_safety
 from tests.formation.conftest import random_fleet, records_from_positions
 
 

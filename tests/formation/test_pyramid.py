@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from agent.formation.assignment import assign, uncross
-from agent.formation.pyramid import (
+from agent.core.formation.assignment import assign, uncross
+from agent.core.formation.pyramid import (
     PyramidFrame,
     layer_of,
     parent_of,
@@ -17,7 +17,7 @@ from agent.formation.pyramid import (
     pyramid_frame,
     slot_positions,
 )
-from agent.formation.safety import paths_cross
+from agent.core.formation.safety import paths_cross
 from tests.formation.conftest import random_fleet
 
 PHI = math.radians(30)

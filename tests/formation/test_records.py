@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agent.formation.records import (
+from agent.core.formation.records import (
     NeighborRecord,
     canonical_records,
     record_from_polar,

@@ -9,8 +9,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent.formation.records import NeighborRecord
-from agent.formation.research import (
+from agent.core.formation.records import NeighborRecord
+from agent.core.formation.research import (
     DEFAULT_APPROACH,
     DEFAULT_STEP,
     GOLDEN_ANGLE,

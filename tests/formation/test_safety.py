@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agent.formation.safety import (
+from agent.core.formation.safety import (
     candidate_segment_pairs,
     check_safety,
     pair_flags,

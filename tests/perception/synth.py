@@ -12,7 +12,7 @@ import math
 import cv2
 import numpy as np
 
-from agent.perception.mbase import MBase, cut_mask
+from agent.core.perception.mbase import MBase, cut_mask
 
 ORANGE_BGR = (0, 60, 255)  # H ≈ 7, S 255, V 255 on OpenCV's scale
 GREY_BGR = (128, 128, 128)

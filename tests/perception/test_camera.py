@@ -3,7 +3,7 @@ import math
 import numpy as np
 import pytest
 
-from agent.perception.camera import CameraModel
+from agent.core.perception.camera import CameraModel
 
 
 def test_intrinsics_match_common_conventions() -> None:

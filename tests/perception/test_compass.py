@@ -3,8 +3,8 @@ import math
 import numpy as np
 import pytest
 
-from agent.perception.camera import CameraModel
-from agent.perception.compass import VisualCompass
+from agent.core.perception.camera import CameraModel
+from agent.core.perception.compass import VisualCompass
 from tests.perception.synth import canvas, textured_panorama, view_of_panorama
 
 CAM = CameraModel()

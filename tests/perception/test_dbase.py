@@ -3,7 +3,7 @@ import json
 import numpy as np
 import pytest
 
-from agent.perception.dbase import DBase, Fit, fit_distance_model
+from agent.core.perception.dbase import DBase, Fit, fit_distance_model
 
 
 def test_fit_recovers_exact_model() -> None:

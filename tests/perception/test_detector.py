@@ -3,9 +3,9 @@ import math
 import numpy as np
 import pytest
 
-from agent.perception.camera import CameraModel
-from agent.perception.dbase import DBase, Fit
-from agent.perception.detector import Detector
+from agent.core.perception.camera import CameraModel
+from agent.core.perception.dbase import DBase, Fit
+from agent.core.perception.detector import Detector
 from tests.perception.synth import canvas, draw_nao, synthetic_mbase
 
 CAM = CameraModel(cam_forward=0.05)

@@ -4,7 +4,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from agent.perception.localise import (
+from agent.core.perception.localise import (
     cluster_sightings,
     local_position,
     merge_sightings,

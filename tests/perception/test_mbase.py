@@ -3,7 +3,7 @@ import json
 import numpy as np
 import pytest
 
-from agent.perception.mbase import MBase, canonical, cut_mask
+from agent.core.perception.mbase import MBase, canonical, cut_mask
 from tests.perception.synth import synthetic_mbase
 
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from agent.perception.dbase import DBase
-from agent.perception.mbase import MBase
+from agent.core.perception.dbase import DBase
+from agent.core.perception.mbase import MBase
 from tools import build_mbase
 
 

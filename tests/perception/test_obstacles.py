@@ -1,4 +1,4 @@
-"""The obstacle detector (agent/perception/obstacles.py) on views rendered by the world.
+"""The obstacle detector (agent/core/perception/obstacles.py) on views rendered by the world.
 
 Known answers (one cylinder ahead, to the side, near enough that its bottom leaves the
 image, one partly hidden behind another), accuracy over a seeded set of views with
@@ -15,8 +15,8 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from agent import nao
-from agent.perception.obstacles import ObstacleDetection, ObstacleDetector, obstacle_mask
+from agent.core import nao
+from agent.core.perception.obstacles import ObstacleDetection, ObstacleDetector, obstacle_mask
 from sim.scenarios import ClutterSpec, ObstacleSpec, RobotSpec, Scenario
 from sim.world import World, make_texture
 
@@ -162,8 +162,8 @@ def test_bad_radius_raises() -> None:
 
 
 def test_adapter_merges_a_robots_sightings_and_bounds_them() -> None:
-    from agent.adapters import PerceptionAdapter
-    from agent.protocol import MAX_OBSTACLES
+    from agent.phases.adapters import PerceptionAdapter
+    from agent.wire import MAX_OBSTACLES
 
     a = np.array([[1.0, 0.0], [0.0, 2.0]])
     b = np.array([[1.04, 0.02]])

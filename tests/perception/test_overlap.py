@@ -1,4 +1,4 @@
-"""Splitting tuples merged by overlapping NAOs (agent/perception/overlap.py)."""
+"""Splitting tuples merged by overlapping NAOs (agent/core/perception/overlap.py)."""
 
 from __future__ import annotations
 
@@ -8,10 +8,10 @@ import cv2
 import numpy as np
 import pytest
 
-from agent.perception.camera import CameraModel
-from agent.perception.overlap import split_merged
-from agent.perception.recognition import recognise
-from agent.perception.segmentation import extract_tuples
+from agent.core.perception.camera import CameraModel
+from agent.core.perception.overlap import split_merged
+from agent.core.perception.recognition import recognise
+from agent.core.perception.segmentation import extract_tuples
 from tests.perception.synth import draw_nao_mask, synthetic_mbase
 
 CAM = CameraModel()
@@ -98,8 +98,8 @@ def test_small_disc_half_inside_a_big_one_is_cut_at_the_concave_corners() -> Non
 
 
 def test_group_keeping_part_of_its_own_split_cap_is_refused() -> None:
-    from agent.perception.recognition import leaves_sibling_inside
-    from agent.perception.segmentation import Tuple
+    from agent.core.perception.recognition import leaves_sibling_inside
+    from agent.core.perception.segmentation import Tuple
 
     whole = Tuple(1, 50.0, 20.0, (20, 10, 60, 20), 900)
     left = Tuple(2, 35.0, 20.0, (20, 10, 30, 20), 450)

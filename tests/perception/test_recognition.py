@@ -3,8 +3,8 @@ import math
 import numpy as np
 import pytest
 
-from agent.perception.camera import CameraModel
-from agent.perception.recognition import (
+from agent.core.perception.camera import CameraModel
+from agent.core.perception.recognition import (
     candidate_groups,
     fast_scores,
     group_crop,
@@ -12,7 +12,7 @@ from agent.perception.recognition import (
     reference_scores,
     share_gap,
 )
-from agent.perception.segmentation import extract_tuples
+from agent.core.perception.segmentation import extract_tuples
 from tests.perception.synth import draw_nao_mask, synthetic_mbase
 
 CAM = CameraModel()

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from agent.perception.segmentation import check_image, extract_tuples, orange_mask
+from agent.core.perception.segmentation import check_image, extract_tuples, orange_mask
 from tests.perception.synth import canvas, draw_nao
 
 

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from agent.perception.detector import Detector
+from agent.core.perception.detector import Detector
 from tools.eval_perception import run_compass, run_views, summarise
 
 VIEWS = 80

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agent.perception import SIGHT_MAX, SIGHT_MIN
+from agent.core.perception import SIGHT_MAX, SIGHT_MIN
 from sim import scenarios
 from sim.scenarios import (
     DETECT_MAX,

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 import zenoh
 
-from agent.protocol import (
+from agent.wire import (
     KEY_WORLD_REGISTER,
     CameraReply,
     CameraRequest,

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from agent.protocol import StatusMsg
+from agent.wire import StatusMsg
 from tests.system.world import Watch, watched_world
 from tools.harness.procs import start_agent
 

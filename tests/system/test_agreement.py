@@ -1,7 +1,7 @@
 """Agreement over real zenoh sessions: the runner's exchange phase in several peers.
 
-Each peer is a real :class:`agent.bus.Bus` (its own zenoh session, loopback TCP, no
-multicast) driving :meth:`agent.runner.Runner.agree`, the code every agent process
+Each peer is a real :class:`agent.net.bus.Bus` (its own zenoh session, loopback TCP, no
+multicast) driving :meth:`agent.phases.runner.Runner.agree`, the code every agent process
 runs. Covered: all agree on one digest; a late joiner is waited for; a lost record is
 re-sent; a member that dies before agreement stops everyone safely.
 """
@@ -15,13 +15,13 @@ from typing import Any
 
 import pytest
 
-from agent.adapters import FormationAdapter, PerceptionAdapter
-from agent.bus import Bus, BusConfig
-from agent.config import AgentConfig
-from agent.exchange import Decision
-from agent.protocol import Message, NeighborRecordMsg, StatusMsg
-from agent.robot import ZenohBody
-from agent.runner import Runner
+from agent.body.zenoh_world import ZenohBody
+from agent.core.agreement import Decision
+from agent.net.bus import Bus, BusConfig
+from agent.phases.adapters import FormationAdapter, PerceptionAdapter
+from agent.phases.config import AgentConfig
+from agent.phases.runner import Runner
+from agent.wire import Message, NeighborRecordMsg, StatusMsg
 from tools.harness.procs import free_port
 
 

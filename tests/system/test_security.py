@@ -25,9 +25,9 @@ from typing import Any
 import pytest
 import zenoh
 
-from agent import protocol as P
-from agent import trust as T
-from agent.bus import Bus, BusConfig, BusError, NoRoute
+from agent import wire as P
+from agent.net.bus import Bus, BusConfig, BusError, NoRoute
+from agent.wire import trust as T
 from sim import scenarios
 from sim.server import WorldServer
 from sim.world import World

@@ -12,8 +12,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from agent.bus import Bus, BusConfig
-from agent.protocol import KEY_STATUS_ALL, KEY_WORLD_TRUTH_ALL, StatusMsg, TruthPosesMsg
+from agent.net.bus import Bus, BusConfig
+from agent.wire import KEY_STATUS_ALL, KEY_WORLD_TRUTH_ALL, StatusMsg, TruthPosesMsg
 from tools.harness.procs import ROOT, Proc, free_port, robot_ids, start_world, stop, wait_ready
 
 

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from agent import protocol as P
+from agent import wire as P
 from tools import eval_loss
 from tools.eval_loss import RunResult, _fmt, _reason, summarise
 from tools.harness.procs import free_port, start_router
@@ -131,8 +131,8 @@ def test_observer_stops_when_every_agent_is_gone(tmp_path: Path) -> None:
     router as ``observer``, records a robot's signed status, ends when the agents'
     liveliness tokens are gone even if no final status arrived, and judges the run a
     failure."""
-    from agent.bus import Bus, BusConfig
-    from agent.trust import create_fleet
+    from agent.net.bus import Bus, BusConfig
+    from agent.wire.trust import create_fleet
 
     fleet = tmp_path / "fleet"
     create_fleet(fleet, [5])

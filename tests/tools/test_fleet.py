@@ -8,8 +8,8 @@ from types import SimpleNamespace
 import msgpack
 import pytest
 
-from agent import protocol as P
-from agent import trust as T
+from agent import wire as P
+from agent.wire import trust as T
 from tools import fleet, rogue
 
 

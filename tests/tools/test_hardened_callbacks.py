@@ -8,8 +8,8 @@ from typing import Any
 
 import pytest
 
-from agent.bus import Event
-from agent.protocol import (
+from agent.net.bus import Event
+from agent.wire import (
     MAX_PUBLICATION_BYTES,
     CameraReply,
     CameraRequest,

@@ -20,7 +20,7 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from agent.protocol import NetworkSpec
+from agent.wire import NetworkSpec
 from tools import router, wait_for
 from tools.harness.procs import free_port
 
@@ -127,7 +127,7 @@ def test_router_cli_bad_endpoint(
 def test_wait_for_cli_errors(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from agent.trust import create_fleet
+    from agent.wire.trust import create_fleet
 
     monkeypatch.delenv("NAO_CREDENTIALS", raising=False)
     assert wait_for.main(["world/clock", "--timeout", "0", "--insecure"]) == 2
@@ -146,7 +146,7 @@ def test_wait_for_cli_errors(
 
 
 def test_wait_for_default_identity(tmp_path: Path) -> None:
-    from agent.trust import create_fleet
+    from agent.wire.trust import create_fleet
 
     fleet = tmp_path / "fleet"
     create_fleet(fleet, [2, 3])
@@ -166,7 +166,7 @@ def test_wait_for_secure_world_clock(tmp_path: Path) -> None:
     """As in the agent containers: a TLS router with the fleet's access control, the world
     publishing world/clock; wait_for with a robot's key (the agents hold only robot keys)
     and with the observer's sees it; a robot key also sees the world/register queryable."""
-    from agent.trust import create_fleet
+    from agent.wire.trust import create_fleet
 
     fleet = tmp_path / "fleet"
     create_fleet(fleet, [1, 2])
@@ -187,7 +187,7 @@ def test_wait_for_secure_world_clock(tmp_path: Path) -> None:
             connect=(ep,), multicast_scouting=False, mode="client",
             credentials=str(fleet), identity="world",
         )  # fmt: skip
-        from agent.bus import zenoh_config
+        from agent.net.bus import zenoh_config
 
         with zenoh.open(zenoh_config(world)) as s:
             q = s.declare_queryable("world/register")

@@ -1,7 +1,7 @@
-"""``python -m tools.bench agent``: cost of the agreement (agent/exchange.py) in messages,
+"""``python -m tools.bench agent``: cost of the agreement (agent/core/agreement.py) in messages,
 bytes and rounds, for fleets of N agents over a lossy broadcast medium (seeded).
 
-Each agent runs the real :class:`agent.exchange.Agreement`; the medium delivers every
+Each agent runs the real :class:`agent.core.agreement.Agreement`; the medium delivers every
 publication to every other agent independently with probability 1 - loss, in 50 ms
 ticks. Prints, per (N, loss): runs agreed, time to agreement (simulated seconds) and the
 record + digest bytes each agent published (mean and max). Writes a PNG with ``--out``.
@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from agent.exchange import Agreement
-from agent.protocol import NeighborRecordMsg, encode
+from agent.core.agreement import Agreement
+from agent.wire import NeighborRecordMsg, encode
 
 
 def record(i: int, n: int) -> NeighborRecordMsg:

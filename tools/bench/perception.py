@@ -17,8 +17,8 @@ import time
 
 import numpy as np
 
-from agent.perception.compass import VisualCompass
-from agent.perception.detector import Detector
+from agent.core.perception.compass import VisualCompass
+from agent.core.perception.detector import Detector
 from tools.eval_perception import run_views
 
 

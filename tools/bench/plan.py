@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from agent.formation.execution import (
+from agent.core.formation.execution import (
     capt_makespan,
     check_dependencies,
     dependency_makespan,
@@ -50,9 +50,9 @@ from agent.formation.execution import (
     path_lengths,
     wave_makespan,
 )
-from agent.formation.plan import Plan, PlanParams, plan_from_positions
-from agent.formation.pyramid import placed_slots, pyramid_frame
-from agent.formation.safety import check_safety
+from agent.core.formation.plan import Plan, PlanParams, plan_from_positions
+from agent.core.formation.pyramid import placed_slots, pyramid_frame
+from agent.core.formation.safety import check_safety
 
 D_E = 2.0
 PHI_E = math.radians(30)

@@ -64,7 +64,7 @@ class WorldProcess:
 
 
 def camera_latency(requests: int, seed: int) -> list[float]:
-    from agent.protocol import CameraReply, CameraRequest, decode, encode, key_camera
+    from agent.wire import CameraReply, CameraRequest, decode, encode, key_camera
 
     world = WorldProcess(3, seed)
     try:
@@ -96,7 +96,7 @@ def camera_latency(requests: int, seed: int) -> list[float]:
 
 def camera_throughput(seed: int, workers: int, clients: int = 3, each: int = 8) -> float:
     """Images per second when ``clients`` robots sweep their heads at the same time."""
-    from agent.protocol import CameraReply, CameraRequest, decode, encode, key_camera
+    from agent.wire import CameraReply, CameraRequest, decode, encode, key_camera
 
     world = WorldProcess(clients, seed, render_workers=workers)
     try:
@@ -133,7 +133,7 @@ def camera_throughput(seed: int, workers: int, clients: int = 3, each: int = 8) 
 def sim_speed_bus(n: int, seed: int, sim_seconds: float) -> float:
     """Sim speed of ``python -m sim`` driven over zenoh: every robot gets its next walk or
     turn as soon as its previous one replies (what a fleet of agents does at most)."""
-    from agent.protocol import (
+    from agent.wire import (
         CommandReply,
         TurnRequest,
         WalkRequest,

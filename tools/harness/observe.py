@@ -14,8 +14,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
-from agent.bus import Bus
-from agent.protocol import (
+from agent.net.bus import Bus
+from agent.wire import (
     KEY_ALIVE_ALL,
     KEY_DIGEST_ALL,
     KEY_RECORD_ALL,
@@ -49,7 +49,7 @@ class Recorder:
         self._w = Writer(self._f)
         self._w.start(profile="", library="nao-formation tools.demo")
         self._schema = self._w.register_schema(
-            name="agent.protocol", encoding="", data=b"msgpack map, see agent/protocol.py"
+            name="agent.wire", encoding="", data=b"msgpack map, see agent/wire/"
         )
         self._channels: dict[str, int] = {}
         self._lock = threading.Lock()

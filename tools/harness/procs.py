@@ -24,8 +24,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
-from agent.bus import BusConfig
-from agent.trust import create_fleet
+from agent.net.bus import BusConfig
+from agent.wire.trust import create_fleet
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -1,0 +1,83 @@
+"""The Body protocol: one NAO's camera and legs as the agent drives them (DESIGN.md §8
+"Bodies").
+
+Implemented by :class:`agent.body.zenoh_world.ZenohBody` (the world's queryables over
+zenoh), :class:`agent.body.naoqi.NaoqiBody` (a real or virtual NAO over the qi protocol)
+and :class:`agent.body.in_process.WorldBody` (an in-process world, for tests). Results
+and errors are dataclasses: a body raises :class:`BodyError` when the robot or its world
+refuses or fails an action, and ``ValueError`` for a request that is wrong before
+anything is sent (a head yaw outside ±119.5°, a non-finite distance).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal, Protocol
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One camera image (BGR uint8, (H, W, 3)), the head yaw actually applied (rad) and
+    the robot's time when it was taken (sim time in the simulation)."""
+
+    image: np.ndarray
+    yaw: float
+    t_sim: float
+
+
+@dataclass(frozen=True)
+class MotionResult:
+    """How a walk or turn ended: ``done``, or ``contact`` (stopped by a contact or, on a
+    NAO, by its own move-failure protection), at the robot's time ``t_sim``."""
+
+    status: Literal["done", "contact"]
+    t_sim: float
+    detail: str = ""
+
+
+@dataclass(eq=False)
+class BodyError(RuntimeError):
+    """The robot (or its world) refused or failed ``action``; ``reason`` says why."""
+
+    action: str
+    reason: str
+
+    def __post_init__(self) -> None:
+        super().__init__(str(self))
+
+    def __str__(self) -> str:
+        return f"{self.action}: {self.reason}"
+
+
+class Body(Protocol):
+    """One NAO's body as the agent drives it. Actions block until they are over."""
+
+    @property
+    def robot_id(self) -> int: ...
+
+    @property
+    def t_sim(self) -> float:
+        """The latest robot time seen (s)."""
+        ...
+
+    def camera(self, yaw: float) -> Frame:
+        """The forehead image with the head turned to ``yaw`` (rad, + left, ±119.5°)."""
+        ...
+
+    def walk(self, distance: float) -> MotionResult:
+        """Walk ``distance`` m straight ahead (< 0: backwards)."""
+        ...
+
+    def turn(self, angle: float) -> MotionResult:
+        """Turn on the spot by ``angle`` rad (+ CCW)."""
+        ...
+
+    def stop(self) -> None:
+        """Stop walking (idempotent; harmless when idle)."""
+        ...
+
+    def close(self) -> None:
+        """Release the connection (idempotent)."""
+        ...

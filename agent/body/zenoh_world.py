@@ -1,0 +1,214 @@
+"""The zenoh body (DESIGN.md §2–3, §8): a :class:`~agent.phases.seams.Body` on the world process.
+
+Forehead camera at a head yaw, walk, turn. Each action is a query to the world's
+queryables (``world/robot/{id}/camera|walk|turn``, DESIGN.md §3); walk and turn replies
+arrive when the motion has finished in sim time.
+
+Lost replies (issue #9): every walk and turn carries a request id, unique to this body
+(a random 40-bit start, then counting up, so that a restarted agent does not reuse its
+predecessor's ids); a query that times out is asked again with the same id, and the
+world executes each (robot, id) once and answers a repeat with the first result. A
+camera query that times out is asked again as it is (a picture moves nothing but the
+head, to the same yaw).
+The body reports no pose: the agent knows only what it commanded and what it sees.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import secrets
+import time
+from collections.abc import Callable
+from typing import TypeVar
+
+import cv2
+import numpy as np
+
+from agent.body.base import BodyError, Frame, MotionResult
+from agent.core.nao import HEAD_YAW_LIMIT
+from agent.net.bus import Bus, BusError, NoRoute, QueryTimeout
+from agent.wire import (
+    KEY_WORLD_REGISTER,
+    MAX_STEP,
+    CameraReply,
+    CameraRequest,
+    CommandReply,
+    Message,
+    RegisterReply,
+    RegisterRequest,
+    TurnRequest,
+    WalkRequest,
+    key_camera,
+    key_turn,
+    key_walk,
+)
+
+#: Former name of :class:`~agent.phases.seams.BodyError` (kept for callers of the old API).
+RobotError = BodyError
+
+T = TypeVar("T")
+M = TypeVar("M", bound=Message)
+
+log = logging.getLogger("agent.body.zenoh_world")
+
+#: Seconds one attempt of a motion query waits for its reply before asking again with
+#: the same request id (a repeat of a running motion waits for that motion in the world).
+MOTION_ATTEMPT_S = 60.0
+#: ... and of a camera query.
+CAMERA_ATTEMPT_S = 15.0
+
+
+def retry_no_route(call: Callable[[], T], deadline_s: float, first_wait: float = 0.05) -> T:
+    """``call()``, repeated with backoff while it raises :class:`NoRoute`, until ``deadline_s``.
+
+    A query that met no queryable executed nothing, so repeating it is safe; the papers
+    assume lossless WiFi, but on a lossy link zenoh rebuilds routes and queries made
+    meanwhile end at once with no reply. Any other error is raised at once.
+    """
+    end = time.monotonic() + deadline_s
+    wait = first_wait
+    while True:
+        try:
+            return call()
+        except NoRoute:
+            if time.monotonic() + wait > end:
+                raise
+            time.sleep(wait)  # back off before asking the network again
+            wait = min(wait * 2.0, 1.0)
+
+
+def retry_timeout(
+    call: Callable[[float], T], total_s: float, attempt_s: float, what: str
+) -> tuple[T, int]:
+    """``call(timeout)`` asked again while it raises :class:`QueryTimeout`, each attempt
+    waiting at most ``attempt_s``, all of them ``total_s``; (result, attempts).
+
+    Only for calls that are safe to repeat (idempotent, or carrying a request id). Any
+    other error, and a timeout past ``total_s``, is raised."""
+    end = time.monotonic() + total_s
+    attempts = 0
+    while True:
+        left = end - time.monotonic()
+        attempts += 1
+        try:
+            return call(max(0.1, min(attempt_s, left))), attempts
+        except QueryTimeout as exc:
+            if time.monotonic() >= end - 0.05:
+                raise
+            log.warning("%s: %s; asking again (attempt %d)", what, exc, attempts + 1)
+
+
+def register(bus: Bus, want: int = -1, timeout: float = 10.0) -> int:
+    """Claim a free robot of the scenario from the world (``--id auto``)."""
+    try:
+        reply = retry_no_route(
+            lambda: bus.query(
+                KEY_WORLD_REGISTER, RegisterRequest(want=want), RegisterReply, timeout
+            ),
+            timeout,
+        )
+    except BusError as exc:
+        raise BodyError("register", f"cannot register with the world: {exc}") from None
+    return reply.robot_id
+
+
+class ZenohBody:
+    """Camera, walk and turn of robot ``robot_id`` through the world process.
+
+    Satisfies :class:`agent.phases.seams.Body`; :meth:`stop` and :meth:`close` do nothing: a
+    motion ends in the world, and the bus belongs to the caller.
+    """
+
+    def __init__(
+        self,
+        bus: Bus,
+        robot_id: int,
+        camera_timeout: float = 30.0,
+        motion_timeout: float = 300.0,
+    ) -> None:
+        self.bus = bus
+        self._robot_id = robot_id
+        self.camera_timeout = camera_timeout
+        self.motion_timeout = motion_timeout
+        self._t_sim = 0.0
+        self.contacts = 0
+        self._next_request = secrets.randbits(40) + 1
+        self.retries = 0  # queries asked again after a timeout
+
+    @property
+    def robot_id(self) -> int:
+        return self._robot_id
+
+    @property
+    def t_sim(self) -> float:
+        return self._t_sim
+
+    def camera(self, yaw: float) -> Frame:
+        """The forehead image with the head at ``yaw`` (rad, + left, |yaw| <= 119.5°)."""
+        if not math.isfinite(yaw) or abs(yaw) > HEAD_YAW_LIMIT + 1e-9:
+            raise ValueError(f"head yaw {yaw} rad outside ±{math.degrees(HEAD_YAW_LIMIT):.1f}°")
+        req = CameraRequest(yaw=yaw)
+        try:
+            rep = self._ask(
+                key_camera(self.robot_id), req, CameraReply, self.camera_timeout, CAMERA_ATTEMPT_S
+            )
+        except BusError as exc:
+            raise BodyError(f"camera at yaw {math.degrees(yaw):.1f}°", str(exc)) from None
+        buf = np.frombuffer(rep.data, dtype=np.uint8)
+        img = cv2.imdecode(buf, cv2.IMREAD_COLOR)
+        if img is None or img.shape != (rep.height, rep.width, 3):
+            raise BodyError(f"camera at yaw {math.degrees(yaw):.1f}°", "undecodable image")
+        self._t_sim = max(self._t_sim, rep.t_sim)
+        return Frame(img, rep.yaw, rep.t_sim)
+
+    def walk(self, distance: float) -> MotionResult:
+        """Walk ``distance`` m straight ahead; returns when done (status done|contact)."""
+        if not math.isfinite(distance) or abs(distance) > MAX_STEP:
+            raise ValueError(f"walk distance {distance} m outside ±{MAX_STEP:g} m")
+        req = WalkRequest(distance=distance, request_id=self._request_id())
+        return self._motion(key_walk(self.robot_id), req, "walk")
+
+    def turn(self, angle: float) -> MotionResult:
+        """Turn on the spot by ``angle`` rad (+ CCW); returns when done."""
+        req = TurnRequest(angle=angle, request_id=self._request_id())
+        return self._motion(key_turn(self.robot_id), req, "turn")
+
+    def stop(self) -> None:
+        """Nothing to stop: the world ends each motion itself (it has no cancel)."""
+
+    def close(self) -> None:
+        """Nothing to release: the bus is the caller's."""
+
+    def _request_id(self) -> int:
+        rid = self._next_request
+        self._next_request += 1
+        return rid
+
+    def _ask(self, key: str, req: Message, expect: type[M], total_s: float, attempt_s: float) -> M:
+        """The query, asked again after a timeout (same request, so the same request id)
+        and while it meets no queryable (NoRoute: nothing was executed)."""
+
+        def once(timeout: float) -> M:
+            return retry_no_route(lambda: self.bus.query(key, req, expect, timeout), 30.0)
+
+        rep, attempts = retry_timeout(once, total_s, attempt_s, key)
+        self.retries += attempts - 1
+        return rep
+
+    def _motion(self, key: str, req: WalkRequest | TurnRequest, what: str) -> MotionResult:
+        try:
+            rep = self._ask(key, req, CommandReply, self.motion_timeout, MOTION_ATTEMPT_S)
+        except BusError as exc:
+            raise BodyError(what, str(exc)) from None
+        self._t_sim = max(self._t_sim, rep.t_sim)
+        if rep.status == "contact":
+            self.contacts += 1
+            return MotionResult("contact", rep.t_sim, rep.detail)
+        if rep.status != "done":
+            raise BodyError(what, f"world reports {rep.status}: {rep.detail}")
+        return MotionResult("done", rep.t_sim, rep.detail)
+
+
+#: Former name of :class:`ZenohBody`.
+Robot = ZenohBody

@@ -1,0 +1,557 @@
+"""Exchange and agreement of neighbour records (NAO paper 4.1.2, DESIGN.md §1 steps 3–4).
+
+The paper exchanges each robot's record ``{i, N_i, (x_ij, y_ij)}`` once over WiFi and
+assumes nothing is lost. Here every agent re-publishes until the fleet provably holds
+the same record set, and moves only then:
+
+* **Membership** is the set of live agents (liveliness tokens, fed in by the caller);
+  with ``fleet_size`` it must reach exactly that size, without it the set must stay
+  unchanged for ``settle`` seconds.
+* Each agent publishes its **record** and a **digest** of the records it holds
+  (``DigestMsg.members`` = the ids whose records are covered, so a digest doubles as an
+  acknowledgement of whose records the sender holds).
+* **Agreed** when the agent holds a record from every member, the members are exactly
+  the live set, and every member's latest digest equals its own (same digest, same
+  members). Then all of them hold bit-identical inputs and compute the same plan.
+* **Failed** (a safe stop, never a move on an unshared plan) when a member whose
+  record we do not hold (or that reported ``failed``) leaves before agreement, the live
+  set exceeds ``fleet_size``,
+  or ``timeout`` expires; the reason names who is missing. A member that leaves after
+  its record arrived is out of reach, not gone (issue #9: at 50 % loss a session stays
+  cut for longer than any sensible grace): the agreement waits for it to come back
+  (:meth:`Agreement.member_joined`) until ``timeout``, and nobody moves meanwhile,
+  since agreement needs every member's matching digest.
+
+Re-publishing (what :meth:`Agreement.due` returns): the record once, again when a member
+joins, and while some member's latest digest does not list this agent; the digest while some member's digest differs from
+ours, after agreement until every member has reported a post-agreement phase, and after
+a failure on parameters (as long as the caller pumps).
+Intervals back off exponentially from ``backoff_min`` to ``backoff_max`` and reset when
+something new arrives. Pure: the caller passes the time and does the I/O.
+
+Per-sender state is kept only for fleet members (issue #8): a record, digest or phase
+from a sender that is not a live member is ignored and counted in ``ignored``, so a
+stranger cycling through 65 536 ids cannot grow it. Nothing is lost for a real member
+whose record outran its liveliness token: our digest does not list it, which makes it
+re-send its record (see the re-publishing rules above).
+
+**Agreed parameters.** Equal records are not enough: every agent must also plan with
+the same d_e, φ_e, radius, orientation and strategy, and march the same route. Each agent
+hashes its own settings (:func:`params_digest`) and sends that digest in every
+``DigestMsg`` (``params``); a member whose parameters digest differs from ours counts as
+disagreeing, and the agreement fails (an agent started with other settings is never
+outvoted, and nobody plans or marches differently). To name the odd robot alike on every
+agent, the failure waits until the parameters digest of every member is known (the
+fleet complete when ``fleet_size`` is given; members that left count with their last
+digest), or until ``timeout``; then the robots outside the largest group of equal
+digests are named (:func:`odd_params`; a tie goes to the group holding the smallest id).
+
+**Membership grace (issue #9).** On a lossy radio a live member's liveliness token can
+vanish for a while (its zenoh lease expires, its client reconnects and declares the
+token again). :class:`Grace` turns token changes and the member's own publications into
+membership: a vanished token counts as gone only after ``grace`` seconds in which
+nothing (record, digest or status) was heard from that member; a token that comes back,
+or any publication, ends the count. The caller feeds :meth:`Agreement.member_left` only
+with what :meth:`Grace.expired` returns.
+
+Tie-breaks: a record with a higher ``round`` replaces an older one; for the same round
+the latest received wins (re-publications are identical). Digests are over the
+records sorted by sender id.
+
+**Adopting** (issue #9, :meth:`Agreement.adopt`): agreement is asymmetric (two
+generals); a member may agree and move while its matching digest never reaches us (its
+session cut until it exits). The runner then lets us agree too when such a member,
+with our parameters digest, reports the plan digest of exactly the records we hold:
+it planned from the same inputs, so moving on that plan is moving on a shared plan.
+
+**Rounds** (re-search, NAO paper 4.1.3 rule 2, :mod:`agent.core.formation.research`): an
+agreement belongs to the round of its own record (``round``). Records and digests of an
+older round are stale and ignored (counted in ``stale``); a record or digest of a newer
+round from a member proves that member agreed on ours and moved on, so it acknowledges
+our digest (no more re-publication for it) and is left to the next round's agreement.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass
+
+from agent.wire import DigestMsg, NeighborRecordMsg, encode
+
+DigestFn = Callable[[Sequence[NeighborRecordMsg]], str]
+
+#: Phases an agent reports only after it has agreed (acknowledges our digest).
+POST_AGREE_PHASES = frozenset({"plan", "wait", "move", "hold", "march", "done"})
+
+ParamValue = float | int | str | None | tuple[float | str, ...]
+
+
+def params_digest(params: Mapping[str, ParamValue]) -> str:
+    """SHA-256 of the agreed planning parameters in a canonical text form.
+
+    Keys sorted; floats by ``repr`` (shortest round-trip form, so 0.8 and 0.8000000001
+    differ and equal floats always hash alike); tuples as lists; ``None`` as null.
+    Raises ``ValueError`` for a non-finite float or a type outside :data:`ParamValue`.
+    """
+
+    def canon(v: object) -> object:
+        if isinstance(v, bool) or v is None or isinstance(v, int | str):
+            return v
+        if isinstance(v, float):
+            if not math.isfinite(v):
+                raise ValueError(f"parameter value {v} is not finite")
+            return repr(v)
+        if isinstance(v, tuple):
+            return [canon(x) for x in v]
+        raise ValueError(f"parameter value of type {type(v).__name__} cannot be agreed")
+
+    text = json.dumps({str(k): canon(v) for k, v in params.items()}, sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def odd_params(params_of: Mapping[int, str]) -> tuple[list[int], list[int]]:
+    """(odd robots, reference robots) by their parameters digests, ids sorted.
+
+    The reference is the largest group of robots with equal digests; between groups of
+    the same size, the one holding the smallest id. Every other robot is odd. A pure
+    function of the digests, so agents holding the same digests name the same robots.
+    """
+    groups: dict[str, list[int]] = {}
+    for rid in sorted(params_of):
+        groups.setdefault(params_of[rid], []).append(rid)
+    ref = min(groups.values(), key=lambda g: (-len(g), g[0]))
+    return sorted(i for i in params_of if i not in ref), ref
+
+
+def canonical_digest(records: Sequence[NeighborRecordMsg]) -> str:
+    """SHA-256 over the msgpack wire form of the records sorted by sender id.
+
+    The wire form is exactly what was exchanged, so equal digests mean bit-identical
+    planning inputs on every agent.
+    """
+    h = hashlib.sha256()
+    for rec in sorted(records, key=lambda r: r.sender):
+        data = encode(rec)
+        h.update(len(data).to_bytes(4, "big"))
+        h.update(data)
+    return h.hexdigest()
+
+
+class Grace:
+    """When a member whose liveliness token vanished counts as gone (module docstring).
+
+    Pure: the caller passes the time. ``grace`` 0 makes a vanished token count as gone
+    at the next :meth:`expired`.
+    """
+
+    def __init__(self, grace: float) -> None:
+        if not (math.isfinite(grace) and grace >= 0.0):
+            raise ValueError(f"grace must be finite and >= 0, got {grace}")
+        self.grace = grace
+        self._vanished: dict[int, float] = {}  # member -> when last its token or a message was seen
+
+    def token(self, robot_id: int, present: bool, now: float) -> None:
+        """The member's liveliness token appeared (``present``) or vanished."""
+        if present:
+            self._vanished.pop(robot_id, None)
+        else:
+            self._vanished.setdefault(robot_id, now)
+
+    def heard(self, robot_id: int, now: float) -> None:
+        """A record, digest or status of the member arrived: a heartbeat."""
+        if robot_id in self._vanished:
+            self._vanished[robot_id] = max(self._vanished[robot_id], now)
+
+    def pending(self) -> tuple[int, ...]:
+        """Members whose token is gone but whose grace has not run out, sorted."""
+        return tuple(sorted(self._vanished))
+
+    def expired(self, now: float) -> list[int]:
+        """Members gone for good at ``now`` (sorted); they are forgotten here."""
+        out = sorted(i for i, t in self._vanished.items() if now - t >= self.grace)
+        for i in out:
+            del self._vanished[i]
+        return out
+
+
+@dataclass(frozen=True)
+class Decision:
+    """The state of the agreement: ``wait``, ``agreed`` or ``failed`` (with ``reason``)."""
+
+    kind: str
+    reason: str = ""
+    digest: str = ""
+    members: tuple[int, ...] = ()
+    records: tuple[NeighborRecordMsg, ...] = ()
+
+
+class _Backoff:
+    def __init__(self, lo: float, hi: float) -> None:
+        self.lo, self.hi = lo, hi
+        self.interval = lo
+        self.next_at = -math.inf  # due at once
+
+    def reset(self, now: float) -> None:
+        self.interval = self.lo
+        self.next_at = min(self.next_at, now)
+
+    def due(self, now: float) -> bool:
+        return now >= self.next_at
+
+    def fired(self, now: float) -> None:
+        self.next_at = now + self.interval
+        self.interval = min(self.hi, self.interval * 2.0)
+
+
+class Agreement:
+    """The agreement state machine of one agent (see the module docstring)."""
+
+    def __init__(
+        self,
+        self_id: int,
+        own_record: NeighborRecordMsg,
+        now: float,
+        fleet_size: int | None = None,
+        timeout: float = 60.0,
+        settle: float = 2.0,
+        backoff_min: float = 0.25,
+        backoff_max: float = 4.0,
+        digest_fn: DigestFn = canonical_digest,
+        params: str = "",
+    ) -> None:
+        if own_record.sender != self_id:
+            raise ValueError(f"own record is from {own_record.sender}, this agent is {self_id}")
+        if fleet_size is not None and fleet_size < 1:
+            raise ValueError(f"fleet size must be >= 1, got {fleet_size}")
+        for name, v in (("timeout", timeout), ("settle", settle), ("now", now)):
+            if not math.isfinite(v) or (name != "now" and v < 0.0):
+                raise ValueError(f"{name} must be finite and >= 0, got {v}")
+        if not (0.0 < backoff_min <= backoff_max and math.isfinite(backoff_max)):
+            raise ValueError(
+                f"need 0 < backoff_min <= backoff_max, got {backoff_min}, {backoff_max}"
+            )
+        self.self_id = self_id
+        self.fleet_size = fleet_size
+        self.timeout = timeout
+        self.settle = settle
+        self.started = now
+        self.digest_fn = digest_fn
+        self.params = params  # our agreed-parameters digest (params_digest)
+        self.params_of: dict[int, str] = {}  # member (live or left) -> its params digest
+        self.live: set[int] = {self_id}
+        self.left: set[int] = set()
+        self.stopped: set[int] = set()  # members that reported ``failed``
+        self.records: dict[int, NeighborRecordMsg] = {self_id: own_record}
+        self.digests: dict[int, DigestMsg] = {}
+        self.peer_agreed: set[int] = set()
+        self.rejected: list[str] = []
+        self.ignored = 0  # records, digests and phases from non-members, not kept
+        self.round = own_record.round  # the (re-)search round this agreement is about
+        self.stale = 0  # records and digests of an older round, not kept
+        self.membership_changed = now
+        self._record_tx = _Backoff(backoff_min, backoff_max)
+        self._record_pending = True  # publish at least once (again after a newcomer)
+        self._digest_tx = _Backoff(backoff_min, backoff_max)
+        self._final: Decision | None = None
+        self._params_failed = False  # failed on parameters: the digest is still answered
+        self._digest_cache: tuple[tuple[int, ...], str] | None = None
+
+    @classmethod
+    def restored(
+        cls,
+        self_id: int,
+        records: Sequence[NeighborRecordMsg],
+        now: float,
+        params: str = "",
+        backoff_max: float = 4.0,
+    ) -> Agreement:
+        """The agreement of an agent restarted after it had agreed (issue #9): the agreed
+        ``records`` (its own among them), every member live, the decision ``agreed``.
+
+        It re-publishes its digest until every member reports a post-agreement phase
+        (see :meth:`due`), which tells the others that its new session holds the same
+        set. Raises ``ValueError`` when ``records`` lack this agent's or repeat a sender.
+        """
+        by_id = {r.sender: r for r in records}
+        if len(by_id) != len(records):
+            raise ValueError("the agreed records repeat a sender")
+        if self_id not in by_id:
+            raise ValueError(f"the agreed records hold none of robot {self_id}")
+        agr = cls(self_id, by_id[self_id], now, params=params, backoff_max=backoff_max)
+        agr.live = set(by_id)
+        agr.records = dict(by_id)
+        agr._final = agr._agreed("restored: ")
+        return agr
+
+    # ----------------------------------------------------------------- inputs
+
+    def member_joined(self, robot_id: int, now: float) -> None:
+        if robot_id in self.live:
+            return
+        self.live.add(robot_id)
+        self.left.discard(robot_id)
+        self.membership_changed = now
+        # A newcomer has seen none of our earlier publications (no history).
+        self._record_pending = True
+        self._record_tx.reset(now)
+        self._digest_tx.reset(now)
+
+    def member_left(self, robot_id: int, now: float) -> None:
+        if robot_id == self.self_id or robot_id not in self.live:
+            return
+        self.live.discard(robot_id)
+        self.left.add(robot_id)
+        self.membership_changed = now
+
+    def on_record(self, msg: NeighborRecordMsg, now: float) -> bool:
+        """Take a record; True when it changed the set held."""
+        if msg.sender == self.self_id:
+            return False  # our own echo (or an impostor): ours is authoritative
+        if msg.sender not in self.live:
+            self.ignored += 1
+            return False
+        if not self._this_round(msg.sender, msg.round):
+            return False
+        old = self.records.get(msg.sender)
+        if old is not None and (old.round > msg.round or old == msg):
+            return False
+        self.records[msg.sender] = msg
+        self._digest_cache = None
+        self._digest_tx.reset(now)
+        return True
+
+    def on_digest(self, msg: DigestMsg, now: float) -> None:
+        if msg.sender == self.self_id:
+            return
+        if msg.sender in self.left:  # its parameters still help to name the odd robot
+            self.params_of[msg.sender] = msg.params
+            return
+        if msg.sender not in self.live:
+            self.ignored += 1
+            return
+        if not self._this_round(msg.sender, msg.round):
+            return
+        old = self.digests.get(msg.sender)
+        self.digests[msg.sender] = msg
+        self.params_of[msg.sender] = msg.params
+        if old is None or (old.digest, old.members) != (msg.digest, msg.members):
+            if self.self_id not in msg.members:
+                self._record_tx.reset(now)
+            if msg.digest != self.digest()[1]:
+                self._digest_tx.reset(now)
+
+    def _this_round(self, sender: int, round_: int) -> bool:
+        """Whether a member's record or digest of ``round_`` belongs to this agreement;
+        a newer round acknowledges our digest (see Rounds in the module doc)."""
+        if round_ < self.round:
+            self.stale += 1
+            return False
+        if round_ > self.round:
+            if self.agreed:
+                self.peer_agreed.add(sender)
+            return False
+        return True
+
+    def on_peer_phase(self, robot_id: int, phase: str) -> None:
+        """A member's status: a post-agreement phase acknowledges our digest."""
+        if robot_id not in self.live:
+            self.ignored += 1
+        elif phase in POST_AGREE_PHASES:
+            self.peer_agreed.add(robot_id)
+        elif phase == "failed":
+            self.stopped.add(robot_id)  # when it leaves, it will not return
+
+    # ----------------------------------------------------------------- state
+
+    def held_members(self) -> tuple[int, ...]:
+        """Ids of the live members whose records we hold, sorted."""
+        return tuple(sorted(i for i in self.records if i in self.live))
+
+    def digest(self) -> tuple[tuple[int, ...], str]:
+        """(members covered, digest) of the live members' records we hold."""
+        members = self.held_members()
+        if self._digest_cache is None or self._digest_cache[0] != members:
+            recs = [self.records[i] for i in members]
+            self._digest_cache = (members, self.digest_fn(recs))
+        return self._digest_cache
+
+    def digest_msg(self) -> DigestMsg:
+        """Our digest message, of this agreement's round."""
+        members, digest = self.digest()
+        return DigestMsg(
+            sender=self.self_id, round=self.round, digest=digest, members=members,
+            params=self.params,
+        )  # fmt: skip
+
+    def missing_records(self) -> list[int]:
+        return sorted(i for i in self.live if i not in self.records)
+
+    def disagreeing(self) -> list[int]:
+        """Live members whose latest digest is absent or differs from ours."""
+        members, digest = self.digest()
+        out = []
+        for i in sorted(self.live - {self.self_id}):
+            d = self.digests.get(i)
+            if d is None or d.digest != digest or d.members != members or d.params != self.params:
+                out.append(i)
+        return out
+
+    def decide(self, now: float) -> Decision:
+        """Wait, agreed or failed. Agreed and failed are final."""
+        if self._final is not None:
+            return self._final
+        params_wait = self._params_decision(now)
+        if params_wait is not None:
+            return params_wait
+        gone = sorted(i for i in self.left if i not in self.records or i in self.stopped)
+        if gone:
+            return self._fail(
+                f"member(s) {gone} left before agreement; not moving on a plan they may not share"
+            )
+        n = len(self.live)
+        if self.fleet_size is not None and n > self.fleet_size:
+            return self._fail(
+                f"{n} members alive {sorted(self.live)}, more than the fleet size {self.fleet_size}"
+            )
+        missing = self.missing_records()
+        disagree = self.disagreeing()
+        size_ok = n == self.fleet_size if self.fleet_size is not None else n >= 1
+        settled = self.fleet_size is not None or now - self.membership_changed >= self.settle
+        if size_ok and settled and not missing and not disagree:
+            self._final = self._agreed()
+            self._digest_tx.reset(now)  # tell the others once more, promptly
+            return self._final
+        if now - self.started > self.timeout:
+            parts = [f"no agreement after {self.timeout:g} s"]
+            if self.fleet_size is not None and n != self.fleet_size:
+                parts.append(f"{n} of {self.fleet_size} members alive {sorted(self.live)}")
+            if missing:
+                parts.append(f"no record from {missing}")
+            if disagree:
+                parts.append(f"digest differs or missing from {disagree}")
+            return self._fail("; ".join(parts))
+        return Decision("wait", self._wait_reason(missing, disagree))
+
+    def adopt(self, now: float, why: str) -> Decision:
+        """Agreed on the records held, without every member's matching digest: the caller
+        saw a member act on the plan of exactly these records (``agent.phases.runner``, issue #9:
+        that member's digest may never reach us). Needs a record from every member of a
+        fleet of known size (members out of reach included); final like :meth:`decide`.
+        """
+        if self._final is not None:
+            return self._final
+        members = tuple(sorted(self.records))
+        if self.fleet_size is None or len(members) != self.fleet_size:
+            raise ValueError(
+                f"adopting needs a record from each of the fleet's {self.fleet_size} members, "
+                f"holding {list(members)}"
+            )
+        recs = tuple(self.records[i] for i in members)
+        self._final = Decision("agreed", why, self.digest_fn(recs), members, recs)
+        self._digest_tx.reset(now)
+        return self._final
+
+    def _params_decision(self, now: float) -> Decision | None:
+        """None while every known parameters digest equals ours; else ``failed``, naming
+        the odd robots (:func:`odd_params`) once every member's digest is known or at the
+        timeout, and ``wait`` until then."""
+        known = {i: p for i, p in self.params_of.items() if i in self.live or i in self.left}
+        if all(p == self.params for p in known.values()):
+            return None
+        known[self.self_id] = self.params
+        unknown = sorted(i for i in self.live if i not in known)
+        complete = self.fleet_size is None or len(self.live | self.left) >= self.fleet_size
+        timed_out = now - self.started > self.timeout
+        odd, ref = odd_params(known)
+        if (unknown or not complete) and not timed_out:
+            return Decision(
+                "wait",
+                f"planning parameters differ (robots {odd} from {ref} so far); "
+                f"waiting for the parameters of {unknown or 'the whole fleet'} to name who",
+            )
+        names = ", ".join(f"{i}: {known[i][:12] or '(none)'}" for i in odd)
+        self._params_failed = True
+        mine = " (this robot among them)" if self.self_id in odd else ""
+        return self._fail(
+            f"robot(s) {odd} plan with different parameters{mine}: params digest {names}; "
+            f"robots {ref}: {known[ref[0]][:12] or '(none)'}"
+            + (f"; parameters unknown for {unknown}" if unknown else "")
+            + "; nobody plans or marches"
+        )
+
+    def _wait_reason(self, missing: list[int], disagree: list[int]) -> str:
+        if self.left:
+            return f"member(s) {sorted(self.left)} out of reach; waiting for them to return"
+        if self.fleet_size is not None and len(self.live) < self.fleet_size:
+            return f"{len(self.live)} of {self.fleet_size} members"
+        if missing:
+            return f"waiting for records from {missing}"
+        if disagree:
+            return f"waiting for matching digests from {disagree}"
+        return "waiting for membership to settle"
+
+    def _agreed(self, prefix: str = "") -> Decision:
+        """The ``agreed`` decision on the records held now."""
+        members, digest = self.digest()
+        return Decision(
+            "agreed",
+            f"{prefix}{len(members)} members agree on digest {digest[:12]}",
+            digest,
+            members,
+            tuple(self.records[i] for i in members),
+        )
+
+    def _fail(self, reason: str) -> Decision:
+        self._final = Decision("failed", reason)
+        return self._final
+
+    @property
+    def agreed(self) -> bool:
+        return self._final is not None and self._final.kind == "agreed"
+
+    # ----------------------------------------------------------------- output
+
+    def due(self, now: float) -> list[str]:
+        """What to (re-)publish now: a subset of ``["record", "digest"]`` in that order.
+
+        The caller publishes and then calls :meth:`sent` with the same list.
+        """
+        out: list[str] = []
+        if self._final is not None and self._final.kind == "failed":
+            # after a parameters failure our digest (our parameters) still goes out, so
+            # that members that have not heard it yet name the same odd robot
+            if self._params_failed and self._digest_tx.due(now):
+                out.append("digest")
+            return out
+        others = self.live - {self.self_id}
+        if self.agreed:
+            if (others - self.peer_agreed) and self._digest_tx.due(now):
+                out.append("digest")
+            return out
+        # Re-send the record only to answer a digest that lacks it: a peer still
+        # searching publishes its digest when it starts exchanging, which re-arms us.
+        unacked = [
+            i for i in others if i in self.digests and self.self_id not in self._members_of(i)
+        ]
+        if (self._record_pending or unacked or not others) and self._record_tx.due(now):
+            out.append("record")
+        if (self.disagreeing() or not others) and self._digest_tx.due(now):
+            out.append("digest")
+        return out
+
+    def sent(self, what: Iterable[str], now: float) -> None:
+        for w in what:
+            if w == "record":
+                self._record_pending = False
+                self._record_tx.fired(now)
+            elif w == "digest":
+                self._digest_tx.fired(now)
+            else:
+                raise ValueError(f"unknown publication {w!r}")
+
+    def _members_of(self, robot_id: int) -> tuple[int, ...]:
+        d = self.digests.get(robot_id)
+        return () if d is None else d.members

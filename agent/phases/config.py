@@ -1,0 +1,168 @@
+"""The agent's settings (DESIGN.md §1; NAO paper 5.2.2): one immutable, validated value.
+
+The runner (:mod:`agent.phases.runner`) takes an :class:`AgentConfig`; ``python -m agent``
+builds it from the command line.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from dataclasses import dataclass
+
+from agent.core.agreement import ParamValue
+from agent.core.formation.plan import PLAN_STRATEGIES, PlanParams
+from agent.core.formation.pyramid import ORIENTATIONS
+from agent.core.formation.research import DEFAULT_STEP
+from agent.core.nao import HEAD_YAW_LIMIT
+from agent.core.perception.camera import CameraModel
+
+#: Head yaws of one sweep (paper 5.2.2 iii): the camera model's, 26.6° apart, so that every
+#: NAO at >= 0.5 m is wholly inside some image (7 evenly spaced yaws, 39.8° apart, left
+#: gaps where a NAO closer than about 0.8 m fell between two images and was dropped as
+#: cut by the border).
+SEARCH_YAWS = CameraModel().sweep_yaws(limit=HEAD_YAW_LIMIT)
+
+
+def add_plan_arguments(p: argparse.ArgumentParser) -> None:
+    """``--orientation`` and ``--strategy`` (the agent's and the demo's, which gives them to
+    every agent): part of the agreed parameters (:meth:`AgentConfig.agreed_params`)."""
+    p.add_argument(
+        "--orientation",
+        choices=ORIENTATIONS,
+        default="pca",
+        help="pyramid orientation: pca (the fleet's principal axis, NAO paper eq. 12) or "
+        "cp (the AUV paper's fixed direction, north of the common frame)",
+    )
+    p.add_argument(
+        "--strategy",
+        choices=PLAN_STRATEGIES,
+        default="default",
+        help="slot assignment strategy of the planner (agent/core/formation/plan.py)",
+    )
+
+
+MAX_ROUTE = 50.0  # m: the longest march accepted (the longest walk command the world takes)
+
+
+@dataclass(frozen=True)
+class Route:
+    """The march after ``hold`` (issue #13): the leader walks ``distance`` m along the
+    pyramid's axis, or to the point ``to`` (x, y) of the common frame. Exactly one is
+    given. The pyramid translates: its axis keeps its direction (see agent/phases/march.py)."""
+
+    distance: float | None = None
+    to: tuple[float, float] | None = None
+
+    def __post_init__(self) -> None:
+        if (self.distance is None) == (self.to is None):
+            raise ValueError("a route is a distance along the axis or a point, exactly one")
+        if self.distance is not None and not (
+            math.isfinite(self.distance) and 0.0 < self.distance <= MAX_ROUTE
+        ):
+            raise ValueError(f"march distance must be in (0, {MAX_ROUTE:g}] m, got {self.distance}")
+        if self.to is not None and not (
+            len(self.to) == 2 and all(math.isfinite(v) and abs(v) <= 1000.0 for v in self.to)
+        ):
+            raise ValueError(f"march point must be two finite coordinates (m), got {self.to}")
+
+    def key(self) -> tuple[str, float] | tuple[str, float, float]:
+        """What the agreed-parameters digest covers."""
+        if self.to is not None:
+            return ("to", float(self.to[0]), float(self.to[1]))
+        assert self.distance is not None
+        return ("axis", float(self.distance))
+
+
+@dataclass(frozen=True)
+class AgentConfig:
+    """What one agent is told: its robot, the fleet, the pyramid (d_e, phi_e, orientation,
+    strategy) and limits."""
+
+    robot_id: int
+    fleet_size: int | None = None
+    d_e: float = 0.8
+    phi_e: float = math.radians(30.0)
+    orientation: str = "pca"  # pyramid orientation: "pca" (NAO eq. 12) | "cp" (AUV III.B)
+    strategy: str = "default"  # assignment strategy, one of formation.plan.PLAN_STRATEGIES
+    timeout: float = 120.0  # s from the end of the search to agreement
+    wave_timeout: float = 600.0  # s to wait for earlier waves, and for the fleet to hold
+    settle: float = 3.0  # s of unchanged membership when no fleet size is given
+    # s a member whose liveliness token vanished, and who published nothing since, still
+    # counts as a member (agent.core.agreement.Grace): a lossy link's lease expiry and
+    # reconnection is no departure; a crashed agent is noticed this much later.
+    member_grace: float = 20.0
+    search_yaws: tuple[float, ...] = SEARCH_YAWS
+    rotation_tolerance: float = math.radians(2.0)
+    # Re-publication backoff cap: a peer that lacks our record says so in its digest,
+    # which re-arms us at once, so long waits (others still searching) need few re-sends.
+    backoff_max: float = 16.0
+    correct: bool = True  # final visual alignment to the parent (see Runner.correct)
+    max_correction: float = 0.3  # m
+    march: Route | None = None  # the march after hold (issue #13); None: stop at hold
+    march_step: float = 0.1  # m per leader step: half a follower's 20 cm, so they keep up
+    march_pause: float = 4.0  # the leader rests this many times each step's duration
+    lost_rounds: int = 3  # head searches for a lost parent before the fleet halts
+    # Re-search (NAO paper 4.1.3 rule 2, agent/core/formation/research.py): rounds before the
+    # fleet stops, the first exploration leg (m), and how long the robots that keep their
+    # place wait for the others to explore and search again (s).
+    research_rounds: int = 2
+    explore_step: float = DEFAULT_STEP
+    research_timeout: float = 300.0
+
+    @property
+    def radius(self) -> float:
+        """The robots' safety radius (m), the planner's."""
+        return PlanParams(d_e=self.d_e, phi_e=self.phi_e).radius
+
+    def plan_params(self) -> PlanParams:
+        """The planning parameters this agent plans with (the formation seam takes them)."""
+        return PlanParams(
+            d_e=self.d_e, phi_e=self.phi_e, orientation=self.orientation, strategy=self.strategy
+        )
+
+    def agreed_params(self) -> dict[str, ParamValue]:
+        """What every agent must share to plan and march alike (digest in DigestMsg)."""
+        pp = self.plan_params()
+        route = None if self.march is None else self.march.key()
+        return {
+            "d_e": pp.d_e,
+            "phi_e": pp.phi_e,
+            "radius": pp.radius,
+            "orientation": pp.orientation,
+            "strategy": pp.strategy,
+            "route": route,
+            "march_step": self.march_step if self.march is not None else None,
+            "research_rounds": self.research_rounds,
+        }
+
+    def __post_init__(self) -> None:
+        if self.fleet_size is not None and self.fleet_size < 1:
+            raise ValueError(f"fleet size must be >= 1, got {self.fleet_size}")
+        if not (math.isfinite(self.d_e) and self.d_e > 0.0):
+            raise ValueError(f"d_e must be > 0 m, got {self.d_e}")
+        if not (math.isfinite(self.phi_e) and 0.0 < self.phi_e < math.pi / 2):
+            raise ValueError(f"phi_e must be in (0°, 90°), got {math.degrees(self.phi_e)}°")
+        self.plan_params()  # orientation and strategy: ValueError when unknown
+        for name in ("timeout", "wave_timeout", "settle", "member_grace"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0.0):
+                raise ValueError(f"{name} must be finite and >= 0, got {v}")
+        if not (math.isfinite(self.march_step) and 0.02 <= self.march_step <= 0.2):
+            raise ValueError(f"march_step must be in [0.02, 0.2] m, got {self.march_step}")
+        if not (math.isfinite(self.march_pause) and 0.0 <= self.march_pause <= 20.0):
+            raise ValueError(f"march_pause must be in [0, 20], got {self.march_pause}")
+        if not 0 <= self.research_rounds <= 10:
+            raise ValueError(f"research_rounds must be in [0, 10], got {self.research_rounds}")
+        if not (math.isfinite(self.explore_step) and 0.2 <= self.explore_step <= 5.0):
+            raise ValueError(f"explore_step must be in [0.2, 5] m, got {self.explore_step}")
+        if not (math.isfinite(self.research_timeout) and self.research_timeout > 0.0):
+            raise ValueError(f"research_timeout must be > 0 s, got {self.research_timeout}")
+        if self.lost_rounds < 1:
+            raise ValueError(f"lost_rounds must be >= 1, got {self.lost_rounds}")
+        for y in self.search_yaws:
+            if abs(y) > HEAD_YAW_LIMIT + 1e-9:
+                raise ValueError(
+                    f"search yaw {math.degrees(y):.1f}° outside "
+                    f"±{math.degrees(HEAD_YAW_LIMIT):.1f}°"
+                )

@@ -1,0 +1,144 @@
+"""zenoh TLS and access-control settings built from the fleet credentials (DESIGN.md §8,
+layer 2: transport). Pure data: dicts that become JSON5 in ``zenoh.Config``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import Any
+
+from agent.wire.credentials import Credentials, Identity
+from agent.wire.keys import KEY_RECORDS_ALL
+
+# --------------------------------------------------------------------------- zenoh settings
+
+
+def tls_settings(creds: Credentials, who: Identity) -> dict[str, Any]:
+    """zenoh ``transport/link/tls``: mutual TLS against the fleet CA with ``who``'s key."""
+    key, cert = str(creds.paths.key(who)), str(creds.paths.cert(who))
+    return {
+        "root_ca_certificate": str(creds.paths.ca),
+        "enable_mtls": True,
+        "listen_private_key": key,
+        "listen_certificate": cert,
+        "connect_private_key": key,
+        "connect_certificate": cert,
+        "verify_name_on_connect": True,
+    }
+
+
+_ALL = [
+    "put",
+    "delete",
+    "declare_subscriber",
+    "query",
+    "reply",
+    "declare_queryable",
+    "liveliness_token",
+    "liveliness_query",
+    "declare_liveliness_subscriber",
+]
+
+
+def _rule(rid: str, messages: list[str], flows: list[str], keys: list[str]) -> dict[str, Any]:
+    return {
+        "id": rid,
+        "messages": messages,
+        "flows": flows,
+        "permission": "allow",
+        "key_exprs": keys,
+    }
+
+
+def acl_settings(roster: Iterable[Identity]) -> dict[str, Any]:
+    """zenoh ``access_control`` for a router: deny by default, each common name its role.
+
+    Ingress is what a subject may send; egress what the router may deliver to it.
+    """
+    rules = [
+        # every fleet member may watch membership and hear the fleet's statuses
+        _rule("hear-fleet", ["declare_subscriber"], ["ingress"], ["nao/**", "world/clock"]),
+        _rule(
+            "watch-alive",
+            ["declare_liveliness_subscriber", "liveliness_query"],
+            ["ingress"],
+            ["nao/alive/*"],
+        ),
+        _rule(
+            "deliver-fleet",
+            ["put", "liveliness_token", "declare_subscriber"],
+            ["egress"],
+            ["nao/**", "world/clock"],
+        ),
+        # the agreed record sets (issue #9): any member asks, every robot serves its own
+        _rule("ask-records", ["query"], ["ingress"], [KEY_RECORDS_ALL]),
+        _rule(
+            "deliver-records",
+            ["query", "reply", "declare_queryable"],
+            ["egress"],
+            [KEY_RECORDS_ALL],
+        ),
+        # the world: serves and publishes world/**, hears membership
+        _rule("world-serve", ["declare_queryable", "reply", "put"], ["ingress"], ["world/**"]),
+        _rule("world-take", ["query", "declare_subscriber"], ["egress"], ["world/**"]),
+        # observers: evaluation reads ground truth too
+        _rule("observe", ["declare_subscriber"], ["ingress"], ["world/**"]),
+        _rule("observe-deliver", ["put"], ["egress"], ["world/**"]),
+    ]
+    subjects = [
+        {"id": "world", "cert_common_names": ["world"]},
+        {"id": "observer", "cert_common_names": ["observer"]},
+        {"id": "members", "cert_common_names": sorted(i.cn for i in roster if i.role != "router")},
+    ]
+    policies = [
+        {
+            "id": "members",
+            "rules": [
+                "hear-fleet",
+                "watch-alive",
+                "deliver-fleet",
+                "ask-records",
+                "deliver-records",
+            ],
+            "subjects": ["members"],
+        },
+        {"id": "world", "rules": ["world-serve", "world-take"], "subjects": ["world"]},
+        {"id": "observer", "rules": ["observe", "observe-deliver"], "subjects": ["observer"]},
+    ]
+    for who in sorted(roster):
+        if who.role != "robot":
+            continue
+        i = who.robot_id
+        rules += [
+            _rule(f"r{i}-out", ["put"], ["ingress"], [f"nao/{i}/**"]),
+            _rule(f"r{i}-alive", ["liveliness_token"], ["ingress"], [f"nao/alive/{i}"]),
+            _rule(f"r{i}-serve", ["declare_queryable", "reply"], ["ingress"], [f"nao/{i}/records"]),
+            _rule(f"r{i}-ask", ["query"], ["ingress"], [f"world/robot/{i}/**", "world/register"]),
+            _rule(
+                f"r{i}-answer",
+                ["reply", "declare_queryable"],
+                ["egress"],
+                [f"world/robot/{i}/**", "world/register"],
+            ),
+        ]
+        subjects.append({"id": who.cn, "cert_common_names": [who.cn]})
+        policies.append(
+            {
+                "id": who.cn,
+                "rules": [
+                    f"r{i}-out",
+                    f"r{i}-alive",
+                    f"r{i}-serve",
+                    f"r{i}-ask",
+                    f"r{i}-answer",
+                ],
+                "subjects": [who.cn],
+            }
+        )
+    return {
+        "enabled": True,
+        "default_permission": "deny",
+        "rules": rules,
+        "subjects": subjects,
+        "policies": policies,
+    }

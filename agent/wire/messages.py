@@ -1,0 +1,365 @@
+"""Message schemas of the wire contract (DESIGN.md §3).
+
+Every message on the wire is a msgpack map ``{"v": SCHEMA_VERSION, "t": <type tag>,
+...fields}``; each class declares its fields' validators (:mod:`agent.wire.fields`).
+Images are encoded (PNG) bytes of a BGR uint8 picture, as OpenCV writes them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, fields
+from typing import Any, ClassVar, TypeVar
+
+from agent.wire.fields import (
+    _ID,
+    _XY,
+    HEAD_YAW_LIMIT,
+    MAX_COORD,
+    MAX_IMAGE_BYTES,
+    MAX_MEMBERS,
+    MAX_NEIGHBOURS,
+    MAX_OBSTACLES,
+    MAX_ROBOT_ID,
+    SCHEMA_VERSION,
+    ProtocolError,
+    _bytes,
+    _float,
+    _hex,
+    _int,
+    _seq,
+    _str,
+    _tuple,
+)
+
+PHASES = (
+    "start",
+    "search",
+    "localise",
+    "exchange",
+    "agree",
+    "explore",
+    "plan",
+    "wait",
+    "move",
+    "hold",
+    "march",
+    "done",
+    "failed",
+)
+
+# --------------------------------------------------------------------------- messages
+
+M = TypeVar("M", bound="Message")
+_REGISTRY: dict[str, type[Message]] = {}
+
+
+@dataclass(frozen=True)
+class Message:
+    """Base of every wire message. Subclasses set ``TAG`` and ``SCHEMA``."""
+
+    TAG: ClassVar[str] = ""
+    SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {}
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        if cls.TAG:
+            if cls.TAG in _REGISTRY:
+                raise TypeError(f"duplicate message tag {cls.TAG!r}")
+            _REGISTRY[cls.TAG] = cls
+
+    def __post_init__(self) -> None:
+        # Validate on construction too, so a bad message cannot even be sent.
+        for f in fields(self):
+            check = self.SCHEMA.get(f.name)
+            if check is None:
+                raise TypeError(f"{type(self).__name__}.{f.name} has no schema entry")
+            object.__setattr__(self, f.name, check(getattr(self, f.name)))
+
+    def to_wire(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"v": SCHEMA_VERSION, "t": self.TAG}
+        for f in fields(self):
+            out[f.name] = _plain(getattr(self, f.name))
+        return out
+
+
+def _plain(v: Any) -> Any:
+    if isinstance(v, tuple):
+        return [_plain(x) for x in v]
+    return v
+
+
+@dataclass(frozen=True)
+class NeighborRecordMsg(Message):
+    """A robot's neighbour record (NAO paper 4.1.2): detections in its fixed frame.
+
+    ``neighbours`` are (x, y) in metres; ``orientations`` (rad, the matched mask's
+    relative orientation) and ``confidences`` (λ) are empty or one per neighbour.
+    ``round`` counts search rounds (a robot that found nobody searches again).
+    ``obstacles`` (x, y) in metres are the static obstacles it saw (5.1.2), in the same
+    fixed frame; empty from a sender that saw none or predates them.
+    """
+
+    TAG: ClassVar[str] = "record"
+    sender: int
+    round: int
+    neighbours: tuple[tuple[float, float], ...]
+    orientations: tuple[float, ...] = ()
+    confidences: tuple[float, ...] = ()
+    obstacles: tuple[tuple[float, float], ...] = ()
+    SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {
+        "sender": _ID,
+        "round": _int("round", 0, 1_000_000),
+        "neighbours": _seq("neighbours", _XY, MAX_NEIGHBOURS),
+        "orientations": _seq("orientations", _float("orientation", -10.0, 10.0), MAX_NEIGHBOURS),
+        "confidences": _seq("confidences", _float("confidence", 0.0, 1.0), MAX_NEIGHBOURS),
+        "obstacles": _seq("obstacles", _XY, MAX_OBSTACLES),
+    }
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        k = len(self.neighbours)
+        for name in ("orientations", "confidences"):
+            n = len(getattr(self, name))
+            if n not in (0, k):
+                raise ProtocolError(f"{name}: {n} values for {k} neighbours")
+
+
+@dataclass(frozen=True)
+class DigestMsg(Message):
+    """The digest of the record set an agent holds, and the members it covers.
+
+    ``params``: the digest of the agent's agreed planning parameters (d_e, φ_e,
+    radius, strategy, march route; :func:`agent.core.agreement.params_digest`), empty from
+    a sender that predates it. Agreement needs it equal on every member too."""
+
+    TAG: ClassVar[str] = "digest"
+    sender: int
+    round: int
+    digest: str
+    members: tuple[int, ...]
+    params: str = ""
+    SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {
+        "sender": _ID,
+        "round": _int("round", 0, 1_000_000),
+        "digest": _hex("digest"),
+        "members": _seq("members", _ID, MAX_MEMBERS),
+        "params": _hex("params", allow_empty=True),
+    }
+
+
+@dataclass(frozen=True)
+class StatusMsg(Message):
+    """Phase and progress of one agent, for viewers and for wave sequencing."""
+
+    TAG: ClassVar[str] = "status"
+    sender: int
+    phase: str
+    progress: float = 0.0
+    detail: str = ""
+    plan_digest: str = ""
+    wave: int = -1
+    error: str = ""
+    t_sim: float = 0.0
+    bytes_sent: int = 0
+    SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {
+        "sender": _ID,
+        "phase": _str("phase", 16, PHASES),
+        "progress": _float("progress", 0.0, 1.0),
+        "detail": _str("detail"),
+        "plan_digest": _hex("plan_digest", allow_empty=True),
+        "wave": _int("wave", -1, 1_000_000),
+        "error": _str("error"),
+        "t_sim": _float("t_sim", 0.0),
+        "bytes_sent": _int("bytes_sent", 0, 2**62),
+    }
+
+
+#: A neighbour record's wire form in a :class:`RecordSetReply` (64 neighbours: ~2.5 KB).
+MAX_RECORD_BYTES = 4096
+
+
+@dataclass(frozen=True)
+class RecordSetRequest(Message):
+    """Ask the agents for the agreed record set whose digest is ``digest`` (issue #9:
+    a restarted agent fetches what it agreed on); empty: whatever set they agreed on.
+    Only agents holding it answer."""
+
+    TAG: ClassVar[str] = "recordset?"
+    digest: str
+    SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {
+        "digest": _hex("digest", allow_empty=True)
+    }
+
+
+@dataclass(frozen=True)
+class RecordSetReply(Message):
+    """The agreed record set ``digest`` as held by ``sender``: each record's wire form
+    (:func:`encode` of a :class:`NeighborRecordMsg`), sorted by sender, exactly the
+    bytes :func:`agent.core.agreement.canonical_digest` hashes, so the asker checks the set
+    against the digest before using it."""
+
+    TAG: ClassVar[str] = "recordset"
+    sender: int
+    digest: str
+    records: tuple[bytes, ...]
+    SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {
+        "sender": _ID,
+        "digest": _hex("digest"),
+        "records": _seq("records", _bytes("record", MAX_RECORD_BYTES), MAX_MEMBERS),
+    }
+
+
+@dataclass(frozen=True)
+class RegisterRequest(Message):
+    """Ask the world for a free robot id (``--id auto``); ``want`` is a preference or -1."""
+
+    TAG: ClassVar[str] = "register"
+    want: int = -1
+    SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {"want": _int("want", -1, MAX_ROBOT_ID)}
+
+
+@dataclass(frozen=True)
+class RegisterReply(Message):
+    TAG: ClassVar[str] = "registered"
+    robot_id: int
+    SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {"robot_id": _ID}
+
+
+@dataclass(frozen=True)
+class CameraRequest(Message):
+    """Render the forehead camera with the head at ``yaw`` (rad, +left, |yaw| <= 119.5°)."""
+
+    TAG: ClassVar[str] = "camera"
+    yaw: float = 0.0
+    SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {"yaw": _float("yaw")}
+
+
+@dataclass(frozen=True)
+class CameraReply(Message):
+    TAG: ClassVar[str] = "image"
+    robot_id: int
+    yaw: float
+    t_sim: float
+    width: int
+    height: int
+    encoding: str
+    data: bytes = field(repr=False)
+    SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {
+        "robot_id": _ID,
+        "yaw": _float("yaw", -HEAD_YAW_LIMIT - 1e-9, HEAD_YAW_LIMIT + 1e-9),
+        "t_sim": _float("t_sim", 0.0),
+        "width": _int("width", 1, 8192),
+        "height": _int("height", 1, 8192),
+        "encoding": _str("encoding", 8, ("png",)),
+        "data": _bytes("data", MAX_IMAGE_BYTES),
+    }
+
+
+#: Motion request ids (issue #9): 0 is "no id" (executed every time); 1..MAX_REQUEST_ID
+#: are executed once per (robot, id) by the world, which answers a repeat with the
+#: first result, so a client may retry a timed-out motion with the same id.
+MAX_REQUEST_ID = 2**53 - 1
+_REQUEST_ID = _int("request_id", 0, MAX_REQUEST_ID)
+
+
+@dataclass(frozen=True)
+class WalkRequest(Message):
+    """Walk straight ahead ``distance`` metres (negative: backwards); ``request_id``:
+    see :data:`MAX_REQUEST_ID`."""
+
+    TAG: ClassVar[str] = "walk"
+    distance: float
+    request_id: int = 0
+    SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {
+        "distance": _float("distance"),
+        "request_id": _REQUEST_ID,
+    }
+
+
+@dataclass(frozen=True)
+class TurnRequest(Message):
+    """Turn on the spot by ``angle`` radians (positive: counter-clockwise); ``request_id``:
+    see :data:`MAX_REQUEST_ID`."""
+
+    TAG: ClassVar[str] = "turn"
+    angle: float
+    request_id: int = 0
+    SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {
+        "angle": _float("angle"),
+        "request_id": _REQUEST_ID,
+    }
+
+
+@dataclass(frozen=True)
+class CommandReply(Message):
+    """Completion of a walk or turn: ``status`` is done, contact (stopped by a contact)
+    or error. Carries no pose: agents never learn ground truth."""
+
+    TAG: ClassVar[str] = "done"
+    robot_id: int
+    status: str
+    t_sim: float
+    detail: str = ""
+    SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {
+        "robot_id": _ID,
+        "status": _str("status", 16, ("done", "contact", "error")),
+        "t_sim": _float("t_sim", 0.0),
+        "detail": _str("detail"),
+    }
+
+
+@dataclass(frozen=True)
+class ErrorReply(Message):
+    """The reply to a request the world cannot serve; ``reason`` says why."""
+
+    TAG: ClassVar[str] = "error"
+    reason: str
+    SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {"reason": _str("reason")}
+
+
+@dataclass(frozen=True)
+class ClockMsg(Message):
+    TAG: ClassVar[str] = "clock"
+    t_sim: float
+    SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {"t_sim": _float("t_sim", 0.0)}
+
+
+@dataclass(frozen=True)
+class TruthPosesMsg(Message):
+    """Ground truth (evaluation only): ``poses`` are (id, x, y, heading)."""
+
+    TAG: ClassVar[str] = "truth"
+    t_sim: float
+    poses: tuple[tuple[int, float, float, float], ...]
+    contacts: int = 0
+    SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {
+        "t_sim": _float("t_sim", 0.0),
+        "poses": _seq(
+            "poses",
+            _tuple(
+                "pose",
+                _ID,
+                _float("x", -MAX_COORD, MAX_COORD),
+                _float("y", -MAX_COORD, MAX_COORD),
+                _float("heading"),
+            ),
+            MAX_MEMBERS,
+        ),
+        "contacts": _int("contacts", 0, 2**62),
+    }
+
+
+@dataclass(frozen=True)
+class ContactMsg(Message):
+    """A contact between two bodies (evaluation only); ``b`` is -1 for an obstacle."""
+
+    TAG: ClassVar[str] = "contact"
+    t_sim: float
+    a: int
+    b: int
+    SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {
+        "t_sim": _float("t_sim", 0.0),
+        "a": _ID,
+        "b": _int("b", -1, MAX_ROBOT_ID),
+    }
