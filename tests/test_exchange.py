@@ -8,8 +8,8 @@ from collections.abc import Callable
 
 import pytest
 
-from agent.core.agreement import Agreement, Grace, canonical_digest, odd_params, params_digest
-from agent.wire import DigestMsg, NeighborRecordMsg
+from agent.core.agreement import Agreement, Grace, odd_params, params_digest
+from agent.wire import DigestMsg, NeighborRecordMsg, canonical_digest
 
 Drop = Callable[[str, int, int, float], bool]
 
@@ -34,7 +34,9 @@ class Net:
             self.add(i)
 
     def add(self, i: int) -> None:
-        a = Agreement(i, rec(i), self.t, fleet_size=self.fleet, **self.kw)  # type: ignore[arg-type]
+        a = Agreement(
+            i, rec(i), self.t, fleet_size=self.fleet, **self.kw, digest_fn=canonical_digest
+        )  # type: ignore[arg-type]
         for j, other in self.agents.items():
             other.member_joined(i, self.t)
             a.member_joined(j, self.t)
@@ -58,7 +60,7 @@ class Net:
                     if what == "record":
                         b.on_record(a.records[i], self.t)
                     else:
-                        b.on_digest(a.digest_msg(), self.t)
+                        b.on_digest(a.digest_note(), self.t)
             a.sent(due, self.t)
             d = a.decide(self.t)
             if d.kind == "agreed":
@@ -179,7 +181,7 @@ def test_agreed_and_failed_are_final() -> None:
 
 
 def test_after_agreement_digest_is_resent_until_peers_ack() -> None:
-    a = Agreement(0, rec(0), 0.0, fleet_size=2)
+    a = Agreement(0, rec(0), 0.0, fleet_size=2, digest_fn=canonical_digest)
     a.member_joined(1, 0.0)
     a.on_record(rec(1), 0.0)
     members, digest = a.digest()
@@ -196,7 +198,7 @@ def test_after_agreement_digest_is_resent_until_peers_ack() -> None:
 
 
 def test_record_is_resent_only_while_unacknowledged() -> None:
-    a = Agreement(0, rec(0), 0.0, fleet_size=3)
+    a = Agreement(0, rec(0), 0.0, fleet_size=3, digest_fn=canonical_digest)
     a.member_joined(1, 0.0)
     assert a.due(0.0) == ["record", "digest"]
     a.sent(["record", "digest"], 0.0)
@@ -207,7 +209,9 @@ def test_record_is_resent_only_while_unacknowledged() -> None:
 
 
 def test_backoff_doubles_and_caps() -> None:
-    a = Agreement(0, rec(0), 0.0, fleet_size=2, backoff_min=0.25, backoff_max=1.0)
+    a = Agreement(
+        0, rec(0), 0.0, fleet_size=2, backoff_min=0.25, backoff_max=1.0, digest_fn=canonical_digest
+    )
     times = []
     t = 0.0
     while t < 5.0:
@@ -222,8 +226,8 @@ def test_backoff_doubles_and_caps() -> None:
 
 
 def test_rounds_older_is_stale_newer_is_left_to_the_next_round() -> None:
-    a = Agreement(0, rec(0, 1), 0.0)
-    assert a.round == 1 and a.digest_msg().round == 1
+    a = Agreement(0, rec(0, 1), 0.0, digest_fn=canonical_digest)
+    assert a.round == 1 and a.digest_note().round == 1
     a.member_joined(1, 0.0)
     assert not a.on_record(rec(1, 0), 0.0)  # an older round: stale
     assert a.stale == 1 and 1 not in a.records
@@ -239,7 +243,7 @@ def test_rounds_older_is_stale_newer_is_left_to_the_next_round() -> None:
 
 
 def test_a_newer_round_acknowledges_an_agreed_digest() -> None:
-    a = Agreement(0, rec(0), 0.0, fleet_size=2)
+    a = Agreement(0, rec(0), 0.0, fleet_size=2, digest_fn=canonical_digest)
     a.member_joined(1, 0.0)
     a.on_record(rec(1), 0.0)
     members, digest = a.digest()
@@ -255,7 +259,7 @@ def test_a_newer_round_acknowledges_an_agreed_digest() -> None:
 
 
 def test_nothing_is_kept_for_non_members() -> None:
-    a = Agreement(0, rec(0), 0.0, fleet_size=2)
+    a = Agreement(0, rec(0), 0.0, fleet_size=2, digest_fn=canonical_digest)
     for sender in range(1, 2000):  # a stranger cycling through ids
         assert not a.on_record(NeighborRecordMsg(sender=sender, round=0, neighbours=()), 0.0)
         a.on_digest(DigestMsg(sender=sender, round=0, digest="0" * 64, members=(0,)), 0.0)
@@ -270,8 +274,8 @@ def test_nothing_is_kept_for_non_members() -> None:
 def test_a_record_that_outran_its_token_is_sent_again() -> None:
     # b's record reaches a before b's liveliness token: a drops it; a's digest, which
     # does not list b, makes b re-send it, and the two agree.
-    a = Agreement(0, rec(0), 0.0, fleet_size=2)
-    b = Agreement(1, rec(1), 0.0, fleet_size=2)
+    a = Agreement(0, rec(0), 0.0, fleet_size=2, digest_fn=canonical_digest)
+    b = Agreement(1, rec(1), 0.0, fleet_size=2, digest_fn=canonical_digest)
     b.member_joined(0, 0.0)
     a.on_record(rec(1), 0.0)
     assert a.ignored == 1
@@ -285,7 +289,7 @@ def test_a_record_that_outran_its_token_is_sent_again() -> None:
                 if what == "record":
                     y.on_record(x.records[me], t)
                 else:
-                    y.on_digest(x.digest_msg(), t)
+                    y.on_digest(x.digest_note(), t)
             x.sent(due, t)
             x.decide(t)
     assert a.agreed and b.agreed and t < 2.0
@@ -319,17 +323,17 @@ def test_bad_construction(kwargs: dict[str, float], match: str) -> None:
     args: dict[str, object] = {"self_id": 0, "own_record": rec(0), "now": 0.0}
     args.update(kwargs)
     with pytest.raises(ValueError, match=match):
-        Agreement(**args)  # type: ignore[arg-type]
+        Agreement(**args, digest_fn=canonical_digest)  # type: ignore[arg-type]
 
 
 def test_sent_rejects_unknown_publication() -> None:
-    a = Agreement(0, rec(0), 0.0)
+    a = Agreement(0, rec(0), 0.0, digest_fn=canonical_digest)
     with pytest.raises(ValueError, match="unknown publication"):
         a.sent(["status"], 0.0)
 
 
 def test_record_goes_out_once_then_only_on_request() -> None:
-    a = Agreement(0, rec(0), 0.0, fleet_size=3)
+    a = Agreement(0, rec(0), 0.0, fleet_size=3, digest_fn=canonical_digest)
     a.member_joined(1, 0.0)
     assert "record" in a.due(0.0)
     a.sent(["record", "digest"], 0.0)
@@ -373,7 +377,7 @@ def test_same_params_agree_and_digests_carry_them() -> None:
         a.params = P_A
     net.run(3.0)
     assert all(a.decide(net.t).kind == "agreed" for a in net.agents.values())
-    assert net.agents[0].digest_msg().params == P_A
+    assert net.agents[0].digest_note().params == P_A
 
 
 def test_an_agent_with_other_params_is_named_and_nobody_plans() -> None:
@@ -420,7 +424,7 @@ def test_odd_robot_is_named_only_once_every_member_is_heard() -> None:
 
 
 def test_a_member_that_left_still_counts_for_naming() -> None:
-    a = Agreement(0, rec(0), 0.0, fleet_size=3, params=P_A)
+    a = Agreement(0, rec(0), 0.0, fleet_size=3, params=P_A, digest_fn=canonical_digest)
     for i in (1, 2):
         a.member_joined(i, 0.0)
     a.on_digest(DigestMsg(sender=2, round=0, digest="a" * 64, members=(2,), params=P_B), 0.1)
@@ -431,7 +435,7 @@ def test_a_member_that_left_still_counts_for_naming() -> None:
 
 
 def test_params_mismatch_names_what_is_known_at_the_timeout() -> None:
-    a = Agreement(0, rec(0), 0.0, fleet_size=3, timeout=5.0, params=P_A)
+    a = Agreement(0, rec(0), 0.0, fleet_size=3, timeout=5.0, params=P_A, digest_fn=canonical_digest)
     a.member_joined(1, 0.0)
     a.on_digest(DigestMsg(sender=1, round=0, digest="a" * 64, members=(1,), params=P_B), 0.1)
     assert a.decide(1.0).kind == "wait"  # robot 2 has not even joined
@@ -526,6 +530,6 @@ def test_adopt_needs_a_record_from_every_member() -> None:
     net.run(1.0)
     with pytest.raises(ValueError, match="a record from each of the fleet's 3 members"):
         net.agents[0].adopt(net.t, "x")
-    b = Agreement(0, rec(0), 0.0, fleet_size=None)
+    b = Agreement(0, rec(0), 0.0, fleet_size=None, digest_fn=canonical_digest)
     with pytest.raises(ValueError, match="fleet's None members"):
         b.adopt(0.0, "x")

@@ -18,7 +18,7 @@ from typing import cast
 
 import pytest
 
-from agent.core.agreement import Agreement, canonical_digest
+from agent.core.agreement import Agreement
 from agent.net.bus import Bus, BusConfig, BusError, Event
 from agent.phases.resume import agreed_by_others, answer, record_set, records_of
 from agent.phases.runner import Runner
@@ -29,6 +29,7 @@ from agent.wire import (
     RecordSetReply,
     RecordSetRequest,
     StatusMsg,
+    canonical_digest,
     encode,
     key_records,
 )
@@ -40,14 +41,14 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def agreed() -> Agreement:
-    a = Agreement.restored(3, records(), 0.0, params="ab" * 32)
+    a = Agreement.restored(3, records(), 0.0, params="ab" * 32, digest_fn=canonical_digest)
     assert a.agreed
     return a
 
 
 def test_restored_agreement_has_the_digest_of_the_normal_one() -> None:
     recs = records()
-    a = Agreement(1, recs[0], 0.0, fleet_size=3)
+    a = Agreement(1, recs[0], 0.0, fleet_size=3, digest_fn=canonical_digest)
     for r in recs[1:]:
         a.member_joined(r.sender, 0.0)
         a.on_record(r, 0.0)
@@ -60,9 +61,9 @@ def test_restored_agreement_has_the_digest_of_the_normal_one() -> None:
 
 def test_restored_agreement_errors() -> None:
     with pytest.raises(ValueError, match="repeat a sender"):
-        Agreement.restored(1, (records()[0], records()[0]), 0.0)
+        Agreement.restored(1, (records()[0], records()[0]), 0.0, digest_fn=canonical_digest)
     with pytest.raises(ValueError, match="none of robot 9"):
-        Agreement.restored(9, records(), 0.0)
+        Agreement.restored(9, records(), 0.0, digest_fn=canonical_digest)
 
 
 def test_answer_only_the_set_asked_for() -> None:

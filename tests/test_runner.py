@@ -15,13 +15,13 @@ import numpy as np
 import pytest
 
 from agent.body.zenoh_world import ZenohBody
-from agent.core.agreement import Agreement, Decision, canonical_digest, params_digest
+from agent.core.agreement import Agreement, Decision, params_digest
 from agent.core.formation.plan import PlanParams
 from agent.net.bus import Bus, BusConfig
 from agent.phases.adapters import FormationAdapter, PerceptionAdapter
 from agent.phases.config import AgentConfig, Route
 from agent.phases.runner import AgentFailure, Peer, Runner, report_unavailable
-from agent.wire import NeighborRecordMsg, StatusMsg
+from agent.wire import NeighborRecordMsg, StatusMsg, canonical_digest
 
 # robots 1, 2, 3 at known world positions; every robot sees every other one
 WORLD = {1: (0.0, 0.0), 2: (-1.0, 0.1), 3: (0.9, -0.2)}
@@ -297,7 +297,7 @@ def test_a_vanished_token_is_a_departure_only_after_the_grace_period(
         r = Runner(
             bus, ZenohBody(bus, 3), cfg, perception, FormationAdapter(), clock=lambda: now[0]
         )
-        r.agreement = Agreement(3, records()[2], 0.0, fleet_size=3)
+        r.agreement = Agreement(3, records()[2], 0.0, fleet_size=3, digest_fn=canonical_digest)
         for i in (1, 2):
             r._handle(Event("alive", f"nao/alive/{i}", robot_id=i))
         r._handle(Event("gone", "nao/alive/1", robot_id=1))
@@ -443,7 +443,7 @@ def _waiting(perception: PerceptionAdapter) -> tuple[Runner, Bus]:
     r = Runner(bus, ZenohBody(bus, 3), AgentConfig(robot_id=3, fleet_size=3), perception,
                FormationAdapter())  # fmt: skip
     r.agreement = Agreement(3, records()[2], 0.0, fleet_size=3,
-                            params=params_digest(r.cfg.agreed_params()))  # fmt: skip
+                            params=params_digest(r.cfg.agreed_params()), digest_fn=canonical_digest)  # fmt: skip
     for i in (1, 2):
         r._handle(Event("alive", f"nao/alive/{i}", robot_id=i))
         r.agreement.on_record(records()[i - 1], 0.0)

@@ -78,10 +78,49 @@ import json
 import math
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Generic, Protocol, TypeVar
 
-from agent.wire import DigestMsg, NeighborRecordMsg, encode
 
-DigestFn = Callable[[Sequence[NeighborRecordMsg]], str]
+class RecordLike(Protocol):
+    """What the agreement reads of a neighbour record (``agent.wire.NeighborRecordMsg``)."""
+
+    @property
+    def sender(self) -> int: ...
+    @property
+    def round(self) -> int: ...
+
+
+class DigestLike(Protocol):
+    """What the agreement reads of a member's digest (``agent.wire.DigestMsg``)."""
+
+    @property
+    def sender(self) -> int: ...
+    @property
+    def round(self) -> int: ...
+    @property
+    def digest(self) -> str: ...
+    @property
+    def members(self) -> tuple[int, ...]: ...
+    @property
+    def params(self) -> str: ...
+
+
+@dataclass(frozen=True)
+class DigestNote:
+    """This agent's digest, to publish (the wire form is ``agent.wire.DigestMsg``, whose
+    fields these are)."""
+
+    sender: int
+    round: int
+    digest: str
+    members: tuple[int, ...]
+    params: str
+
+
+R = TypeVar("R", bound=RecordLike)
+#: The digest of a record set: the caller's, over the records' wire form sorted by sender
+#: (``agent.wire.canonical_digest``), so that equal digests mean bit-identical inputs.
+DigestFn = Callable[[Sequence[R]], str]
 
 #: Phases an agent reports only after it has agreed (acknowledges our digest).
 POST_AGREE_PHASES = frozenset({"plan", "wait", "move", "hold", "march", "done"})
@@ -126,20 +165,6 @@ def odd_params(params_of: Mapping[int, str]) -> tuple[list[int], list[int]]:
     return sorted(i for i in params_of if i not in ref), ref
 
 
-def canonical_digest(records: Sequence[NeighborRecordMsg]) -> str:
-    """SHA-256 over the msgpack wire form of the records sorted by sender id.
-
-    The wire form is exactly what was exchanged, so equal digests mean bit-identical
-    planning inputs on every agent.
-    """
-    h = hashlib.sha256()
-    for rec in sorted(records, key=lambda r: r.sender):
-        data = encode(rec)
-        h.update(len(data).to_bytes(4, "big"))
-        h.update(data)
-    return h.hexdigest()
-
-
 class Grace:
     """When a member whose liveliness token vanished counts as gone (module docstring).
 
@@ -178,14 +203,14 @@ class Grace:
 
 
 @dataclass(frozen=True)
-class Decision:
+class Decision(Generic[R]):
     """The state of the agreement: ``wait``, ``agreed`` or ``failed`` (with ``reason``)."""
 
     kind: str
     reason: str = ""
     digest: str = ""
     members: tuple[int, ...] = ()
-    records: tuple[NeighborRecordMsg, ...] = ()
+    records: tuple[R, ...] = ()
 
 
 class _Backoff:
@@ -206,20 +231,21 @@ class _Backoff:
         self.interval = min(self.hi, self.interval * 2.0)
 
 
-class Agreement:
+class Agreement(Generic[R]):
     """The agreement state machine of one agent (see the module docstring)."""
 
     def __init__(
         self,
         self_id: int,
-        own_record: NeighborRecordMsg,
+        own_record: R,
         now: float,
         fleet_size: int | None = None,
         timeout: float = 60.0,
         settle: float = 2.0,
         backoff_min: float = 0.25,
         backoff_max: float = 4.0,
-        digest_fn: DigestFn = canonical_digest,
+        *,
+        digest_fn: DigestFn[R],
         params: str = "",
     ) -> None:
         if own_record.sender != self_id:
@@ -244,8 +270,8 @@ class Agreement:
         self.live: set[int] = {self_id}
         self.left: set[int] = set()
         self.stopped: set[int] = set()  # members that reported ``failed``
-        self.records: dict[int, NeighborRecordMsg] = {self_id: own_record}
-        self.digests: dict[int, DigestMsg] = {}
+        self.records: dict[int, R] = {self_id: own_record}
+        self.digests: dict[int, DigestLike] = {}
         self.peer_agreed: set[int] = set()
         self.rejected: list[str] = []
         self.ignored = 0  # records, digests and phases from non-members, not kept
@@ -255,7 +281,7 @@ class Agreement:
         self._record_tx = _Backoff(backoff_min, backoff_max)
         self._record_pending = True  # publish at least once (again after a newcomer)
         self._digest_tx = _Backoff(backoff_min, backoff_max)
-        self._final: Decision | None = None
+        self._final: Decision[R] | None = None
         self._params_failed = False  # failed on parameters: the digest is still answered
         self._digest_cache: tuple[tuple[int, ...], str] | None = None
 
@@ -263,11 +289,13 @@ class Agreement:
     def restored(
         cls,
         self_id: int,
-        records: Sequence[NeighborRecordMsg],
+        records: Sequence[R],
         now: float,
+        *,
+        digest_fn: DigestFn[R],
         params: str = "",
         backoff_max: float = 4.0,
-    ) -> Agreement:
+    ) -> Agreement[R]:
         """The agreement of an agent restarted after it had agreed (issue #9): the agreed
         ``records`` (its own among them), every member live, the decision ``agreed``.
 
@@ -280,7 +308,10 @@ class Agreement:
             raise ValueError("the agreed records repeat a sender")
         if self_id not in by_id:
             raise ValueError(f"the agreed records hold none of robot {self_id}")
-        agr = cls(self_id, by_id[self_id], now, params=params, backoff_max=backoff_max)
+        agr = cls(
+            self_id, by_id[self_id], now, digest_fn=digest_fn, params=params,
+            backoff_max=backoff_max,
+        )  # fmt: skip
         agr.live = set(by_id)
         agr.records = dict(by_id)
         agr._final = agr._agreed("restored: ")
@@ -306,7 +337,7 @@ class Agreement:
         self.left.add(robot_id)
         self.membership_changed = now
 
-    def on_record(self, msg: NeighborRecordMsg, now: float) -> bool:
+    def on_record(self, msg: R, now: float) -> bool:
         """Take a record; True when it changed the set held."""
         if msg.sender == self.self_id:
             return False  # our own echo (or an impostor): ours is authoritative
@@ -323,7 +354,7 @@ class Agreement:
         self._digest_tx.reset(now)
         return True
 
-    def on_digest(self, msg: DigestMsg, now: float) -> None:
+    def on_digest(self, msg: DigestLike, now: float) -> None:
         if msg.sender == self.self_id:
             return
         if msg.sender in self.left:  # its parameters still help to name the odd robot
@@ -378,10 +409,10 @@ class Agreement:
             self._digest_cache = (members, self.digest_fn(recs))
         return self._digest_cache
 
-    def digest_msg(self) -> DigestMsg:
-        """Our digest message, of this agreement's round."""
+    def digest_note(self) -> DigestNote:
+        """Our digest, of this agreement's round, to publish."""
         members, digest = self.digest()
-        return DigestMsg(
+        return DigestNote(
             sender=self.self_id, round=self.round, digest=digest, members=members,
             params=self.params,
         )  # fmt: skip
@@ -399,7 +430,7 @@ class Agreement:
                 out.append(i)
         return out
 
-    def decide(self, now: float) -> Decision:
+    def decide(self, now: float) -> Decision[R]:
         """Wait, agreed or failed. Agreed and failed are final."""
         if self._final is not None:
             return self._final
@@ -435,7 +466,7 @@ class Agreement:
             return self._fail("; ".join(parts))
         return Decision("wait", self._wait_reason(missing, disagree))
 
-    def adopt(self, now: float, why: str) -> Decision:
+    def adopt(self, now: float, why: str) -> Decision[R]:
         """Agreed on the records held, without every member's matching digest: the caller
         saw a member act on the plan of exactly these records (``agent.phases.runner``, issue #9:
         that member's digest may never reach us). Needs a record from every member of a
@@ -454,7 +485,7 @@ class Agreement:
         self._digest_tx.reset(now)
         return self._final
 
-    def _params_decision(self, now: float) -> Decision | None:
+    def _params_decision(self, now: float) -> Decision[R] | None:
         """None while every known parameters digest equals ours; else ``failed``, naming
         the odd robots (:func:`odd_params`) once every member's digest is known or at the
         timeout, and ``wait`` until then."""
@@ -493,7 +524,7 @@ class Agreement:
             return f"waiting for matching digests from {disagree}"
         return "waiting for membership to settle"
 
-    def _agreed(self, prefix: str = "") -> Decision:
+    def _agreed(self, prefix: str = "") -> Decision[R]:
         """The ``agreed`` decision on the records held now."""
         members, digest = self.digest()
         return Decision(
@@ -504,7 +535,7 @@ class Agreement:
             tuple(self.records[i] for i in members),
         )
 
-    def _fail(self, reason: str) -> Decision:
+    def _fail(self, reason: str) -> Decision[R]:
         self._final = Decision("failed", reason)
         return self._final
 

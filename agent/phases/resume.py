@@ -37,7 +37,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from agent.body.zenoh_world import retry_no_route
-from agent.core.agreement import Agreement, Decision, canonical_digest, params_digest
+from agent.core.agreement import Agreement, Decision, params_digest
 from agent.core.control import PAPER_GAINS, advance, wrap_pi
 from agent.net.bus import BusError
 from agent.phases.journal import Journal, JournalError, JournalState
@@ -48,6 +48,7 @@ from agent.wire import (
     ProtocolError,
     RecordSetReply,
     RecordSetRequest,
+    canonical_digest,
     decode,
     encode,
 )
@@ -73,7 +74,7 @@ AGREED_STAGES = {"plan": "wait", "wait": "wait", "move": "move", "hold": "hold",
 # --------------------------------------------------------------------------- record sets
 
 
-def record_set(me: int, decision: Decision) -> RecordSetReply:
+def record_set(me: int, decision: Decision[NeighborRecordMsg]) -> RecordSetReply:
     """What this agent serves once agreed: the records of ``decision`` in wire form."""
     return RecordSetReply(
         sender=me, digest=decision.digest, records=tuple(encode(r) for r in decision.records)
@@ -250,6 +251,7 @@ def _resume(
         runner.me,
         records,
         runner.clock(),
+        digest_fn=canonical_digest,
         params=params_digest(runner.cfg.agreed_params()),
         backoff_max=runner.cfg.backoff_max,
     )

@@ -42,7 +42,7 @@ import math
 import time
 import traceback
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from typing import TypeVar
 
 import numpy as np
@@ -90,6 +90,7 @@ from agent.wire import (
     NeighborRecordMsg,
     RecordSetReply,
     StatusMsg,
+    canonical_digest,
     id_from_key,
     key_alive,
     key_digest,
@@ -188,8 +189,10 @@ class Runner:
         self.epochs: dict[int, int] = {}  # newest session (epoch) heard per sender
         self.agreed_epochs: dict[int, int] = {}  # the sessions the agreement was made with
         self.early_digests: dict[int, DigestMsg] = {}
-        self.agreement: Agreement | None = None
-        self.retired: list[Agreement] = []  # agreed earlier rounds, still acknowledged
+        self.agreement: Agreement[NeighborRecordMsg] | None = None
+        self.retired: list[
+            Agreement[NeighborRecordMsg]
+        ] = []  # agreed earlier rounds, still acknowledged
         self._plan: Plan | None = None
         self.plan_digest = ""
         self.wave = -1
@@ -297,10 +300,12 @@ class Runner:
                 if what == "record":
                     self.bus.publish(key_record(self.me), agr.records[self.me], "record")
                 else:
-                    self.bus.publish(key_digest(self.me), agr.digest_msg(), "digest")
+                    self.bus.publish(
+                        key_digest(self.me), DigestMsg(**asdict(agr.digest_note())), "digest"
+                    )
             agr.sent(due, now)
 
-    def _agreements(self) -> list[Agreement]:
+    def _agreements(self) -> list[Agreement[NeighborRecordMsg]]:
         """The current agreement and the agreed ones of earlier re-search rounds (their
         digests are re-published until every member has moved on)."""
         return [*self.retired, *([self.agreement] if self.agreement is not None else [])]
@@ -771,7 +776,7 @@ class Runner:
         self.status("localise", 1.0, f"{len(pts)} neighbours, {len(obstacles)} obstacles")
         return rec
 
-    def agree(self, record: NeighborRecordMsg) -> Decision:
+    def agree(self, record: NeighborRecordMsg) -> Decision[NeighborRecordMsg]:
         now = self.clock()
         agr = Agreement(
             self.me,
@@ -781,6 +786,7 @@ class Runner:
             timeout=self.cfg.timeout,
             settle=self.cfg.settle,
             backoff_max=self.cfg.backoff_max,
+            digest_fn=canonical_digest,
             params=params_digest(self.cfg.agreed_params()),
         )
         for rid, peer in sorted(self.peers.items()):
@@ -814,7 +820,7 @@ class Runner:
             phase = "exchange" if agr.missing_records() else "agree"
             self.status(phase, (held + agreeing) / (2 * n), d.reason)
 
-    def _adopt_plan(self, agr: Agreement) -> Decision | None:
+    def _adopt_plan(self, agr: Agreement[NeighborRecordMsg]) -> Decision[NeighborRecordMsg] | None:
         """Agreed, when a member already acts on the plan of exactly our records (issue #9).
 
         Agreement is asymmetric: a member agrees once it holds every matching digest, and
@@ -852,7 +858,7 @@ class Runner:
         log.info("agreed by adoption: %s", why)
         return agr.adopt(self.clock(), why)
 
-    def research(self, decision: Decision) -> NeighborRecordMsg | None:
+    def research(self, decision: Decision[NeighborRecordMsg]) -> NeighborRecordMsg | None:
         """Re-search (NAO paper 4.1.3 rule 2) on the agreed records: ``None`` when the
         fleet is connected, else this robot's record of the next round.
 
@@ -949,7 +955,7 @@ class Runner:
                 )
             self.status("explore", 0.0, text)
 
-    def make_plan(self, decision: Decision) -> Plan:
+    def make_plan(self, decision: Decision[NeighborRecordMsg]) -> Plan:
         self.status("plan", 0.0, decision.reason)
         try:
             plan = self.formation.plan(decision.records, self.cfg.plan_params())

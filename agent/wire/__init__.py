@@ -19,7 +19,14 @@ as P`` gives the whole contract. It imports no zenoh.
 
 from agent.core import nao
 from agent.wire import trust
-from agent.wire.codec import decode, encode, message_types, take_payload, unpack_bounded
+from agent.wire.codec import (
+    canonical_digest,
+    decode,
+    encode,
+    message_types,
+    take_payload,
+    unpack_bounded,
+)
 from agent.wire.fields import (
     DIGEST_HEX_LEN,
     HEAD_YAW_LIMIT,
@@ -162,6 +169,7 @@ __all__ = [
     "TurnRequest",
     "WalkRequest",
     "add_network_arguments",
+    "canonical_digest",
     "decode",
     "encode",
     "id_from_key",

@@ -8,6 +8,8 @@ copied or unpacked (:func:`take_payload`, :func:`unpack_bounded`).
 
 from __future__ import annotations
 
+import hashlib
+from collections.abc import Sequence
 from dataclasses import fields
 from typing import Any, Protocol
 
@@ -25,7 +27,7 @@ from agent.wire.fields import (
     ProtocolError,
     _short,
 )
-from agent.wire.messages import _REGISTRY, M, Message
+from agent.wire.messages import _REGISTRY, M, Message, NeighborRecordMsg
 
 # --------------------------------------------------------------------------- codec
 
@@ -241,3 +243,17 @@ def decode(
 def message_types() -> dict[str, type[Message]]:
     """Every registered message class by tag (for tests and tools)."""
     return dict(_REGISTRY)
+
+
+def canonical_digest(records: Sequence[NeighborRecordMsg]) -> str:
+    """SHA-256 over the msgpack wire form of the records sorted by sender id.
+
+    The wire form is exactly what was exchanged, so equal digests mean bit-identical
+    planning inputs on every agent.
+    """
+    h = hashlib.sha256()
+    for rec in sorted(records, key=lambda r: r.sender):
+        data = encode(rec)
+        h.update(len(data).to_bytes(4, "big"))
+        h.update(data)
+    return h.hexdigest()

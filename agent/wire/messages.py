@@ -196,7 +196,7 @@ class RecordSetRequest(Message):
 class RecordSetReply(Message):
     """The agreed record set ``digest`` as held by ``sender``: each record's wire form
     (:func:`encode` of a :class:`NeighborRecordMsg`), sorted by sender, exactly the
-    bytes :func:`agent.core.agreement.canonical_digest` hashes, so the asker checks the set
+    bytes :func:`agent.wire.codec.canonical_digest` hashes, so the asker checks the set
     against the digest before using it."""
 
     TAG: ClassVar[str] = "recordset"

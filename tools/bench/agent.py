@@ -11,12 +11,13 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
 from agent.core.agreement import Agreement
-from agent.wire import NeighborRecordMsg, encode
+from agent.wire import DigestMsg, NeighborRecordMsg, canonical_digest, encode
 
 
 def record(i: int, n: int) -> NeighborRecordMsg:
@@ -28,7 +29,10 @@ def record(i: int, n: int) -> NeighborRecordMsg:
 def simulate(
     n: int, loss: float, rng: np.random.Generator, limit: float = 120.0
 ) -> dict[str, float]:
-    agents = {i: Agreement(i, record(i, n), 0.0, fleet_size=n, timeout=limit) for i in range(n)}
+    agents = {
+        i: Agreement(i, record(i, n), 0.0, fleet_size=n, timeout=limit, digest_fn=canonical_digest)
+        for i in range(n)
+    }
     for a in agents.values():
         for j in agents:
             a.member_joined(j, 0.0)
@@ -39,7 +43,7 @@ def simulate(
         for i, a in agents.items():
             due = a.due(t)
             for what in due:
-                msg = a.records[i] if what == "record" else a.digest_msg()
+                msg = a.records[i] if what == "record" else DigestMsg(**asdict(a.digest_note()))
                 sent[i] += len(encode(msg))
                 for j, b in agents.items():
                     if j == i or rng.random() < loss:
@@ -47,7 +51,7 @@ def simulate(
                     if what == "record":
                         b.on_record(a.records[i], t)
                     else:
-                        b.on_digest(a.digest_msg(), t)
+                        b.on_digest(a.digest_note(), t)
             a.sent(due, t)
             if a.decide(t).kind == "agreed" and agreed_at[i] < 0:
                 agreed_at[i] = t
