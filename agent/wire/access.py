@@ -7,7 +7,8 @@ from __future__ import annotations
 from collections.abc import Iterable
 from typing import Any
 
-from agent.wire.credentials import Credentials, Identity
+from agent.wire.credentials import Credentials
+from agent.wire.identity import Identity
 from agent.wire.keys import KEY_RECORDS_ALL
 
 # --------------------------------------------------------------------------- zenoh settings

@@ -11,7 +11,8 @@ import sys
 from dataclasses import dataclass
 
 from agent.wire.access import acl_settings, tls_settings
-from agent.wire.credentials import Credentials, Identity
+from agent.wire.credentials import Credentials
+from agent.wire.identity import Identity
 
 # --------------------------------------------------------------------------- joining
 

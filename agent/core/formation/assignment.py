@@ -180,7 +180,9 @@ def _has_perfect_matching(ok: np.ndarray) -> bool:
 
 
 def _distances(starts: np.ndarray, slots: np.ndarray) -> np.ndarray:
-    return np.hypot(starts[:, None, 0] - slots[None, :, 0], starts[:, None, 1] - slots[None, :, 1])
+    return np.asarray(
+        np.hypot(starts[:, None, 0] - slots[None, :, 0], starts[:, None, 1] - slots[None, :, 1])
+    )
 
 
 def min_bottleneck(starts: np.ndarray, slots: np.ndarray) -> float:

@@ -146,7 +146,7 @@ def pyramid_frame(positions: np.ndarray, orientation: str = "pca") -> PyramidFra
 def centred_slots(n: int, d_e: float, phi_e: float) -> np.ndarray:
     """Slots in the pyramid frame, translated so that their centroid is o_p."""
     s = slot_positions(n, d_e, phi_e)
-    return s - s.mean(axis=0)
+    return np.asarray(s - s.mean(axis=0))
 
 
 PLACEMENTS = ("centroid", "front")
@@ -168,7 +168,7 @@ def placed_slots(
         raise ValueError(f"placement must be one of {PLACEMENTS}, got {placement!r}")
     front = float(np.max(starts_p[:, 1])) if starts_p.size else 0.0
     shift = front + d_e - float(np.min(s[:, 1]))
-    return s + np.array([0.0, max(shift, 0.0)])
+    return np.asarray(s + np.array([0.0, max(shift, 0.0)]))
 
 
 def nearest_to(point: np.ndarray, positions: np.ndarray) -> int:

@@ -51,7 +51,7 @@ def rotate(points: np.ndarray, theta: float) -> np.ndarray:
     if not math.isfinite(theta):
         raise ValueError(f"theta must be finite, got {theta}")
     c, s = math.cos(theta), math.sin(theta)
-    return pts @ np.array([[c, s], [-s, c]])
+    return np.asarray(pts @ np.array([[c, s], [-s, c]]))
 
 
 def to_fixed_frame(detections: Sequence[Sighting], body_heading: float) -> np.ndarray:

@@ -48,7 +48,7 @@ def part_shares(binary: np.ndarray) -> np.ndarray:
     areas = np.sort(stats[1:n, cv2.CC_STAT_AREA].astype(np.float64))[::-1]
     if areas.size == 0:
         raise ValueError("mask has no foreground pixels")
-    return areas / areas.sum()
+    return np.asarray(areas / areas.sum())
 
 
 @dataclass
