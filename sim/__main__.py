@@ -46,6 +46,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="the last robot (generated) stands 2-3 m from every other (far end of sight)",
     )
     p.add_argument("--light", type=float, default=1.0, help="light intensity (1.0 = default)")
+    p.add_argument(
+        "--headings",
+        type=scenarios.Headings.parse,
+        default=scenarios.Headings(),
+        metavar="KIND",
+        help=scenarios.HEADINGS_HELP,
+    )
     p.add_argument("--no-noise", action="store_true", help="noiseless walking and turning")
     p.add_argument(
         "--noise-scale",
@@ -104,6 +111,7 @@ def main(argv: list[str] | None = None) -> int:
                 clutter=args.clutter,
                 light=light,
                 isolated=args.isolated,
+                headings=args.headings,
             )
         if args.dump_scenario:
             scenarios.dump(sc, args.dump_scenario)

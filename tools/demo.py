@@ -50,6 +50,7 @@ import numpy as np
 
 from agent.phases.config import add_plan_arguments
 from agent.wire import INSECURE_WARNING
+from sim import scenarios
 from sim.locomotion import MAX_NOISE_SCALE
 from tools.harness.run import run_once
 
@@ -90,6 +91,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--isolated",
         action="store_true",
         help="generated scenario with one robot 2-3 m from every other",
+    )
+    p.add_argument(
+        "--headings",
+        type=scenarios.Headings.parse,
+        default=scenarios.Headings(),
+        metavar="KIND",
+        help=scenarios.HEADINGS_HELP + " (a generated scenario; the world gets its file)",
     )
     p.add_argument("--timeout", type=float, default=600.0, help="wall limit for the agents (s)")
     p.add_argument("--agree-timeout", type=float, default=120.0)
@@ -162,8 +170,6 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     a = p.parse_args(argv)
     a.scenario_ids = None
     if a.scenario is not None:
-        from sim import scenarios
-
         try:
             sc = scenarios.load(a.scenario)
         except (OSError, ValueError) as exc:

@@ -11,7 +11,11 @@ every robot faces the same "north" (world +y, heading pi/2), nearest spacing 0.6
 every robot within the range of sight [DETECT_MIN, DETECT_MAX] = [0.5, 3.0] m (the
 perception's, :data:`agent.core.nao.SIGHT_MAX`) of at least one other, the whole fleet
 connected by that relation. With ``isolated`` one robot stands 2-3 m from every other
-(at the far end of sight). Scenario files are JSON (:func:`load`, :func:`dump`).
+(at the far end of sight). ``headings`` leaves the papers' alignment (DESIGN.md §9):
+``aligned`` (every robot faces north, the default), ``random`` (uniform over the
+circle) or ``jitter:DEG`` (north ± DEG degrees, uniform), drawn from a stream of their own
+so that the positions of a seed do not depend on them. Scenario files are JSON
+(:func:`load`, :func:`dump`).
 """
 
 from __future__ import annotations
@@ -35,6 +39,49 @@ ISOLATED_MIN = 2.0  # m: ``generate(isolated=True)``'s robot is 2 m to DETECT_MA
 ROOM_MARGIN = 1.8  # metres between the outermost robot and a wall
 MIN_ROOM = 3.0  # smallest room half-size (a 6 m x 6 m room)
 MIN_BODY_GAP = 0.31  # two NAO footprints (radius 0.155 m) must not overlap
+HEADINGS_HELP = "start headings: aligned (all north), random (uniform), jitter:DEG (north ± DEG)"
+#: Salt of the start headings' random stream (``numpy.random.default_rng([seed, salt])``).
+_HEADING_STREAM = 0x4E414F
+
+
+@dataclass(frozen=True)
+class Headings:
+    """How a generated scenario's robots face at the start (module docstring)."""
+
+    kind: str = "aligned"  # aligned | random | jitter
+    spread_deg: float = 0.0  # jitter: the half-width of the uniform spread
+
+    @classmethod
+    def parse(cls, text: str) -> Headings:
+        """``aligned``, ``random`` or ``jitter:DEG`` (0 < DEG <= 180); ``ValueError`` else."""
+        if text in ("aligned", "random"):
+            return cls(text)
+        kind, _, deg = text.partition(":")
+        if kind == "jitter" and deg:
+            try:
+                spread = float(deg)
+            except ValueError:
+                spread = math.nan
+            if math.isfinite(spread) and 0.0 < spread <= 180.0:
+                return cls("jitter", spread)
+        raise ValueError(
+            f"headings {text!r}: expected aligned, random or jitter:DEG (0 < DEG <= 180)"
+        )
+
+    def __str__(self) -> str:
+        return f"jitter:{self.spread_deg:g}" if self.kind == "jitter" else self.kind
+
+    def draw(self, n: int, seed: int) -> list[float]:
+        """The start headings (rad, CCW from +x, rounded to 1e-6) of robots 1..n."""
+        if self.kind == "aligned":
+            return [NORTH] * n
+        rng = np.random.default_rng([seed, _HEADING_STREAM])
+        if self.kind == "random":
+            raw = rng.uniform(-math.pi, math.pi, size=n)
+        else:
+            half = math.radians(self.spread_deg)
+            raw = NORTH + rng.uniform(-half, half, size=n)
+        return [round(float(math.remainder(h, 2 * math.pi)), 6) for h in raw]
 
 
 @dataclass(frozen=True)
@@ -136,8 +183,10 @@ def generate(
     clutter: int = 0,
     light: LightSpec | None = None,
     isolated: bool = False,
+    headings: Headings | None = None,
 ) -> Scenario:
-    """Paper-like starts for ``n`` robots (ids 1..n), all facing north, seeded.
+    """Paper-like starts for ``n`` robots (ids 1..n), seeded; all facing north unless
+    ``headings`` says otherwise (:class:`Headings`).
 
     Robots are placed one after another: each new robot picks an already placed one
     (uniformly), a direction (uniform) and a distance in [0.6, 1.2] m from it, and is kept
@@ -176,7 +225,8 @@ def generate(
     arr = np.round(arr, 3)
     half = max(MIN_ROOM, float(np.abs(arr).max()) + ROOM_MARGIN)
     half = math.ceil(half * 2.0) / 2.0
-    robots = tuple(RobotSpec(i + 1, float(x), float(y), NORTH) for i, (x, y) in enumerate(arr))
+    faces = (headings or Headings()).draw(n, seed)
+    robots = tuple(RobotSpec(i + 1, float(x), float(y), faces[i]) for i, (x, y) in enumerate(arr))
 
     def free_spot(min_d: float) -> tuple[float, float]:
         for _ in range(10_000):

@@ -172,3 +172,49 @@ def test_dump_is_plain_json(tmp_path: Path) -> None:
     data = json.loads(path.read_text())
     assert set(data) == {"robots", "obstacles", "clutter", "light", "seed", "room"}
     assert scenarios.from_dict(data) == generate(2, 1)
+
+
+# ------------------------------------------------------------------ start headings (issue 19)
+
+
+@pytest.mark.parametrize(
+    ("text", "kind", "spread"),
+    [("aligned", "aligned", 0.0), ("random", "random", 0.0), ("jitter:20", "jitter", 20.0)],
+)
+def test_headings_parse(text: str, kind: str, spread: float) -> None:
+    h = scenarios.Headings.parse(text)
+    assert (h.kind, h.spread_deg) == (kind, spread)
+    assert str(h) == text
+
+
+@pytest.mark.parametrize("text", ["", "north", "jitter", "jitter:", "jitter:0", "jitter:-5",
+                                  "jitter:181", "jitter:nan", "jitter:x", "random:3"])  # fmt: skip
+def test_headings_parse_refuses(text: str) -> None:
+    with pytest.raises(ValueError, match="headings"):
+        scenarios.Headings.parse(text)
+
+
+def test_headings_leave_the_positions_of_a_seed_alone() -> None:
+    base = scenarios.generate(6, 11)
+    for text in ("random", "jitter:20"):
+        sc = scenarios.generate(6, 11, headings=scenarios.Headings.parse(text))
+        assert [(r.id, r.x, r.y) for r in sc.robots] == [(r.id, r.x, r.y) for r in base.robots]
+    assert all(r.heading == scenarios.NORTH for r in base.robots)
+
+
+def test_jitter_stays_within_its_spread_and_random_covers_the_circle() -> None:
+    jit = scenarios.Headings.parse("jitter:20").draw(200, 3)
+    assert all(abs(h - scenarios.NORTH) <= math.radians(20) + 1e-6 for h in jit)
+    rnd = scenarios.Headings.parse("random").draw(400, 3)
+    assert all(-math.pi <= h <= math.pi for h in rnd)
+    # every quarter of the circle gets robots
+    assert {int((h + math.pi) // (math.pi / 2)) % 4 for h in rnd} == {0, 1, 2, 3}
+    assert scenarios.Headings.parse("random").draw(5, 3) == scenarios.Headings.parse("random").draw(
+        5, 3
+    )
+
+
+def test_random_headings_survive_the_file_round_trip(tmp_path: Path) -> None:
+    sc = scenarios.generate(4, 2, headings=scenarios.Headings.parse("random"))
+    scenarios.dump(sc, tmp_path / "s.json")
+    assert scenarios.load(tmp_path / "s.json") == sc

@@ -49,7 +49,9 @@ def march_room(args: argparse.Namespace, n: int, seed: int, out: Path) -> list[s
     extra = route_length(args)
     scenario = getattr(args, "scenario", None)
     isolated = bool(getattr(args, "isolated", False))
-    if (extra <= 0.0 and scenario is None and not isolated) or any(
+    headings = getattr(args, "headings", None)
+    turned = headings is not None and headings.kind != "aligned"
+    if (extra <= 0.0 and scenario is None and not isolated and not turned) or any(
         "--scenario" in a for a in (args.world_arg or [])
     ):
         return []
@@ -59,7 +61,7 @@ def march_room(args: argparse.Namespace, n: int, seed: int, out: Path) -> list[s
 
     sc = scenarios.load(scenario) if scenario is not None else None
     if sc is None:
-        sc = scenarios.generate(n, seed, isolated=isolated)
+        sc = scenarios.generate(n, seed, isolated=isolated, headings=headings)
     if extra > 0.0:
         sc = replace(sc, room=min(100.0, math.ceil(2.0 * (sc.room + extra)) / 2.0))
     path = out / "scenario.json"
@@ -89,6 +91,7 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
         result["scenario"] = str(args.scenario)
     if getattr(args, "isolated", False):
         result["isolated"] = True
+    result["headings"] = str(getattr(args, "headings", None) or "aligned")
     if getattr(args, "agent_arg", None):
         result["agent_args"] = [f"{i}:{a}" for i, a in args.agent_arg]
     if getattr(args, "march", None) is not None:
