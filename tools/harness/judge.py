@@ -17,12 +17,11 @@ from typing import Any
 
 import numpy as np
 
+from agent.core.formation.verdict import R_D_MAX, R_PHI_MAX, check_pair
 from agent.wire import PHASES
 from tools.harness.observe import AgentView, Observer
 from tools.harness.procs import rogue_reports
 
-R_D_MAX = 0.125
-R_PHI_MAX = 0.30
 #: The phases of DESIGN.md §1 in order (the wire's list, less the terminal "failed").
 PHASE_ORDER = tuple(p for p in PHASES if p != "failed")
 
@@ -56,22 +55,20 @@ def evaluate(
     d_e: float,
     phi_e: float,
 ) -> list[dict[str, float]]:
-    """Per pair: distance, angle off the backward axis, r_d, r_φ (NAO paper 5.1.1)."""
-    back = np.array([-math.cos(axis), -math.sin(axis)])
+    """Per pair: distance, angle off the backward axis, r_d, r_φ (NAO paper 5.1.1), by the
+    formula the robots' own check uses (:func:`agent.core.formation.verdict.check_pair`)."""
     rows = []
     for child, parent in pairs:
-        v = np.array(final[child][:2]) - np.array(final[parent][:2])
-        d = float(np.hypot(*v))
-        cosang = float(np.clip(np.dot(v, back) / max(d, 1e-12), -1.0, 1.0))
-        phi = math.acos(cosang)
+        offset = np.array(final[parent][:2]) - np.array(final[child][:2])
+        c = check_pair(child, parent, offset, axis, d_e, phi_e)
         rows.append(
             {
                 "child": child,
                 "parent": parent,
-                "distance": d,
-                "angle_deg": math.degrees(phi),
-                "r_d": (d - d_e) / d_e,
-                "r_phi": (phi - phi_e) / phi_e,
+                "distance": c.distance,
+                "angle_deg": math.degrees(c.angle),
+                "r_d": c.r_d,
+                "r_phi": c.r_phi,
             }
         )
     return rows

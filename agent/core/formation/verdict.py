@@ -1,0 +1,78 @@
+"""Is the pyramid right? One formula for the robots' own check and the ground truth's.
+
+NAO paper 5.1.1 measures a built pyramid pair by pair: for a child and its parent, the
+distance d between them and the angle φ between the line parent → child and the
+pyramid's backward axis, as relative errors
+
+    r_d = (d − d_e) / d_e,        r_φ = (φ − φ_e) / φ_e.
+
+A pair is *in tolerance* when |r_d| <= :data:`R_D_MAX` and |r_φ| <= :data:`R_PHI_MAX`
+(the papers' simulations report r_d mainly within ±20 % and r_φ within ±30 %; the real
+NAOs of 5.2 hold ±0.1 m at d_e = 0.8 m, i.e. 12.5 %).
+
+"Done" is a measurement, not an assumption (DESIGN.md §9): after hold each child
+measures its parent with the camera and judges the pair with :func:`check_pair`; the
+evaluation tools judge the ground truth with the same function.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+#: Largest |r_d| of a pair in tolerance (0.1 m at the real NAOs' d_e = 0.8 m).
+R_D_MAX = 0.125
+#: Largest |r_φ| of a pair in tolerance.
+R_PHI_MAX = 0.30
+
+
+@dataclass(frozen=True)
+class PairCheck:
+    """One child–parent pair: distance (m), angle off the backward axis (rad), r_d, r_φ."""
+
+    child: int
+    parent: int
+    distance: float
+    angle: float
+    r_d: float
+    r_phi: float
+
+    @property
+    def ok(self) -> bool:
+        return abs(self.r_d) <= R_D_MAX and abs(self.r_phi) <= R_PHI_MAX
+
+    def text(self) -> str:
+        """``r_d +3.1 %, r_φ −54.0 % to parent 1`` (for statuses and logs)."""
+        return f"r_d {self.r_d:+.1%}, r_φ {self.r_phi:+.1%} to parent {self.parent}"
+
+
+def check_pair(
+    child: int,
+    parent: int,
+    offset: np.ndarray,
+    axis: float,
+    d_e: float,
+    phi_e: float,
+) -> PairCheck:
+    """Judge a pair from ``offset`` = parent − child (m), in a frame where the pyramid's
+    axis points at ``axis`` (rad, CCW from +x).
+
+    Raises ``ValueError`` for a non-finite offset or axis, a zero offset, or d_e, φ_e
+    that are not positive.
+    """
+    v = np.asarray(offset, dtype=np.float64).reshape(-1)
+    if v.shape != (2,) or not np.all(np.isfinite(v)):
+        raise ValueError(f"offset must be two finite numbers, got {offset!r}")
+    if not math.isfinite(axis):
+        raise ValueError(f"axis must be finite, got {axis}")
+    if not (d_e > 0.0 and phi_e > 0.0 and math.isfinite(d_e) and math.isfinite(phi_e)):
+        raise ValueError(f"d_e and phi_e must be positive, got {d_e}, {phi_e}")
+    d = float(math.hypot(float(v[0]), float(v[1])))
+    if d == 0.0:
+        raise ValueError("child and parent at the same point")
+    # parent − child points forward along the axis, φ_e to one side
+    cosang = (float(v[0]) * math.cos(axis) + float(v[1]) * math.sin(axis)) / d
+    phi = math.acos(min(1.0, max(-1.0, cosang)))
+    return PairCheck(child, parent, d, phi, (d - d_e) / d_e, (phi - phi_e) / phi_e)
