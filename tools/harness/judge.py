@@ -296,7 +296,10 @@ def summarise(
             result["leader"] = int(plan.leader)
             # in the common frame: where --march-to points are given
             result["leader_target"] = [float(v) for v in plan.robot(plan.leader).target]
-            axis = fa.axis_angle(plan)
+            # the common frame is the frame robot's fixed frame: the world turned by that
+            # robot's start heading off north (0 for the papers' aligned starts)
+            turn = float(obs.truth[0][1][int(plan.frame_robot)][2]) - math.pi / 2
+            axis = fa.axis_angle(plan) + turn
             result["axis_deg"] = math.degrees(axis)
             pairs = pyramid_pairs(plan, ids)
             final = obs.truth[-1][1]
