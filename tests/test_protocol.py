@@ -462,3 +462,18 @@ def test_inbox_weight_cap_drops_oldest_until_the_new_item_fits() -> None:
     assert box.get_nowait() == ("big", "y")
     assert box.weights()["big"] == 5
     assert box.put("small", "s", 10**9) == 0  # no weight cap on this lane
+
+
+def test_status_carries_the_robot_s_own_check() -> None:
+    msg = p.StatusMsg(sender=2, phase="done", check_parent=1, r_d=0.031, r_phi=-0.54)
+    back = p.decode(p.encode(msg))
+    assert back == msg and back.check_parent == 1 and back.r_phi == -0.54
+    assert p.decode(p.encode(p.StatusMsg(sender=2, phase="hold"))).check_parent == -1
+
+
+@pytest.mark.parametrize(
+    ("field", "value"), [("check_parent", -2), ("r_d", 1e9), ("r_phi", float("nan"))]
+)
+def test_status_check_fields_are_bounded(field: str, value: float) -> None:
+    with pytest.raises(p.ProtocolError, match=field):
+        p.StatusMsg(sender=2, phase="done", **{field: value})

@@ -150,7 +150,12 @@ class DigestMsg(Message):
 
 @dataclass(frozen=True)
 class StatusMsg(Message):
-    """Phase and progress of one agent, for viewers and for wave sequencing."""
+    """Phase and progress of one agent, for viewers and for wave sequencing.
+
+    ``check_parent`` >= 0: the robot measured that parent with its camera after hold and
+    judged the pair (``r_d``, ``r_phi``: NAO paper 5.1.1, ``agent.core.formation.verdict``);
+    -1: no such measurement (yet, or the leader).
+    """
 
     TAG: ClassVar[str] = "status"
     sender: int
@@ -162,6 +167,9 @@ class StatusMsg(Message):
     error: str = ""
     t_sim: float = 0.0
     bytes_sent: int = 0
+    check_parent: int = -1
+    r_d: float = 0.0
+    r_phi: float = 0.0
     SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {
         "sender": _ID,
         "phase": _str("phase", 16, PHASES),
@@ -172,6 +180,9 @@ class StatusMsg(Message):
         "error": _str("error"),
         "t_sim": _float("t_sim", 0.0),
         "bytes_sent": _int("bytes_sent", 0, 2**62),
+        "check_parent": _int("check_parent", -1, MAX_ROBOT_ID),
+        "r_d": _float("r_d", -100.0, 100.0),
+        "r_phi": _float("r_phi", -100.0, 100.0),
     }
 
 
