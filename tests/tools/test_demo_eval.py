@@ -144,3 +144,17 @@ def test_judge_march_known_answer() -> None:
     judge_march(obs, late, _Plan(), 0.0, [(2, 1)], 0.8, math.radians(30))
     assert late["march_route"] == pytest.approx([0.0, 3.0])
     assert late["march_ok"] is False and "never started" in str(late["march_error_reason"])
+
+
+def test_fleet_verdict_names_a_silent_wrong_formation() -> None:
+    from tools.harness.judge import fleet_verdict
+    from tools.harness.observe import AgentView
+
+    views = {1: AgentView(phase="done"), 2: AgentView(phase="done", check=(1, 0.02, -0.54))}
+    v = fleet_verdict(views, [1, 2], all_done=True, truth_ok=False)
+    assert v["silent_wrong"] and not v["verdicts_agree"]
+    assert v["own_checks"] == {"2": [1, 0.02, -0.54]}
+    assert v["own_checks_out_of_tolerance"] == [2]
+    honest = fleet_verdict(views, [1, 2], all_done=False, truth_ok=False)
+    assert not honest["silent_wrong"] and honest["verdicts_agree"]
+    assert fleet_verdict(views, [1, 2], all_done=True, truth_ok=True)["verdicts_agree"]

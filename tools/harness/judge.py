@@ -226,6 +226,28 @@ def plot(obs: Observer, result: dict[str, Any], path: Path) -> None:
     plt.close(fig)
 
 
+def fleet_verdict(
+    views: dict[int, AgentView], ids: list[int], all_done: bool, truth_ok: bool
+) -> dict[str, Any]:
+    """The fleet's own verdict beside the ground truth's (DESIGN.md §9 "Honest results").
+
+    The fleet says "formation held" when every agent reports ``done``; each child's own
+    check of its pair (``StatusMsg.r_d``/``r_phi``) is reported too. ``silent_wrong``: every
+    agent reported done while the ground truth fails - as bad as a contact.
+    """
+    checks = {str(i): list(c) for i in ids if (c := views[i].check) is not None}
+    out_of_tol = sorted(
+        int(i) for i, (_, rd, rp) in checks.items() if abs(rd) > R_D_MAX or abs(rp) > R_PHI_MAX
+    )
+    return {
+        "fleet_held": all_done,
+        "own_checks": checks,
+        "own_checks_out_of_tolerance": out_of_tol,
+        "verdicts_agree": all_done == truth_ok,
+        "silent_wrong": all_done and not truth_ok,
+    }
+
+
 def summarise(
     obs: Observer,
     result: dict[str, Any],
@@ -319,6 +341,7 @@ def summarise(
         abs(r["r_d"]) <= R_D_MAX and abs(r["r_phi"]) <= R_PHI_MAX for r in rows
     )
     result["within_tolerance"] = within
+    result.update(fleet_verdict(views, ids, ok_agents, within))
     # The agents planned from exactly the records the robots signed: the evaluator, which
     # accepts only verified envelopes, recomputes the same plan digest from them.
     result["plan_matches_records"] = bool(digests) and digests == {
@@ -359,11 +382,15 @@ def print_table(r: dict[str, Any]) -> None:
     p = print
     p(f"\nnao-formation demo: {r['robots']} robots, seed {r['seed']}, "
       f"d_e {r['d_e']:.2f} m, phi_e {r['phi_e_deg']:.0f} deg")  # fmt: skip
-    p(f"{'child':>5} {'parent':>6} {'dist (m)':>9} {'angle (deg)':>11} {'r_d':>8} {'r_phi':>8}  ok")
+    p(f"{'child':>5} {'parent':>6} {'dist (m)':>9} {'angle (deg)':>11} {'r_d':>8} {'r_phi':>8}  ok"
+      "   robot's own check (r_d, r_phi)")  # fmt: skip
+    checks = r.get("own_checks", {})
     for row in r["pairs"]:
         ok = abs(row["r_d"]) <= R_D_MAX and abs(row["r_phi"]) <= R_PHI_MAX
+        own = checks.get(str(row["child"]))
+        mine = f"{own[1]:+8.1%} {own[2]:+8.1%}" if own else "       -"
         p(f"{row['child']:>5} {row['parent']:>6} {row['distance']:9.3f} {row['angle_deg']:11.1f} "
-          f"{row['r_d']:+8.1%} {row['r_phi']:+8.1%}  {'yes' if ok else 'NO'}")  # fmt: skip
+          f"{row['r_d']:+8.1%} {row['r_phi']:+8.1%}  {'yes' if ok else 'NO ':3s}   {mine}")  # fmt: skip
     if not r["pairs"]:
         p(
             "  (no pairs evaluated"
@@ -411,4 +438,9 @@ def print_table(r: dict[str, Any]) -> None:
         p(f"  {r['timeout']}")
     p(f"exit codes: {r['exit_codes']}")
     p(f"figure: {r.get('figure', '-')}   recording: {r['recording']}")
+    if "fleet_held" in r:
+        fleet = "formation held (every agent done)" if r["fleet_held"] else "not held"
+        truth = "within tolerance" if r["within_tolerance"] else "NOT within tolerance"
+        p(f"verdicts: the fleet says {fleet}; the ground truth says {truth}"
+          + ("  <- SILENT WRONG FORMATION" if r["silent_wrong"] else ""))  # fmt: skip
     p("RESULT: " + ("SUCCESS" if r["success"] else "FAILURE"))

@@ -89,6 +89,8 @@ class AgentView:
     bytes_by_kind: dict[str, int] = field(default_factory=lambda: defaultdict(int))
     count_by_kind: dict[str, int] = field(default_factory=lambda: defaultdict(int))
     exit_code: int | None = None
+    #: the robot's own check of its pair after hold (parent id, r_d, r_φ); None: none
+    check: tuple[int, float, float] | None = None
 
 
 @dataclass
@@ -147,6 +149,8 @@ class Observer:
             view.error, view.plan_digest, view.wave, view.t_sim = (
                 msg.error, msg.plan_digest, msg.wave, msg.t_sim,
             )  # fmt: skip
+            if msg.check_parent >= 0:
+                view.check = (msg.check_parent, msg.r_d, msg.r_phi)
         elif isinstance(msg, NeighborRecordMsg):
             old = self.records.get(msg.sender)
             if old is None or old.round <= msg.round:  # the newest (re-)search round
