@@ -158,3 +158,38 @@ def test_fleet_verdict_names_a_silent_wrong_formation() -> None:
     honest = fleet_verdict(views, [1, 2], all_done=False, truth_ok=False)
     assert not honest["silent_wrong"] and honest["verdicts_agree"]
     assert fleet_verdict(views, [1, 2], all_done=True, truth_ok=True)["verdicts_agree"]
+
+
+def _judged(**kw: object) -> dict[str, object]:
+    base: dict[str, object] = {
+        "contacts": 0,
+        "plan_digests": {"1": "aa", "2": "aa"},
+        "movers": [1, 2],
+        "exit_codes": {"1": 0, "2": 0},
+        "final_phase": {"1": "done", "2": "done"},
+        "identical_digests": True,
+        "within_tolerance": True,
+        "max_abs_r_d": 0.02,
+        "max_abs_r_phi": 0.54,
+        "errors": {},
+    }
+    return {**base, **kw}
+
+
+@pytest.mark.parametrize(
+    ("kw", "expected", "words"),
+    [
+        ({}, "complete", "within"),
+        ({"contacts": 2}, "unsafe", "contact"),
+        ({"plan_digests": {"1": "aa", "2": "bb"}, "identical_digests": False}, "unsafe", "differ"),
+        ({"within_tolerance": False}, "unsafe", "wrong formation"),
+        ({"final_phase": {"1": "done", "2": "failed"}, "exit_codes": {"1": 0, "2": 1},
+          "errors": {"2": "formation off: r_phi -54 % to parent 1"}}, "safe_abort", "formation off"),
+        ({"timeout": "agents still running"}, "complete", "within"),
+    ],
+)  # fmt: skip
+def test_outcome_one_rule_for_every_tool(kw: dict[str, object], expected: str, words: str) -> None:
+    from tools.harness.judge import outcome
+
+    got, detail = outcome(_judged(**kw))
+    assert got == expected and words in detail

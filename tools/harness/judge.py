@@ -248,6 +248,39 @@ def fleet_verdict(
     }
 
 
+OUTCOMES = ("complete", "safe_abort", "unsafe")
+
+
+def outcome(result: dict[str, Any]) -> tuple[str, str]:
+    """(outcome, detail) of a judged run, one rule for every evaluation tool.
+
+    ``unsafe``: a contact; a robot walked on a plan that another robot that planned did not
+    share; or every agent reported done while the ground truth fails (a silent wrong
+    formation is as bad as a contact). ``complete``: every agent done on identical plans,
+    the ground truth within tolerance. Everything else is a ``safe_abort``.
+    """
+    contacts = int(result.get("contacts", 0))
+    if contacts:
+        return "unsafe", f"{contacts} contact(s)"
+    planned = {d for d in result.get("plan_digests", {}).values() if d}
+    movers = result.get("movers", [])
+    if movers and len(planned) > 1:
+        return "unsafe", f"robots {movers} walked; plan digests differ {sorted(planned)}"
+    codes, phases = result.get("exit_codes", {}), result.get("final_phase", {})
+    all_done = bool(codes) and all(codes.get(i) == 0 and phases.get(i) == "done" for i in codes)
+    if all_done and result.get("identical_digests"):
+        if result.get("within_tolerance"):
+            return "complete", "done, pairs within tolerance"
+        worst = f"max |r_d| {result.get('max_abs_r_d', math.nan):.1%}, |r_phi| " + (
+            f"{result.get('max_abs_r_phi', math.nan):.1%}"
+        )
+        return "unsafe", f"every agent said done on a wrong formation ({worst})"
+    errors = "; ".join(f"{k}: {v[:90]}" for k, v in result.get("errors", {}).items())
+    if "timeout" in result:
+        errors = f"{result['timeout']}; {errors}"
+    return "safe_abort", errors or f"exit codes {codes}, phases {phases}"
+
+
 def summarise(
     obs: Observer,
     result: dict[str, Any],
@@ -260,6 +293,7 @@ def summarise(
     n = len(ids)
     views = {i: obs.agents.get(i, AgentView()) for i in ids}
     result["exit_codes"] = {str(i): views[i].exit_code for i in ids}
+    result["movers"] = [i for i in ids if "move" in views[i].phase_wall]
     result["final_phase"] = {str(i): views[i].phase for i in ids}
     result["errors"] = {str(i): views[i].error for i in ids if views[i].error}
     digests = {views[i].plan_digest for i in ids}

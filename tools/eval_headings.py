@@ -1,0 +1,240 @@
+"""``python -m tools.eval_headings``: robots set down facing any direction (issue 19).
+
+The papers (NAO 4.1.1) assume every robot starts facing the same way. This tool runs the
+fleet as ``tools.demo`` does (secure, a TLS router, one agent process per robot) on
+generated scenarios whose start headings are ``aligned``, ``random`` (uniform over the
+circle) or ``jitter:DEG``, optionally with one robot whose sensor is faulty (the agent's
+test tool ``--sensor-fault rotate:DEG|scale:F|shift:M`` on robot ``1 + seed mod N``),
+and judges every run from the ground truth with the one rule of
+:func:`tools.harness.judge.outcome`:
+
+* ``complete``: every agent done on identical plans, every pair within tolerance;
+* ``unsafe``: a contact, a robot that walked on a plan another did not share, or every
+  agent reporting done on a formation the ground truth fails (a silent wrong "done");
+* ``safe_abort``: everything else (the fleet stopped, and said why).
+
+For a sensor fault it also records whom the fleet named (the robots the plan leaves out,
+recomputed by the evaluator from the signed records: every agent that planned holds the
+same plan digest). Writes the shared JSON (``{"runs": [...]}``, as ``tools.eval_faults``)
+to ``--json`` and ``results.json``, ``headings.png`` (outcomes per case) under ``--out``
+and prints a table; a progress line with an estimate after every run.
+
+    python -m tools.eval_headings --headings random --robots 4 --robots 6 --seeds 10
+    python -m tools.eval_headings --headings jitter:20 --robots 10 --seeds 5
+    python -m tools.eval_headings --robots 6 --sensor-fault rotate:40 --sensor-fault scale:1.4 \\
+        --sensor-fault shift:0.5 --seeds 5
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections import Counter
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from sim.scenarios import Headings
+from tools.harness.judge import OUTCOMES, outcome
+from tools.harness.progress import Progress
+
+
+@dataclass
+class Run:
+    case: str
+    seed: int
+    outcome: str
+    contacts: int
+    wall_s: float
+    detail: str
+    headings: str = "aligned"
+    robots: int = 3
+    fault: str = ""
+    victim: int = -1
+    named: list[int] = field(default_factory=list)
+    verdicts_agree: bool = False
+    silent_wrong: bool = False
+    max_abs_r_d: float | None = None
+    max_abs_r_phi: float | None = None
+
+
+@dataclass(frozen=True)
+class Case:
+    headings: Headings
+    robots: int
+    fault: str = ""
+
+    @property
+    def name(self) -> str:
+        return f"{self.headings} N={self.robots}" + (f" {self.fault}" if self.fault else "")
+
+    def victim(self, seed: int) -> int:
+        """The robot with the injected fault: 1 + seed mod N (-1 without a fault)."""
+        return 1 + seed % self.robots if self.fault else -1
+
+
+def run_one(args: argparse.Namespace, case: Case, seed: int, out: Path) -> Run:
+    """One run of ``case`` at ``seed`` (module docstring)."""
+    from tools.demo import parse_args
+    from tools.harness.run import run_once
+
+    argv = ["--robots", str(case.robots), "--seed", str(seed), "--headings", str(case.headings)]
+    argv += ["--out", str(out), "--timeout", str(args.timeout), *args.demo_arg]
+    victim = case.victim(seed)
+    if case.fault:
+        argv += ["--agent-arg", f"{victim}:--sensor-fault={case.fault}"]
+    try:
+        r = run_once(parse_args(argv), seed, out, quiet=True)
+    except RuntimeError as exc:
+        r = {"errors": {"demo": str(exc)}, "contacts": 0}
+    got, detail = outcome(r)
+    return Run(
+        case=case.name,
+        seed=seed,
+        outcome=got,
+        contacts=int(r.get("contacts", 0)),
+        wall_s=float(r.get("wall_total", 0.0)),
+        detail=detail,
+        headings=str(case.headings),
+        robots=case.robots,
+        fault=case.fault,
+        victim=victim,
+        named=[int(i) for i in r.get("excluded", [])],
+        verdicts_agree=bool(r.get("verdicts_agree", False)),
+        silent_wrong=bool(r.get("silent_wrong", False)),
+        max_abs_r_d=_finite(r.get("max_abs_r_d")),
+        max_abs_r_phi=_finite(r.get("max_abs_r_phi")),
+    )
+
+
+def _finite(v: Any) -> float | None:
+    return float(v) if isinstance(v, int | float) and v == v else None
+
+
+def print_table(runs: list[Run]) -> None:
+    print(f"\n{'case':28s} {'seed':>4} {'outcome':10s} {'named':>8} {'max|r_d|':>8} "
+          f"{'max|r_phi|':>10} {'wall':>6}  detail")  # fmt: skip
+    for r in runs:
+        rd = "-" if r.max_abs_r_d is None else f"{r.max_abs_r_d:.1%}"
+        rp = "-" if r.max_abs_r_phi is None else f"{r.max_abs_r_phi:.1%}"
+        named = ",".join(map(str, r.named)) or "-"
+        print(f"{r.case:28s} {r.seed:4d} {r.outcome:10s} {named:>8} {rd:>8} {rp:>10} "
+              f"{r.wall_s:6.0f}  {r.detail[:80]}")  # fmt: skip
+    print(f"\n{'case':28s} {'complete':>8} {'safe_abort':>10} {'unsafe':>6} {'contacts':>8} "
+          f"{'named right':>11} {'verdicts agree':>14}")  # fmt: skip
+    for case in [*dict.fromkeys(r.case for r in runs), "all"]:
+        mine = [r for r in runs if case in ("all", r.case)]
+        c = Counter(r.outcome for r in mine)
+        faulty = [r for r in mine if r.fault]
+        right = f"{sum(r.named == [r.victim] for r in faulty)}/{len(faulty)}" if faulty else "-"
+        agree = f"{sum(r.verdicts_agree for r in mine)}/{len(mine)}"
+        print(f"{case:28s} {c['complete']:8d} {c['safe_abort']:10d} {c['unsafe']:6d} "
+              f"{sum(r.contacts for r in mine):8d} {right:>11} {agree:>14}")  # fmt: skip
+
+
+def plot(runs: list[Run], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    cases = list(dict.fromkeys(r.case for r in runs))
+    colours = {"complete": "tab:green", "safe_abort": "tab:orange", "unsafe": "tab:red"}
+    fig, ax = plt.subplots(figsize=(8, 1.0 + 0.45 * len(cases) + 0.5))
+    for y, case in enumerate(cases):
+        left = 0
+        c = Counter(r.outcome for r in runs if r.case == case)
+        for o in OUTCOMES:
+            if c[o]:
+                ax.barh(y, c[o], left=left, color=colours[o])
+                ax.text(left + c[o] / 2, y, str(c[o]), ha="center", va="center", color="white")
+                left += c[o]
+    handles = [plt.Rectangle((0, 0), 1, 1, color=colours[o]) for o in OUTCOMES]
+    ax.legend(handles, OUTCOMES, loc="lower right", fontsize=8)
+    ax.set_yticks(range(len(cases)), cases)
+    ax.invert_yaxis()
+    ax.set_xlabel("runs (seeds)")
+    total = Counter(r.outcome for r in runs)
+    ax.set_title(
+        f"Start headings: {len(runs)} runs, {total['complete']} complete, "
+        f"{total['safe_abort']} safe abort, {total['unsafe']} unsafe; "
+        f"silent wrong 'done' {sum(r.silent_wrong for r in runs)}"
+    )
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def write(args: argparse.Namespace, runs: list[Run]) -> None:
+    """results.json, headings.png and --json (after every run: a long matrix can be cut)."""
+    args.out.mkdir(parents=True, exist_ok=True)
+    doc = json.dumps({"runs": [asdict(r) for r in runs]}, indent=2)
+    (args.out / "results.json").write_text(doc)
+    if args.json is not None:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(doc)
+    plot(runs, args.out / "headings.png")
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(
+        prog="python -m tools.eval_headings", description=__doc__.split("\n\n")[0]
+    )
+    p.add_argument("--headings", action="append", type=Headings.parse, default=[],
+                   metavar="KIND", help="aligned | random | jitter:DEG (repeat; default random)")  # fmt: skip
+    p.add_argument("--robots", action="append", type=int, default=[],
+                   help="fleet size (repeat; default 4)")  # fmt: skip
+    p.add_argument("--sensor-fault", action="append", default=[], metavar="KIND:AMOUNT",
+                   help="one case per fault on robot 1 + seed mod N (the agent's test tool)")  # fmt: skip
+    p.add_argument("--seed-start", type=int, default=1)
+    p.add_argument("--seeds", type=int, default=10)
+    p.add_argument("--timeout", type=float, default=900.0, help="wall limit of a run (s)")
+    p.add_argument("--demo-arg", action="append", default=[], metavar="ARG",
+                   help="one more tools.demo argument for every run (repeat)")  # fmt: skip
+    p.add_argument("--json", type=Path, default=None)
+    p.add_argument("--out", type=Path, default=Path("out/eval_headings"))
+    p.add_argument("--report", type=Path, nargs="+", default=None, metavar="JSON",
+                   help="run nothing: the table and figure of earlier --json files together")  # fmt: skip
+    a = p.parse_args(argv)
+    a.headings = a.headings or [Headings("random")]
+    a.robots = a.robots or [4]
+    if any(not 2 <= n <= 64 for n in a.robots) or a.seeds < 1:
+        p.error("--robots in [2, 64], --seeds >= 1")
+    from agent.core.perception.sensor_fault import SensorFault
+
+    for f in a.sensor_fault:
+        try:
+            SensorFault.parse(f)
+        except ValueError as exc:
+            p.error(str(exc))
+    faults = a.sensor_fault or [""]
+    a.cases = [Case(h, n, f) for h in a.headings for n in a.robots for f in faults]
+    return a
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    runs: list[Run] = []
+    if args.report:
+        for path in args.report:
+            runs += [Run(**r) for r in json.loads(path.read_text())["runs"]]
+        write(args, runs)
+        print_table(runs)
+        return 0
+    seeds = range(args.seed_start, args.seed_start + args.seeds)
+    bar = Progress(len(args.cases) * len(seeds), "eval_headings")
+    for case in args.cases:
+        for seed in seeds:
+            slug = case.name.replace(" ", "_").replace(":", "-").replace("=", "")
+            r = run_one(args, case, seed, args.out / slug / f"seed-{seed:03d}")
+            runs.append(r)
+            write(args, runs)
+            bar.step(f"{case.name} seed {seed}: {r.outcome} ({r.detail[:70]})")
+    print_table(runs)
+    print(f"figure: {args.out / 'headings.png'}", file=sys.stderr)
+    return 0 if all(r.outcome != "unsafe" for r in runs) else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
