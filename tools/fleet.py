@@ -5,10 +5,15 @@
     python -m tools.fleet init --ids 2,5,9 --host router.lab --out fleet/
     python -m tools.fleet show fleet/                           # the roster, checked
     python -m tools.fleet export fleet/ --identity robot-2 --out robot-2/   # one host's set
+    python -m tools.fleet revoke fleet/ --robot 3 --reason key-compromise   # withdraw keys
+    python -m tools.fleet revoke fleet/ --identity observer --identity robot-4
 
-``export`` copies the public part (``ca.pem``, ``certs/``) and exactly one private key:
-that is what one host gets. The CA's private key (``ca-private/``) never leaves the
-machine that made the fleet. See ``agent/wire/trust.py`` for the layout and the checks.
+``export`` copies the public part (``ca.pem``, ``certs/``, ``crl.pem``) and exactly one
+private key: that is what one host gets. The CA's private key (``ca-private/``) never
+leaves the machine that made the fleet. ``revoke`` (which needs that key) adds
+certificates to ``crl.pem``, the revocation list signed by the CA; revoking one again
+changes nothing. Hand the new ``crl.pem`` to every host (docs/security.md "Revoking a
+key"). See ``agent/wire/trust.py`` for the layout and the checks.
 """
 
 from __future__ import annotations
@@ -18,7 +23,15 @@ import shutil
 import sys
 from pathlib import Path
 
-from agent.wire.trust import Credentials, FleetPaths, Identity, TrustError, create_fleet
+from agent.wire.trust import (
+    REASONS,
+    Credentials,
+    FleetPaths,
+    Identity,
+    TrustError,
+    create_fleet,
+    revoke,
+)
 
 
 def _ids(args: argparse.Namespace) -> list[int]:
@@ -33,8 +46,10 @@ def _ids(args: argparse.Namespace) -> list[int]:
 
 
 def export(src: Path, who: Identity, out: Path) -> FleetPaths:
-    """Copy the public credentials and ``who``'s private key from ``src`` to ``out``."""
+    """Copy the public credentials (with the revocation list, if any) and ``who``'s private
+    key from ``src`` to ``out``; a revoked ``who`` is refused."""
     creds = Credentials(src)  # checks the source before copying anything
+    creds.check_active(who)
     key = creds.paths.key(who)
     if not key.is_file():
         raise ValueError(f"{src} holds no private key for {who.cn}")
@@ -43,12 +58,21 @@ def export(src: Path, who: Identity, out: Path) -> FleetPaths:
         raise ValueError(f"{out} already holds credentials")
     dst.certs.mkdir(parents=True, exist_ok=True)
     shutil.copy2(creds.paths.ca, dst.ca)
+    if creds.paths.crl.is_file():
+        shutil.copy2(creds.paths.crl, dst.crl)
     for cert in sorted(creds.paths.certs.glob("*.pem")):
         shutil.copy2(cert, dst.certs / cert.name)
     dst.keys.mkdir(parents=True, exist_ok=True)
     shutil.copy2(key, dst.key(who))
     dst.key(who).chmod(0o600)
     return dst
+
+
+def _revoked_identities(args: argparse.Namespace) -> list[Identity]:
+    who = {Identity.robot(r) for r in args.robot} | {Identity.parse(c) for c in args.identity}
+    if not who:
+        raise ValueError("name what to revoke: --robot N or --identity robot-N|world|observer")
+    return sorted(who)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -66,6 +90,15 @@ def main(argv: list[str] | None = None) -> int:
     e.add_argument("dir")
     e.add_argument("--identity", required=True, help="robot-N, world, observer or router")
     e.add_argument("--out", required=True)
+    r = sub.add_parser("revoke", help="withdraw identities' certificates (needs the CA's key)")
+    r.add_argument("dir")
+    r.add_argument("--robot", type=int, action="append", default=[], help="robot id (repeat)")
+    r.add_argument(
+        "--identity", action="append", default=[], help="robot-N, world, observer or router"
+    )
+    r.add_argument(
+        "--reason", choices=sorted(REASONS), default="unspecified", help="RFC 5280 reason"
+    )
     args = p.parse_args(argv)
     try:
         if args.cmd == "init":
@@ -81,9 +114,22 @@ def main(argv: list[str] | None = None) -> int:
             for who in sorted(creds.roster):
                 own = "key here" if creds.paths.key(who).is_file() else "certificate only"
                 print(f"  {who.cn:12s} {own}")
+            for who, gone in sorted(creds.revoked.items()):
+                print(f"  {who.cn:12s} revoked ({gone.describe()})")
+        elif args.cmd == "revoke":
+            want = _revoked_identities(args)
+            added = revoke(args.dir, want, reason=args.reason)
+            again = [w.cn for w in want if w not in added]
+            paths = FleetPaths(Path(args.dir))
+            if added:
+                names = ", ".join(w.cn for w in added)
+                print(f"revoked {names} in {paths.crl}: copy it to every host, restart the router")
+            if again:
+                print(f"already revoked: {', '.join(again)}")
         else:
             dst = export(Path(args.dir), Identity.parse(args.identity), Path(args.out))
-            print(f"wrote {dst.root}: ca.pem, certs/, keys/{args.identity}.key")
+            crl = ", crl.pem" if dst.crl.is_file() else ""
+            print(f"wrote {dst.root}: ca.pem{crl}, certs/, keys/{args.identity}.key")
     except (ValueError, OSError) as exc:  # TrustError is a ValueError
         kind = "untrusted" if isinstance(exc, TrustError) else "error"
         print(f"fleet: {kind}: {exc}", file=sys.stderr)

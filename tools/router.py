@@ -3,7 +3,10 @@
 Secure (the default, DESIGN.md §8): ``--credentials DIR`` (or ``$NAO_CREDENTIALS``); the
 router listens on ``tls/0.0.0.0:7447`` and ``tls/0.0.0.0:7448``, accepts only links with a certificate of the
 fleet CA (mutual TLS) and enforces the fleet's access control by common name
-(``agent.wire.trust.acl_settings``). Every other process then runs with ``--credentials DIR
+(``agent.wire.trust.acl_settings``); identities revoked by the folder's ``crl.pem``
+(``python -m tools.fleet revoke``) get no rule at all, so the router refuses everything
+they send and delivers nothing to them (listed on stderr at start; restart the router
+to apply a new list). Every other process then runs with ``--credentials DIR
 --connect tls/ROUTER:7447`` as a zenoh client. ``--insecure`` (development only): plain
 TCP on ``tcp/0.0.0.0:7447`` and ``:7448``, anyone may connect. Port 7447
 (``agent.wire.BUS_PORT``) carries robot-to-robot traffic, port 7448
@@ -39,6 +42,7 @@ from agent.wire import (
     add_network_arguments,
     network_spec,
 )
+from agent.wire.trust import Credentials
 
 DEFAULT_LISTEN = [f"tcp/0.0.0.0:{BUS_PORT}", f"tcp/0.0.0.0:{WORLD_PORT}"]
 DEFAULT_LISTEN_TLS = [f"tls/0.0.0.0:{BUS_PORT}", f"tls/0.0.0.0:{WORLD_PORT}"]
@@ -53,10 +57,15 @@ def main(argv: list[str] | None = None) -> int:
         args.listen = list(DEFAULT_LISTEN_TLS if secure else DEFAULT_LISTEN)
     listen = args.listen
     try:
-        cfg = zenoh_config(network_spec(args, "router", default_mode="router"))
-    except ValueError as exc:
+        spec = network_spec(args, "router", default_mode="router")
+        cfg = zenoh_config(spec)
+        revoked = sorted(Credentials(spec.credentials).revoked) if spec.tls and spec.secure else []
+    except ValueError as exc:  # TrustError is one: a bad certificate or revocation list
         print(f"router: {exc}", file=sys.stderr)
         return 2
+    if revoked:
+        names = ", ".join(w.cn for w in revoked)
+        print(f"router: revoked, denied everything: {names}", file=sys.stderr, flush=True)
 
     stop = threading.Event()
 

@@ -15,7 +15,11 @@ from agent.wire.keys import KEY_RECORDS_ALL
 
 
 def tls_settings(creds: Credentials, who: Identity) -> dict[str, Any]:
-    """zenoh ``transport/link/tls``: mutual TLS against the fleet CA with ``who``'s key."""
+    """zenoh ``transport/link/tls``: mutual TLS against the fleet CA with ``who``'s key.
+
+    :class:`TrustError` when ``who``'s certificate is revoked: the process does not start.
+    """
+    creds.check_active(who)
     key, cert = str(creds.paths.key(who)), str(creds.paths.cert(who))
     return {
         "root_ca_certificate": str(creds.paths.ca),
@@ -54,8 +58,12 @@ def _rule(rid: str, messages: list[str], flows: list[str], keys: list[str]) -> d
 def acl_settings(roster: Iterable[Identity]) -> dict[str, Any]:
     """zenoh ``access_control`` for a router: deny by default, each common name its role.
 
-    Ingress is what a subject may send; egress what the router may deliver to it.
+    Ingress is what a subject may send; egress what the router may deliver to it. Only
+    ``roster`` gets rules: a common name left out of it (a revoked key,
+    :class:`~agent.wire.credentials.Credentials` leaves those out) matches no subject, so
+    the router denies everything it sends and delivers nothing to it.
     """
+    roster = sorted(set(roster))
     rules = [
         # every fleet member may watch membership and hear the fleet's statuses
         _rule("hear-fleet", ["declare_subscriber"], ["ingress"], ["nao/**", "world/clock"]),
@@ -86,27 +94,24 @@ def acl_settings(roster: Iterable[Identity]) -> dict[str, Any]:
         _rule("observe", ["declare_subscriber"], ["ingress"], ["world/**"]),
         _rule("observe-deliver", ["put"], ["egress"], ["world/**"]),
     ]
-    subjects = [
-        {"id": "world", "cert_common_names": ["world"]},
-        {"id": "observer", "cert_common_names": ["observer"]},
-        {"id": "members", "cert_common_names": sorted(i.cn for i in roster if i.role != "router")},
+    members = sorted(i.cn for i in roster if i.role != "router")
+    subjects: list[dict[str, Any]] = []
+    policies: list[dict[str, Any]] = []
+    member_rules = ["hear-fleet", "watch-alive", "deliver-fleet", "ask-records", "deliver-records"]
+    roles = [
+        ("members", members, member_rules),
+        ("world", ["world"] if Identity("world") in roster else [], ["world-serve", "world-take"]),
+        (
+            "observer",
+            ["observer"] if Identity("observer") in roster else [],
+            ["observe", "observe-deliver"],
+        ),
     ]
-    policies = [
-        {
-            "id": "members",
-            "rules": [
-                "hear-fleet",
-                "watch-alive",
-                "deliver-fleet",
-                "ask-records",
-                "deliver-records",
-            ],
-            "subjects": ["members"],
-        },
-        {"id": "world", "rules": ["world-serve", "world-take"], "subjects": ["world"]},
-        {"id": "observer", "rules": ["observe", "observe-deliver"], "subjects": ["observer"]},
-    ]
-    for who in sorted(roster):
+    for sid, names, rule_ids in roles:
+        if names:  # a subject without common names would match nothing (or be refused)
+            subjects.append({"id": sid, "cert_common_names": names})
+            policies.append({"id": sid, "rules": rule_ids, "subjects": [sid]})
+    for who in roster:
         if who.role != "robot":
             continue
         i = who.robot_id

@@ -1,5 +1,6 @@
 """Fleet credentials (DESIGN.md §8 "Trust", layer 1): identities, the credentials folder,
-creating a fleet, loading and checking certificates. See :mod:`agent.wire.trust`.
+creating a fleet, revoking a key, loading and checking certificates (issuer, validity
+period, revocation: :mod:`agent.wire.revocation`). See :mod:`agent.wire.trust`.
 """
 
 from __future__ import annotations
@@ -19,6 +20,13 @@ from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
 from agent.wire.envelope import MAX_AGE_S, Signer, Verifier
 from agent.wire.identity import Identity, TrustError
+from agent.wire.revocation import (
+    REASONS,
+    Revocation,
+    RevocationList,
+    build_revocations,
+    load_revocations,
+)
 
 # --------------------------------------------------------------------------- the folder
 
@@ -36,6 +44,11 @@ class FleetPaths:
     @property
     def ca_key(self) -> Path:
         return self.root / "ca-private" / "ca.key"
+
+    @property
+    def crl(self) -> Path:
+        """The revocation list, signed by the CA (public; every host)."""
+        return self.root / "crl.pem"
 
     @property
     def certs(self) -> Path:
@@ -164,7 +177,16 @@ def create_fleet(
     return paths
 
 
-def _load_cert(path: Path, ca: x509.Certificate, now: datetime.datetime) -> x509.Certificate:
+class CertificateRevoked(TrustError):
+    """A certificate of the fleet that the fleet's revocation list withdraws."""
+
+    def __init__(self, message: str, cert: x509.Certificate, revocation: Revocation) -> None:
+        super().__init__(message)
+        self.cert = cert
+        self.revocation = revocation
+
+
+def _read_cert(path: Path, ca: x509.Certificate) -> x509.Certificate:
     try:
         cert = x509.load_pem_x509_certificate(path.read_bytes())
     except (OSError, ValueError) as exc:
@@ -173,11 +195,32 @@ def _load_cert(path: Path, ca: x509.Certificate, now: datetime.datetime) -> x509
         cert.verify_directly_issued_by(ca)
     except (ValueError, TypeError, InvalidSignature):
         raise TrustError(f"{path}: not issued by this fleet's CA") from None
+    return cert
+
+
+def _load_cert(
+    path: Path,
+    ca: x509.Certificate,
+    now: datetime.datetime,
+    revoked: RevocationList | None = None,
+) -> x509.Certificate:
+    cert = _read_cert(path, ca)
     if not cert.not_valid_before_utc <= now <= cert.not_valid_after_utc:
         raise TrustError(f"{path}: certificate expired or not yet valid")
     if not isinstance(cert.public_key(), ed25519.Ed25519PublicKey):
         raise TrustError(f"{path}: not an Ed25519 certificate")
+    gone = revoked.of(cert) if revoked is not None else None
+    if gone is not None:
+        msg = f"{path}: certificate revoked by the fleet CA ({gone.describe()})"
+        raise CertificateRevoked(msg, cert, gone)
     return cert
+
+
+def _load_ca(paths: FleetPaths) -> x509.Certificate:
+    try:
+        return x509.load_pem_x509_certificate(paths.ca.read_bytes())
+    except (OSError, ValueError) as exc:
+        raise TrustError(f"no fleet CA at {paths.ca}: {exc}") from None
 
 
 def _cn(cert: x509.Certificate) -> str:
@@ -188,32 +231,98 @@ def _cn(cert: x509.Certificate) -> str:
     return value if isinstance(value, str) else value.decode("ascii", "replace")
 
 
+def revoke(
+    root: Path | str,
+    who: Iterable[Identity],
+    reason: str = "unspecified",
+    now: datetime.datetime | None = None,
+) -> list[Identity]:
+    """Add the certificates of ``who`` to the fleet's revocation list (``crl.pem``).
+
+    Needs the CA's private key (``ca-private/ca.key``). The list is re-signed with one
+    more CRL number; a certificate already on it keeps its entry (idempotent). Returns
+    the identities newly revoked, sorted; when there are none the file is left as it is.
+    """
+    if reason not in REASONS:
+        raise ValueError(f"reason {reason!r} is not one of {', '.join(REASONS)}")
+    paths = FleetPaths(Path(root))
+    now = now or datetime.datetime.now(datetime.UTC)
+    ca = _load_ca(paths)
+    try:
+        ca_key = serialization.load_pem_private_key(paths.ca_key.read_bytes(), password=None)
+    except (OSError, ValueError, TypeError) as exc:
+        raise ValueError(f"revoking needs the CA's private key at {paths.ca_key}: {exc}") from None
+    raw = serialization.Encoding.Raw, serialization.PublicFormat.Raw
+    ca_pub = ca.public_key()
+    if (
+        not isinstance(ca_key, ed25519.Ed25519PrivateKey)
+        or not isinstance(ca_pub, ed25519.Ed25519PublicKey)
+        or ca_key.public_key().public_bytes(*raw) != ca_pub.public_bytes(*raw)
+    ):
+        raise TrustError(f"{paths.ca_key} is not the private key of {paths.ca}")
+    current = load_revocations(paths.crl, ca, now)
+    entries = dict(current.entries)
+    added: list[Identity] = []
+    for ident in sorted(set(who)):
+        cert = _read_cert(paths.cert(ident), ca)
+        if _cn(cert) != ident.cn:
+            raise TrustError(f"{paths.cert(ident)}: certificate names {_cn(cert)!r}")
+        if cert.serial_number not in entries:
+            entries[cert.serial_number] = Revocation(cert.serial_number, now, reason)
+            added.append(ident)
+    if added:
+        pem = build_revocations(ca, ca_key, entries.values(), current.number + 1, now)
+        tmp = paths.crl.with_name(paths.crl.name + ".tmp")
+        _write(tmp, pem, private=False)
+        os.replace(tmp, paths.crl)
+    return added
+
+
 class Credentials:
     """A credentials folder, checked: the CA, the roster, and the private keys present.
 
     The roster holds every certificate under ``certs/`` that the fleet CA issued, is
-    valid now and names a fleet identity; anything else is refused with the reason (a
-    forged or foreign certificate must not widen the fleet).
+    valid now, is not revoked and names a fleet identity; anything else is refused with
+    the reason (a forged or foreign certificate must not widen the fleet). Revoked
+    certificates are left out of the roster and listed in :attr:`revoked`; a revocation
+    list (``crl.pem``) the CA did not sign, or that cannot be read, is refused.
     """
 
     def __init__(self, root: Path | str, now: datetime.datetime | None = None) -> None:
         self.paths = FleetPaths(Path(root))
         now = now or datetime.datetime.now(datetime.UTC)
-        try:
-            self.ca = x509.load_pem_x509_certificate(self.paths.ca.read_bytes())
-        except (OSError, ValueError) as exc:
-            raise TrustError(f"no fleet CA at {self.paths.ca}: {exc}") from None
+        self.ca = _load_ca(self.paths)
+        self.revocations = load_revocations(self.paths.crl, self.ca, now)
         self.roster: dict[Identity, ed25519.Ed25519PublicKey] = {}
+        #: Identities whose certificate under ``certs/`` the revocation list withdraws.
+        self.revoked: dict[Identity, Revocation] = {}
         if not self.paths.certs.is_dir():
             raise TrustError(f"no roster folder {self.paths.certs}")
         for path in sorted(self.paths.certs.glob("*.pem")):
-            cert = _load_cert(path, self.ca, now)
-            ident = Identity.parse(_cn(cert))
-            if path.name != f"{ident.cn}.pem":
-                raise TrustError(f"{path}: certificate names {ident.cn!r}, not its file name")
+            try:
+                cert = _load_cert(path, self.ca, now, self.revocations)
+            except CertificateRevoked as exc:
+                self.revoked[self._identity(path, exc.cert)] = exc.revocation
+                continue
             pub = cert.public_key()
             assert isinstance(pub, ed25519.Ed25519PublicKey)
-            self.roster[ident] = pub
+            self.roster[self._identity(path, cert)] = pub
+
+    @staticmethod
+    def _identity(path: Path, cert: x509.Certificate) -> Identity:
+        ident = Identity.parse(_cn(cert))
+        if path.name != f"{ident.cn}.pem":
+            raise TrustError(f"{path}: certificate names {ident.cn!r}, not its file name")
+        return ident
+
+    def check_active(self, who: Identity) -> None:
+        """Refuse to act as ``who`` when its certificate is revoked (a clear message)."""
+        gone = self.revoked.get(who)
+        if gone is not None:
+            raise TrustError(
+                f"{who.cn}'s certificate is revoked by the fleet CA ({gone.describe()}, "
+                f"{self.paths.crl}): this key may no longer join the fleet"
+            )
 
     @property
     def root(self) -> Path:
@@ -229,6 +338,7 @@ class Credentials:
 
     def signer(self, who: Identity, epoch_ms: int | None = None) -> Signer:
         """The :class:`Signer` of ``who``: its private key, checked against its certificate."""
+        self.check_active(who)
         path = self.paths.key(who)
         try:
             key = serialization.load_pem_private_key(path.read_bytes(), password=None)
@@ -243,4 +353,4 @@ class Credentials:
         return Signer(who, key, epoch_ms)
 
     def verifier(self, max_age: float = MAX_AGE_S) -> Verifier:
-        return Verifier(self.roster, max_age=max_age)
+        return Verifier(self.roster, max_age=max_age, revoked=self.revoked)

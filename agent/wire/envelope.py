@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
 import msgpack
@@ -110,6 +110,9 @@ class _Window:
 class Verifier:
     """Opens envelopes: signature by a roster member, freshness, no replays.
 
+    ``revoked`` names identities whose key the fleet CA has withdrawn
+    (:mod:`agent.wire.revocation`): they are never trusted, even when also in ``roster``,
+    and their envelopes are refused, including ones captured before the revocation.
     Replay state is kept only for roster members (bounded by the roster), each a set of
     at most :data:`REPLAY_WINDOW` sequence numbers.
     """
@@ -120,10 +123,12 @@ class Verifier:
         max_age: float = MAX_AGE_S,
         clock: Callable[[], float] = time.time,
         window: int = REPLAY_WINDOW,
+        revoked: Iterable[Identity] = (),
     ) -> None:
         if not max_age > 0:
             raise ValueError(f"max_age {max_age} must be > 0")
-        self.roster = dict(roster)
+        self.revoked = frozenset(revoked)
+        self.roster = {who: key for who, key in roster.items() if who not in self.revoked}
         self.max_age = max_age
         self.clock = clock
         self.window = window
@@ -149,6 +154,8 @@ class Verifier:
         if not isinstance(p, bytes) or not isinstance(s, bytes) or len(s) != 64:
             raise TrustError("envelope payload or signature malformed")
         who = Identity.from_code(by)
+        if who in self.revoked:
+            raise TrustError(f"signer {who.cn}'s key is revoked by the fleet CA")
         if who not in self.roster:
             raise TrustError(f"signer {who.cn} is not in the fleet roster")
         try:

@@ -9,8 +9,14 @@ Three layers, each useful without the others:
 
        ca.pem                 fleet CA certificate (public; every host)
        certs/{cn}.pem         every identity's certificate: the roster (public; every host)
+       crl.pem                revoked certificates, signed by the CA (public; every host;
+                              ``python -m tools.fleet revoke``, :mod:`agent.wire.revocation`)
        keys/{cn}.key          private keys: a host gets only its own
        ca-private/ca.key      the CA's private key: keep it offline
+
+   A revoked certificate leaves the roster: no verifier trusts its signatures (not even
+   ones made before the revocation), the router's access control has no rule for its
+   common name, and a process holding it refuses to start.
 
 2. **Transport.** Every zenoh link is TLS with mutual authentication against the fleet
    CA (:func:`tls_settings`), and the router's access control (:func:`acl_settings`) gives
@@ -38,12 +44,13 @@ consistency check (``agent/core/formation/neighbour_check.py``) is the defence t
 
 This module uses ``cryptography`` only (no hand-written crypto) and is part of the wire
 contract: ``sim/`` reaches it through ``agent.wire``. The three layers live in
-:mod:`agent.wire.credentials`, :mod:`agent.wire.access` and :mod:`agent.wire.envelope`;
+:mod:`agent.wire.credentials` (with :mod:`agent.wire.revocation`), :mod:`agent.wire.access`
+and :mod:`agent.wire.envelope`;
 this module gathers their public names.
 """
 
 from agent.wire.access import acl_settings, tls_settings
-from agent.wire.credentials import Credentials, FleetPaths, create_fleet
+from agent.wire.credentials import CertificateRevoked, Credentials, FleetPaths, create_fleet, revoke
 from agent.wire.envelope import (
     ENVELOPE_VERSION,
     EPOCHS_KEPT,
@@ -56,23 +63,29 @@ from agent.wire.envelope import (
     Verifier,
 )
 from agent.wire.identity import ROLES, Identity, TrustError
+from agent.wire.revocation import REASONS, Revocation, RevocationList
 
 __all__ = [
     "ENVELOPE_VERSION",
     "EPOCHS_KEPT",
     "MAX_AGE_S",
     "MAX_SEALED_BYTES",
+    "REASONS",
     "REPLAY_WINDOW",
     "ROLES",
     "SIGNATURE_CONTEXT",
+    "CertificateRevoked",
     "Credentials",
     "FleetPaths",
     "Identity",
     "Opened",
+    "Revocation",
+    "RevocationList",
     "Signer",
     "TrustError",
     "Verifier",
     "acl_settings",
     "create_fleet",
+    "revoke",
     "tls_settings",
 ]
