@@ -533,3 +533,70 @@ def test_adopt_needs_a_record_from_every_member() -> None:
     b = Agreement(0, rec(0), 0.0, fleet_size=None, digest_fn=canonical_digest)
     with pytest.raises(ValueError, match="fleet's None members"):
         b.adopt(0.0, "x")
+
+
+# ------------------------------------------------------------- re-sends that scale (issue 21)
+
+
+def _peer_digest(sender: int, members: tuple[int, ...], digest: str = "ab" * 32) -> DigestMsg:
+    return DigestMsg(sender=sender, round=0, digest=digest, members=members, params="")
+
+
+def _lone(n: int = 3) -> Agreement[NeighborRecordMsg]:
+    """Agent 0 of n, backoff 1 s doubling to 8 s; its first record and digest sent at 0."""
+    a = Agreement(
+        0, rec(0), 0.0, fleet_size=n, backoff_min=1.0, backoff_max=8.0,
+        digest_fn=canonical_digest,
+    )  # fmt: skip
+    for j in range(1, n):
+        a.member_joined(j, 0.0)
+    assert a.due(0.0) == ["record", "digest"]
+    a.sent(["record", "digest"], 0.0)  # the digest timer is due next at 1.0
+    return a
+
+
+def test_a_differing_digest_does_not_make_us_repeat_ours() -> None:
+    a = _lone()
+    a.on_record(rec(1), 0.1)
+    assert a.due(0.1) == []  # incomplete: our changed digest waits for the timer
+    a.on_digest(_peer_digest(1, (0, 1)), 0.2)  # differs from ours, lists us: nothing to say
+    assert a.due(0.5) == []
+    assert a.due(1.0) == ["digest"]  # the timer
+
+
+def test_a_digest_that_lacks_our_record_is_answered_once() -> None:
+    a = _lone()
+    a.on_digest(_peer_digest(1, (1,)), 1.2)
+    assert a.due(1.2) == ["record", "digest"]  # the answer, and the digest timer (1.0)
+    a.sent(["record", "digest"], 1.2)  # digest timer next at 3.2
+    assert a.due(1.3) == []  # once: the next answer waits for news or the timer
+    a.on_digest(_peer_digest(1, (1,), "cd" * 32), 1.4)  # its next digest still lacks us
+    assert a.due(1.4) == []  # news, but answers are at least backoff_min apart
+    assert a.due(2.2) == ["record"]
+
+
+def test_a_complete_set_is_announced_then_repeated_quickly() -> None:
+    a = _lone()
+    a.on_record(rec(1), 0.2)
+    a.on_record(rec(2), 0.3)
+    assert a.due(0.3) == []  # complete, but at least backoff_min after the last digest
+    assert a.due(1.0) == ["digest"]
+    a.sent(["digest"], 1.0)  # complete: the timer restarts at 1 s, capped at 4·1 s
+    assert a.due(1.5) == []
+    assert a.due(2.0) == ["digest"]
+    a.sent(["digest"], 2.0)
+    assert a.due(3.9) == [] and a.due(4.0) == ["digest"]
+    a.sent(["digest"], 4.0)
+    assert a.due(7.9) == [] and a.due(8.0) == ["digest"]  # 4 s, not 8 s: the cap
+
+
+def test_exchange_bytes_stay_linear_when_searches_end_apart() -> None:
+    """Seeded, simulated medium (tools.bench agent): 30 agents whose searches end over
+    30 s publish a few kB each (before issue 21: ~7 kB mean, ~13 kB max)."""
+    import numpy as np
+
+    from tools.bench.agent import simulate
+
+    r = simulate(30, 0.0, np.random.default_rng(5), stagger=30.0)
+    assert r["agreed"] == 1.0
+    assert r["bytes_mean"] < 3500 and r["bytes_max"] < 5000

@@ -280,7 +280,12 @@ class Agreement(Generic[R]):
         self.membership_changed = now
         self._record_tx = _Backoff(backoff_min, backoff_max)
         self._record_pending = True  # publish at least once (again after a newcomer)
+        self._record_hint = False  # a member's new digest lacks our record: send once
         self._digest_tx = _Backoff(backoff_min, backoff_max)
+        self._digest_dirty = True  # our digest changed since we last published it
+        self._min_gap = backoff_min  # prompt sends are at least this far apart
+        self._backoff_max = backoff_max
+        self._last_sent = {"record": -math.inf, "digest": -math.inf}
         self._final: Decision[R] | None = None
         self._params_failed = False  # failed on parameters: the digest is still answered
         self._digest_cache: tuple[tuple[int, ...], str] | None = None
@@ -327,6 +332,7 @@ class Agreement(Generic[R]):
         self.membership_changed = now
         # A newcomer has seen none of our earlier publications (no history).
         self._record_pending = True
+        self._digest_dirty = True
         self._record_tx.reset(now)
         self._digest_tx.reset(now)
 
@@ -351,7 +357,7 @@ class Agreement(Generic[R]):
             return False
         self.records[msg.sender] = msg
         self._digest_cache = None
-        self._digest_tx.reset(now)
+        self._digest_dirty = True
         return True
 
     def on_digest(self, msg: DigestLike, now: float) -> None:
@@ -368,11 +374,12 @@ class Agreement(Generic[R]):
         old = self.digests.get(msg.sender)
         self.digests[msg.sender] = msg
         self.params_of[msg.sender] = msg.params
-        if old is None or (old.digest, old.members) != (msg.digest, msg.members):
-            if self.self_id not in msg.members:
-                self._record_tx.reset(now)
-            if msg.digest != self.digest()[1]:
-                self._digest_tx.reset(now)
+        news = old is None or (old.digest, old.members) != (msg.digest, msg.members)
+        if news and self.self_id not in msg.members:
+            self._record_hint = True  # it lacks our record: answer once
+        # A digest that differs from ours needs records, not our digest: no re-send.
+        # (Before issue 21 it reset our digest timer, which at 50 robots made every
+        # agent publish its digest several times per record that arrived.)
 
     def _this_round(self, sender: int, round_: int) -> bool:
         """Whether a member's record or digest of ``round_`` belongs to this agreement;
@@ -453,7 +460,7 @@ class Agreement(Generic[R]):
         settled = self.fleet_size is not None or now - self.membership_changed >= self.settle
         if size_ok and settled and not missing and not disagree:
             self._final = self._agreed()
-            self._digest_tx.reset(now)  # tell the others once more, promptly
+            self._digest_dirty = True  # tell the others once more, promptly
             return self._final
         if now - self.started > self.timeout:
             parts = [f"no agreement after {self.timeout:g} s"]
@@ -482,7 +489,7 @@ class Agreement(Generic[R]):
             )
         recs = tuple(self.records[i] for i in members)
         self._final = Decision("agreed", why, self.digest_fn(recs), members, recs)
-        self._digest_tx.reset(now)
+        self._digest_dirty = True
         return self._final
 
     def _params_decision(self, now: float) -> Decision[R] | None:
@@ -548,18 +555,29 @@ class Agreement(Generic[R]):
     def due(self, now: float) -> list[str]:
         """What to (re-)publish now: a subset of ``["record", "digest"]`` in that order.
 
-        The caller publishes and then calls :meth:`sent` with the same list.
+        Prompt sends answer news, at most one per ``backoff_min``: the record when it was
+        never sent, a member joined, or a member's new digest lacks it; the digest when it
+        changed and we hold a record of every live member (a digest of an incomplete set
+        cannot be agreed on; others learn what we lack from the slow re-sends), and once
+        more when we agree. A backoff timer (``backoff_min`` doubling to ``backoff_max``,
+        reset by a newcomer and when our set becomes complete, then capped at
+        4·``backoff_min``) re-sends while something is still unacknowledged, so
+        that lost publications are repaired: bytes per agent grow with the fleet size and
+        the time spent waiting, not with their product (issue 21). The caller publishes
+        and then calls :meth:`sent` with the same list.
         """
         out: list[str] = []
         if self._final is not None and self._final.kind == "failed":
             # after a parameters failure our digest (our parameters) still goes out, so
             # that members that have not heard it yet name the same odd robot
-            if self._params_failed and self._digest_tx.due(now):
+            if self._params_failed and (self._prompt("digest", now) or self._digest_tx.due(now)):
                 out.append("digest")
             return out
         others = self.live - {self.self_id}
         if self.agreed:
-            if (others - self.peer_agreed) and self._digest_tx.due(now):
+            if (others - self.peer_agreed) and (
+                self._prompt("digest", now) or self._digest_tx.due(now)
+            ):
                 out.append("digest")
             return out
         # Re-send the record only to answer a digest that lacks it: a peer still
@@ -567,21 +585,40 @@ class Agreement(Generic[R]):
         unacked = [
             i for i in others if i in self.digests and self.self_id not in self._members_of(i)
         ]
-        if (self._record_pending or unacked or not others) and self._record_tx.due(now):
+        if ((self._record_pending or self._record_hint) and self._spaced("record", now)) or (
+            (unacked or not others) and self._record_tx.due(now)
+        ):
             out.append("record")
-        if (self.disagreeing() or not others) and self._digest_tx.due(now):
+        complete = not self.missing_records()
+        # a complete set is what the others wait for: re-sent at most 4·backoff_min apart
+        self._digest_tx.hi = (
+            min(self._backoff_max, 4.0 * self._min_gap) if complete else (self._backoff_max)
+        )
+        if complete and self._prompt("digest", now):
+            self._digest_tx.reset(now)
+            out.append("digest")
+        elif (self.disagreeing() or not others) and self._digest_tx.due(now):
             out.append("digest")
         return out
+
+    def _spaced(self, what: str, now: float) -> bool:
+        return now - self._last_sent[what] >= self._min_gap
+
+    def _prompt(self, what: str, now: float) -> bool:
+        return self._digest_dirty and self._spaced(what, now)
 
     def sent(self, what: Iterable[str], now: float) -> None:
         for w in what:
             if w == "record":
                 self._record_pending = False
+                self._record_hint = False
                 self._record_tx.fired(now)
             elif w == "digest":
+                self._digest_dirty = False
                 self._digest_tx.fired(now)
             else:
                 raise ValueError(f"unknown publication {w!r}")
+            self._last_sent[w] = now
 
     def _members_of(self, robot_id: int) -> tuple[int, ...]:
         d = self.digests.get(robot_id)

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from agent.core.agreement import Agreement
+from agent.core.agreement import Agreement, DigestNote
 from agent.wire import DigestMsg, NeighborRecordMsg, canonical_digest, encode
 
 
@@ -27,28 +27,45 @@ def record(i: int, n: int) -> NeighborRecordMsg:
 
 
 def simulate(
-    n: int, loss: float, rng: np.random.Generator, limit: float = 120.0
+    n: int, loss: float, rng: np.random.Generator, limit: float = 120.0, stagger: float = 0.0
 ) -> dict[str, float]:
-    agents = {
-        i: Agreement(i, record(i, n), 0.0, fleet_size=n, timeout=limit, digest_fn=canonical_digest)
-        for i in range(n)
-    }
-    for a in agents.values():
-        for j in agents:
-            a.member_joined(j, 0.0)
-    sent = dict.fromkeys(agents, 0)
-    t, dt, agreed_at = 0.0, 0.05, dict.fromkeys(agents, -1.0)
+    """One fleet: agent i starts exchanging at ``U(0, stagger)`` s (its search ends then);
+    before that it only collects what it hears, as the runner's early records and digests.
+    Every agent is a live member from the start (liveliness tokens outlive the search)."""
+    starts = {i: float(rng.uniform(0.0, stagger)) if stagger > 0 else 0.0 for i in range(n)}
+    agents: dict[int, Agreement[NeighborRecordMsg]] = {}
+    early: dict[int, dict[int, NeighborRecordMsg | DigestNote]] = {i: {} for i in range(n)}
+    sent = dict.fromkeys(range(n), 0)
+    t, dt, agreed_at = 0.0, 0.05, dict.fromkeys(range(n), -1.0)
     while t < limit:
         t += dt
-        for i, a in agents.items():
+        for i in range(n):
+            if i not in agents and t >= starts[i]:
+                a = Agreement(
+                    i, record(i, n), t, fleet_size=n, timeout=limit, digest_fn=canonical_digest
+                )
+                for j in range(n):
+                    a.member_joined(j, t)
+                for _j, m in sorted(early[i].items(), key=lambda kv: kv[0]):
+                    if isinstance(m, NeighborRecordMsg):
+                        a.on_record(m, t)
+                for _j, m in sorted(early[i].items(), key=lambda kv: kv[0]):
+                    if isinstance(m, DigestNote):
+                        a.on_digest(m, t)
+                agents[i] = a
+        for i, a in list(agents.items()):
             due = a.due(t)
             for what in due:
                 msg = a.records[i] if what == "record" else DigestMsg(**asdict(a.digest_note()))
                 sent[i] += len(encode(msg))
-                for j, b in agents.items():
+                for j in range(n):
                     if j == i or rng.random() < loss:
                         continue
-                    if what == "record":
+                    b = agents.get(j)
+                    if b is None:  # still searching: kept for later, newest wins
+                        key = j, i + (0 if what == "record" else n)
+                        early[j][key[1]] = a.records[i] if what == "record" else a.digest_note()
+                    elif what == "record":
                         b.on_record(a.records[i], t)
                     else:
                         b.on_digest(a.digest_note(), t)
@@ -57,15 +74,18 @@ def simulate(
                 agreed_at[i] = t
                 for b in agents.values():
                     b.on_peer_phase(i, "plan")  # its next status acknowledges
-        if all(v >= 0 for v in agreed_at.values()) and not any(
-            a.due(t + 100.0) for a in agents.values()
+        if (
+            len(agents) == n
+            and all(v >= 0 for v in agreed_at.values())
+            and not any(a.due(t + 100.0) for a in agents.values())
         ):
             break
-    ok = all(v >= 0 for v in agreed_at.values())
+    ok = len(agents) == n and all(v >= 0 for v in agreed_at.values())
     digests = {a.decide(t).digest for a in agents.values()}
+    last_start = max(starts.values())
     return {
         "agreed": float(ok and len(digests) == 1),
-        "t_agree": max(agreed_at.values()) if ok else float("nan"),
+        "t_agree": max(agreed_at.values()) - last_start if ok else float("nan"),
         "bytes_mean": float(np.mean(list(sent.values()))),
         "bytes_max": float(max(sent.values())),
     }
@@ -79,6 +99,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--losses", type=float, nargs="+", default=[0.0, 0.1, 0.3])
     p.add_argument("--runs", type=int, default=10)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--stagger",
+        type=float,
+        default=0.0,
+        metavar="S",
+        help="agents finish their search at U(0, S) s (0: all at once)",
+    )
     p.add_argument("--out", type=Path, default=None, help="PNG of bytes per agent vs N")
     a = p.parse_args(argv)
     if any(n < 1 for n in a.sizes) or any(not 0 <= x < 1 for x in a.losses) or a.runs < 1:
@@ -90,7 +117,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     for n in a.sizes:
         for loss in a.losses:
-            rs = [simulate(n, loss, rng) for _ in range(a.runs)]
+            rs = [simulate(n, loss, rng, stagger=a.stagger) for _ in range(a.runs)]
             row = {
                 "n": n,
                 "loss": loss,
