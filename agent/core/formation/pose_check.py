@@ -40,7 +40,7 @@ from agent.core.formation.poses import PoseFrame, fit_poses, poses_from_graph
 from agent.core.formation.records import NeighborRecord
 
 Z_MIN = 3.5  #: robust z-score a robot must reach to be named among several candidates
-Z_AGREE = 2.0  #: z-score enough when both tie-breaks among candidates agree (rule 3)
+Z_AGREE = 1.0  #: z-score enough when both tie-breaks among candidates agree (rule 3)
 MAD_FLOOR = 0.1  #: smallest MAD of robot scores (scores are in units of the tolerance)
 
 

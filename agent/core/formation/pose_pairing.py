@@ -19,11 +19,15 @@ not depend on it:
   (iii)); its disagreement with the bearing estimate ranks candidates;
 * **loop consistency** (the *support*, as :mod:`neighbour_check`'s but rotated): if the
   candidate is right, every other sighting ``v_ic`` of i, moved into j's frame as
-  ``R(−Δ)(v_ic − v_ij)``, is one of j's sightings when j sees c too: each such triangle
-  i–j–c that closes counts one, from both sides.
+  ``R(−Δ)(v_ic − v_ij)``, is one of j's sightings (within ε/2 + 0.08·|v_ic − v_ij|)
+  when j sees c too: each such triangle i–j–c that closes counts one, from both sides.
 
 Candidates are taken globally greedy (as :func:`neighbour_check.identify_neighbours`) in
-the order: more support first, then lower cost (normalised distance disagreement plus
+two passes. The first takes the supported candidates (support ≥ 1); the second the
+unsupported ones, but only where one of the two robots has no pair after the first pass
+(two robots alone, a robot whose own sightings are off): a leftover one-way sighting of
+a well-connected robot is not paired on distance alone. Within a pass the order is:
+more support first, then lower cost (normalised distance disagreement plus
 normalised mask disagreement), then smaller |ψ_j − ψ_i| (so a configuration that is
 truly ambiguous without headings, such as three robots on a line, resolves towards the
 aligned start), then lower owner (record order, ascending id), then lower detection
@@ -47,9 +51,10 @@ from agent.core.formation.records import NeighborRecord, canonical_records
 #: with the paper's ±5 % distance error disagree by at most 10 %; a D-base off by 40 %
 #: still pairs (and is then named by the consistency check).
 PAIR_REL_TOL = 0.3
-#: Loop-consistency tolerance per metre of lever arm (on top of ε): 3° bearing errors on
-#: both sides turn the moved sighting by up to ~6° ≈ 0.1 rad.
-SUPPORT_REL_TOL = 0.15
+#: Loop-consistency tolerance per metre of lever arm (on top of ε/2): 3° bearing errors
+#: on both sides turn the moved sighting by a few degrees. Tight on purpose: with a looser
+#: one, chance matches support wrong pairs in dense fleets.
+SUPPORT_REL_TOL = 0.08
 #: Mask disagreement (rad) that costs as much as a distance disagreement of ε + ρ·d.
 MASK_SCALE = math.radians(30.0)
 
@@ -183,7 +188,7 @@ def _support_one_side(
         moved = rel @ np.array([[c, s], [-s, c]])
         dist, k = trees[oj].query(moved)
         hit = by_owner[oj][np.minimum(k, by_owner[oj].size - 1)]
-        tol = epsilon + SUPPORT_REL_TOL * np.hypot(rel[:, 0], rel[:, 1])
+        tol = 0.5 * epsilon + SUPPORT_REL_TOL * np.hypot(rel[:, 0], rel[:, 1])
         out[t] = int(np.sum((dist <= tol) & (hit != dst[t])))
     return out
 
@@ -230,17 +235,24 @@ def identify_pairs(
         ok = (derr <= tol) & (dist[ra] > 0) & (dist[rb] > 0)
         ra, rb, derr, tol = ra[ok], rb[ok], derr[ok], tol[ok]
         turn = wrap_angle(bearing[ra] - bearing[rb] + np.pi)  # ψ_j − ψ_i of each candidate
-        cost = derr / tol + _mask_cost(turn, bearing, ori, ra, rb) / MASK_SCALE
+        # rounded so that float noise does not decide between exact ties (|Δ| does)
+        cost = np.round(derr / tol + _mask_cost(turn, bearing, ori, ra, rb) / MASK_SCALE, 9)
         support = _support_one_side(ra, rb, turn, owner, vecs, epsilon) + _support_one_side(
             rb, ra, -turn, owner, vecs, epsilon
         )
         order = np.lexsort((rb, ra, np.abs(turn), cost, -support))
         used: set[int] = set()
         linked: set[tuple[int, int]] = set()
-        for t in order:
+        supported = [t for t in order if support[t] > 0]
+        paired: set[int] = set()  # robots (record index) paired by supported candidates
+        for t in [*supported, *(t for t in order if support[t] == 0)]:
             da, db = int(ra[t]), int(rb[t])
             oa, ob = int(owner[da]), int(owner[db])
             if da in used or db in used or (oa, ob) in linked:
+                continue
+            if support[t] == 0 and not paired:
+                paired = {o for pair in linked for o in pair} | {-1}
+            if support[t] == 0 and oa in paired and ob in paired:
                 continue
             used.update((da, db))
             linked.add((oa, ob))

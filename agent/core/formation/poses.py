@@ -25,11 +25,13 @@ over mutual pairs, neighbours in ascending id, ``ψ_v = ψ_u + (β_uv − β_vu 
 same records (canonical order, :mod:`records`). One-way sightings are attached after a
 first fit and the fit is run once more from the spanning tree.
 
-**Aligned starts stay exactly as good as today.** When every estimated |ψ| is at most
-:data:`ALIGNED_MAX_HEADING` and the papers' model — :func:`neighbour_check.
-identify_neighbours` + :func:`common_frame.lsq_positions`, ψ ≡ 0 — is connected, pairs at
-least as many robots and explains every measurement within the consistency tolerances,
-that result is returned *exactly* (``aligned=True``, ψ = 0).
+**Aligned starts stay exactly as good as today.** The papers' model —
+:func:`neighbour_check.identify_neighbours` + :func:`common_frame.lsq_positions`, ψ ≡ 0 —
+is returned *exactly* (``aligned=True``, ψ = 0, its pairs' sightings as the
+measurements) when it is connected and explains its pairs' sightings within the
+consistency tolerances, and the unaligned fit is not a consistent alternative: it failed
+(not connected), is inconsistent, or puts every |ψ| within :data:`ALIGNED_MAX_HEADING`.
+So a robot turned by less than that at the start is treated as aligned, as today.
 
 Residuals: per pair, the sum over its sightings of the position misfit (m) and the
 largest mask misfit (rad, modulo π); its *score* is the larger of position /
@@ -61,10 +63,10 @@ from agent.core.formation.records import NeighborRecord
 SIGMA_POS = 0.05  #: σ₀ (m) of a sighting's position
 SIGMA_REL = 0.05  #: σ₁: σ per metre of distance (±5 % distance, ±3° bearing)
 SIGMA_MASK = math.radians(15.0)  #: σ_m of a mask's relative heading (5° masks, turned heads)
-POS_TOL = 0.05  #: consistency: a pair's position misfit (m) allowed at distance 0 ...
-POS_TOL_REL = 0.17  #: ... plus this per metre of distance
+POS_TOL = 0.12  #: consistency: a pair's position misfit (m) allowed at distance 0 ...
+POS_TOL_REL = 0.15  #: ... plus this per metre of distance
 HEADING_TOL = math.radians(20.0)  #: consistency: a pair's mask misfit (rad, modulo π)
-ALIGNED_MAX_HEADING = math.radians(5.0)  #: |ψ| below which the aligned model is tried
+ALIGNED_MAX_HEADING = math.radians(10.0)  #: |ψ| within which the aligned model is kept
 MAX_NFEV = 200  #: least-squares budget (function evaluations), fixed for determinism
 _TOL = 1e-12
 
@@ -425,32 +427,38 @@ def build_poses(records: Sequence[NeighborRecord], epsilon: float = DEFAULT_EPSI
 
 def poses_from_graph(graph: NeighbourGraph, records: Sequence[NeighborRecord]) -> PoseFrame:
     """:func:`build_poses` after the pairing (``records`` for the aligned model)."""
-    meas = pair_measurements(graph)
-    pf = fit_poses(graph.ids, meas)
-    extra = one_way_measurements(graph, pf)
-    if extra:
-        pf = fit_poses(graph.ids, [*meas, *extra])
-    if len(pf.ids) > 1 and float(np.max(np.abs(pf.headings))) <= ALIGNED_MAX_HEADING:
-        aligned = _aligned_model(graph, records, pf)
-        if aligned is not None:
-            return aligned
+    aligned = _aligned_model(records, graph.epsilon)
+    try:
+        meas = pair_measurements(graph)
+        pf = fit_poses(graph.ids, meas)
+        extra = one_way_measurements(graph, pf)
+        if extra:
+            pf = fit_poses(graph.ids, [*meas, *extra])
+    except ValueError:
+        if aligned is None:
+            raise
+        return aligned
+    if aligned is not None and (
+        not pf.consistent or float(np.max(np.abs(pf.headings))) <= ALIGNED_MAX_HEADING
+    ):
+        return aligned
     return pf
 
 
-def _aligned_model(
-    graph: NeighbourGraph, records: Sequence[NeighborRecord], pf: PoseFrame
-) -> PoseFrame | None:
-    """Today's result (eq. 9 pairs + lsq, ψ ≡ 0) when it explains every measurement."""
-    today = identify_neighbours(records, graph.epsilon)
-    if len(today.pairs) < len(graph.pairs):
-        return None
+def _aligned_model(records: Sequence[NeighborRecord], epsilon: float) -> PoseFrame | None:
+    """Today's result (eq. 9 pairs + lsq, ψ ≡ 0) when it is connected and explains its
+    own pairs' sightings within the consistency tolerances; else None."""
+    today = identify_neighbours(records, epsilon)
     try:
         cf = build_common_frame(today, "lsq")
     except ValueError:
         return None
-    if cf.ids != pf.ids:
-        return None
     cand = evaluate_poses(
-        pf.ids, pf.measurements, cf.positions, np.zeros(len(pf.ids)), cf.frame_robot, True
+        cf.ids,
+        pair_measurements(today),
+        cf.positions,
+        np.zeros(len(cf.ids)),
+        cf.frame_robot,
+        True,
     )
     return cand if cand.consistent else None
