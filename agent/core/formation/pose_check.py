@@ -1,0 +1,147 @@
+"""Consistency check of the common frame: name the robot whose sightings do not fit
+(DESIGN.md §9, "per-robot residuals name a robot whose sightings do not fit").
+
+A robot with a broken compass (its sightings rotated), a wrong D-base (its distances
+scaled) or a lying insider (its sightings shifted) disagrees with what the others saw of
+it. Rotating all of one robot's sightings is absorbed by its unknown ψ; only the others'
+mask orientations (modulo π) reveal it, so that fault is found only when the records
+carry orientations.
+
+Rule (deterministic, on the poses of :func:`poses.build_poses`):
+
+1. the fleet is *consistent* when every pair scores ≤ 1 (absolute tolerances
+   :data:`poses.POS_TOL` + :data:`poses.POS_TOL_REL`·d in metres and
+   :data:`poses.HEADING_TOL` in radians): nobody is named;
+2. otherwise each robot r (ascending id), in turn, is left out: its sightings and the
+   others' sightings of it are dropped and the rest is fitted again (same pairing); r is
+   a *candidate* when the rest is connected (at least two robots) and consistent;
+3. exactly one candidate: it is named. Several (typically the faulty robot and the
+   partner of its worst pair): with the robust z-score ``(s_r − median(s)) /
+   (1.4826·MAD(s))`` of the robot scores s (MAD floored at :data:`MAD_FLOOR`), the
+   candidate is named that both has the highest score (tie: lowest id) and, left out,
+   leaves the lowest worst pair score (tie: lowest id), when its z ≥ :data:`Z_AGREE`;
+   failing that, the only candidate with z ≥ :data:`Z_MIN`; otherwise nobody
+   (ambiguous). No candidate: nobody (more than one robot would have to be left out).
+
+The reason text says which of these happened, with the figures.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from agent.core.formation.neighbour_check import DEFAULT_EPSILON
+from agent.core.formation.pose_pairing import identify_pairs
+from agent.core.formation.poses import PoseFrame, fit_poses, poses_from_graph
+from agent.core.formation.records import NeighborRecord
+
+Z_MIN = 3.5  #: robust z-score a robot must reach to be named among several candidates
+Z_AGREE = 1.0  #: z-score enough when both tie-breaks among candidates agree (rule 3)
+MAD_FLOOR = 0.1  #: smallest MAD of robot scores (scores are in units of the tolerance)
+
+
+@dataclass(frozen=True)
+class PoseVerdict:
+    """The named robot(s) (empty: none) and why, with the poses the check ran on."""
+
+    named: tuple[int, ...]
+    reason: str
+    poses: PoseFrame
+
+
+def robust_z(scores: np.ndarray) -> np.ndarray:
+    """``(s − median) / (1.4826·max(MAD, MAD_FLOOR))`` of each robot score."""
+    s = np.asarray(scores, dtype=np.float64)
+    if s.size == 0:
+        return s
+    med = float(np.median(s))
+    mad = max(float(np.median(np.abs(s - med))), MAD_FLOOR)
+    return (s - med) / (1.4826 * mad)
+
+
+def leave_out(poses: PoseFrame, robot: int) -> PoseFrame | None:
+    """The fit without ``robot`` and every sighting of or by it; None when the rest is
+    fewer than two robots or not connected by mutual pairs."""
+    if robot not in poses.ids:
+        raise ValueError(f"robot {robot} has no pose")
+    rest = [i for i in poses.ids if i != robot]
+    if len(rest) < 2:
+        return None
+    meas = [m for m in poses.measurements if robot not in (m.owner, m.target)]
+    try:
+        return fit_poses(rest, meas)
+    except ValueError:
+        return None
+
+
+def check_poses(records: Sequence[NeighborRecord], epsilon: float = DEFAULT_EPSILON) -> PoseVerdict:
+    """Pair, fit and check a record set (module docstring).
+
+    Raises
+    ------
+    ValueError
+        As :func:`poses.build_poses` (bad records or ε, a fleet not connected).
+    """
+    graph = identify_pairs(records, epsilon)
+    return check_frame(poses_from_graph(graph, records))
+
+
+def check_frame(poses: PoseFrame) -> PoseVerdict:
+    """The rule of the module docstring on fitted poses."""
+    if poses.consistent:
+        return PoseVerdict((), "consistent: every pair within tolerance", poses)
+    worst = max(poses.pairs, key=lambda p: (p.score, -p.i, -p.j))
+    bad = f"pair {worst.i}-{worst.j} misfit {worst.position:.2f} m, " + (
+        f"{math.degrees(worst.heading):.0f}° (score {worst.score:.1f})"
+    )
+    candidates: list[int] = []
+    rest_max: dict[int, float] = {}
+    for r in poses.ids:
+        rest = leave_out(poses, r)
+        if rest is not None and rest.consistent:
+            candidates.append(r)
+            rest_max[r] = max((p.score for p in rest.pairs), default=0.0)
+    z = robust_z(poses.scores)
+    zs = {rid: float(z[k]) for k, rid in enumerate(poses.ids)}
+    score = {rid: float(poses.scores[k]) for k, rid in enumerate(poses.ids)}
+    if len(candidates) == 1:
+        r = candidates[0]
+        return PoseVerdict(
+            (r,),
+            f"robot {r}: the others are consistent without it ({bad}; its score "
+            f"{float(poses.scores[poses.ids.index(r)]):.1f}, z {zs[r]:.1f})",
+            poses,
+        )
+    if candidates:
+        worst_robot = min(candidates, key=lambda r: (-score[r], r))
+        cleanest = min(candidates, key=lambda r: (rest_max[r], r))
+        if worst_robot == cleanest and zs[worst_robot] >= Z_AGREE:
+            r = worst_robot
+            return PoseVerdict(
+                (r,),
+                f"robot {r}: of {candidates}, it has the highest score "
+                f"({score[r]:.2f}, z {zs[r]:.1f}) and leaving it out leaves the lowest "
+                f"worst pair score ({rest_max[r]:.2f}) ({bad})",
+                poses,
+            )
+        high = [r for r in candidates if zs[r] >= Z_MIN]
+        if len(high) == 1:
+            r = high[0]
+            return PoseVerdict(
+                (r,),
+                f"robot {r}: the only one of {candidates} whose leaving makes the rest "
+                f"consistent with z {zs[r]:.1f} >= {Z_MIN} ({bad})",
+                poses,
+            )
+        return PoseVerdict(
+            (),
+            f"ambiguous: leaving out any of {candidates} makes the rest consistent ({bad})",
+            poses,
+        )
+    return PoseVerdict(
+        (), f"inconsistent beyond one robot: no single robot explains it ({bad})", poses
+    )

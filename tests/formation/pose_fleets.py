@@ -1,0 +1,96 @@
+"""Fleets with unaligned start poses, their records, and record faults (DESIGN.md §9).
+
+A robot's start pose is (x, y, h) in the world, h its body heading; its fixed frame is
+its start pose with the body facing +y (π/2), so ψ = h − π/2 and a world vector w reads
+``R(−ψ) w`` in it. Mask orientations follow the M-base convention (the observed body
+heading minus the line of sight), with the observed robot at θ = 0 or 180° of its
+search (random) and quantised to the masks' 5° when noisy (``rng`` given).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from agent.core.formation.records import NeighborRecord
+
+MASK_STEP = math.radians(5.0)
+
+
+def rot(a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s], [s, c]])
+
+
+def sim_layout(rng: np.random.Generator, n: int) -> np.ndarray:
+    """Positions (n, 2) like the simulator's: 0.6-2.5 m to the nearest neighbour, every
+    robot within 3.0 m of at least two others (one other for n = 2)."""
+    side = 1.2 * math.sqrt(n)
+    while True:
+        pts: list[np.ndarray] = []
+        tries = 0
+        while len(pts) < n and tries < 1000:
+            tries += 1
+            p = rng.uniform(0.0, side, 2)
+            if all(np.hypot(*(p - q)) >= 0.6 for q in pts):
+                pts.append(p)
+        if len(pts) < n:
+            continue
+        pos = np.array(pts)
+        d = np.hypot(*(pos[:, None, :] - pos[None, :, :]).transpose(2, 0, 1))
+        np.fill_diagonal(d, np.inf)
+        seen = ((d >= 0.5) & (d <= 3.0)).sum(axis=1)
+        if d.min(axis=1).max() <= 2.5 and seen.min() >= min(2, n - 1):
+            return pos
+
+
+def unaligned_records(
+    ids: list[int],
+    pos: np.ndarray,
+    headings: np.ndarray,
+    rng: np.random.Generator | None = None,
+    dist_noise: float = 0.0,
+    bearing_noise: float = 0.0,
+    masks: bool = True,
+    reach: tuple[float, float] = (0.5, 3.0),
+) -> list[NeighborRecord]:
+    """Records of robots at world ``pos`` with body headings ``headings`` (rad)."""
+    recs = []
+    for k, rid in enumerate(ids):
+        psi = headings[k] - math.pi / 2
+        nb, ori = [], []
+        for j in range(len(ids)):
+            w = pos[j] - pos[k]
+            d = math.hypot(*w)
+            if j == k or not reach[0] <= d <= reach[1]:
+                continue
+            los = math.atan2(w[1], w[0])
+            b = los - psi
+            if rng is not None:
+                d *= 1.0 + rng.uniform(-dist_noise, dist_noise)
+                b += rng.uniform(-bearing_noise, bearing_noise)
+            nb.append([d * math.cos(b), d * math.sin(b)])
+            turned = math.pi if (rng is not None and rng.random() < 0.5) else 0.0
+            theta = (headings[j] + turned - los) % (2 * math.pi)
+            if rng is not None:
+                theta += rng.uniform(-bearing_noise, bearing_noise)
+                theta = MASK_STEP * round(theta / MASK_STEP)  # the masks' 5° steps
+            ori.append(theta % (2 * math.pi))
+        arr = np.array(nb, dtype=np.float64).reshape(-1, 2)
+        recs.append(NeighborRecord(rid, arr, np.array(ori) if masks and nb else None))
+    return recs
+
+
+def fault(rec: NeighborRecord, kind: str) -> NeighborRecord:
+    """``rotate`` 40° (a compass off), ``scale`` 1.4 (a D-base off), ``shift`` 0.5 m (a liar)."""
+    nb = rec.neighbours
+    if kind == "rotate":
+        nb = nb @ rot(math.radians(40.0)).T
+    elif kind == "scale":
+        nb = nb * 1.4
+    elif kind == "shift":
+        nb = nb + np.array([0.5, 0.0])
+    else:
+        raise ValueError(kind)
+    return NeighborRecord(rec.robot_id, nb, rec.orientations, rec.confidences)
