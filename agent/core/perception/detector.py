@@ -53,8 +53,8 @@ class Detection:
 
     ``distance`` (m, eq. 6 through the D-base of the matched mask) and ``bearing`` (rad,
     +left, body frame: head yaw + pixel offset) locate its body centre from the observer's
-    body centre. ``orientation`` is the matched mask's relative orientation re-expressed
-    against the camera axis (common.md), ``scale`` is r_g, ``box`` (x, y, w, h) is in the
+    body centre. ``orientation`` is the matched mask's relative orientation: the observed
+    NAO's heading minus the line of sight to it (rad, [0, 2π)), ``scale`` is r_g, ``box`` (x, y, w, h) is in the
     input image's pixels, ``side`` marks a side-posture (2-tuple) match.
     """
 
@@ -147,7 +147,9 @@ class Detector:
             ox, oy = cam.body_offset(head_yaw)
             px = ox + d_cam * math.cos(head_yaw + beta)
             py = oy + d_cam * math.sin(head_yaw + beta)
-            orient = (float(self.mbase.orientation[m.mask]) + beta) % TWO_PI
+            # the matched mask's orientation: the observed NAO's heading minus the line of
+            # sight (mbase.py), which is what a record carries (DESIGN.md §9 pose fit)
+            orient = float(self.mbase.orientation[m.mask]) % TWO_PI
             out.append(
                 Detection(
                     distance=math.hypot(px, py),
