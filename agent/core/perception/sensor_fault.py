@@ -5,8 +5,8 @@ saw, and the fleet must notice. For evaluation an agent can corrupt its *own* re
 after localisation (NAO paper 3.2, eqs. 7-8) and before it is published, in one of three
 ways that mirror what goes wrong on a real floor:
 
-* ``rotate:DEG`` - a broken compass: every sighting (and its mask orientation) turned
-  by DEG degrees about the robot;
+* ``rotate:DEG`` - a broken compass: every sighting turned by DEG degrees about the
+  robot (the mask orientations, relative to each line of sight, stay as they are);
 * ``scale:F`` - a miscalibrated D-base (eq. 6): every distance multiplied by F;
 * ``shift:M`` - an insider that lies with its own key: every sighting moved by M metres
   along +x of its fixed frame (as if it stood M metres away from where it is).
@@ -70,7 +70,7 @@ class SensorFault:
             a = math.radians(self.amount)
             c, s = math.cos(a), math.sin(a)
             rot = np.array([[c, -s], [s, c]])
-            return pts @ rot.T, np.mod(ori + a, 2.0 * math.pi)
+            return pts @ rot.T, ori.copy()
         if self.kind == "scale":
             return pts * self.amount, ori.copy()
         return pts + np.array([self.amount, 0.0]), ori.copy()

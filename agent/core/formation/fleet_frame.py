@@ -1,0 +1,121 @@
+"""The fleet's frame for planning: poses, and the robot left out (DESIGN.md §9).
+
+NAO paper 4.1.3 builds the common frame from positions alone, assuming parallel fixed
+frames (4.1.1). Here the common frame carries every robot's start *pose*: the pairing and
+robust SE(2) fit of :mod:`poses` (exactly the papers' result when the starts are
+aligned), checked by :mod:`pose_check`, which names a robot whose sightings do not fit.
+
+* Nobody named: every robot is planned from its estimated start position, and walks in
+  the common frame by turning its own plan by its estimated start heading ψ
+  (:mod:`own_frame`).
+* One robot named, the rest connected without it: the rest are fitted again without its
+  sightings and without the others' sightings of it (:func:`pose_check.leave_out`); the
+  named robot is placed where the *others* saw it (the mean of their sightings of it, in
+  the rest's frame), stands still, and is planned around like an obstacle.
+* One robot named and the rest not connected without it, or a fleet inconsistent beyond
+  one robot: nobody can be trusted to move, and :func:`fleet_frame` raises ``ValueError``
+  with the same reason on every agent (they hold the same records).
+
+Deterministic: the same records in any order give bit-identical output (the pose fit's
+own guarantee; the named robot's place is a mean over sightings sorted by owner id).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from agent.core.formation.pose_check import check_poses, leave_out
+from agent.core.formation.poses import PoseFrame
+from agent.core.formation.records import NeighborRecord
+
+
+@dataclass(frozen=True)
+class FleetFrame:
+    """Poses of the robots to plan, in the frame robot's fixed frame, and who is left out."""
+
+    frame_robot: int
+    ids: tuple[int, ...]  # ascending: the robots to plan
+    positions: np.ndarray  # (N, 2)
+    headings: np.ndarray  # (N,) ψ: each robot's fixed frame turned from the common frame
+    aligned: bool  # the papers' aligned model was kept (every ψ exactly 0)
+    excluded: tuple[int, ...] = ()  # robots left out: they stand still
+    #: (len(excluded), 2): where the others saw the robots left out
+    excluded_at: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    reason: str = ""  # the consistency check's verdict
+
+    def heading_of(self, robot_id: int) -> float:
+        """ψ of a planned robot; ``ValueError`` for one not planned."""
+        if robot_id not in self.ids:
+            raise ValueError(f"robot {robot_id} is not planned")
+        return float(self.headings[self.ids.index(robot_id)])
+
+
+def _seen_by_others(poses: PoseFrame, rest: PoseFrame, robot: int) -> np.ndarray:
+    """Where the rest saw ``robot``: the mean of their sightings of it, in ``rest``'s frame."""
+    seen = [
+        rest.to_common(m.owner, m.vector)[0]
+        for m in sorted(poses.measurements, key=lambda m: (m.owner, m.target))
+        if m.target == robot and m.owner in rest.ids
+    ]
+    if not seen:  # nobody else saw it (it only saw them): its own estimate, mapped
+        k = poses.ids.index(robot)
+        return _map_point(poses, rest, poses.positions[k])
+    return np.asarray(np.mean(np.array(seen), axis=0))
+
+
+def _map_point(src: PoseFrame, dst: PoseFrame, point: np.ndarray) -> np.ndarray:
+    """A point of ``src``'s frame in ``dst``'s, through their common robots (a 2-D rigid
+    least-squares fit of the shared positions)."""
+    common = [i for i in dst.ids if i in src.ids]
+    a = np.array([src.positions[src.ids.index(i)] for i in common])
+    b = np.array([dst.positions[dst.ids.index(i)] for i in common])
+    ca, cb = a.mean(axis=0), b.mean(axis=0)
+    h = (a - ca).T @ (b - cb)
+    u, _, vt = np.linalg.svd(h)
+    r = vt.T @ u.T
+    if np.linalg.det(r) < 0:
+        vt[-1] *= -1
+        r = vt.T @ u.T
+    return np.asarray(cb + r @ (np.asarray(point, dtype=np.float64) - ca))
+
+
+def fleet_frame(records: Sequence[NeighborRecord], epsilon: float) -> FleetFrame:
+    """Pair, fit, check and, if needed, leave one robot out (module docstring).
+
+    Raises ``ValueError`` for bad records, a fleet the mutual pairs do not connect, a
+    named robot without which the rest is not connected, or a fleet whose sightings are
+    inconsistent beyond one robot.
+    """
+    verdict = check_poses(records, epsilon)
+    poses = verdict.poses
+    if not verdict.named:
+        if not poses.consistent:
+            raise ValueError(
+                f"the sightings do not fit and no single robot explains it ({verdict.reason}); "
+                "nobody moves"
+            )
+        return FleetFrame(
+            poses.frame_robot, poses.ids, poses.positions, poses.headings, poses.aligned,
+            reason=verdict.reason,
+        )  # fmt: skip
+    (robot,) = verdict.named[:1]
+    rest = leave_out(poses, robot)
+    if rest is None or not rest.consistent:
+        raise ValueError(
+            f"robot {robot}'s sightings do not fit ({verdict.reason}) and the rest is not a "
+            "connected, consistent fleet without it; nobody moves"
+        )
+    at = _seen_by_others(poses, rest, robot)
+    return FleetFrame(
+        rest.frame_robot,
+        rest.ids,
+        rest.positions,
+        rest.headings,
+        rest.aligned,
+        excluded=(robot,),
+        excluded_at=at.reshape(1, 2),
+        reason=verdict.reason,
+    )

@@ -1,0 +1,103 @@
+"""The fleet's frame for planning (agent/core/formation/fleet_frame.py, DESIGN.md §9)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from agent.core.formation.fleet_frame import fleet_frame
+from agent.core.formation.neighbour_check import DEFAULT_EPSILON
+from tests.formation.pose_fleets import fault, sim_layout, unaligned_records
+
+IDS = [1, 2, 3, 4, 5, 6]
+
+
+def _fleet(seed: int, headings: np.ndarray | None = None):  # type: ignore[no-untyped-def]
+    rng = np.random.default_rng(seed)
+    pos = sim_layout(rng, len(IDS))
+    h = rng.uniform(-math.pi, math.pi, len(IDS)) if headings is None else headings
+    return pos, h, unaligned_records(IDS, pos, h)
+
+
+def test_aligned_starts_keep_the_papers_model() -> None:
+    _, _, recs = _fleet(3, np.full(len(IDS), math.pi / 2))
+    ff = fleet_frame(recs, DEFAULT_EPSILON)
+    assert ff.aligned and ff.excluded == () and ff.ids == tuple(IDS)
+    assert np.all(ff.headings == 0.0)
+
+
+def test_random_headings_are_recovered_without_noise() -> None:
+    pos, h, recs = _fleet(4)
+    ff = fleet_frame(recs, DEFAULT_EPSILON)
+    k = ff.ids.index(ff.frame_robot)
+    psi_true = h - h[IDS.index(ff.frame_robot)]
+    for rid in ff.ids:
+        assert math.cos(ff.heading_of(rid) - psi_true[IDS.index(rid)]) == pytest.approx(1.0)
+    # positions: the same shape as the world's (distances between robots)
+    d_est = np.hypot(*(ff.positions[None] - ff.positions[:, None]).transpose(2, 0, 1))
+    d_true = np.hypot(*(pos[None] - pos[:, None]).transpose(2, 0, 1))
+    np.testing.assert_allclose(d_est, d_true, atol=1e-6)
+    assert ff.positions[k] == pytest.approx([0.0, 0.0])
+
+
+@pytest.mark.parametrize("kind", ["rotate", "scale", "shift"])
+def test_a_faulty_robot_is_left_out_and_placed_where_the_others_saw_it(kind: str) -> None:
+    pos, h, recs = _fleet(7)
+    bad = 3
+    recs = [fault(r, kind) if r.robot_id == bad else r for r in recs]
+    ff = fleet_frame(recs, DEFAULT_EPSILON)
+    assert ff.excluded == (bad,) and bad not in ff.ids and f"robot {bad}" in ff.reason
+    # its place, seen by the others, matches the world's (up to the rigid frame)
+    k = IDS.index(ff.frame_robot)
+    w = pos[IDS.index(bad)] - pos[k]
+    psi_f = h[k] - math.pi / 2
+    c, s = math.cos(-psi_f), math.sin(-psi_f)
+    expected = np.array([c * w[0] - s * w[1], s * w[0] + c * w[1]])
+    np.testing.assert_allclose(ff.excluded_at[0], expected, atol=1e-6)
+
+
+def test_shuffled_records_give_the_same_frame() -> None:
+    _, _, recs = _fleet(11)
+    a = fleet_frame(recs, DEFAULT_EPSILON)
+    b = fleet_frame(list(reversed(recs)), DEFAULT_EPSILON)
+    assert a.ids == b.ids and a.frame_robot == b.frame_robot
+    assert a.positions.tobytes() == b.positions.tobytes()
+    assert a.headings.tobytes() == b.headings.tobytes()
+
+
+def test_heading_of_a_robot_not_planned() -> None:
+    _, _, recs = _fleet(4)
+    with pytest.raises(ValueError, match="not planned"):
+        fleet_frame(recs, DEFAULT_EPSILON).heading_of(99)
+
+
+def test_a_fleet_that_falls_apart_without_the_named_robot_stops(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import agent.core.formation.fleet_frame as ff_mod
+    from agent.core.formation.pose_check import PoseVerdict
+
+    _, _, recs = _fleet(4)
+    real = ff_mod.check_poses(recs, DEFAULT_EPSILON)
+    named = PoseVerdict((2,), "robot 2: the others are consistent without it", real.poses)
+    monkeypatch.setattr(ff_mod, "check_poses", lambda r, e: named)
+    monkeypatch.setattr(ff_mod, "leave_out", lambda poses, robot: None)
+    with pytest.raises(ValueError, match=r"robot 2's sightings do not fit.*nobody moves"):
+        fleet_frame(recs, DEFAULT_EPSILON)
+
+
+def test_a_fleet_inconsistent_beyond_one_robot_stops(monkeypatch: pytest.MonkeyPatch) -> None:
+    import dataclasses
+
+    import agent.core.formation.fleet_frame as ff_mod
+    from agent.core.formation.pose_check import PoseVerdict
+
+    _, _, recs = _fleet(4)
+    real = ff_mod.check_poses(recs, DEFAULT_EPSILON)
+    worse = [dataclasses.replace(p, score=5.0) for p in real.poses.pairs]
+    poses = dataclasses.replace(real.poses, pairs=tuple(worse))
+    monkeypatch.setattr(ff_mod, "check_poses", lambda r, e: PoseVerdict((), "ambiguous", poses))
+    with pytest.raises(ValueError, match="no single robot explains it"):
+        fleet_frame(recs, DEFAULT_EPSILON)
