@@ -57,7 +57,8 @@ from agent.core.formation.pyramid import (
     pyramid_frame,
 )
 from agent.core.formation.records import NeighborRecord
-from agent.core.formation.safety import Schedule, ScheduleError, pair_flags, schedule
+from agent.core.formation.safety import pair_flags
+from agent.core.formation.scheduler import Schedule, ScheduleError, schedule
 
 #: ``default`` strategy: exact min-sum (``optimal``, O(n³)) up to this many robots; the
 #: paper's O(n log n) strategy above. Whatever it starts with, ``default`` falls back to
