@@ -11,7 +11,8 @@ from hypothesis import strategies as st
 
 from agent.core.formation.execution import check_dependencies
 from agent.core.formation.fallback import banded_plan
-from agent.core.formation.plan import PlanParams, plan_from_positions
+from agent.core.formation.params import PlanParams
+from agent.core.formation.plan import plan_from_positions
 from agent.core.formation.pyramid import pyramid_frame
 from agent.core.formation.safety import check_safety
 

@@ -9,7 +9,8 @@ import pytest
 
 from agent.core.formation import plan as plan_module
 from agent.core.formation.obstacles import SLOT_CLEARANCE, clear_shifts
-from agent.core.formation.plan import Plan, PlanParams, plan_from_positions, plan_from_records
+from agent.core.formation.params import PlanParams
+from agent.core.formation.plan import Plan, plan_from_positions, plan_from_records
 from agent.core.formation.pyramid import parent_of
 from agent.core.formation.records import NeighborRecord
 from agent.core.formation.safety import check_safety
@@ -222,16 +223,3 @@ def test_plan_errors() -> None:
         plan_from_positions([1], np.zeros((1, 2)), obstacles=np.zeros((2, 3)))
     with pytest.raises(ValueError, match="not in the plan"):
         plan_from_positions([1], np.zeros((1, 2))).robot(2)
-    for kw, msg in (
-        ({"d_e": -1.0}, "d_e"),
-        ({"phi_e": 2.0}, "phi_e"),
-        ({"radius": 0.0}, "radius"),
-        ({"strategy": "x"}, "strategy"),
-        ({"orientation": "x"}, "orientation"),
-        ({"frame_method": "x"}, "frame_method"),
-        ({"epsilon": -1.0}, "epsilon"),
-        ({"placement": "x"}, "placement"),
-        ({"obstacle_method": "x"}, "obstacle_method"),
-    ):
-        with pytest.raises(ValueError, match=msg):
-            PlanParams(**kw)  # type: ignore[arg-type]

@@ -35,16 +35,12 @@ safely does the planner fall back to the paper's procedure above.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from agent.core.formation.assignment import assign
+from agent.core.formation.params import PlanParams
 from agent.core.formation.pyramid import centred_slots, pyramid_frame
-
-if TYPE_CHECKING:
-    from agent.core.formation.plan import PlanParams
-
 
 #: ``near`` placement: a slot's centre stays this many robot radii from an obstacle's
 #: centre: the planner's clearance (2·radius) plus one radius for the final visual
