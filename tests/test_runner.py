@@ -16,7 +16,7 @@ import pytest
 
 from agent.body.zenoh_world import ZenohBody
 from agent.core.agreement import Agreement, Decision, params_digest
-from agent.core.formation.plan import PlanParams
+from agent.core.formation.params import PlanParams
 from agent.net.bus import Bus, BusConfig
 from agent.phases.adapters import FormationAdapter, PerceptionAdapter
 from agent.phases.config import AgentConfig, Route

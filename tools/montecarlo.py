@@ -50,11 +50,13 @@ from agent.core.formation.execution import (
     path_lengths,
     wave_makespan,
 )
+from agent.core.formation.geometry import paths_cross
 from agent.core.formation.neighbour_check import identify_neighbours
-from agent.core.formation.plan import Plan, PlanParams, plan_from_positions, plan_from_records
+from agent.core.formation.params import PlanParams
+from agent.core.formation.plan import Plan, plan_from_positions, plan_from_records
 from agent.core.formation.pyramid import parent_of
 from agent.core.formation.records import NeighborRecord
-from agent.core.formation.safety import check_safety, paths_cross
+from agent.core.formation.safety import check_safety
 
 D_E = 2.0
 PHI_E = math.radians(30)

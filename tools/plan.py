@@ -33,7 +33,8 @@ from typing import Any
 
 import numpy as np
 
-from agent.core.formation.plan import Plan, PlanParams, plan_from_positions
+from agent.core.formation.params import PlanParams
+from agent.core.formation.plan import Plan, plan_from_positions
 
 _KEYS = {"robots", "d_e", "phi_e_deg", "radius", "strategy", "orientation", "obstacles"}
 

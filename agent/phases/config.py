@@ -11,7 +11,7 @@ import math
 from dataclasses import dataclass
 
 from agent.core.agreement import ParamValue
-from agent.core.formation.plan import PLAN_STRATEGIES, PlanParams
+from agent.core.formation.params import PLAN_STRATEGIES, PlanParams
 from agent.core.formation.pyramid import ORIENTATIONS
 from agent.core.formation.research import DEFAULT_STEP
 from agent.core.nao import HEAD_YAW_LIMIT
@@ -84,7 +84,7 @@ class AgentConfig:
     d_e: float = 0.8
     phi_e: float = math.radians(30.0)
     orientation: str = "pca"  # pyramid orientation: "pca" (NAO eq. 12) | "cp" (AUV III.B)
-    strategy: str = "default"  # assignment strategy, one of formation.plan.PLAN_STRATEGIES
+    strategy: str = "default"  # assignment strategy, one of formation.params.PLAN_STRATEGIES
     timeout: float = 120.0  # s from the end of the search to agreement
     wave_timeout: float = 600.0  # s to wait for earlier waves, and for the fleet to hold
     settle: float = 3.0  # s of unchanged membership when no fleet size is given

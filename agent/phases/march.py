@@ -56,7 +56,8 @@ import numpy as np
 
 from agent.core.control import PAPER_GAINS, STEP_GAINS, next_leg, wrap_pi
 from agent.core.control.station import StationGains, StationKeeper, safe_walk, unicycle_step
-from agent.core.formation.plan import Plan, PlanParams
+from agent.core.formation.params import PlanParams
+from agent.core.formation.plan import Plan
 from agent.core.nao import HEAD_YAW_LIMIT
 
 if TYPE_CHECKING:

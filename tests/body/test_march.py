@@ -17,7 +17,8 @@ import pytest
 from agent.body.base import Frame
 from agent.body.in_process import WorldBody
 from agent.core.control import wrap_pi
-from agent.core.formation.plan import Plan, PlanParams
+from agent.core.formation.params import PlanParams
+from agent.core.formation.plan import Plan
 from agent.net.bus import Bus
 from agent.phases.adapters import FormationAdapter, PerceptionAdapter
 from agent.phases.config import AgentConfig, Route

@@ -17,7 +17,7 @@ import pytest
 
 from agent.body.in_process import WorldBody
 from agent.core.control import wrap_pi
-from agent.core.formation.plan import PlanParams
+from agent.core.formation.params import PlanParams
 from agent.net.bus import Bus
 from agent.phases.adapters import FormationAdapter, PerceptionAdapter
 from agent.phases.config import AgentConfig

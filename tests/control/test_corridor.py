@@ -27,7 +27,7 @@ from agent.core.control.corridor import (
     patience,
     plan_rank,
 )
-from agent.core.formation.plan import PlanParams
+from agent.core.formation.params import PlanParams
 from agent.core.nao import CAMERA_HFOV
 
 NORTH = math.pi / 2

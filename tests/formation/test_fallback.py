@@ -11,7 +11,8 @@ from hypothesis import strategies as st
 
 from agent.core.formation.execution import check_dependencies
 from agent.core.formation.fallback import banded_plan
-from agent.core.formation.plan import PlanParams, plan_from_positions
+from agent.core.formation.params import PlanParams
+from agent.core.formation.plan import plan_from_positions
 from agent.core.formation.pyramid import pyramid_frame
 from agent.core.formation.safety import check_safety
 
@@ -100,12 +101,12 @@ def test_property_banded_plan_is_always_safe(
 def test_plan_falls_back_to_the_banded_plan_when_scheduling_fails(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    import agent.core.formation.plan as plan_mod
+    import agent.core.formation.scheduled as scheduled_mod
 
     def fail(*args: object, **kwargs: object) -> None:
         raise ValueError("no safe schedule found after 10 rounds of slot swaps")
 
-    monkeypatch.setattr(plan_mod, "_schedule_with_repair", fail)
+    monkeypatch.setattr(scheduled_mod, "schedule_with_repair", fail)
     rng = np.random.default_rng(8)
     pos = rng.uniform(0, 8.0, (25, 2))
     ids = [int(i) for i in rng.permutation(1000)[:25]]

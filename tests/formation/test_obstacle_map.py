@@ -11,7 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agent.core.formation.obstacle_map import MERGE_RADIUS, common_frame_obstacles, merge_sightings
-from agent.core.formation.plan import PlanParams, plan_from_records
+from agent.core.formation.params import PlanParams
+from agent.core.formation.plan import plan_from_records
 from agent.core.formation.records import NeighborRecord
 
 

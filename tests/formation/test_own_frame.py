@@ -10,7 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agent.core.formation.own_frame import in_own_frame
-from agent.core.formation.plan import PlanParams, plan_from_positions
+from agent.core.formation.params import PlanParams
+from agent.core.formation.plan import plan_from_positions
 
 IDS = [1, 2, 3, 4]
 STARTS = np.array([[0.0, 0.0], [1.0, 0.1], [0.2, 1.1], [-0.9, 0.4]])

@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from agent.core.formation import plan as plan_module
-from agent.core.formation.obstacles import SLOT_CLEARANCE, clear_shifts
-from agent.core.formation.plan import Plan, PlanParams, plan_from_positions, plan_from_records
+from agent.core.formation.obstacles import SLOT_CLEARANCE
+from agent.core.formation.params import PlanParams
+from agent.core.formation.plan import Plan, plan_from_positions, plan_from_records
 from agent.core.formation.pyramid import parent_of
 from agent.core.formation.records import NeighborRecord
 from agent.core.formation.safety import check_safety
@@ -177,7 +178,7 @@ def test_default_falls_back_to_the_paper_procedure(monkeypatch: pytest.MonkeyPat
     pts = random_fleet(rng, 11, spacing=0.8)
     robots, obstacles = pts[:8], pts[8:]
     near = plan_from_positions(list(range(8)), robots, obstacles=obstacles)
-    monkeypatch.setattr(plan_module, "_near_obstacles", lambda *a: None)
+    monkeypatch.setattr(plan_module, "plan_near_obstacles", lambda *a: None)
     fallback = plan_from_positions(list(range(8)), robots, obstacles=obstacles)
     paper = plan_from_positions(
         list(range(8)), robots, PlanParams(obstacle_method="paper"), obstacles=obstacles
@@ -187,22 +188,6 @@ def test_default_falls_back_to_the_paper_procedure(monkeypatch: pytest.MonkeyPat
         plan_from_positions(
             list(range(8)), robots, PlanParams(obstacle_method="near"), obstacles=obstacles
         )
-
-
-def test_clear_shifts_known_answer() -> None:
-    # one slot at 0, an obstacle 0.1 m east, step 0.2, clearance 0.6: ring 3 (0.6 m) is
-    # clear where cos(angle) <= 1/12 (directions 90°..270°: 9 of 16), ring 4 everywhere
-    shifts = clear_shifts(np.zeros((1, 2)), np.array([[0.1, 0.0]]), 0.2, 0.6)
-    assert len(shifts) == 9 + 16
-    np.testing.assert_allclose(shifts[0], [0.0, 0.6], atol=1e-12)
-    np.testing.assert_allclose(shifts[8], [0.0, -0.6], atol=1e-12)
-    np.testing.assert_allclose(shifts[9], [0.8, 0.0], atol=1e-12)
-    far = clear_shifts(np.zeros((1, 2)), np.array([[5.0, 0.0]]), 0.2, 0.6)
-    assert len(far) == 1 + 16 and not far[0].any()  # ring 0 (no move), then ring 1
-    none = clear_shifts(np.zeros((1, 2)), np.zeros((0, 2)), 0.2, 0.6)
-    assert len(none) == 1 and not none[0].any()
-    with pytest.raises(ValueError, match="no obstacle-free place"):
-        clear_shifts(np.zeros((1, 2)), np.zeros((1, 2)), 0.01, 100.0)
 
 
 def test_plan_errors() -> None:
@@ -222,16 +207,3 @@ def test_plan_errors() -> None:
         plan_from_positions([1], np.zeros((1, 2)), obstacles=np.zeros((2, 3)))
     with pytest.raises(ValueError, match="not in the plan"):
         plan_from_positions([1], np.zeros((1, 2))).robot(2)
-    for kw, msg in (
-        ({"d_e": -1.0}, "d_e"),
-        ({"phi_e": 2.0}, "phi_e"),
-        ({"radius": 0.0}, "radius"),
-        ({"strategy": "x"}, "strategy"),
-        ({"orientation": "x"}, "orientation"),
-        ({"frame_method": "x"}, "frame_method"),
-        ({"epsilon": -1.0}, "epsilon"),
-        ({"placement": "x"}, "placement"),
-        ({"obstacle_method": "x"}, "obstacle_method"),
-    ):
-        with pytest.raises(ValueError, match=msg):
-            PlanParams(**kw)  # type: ignore[arg-type]

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from agent.core.formation.assignment import assign, uncross
+from agent.core.formation.geometry import paths_cross
 from agent.core.formation.pyramid import (
     PyramidFrame,
     layer_of,
@@ -17,7 +18,6 @@ from agent.core.formation.pyramid import (
     pyramid_frame,
     slot_positions,
 )
-from agent.core.formation.safety import paths_cross
 from tests.formation.conftest import random_fleet
 
 PHI = math.radians(30)

@@ -1,31 +1,18 @@
-"""Waves and the safety checker (speed-independent clearance >= 2·radius)."""
+"""The safety rule and its checker (speed-independent clearance >= 2·radius)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from agent.core.formation.safety import (
-    candidate_segment_pairs,
-    check_safety,
-    pair_flags,
-    point_seg_dist,
-    schedule,
-    seg_seg_dist,
-)
+from agent.core.formation.geometry import point_seg_dist, seg_seg_dist
+from agent.core.formation.safety import check_safety, pair_flags
 
 R = 0.2
 
 
 def P(*pts: tuple[float, float]) -> np.ndarray:
     return np.array(pts, dtype=np.float64)
-
-
-def test_geometry_known_answers() -> None:
-    assert point_seg_dist(P((0, 1)), P((-1, 0)), P((1, 0)))[0] == pytest.approx(1.0)
-    assert point_seg_dist(P((3, 4)), P((0, 0)), P((0, 0)))[0] == pytest.approx(5.0)
-    assert seg_seg_dist(P((0, 0)), P((2, 2)), P((0, 2)), P((2, 0)))[0] == 0.0  # crossing
-    assert seg_seg_dist(P((0, 0)), P((1, 0)), P((0, 0.3)), P((1, 0.3)))[0] == pytest.approx(0.3)
 
 
 def test_rejects_non_crossing_paths_too_close_in_same_wave() -> None:
@@ -61,59 +48,12 @@ def test_pair_flags_relax_for_starts_already_close() -> None:
     assert f.same_ok[0]
 
 
-def test_schedule_orders_a_queue() -> None:
-    # a queue: each robot's path runs through the start of the one in front of it
-    starts = P((0, 0), (0, 1), (0, 2))
-    targets = P((0, 3), (0, 4), (0, 5))
-    sch = schedule(starts, targets, leader=1, priority=np.array([2, 0, 1]), radius=R)
-    paths = [np.vstack([s, *v, t]) for s, v, t in zip(starts, sch.vias, targets)]
-    assert check_safety(paths, sch.waves, R) == []
-    assert sch.waves.tolist() == [2, 1, 0]  # the front robot goes first, leader or not
-
-
-def test_schedule_adds_a_detour() -> None:
-    # the leader's straight path runs through a robot that never moves (already on its slot)
-    starts = P((0, 0), (2, 0.05))
-    targets = P((4, 0), (2, 0.05))
-    sch = schedule(starts, targets, leader=0, priority=np.array([0, 1]), radius=R)
-    assert len(sch.vias[0]) == 1
-    paths = [np.vstack([s, *v, t]) for s, v, t in zip(starts, sch.vias, targets)]
-    assert check_safety(paths, sch.waves, R) == []
-
-
 def test_checker_errors() -> None:
     with pytest.raises(ValueError, match="radius"):
         check_safety([P((0, 0), (1, 0))], [0], 0.0)
     with pytest.raises(ValueError, match="wave numbers"):
         check_safety([P((0, 0), (1, 0))], [0, 1], R)
     assert check_safety([], [], R) == []
-
-
-def test_candidate_segment_pairs_is_exact_against_brute_force() -> None:
-    # every segment pair of different owners within c is found, and no other: random,
-    # point, vertical, horizontal and long segments, owners in any order
-    rng = np.random.default_rng(1)
-    for trial in range(120):
-        m = int(rng.integers(1, 30))
-        a = rng.uniform(-5, 5, (m, 2))
-        b = a + rng.normal(0, float(rng.choice([0.01, 1.0, 4.0])), (m, 2))
-        z = rng.random(m) < 0.2
-        b[z] = a[z]
-        v = rng.random(m) < 0.1
-        b[v, 0] = a[v, 0]
-        hz = rng.random(m) < 0.1
-        b[hz, 1] = a[hz, 1]
-        owner = rng.integers(0, m, m)
-        c = float(rng.choice([0.1, 0.4, 2.0]))
-        s, t = candidate_segment_pairs(a, b, owner, c)
-        got = set(zip(s.tolist(), t.tolist(), strict=True))
-        want = {
-            (i, j)
-            for i in range(m)
-            for j in range(m)
-            if owner[i] < owner[j] and seg_seg_dist(a[i], b[i], a[j], b[j]) <= c
-        }
-        assert got == want, trial
 
 
 def _brute_violations(paths: list[np.ndarray], waves: list[int], r: float) -> set[tuple[int, int]]:
@@ -158,12 +98,3 @@ def test_checker_agrees_with_brute_force_on_random_plans() -> None:
         waves = [int(w) for w in rng.integers(0, 3, n)]
         got = {(v.robot_a, v.robot_b) for v in check_safety(paths, waves, R)}
         assert got == _brute_violations(paths, waves, R)
-
-
-def test_collinear_disjoint_segments_are_not_a_crossing() -> None:
-    # two legs on one slanted line (rounding makes the orientations tiny, of any sign)
-    u = np.array([np.cos(0.7), np.sin(0.7)])
-    for k in range(50):
-        a0, a1 = 0.1 * k * u, (0.1 * k + 1.0) * u
-        b0, b1 = (0.1 * k + 3.0) * u, (0.1 * k + 5.0) * u
-        assert seg_seg_dist(a0, a1, b0, b1) == pytest.approx(2.0)

@@ -50,7 +50,8 @@ from agent.core.formation.execution import (
     path_lengths,
     wave_makespan,
 )
-from agent.core.formation.plan import Plan, PlanParams, plan_from_positions
+from agent.core.formation.params import PlanParams
+from agent.core.formation.plan import Plan, plan_from_positions
 from agent.core.formation.pyramid import placed_slots, pyramid_frame
 from agent.core.formation.safety import check_safety
 

@@ -34,7 +34,7 @@ def plan_from_agreed(
 ) -> Any:
     """The plan recomputed by the evaluator from the records the agents exchanged, with
     the fleet's planning parameters."""
-    from agent.core.formation.plan import PlanParams
+    from agent.core.formation.params import PlanParams
     from agent.phases.adapters import FormationAdapter
 
     fa = FormationAdapter()

@@ -55,7 +55,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from agent.core.control.rotation import wrap_pi
-from agent.core.formation.plan import PlanParams
+from agent.core.formation.params import PlanParams
 
 GO, WAIT, VIA = "go", "wait", "via"
 RIGHT, LEFT = -1, 1  # the side of a via step: the sign of the normal (left of the heading)

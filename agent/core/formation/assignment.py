@@ -44,6 +44,9 @@ import math
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from agent.core.formation.close_pairs import candidate_segment_pairs
+from agent.core.formation.geometry import paths_cross
+
 STRATEGIES = ("paper", "optimal", "capt", "bottleneck")
 
 
@@ -249,8 +252,6 @@ def uncross(
     e.g. d_e) and swapped in ascending row order, each robot at most once per round.
     Returns ``perm`` with ``targets[perm]`` the repaired targets.
     """
-    from agent.core.formation.safety import candidate_segment_pairs, paths_cross
-
     n = starts.shape[0]
     perm = np.arange(n)
     if n < 2:

@@ -8,7 +8,7 @@ other, so that both may walk together. Local search, deterministic:
 1. pack; take the critical chain (the robot that ends last, then the robot it waits for
    that ends last, ... ties by row);
 2. for each link (v waits for u) and each of the two robots, the detour candidates of
-   :func:`safety._detour_candidates` (one via point beside the straight path) and the
+   :func:`via_points.detour_candidates` (one via point beside the straight path) and the
    end candidates below (a step aside at the start, or an approach from the side) that
    keep the pair clear (both paths >= the pair's clearance apart)
    are tried, shortest first, at most ``TRIES`` per robot: the pair flags are updated
@@ -33,13 +33,10 @@ from typing import Any
 
 import numpy as np
 
+from agent.core.formation.geometry import seg_seg_dist
 from agent.core.formation.packing import pack
-from agent.core.formation.safety import (
-    PairFlags,
-    _detour_candidates,
-    _update_flags,
-    seg_seg_dist,
-)
+from agent.core.formation.safety import PairFlags, update_flags
+from agent.core.formation.via_points import detour_candidates
 
 #: Detour candidates tried per robot of a link (shortest first).
 TRIES = 6
@@ -51,14 +48,14 @@ MAX_EVALS = 2000
 
 #: Extra via points near the ends of the path (fractions of the path, offsets in
 #: clearances): a step aside first, or an approach from the side, clears a robot standing
-#: next to the start or the target, which the middle detours of :mod:`safety` miss.
+#: next to the start or the target, which the middle detours of :mod:`via_points` miss.
 END_FRACTIONS = (0.0, 0.1, 0.9, 1.0)
 END_OFFSETS = (1.0, 1.5, 2.0, 3.0)
 
 
 def _candidates(p: np.ndarray, q: np.ndarray, c: float) -> list[np.ndarray]:
-    """:func:`safety._detour_candidates`, then the end candidates (left before right)."""
-    out = _detour_candidates(p, q, c)
+    """:func:`via_points.detour_candidates`, then the end candidates (left before right)."""
+    out = detour_candidates(p, q, c)
     if not out:
         return out
     d = q - p
@@ -147,7 +144,7 @@ def shorten(
                 new_len[r] = _length(new_paths[r])
             if float(new_len.sum()) > bound:
                 return
-            f2 = _update_flags(flags, new_paths, rows, c, (starts, new_t))
+            f2 = update_flags(flags, new_paths, rows, c, (starts, new_t))
             try:
                 s2, _, _ = pack(f2, new_len, leader_of(new_o), new_o, times_only=True)
             except ValueError:

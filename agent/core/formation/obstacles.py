@@ -20,31 +20,29 @@ The paper's procedure, as we implement it:
 The path of each robot is thus start -> slot -> shifted slot -> final slot (via points
 that coincide with the previous point are dropped). The safety scheduler treats the
 obstacles as robots that stand still in every wave, and may replace such a path by a
-detour (module :mod:`safety`) when it cannot be scheduled safely.
+detour (module :mod:`scheduler`) when it cannot be scheduled safely.
 
 The paper's sideways shift moves the whole pattern out of the obstacle area even when
 the obstacles only stand on the way: paths of 3-6 m for six robots whose straight paths
 are ~1.5 m, and dead reckoning drifts with the distance walked. The project's ``near``
-placement (:func:`clear_shifts`, used by :mod:`plan` first) keeps the pattern of the
-obstacle-free plan and moves it by the smallest translation, in any direction, that puts
-every slot ``SLOT_CLEARANCE`` from every obstacle; the scheduler then bends the paths
-that pass too close to an obstacle (via points). Only when that plan cannot be scheduled
+placement (:func:`plan_near_obstacles`, tried first by :mod:`plan`; translations by
+:func:`clear_shifts`) keeps the pattern of the obstacle-free plan and moves it by the
+smallest translation, in any direction, that puts every slot ``SLOT_CLEARANCE`` from
+every obstacle; the scheduler then bends the paths that pass too close to an obstacle
+(via points). Only when that plan cannot be scheduled
 safely does the planner fall back to the paper's procedure above.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from agent.core.formation.assignment import assign
-from agent.core.formation.pyramid import centred_slots, pyramid_frame
-
-if TYPE_CHECKING:
-    from agent.core.formation.plan import PlanParams
-
+from agent.core.formation.params import CANDIDATES_MAX_N, PlanParams
+from agent.core.formation.pyramid import centred_slots, placed_slots, pyramid_frame
+from agent.core.formation.scheduled import Scheduled, path_length, scheduled_plan
 
 #: ``near`` placement: a slot's centre stays this many robot radii from an obstacle's
 #: centre: the planner's clearance (2·radius) plus one radius for the final visual
@@ -88,6 +86,49 @@ def clear_shifts(
     if not out:
         raise ValueError("obstacles: no obstacle-free place for the pyramid near the fleet")
     return out
+
+
+def plan_near_obstacles(
+    pos: np.ndarray, obs: np.ndarray, params: PlanParams, strategy: str
+) -> tuple[Scheduled, np.ndarray, float] | None:
+    """The ``near`` obstacle plan: (scheduled plan, origin, beta), or None.
+
+    The pyramid frame and centred slots of the robots alone (as without obstacles),
+    moved by each translation of :func:`clear_shifts` (slots
+    ``SLOT_CLEARANCE``·radius from the obstacles, step d_e/4, the first clear ring and
+    the next); each is matched (``strategy``) and scheduled with the obstacles standing
+    (detours bend the paths that pass too close). The shortest longest path wins, then
+    the smallest total, then the candidate order (ring, direction). Above
+    CANDIDATES_MAX_N robots only the first clear translation is tried. None when no
+    candidate can be scheduled safely.
+    """
+    n = pos.shape[0]
+    frame = pyramid_frame(pos, params.orientation)
+    starts_p = frame.to_pyramid(pos)
+    slots = placed_slots(n, params.d_e, params.phi_e, starts_p, "centroid")
+    obs_p = frame.to_pyramid(obs)
+    shifts = clear_shifts(slots, obs_p, params.d_e / 4.0, SLOT_CLEARANCE * params.radius)
+    if n > CANDIDATES_MAX_N:
+        shifts = shifts[:1]
+    empty: list[tuple[np.ndarray, ...]] = [() for _ in range(n)]
+    best: tuple[float, float, int, Scheduled, np.ndarray] | None = None
+    for k, shift in enumerate(shifts):
+        moved = slots + shift
+        perm = assign(starts_p, moved, strategy, params.d_e, params.phi_e)
+        try:
+            sc = scheduled_plan(
+                pos, frame.to_common(moved[perm]), perm, empty, obs, params, strategy
+            )
+        except ValueError:
+            continue
+        lengths = [path_length(pos[r], sc.vias[r], sc.targets[r]) for r in range(n)]
+        key = (max(lengths), sc.total, k)
+        if best is None or key < best[:3]:
+            best = (*key, sc, shift)
+    if best is None:
+        return None
+    shift_c = frame.to_common(best[4]) - frame.to_common(np.zeros(2))
+    return best[3], frame.origin + shift_c, frame.beta
 
 
 @dataclass(frozen=True)

@@ -2,16 +2,18 @@
 
 Pipeline: neighbour check (Algorithm 2, eq. 9) -> common frame (eq. 10 or least
 squares) -> pyramid frame (PCA eq. 12-13, or CP) -> slots (AUV eqs. 5-7) ->
-assignment (combined sub-groups + Lemma 1, exact, or bottleneck-bounded) -> safe
-schedule (:mod:`safety`: slot swaps and via points until every close pair has a safe
-order) -> packing (:mod:`packing`: each robot starts once its own conflicts are clear)
--> detours that cut the critical chain (:mod:`detours`, small fleets) -> trajectories
-(η_i, d_i), waves and ``after`` lists. Whenever no scheduled plan is found - and
-straight away above SCHEDULE_MAX_N robots - the banded plan of :mod:`fallback`, which
-always exists, is used: a valid input never ends in "no safe schedule" (obstacles
-aside: a robot walled in by obstacles has no safe path at all). With obstacles, the
-``near`` placement (:func:`_near_obstacles`) is tried first, the paper's 5.1.2
-procedure (:mod:`obstacles`) after it (``PlanParams.obstacle_method``).
+assignment (combined sub-groups + Lemma 1, exact, or bottleneck-bounded; compared by
+:mod:`choice`) -> safe schedule (:mod:`scheduled`, :mod:`scheduler`: slot swaps and via
+points until every close pair has a safe order under the rule of :mod:`safety`) ->
+packing (:mod:`packing`: each robot starts once its own conflicts are clear) -> detours
+that cut the critical chain (:mod:`detours`, small fleets) -> trajectories (η_i, d_i),
+waves and ``after`` lists. The settings are :class:`params.PlanParams`. Whenever no
+scheduled plan is found - and straight away above ``params.SCHEDULE_MAX_N`` robots - the
+banded plan of :mod:`fallback`, which always exists, is used: a valid input never ends
+in "no safe schedule" (obstacles aside: a robot walled in by obstacles has no safe path
+at all). With obstacles, the ``near`` placement (:func:`obstacles.plan_near_obstacles`)
+is tried first, the paper's 5.1.2 procedure (:func:`obstacles.plan_around_obstacles`)
+after it (``PlanParams.obstacle_method``).
 
 Execution (:mod:`execution`): a robot may start once every robot of its ``after`` list
 holds its slot; waiting for every robot of every earlier ``wave`` is safe too (``after``
@@ -33,125 +35,22 @@ so two agents holding the same record set compute bit-identical plans and digest
 from __future__ import annotations
 
 import hashlib
-import math
 import struct
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from agent.core.formation.assignment import STRATEGIES, assign, bounded_assignment, min_bottleneck
-from agent.core.formation.common_frame import METHODS, build_common_frame
-from agent.core.formation.detours import shorten
+from agent.core.formation.choice import choose
+from agent.core.formation.common_frame import build_common_frame
 from agent.core.formation.fallback import banded_plan
-from agent.core.formation.neighbour_check import DEFAULT_EPSILON, identify_neighbours
+from agent.core.formation.neighbour_check import identify_neighbours
 from agent.core.formation.obstacle_map import common_frame_obstacles
-from agent.core.formation.obstacles import SLOT_CLEARANCE, clear_shifts, plan_around_obstacles
-from agent.core.formation.packing import pack, regroup_waves
-from agent.core.formation.pyramid import (
-    ORIENTATIONS,
-    PLACEMENTS,
-    PyramidFrame,
-    check_geometry,
-    placed_slots,
-    pyramid_frame,
-)
+from agent.core.formation.obstacles import plan_around_obstacles, plan_near_obstacles
+from agent.core.formation.params import PlanParams
+from agent.core.formation.pyramid import pyramid_frame
 from agent.core.formation.records import NeighborRecord
-from agent.core.formation.safety import Schedule, ScheduleError, pair_flags, schedule
-
-#: ``default`` strategy: exact min-sum (``optimal``, O(n³)) up to this many robots; the
-#: paper's O(n log n) strategy above. Whatever it starts with, ``default`` falls back to
-#: the next attempt of :func:`attempts` when a plan cannot be scheduled safely.
-OPTIMAL_MAX_N = 1500
-
-#: ``default`` strategy: up to this many robots, several assignments are scheduled and
-#: compared by makespan, and the critical chain gets detours (see :func:`_choose`).
-CANDIDATES_MAX_N = 200
-
-#: ``default`` strategy: above this many robots, the banded plan of :mod:`fallback`
-#: (O(n log n), safe by construction) instead of the scheduled ones (whose pair search
-#: grows with the total path length, ~n^1.5 for the centred pyramid: > 20 s at 2·10^4).
-SCHEDULE_MAX_N = 12_000
-
-#: The ``front`` fallback placement is only tried up to this many robots.
-FRONT_MAX_N = 2000
-
-
-#: How a plan meets obstacles: ``near`` (the obstacle-free pattern moved by the smallest
-#: clear translation, paths bent by the scheduler; :func:`_near_obstacles`), ``paper``
-#: (5.1.2: obstacles as robots, sideways shift, layer correction;
-#: :func:`obstacles.plan_around_obstacles`), ``default`` (near, else paper).
-OBSTACLE_METHODS = ("near", "paper", "default")
-
-#: Every strategy a plan may name: an assignment of :mod:`assignment`, ``banded`` (the
-#: plan of :mod:`fallback`, which always exists) or ``default``.
-PLAN_STRATEGIES = (*STRATEGIES, "banded", "default")
-
-
-@dataclass(frozen=True)
-class PlanParams:
-    d_e: float = 0.8
-    phi_e: float = math.radians(30)
-    radius: float = 0.2
-    strategy: str = "default"  # "paper" | "optimal" | "capt" | "banded" | "default"
-    orientation: str = "pca"  # "pca" | "cp"
-    frame_method: str = "default"  # "bfs" (paper eq. 10) | "lsq" | "default" (= lsq)
-    epsilon: float = DEFAULT_EPSILON  # eq. 9 threshold, metres (see neighbour_check)
-    # "centroid" (slots centred on the starts) | "front" (pyramid ahead of the fleet) |
-    # "default": centroid, or front when the centroid placement cannot be scheduled safely
-    placement: str = "default"
-    obstacle_method: str = "default"  # see OBSTACLE_METHODS
-
-    def __post_init__(self) -> None:
-        check_geometry(self.d_e, self.phi_e)
-        if not (
-            isinstance(self.radius, int | float) and math.isfinite(self.radius) and self.radius > 0
-        ):
-            raise ValueError(f"radius must be a finite distance > 0, got {self.radius!r}")
-        if self.strategy not in PLAN_STRATEGIES:
-            raise ValueError(f"strategy must be one of {PLAN_STRATEGIES}, got {self.strategy!r}")
-        if self.orientation not in ORIENTATIONS:
-            raise ValueError(f"orientation must be one of {ORIENTATIONS}, got {self.orientation!r}")
-        if self.frame_method not in (*METHODS, "default"):
-            raise ValueError(
-                f"frame_method must be one of {(*METHODS, 'default')}, got {self.frame_method!r}"
-            )
-        if self.placement not in (*PLACEMENTS, "default"):
-            raise ValueError(
-                f"placement must be one of {(*PLACEMENTS, 'default')}, got {self.placement!r}"
-            )
-        if self.obstacle_method not in OBSTACLE_METHODS:
-            raise ValueError(
-                f"obstacle_method must be one of {OBSTACLE_METHODS}, got {self.obstacle_method!r}"
-            )
-        if not (
-            isinstance(self.epsilon, int | float)
-            and math.isfinite(self.epsilon)
-            and self.epsilon > 0
-        ):
-            raise ValueError(f"epsilon must be a finite distance > 0, got {self.epsilon!r}")
-
-    def resolved_strategy(self, n: int) -> str:
-        if self.strategy != "default":
-            return self.strategy
-        return "optimal" if n <= OPTIMAL_MAX_N else "paper"
-
-    def attempts(self, n: int) -> list[tuple[str, str]]:
-        """(strategy, placement) pairs tried in turn until one schedules safely.
-
-        An explicit strategy keeps its strategy; the ``default`` placement falls back
-        from ``centroid`` to ``front``. The ``default`` strategy tries optimal (small N)
-        then paper (whose top-to-bottom ranking schedules well in dense fleets).
-        """
-        if self.strategy == "banded" or (self.strategy == "default" and n > SCHEDULE_MAX_N):
-            return []  # straight to the plan that always exists
-        strategies = [self.resolved_strategy(n)]
-        if self.strategy == "default" and "paper" not in strategies:
-            strategies.append("paper")
-        placements = ["centroid", "front"] if self.placement == "default" else [self.placement]
-        if self.placement == "default" and n > FRONT_MAX_N:
-            placements = ["centroid"]  # "front" makes O(n^1.5) long paths: hours at 10^4
-        return [(s, p) for p in placements for s in strategies]
+from agent.core.formation.scheduled import Scheduled, scheduled_plan
 
 
 @dataclass(frozen=True)
@@ -236,58 +135,6 @@ def _check_positions(ids: Sequence[int], positions: np.ndarray) -> tuple[list[in
     return id_list, pos
 
 
-#: How many rounds of slot swaps :func:`_schedule_with_repair` may make before giving up.
-MAX_SWAPS = 10
-
-
-def _schedule_with_repair(
-    pos: np.ndarray,
-    targets: np.ndarray,
-    order: np.ndarray,
-    vias: list[tuple[np.ndarray, ...]],
-    obs: np.ndarray,
-    params: PlanParams,
-) -> tuple[Schedule, np.ndarray, np.ndarray]:
-    """Schedule; when two robots block each other in both orders (each one's slot lies
-    within the clearance of the other's start: a swap no single wave can do), they
-    exchange slots (a 2-opt step in the spirit of Lemma 1) and we schedule again, keeping
-    the detours found for the other robots. Blocked pairs are swapped in ascending row
-    order, each robot at most once per round."""
-    order = order.copy()
-    targets = np.array(targets, dtype=np.float64)
-    vias = list(vias)
-    prior: ScheduleError | None = None
-    for _ in range(MAX_SWAPS + 1):
-        leader_row = int(np.flatnonzero(order == 0)[0])
-        try:
-            sched = schedule(
-                pos,
-                targets,
-                leader_row,
-                order,
-                params.radius,
-                fixed_vias=vias,
-                obstacles=obs,
-                prior=prior,
-            )
-            return sched, order, targets
-        except ScheduleError as exc:
-            if not exc.pairs:
-                raise
-            prior = exc
-            if exc.vias:
-                vias = list(exc.vias)
-            touched: set[int] = set()
-            for a, b in sorted(exc.pairs):
-                if a in touched or b in touched:
-                    continue
-                touched.update((a, b))
-                order[[a, b]] = order[[b, a]]
-                targets[[a, b]] = targets[[b, a]]
-                vias[a], vias[b] = (), ()
-    raise ValueError(f"no safe schedule found after {MAX_SWAPS} rounds of slot swaps")
-
-
 def _parents(order: np.ndarray) -> np.ndarray:
     """Eq. 6 on an array of orders (see :func:`pyramid.parent_of`), -1 for the leader."""
     o = np.asarray(order, dtype=np.int64)
@@ -299,201 +146,6 @@ def _parents(order: np.ndarray) -> np.ndarray:
     last = layer * (layer + 1) // 2 - 1
     par = np.where(o == last, o - layer, o - (layer - 1))
     return np.where(layer == 1, -1, par)
-
-
-def _path(start: np.ndarray, via: Sequence[np.ndarray], target: np.ndarray) -> np.ndarray:
-    return np.vstack([start, *via, target])
-
-
-def _length(start: np.ndarray, via: Sequence[np.ndarray], target: np.ndarray) -> float:
-    p = _path(start, via, target)
-    return float(np.sum(np.hypot(*np.diff(p, axis=0).T)))
-
-
-@dataclass(frozen=True)
-class _Scheduled:
-    """A safe plan for robot rows: slot orders, targets, via points, waves, after lists."""
-
-    order: np.ndarray
-    targets: np.ndarray
-    vias: tuple[tuple[np.ndarray, ...], ...]
-    waves: np.ndarray
-    after: tuple[tuple[int, ...], ...]
-    strategy: str
-    makespan: float = 0.0  # dependency makespan (path-length units)
-    total: float = 0.0  # total path length
-
-
-def _packed(
-    pos: np.ndarray,
-    targets: np.ndarray,
-    order: np.ndarray,
-    vias: Sequence[tuple[np.ndarray, ...]],
-    obs: np.ndarray,
-    params: PlanParams,
-    strategy: str,
-    bound: float | None = None,
-) -> _Scheduled:
-    """Schedule (slot swaps and detours until safe, see :func:`_schedule_with_repair`),
-    then pack the waves (:mod:`packing`); with a ``bound`` on the total path (no
-    obstacles), first shorten the critical chain by detours (:mod:`detours`). Raises
-    ``ValueError`` if no schedule is found."""
-    sched, order, targets = _schedule_with_repair(pos, targets, order, list(vias), obs, params)
-    n = pos.shape[0]
-    flags = sched.flags
-    vias_rows = sched.vias
-    if flags is None:  # pragma: no cover - schedule() always returns its flags
-        paths = [_path(pos[k], vias_rows[k], targets[k]) for k in range(n)]
-        flags = pair_flags(paths, 2.0 * params.radius)
-    leader_row = int(np.flatnonzero(order == 0)[0])
-    if bound is not None and not obs.shape[0]:
-        targets, order, vias_rows, flags = shorten(
-            pos, targets, vias_rows, flags, order, params.radius, bound
-        )
-        leader_row = int(np.flatnonzero(order == 0)[0])
-    lengths = np.array(
-        [_length(pos[k], vias_rows[k], targets[k]) for k in range(n)], dtype=np.float64
-    )
-    start, after, waves = pack(flags, lengths, leader_row, order)
-    waves = regroup_waves(lengths, after, waves, leader_row)
-    return _Scheduled(
-        order,
-        targets,
-        vias_rows,
-        waves,
-        after,
-        strategy,
-        makespan=float(np.max(start + lengths)),
-        total=float(lengths.sum()),
-    )
-
-
-#: The ``default`` strategy keeps a plan whose total path is at most this many times the
-#: smallest total (the min-sum assignment's straight paths).
-PATH_SLACK = 1.05
-
-#: Bounds on the longest path the ``default`` strategy tries (n <= CANDIDATES_MAX_N), as
-#: fractions of the way from B* (the smallest possible longest path) to the longest path
-#: of the min-sum assignment.
-BOUND_STEPS = (0.0, 0.25, 0.5, 0.75)
-
-
-#: How many of the best candidates (by makespan before detours) get detours.
-SHORTENED = 3
-
-
-def _candidates(starts_p: np.ndarray, slots_p: np.ndarray) -> list[tuple[str, np.ndarray]]:
-    """Assignments the ``default`` strategy compares: min-sum first, then min-sum under
-    bounds on the longest path between B* and min-sum's own (CAT-ORA's idea), then CAPT.
-    Duplicates are dropped (first kept)."""
-    opt = assign(starts_p, slots_p, "optimal", 1.0, 0.5)
-    longest = float(np.max(np.hypot(*(starts_p - slots_p[opt]).T)))
-    b_star = min_bottleneck(starts_p, slots_p)
-    out = [("optimal", opt)]
-    for f in BOUND_STEPS:
-        out.append(
-            ("bottleneck", bounded_assignment(starts_p, slots_p, b_star + f * (longest - b_star)))
-        )
-    out.append(("capt", assign(starts_p, slots_p, "capt", 1.0, 0.5)))
-    seen: set[bytes] = set()
-    uniq = []
-    for name, perm in out:
-        key = perm.tobytes()
-        if key not in seen:
-            seen.add(key)
-            uniq.append((name, perm))
-    return uniq
-
-
-def _choose(
-    pos: np.ndarray, frame: PyramidFrame, starts_p: np.ndarray, params: PlanParams
-) -> _Scheduled | None:
-    """The scheduled plan of the first attempt that succeeds (see PlanParams.attempts).
-
-    ``default`` with n <= CANDIDATES_MAX_N first compares the _candidates assignments on the
-    centred pyramid: of those that schedule with a total path <= PATH_SLACK × the
-    min-sum total, the smallest dependency makespan wins (then the smaller total, then
-    the order of CANDIDATES). None: no attempt could be scheduled.
-    """
-    n = pos.shape[0]
-    empty: list[tuple[np.ndarray, ...]] = [() for _ in range(n)]
-    exact = params.strategy == "default" and params.placement in ("default", "centroid")
-    if exact and n <= CANDIDATES_MAX_N:
-        slots_p = placed_slots(n, params.d_e, params.phi_e, starts_p, "centroid")
-        good: list[tuple[float, float, int, _Scheduled]] = []
-        bound = math.inf
-        for k, (strat, perm) in enumerate(_candidates(starts_p, slots_p)):
-            if k == 0:
-                straight = np.hypot(*(starts_p - slots_p[perm]).T)
-                bound = PATH_SLACK * float(straight.sum()) + 1e-9
-            try:
-                sc = _packed(
-                    pos, frame.to_common(slots_p[perm]), perm, empty, _NO_OBS, params, strat
-                )
-            except ValueError:
-                continue
-            if sc.total <= bound:
-                good.append((sc.makespan, sc.total, k, sc))
-        good.sort(key=lambda g: g[:3])
-        for j, (_, _, k, sc) in enumerate(good[:SHORTENED]):  # detours for the best
-            better = _packed(
-                pos, sc.targets, sc.order, empty, _NO_OBS, params, sc.strategy, bound=bound
-            )
-            good[j] = (better.makespan, better.total, k, better)
-        if good:
-            return min(good, key=lambda g: g[:3])[3]
-    for strat, placement in params.attempts(n):
-        slots_p = placed_slots(n, params.d_e, params.phi_e, starts_p, placement)
-        perm = assign(starts_p, slots_p, strat, params.d_e, params.phi_e)
-        try:
-            return _packed(pos, frame.to_common(slots_p[perm]), perm, empty, _NO_OBS, params, strat)
-        except ValueError:
-            continue
-    return None
-
-
-_NO_OBS = np.zeros((0, 2))
-
-
-def _near_obstacles(
-    pos: np.ndarray, obs: np.ndarray, params: PlanParams, strategy: str
-) -> tuple[_Scheduled, np.ndarray, float] | None:
-    """The ``near`` obstacle plan: (scheduled plan, origin, beta), or None.
-
-    The pyramid frame and centred slots of the robots alone (as without obstacles),
-    moved by each translation of :func:`obstacles.clear_shifts` (slots
-    ``SLOT_CLEARANCE``·radius from the obstacles, step d_e/4, the first clear ring and
-    the next); each is matched (``strategy``) and scheduled with the obstacles standing
-    (detours bend the paths that pass too close). The shortest longest path wins, then
-    the smallest total, then the candidate order (ring, direction). Above
-    CANDIDATES_MAX_N robots only the first clear translation is tried. None when no
-    candidate can be scheduled safely.
-    """
-    n = pos.shape[0]
-    frame = pyramid_frame(pos, params.orientation)
-    starts_p = frame.to_pyramid(pos)
-    slots = placed_slots(n, params.d_e, params.phi_e, starts_p, "centroid")
-    obs_p = frame.to_pyramid(obs)
-    shifts = clear_shifts(slots, obs_p, params.d_e / 4.0, SLOT_CLEARANCE * params.radius)
-    if n > CANDIDATES_MAX_N:
-        shifts = shifts[:1]
-    empty: list[tuple[np.ndarray, ...]] = [() for _ in range(n)]
-    best: tuple[float, float, int, _Scheduled, np.ndarray] | None = None
-    for k, shift in enumerate(shifts):
-        moved = slots + shift
-        perm = assign(starts_p, moved, strategy, params.d_e, params.phi_e)
-        try:
-            sc = _packed(pos, frame.to_common(moved[perm]), perm, empty, obs, params, strategy)
-        except ValueError:
-            continue
-        lengths = [_length(pos[r], sc.vias[r], sc.targets[r]) for r in range(n)]
-        key = (max(lengths), sc.total, k)
-        if best is None or key < best[:3]:
-            best = (*key, sc, shift)
-    if best is None:
-        return None
-    shift_c = frame.to_common(best[4]) - frame.to_common(np.zeros(2))
-    return best[3], frame.origin + shift_c, frame.beta
 
 
 def _f(x: float) -> bytes:
@@ -544,7 +196,7 @@ def plan_from_positions(
     """Plan a pyramid for robots at known positions (caller's frame).
 
     Wave 0 is the leader alone, unless the leader's slot lies within 2·radius of another
-    robot's start: then the robots that must clear it go first (see :mod:`safety`).
+    robot's start: then the robots that must clear it go first (see :mod:`scheduler`).
     """
     id_list, pos = _check_positions(ids, positions)
     order_idx = np.argsort(np.asarray(id_list), kind="stable")
@@ -562,7 +214,7 @@ def plan_from_positions(
             raise ValueError("strategy 'banded' takes no obstacles (see fallback)")
         near = None
         if params.obstacle_method != "paper":
-            near = _near_obstacles(pos, obs, params, params.resolved_strategy(n))
+            near = plan_near_obstacles(pos, obs, params, params.resolved_strategy(n))
             if near is None and params.obstacle_method == "near":
                 raise ValueError("obstacles: no safe schedule for the near placement")
         if near is not None:
@@ -570,16 +222,16 @@ def plan_from_positions(
         else:
             op = plan_around_obstacles(pos, obs, params, strategy)
             frame_origin, beta = op.origin, op.beta
-            best = _packed(pos, op.targets, op.order, op.vias, obs, params, strategy)
+            best = scheduled_plan(pos, op.targets, op.order, op.vias, obs, params, strategy)
     else:
         frame = pyramid_frame(pos, params.orientation)
         starts_p = frame.to_pyramid(pos)
         frame_origin, beta = frame.origin, frame.beta
-        chosen = _choose(pos, frame, starts_p, params)
+        chosen = choose(pos, frame, starts_p, params)
         if chosen is None:  # the plan that always exists (see fallback)
             bp = banded_plan(pos, frame, params.d_e, params.phi_e, params.radius)
             frame_origin = bp.origin
-            chosen = _Scheduled(bp.order, bp.targets, bp.vias, bp.waves, bp.after, "banded")
+            chosen = Scheduled(bp.order, bp.targets, bp.vias, bp.waves, bp.after, "banded")
         best = chosen
     strategy = best.strategy
     order, targets, vias_rows = best.order, best.targets, best.vias

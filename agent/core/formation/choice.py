@@ -1,0 +1,108 @@
+"""Which scheduled plan, without obstacles: the ``default`` strategy's comparison of
+candidate assignments, or the attempts of :meth:`params.PlanParams.attempts` in turn.
+
+Candidates (n <= ``CANDIDATES_MAX_N``): the min-sum assignment (``optimal``), min-sum
+under bounds on the longest path between B* and min-sum's own (the CAT-ORA idea), and
+CAPT, all on the centred pyramid (AUV eqs. 5-7). Each is made safe and packed
+(:mod:`scheduled`); of those whose total path stays within ``PATH_SLACK`` of the
+optimum, the best by dependency makespan get detours on their critical chain, and the
+smallest makespan wins. Otherwise the paper's matching (NAO paper 4.2, Lemma 1) or the
+explicit strategy is tried per placement until one schedules safely.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from agent.core.formation.assignment import assign, bounded_assignment, min_bottleneck
+from agent.core.formation.params import CANDIDATES_MAX_N, PlanParams
+from agent.core.formation.pyramid import PyramidFrame, placed_slots
+from agent.core.formation.scheduled import Scheduled, scheduled_plan
+
+#: The ``default`` strategy keeps a plan whose total path is at most this many times the
+#: smallest total (the min-sum assignment's straight paths).
+PATH_SLACK = 1.05
+
+#: Bounds on the longest path the ``default`` strategy tries (n <= CANDIDATES_MAX_N), as
+#: fractions of the way from B* (the smallest possible longest path) to the longest path
+#: of the min-sum assignment.
+BOUND_STEPS = (0.0, 0.25, 0.5, 0.75)
+
+#: How many of the best candidates (by makespan before detours) get detours.
+SHORTENED = 3
+
+_NO_OBS = np.zeros((0, 2))
+
+
+def _candidates(starts_p: np.ndarray, slots_p: np.ndarray) -> list[tuple[str, np.ndarray]]:
+    """Assignments the ``default`` strategy compares: min-sum first, then min-sum under
+    bounds on the longest path between B* and min-sum's own (CAT-ORA's idea), then CAPT.
+    Duplicates are dropped (first kept)."""
+    opt = assign(starts_p, slots_p, "optimal", 1.0, 0.5)
+    longest = float(np.max(np.hypot(*(starts_p - slots_p[opt]).T)))
+    b_star = min_bottleneck(starts_p, slots_p)
+    out = [("optimal", opt)]
+    for f in BOUND_STEPS:
+        out.append(
+            ("bottleneck", bounded_assignment(starts_p, slots_p, b_star + f * (longest - b_star)))
+        )
+    out.append(("capt", assign(starts_p, slots_p, "capt", 1.0, 0.5)))
+    seen: set[bytes] = set()
+    uniq = []
+    for name, perm in out:
+        key = perm.tobytes()
+        if key not in seen:
+            seen.add(key)
+            uniq.append((name, perm))
+    return uniq
+
+
+def choose(
+    pos: np.ndarray, frame: PyramidFrame, starts_p: np.ndarray, params: PlanParams
+) -> Scheduled | None:
+    """The scheduled plan of the first attempt that succeeds (see PlanParams.attempts).
+
+    ``default`` with n <= CANDIDATES_MAX_N first compares the :func:`_candidates` assignments on the
+    centred pyramid: of those that schedule with a total path <= PATH_SLACK × the
+    min-sum total, the smallest dependency makespan wins (then the smaller total, then
+    the order of CANDIDATES). None: no attempt could be scheduled.
+    """
+    n = pos.shape[0]
+    empty: list[tuple[np.ndarray, ...]] = [() for _ in range(n)]
+    exact = params.strategy == "default" and params.placement in ("default", "centroid")
+    if exact and n <= CANDIDATES_MAX_N:
+        slots_p = placed_slots(n, params.d_e, params.phi_e, starts_p, "centroid")
+        good: list[tuple[float, float, int, Scheduled]] = []
+        bound = math.inf
+        for k, (strat, perm) in enumerate(_candidates(starts_p, slots_p)):
+            if k == 0:
+                straight = np.hypot(*(starts_p - slots_p[perm]).T)
+                bound = PATH_SLACK * float(straight.sum()) + 1e-9
+            try:
+                sc = scheduled_plan(
+                    pos, frame.to_common(slots_p[perm]), perm, empty, _NO_OBS, params, strat
+                )
+            except ValueError:
+                continue
+            if sc.total <= bound:
+                good.append((sc.makespan, sc.total, k, sc))
+        good.sort(key=lambda g: g[:3])
+        for j, (_, _, k, sc) in enumerate(good[:SHORTENED]):  # detours for the best
+            better = scheduled_plan(
+                pos, sc.targets, sc.order, empty, _NO_OBS, params, sc.strategy, bound=bound
+            )
+            good[j] = (better.makespan, better.total, k, better)
+        if good:
+            return min(good, key=lambda g: g[:3])[3]
+    for strat, placement in params.attempts(n):
+        slots_p = placed_slots(n, params.d_e, params.phi_e, starts_p, placement)
+        perm = assign(starts_p, slots_p, strat, params.d_e, params.phi_e)
+        try:
+            return scheduled_plan(
+                pos, frame.to_common(slots_p[perm]), perm, empty, _NO_OBS, params, strat
+            )
+        except ValueError:
+            continue
+    return None

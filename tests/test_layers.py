@@ -1,0 +1,217 @@
+"""The house rules of docs/design.md ("Layers"), checked on the source with ``ast``.
+
+- the pure core (``agent/core``) imports no I/O module and nothing of the project but
+  itself;
+- ``agent/wire`` (the contract every process shares) imports only itself and the NAO's
+  numbers of the core; it never imports zenoh;
+- ``agent/net`` is the only agent layer that imports zenoh; only modules named
+  ``*naoqi*`` import ``qi``;
+- ``agent/body`` never reaches up into the phases; nothing of ``agent/`` imports
+  ``sim/`` or ``tools/``;
+- ``sim/`` imports only ``agent.wire`` of ``agent/``;
+- tools reach agents as processes or through the seams, never the phase machine;
+- no import cycles among the modules of ``agent/``, ``sim/`` and ``tools/`` (imports
+  under ``if TYPE_CHECKING:`` included: a cycle of types is still a knot);
+- no source file over 600 lines.
+"""
+
+from __future__ import annotations
+
+import ast
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("agent", "sim", "tools")
+MAX_LINES = 600
+IO_MODULES = frozenset({"zenoh", "msgpack", "pybullet", "qi", "socket", "sim", "tools"})
+
+
+def _modules() -> dict[str, Path]:
+    out: dict[str, Path] = {}
+    for pkg in PACKAGES:
+        for p in sorted((ROOT / pkg).rglob("*.py")):
+            parts = p.relative_to(ROOT).with_suffix("").parts
+            name = ".".join(parts).removesuffix(".__init__")
+            out[name] = p
+    return out
+
+
+MODULES = _modules()
+
+
+def _imports(name: str, path: Path) -> Iterator[str]:
+    """Every module named by an import statement of ``path`` (any depth, any block)."""
+    pkg = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            yield from (a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                up = pkg.split(".")[: len(pkg.split(".")) - node.level + 1]
+                base = ".".join([*up, base] if base else up)
+            for a in node.names:
+                # ``from agent.wire import trust`` imports the module agent.wire.trust
+                sub = f"{base}.{a.name}"
+                yield sub if sub in MODULES else base
+
+
+def _own(target: str) -> str | None:
+    """The project module an import names (a name inside a module counts as the module)."""
+    while target and target not in MODULES:
+        target = target.rpartition(".")[0]
+    return target or None
+
+
+GRAPH = {
+    m: {t for t in (_own(i) for i in _imports(m, p)) if t and t != m and not m.startswith(t + ".")}
+    for m, p in MODULES.items()
+}
+RAW = {m: set(_imports(m, p)) for m, p in MODULES.items()}
+
+
+def _in(module: str, layer: str) -> bool:
+    return module == layer or module.startswith(layer + ".")
+
+
+def _violations(layer: str, allowed: tuple[str, ...], banned: frozenset[str]) -> list[str]:
+    out = []
+    for m in sorted(x for x in MODULES if _in(x, layer)):
+        for imp in sorted(RAW[m]):
+            top = imp.split(".")[0]
+            if top in banned or (
+                top == "agent" and imp != "agent" and not any(_in(imp, a) for a in allowed)
+            ):
+                out.append(f"{m} imports {imp}")
+    return out
+
+
+def test_the_tree_has_the_layers() -> None:
+    for layer in ("core", "wire", "net", "body", "phases"):
+        assert (ROOT / "agent" / layer / "__init__.py").is_file(), layer
+
+
+def test_core_is_pure() -> None:
+    assert _violations("agent.core", ("agent.core",), IO_MODULES) == []
+
+
+def test_wire_imports_only_itself_and_the_nao_facts() -> None:
+    banned = frozenset({"zenoh", "pybullet", "qi", "socket", "sim", "tools"})
+    assert _violations("agent.wire", ("agent.wire", "agent.core.nao"), banned) == []
+
+
+def test_net_sits_on_the_wire() -> None:
+    banned = frozenset({"pybullet", "qi", "sim", "tools"})
+    assert _violations("agent.net", ("agent.net", "agent.wire"), banned) == []
+
+
+def test_bodies_never_reach_up_into_the_phases() -> None:
+    banned = frozenset({"pybullet", "sim", "tools"})
+    allowed = ("agent.body", "agent.net", "agent.wire", "agent.core")
+    assert _violations("agent.body", allowed, banned) == []
+
+
+def test_only_the_transport_imports_zenoh_and_only_naoqi_modules_import_qi() -> None:
+    zenoh = sorted(
+        m for m in MODULES if _in(m, "agent") and "zenoh" in {i.split(".")[0] for i in RAW[m]}
+    )
+    assert zenoh and all(_in(m, "agent.net") for m in zenoh), zenoh
+    qi = sorted(m for m in MODULES if "qi" in {i.split(".")[0] for i in RAW[m]})
+    assert all("naoqi" in m.rpartition(".")[2] for m in qi), qi
+
+
+def test_agent_never_imports_sim_or_tools() -> None:
+    bad = sorted(
+        f"{m} imports {i}"
+        for m in MODULES
+        if _in(m, "agent")
+        for i in RAW[m]
+        if i.split(".")[0] in ("sim", "tools")
+    )
+    assert bad == []
+
+
+def test_sim_imports_only_the_wire_format() -> None:
+    bad = sorted(
+        f"{m} imports {i}"
+        for m in MODULES
+        if _in(m, "sim")
+        for i in RAW[m]
+        if i.split(".")[0] == "agent" and not _in(i, "agent.wire")
+    )
+    assert bad == []
+
+
+def test_tools_never_import_the_phase_machine() -> None:
+    bad = sorted(
+        f"{m} imports {i}"
+        for m in MODULES
+        if _in(m, "tools")
+        for i in RAW[m]
+        if _in(i, "agent.phases")
+    )
+    assert bad == []
+
+
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components with more than one module (Tarjan, iterative)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on: set[str] = set()
+    out: list[list[str]] = []
+    counter = 0
+    for root in sorted(graph):
+        if root in index:
+            continue
+        work = [(root, iter(sorted(graph[root])))]
+        index[root] = low[root] = counter
+        counter += 1
+        stack.append(root)
+        on.add(root)
+        while work:
+            v, it = work[-1]
+            w = next(it, None)
+            if w is not None:
+                if w not in index:
+                    index[w] = low[w] = counter
+                    counter += 1
+                    stack.append(w)
+                    on.add(w)
+                    work.append((w, iter(sorted(graph[w]))))
+                elif w in on:
+                    low[v] = min(low[v], index[w])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[v])
+            if low[v] == index[v]:
+                comp = []
+                while True:
+                    w = stack.pop()
+                    on.discard(w)
+                    comp.append(w)
+                    if w == v:
+                        break
+                if len(comp) > 1:
+                    out.append(sorted(comp))
+    return out
+
+
+def test_cycle_finder_finds_a_known_cycle() -> None:
+    graph = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}
+    assert _cycles(graph) == [["a", "b", "c"]]
+    assert _cycles({"a": {"b"}, "b": set()}) == []
+
+
+def test_no_import_cycles() -> None:
+    assert _cycles(GRAPH) == []
+
+
+@pytest.mark.parametrize("name", sorted(MODULES))
+def test_no_source_file_over_600_lines(name: str) -> None:
+    n = len(MODULES[name].read_text().splitlines())
+    assert n <= MAX_LINES, f"{MODULES[name].relative_to(ROOT)}: {n} lines"
