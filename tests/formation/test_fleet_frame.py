@@ -88,7 +88,9 @@ def test_a_fleet_that_falls_apart_without_the_named_robot_stops(
         fleet_frame(recs, DEFAULT_EPSILON)
 
 
-def test_a_fleet_inconsistent_beyond_one_robot_stops(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_fleet_inconsistent_beyond_one_robot_plans_as_the_papers_do(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
     import dataclasses
 
     import agent.core.formation.fleet_frame as ff_mod
@@ -99,5 +101,13 @@ def test_a_fleet_inconsistent_beyond_one_robot_stops(monkeypatch: pytest.MonkeyP
     worse = [dataclasses.replace(p, score=5.0) for p in real.poses.pairs]
     poses = dataclasses.replace(real.poses, pairs=tuple(worse))
     monkeypatch.setattr(ff_mod, "check_poses", lambda r, e: PoseVerdict((), "ambiguous", poses))
-    with pytest.raises(ValueError, match="no single robot explains it"):
-        fleet_frame(recs, DEFAULT_EPSILON)
+    got = fleet_frame(recs, DEFAULT_EPSILON)  # random headings: eq. 9 pairs nobody
+    assert got.reason == "ambiguous" and not got.aligned
+    _, _, aligned = _fleet(3, np.full(len(IDS), math.pi / 2))
+    real = ff_mod.check_poses(aligned, DEFAULT_EPSILON)
+    bad = dataclasses.replace(
+        real.poses, pairs=tuple(dataclasses.replace(p, score=5.0) for p in real.poses.pairs)
+    )
+    monkeypatch.setattr(ff_mod, "check_poses", lambda r, e: PoseVerdict((), "noisy", bad))
+    got = fleet_frame(aligned, DEFAULT_EPSILON)
+    assert got.aligned and got.reason == "noisy; planned on aligned frames"

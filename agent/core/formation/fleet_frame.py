@@ -12,9 +12,13 @@ aligned), checked by :mod:`pose_check`, which names a robot whose sightings do n
   sightings and without the others' sightings of it (:func:`pose_check.leave_out`); the
   named robot is placed where the *others* saw it (the mean of their sightings of it, in
   the rest's frame), stands still, and is planned around like an obstacle.
-* One robot named and the rest not connected without it, or a fleet inconsistent beyond
-  one robot: nobody can be trusted to move, and :func:`fleet_frame` raises ``ValueError``
-  with the same reason on every agent (they hold the same records).
+* One robot named and the rest not connected, or not consistent, without it: nobody can
+  be trusted to move, and :func:`fleet_frame` raises ``ValueError`` with the same reason
+  on every agent (they hold the same records).
+* Sightings inconsistent with nobody to blame (noise beyond the check's tolerances, as in
+  the papers' own Monte Carlo): planned as the papers do, on aligned frames, when that
+  model connects the fleet (else on the fit); the robots' own check after hold tells
+  whether the pyramid holds.
 
 Deterministic: the same records in any order give bit-identical output (the pose fit's
 own guarantee; the named robot's place is a mean over sightings sorted by owner id).
@@ -23,10 +27,12 @@ own guarantee; the named robot's place is a mean over sightings sorted by owner 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from agent.core.formation.common_frame import build_common_frame
+from agent.core.formation.neighbour_check import identify_neighbours
 from agent.core.formation.pose_check import check_poses, leave_out
 from agent.core.formation.poses import PoseFrame
 from agent.core.formation.records import NeighborRecord
@@ -82,6 +88,15 @@ def _map_point(src: PoseFrame, dst: PoseFrame, point: np.ndarray) -> np.ndarray:
     return np.asarray(cb + r @ (np.asarray(point, dtype=np.float64) - ca))
 
 
+def _papers_model(records: Sequence[NeighborRecord], epsilon: float) -> FleetFrame | None:
+    """Today's common frame (eq. 9 pairs, least squares, ψ ≡ 0), or None if not connected."""
+    try:
+        cf = build_common_frame(identify_neighbours(records, epsilon), "lsq")
+    except ValueError:
+        return None
+    return FleetFrame(cf.frame_robot, cf.ids, cf.positions, np.zeros(len(cf.ids)), True)
+
+
 def fleet_frame(records: Sequence[NeighborRecord], epsilon: float) -> FleetFrame:
     """Pair, fit, check and, if needed, leave one robot out (module docstring).
 
@@ -93,10 +108,12 @@ def fleet_frame(records: Sequence[NeighborRecord], epsilon: float) -> FleetFrame
     poses = verdict.poses
     if not verdict.named:
         if not poses.consistent:
-            raise ValueError(
-                f"the sightings do not fit and no single robot explains it ({verdict.reason}); "
-                "nobody moves"
-            )
+            # noisy sightings no single robot explains: plan as the papers do (aligned
+            # frames, least squares) when that model connects the fleet, else on the fit;
+            # the robots' own check after hold says whether the result holds
+            today = _papers_model(records, epsilon)
+            if today is not None:
+                return replace(today, reason=f"{verdict.reason}; planned on aligned frames")
         return FleetFrame(
             poses.frame_robot, poses.ids, poses.positions, poses.headings, poses.aligned,
             reason=verdict.reason,

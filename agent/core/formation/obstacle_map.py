@@ -17,6 +17,7 @@ taken in (x, y, weight) order of the sightings).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -71,12 +72,14 @@ def common_frame_obstacles(
     positions: np.ndarray,
     sightings: Mapping[int, np.ndarray],
     radius: float = MERGE_RADIUS,
+    headings: np.ndarray | None = None,
 ) -> np.ndarray:
     """Obstacles (M, 2) in the common frame from each robot's fixed-frame ``sightings``.
 
     ``ids``/``positions`` are the robots' starts in the common frame
-    (:class:`~agent.core.formation.common_frame.CommonFrame`); sightings of robots not among
-    them (not reachable, hence not placed) are left out.
+    (:class:`~agent.core.formation.common_frame.CommonFrame`), ``headings`` their ψ (each
+    fixed frame turned from the common frame; None: all 0, the papers' aligned frames);
+    sightings of robots not among them (not reachable, hence not placed) are left out.
     """
     index = {int(r): k for k, r in enumerate(ids)}
     pos = np.asarray(positions, dtype=np.float64).reshape(-1, 2)
@@ -86,8 +89,12 @@ def common_frame_obstacles(
         if rid not in index:
             continue
         own = np.asarray(sightings[rid], dtype=np.float64).reshape(-1, 2)
-        pts.append(own + pos[index[rid]])
         dist.append(np.hypot(own[:, 0], own[:, 1]))
+        if headings is not None and float(headings[index[rid]]) != 0.0:
+            a = float(headings[index[rid]])
+            c, s = math.cos(a), math.sin(a)
+            own = own @ np.array([[c, s], [-s, c]])  # row vectors turned by +ψ
+        pts.append(own + pos[index[rid]])
     if not pts:
         return np.zeros((0, 2))
     return merge_sightings(np.concatenate(pts), np.concatenate(dist), radius)

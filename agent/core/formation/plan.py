@@ -37,13 +37,14 @@ from __future__ import annotations
 import hashlib
 import struct
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from agent.core.formation.choice import choose
 from agent.core.formation.common_frame import build_common_frame
 from agent.core.formation.fallback import banded_plan
+from agent.core.formation.fleet_frame import FleetFrame, fleet_frame
 from agent.core.formation.neighbour_check import identify_neighbours
 from agent.core.formation.obstacle_map import common_frame_obstacles
 from agent.core.formation.obstacles import plan_around_obstacles, plan_near_obstacles
@@ -90,6 +91,20 @@ class Plan:
     digest: str
     strategy: str = ""
     obstacles: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    #: (N,) ψ of each robot (``robots`` order): its fixed frame turned from the common
+    #: frame (DESIGN.md §9); empty: all 0 (the papers' aligned starts)
+    psi: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: robots left out by the consistency check: they stand still, planned around
+    excluded: tuple[int, ...] = ()
+    #: the consistency check's verdict (empty for :func:`plan_from_positions`)
+    verdict: str = ""
+
+    def psi_of(self, robot_id: int) -> float:
+        """ψ of a planned robot (0 for a plan without poses); ``ValueError`` if absent."""
+        k = self.ids.index(robot_id) if robot_id in self.ids else -1
+        if k < 0:
+            raise ValueError(f"robot {robot_id} is not in the plan")
+        return float(self.psi[k]) if len(self.psi) else 0.0
 
     def robot(self, robot_id: int) -> RobotPlan:
         for r in self.robots:
@@ -306,17 +321,42 @@ def plan_from_records(
 ) -> Plan:
     """The whole pipeline on a record set (any order): the same records -> the same plan.
 
-    ``obstacles`` (M, 2), if any, are positions in the common frame (the frame robot's
-    fixed frame). ``sightings`` maps a robot id to the obstacles it saw, in its fixed
-    frame: they are placed in the common frame and merged (:mod:`obstacle_map`), then
-    planned around with the others. Raises ``ValueError`` for bad records, a fleet that
-    is not connected through identified neighbours, or (with obstacles only) no safe
-    schedule.
+    The common frame holds every robot's start pose (:mod:`fleet_frame`, DESIGN.md §9;
+    ``frame_method`` ``bfs`` or ``lsq``: positions on the papers' aligned frames instead). A robot the
+    consistency check names is left out (``Plan.excluded``): it stands still where the
+    others saw it and is planned around like an obstacle. ``obstacles`` (M, 2), if any, are
+    positions in the common frame (the frame robot's fixed frame). ``sightings`` maps a
+    robot id to the obstacles it saw, in its fixed frame: they are placed in the common
+    frame (turned by its ψ) and merged (:mod:`obstacle_map`), then planned around with the
+    others. The digest of a plan with aligned starts and nobody left out is the papers'
+    plan's; otherwise it also covers every ψ, who is left out and why.
+
+    Raises ``ValueError`` for bad records, a fleet that is not connected through
+    identified neighbours, sightings no single robot can be blamed for, or (with
+    obstacles only) no safe schedule.
     """
-    graph = identify_neighbours(records, params.epsilon)
-    cf = build_common_frame(graph, params.frame_method)
+    if params.frame_method != "default":  # the papers' aligned frames, as asked
+        graph = identify_neighbours(records, params.epsilon)
+        cf = build_common_frame(graph, params.frame_method)
+        ff = FleetFrame(cf.frame_robot, cf.ids, cf.positions, np.zeros(len(cf.ids)), True)
+    else:
+        ff = fleet_frame(records, params.epsilon)
+    given = np.zeros((0, 2)) if obstacles is None else np.asarray(obstacles, dtype=np.float64)
+    extra = [given.reshape(-1, 2)]
     if sightings:
-        seen = common_frame_obstacles(cf.ids, cf.positions, sightings)
-        given = np.zeros((0, 2)) if obstacles is None else np.asarray(obstacles, dtype=np.float64)
-        obstacles = np.vstack([given.reshape(-1, 2), seen]) if seen.size else obstacles
-    return plan_from_positions(cf.ids, cf.positions, params, obstacles, frame_robot=cf.frame_robot)
+        mine = {i: s for i, s in sightings.items() if i in ff.ids}
+        seen = common_frame_obstacles(ff.ids, ff.positions, mine, headings=ff.headings)
+        extra.append(seen)
+    extra.append(ff.excluded_at.reshape(-1, 2))
+    obs = np.vstack(extra)
+    plan = plan_from_positions(
+        ff.ids, ff.positions, params, obs if len(obs) else obstacles, frame_robot=ff.frame_robot
+    )
+    if ff.aligned and not ff.excluded:
+        return plan
+    psi = np.asarray(ff.headings, dtype=np.float64)
+    h = hashlib.sha256(b"nao-formation/plan-poses/v1")
+    h.update(plan.digest.encode())
+    h.update(np.ascontiguousarray(psi, dtype="<f8").tobytes())
+    h.update(repr((ff.excluded, ff.reason)).encode())
+    return replace(plan, psi=psi, excluded=ff.excluded, verdict=ff.reason, digest=h.hexdigest())

@@ -56,6 +56,7 @@ from agent.core.formation.neighbour_check import (
     NeighbourGraph,
     identify_neighbours,
 )
+from agent.core.formation.pose_pairing import identify_pairs
 from agent.core.formation.records import NeighborRecord
 
 NORTH = math.pi / 2
@@ -179,6 +180,12 @@ def decide_research(
             raise ValueError(f"{name} must be a finite distance > 0, got {v!r}")
     graph = identify_neighbours(records, epsilon)
     comps = components(graph)
+    if len(comps) > 1:
+        # frames that are not parallel (DESIGN.md §9): the pose fit's pairing may join
+        # what eq. 9 cannot; the planner uses it too, so the fewer groups win
+        unaligned = identify_pairs(records, epsilon)
+        if len(components(unaligned)) < len(comps):
+            graph, comps = unaligned, components(unaligned)
     deg = graph.degree()
     isolated = tuple(i for i in graph.ids if deg[i] == 0)
     kept = comps[0]
