@@ -499,10 +499,10 @@ def test_liveliness_of_non_robots_keeps_no_state(server: Any) -> None:
         server.admit_alive(SimpleNamespace(key_expr=key, kind=zenoh.SampleKind.PUT))
     assert server.rejected == 1  # the alias 02
     server._drain(block=False)
-    assert server.alive == {2}
+    assert server.bindings.alive == {2}
     server.admit_alive(SimpleNamespace(key_expr="nao/alive/2", kind=zenoh.SampleKind.DELETE))
     server._drain(block=False)
-    assert server.alive == set()
+    assert server.bindings.alive == set()
 
 
 def test_a_flood_of_malformed_requests_against_the_running_world(client: Client) -> None:
@@ -569,7 +569,7 @@ def test_a_motion_request_id_is_executed_once_and_a_repeat_gets_the_first_result
     assert first.replies == again.replies == [want]
     late = _ask(server, "walk", WalkRequest(distance=0.2, request_id=7))  # after it ended
     assert late.replies == [want] and legs.started == [("walk", 3, 0.2)]
-    assert server.repeats == 2
+    assert server.motions.repeats == 2
     other = _ask(server, "walk", WalkRequest(distance=0.2, request_id=7), rid=2)  # per robot
     assert legs.started[-1] == ("walk", 2, 0.2) and other.replies == []
 
@@ -579,7 +579,7 @@ def test_without_a_request_id_every_motion_is_executed(server: Any, legs: FakeLe
         q = _ask(server, "turn", TurnRequest(angle=0.1))
         _finish(server, legs, 3, "turn", t)
         assert q.replies == [CommandReply(robot_id=3, status="done", t_sim=t)]
-    assert len(legs.started) == 2 and server.repeats == 0
+    assert len(legs.started) == 2 and server.motions.repeats == 0
 
 
 def test_a_request_id_reused_for_another_motion_is_refused(server: Any, legs: FakeLegs) -> None:
@@ -598,6 +598,6 @@ def test_the_motion_cache_is_bounded_per_robot(server: Any, legs: FakeLegs) -> N
     for i in range(1, MOTION_CACHE + 2):
         _ask(server, "turn", TurnRequest(angle=0.1, request_id=i))
         _finish(server, legs, 3, "turn", float(i))
-    assert len(server._results[3]) == MOTION_CACHE
+    assert len(server.motions.results[3]) == MOTION_CACHE
     _ask(server, "turn", TurnRequest(angle=0.1, request_id=1))  # forgotten: executed again
     assert len(legs.started) == MOTION_CACHE + 2
