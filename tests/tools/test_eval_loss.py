@@ -214,6 +214,7 @@ def test_run_rows_have_the_shared_schema_and_the_outcomes_plot(tmp_path: Path) -
 
 
 def test_exit_code_zero_is_done_when_the_final_status_went_unheard() -> None:
+    from tools.harness.monitor import done_by_exit_code
     from tools.harness.observe import AgentView, Observer
 
     obs = Observer(0.0)
@@ -221,7 +222,7 @@ def test_exit_code_zero_is_done_when_the_final_status_went_unheard() -> None:
     for i, (phase, code) in phases.items():
         obs.agents[i] = AgentView(phase=phase, exit_code=code)
     obs.agents[6] = AgentView(phase="hold", exit_code=None)  # still running at the timeout
-    assert eval_loss.done_by_exit_code(obs, [1, 2, 3, 4, 5, 6, 7]) == [2, 5]
+    assert done_by_exit_code(obs, [1, 2, 3, 4, 5, 6, 7]) == [2, 5]
     assert {i: v.phase for i, v in obs.agents.items()} == {
         1: "done", 2: "done", 3: "hold", 4: "failed", 5: "done", 6: "hold",
     }  # fmt: skip
