@@ -23,9 +23,11 @@ plan digests, no contact, every pair within |r_d| <= 12.5 % and |r_φ| <= 30 %).
 it also records the agreement time (wall seconds from the last agent entering
 ``exchange`` to the last agent leaving ``agree``: the cost of the protocol, not of the
 search), the bytes each agent published (all, and records + digests only) and the
-packets dropped. It writes ``results.json`` and ``loss.png`` (success rate, agreement
-time and bytes vs loss) under ``--out``, one directory per run with the processes'
-logs, ``result.json``, ``formation.png`` and ``run.mcap``, and prints a table.
+packets dropped. Each run's outcome is that of :func:`tools.harness.judge.outcome`,
+reported as every evaluation tool does (:mod:`tools.harness.report`: ``--json``, the
+table, ``outcomes.png``). It writes ``results.json`` and ``loss.png`` (success rate,
+agreement time and bytes vs loss) under ``--out``, one directory per run with the
+processes' logs, ``result.json``, ``formation.png`` and ``run.mcap``, and prints a table.
 
 ``python -m tools.eval_loss --loss 0,0.1,0.3 --robots 3 --seeds 3 [--out out/eval_loss]``
 Needs root, iproute2 and iptables (network namespaces).
@@ -49,12 +51,13 @@ from typing import Any
 
 from agent import wire as P
 from tools import netns
+from tools.harness import report
+from tools.harness.judge import outcome
 from tools.harness.monitor import monitor
 from tools.harness.procs import Lines
 from tools.packet_drop import Dropper
 
 REPO = Path(__file__).resolve().parents[1]
-OUTCOMES = ("complete", "safe_abort", "unsafe")
 
 
 #: Bounds of Linux's ``net.ipv4.tcp_rto_max_ms`` (kernel >= 6.15; ms).
@@ -468,53 +471,19 @@ def main(argv: list[str] | None = None) -> int:
         return 130
 
 
-def outcome(res: dict[str, Any], success: bool) -> str:
-    """``complete``, ``safe_abort`` or ``unsafe`` of a monitor result (``result.json``).
-
-    Unsafe: a contact, or some robot moved (its phases include ``move``) while the agents'
-    plan digests were not all identical (it moved on a plan another did not share).
-    """
-    moved = any("move" in ph for ph in res.get("phases_visited", {}).values())
-    if res.get("contacts", 0) or (moved and not res.get("identical_digests")):
-        return "unsafe"
-    return "complete" if success else "safe_abort"
-
-
-def run_row(r: RunResult, res_outcome: str) -> dict[str, Any]:
-    """One run in the JSON schema shared with ``tools.eval_faults``."""
+def run_row(r: RunResult, res: dict[str, Any]) -> dict[str, Any]:
+    """One run in the rows of :mod:`tools.harness.report` (the JSON schema shared with
+    ``tools.eval_faults``): its outcome and detail by :func:`tools.harness.judge.outcome`
+    from the monitor's ``result.json`` (``res``; empty: no result, a safe abort)."""
+    oc, detail = outcome(res) if res else ("safe_abort", r.reason)
     return {
         "seed": r.seed,
         "loss": r.loss,
-        "outcome": res_outcome,
+        "outcome": oc,
         "contacts": r.contacts,
         "wall_s": round(r.wall_s, 1),
-        "detail": r.reason,
+        "detail": detail,
     }
-
-
-def plot_outcomes(rows: list[dict[str, Any]], path: Path, title: str) -> None:
-    """Stacked bars: runs per loss rate by outcome (complete, safe abort, unsafe)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    losses = sorted({float(r["loss"]) for r in rows})
-    colours = {"complete": "tab:green", "safe_abort": "tab:orange", "unsafe": "tab:red"}
-    fig, ax = plt.subplots(figsize=(5.5, 3.6))
-    bottom = [0] * len(losses)
-    xs = [f"{100 * x:g} %" for x in losses]
-    for oc in OUTCOMES:
-        n = [sum(1 for r in rows if r["loss"] == x and r["outcome"] == oc) for x in losses]
-        ax.bar(xs, n, bottom=bottom, color=colours[oc], label=oc.replace("_", " "))
-        bottom = [b + k for b, k in zip(bottom, n)]
-    ax.set_xlabel("packet loss per direction on every agent host")
-    ax.set_ylabel("runs")
-    ax.set_title(title, fontsize=9)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def _fleet(out: Path, robots: int) -> str:
@@ -549,9 +518,8 @@ def _evaluate(args: argparse.Namespace, losses: list[float], out: Path) -> int:
             results.append(r)
             res_path = Path(r.out) / "result.json"
             res = json.loads(res_path.read_text()) if res_path.exists() else {}
-            rows.append(run_row(r, outcome(res, r.success)))
-            # written after every run: a long evaluation can be read while it goes on
-            json_path.write_text(json.dumps({"runs": rows}, indent=2))
+            rows.append(run_row(r, res))
+            report.write_runs(rows, json_path)
             print(
                 f"[{n}/{total}] {'OK  ' if r.success else 'FAIL'} {r.reason}; agree "
                 f"{_fmt(r.agree_s, '.2f')} s, bytes/agent {r.bytes_per_agent}, "
@@ -571,20 +539,18 @@ def _evaluate(args: argparse.Namespace, losses: list[float], out: Path) -> int:
     }
     (out / "results.json").write_text(json.dumps(doc, indent=2))
     plot(summary, out / "loss.png")
-    plot_outcomes(
-        rows,
+    report.plot_outcomes(
+        report.count_outcomes(
+            sorted(rows, key=lambda r: float(r["loss"])), "loss", name=lambda x: f"{100 * x:g} %"
+        ),
         out / "outcomes.png",
         f"{args.robots} robots, seeds {args.seed_start}..{args.seed_start + args.seeds - 1}, "
         f"{'insecure' if args.insecure else 'TLS router'}, world traffic "
         f"{'lossy' if args.lossy_world else 'exempt'}"
         + (f", TCP RTO <= {args.tcp_rto_max_ms} ms" if args.tcp_rto_max_ms else ""),
+        ylabel="packet loss per direction",
     )
-    print(f"{'loss':>6} {'seed':>5} {'outcome':>11} {'contacts':>8} {'wall s':>7}  detail")
-    for row in rows:
-        print(
-            f"{row['loss']:6.2f} {row['seed']:5d} {row['outcome']:>11} {row['contacts']:8d} "
-            f"{row['wall_s']:7.0f}  {row['detail'][:70]}"
-        )
+    report.print_runs(rows, "loss", detail_width=70)
     print(
         f"{'loss':>6} {'runs':>5} {'success':>8} {'agree s':>8} {'max s':>7} {'B/agent':>9} "
         f"{'exch B':>8} {'dropped':>8}"
