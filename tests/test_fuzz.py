@@ -1,9 +1,10 @@
 """Property-based fuzz of the wire codec (issue #8): nothing but ProtocolError leaves decode.
 
 Each hypothesis example draws a seed and runs a batch of ``BATCH`` mutants of one message
-type through :func:`agent.wire.decode` (generators shared with ``python -m
-tools.fuzz``), so that CI sees ``EXAMPLES * BATCH`` = 20 000 hostile payloads per type in
-a few seconds; pure-hypothesis strategies add structures hypothesis can shrink.
+type through :func:`agent.wire.decode` (generators of :mod:`tools.fuzz_payloads`, shared
+with ``python -m tools.fuzz``), so that CI sees ``EXAMPLES * BATCH`` = 20 000 hostile
+payloads per type in a few seconds; pure-hypothesis strategies add structures hypothesis
+can shrink.
 Derandomized: the same inputs on every run, no flakiness.
 """
 
@@ -17,7 +18,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from agent import wire as P
-from tools import fuzz
+from tools import fuzz, fuzz_payloads
 
 BATCH = 500
 EXAMPLES = 40
@@ -40,12 +41,12 @@ def only_protocol_errors(data: bytes, expect: type[P.Message] | None = None) -> 
         return False
 
 
-@pytest.mark.parametrize("tag", fuzz.TAGS)
+@pytest.mark.parametrize("tag", fuzz_payloads.TAGS)
 @settings(CI, max_examples=EXAMPLES)
 @given(seed=st.integers(0, 2**32 - 1))
 def test_mutants_of_every_type_raise_only_protocol_error(tag: str, seed: int) -> None:
     c = fuzz.TypeCounts()
-    for data in fuzz.payloads(seed, tag, BATCH):
+    for data in fuzz_payloads.payloads(seed, tag, BATCH):
         fuzz.decode_one(data, c)
     assert c.crashed == 0, c.crashes
     assert c.accepted + c.rejected == BATCH
@@ -53,11 +54,11 @@ def test_mutants_of_every_type_raise_only_protocol_error(tag: str, seed: int) ->
 
 def test_ci_runs_20000_payloads_per_type() -> None:
     assert PER_TYPE >= 20_000
-    assert set(fuzz.TAGS) == set(P.message_types())
+    assert set(fuzz_payloads.TAGS) == set(P.message_types())
 
 
 def test_the_mutants_are_neither_all_valid_nor_all_garbage() -> None:
-    res = fuzz.fuzz(len(fuzz.TAGS) * 600, seed=3)
+    res = fuzz.fuzz(len(fuzz_payloads.TAGS) * 600, seed=3)
     for tag, c in res.items():
         assert c.crashed == 0, c.crashes
         assert c.accepted > 10 and c.rejected > 300, (tag, vars(c))
@@ -81,7 +82,7 @@ FIELD_NAMES = sorted({f for cls in P.message_types().values() for f in cls.SCHEM
 
 @settings(CI, max_examples=600)
 @given(
-    tag=st.sampled_from(fuzz.TAGS) | st.text(max_size=8),
+    tag=st.sampled_from(fuzz_payloads.TAGS) | st.text(max_size=8),
     version=st.sampled_from([1, 1, 1, True, 1.0, 2, "1", None]),
     fields=st.dictionaries(
         st.sampled_from(FIELD_NAMES) | st.text(max_size=6) | st.binary(max_size=4),
@@ -140,12 +141,12 @@ def test_worst_payloads_stay_under_50_mb() -> None:
 def test_flood_requests_are_all_malformed() -> None:
     import random
 
-    reqs = list(fuzz.malformed_requests(random.Random(1), 900))
+    reqs = list(fuzz_payloads.malformed_requests(random.Random(1), 900))
     assert len(reqs) == 900
     kinds = {key.rsplit("/", 1)[-1] for key, _ in reqs}
     assert kinds == {"camera", "walk", "turn", "register"}
     for key, payload in reqs:
-        assert not fuzz._world_accepts(key, payload) or "/9/" in key
+        assert not fuzz_payloads._world_accepts(key, payload) or "/9/" in key
 
 
 def test_tool_prints_counts_and_meets_the_targets(capsys: pytest.CaptureFixture[str]) -> None:

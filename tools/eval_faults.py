@@ -13,12 +13,14 @@ the fault, and judges the run from ground truth:
   P and started again on the same endpoint ``--restart-after`` s later; the clients
   reconnect and declare their tokens again, the membership grace period covers the gap.
 
-Outcomes: ``complete`` (every agent exited 0 in ``done``, identical plan digests, no
-contact), ``unsafe`` (a contact, or a robot walked on a plan another robot that
-planned did not share), else ``safe_abort``. ``detail`` says why, and whether the pairs
-are within the demo's tolerances. Writes ``--json`` (``{"runs": [...]}``), ``results.json``
-and ``faults.png`` under ``--out`` (one directory per run with the processes' logs,
-``result.json``, ``formation.png`` and ``run.mcap``) and prints a table.
+Outcomes, by the one rule of :func:`tools.harness.judge.outcome`: ``complete`` (every
+agent exited 0 in ``done``, identical plan digests, no contact, the pairs within the
+demo's tolerances), ``unsafe`` (a contact, a robot that walked on a plan another robot
+that planned did not share, or every agent done on a formation the ground truth fails),
+else ``safe_abort``; ``detail`` says why. Writes ``--json`` (``{"runs": [...]}``),
+``results.json`` and ``faults.png`` under ``--out`` (one directory per run with the
+processes' logs, ``result.json``, ``formation.png`` and ``run.mcap``) and prints a table
+(:mod:`tools.harness.report`, as every evaluation tool).
 
 ``python -m tools.eval_faults --fault kill-agent@move --robots 3 --seed-start 1 --seeds 3``
 """
@@ -26,7 +28,6 @@ and ``faults.png`` under ``--out`` (one directory per run with the processes' lo
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import signal
@@ -37,7 +38,8 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from tools.harness.judge import summarise
+from tools.harness import report
+from tools.harness.judge import outcome, summarise
 from tools.harness.observe import AgentView, Observer, Recorder, observe_for, observer_bus
 from tools.harness.procs import (
     Proc,
@@ -59,7 +61,6 @@ FAULTS = (
     "kill-router@agree",
     "kill-router@move",
 )
-OUTCOMES = ("complete", "safe_abort", "unsafe")
 #: The phases each fault's trigger accepts (``agree`` covers the whole exchange).
 TRIGGER_PHASES = {
     "search": ("search",),
@@ -90,29 +91,6 @@ def triggered(view: AgentView, phase: str) -> bool:
     if phase == "search":  # during a turn: the heading is then in doubt
         return view.detail.startswith("turn to")
     return True
-
-
-def judge(result: dict[str, Any], obs: Observer, ids: list[int]) -> tuple[str, str]:
-    """(outcome, detail) of one run (see the module docstring)."""
-    contacts = int(result.get("contacts", 0))
-    planned = {i: v.plan_digest for i in ids if (v := obs.agents.get(i)) and v.plan_digest}
-    movers = [i for i in ids if (v := obs.agents.get(i)) and "move" in v.phase_wall]
-    digests = set(planned.values())
-    if contacts:
-        return "unsafe", f"{contacts} contact(s)"
-    if movers and len(digests) > 1:
-        return "unsafe", f"robots {movers} walked; plan digests differ {sorted(digests)}"
-    codes = result.get("exit_codes", {})
-    phases = result.get("final_phase", {})
-    if all(codes.get(str(i)) == 0 and phases.get(str(i)) == "done" for i in ids) and (
-        result.get("identical_digests")
-    ):
-        tol = "within" if result.get("within_tolerance") else "NOT within"
-        return "complete", f"done, pairs {tol} tolerance"
-    errors = "; ".join(f"{k}: {v[:90]}" for k, v in result.get("errors", {}).items())
-    if "timeout" in result:
-        errors = f"{result['timeout']}; {errors}"
-    return "safe_abort", errors or f"exit codes {codes}, phases {phases}"
 
 
 def run_one(args: argparse.Namespace, fault: str, seed: int, out: Path) -> Run:
@@ -205,13 +183,13 @@ def run_one(args: argparse.Namespace, fault: str, seed: int, out: Path) -> Run:
     if not math.isnan(injected) and restart_at != math.inf:
         result["timeout"] = "the run ended before the restart"
     res = summarise(obs, result, out, ids, args.d_e, math.radians(args.phi_e_deg), True)
-    outcome, detail = judge(res, obs, ids)
+    got, detail = outcome(res)
     if math.isnan(injected):
         detail = f"fault never injected (no agent reached {phase}); {detail}"
     return Run(
         seed=seed,
         fault=fault,
-        outcome=outcome,
+        outcome=got,
         contacts=int(res.get("contacts", 0)),
         wall_s=round(float(res.get("wall_total", time.monotonic() - t0)), 1),
         detail=detail[:400],
@@ -224,11 +202,13 @@ def run_one(args: argparse.Namespace, fault: str, seed: int, out: Path) -> Run:
 # --------------------------------------------------------------------------- report
 
 
+def injected(row: report.Row) -> bool:
+    """Whether the run's fault was injected (the others are counted apart)."""
+    return row["injected_at_s"] is not None
+
+
 def print_table(runs: list[Run]) -> None:
-    print(f"\n{'fault':20s} {'seed':>4} {'outcome':10s} {'contacts':>8} {'wall (s)':>8}  detail")
-    for r in runs:
-        print(f"{r.fault:20s} {r.seed:4d} {r.outcome:10s} {r.contacts:8d} {r.wall_s:8.0f}  "
-              f"{r.detail[:90]}")  # fmt: skip
+    report.print_runs([asdict(r) for r in runs], "fault")
     print(f"\n{'fault (injected runs)':22s} {'complete':>8} {'safe_abort':>10} {'unsafe':>6} "
           f"{'not injected':>12}")  # fmt: skip
     for fault in [*dict.fromkeys(r.fault for r in runs), "all"]:
@@ -239,37 +219,17 @@ def print_table(runs: list[Run]) -> None:
 
 
 def plot(runs: list[Run], path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    faults = list(dict.fromkeys(r.fault for r in runs))
-    colours = {"complete": "tab:green", "safe_abort": "tab:orange", "unsafe": "tab:red"}
-    fig, ax = plt.subplots(figsize=(8, 0.5 + 0.45 * len(faults) + 1))
-    for y, fault in enumerate(faults):
-        left = 0
-        c = Counter(r.outcome for r in runs if r.fault == fault and r.injected_at_s is not None)
-        for o in OUTCOMES:
-            if c[o]:
-                ax.barh(y, c[o], left=left, color=colours[o], label=o if y == 0 else None)
-                ax.text(left + c[o] / 2, y, str(c[o]), ha="center", va="center", color="white")
-                left += c[o]
-    handles = [plt.Rectangle((0, 0), 1, 1, color=colours[o]) for o in OUTCOMES]
-    ax.legend(handles, OUTCOMES, loc="lower right", fontsize=8)
-    ax.set_yticks(range(len(faults)), faults)
-    ax.invert_yaxis()
-    ax.set_xlabel("runs (seeds) in which the fault was injected")
+    """Outcomes per fault, of the runs in which it was injected."""
     done = [r for r in runs if r.injected_at_s is not None]
     total = Counter(r.outcome for r in done)
-    ax.set_title(
+    report.plot_outcomes(
+        report.count_outcomes([asdict(r) for r in runs], "fault", injected),
+        path,
         f"Faults injected in {len(done)} runs: {total['complete']} complete, "
         f"{total['safe_abort']} safe abort, {total['unsafe']} unsafe; "
-        f"contacts {sum(r.contacts for r in runs)}"
+        f"contacts {sum(r.contacts for r in runs)}",
+        xlabel="runs (seeds) in which the fault was injected",
     )
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 # --------------------------------------------------------------------------- CLI
@@ -321,8 +281,7 @@ def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("PYTHONUNBUFFERED", "1")
     runs: list[Run] = []
     if args.report:
-        for path in args.report:
-            runs += [Run(**r) for r in json.loads(path.read_text())["runs"]]
+        runs = [Run(**r) for r in report.read_runs(args.report)]
         write(args, runs)
         print_table(runs)
         return 0
@@ -340,12 +299,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def write(args: argparse.Namespace, runs: list[Run]) -> None:
     """results.json, faults.png and --json (after every run: a long matrix can be cut)."""
-    args.out.mkdir(parents=True, exist_ok=True)
-    doc = json.dumps({"runs": [asdict(r) for r in runs]}, indent=2)
-    (args.out / "results.json").write_text(doc)
-    if args.json is not None:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(doc)
+    report.write_runs([asdict(r) for r in runs], args.out / "results.json", args.json)
     plot(runs, args.out / "faults.png")
 
 

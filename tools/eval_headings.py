@@ -15,9 +15,10 @@ and judges every run from the ground truth with the one rule of
 
 For a sensor fault it also records whom the fleet named (the robots the plan leaves out,
 recomputed by the evaluator from the signed records: every agent that planned holds the
-same plan digest). Writes the shared JSON (``{"runs": [...]}``, as ``tools.eval_faults``)
-to ``--json`` and ``results.json``, ``headings.png`` (outcomes per case) under ``--out``
-and prints a table; a progress line with an estimate after every run.
+same plan digest). Writes the shared JSON (``{"runs": [...]}``, as ``tools.eval_faults``;
+:mod:`tools.harness.report`) to ``--json`` and ``results.json``, ``headings.png``
+(outcomes per case) under ``--out`` and prints a table; a progress line with an estimate
+after every run.
 
     python -m tools.eval_headings --headings random --robots 4 --robots 6 --seeds 10
     python -m tools.eval_headings --headings jitter:20 --robots 10 --seeds 5
@@ -28,7 +29,6 @@ and prints a table; a progress line with an estimate after every run.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from collections import Counter
 from dataclasses import asdict, dataclass, field
@@ -36,7 +36,8 @@ from pathlib import Path
 from typing import Any
 
 from sim.scenarios import Headings
-from tools.harness.judge import OUTCOMES, outcome
+from tools.harness import report
+from tools.harness.judge import outcome
 from tools.harness.progress import Progress
 
 
@@ -134,46 +135,20 @@ def print_table(runs: list[Run]) -> None:
 
 
 def plot(runs: list[Run], path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    cases = list(dict.fromkeys(r.case for r in runs))
-    colours = {"complete": "tab:green", "safe_abort": "tab:orange", "unsafe": "tab:red"}
-    fig, ax = plt.subplots(figsize=(8, 1.0 + 0.45 * len(cases) + 0.5))
-    for y, case in enumerate(cases):
-        left = 0
-        c = Counter(r.outcome for r in runs if r.case == case)
-        for o in OUTCOMES:
-            if c[o]:
-                ax.barh(y, c[o], left=left, color=colours[o])
-                ax.text(left + c[o] / 2, y, str(c[o]), ha="center", va="center", color="white")
-                left += c[o]
-    handles = [plt.Rectangle((0, 0), 1, 1, color=colours[o]) for o in OUTCOMES]
-    ax.legend(handles, OUTCOMES, loc="lower right", fontsize=8)
-    ax.set_yticks(range(len(cases)), cases)
-    ax.invert_yaxis()
-    ax.set_xlabel("runs (seeds)")
+    """Outcomes per case."""
     total = Counter(r.outcome for r in runs)
-    ax.set_title(
+    report.plot_outcomes(
+        report.count_outcomes([asdict(r) for r in runs], "case"),
+        path,
         f"Start headings: {len(runs)} runs, {total['complete']} complete, "
         f"{total['safe_abort']} safe abort, {total['unsafe']} unsafe; "
-        f"silent wrong 'done' {sum(r.silent_wrong for r in runs)}"
+        f"silent wrong 'done' {sum(r.silent_wrong for r in runs)}",
     )
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def write(args: argparse.Namespace, runs: list[Run]) -> None:
     """results.json, headings.png and --json (after every run: a long matrix can be cut)."""
-    args.out.mkdir(parents=True, exist_ok=True)
-    doc = json.dumps({"runs": [asdict(r) for r in runs]}, indent=2)
-    (args.out / "results.json").write_text(doc)
-    if args.json is not None:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(doc)
+    report.write_runs([asdict(r) for r in runs], args.out / "results.json", args.json)
     plot(runs, args.out / "headings.png")
 
 
@@ -217,8 +192,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     runs: list[Run] = []
     if args.report:
-        for path in args.report:
-            runs += [Run(**r) for r in json.loads(path.read_text())["runs"]]
+        runs = [Run(**r) for r in report.read_runs(args.report)]
         write(args, runs)
         print_table(runs)
         return 0

@@ -17,15 +17,17 @@ host :mod:`tools.packet_drop` drops packets with probability ``loss`` in both di
 except traffic with the world host: on a real NAO the camera and the legs are on board,
 only the robot-to-robot exchange crosses the radio (``--lossy-world`` drops that too).
 
-A monitor on its own (lossless) host observes the bus with ``tools.harness``'s observer and
+A monitor on its own (lossless) host (:mod:`tools.harness.monitor`) observes the bus and
 judges each run with ``tools.harness``'s criteria (every agent exits 0 in ``done``, identical
 plan digests, no contact, every pair within |r_d| <= 12.5 % and |r_φ| <= 30 %). Per run
 it also records the agreement time (wall seconds from the last agent entering
 ``exchange`` to the last agent leaving ``agree``: the cost of the protocol, not of the
 search), the bytes each agent published (all, and records + digests only) and the
-packets dropped. It writes ``results.json`` and ``loss.png`` (success rate, agreement
-time and bytes vs loss) under ``--out``, one directory per run with the processes'
-logs, ``result.json``, ``formation.png`` and ``run.mcap``, and prints a table.
+packets dropped. Each run's outcome is that of :func:`tools.harness.judge.outcome`,
+reported as every evaluation tool does (:mod:`tools.harness.report`: ``--json``, the
+table, ``outcomes.png``). It writes ``results.json`` and ``loss.png`` (success rate,
+agreement time and bytes vs loss) under ``--out``, one directory per run with the
+processes' logs, ``result.json``, ``formation.png`` and ``run.mcap``, and prints a table.
 
 ``python -m tools.eval_loss --loss 0,0.1,0.3 --robots 3 --seeds 3 [--out out/eval_loss]``
 Needs root, iproute2 and iptables (network namespaces).
@@ -38,11 +40,9 @@ import contextlib
 import json
 import math
 import os
-import queue
 import signal
 import subprocess
 import sys
-import threading
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -51,181 +51,13 @@ from typing import Any
 
 from agent import wire as P
 from tools import netns
+from tools.harness import report
+from tools.harness.judge import outcome
+from tools.harness.monitor import monitor
+from tools.harness.procs import Lines
 from tools.packet_drop import Dropper
 
 REPO = Path(__file__).resolve().parents[1]
-OUTCOMES = ("complete", "safe_abort", "unsafe")
-AGREED_PHASES = ("plan", "wait", "move", "hold", "march", "done")
-TERMINAL_PHASES = ("done", "failed")
-
-
-# =========================================================================== monitor
-
-
-def monitor(
-    connect: list[str],
-    out: Path,
-    d_e: float,
-    phi_e_deg: float,
-    until_done: int = 0,
-    timeout_s: float = 900.0,
-    seed: int | None = None,
-    credentials: str = "",
-) -> int:
-    """Observe the bus like ``tools.demo`` does, until the run is over; judge it.
-
-    ``credentials``: a fleet credentials folder (``agent.wire.trust``); the monitor then joins
-    as a zenoh client of the TLS router with the ``observer`` identity (observers only
-    subscribe; every message it records has passed the signature check). Empty:
-    insecure, as a peer (the caller gave ``--insecure``).
-
-    Prints ``monitor ready`` once subscribed, then records statuses, records, digests and
-    ground truth (``tools.harness.observe.Observer``, MCAP recording). The run is over when the
-    orchestrator writes one JSON line to stdin, ``{"ids": [...], "exit_codes": {...},
-    "timeout": str|null}``, or, with ``until_done=N`` (the compose ``observer``, which
-    cannot see exit codes), when N agents have reached ``done`` or ``failed``, or N agents
-    were alive and every liveliness token has been gone for 5 s (a final status lost on a
-    dead link), or ``timeout_s`` has passed; the exit code is taken as 0 for an agent in
-    ``done``, 1 otherwise. It then drains
-    1.5 s more and writes ``out/result.json`` (and the formation figure) with
-    ``tools.harness.judge.summarise``. Returns 0 when the run succeeded.
-    """
-    from agent.net.bus import Bus, BusConfig
-    from tools.harness import judge, observe
-
-    out.mkdir(parents=True, exist_ok=True)
-    lines: queue.Queue[str] = queue.Queue()
-
-    def read_stdin() -> None:
-        for line in sys.stdin:
-            lines.put(line)
-        lines.put("")
-
-    if not until_done:
-        threading.Thread(target=read_stdin, daemon=True).start()
-    deadline = time.monotonic() + timeout_s
-    rec = observe.Recorder(out / "run.mcap")
-    obs = observe.Observer(time.monotonic())
-    bus = Bus(
-        BusConfig(
-            connect=tuple(connect),
-            multicast_scouting=False,
-            mode="client" if credentials else "peer",
-            credentials=credentials,
-            identity="observer" if credentials else "",
-        )
-    )
-    try:
-        for key in (P.KEY_STATUS_ALL, P.KEY_RECORD_ALL, P.KEY_DIGEST_ALL, P.KEY_WORLD_TRUTH_ALL):
-            bus.subscribe(key)
-        bus.watch_alive(P.KEY_ALIVE_ALL)
-        print("monitor ready", flush=True)
-        order: dict[str, Any] | None = None
-        alive: set[int] = set()
-        ever_alive: set[int] = set()
-        all_gone_since: float | None = None
-        while order is None:
-            for ev in bus.drain(0.1):
-                if ev.kind == "msg":
-                    known = len(obs.agents)
-                    obs.take_event(ev, rec)
-                    if len(obs.agents) > known:
-                        print(f"monitor sees agents {sorted(obs.agents)}", flush=True)
-                elif ev.kind == "alive":
-                    alive.add(ev.robot_id)
-                    ever_alive.add(ev.robot_id)
-                elif ev.kind == "gone":
-                    alive.discard(ev.robot_id)
-            if until_done:
-                now = time.monotonic()
-                if alive or len(ever_alive) < until_done:
-                    all_gone_since = None
-                elif all_gone_since is None:
-                    all_gone_since = now
-                final = {i: v.phase for i, v in obs.agents.items() if v.phase in TERMINAL_PHASES}
-                gone = all_gone_since is not None and now - all_gone_since > 5.0
-                late = now > deadline
-                if len(final) >= until_done or gone or late:
-                    ids = sorted(final) if len(final) >= until_done else sorted(obs.agents)
-                    order = {
-                        "ids": ids[:until_done],
-                        "exit_codes": {str(i): int(final.get(i) != "done") for i in ids},
-                        "timeout": f"agents not finished after {timeout_s:g} s" if late else None,
-                    }
-                continue
-            with contextlib.suppress(queue.Empty):
-                line = lines.get_nowait()
-                order = json.loads(line) if line.strip() else {}
-        settle = time.monotonic() + 1.5
-        while time.monotonic() < settle:
-            for ev in bus.drain(0.1):
-                obs.take_event(ev, rec)
-    finally:
-        bus.close()
-        rec.close()
-    ids = [int(i) for i in order.get("ids", [])]
-    for i in ids:
-        code = order.get("exit_codes", {}).get(str(i))
-        obs.agents.setdefault(i, observe.AgentView()).exit_code = code
-    lost = done_by_exit_code(obs, ids)
-    result: dict[str, Any] = {
-        "robots": len(ids),
-        "seed": seed,
-        "d_e": d_e,
-        "phi_e_deg": phi_e_deg,
-        "wall_total": time.monotonic() - obs.t0,  # since the monitor started
-    }
-    if order.get("timeout"):
-        result["timeout"] = order["timeout"]
-    if lost:
-        result["final_status_unheard"] = lost
-    # which phases each agent went through (did it move?), and how far each robot walked
-    # (ground truth): what tells a safe abort from a robot moving on an unshared plan
-    result["phases_visited"] = {
-        str(i): [p for p in P.PHASES if p in obs.agents[i].phase_wall]
-        for i in ids
-        if i in obs.agents
-    }
-    if obs.truth:
-        first, last = obs.truth[0][1], obs.truth[-1][1]
-        result["displacement_m"] = {
-            str(i): math.dist(first[i][:2], last[i][:2]) for i in ids if i in first and i in last
-        }
-    result = judge.summarise(obs, result, out, ids, d_e, math.radians(phi_e_deg), quiet=True)
-    # protocol latency: from the last agent entering exchange to the last one agreeing
-    views = [obs.agents[i] for i in ids if i in obs.agents]
-    entered = [v.phase_wall.get("exchange") for v in views]
-    agreed = [
-        min((v.phase_wall[p] for p in AGREED_PHASES if p in v.phase_wall), default=None)
-        for v in views
-    ]
-    if len(views) == len(ids) and all(t is not None for t in entered + agreed):
-        result["agree_s"] = max(t for t in agreed if t is not None) - max(
-            t for t in entered if t is not None
-        )
-    (out / "result.json").write_text(json.dumps(result, indent=2, default=float))
-    if until_done:
-        judge.print_table(result)
-    print("monitor done", flush=True)
-    return 0 if result.get("success") else 1
-
-
-def done_by_exit_code(obs: Any, ids: list[int]) -> list[int]:
-    """Agents that exited 0 but whose final ``done`` status the monitor never heard (sorted);
-    their phase in ``obs`` (a ``tools.harness.observe.Observer``) is set to ``done``.
-
-    ``Runner.run`` returns 0 only after it published ``done`` (the exit code is the
-    authority, not one status packet that a cut session may swallow); the rest of the
-    judgement stays with what the monitor saw: the plan digests of the agents' statuses
-    and the world's ground truth.
-    """
-    out = []
-    for i in ids:
-        view = obs.agents.get(i)
-        if view is not None and view.exit_code == 0 and view.phase not in TERMINAL_PHASES:
-            view.phase = "done"
-            out.append(i)
-    return sorted(out)
 
 
 #: Bounds of Linux's ``net.ipv4.tcp_rto_max_ms`` (kernel >= 6.15; ms).
@@ -271,30 +103,6 @@ class RunResult:
     max_abs_r_phi: float
     dropped_packets: int
     out: str
-
-
-class _Lines:
-    """A child's stdout lines, pumped by a thread into a list (for ready lines)."""
-
-    def __init__(self, proc: subprocess.Popen[str]) -> None:
-        self.lines: list[str] = []
-        self._proc = proc
-        threading.Thread(target=self._pump, daemon=True).start()
-
-    def _pump(self) -> None:
-        assert self._proc.stdout is not None
-        for line in self._proc.stdout:
-            self.lines.append(line.rstrip("\n"))
-
-    def wait_for(self, needle: str, deadline_s: float) -> bool:
-        end = time.monotonic() + deadline_s
-        while time.monotonic() < end:
-            if any(needle in ln for ln in self.lines):
-                return True
-            if self._proc.poll() is not None:
-                return any(needle in ln for ln in self.lines)
-            time.sleep(0.1)
-        return False
 
 
 def _reason(res: dict[str, Any], robots: int) -> str:
@@ -363,7 +171,7 @@ def run_once(
             env=env,
             cwd=str(REPO),
         )
-        if not _Lines(router).wait_for("router ready", 30.0):
+        if not Lines(router).wait_for("router ready", 30.0):
             raise RuntimeError(f"router did not start; see {workdir / 'router.log'}")
         mon = subprocess.Popen(
             netns.netns_cmd(
@@ -378,7 +186,7 @@ def run_once(
             text=True, env=env, cwd=str(REPO), start_new_session=True,
         )  # fmt: skip
         try:
-            mon_lines = _Lines(mon)
+            mon_lines = Lines(mon)
             if not mon_lines.wait_for("monitor ready", 30.0):
                 raise RuntimeError(f"monitor did not start; see {workdir / 'monitor.log'}")
             world = fab.popen(
@@ -388,7 +196,7 @@ def run_once(
                 env=env,
                 cwd=str(REPO),
             )
-            world_lines = _Lines(world)
+            world_lines = Lines(world)
             if not world_lines.wait_for("ready", 180.0):
                 raise RuntimeError(f"world not ready; see {workdir / 'world.log'}")
             ids = robot_ids(world_lines.lines, robots)
@@ -663,53 +471,19 @@ def main(argv: list[str] | None = None) -> int:
         return 130
 
 
-def outcome(res: dict[str, Any], success: bool) -> str:
-    """``complete``, ``safe_abort`` or ``unsafe`` of a monitor result (``result.json``).
-
-    Unsafe: a contact, or some robot moved (its phases include ``move``) while the agents'
-    plan digests were not all identical (it moved on a plan another did not share).
-    """
-    moved = any("move" in ph for ph in res.get("phases_visited", {}).values())
-    if res.get("contacts", 0) or (moved and not res.get("identical_digests")):
-        return "unsafe"
-    return "complete" if success else "safe_abort"
-
-
-def run_row(r: RunResult, res_outcome: str) -> dict[str, Any]:
-    """One run in the JSON schema shared with ``tools.eval_faults``."""
+def run_row(r: RunResult, res: dict[str, Any]) -> dict[str, Any]:
+    """One run in the rows of :mod:`tools.harness.report` (the JSON schema shared with
+    ``tools.eval_faults``): its outcome and detail by :func:`tools.harness.judge.outcome`
+    from the monitor's ``result.json`` (``res``; empty: no result, a safe abort)."""
+    oc, detail = outcome(res) if res else ("safe_abort", r.reason)
     return {
         "seed": r.seed,
         "loss": r.loss,
-        "outcome": res_outcome,
+        "outcome": oc,
         "contacts": r.contacts,
         "wall_s": round(r.wall_s, 1),
-        "detail": r.reason,
+        "detail": detail,
     }
-
-
-def plot_outcomes(rows: list[dict[str, Any]], path: Path, title: str) -> None:
-    """Stacked bars: runs per loss rate by outcome (complete, safe abort, unsafe)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    losses = sorted({float(r["loss"]) for r in rows})
-    colours = {"complete": "tab:green", "safe_abort": "tab:orange", "unsafe": "tab:red"}
-    fig, ax = plt.subplots(figsize=(5.5, 3.6))
-    bottom = [0] * len(losses)
-    xs = [f"{100 * x:g} %" for x in losses]
-    for oc in OUTCOMES:
-        n = [sum(1 for r in rows if r["loss"] == x and r["outcome"] == oc) for x in losses]
-        ax.bar(xs, n, bottom=bottom, color=colours[oc], label=oc.replace("_", " "))
-        bottom = [b + k for b, k in zip(bottom, n)]
-    ax.set_xlabel("packet loss per direction on every agent host")
-    ax.set_ylabel("runs")
-    ax.set_title(title, fontsize=9)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def _fleet(out: Path, robots: int) -> str:
@@ -744,9 +518,8 @@ def _evaluate(args: argparse.Namespace, losses: list[float], out: Path) -> int:
             results.append(r)
             res_path = Path(r.out) / "result.json"
             res = json.loads(res_path.read_text()) if res_path.exists() else {}
-            rows.append(run_row(r, outcome(res, r.success)))
-            # written after every run: a long evaluation can be read while it goes on
-            json_path.write_text(json.dumps({"runs": rows}, indent=2))
+            rows.append(run_row(r, res))
+            report.write_runs(rows, json_path)
             print(
                 f"[{n}/{total}] {'OK  ' if r.success else 'FAIL'} {r.reason}; agree "
                 f"{_fmt(r.agree_s, '.2f')} s, bytes/agent {r.bytes_per_agent}, "
@@ -766,20 +539,18 @@ def _evaluate(args: argparse.Namespace, losses: list[float], out: Path) -> int:
     }
     (out / "results.json").write_text(json.dumps(doc, indent=2))
     plot(summary, out / "loss.png")
-    plot_outcomes(
-        rows,
+    report.plot_outcomes(
+        report.count_outcomes(
+            sorted(rows, key=lambda r: float(r["loss"])), "loss", name=lambda x: f"{100 * x:g} %"
+        ),
         out / "outcomes.png",
         f"{args.robots} robots, seeds {args.seed_start}..{args.seed_start + args.seeds - 1}, "
         f"{'insecure' if args.insecure else 'TLS router'}, world traffic "
         f"{'lossy' if args.lossy_world else 'exempt'}"
         + (f", TCP RTO <= {args.tcp_rto_max_ms} ms" if args.tcp_rto_max_ms else ""),
+        ylabel="packet loss per direction",
     )
-    print(f"{'loss':>6} {'seed':>5} {'outcome':>11} {'contacts':>8} {'wall s':>7}  detail")
-    for row in rows:
-        print(
-            f"{row['loss']:6.2f} {row['seed']:5d} {row['outcome']:>11} {row['contacts']:8d} "
-            f"{row['wall_s']:7.0f}  {row['detail'][:70]}"
-        )
+    report.print_runs(rows, "loss", detail_width=70)
     print(
         f"{'loss':>6} {'runs':>5} {'success':>8} {'agree s':>8} {'max s':>7} {'B/agent':>9} "
         f"{'exch B':>8} {'dropped':>8}"

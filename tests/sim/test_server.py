@@ -267,23 +267,38 @@ def test_walk_1m_in_20cm_steps_and_read_the_truth(client: Client) -> None:
     assert client.clock and client.clock[-1].t_sim >= t_prev
 
 
+def _heading(client: Client, rid: int, since: float) -> float | None:
+    """Robot ``rid``'s heading in the latest ground truth, if that is of sim time ``since``
+    or later (None: no such truth yet)."""
+    client.pump()
+    if not client.truth or client.truth[-1].t_sim < since:
+        return None
+    return next((p[3] for p in client.truth[-1].poses if p[0] == rid), None)
+
+
 def test_busy_robot_refuses_a_second_motion(client: Client) -> None:
-    # A 6 rad turn lasts 10 s of sim time, 2.5 s of wall time at --speed 4: time enough for
-    # the second request to arrive while it runs, even on a loaded machine.
+    # A 6 rad turn lasts 10 s of sim time, 2.5 s of wall time at --speed 4. The second
+    # request is sent only once the ground truth shows the first one running (robot 3's
+    # heading moving), so the order in which the two reach the world is never in doubt.
     # An earlier test of this module may leave robot 3 still moving: wait until a zero
     # turn is accepted (the robot is free) before starting the long one.
     deadline = time.monotonic() + 30.0
-    while not isinstance(client.ask(key_turn(3), TurnRequest(angle=0.0)), CommandReply):
+    while not isinstance(free := client.ask(key_turn(3), TurnRequest(angle=0.0)), CommandReply):
         assert time.monotonic() < deadline, "robot 3 never became free"
         time.sleep(0.05)
-    first = client.session.get(key_turn(3), payload=encode(TurnRequest(angle=6.0)), timeout=60.0)
     deadline = time.monotonic() + 10.0
-    rep: Any = None
-    while time.monotonic() < deadline:
-        rep = client.ask(key_walk(3), WalkRequest(distance=0.1))
-        if isinstance(rep, ErrorReply):
-            break
+    while (before := _heading(client, 3, free.t_sim)) is None:  # the truth after that turn
+        assert time.monotonic() < deadline, "no ground truth of robot 3"
         time.sleep(0.05)
+    first = client.session.get(key_turn(3), payload=encode(TurnRequest(angle=6.0)), timeout=60.0)
+    deadline = time.monotonic() + 30.0
+    while True:  # the truth is published at 10 Hz of wall time, also while robot 3 turns
+        now = _heading(client, 3, free.t_sim)
+        if now is not None and abs(math.remainder(now - before, math.tau)) > 0.05:
+            break
+        assert time.monotonic() < deadline, "the first motion never started"
+        time.sleep(0.02)
+    rep = client.ask(key_walk(3), WalkRequest(distance=0.1))
     assert isinstance(rep, ErrorReply) and "busy" in rep.reason
     done = [decode(r.ok.payload.to_bytes()) for r in first if r.ok is not None]
     assert len(done) == 1 and isinstance(done[0], CommandReply) and done[0].status == "done"
@@ -499,10 +514,10 @@ def test_liveliness_of_non_robots_keeps_no_state(server: Any) -> None:
         server.admit_alive(SimpleNamespace(key_expr=key, kind=zenoh.SampleKind.PUT))
     assert server.rejected == 1  # the alias 02
     server._drain(block=False)
-    assert server.alive == {2}
+    assert server.bindings.alive == {2}
     server.admit_alive(SimpleNamespace(key_expr="nao/alive/2", kind=zenoh.SampleKind.DELETE))
     server._drain(block=False)
-    assert server.alive == set()
+    assert server.bindings.alive == set()
 
 
 def test_a_flood_of_malformed_requests_against_the_running_world(client: Client) -> None:
@@ -569,7 +584,7 @@ def test_a_motion_request_id_is_executed_once_and_a_repeat_gets_the_first_result
     assert first.replies == again.replies == [want]
     late = _ask(server, "walk", WalkRequest(distance=0.2, request_id=7))  # after it ended
     assert late.replies == [want] and legs.started == [("walk", 3, 0.2)]
-    assert server.repeats == 2
+    assert server.motions.repeats == 2
     other = _ask(server, "walk", WalkRequest(distance=0.2, request_id=7), rid=2)  # per robot
     assert legs.started[-1] == ("walk", 2, 0.2) and other.replies == []
 
@@ -579,7 +594,7 @@ def test_without_a_request_id_every_motion_is_executed(server: Any, legs: FakeLe
         q = _ask(server, "turn", TurnRequest(angle=0.1))
         _finish(server, legs, 3, "turn", t)
         assert q.replies == [CommandReply(robot_id=3, status="done", t_sim=t)]
-    assert len(legs.started) == 2 and server.repeats == 0
+    assert len(legs.started) == 2 and server.motions.repeats == 0
 
 
 def test_a_request_id_reused_for_another_motion_is_refused(server: Any, legs: FakeLegs) -> None:
@@ -598,6 +613,6 @@ def test_the_motion_cache_is_bounded_per_robot(server: Any, legs: FakeLegs) -> N
     for i in range(1, MOTION_CACHE + 2):
         _ask(server, "turn", TurnRequest(angle=0.1, request_id=i))
         _finish(server, legs, 3, "turn", float(i))
-    assert len(server._results[3]) == MOTION_CACHE
+    assert len(server.motions.results[3]) == MOTION_CACHE
     _ask(server, "turn", TurnRequest(angle=0.1, request_id=1))  # forgotten: executed again
     assert len(legs.started) == MOTION_CACHE + 2

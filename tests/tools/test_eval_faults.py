@@ -1,4 +1,5 @@
-"""tools.eval_faults: triggers, the verdict of a run, the report, the command line."""
+"""tools.eval_faults: triggers, the verdict of a run (the one rule of
+tools.harness.judge.outcome on what eval_faults observes), the report, the command line."""
 
 from __future__ import annotations
 
@@ -9,8 +10,9 @@ from typing import Any
 import pytest
 
 from tools import eval_faults
-from tools.eval_faults import Run, judge, triggered
-from tools.harness.observe import AgentView, Observer
+from tools.eval_faults import Run, triggered
+from tools.harness.judge import outcome
+from tools.harness.observe import AgentView
 
 
 def view(phase: str, detail: str = "", progress: float = 0.0, digest: str = "") -> AgentView:
@@ -38,10 +40,15 @@ def test_triggers(phase: str, v: AgentView, want: bool) -> None:
     assert triggered(v, phase) is want
 
 
-def _obs(views: dict[int, AgentView]) -> Observer:
-    obs = Observer(0.0)
-    obs.agents.update(views)
-    return obs
+def judge(result: dict[str, Any], views: dict[int, AgentView]) -> tuple[str, str]:
+    """The verdict of a run whose agents ``views`` showed (movers and plan digests, as
+    ``tools.harness.judge.summarise`` records them from eval_faults' observer)."""
+    ids = sorted(views)
+    seen = {
+        "movers": [i for i in ids if "move" in views[i].phase_wall],
+        "plan_digests": {str(i): views[i].plan_digest for i in ids},
+    }
+    return outcome({**seen, **result})
 
 
 def _result(**over: Any) -> dict[str, Any]:
@@ -64,13 +71,14 @@ def test_judge_complete_safe_abort_and_unsafe() -> None:
     done = {1: view("done", digest=D1), 2: view("done", digest=D1)}
     for v in done.values():
         v.phase_wall["move"] = 2.0
-    assert judge(_result(), _obs(done), [1, 2]) == ("complete", "done, pairs within tolerance")
-    out = judge(_result(within_tolerance=False), _obs(done), [1, 2])
-    assert out == ("complete", "done, pairs NOT within tolerance")
-    assert judge(_result(contacts=2), _obs(done), [1, 2]) == ("unsafe", "2 contact(s)")
+    assert judge(_result(), done) == ("complete", "done, pairs within tolerance")
+    # every agent done on a formation the ground truth fails: a silent wrong "done"
+    got, detail = judge(_result(within_tolerance=False), done)
+    assert got == "unsafe" and "every agent said done on a wrong formation" in detail
+    assert judge(_result(contacts=2), done) == ("unsafe", "2 contact(s)")
     split = {1: view("move", digest=D1), 2: view("wait", digest=D2)}
-    outcome, detail = judge(_result(identical_digests=False), _obs(split), [1, 2])
-    assert outcome == "unsafe" and "walked" in detail
+    got, detail = judge(_result(identical_digests=False), split)
+    assert got == "unsafe" and "walked" in detail
     failed = {1: view("failed"), 2: view("failed")}
     res = _result(
         exit_codes={"1": 1, "2": 1},
@@ -79,12 +87,12 @@ def test_judge_complete_safe_abort_and_unsafe() -> None:
         errors={"1": "member(s) [2] left before agreement"},
         timeout="agents still running after 9 s",
     )
-    outcome, detail = judge(res, _obs(failed), [1, 2])
-    assert outcome == "safe_abort" and "left before agreement" in detail and "still" in detail
+    got, detail = judge(res, failed)
+    assert got == "safe_abort" and "left before agreement" in detail and "still" in detail
     # different digests but nobody walked: safe
     apart = {1: view("wait", digest=D1), 2: view("plan", digest=D2)}
     res2 = _result(exit_codes={"1": 1, "2": 1}, identical_digests=False)
-    assert judge(res2, _obs(apart), [1, 2])[0] == "safe_abort"
+    assert judge(res2, apart)[0] == "safe_abort"
 
 
 def test_report_table_json_and_figure(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -14,6 +14,7 @@ import pytest
 from agent import wire as P
 from tools import eval_loss
 from tools.eval_loss import RunResult, _fmt, _reason, summarise
+from tools.harness import report
 from tools.harness.procs import free_port, start_router
 from tools.harness.procs import stop as stop_proc
 
@@ -189,31 +190,40 @@ def test_observer_stops_when_every_agent_is_gone(tmp_path: Path) -> None:
         stop_proc(router)
 
 
-def test_outcome_complete_safe_abort_unsafe() -> None:
-    moved = {"1": ["search", "move", "done"], "2": ["search", "failed"]}
-    assert eval_loss.outcome({"identical_digests": True, "contacts": 0}, True) == "complete"
-    assert eval_loss.outcome({"phases_visited": {"1": ["search", "failed"]}}, False) == (
-        "safe_abort"
-    )
-    shared = {"phases_visited": moved, "identical_digests": True, "contacts": 0}
-    assert eval_loss.outcome(shared, False) == "safe_abort"  # moved, on the shared plan
-    unshared = {"phases_visited": moved, "identical_digests": False, "contacts": 0}
-    assert eval_loss.outcome(unshared, False) == "unsafe"
-    assert eval_loss.outcome({"identical_digests": True, "contacts": 1}, True) == "unsafe"
+def _outcome(res: dict[str, object]) -> str:
+    return str(eval_loss.run_row(_run(0.3, False, None, [500, 500]), res)["outcome"])
+
+
+def test_run_rows_take_the_outcome_of_the_one_rule() -> None:
+    # complete, safe abort, unsafe: tools.harness.judge.outcome on the monitor's result
+    failed = {"exit_codes": {"1": 1, "2": 1}, "final_phase": {"1": "failed", "2": "failed"}}
+    assert _outcome(dict(_ok_result(), plan_digests={"1": "a"}, movers=[1])) == "complete"
+    assert _outcome(dict(failed, plan_digests={"1": "", "2": ""}, movers=[])) == "safe_abort"
+    moved = {**failed, "movers": [1], "contacts": 0}
+    shared = dict(moved, plan_digests={"1": "a", "2": "a"}, identical_digests=True)
+    assert _outcome(shared) == "safe_abort"  # moved, on the shared plan
+    unshared = dict(moved, plan_digests={"1": "a", "2": "b"}, identical_digests=False)
+    assert _outcome(unshared) == "unsafe"
+    assert _outcome(dict(_ok_result(), contacts=1)) == "unsafe"
+    assert _outcome({}) == "safe_abort"  # the monitor wrote no result
 
 
 def test_run_rows_have_the_shared_schema_and_the_outcomes_plot(tmp_path: Path) -> None:
-    row = eval_loss.run_row(_run(0.3, True, 2.0, [500, 600]), "complete")
+    row = eval_loss.run_row(_run(0.3, True, 2.0, [500, 600]), _ok_result())
     assert row == {
         "seed": 1, "loss": 0.3, "outcome": "complete", "contacts": 0, "wall_s": 10.0,
-        "detail": "ok",
+        "detail": "done, pairs within tolerance",
     }  # fmt: skip
+    lost = eval_loss.run_row(_run(0.3, False, None, [500]), {})
+    assert lost["outcome"] == "safe_abort" and lost["detail"] == "x"  # the run's reason
     bad = dict(row, seed=2, outcome="safe_abort", detail="x")
-    eval_loss.plot_outcomes([row, bad], tmp_path / "outcomes.png", "test")
+    counts = report.count_outcomes([row, bad], "loss")
+    report.plot_outcomes(counts, tmp_path / "outcomes.png", "test")
     assert (tmp_path / "outcomes.png").stat().st_size > 1000
 
 
 def test_exit_code_zero_is_done_when_the_final_status_went_unheard() -> None:
+    from tools.harness.monitor import done_by_exit_code
     from tools.harness.observe import AgentView, Observer
 
     obs = Observer(0.0)
@@ -221,7 +231,7 @@ def test_exit_code_zero_is_done_when_the_final_status_went_unheard() -> None:
     for i, (phase, code) in phases.items():
         obs.agents[i] = AgentView(phase=phase, exit_code=code)
     obs.agents[6] = AgentView(phase="hold", exit_code=None)  # still running at the timeout
-    assert eval_loss.done_by_exit_code(obs, [1, 2, 3, 4, 5, 6, 7]) == [2, 5]
+    assert done_by_exit_code(obs, [1, 2, 3, 4, 5, 6, 7]) == [2, 5]
     assert {i: v.phase for i, v in obs.agents.items()} == {
         1: "done", 2: "done", 3: "hold", 4: "failed", 5: "done", 6: "hold",
     }  # fmt: skip

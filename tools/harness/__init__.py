@@ -2,6 +2,11 @@
 
 ``procs``: ports, the world, router, agents and rogues, the fleet's network, stopping.
 ``observe``: the MCAP recorder, the bus observer, the live status lines.
-``judge``: a run judged from ground truth, the result table, the formation figure.
+``judge``: a run judged from ground truth, its outcome (one rule), the result table, the
+formation figure.
 ``run``: one demo run (world, agents, observation, judgement), as ``tools.demo`` runs it.
+``monitor``: one run observed and judged by a process of its own (``tools.eval_loss``,
+the compose observer).
+``report``: the evaluation tools' shared runs JSON, table and outcome figure.
+``progress``: the progress line of a long evaluation.
 """

@@ -206,10 +206,16 @@ class LiveView:
 def observer_bus(net: FleetNet) -> Bus:
     """The observer's bus: statuses, records, digests, ground truth and membership."""
     bus = Bus(net.observer())
+    watch(bus)
+    return bus
+
+
+def watch(bus: Bus) -> None:
+    """Subscribe ``bus`` to what an observer sees: statuses, records, digests, ground
+    truth and membership."""
     for key in (KEY_STATUS_ALL, KEY_RECORD_ALL, KEY_DIGEST_ALL, KEY_WORLD_TRUTH_ALL):
         bus.subscribe(key)
     bus.watch_alive(KEY_ALIVE_ALL)
-    return bus
 
 
 def observe_for(bus: Bus, obs: Observer, rec: Recorder | None, seconds: float) -> None:

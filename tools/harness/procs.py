@@ -47,6 +47,33 @@ class Proc:
     lines: list[str] = field(default_factory=list)
 
 
+class Lines:
+    """A child's text stdout, pumped by a thread into ``lines`` (to wait for a ready line
+    of a process started elsewhere, e.g. in a network namespace by ``tools.eval_loss``)."""
+
+    def __init__(self, proc: subprocess.Popen[str]) -> None:
+        self.lines: list[str] = []
+        self._proc = proc
+        threading.Thread(target=self._pump, daemon=True).start()
+
+    def _pump(self) -> None:
+        assert self._proc.stdout is not None
+        for line in self._proc.stdout:
+            self.lines.append(line.rstrip("\n"))
+
+    def wait_for(self, needle: str, deadline_s: float) -> bool:
+        """Whether a line holding ``needle`` came within ``deadline_s`` seconds (polls;
+        False at once when the child ends without one)."""
+        end = time.monotonic() + deadline_s
+        while time.monotonic() < end:
+            if any(needle in ln for ln in self.lines):
+                return True
+            if self._proc.poll() is not None:
+                return any(needle in ln for ln in self.lines)
+            time.sleep(0.1)  # polling the pumped lines, bounded by the deadline
+        return False
+
+
 def world_command(robots: int, seed: int, net: list[str], extra: list[str]) -> list[str]:
     """The argv of ``python -m sim`` (``extra``: e.g. ``--scenario FILE``, which replaces
     ``--robots``/``--seed``); :func:`start_world` runs it here, ``tools.eval_loss`` inside a

@@ -1,0 +1,192 @@
+"""The monitor: one run observed and judged by a process of its own (DESIGN.md §10
+"Viewers are observers"; docs/faults.md).
+
+``python -m tools.eval_loss --monitor`` runs it on a lossless test host of every
+``tools.eval_loss`` run, and the compose ``observer`` runs it beside a containerised
+fleet. It joins the bus as an observer (secure: a zenoh client of the TLS router with the
+``observer`` identity, which only subscribes; every message it records has passed the
+signature check), records statuses, records, digests and ground truth
+(:mod:`tools.harness.observe`, MCAP) until the run is over, and judges it with
+:func:`tools.harness.judge.summarise`. Besides the demo's result it records each
+agent's ``phases_visited``, each robot's ``displacement_m`` and the protocol's
+agreement time ``agree_s``. The exit code of an agent is the authority on ``done``
+(:func:`done_by_exit_code`): one status packet that a cut session swallowed does not
+turn a finished run into a failed one.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import queue
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+from agent.net.bus import Bus, BusConfig
+from agent.wire import PHASES
+from tools.harness.judge import print_table, summarise
+from tools.harness.observe import AgentView, Observer, Recorder, observe_for, watch
+
+#: Phases an agent reaches only after agreement (its first one ends ``agree_s``).
+AGREED_PHASES = ("plan", "wait", "move", "hold", "march", "done")
+TERMINAL_PHASES = ("done", "failed")
+
+
+def monitor(
+    connect: list[str],
+    out: Path,
+    d_e: float,
+    phi_e_deg: float,
+    until_done: int = 0,
+    timeout_s: float = 900.0,
+    seed: int | None = None,
+    credentials: str = "",
+) -> int:
+    """Observe the bus like ``tools.demo`` does, until the run is over; judge it.
+
+    ``credentials``: a fleet credentials folder (``agent.wire.trust``); the monitor then joins
+    as a zenoh client of the TLS router with the ``observer`` identity (observers only
+    subscribe; every message it records has passed the signature check). Empty:
+    insecure, as a peer (the caller gave ``--insecure``).
+
+    Prints ``monitor ready`` once subscribed, then records statuses, records, digests and
+    ground truth (``tools.harness.observe.Observer``, MCAP recording). The run is over when the
+    orchestrator writes one JSON line to stdin, ``{"ids": [...], "exit_codes": {...},
+    "timeout": str|null}``, or, with ``until_done=N`` (the compose ``observer``, which
+    cannot see exit codes), when N agents have reached ``done`` or ``failed``, or N agents
+    were alive and every liveliness token has been gone for 5 s (a final status lost on a
+    dead link), or ``timeout_s`` has passed; the exit code is taken as 0 for an agent in
+    ``done``, 1 otherwise. It then drains 1.5 s more and writes ``out/result.json`` (and
+    the formation figure) with ``tools.harness.judge.summarise``. Returns 0 when the run
+    succeeded.
+    """
+    out.mkdir(parents=True, exist_ok=True)
+    lines: queue.Queue[str] = queue.Queue()
+
+    def read_stdin() -> None:
+        for line in sys.stdin:
+            lines.put(line)
+        lines.put("")
+
+    if not until_done:
+        threading.Thread(target=read_stdin, daemon=True).start()
+    deadline = time.monotonic() + timeout_s
+    rec = Recorder(out / "run.mcap")
+    obs = Observer(time.monotonic())
+    bus = Bus(
+        BusConfig(
+            connect=tuple(connect),
+            multicast_scouting=False,
+            mode="client" if credentials else "peer",
+            credentials=credentials,
+            identity="observer" if credentials else "",
+        )
+    )
+    try:
+        watch(bus)
+        print("monitor ready", flush=True)
+        order: dict[str, Any] | None = None
+        alive: set[int] = set()
+        ever_alive: set[int] = set()
+        all_gone_since: float | None = None
+        while order is None:
+            for ev in bus.drain(0.1):
+                if ev.kind == "msg":
+                    known = len(obs.agents)
+                    obs.take_event(ev, rec)
+                    if len(obs.agents) > known:
+                        print(f"monitor sees agents {sorted(obs.agents)}", flush=True)
+                elif ev.kind == "alive":
+                    alive.add(ev.robot_id)
+                    ever_alive.add(ev.robot_id)
+                elif ev.kind == "gone":
+                    alive.discard(ev.robot_id)
+            if until_done:
+                now = time.monotonic()
+                if alive or len(ever_alive) < until_done:
+                    all_gone_since = None
+                elif all_gone_since is None:
+                    all_gone_since = now
+                final = {i: v.phase for i, v in obs.agents.items() if v.phase in TERMINAL_PHASES}
+                gone = all_gone_since is not None and now - all_gone_since > 5.0
+                late = now > deadline
+                if len(final) >= until_done or gone or late:
+                    ids = sorted(final) if len(final) >= until_done else sorted(obs.agents)
+                    order = {
+                        "ids": ids[:until_done],
+                        "exit_codes": {str(i): int(final.get(i) != "done") for i in ids},
+                        "timeout": f"agents not finished after {timeout_s:g} s" if late else None,
+                    }
+                continue
+            with contextlib.suppress(queue.Empty):
+                line = lines.get_nowait()
+                order = json.loads(line) if line.strip() else {}
+        observe_for(bus, obs, rec, 1.5)
+    finally:
+        bus.close()
+        rec.close()
+    ids = [int(i) for i in order.get("ids", [])]
+    for i in ids:
+        code = order.get("exit_codes", {}).get(str(i))
+        obs.agents.setdefault(i, AgentView()).exit_code = code
+    lost = done_by_exit_code(obs, ids)
+    result: dict[str, Any] = {
+        "robots": len(ids),
+        "seed": seed,
+        "d_e": d_e,
+        "phi_e_deg": phi_e_deg,
+        "wall_total": time.monotonic() - obs.t0,  # since the monitor started
+    }
+    if order.get("timeout"):
+        result["timeout"] = order["timeout"]
+    if lost:
+        result["final_status_unheard"] = lost
+    # which phases each agent went through (did it move?), and how far each robot walked
+    # (ground truth): what tells a safe abort from a robot moving on an unshared plan
+    result["phases_visited"] = {
+        str(i): [p for p in PHASES if p in obs.agents[i].phase_wall] for i in ids if i in obs.agents
+    }
+    if obs.truth:
+        first, last = obs.truth[0][1], obs.truth[-1][1]
+        result["displacement_m"] = {
+            str(i): math.dist(first[i][:2], last[i][:2]) for i in ids if i in first and i in last
+        }
+    result = summarise(obs, result, out, ids, d_e, math.radians(phi_e_deg), quiet=True)
+    # protocol latency: from the last agent entering exchange to the last one agreeing
+    views = [obs.agents[i] for i in ids if i in obs.agents]
+    entered = [v.phase_wall.get("exchange") for v in views]
+    agreed = [
+        min((v.phase_wall[p] for p in AGREED_PHASES if p in v.phase_wall), default=None)
+        for v in views
+    ]
+    if len(views) == len(ids) and all(t is not None for t in entered + agreed):
+        result["agree_s"] = max(t for t in agreed if t is not None) - max(
+            t for t in entered if t is not None
+        )
+    (out / "result.json").write_text(json.dumps(result, indent=2, default=float))
+    if until_done:
+        print_table(result)
+    print("monitor done", flush=True)
+    return 0 if result.get("success") else 1
+
+
+def done_by_exit_code(obs: Observer, ids: list[int]) -> list[int]:
+    """Agents that exited 0 but whose final ``done`` status the monitor never heard (sorted);
+    their phase in ``obs`` is set to ``done``.
+
+    ``Runner.run`` returns 0 only after it published ``done`` (the exit code is the
+    authority, not one status packet that a cut session may swallow); the rest of the
+    judgement stays with what the monitor saw: the plan digests of the agents' statuses
+    and the world's ground truth.
+    """
+    out = []
+    for i in ids:
+        view = obs.agents.get(i)
+        if view is not None and view.exit_code == 0 and view.phase not in TERMINAL_PHASES:
+            view.phase = "done"
+            out.append(i)
+    return sorted(out)
