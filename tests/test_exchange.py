@@ -8,7 +8,9 @@ from collections.abc import Callable
 
 import pytest
 
-from agent.core.agreement import Agreement, Grace, odd_params, params_digest
+from agent.core.agreed_params import odd_params, params_digest
+from agent.core.agreement import Agreement
+from agent.core.grace import Grace
 from agent.wire import DigestMsg, NeighborRecordMsg, canonical_digest
 
 Drop = Callable[[str, int, int, float], bool]

@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 from agent.body.zenoh_world import ZenohBody
-from agent.core.agreement import Agreement, Decision, params_digest
+from agent.core.agreed_params import params_digest
+from agent.core.agreement import Agreement, Decision
 from agent.core.formation.params import PlanParams
 from agent.net.bus import Bus, BusConfig
 from agent.phases.adapters import FormationAdapter, PerceptionAdapter

@@ -37,22 +37,22 @@ re-send its record (see the re-publishing rules above).
 
 **Agreed parameters.** Equal records are not enough: every agent must also plan with
 the same d_e, φ_e, radius, orientation and strategy, and march the same route. Each agent
-hashes its own settings (:func:`params_digest`) and sends that digest in every
+hashes its own settings (:func:`agent.core.agreed_params.params_digest`) and sends that digest in every
 ``DigestMsg`` (``params``); a member whose parameters digest differs from ours counts as
 disagreeing, and the agreement fails (an agent started with other settings is never
 outvoted, and nobody plans or marches differently). To name the odd robot alike on every
 agent, the failure waits until the parameters digest of every member is known (the
 fleet complete when ``fleet_size`` is given; members that left count with their last
 digest), or until ``timeout``; then the robots outside the largest group of equal
-digests are named (:func:`odd_params`; a tie goes to the group holding the smallest id).
+digests are named (:func:`agent.core.agreed_params.odd_params`; a tie goes to the group holding the smallest id).
 
 **Membership grace (issue #9).** On a lossy radio a live member's liveliness token can
 vanish for a while (its zenoh lease expires, its client reconnects and declares the
-token again). :class:`Grace` turns token changes and the member's own publications into
+token again). :class:`agent.core.grace.Grace` turns token changes and the member's own publications into
 membership: a vanished token counts as gone only after ``grace`` seconds in which
 nothing (record, digest or status) was heard from that member; a token that comes back,
 or any publication, ends the count. The caller feeds :meth:`Agreement.member_left` only
-with what :meth:`Grace.expired` returns.
+with what :meth:`agent.core.grace.Grace.expired` returns.
 
 Tie-breaks: a record with a higher ``round`` replaces an older one; for the same round
 the latest received wins (re-publications are identical). Digests are over the
@@ -73,12 +73,12 @@ our digest (no more re-publication for it) and is left to the next round's agree
 
 from __future__ import annotations
 
-import hashlib
-import json
 import math
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import Generic, Protocol, TypeVar
+
+from agent.core.agreed_params import odd_params
 
 
 class RecordLike(Protocol):
@@ -124,82 +124,6 @@ DigestFn = Callable[[Sequence[R]], str]
 
 #: Phases an agent reports only after it has agreed (acknowledges our digest).
 POST_AGREE_PHASES = frozenset({"plan", "wait", "move", "hold", "march", "done"})
-
-ParamValue = float | int | str | None | tuple[float | str, ...]
-
-
-def params_digest(params: Mapping[str, ParamValue]) -> str:
-    """SHA-256 of the agreed planning parameters in a canonical text form.
-
-    Keys sorted; floats by ``repr`` (shortest round-trip form, so 0.8 and 0.8000000001
-    differ and equal floats always hash alike); tuples as lists; ``None`` as null.
-    Raises ``ValueError`` for a non-finite float or a type outside :data:`ParamValue`.
-    """
-
-    def canon(v: object) -> object:
-        if isinstance(v, bool) or v is None or isinstance(v, int | str):
-            return v
-        if isinstance(v, float):
-            if not math.isfinite(v):
-                raise ValueError(f"parameter value {v} is not finite")
-            return repr(v)
-        if isinstance(v, tuple):
-            return [canon(x) for x in v]
-        raise ValueError(f"parameter value of type {type(v).__name__} cannot be agreed")
-
-    text = json.dumps({str(k): canon(v) for k, v in params.items()}, sort_keys=True)
-    return hashlib.sha256(text.encode()).hexdigest()
-
-
-def odd_params(params_of: Mapping[int, str]) -> tuple[list[int], list[int]]:
-    """(odd robots, reference robots) by their parameters digests, ids sorted.
-
-    The reference is the largest group of robots with equal digests; between groups of
-    the same size, the one holding the smallest id. Every other robot is odd. A pure
-    function of the digests, so agents holding the same digests name the same robots.
-    """
-    groups: dict[str, list[int]] = {}
-    for rid in sorted(params_of):
-        groups.setdefault(params_of[rid], []).append(rid)
-    ref = min(groups.values(), key=lambda g: (-len(g), g[0]))
-    return sorted(i for i in params_of if i not in ref), ref
-
-
-class Grace:
-    """When a member whose liveliness token vanished counts as gone (module docstring).
-
-    Pure: the caller passes the time. ``grace`` 0 makes a vanished token count as gone
-    at the next :meth:`expired`.
-    """
-
-    def __init__(self, grace: float) -> None:
-        if not (math.isfinite(grace) and grace >= 0.0):
-            raise ValueError(f"grace must be finite and >= 0, got {grace}")
-        self.grace = grace
-        self._vanished: dict[int, float] = {}  # member -> when last its token or a message was seen
-
-    def token(self, robot_id: int, present: bool, now: float) -> None:
-        """The member's liveliness token appeared (``present``) or vanished."""
-        if present:
-            self._vanished.pop(robot_id, None)
-        else:
-            self._vanished.setdefault(robot_id, now)
-
-    def heard(self, robot_id: int, now: float) -> None:
-        """A record, digest or status of the member arrived: a heartbeat."""
-        if robot_id in self._vanished:
-            self._vanished[robot_id] = max(self._vanished[robot_id], now)
-
-    def pending(self) -> tuple[int, ...]:
-        """Members whose token is gone but whose grace has not run out, sorted."""
-        return tuple(sorted(self._vanished))
-
-    def expired(self, now: float) -> list[int]:
-        """Members gone for good at ``now`` (sorted); they are forgotten here."""
-        out = sorted(i for i, t in self._vanished.items() if now - t >= self.grace)
-        for i in out:
-            del self._vanished[i]
-        return out
 
 
 @dataclass(frozen=True)

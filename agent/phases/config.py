@@ -10,7 +10,7 @@ import argparse
 import math
 from dataclasses import dataclass
 
-from agent.core.agreement import ParamValue
+from agent.core.agreed_params import ParamValue
 from agent.core.formation.params import PLAN_STRATEGIES, PlanParams
 from agent.core.formation.pyramid import ORIENTATIONS
 from agent.core.formation.research import DEFAULT_STEP

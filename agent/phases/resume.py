@@ -37,7 +37,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from agent.body.zenoh_world import retry_no_route
-from agent.core.agreement import Agreement, Decision, params_digest
+from agent.core.agreed_params import params_digest
+from agent.core.agreement import Agreement, Decision
 from agent.core.control import PAPER_GAINS, advance, wrap_pi
 from agent.net.bus import BusError
 from agent.phases.journal import Journal, JournalError, JournalState

@@ -48,7 +48,8 @@ from typing import TypeVar
 import numpy as np
 
 from agent.body.base import Body, BodyError, Frame, MotionResult
-from agent.core.agreement import Agreement, Decision, Grace, params_digest
+from agent.core.agreed_params import params_digest
+from agent.core.agreement import Agreement, Decision
 from agent.core.control import (
     PAPER_GAINS,
     STEP_GAINS,
@@ -73,6 +74,7 @@ from agent.core.control.corridor import (
 )
 from agent.core.formation.plan import Plan
 from agent.core.formation.research import step_blocked
+from agent.core.grace import Grace
 from agent.core.nao import CAMERA_HFOV, HEAD_YAW_LIMIT
 from agent.core.perception.detector import Detection
 from agent.core.perception.obstacles import ObstacleDetection
