@@ -193,3 +193,16 @@ def test_outcome_one_rule_for_every_tool(kw: dict[str, object], expected: str, w
 
     got, detail = outcome(_judged(**kw))
     assert got == expected and words in detail
+
+
+def test_a_robot_the_fleet_left_out_only_stands_still() -> None:
+    from tools.harness.judge import outcome
+
+    r = _judged(
+        excluded=[2],
+        exit_codes={"1": 0, "2": 1, "3": 0},
+        final_phase={"1": "done", "2": "failed", "3": "done"},
+    )
+    assert outcome(r) == ("complete", "done, pairs within tolerance (robots [2] left out)")
+    r["excluded"] = []
+    assert outcome(r)[0] == "safe_abort"

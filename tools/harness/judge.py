@@ -257,7 +257,8 @@ def outcome(result: dict[str, Any]) -> tuple[str, str]:
     ``unsafe``: a contact; a robot walked on a plan that another robot that planned did not
     share; or every agent reported done while the ground truth fails (a silent wrong
     formation is as bad as a contact). ``complete``: every agent done on identical plans,
-    the ground truth within tolerance. Everything else is a ``safe_abort``.
+    the ground truth within tolerance; robots the fleet left out (``excluded``, named by
+    its consistency check) only stand still. Everything else is a ``safe_abort``.
     """
     contacts = int(result.get("contacts", 0))
     if contacts:
@@ -267,10 +268,14 @@ def outcome(result: dict[str, Any]) -> tuple[str, str]:
     if movers and len(planned) > 1:
         return "unsafe", f"robots {movers} walked; plan digests differ {sorted(planned)}"
     codes, phases = result.get("exit_codes", {}), result.get("final_phase", {})
-    all_done = bool(codes) and all(codes.get(i) == 0 and phases.get(i) == "done" for i in codes)
+    out = {str(i) for i in result.get("excluded", [])}  # left out by the fleet: stand still
+    all_done = bool(codes) and all(
+        codes.get(i) == 0 and phases.get(i) == "done" for i in codes if i not in out
+    )
     if all_done and result.get("identical_digests"):
         if result.get("within_tolerance"):
-            return "complete", "done, pairs within tolerance"
+            rest = f" (robots {sorted(int(i) for i in out)} left out)" if out else ""
+            return "complete", f"done, pairs within tolerance{rest}"
         worst = f"max |r_d| {result.get('max_abs_r_d', math.nan):.1%}, |r_phi| " + (
             f"{result.get('max_abs_r_phi', math.nan):.1%}"
         )
@@ -333,7 +338,6 @@ def summarise(
         )
     result["t_sim_end"] = obs.truth[-1][0] if obs.truth else 0.0
     result["pairs"] = []
-    ok_agents = all(views[i].exit_code == 0 and views[i].phase == "done" for i in ids)
     # the (re-)search round of each robot's last record (NAO 4.1.3 rule 2)
     result["record_rounds"] = {str(i): obs.records[i].round for i in ids if i in obs.records}
     if obs.truth:
@@ -349,6 +353,8 @@ def summarise(
                 result.get("strategy", "default"),
             )
             result["evaluator_plan_digest"] = str(plan.digest)
+            result["excluded"] = [int(i) for i in plan.excluded]
+            result["verdict"] = plan.verdict
             result["leader"] = int(plan.leader)
             # in the common frame: where --march-to points are given
             result["leader_target"] = [float(v) for v in plan.robot(plan.leader).target]
@@ -375,6 +381,10 @@ def summarise(
         abs(r["r_d"]) <= R_D_MAX and abs(r["r_phi"]) <= R_PHI_MAX for r in rows
     )
     result["within_tolerance"] = within
+    left_out = set(result.get("excluded", []))  # named by the fleet: they only stand still
+    ok_agents = all(
+        views[i].exit_code == 0 and views[i].phase == "done" for i in ids if i not in left_out
+    )
     result.update(fleet_verdict(views, ids, ok_agents, within))
     # The agents planned from exactly the records the robots signed: the evaluator, which
     # accepts only verified envelopes, recomputes the same plan digest from them.
