@@ -322,7 +322,7 @@ def main(argv: list[str] | None = None) -> int:
                 from agent.phases.journal import Journal
 
                 try:
-                    runner.journal = Journal(args.state_dir, rid)
+                    runner.ctx.journal = Journal(args.state_dir, rid)
                 except (OSError, ValueError) as exc:
                     log.error("no journal in %s: %s", args.state_dir, exc)
             code = runner.run()

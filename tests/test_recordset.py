@@ -14,7 +14,6 @@ import sys
 import time
 from pathlib import Path
 from types import SimpleNamespace
-from typing import cast
 
 import pytest
 
@@ -114,7 +113,7 @@ def test_records_of_each_error_branch(case: str, match: str) -> None:
 def test_a_restarted_member_counts_once_it_shows_the_agreed_digest(runner: Runner) -> None:  # noqa: F811
     r = runner
     r.agreement = agreed()
-    r.plan_digest = "cd" * 32
+    r.ctx.plan_digest = "cd" * 32
     r._handle(Event("alive", "nao/alive/2", robot_id=2))
     r.agreed_epochs = {2: 100}
     r.epochs = {2: 100}
@@ -194,10 +193,9 @@ def test_record_set_query_over_plain_sessions() -> None:
         rep = _fetch(b, d.digest, d.members)
         assert rep == served
         # a restarted agent whose record the others agreed on adopts their set
-        asker = cast("Runner", SimpleNamespace(bus=b))
-        assert agreed_by_others(asker, records()[0]) == (d.digest, (1, 2, 3))
+        assert agreed_by_others(b, records()[0]) == (d.digest, (1, 2, 3))
         stranger = NeighborRecordMsg(sender=1, round=0, neighbours=((3.0, 3.0),))
-        assert agreed_by_others(asker, stranger) is None  # not with another record of ours
+        assert agreed_by_others(b, stranger) is None  # not with another record of ours
         # an unknown digest: nobody answers (no reply), never a wrong set
         with pytest.raises(BusError):
             b.query(KEY_RECORDS_ALL, RecordSetRequest(digest="0" * 64), RecordSetReply, 1.0)

@@ -20,7 +20,8 @@ from agent.core.formation.plan import PlanParams
 from agent.net.bus import Bus, BusConfig
 from agent.phases.adapters import FormationAdapter, PerceptionAdapter
 from agent.phases.config import AgentConfig, Route
-from agent.phases.runner import AgentFailure, Peer, Runner, report_unavailable
+from agent.phases.context import AgentFailure
+from agent.phases.runner import Peer, Runner, report_unavailable
 from agent.wire import NeighborRecordMsg, StatusMsg, canonical_digest
 
 # robots 1, 2, 3 at known world positions; every robot sees every other one
@@ -172,7 +173,7 @@ def runner(perception: PerceptionAdapter) -> Iterator[Runner]:
     bus = Bus(BusConfig(multicast_scouting=False))
     cfg = AgentConfig(robot_id=3, fleet_size=3, wave_timeout=2.0)
     r = Runner(bus, ZenohBody(bus, 3), cfg, perception, FormationAdapter())
-    r.plan = r.formation.plan(records(), PlanParams())
+    r.ctx.plan = r.ctx.formation.plan(records(), PlanParams())
     try:
         yield r
     finally:
@@ -194,15 +195,15 @@ def test_make_plan_plans_with_the_agents_parameters(perception: PerceptionAdapte
 
 
 def earlier(r: Runner) -> list[int]:
-    return [i for i in (1, 2, 3) if r.plan.robot(i).wave < r.plan.robot(3).wave]
+    return [i for i in (1, 2, 3) if r.ctx.plan.robot(i).wave < r.ctx.plan.robot(3).wave]
 
 
 def after(r: Runner, ids: tuple[int, ...]) -> None:
     """Make robot 3 of ``r``'s plan wait for ``ids`` (its ``after`` list)."""
     robots = tuple(
-        dataclasses.replace(rp, after=ids) if rp.robot_id == 3 else rp for rp in r.plan.robots
+        dataclasses.replace(rp, after=ids) if rp.robot_id == 3 else rp for rp in r.ctx.plan.robots
     )
-    r.plan = dataclasses.replace(r.plan, robots=robots)
+    r.ctx.plan = dataclasses.replace(r.ctx.plan, robots=robots)
 
 
 def test_runner_rejects_config_for_another_robot(perception: PerceptionAdapter) -> None:
@@ -333,18 +334,18 @@ def _lost_records() -> tuple[NeighborRecordMsg, ...]:
 
 def test_research_returns_nothing_for_a_connected_fleet(runner: Runner) -> None:
     assert runner.research(Decision("agreed", records=records())) is None
-    assert runner.record_round == 0
+    assert runner.ctx.record_round == 0
 
 
 def test_research_stops_the_fleet_after_the_last_round(runner: Runner) -> None:
-    runner.cfg = dataclasses.replace(runner.cfg, research_rounds=0)
+    runner.ctx.cfg = dataclasses.replace(runner.ctx.cfg, research_rounds=0)
     with pytest.raises(AgentFailure, match=r"robots \[3\] outside .* after 0 re-search round"):
         runner.research(Decision("agreed", records=_lost_records()))
-    assert runner.record_round == 0  # nobody moved on to another round
+    assert runner.ctx.record_round == 0  # nobody moved on to another round
 
 
 def test_a_waiting_robot_stops_when_a_searcher_failed(runner: Runner) -> None:
-    runner.record_round = 1
+    runner.ctx.record_round = 1
     runner.peers[1] = Peer(alive=True, phase="failed", seen_alive=True)
     with pytest.raises(AgentFailure, match="robot 1 failed in re-search round 1"):
         runner._wait_for_searchers((1,))
@@ -352,7 +353,7 @@ def test_a_waiting_robot_stops_when_a_searcher_failed(runner: Runner) -> None:
     with pytest.raises(AgentFailure, match="robot 1 left in re-search round 1"):
         runner._wait_for_searchers((1,))
     runner.peers[1] = Peer(alive=True, phase="explore", seen_alive=True)
-    runner.cfg = dataclasses.replace(runner.cfg, research_timeout=0.3)
+    runner.ctx.cfg = dataclasses.replace(runner.ctx.cfg, research_timeout=0.3)
     with pytest.raises(AgentFailure, match=r"robots \[1\] did not search again within 0.3 s"):
         runner._wait_for_searchers((1,))
     # a record of the round from the searcher ends the wait
@@ -384,7 +385,7 @@ def _lingering(perception: PerceptionAdapter, peers: dict[int, Peer]) -> tuple[R
     bus = Bus(BusConfig(multicast_scouting=False))
     cfg = AgentConfig(robot_id=3, fleet_size=3, wave_timeout=60.0, member_grace=10.0)
     r = Runner(bus, ZenohBody(bus, 3), cfg, perception, FormationAdapter(), clock=clock)
-    r.plan = r.formation.plan(records(), PlanParams())
+    r.ctx.plan = r.ctx.formation.plan(records(), PlanParams())
     r.peers.update(peers)
     return r, bus
 
@@ -395,10 +396,10 @@ def test_done_lingers_with_heartbeats_for_members_out_of_reach(
     out_of_reach = {i: Peer(alive=False, phase="hold", seen_alive=True) for i in (1, 2)}
     r, bus = _lingering(perception, out_of_reach)
     try:
-        r.status("done", 1.0, force=True)
-        r._wait_all(("done", "failed"), "done", "waiting for", linger=r.cfg.member_grace)
+        r.ctx.status("done", 1.0, force=True)
+        r._wait_all(("done", "failed"), "done", "waiting for", linger=r.ctx.cfg.member_grace)
         # returned once the linger passed, having re-published ``done`` meanwhile
-        assert r.clock() >= r.cfg.member_grace
+        assert r.ctx.clock() >= r.ctx.cfg.member_grace
         assert bus.stats.published_count["status"] >= 3
     finally:
         bus.close()
@@ -415,9 +416,9 @@ def test_done_does_not_linger_once_every_member_is_seen_done(
         },
     )
     try:
-        r.status("done", 1.0, force=True)
-        r._wait_all(("done", "failed"), "done", "waiting for", linger=r.cfg.member_grace)
-        assert r.clock() < 3.0  # no heartbeat was due
+        r.ctx.status("done", 1.0, force=True)
+        r._wait_all(("done", "failed"), "done", "waiting for", linger=r.ctx.cfg.member_grace)
+        assert r.ctx.clock() < 3.0  # no heartbeat was due
         assert bus.stats.published_count["status"] == 1
     finally:
         bus.close()
@@ -430,7 +431,7 @@ def test_without_linger_members_out_of_reach_are_not_waited_for(
     r, bus = _lingering(perception, out_of_reach)
     try:
         r._wait_all(("done", "failed"), "done", "waiting for")
-        assert r.clock() < 3.0
+        assert r.ctx.clock() < 3.0
     finally:
         bus.close()
 
@@ -443,7 +444,7 @@ def _waiting(perception: PerceptionAdapter) -> tuple[Runner, Bus]:
     r = Runner(bus, ZenohBody(bus, 3), AgentConfig(robot_id=3, fleet_size=3), perception,
                FormationAdapter())  # fmt: skip
     r.agreement = Agreement(3, records()[2], 0.0, fleet_size=3,
-                            params=params_digest(r.cfg.agreed_params()), digest_fn=canonical_digest)  # fmt: skip
+                            params=params_digest(r.ctx.cfg.agreed_params()), digest_fn=canonical_digest)  # fmt: skip
     for i in (1, 2):
         r._handle(Event("alive", f"nao/alive/{i}", robot_id=i))
         r.agreement.on_record(records()[i - 1], 0.0)
@@ -470,7 +471,7 @@ def test_a_member_moving_on_the_plan_of_our_records_is_adopted(
         agr = r.agreement
         assert agr is not None and agr.decide(0.0).kind == "wait"
         assert r._adopt_plan(agr) is None  # nobody has a plan yet
-        ours = str(r.formation.plan(records(), r.cfg.plan_params()).digest)
+        ours = str(r.ctx.formation.plan(records(), r.ctx.cfg.plan_params()).digest)
         _claim(r, 2, ours, agr.params)
         d = r._adopt_plan(agr)
         assert d is not None and d.kind == "agreed" and d.members == (1, 2, 3)
@@ -488,7 +489,7 @@ def test_a_member_on_another_plan_or_with_other_params_is_not_adopted(
     try:
         agr = r.agreement
         assert agr is not None
-        ours = str(r.formation.plan(records(), r.cfg.plan_params()).digest)
+        ours = str(r.ctx.formation.plan(records(), r.ctx.cfg.plan_params()).digest)
         _claim(r, 2, "f" * 64 if other == "plan" else ours,
                agr.params if other == "plan" else "e" * 64)  # fmt: skip
         assert r._adopt_plan(agr) is None

@@ -103,13 +103,15 @@ class Marcher:
 
     def __init__(self, runner: Runner, route: Route, axis: float) -> None:
         self.r = runner
-        self.plan = runner.plan
+        self.plan = runner.ctx.plan
         self.route = route
         self.axis = axis
         self.v = route_vector(self.plan, route, axis)
         self.length = float(np.hypot(*self.v))
         self.direction = math.atan2(float(self.v[1]), float(self.v[0]))
-        self.members = [int(i) for i in runner.formation.members(self.plan) if i != runner.me]
+        self.members = [
+            int(i) for i in runner.ctx.formation.members(self.plan) if i != runner.ctx.me
+        ]
         self.worst_range = 0.0  # largest |e_ρ| / d_ref measured by a follower (its own view)
         self.worst_bearing = 0.0  # largest |e_β| (rad)
         self.seen_last = np.zeros((0, 2))  # the robots in the last image (for the log)
@@ -137,48 +139,58 @@ class Marcher:
         ]
 
     def run(self) -> None:
-        rp = self.plan.robot(self.r.me)
+        rp = self.plan.robot(self.r.ctx.me)
         log.info("march: V = %s (%.2f m), axis %.1f°", self.v.round(3).tolist(), self.length,
                  math.degrees(self.axis))  # fmt: skip
         if int(rp.parent) < 0:
             self.lead()
         else:
             self.follow(int(rp.parent))
-        self.r.rotate(wrap_pi(self.r.final_heading - self.r.heading), PAPER_GAINS, "turn to axis")
+        self.r.rotate(
+            wrap_pi(self.r.ctx.final_heading - self.r.ctx.beliefs.heading),
+            PAPER_GAINS,
+            "turn to axis",
+        )
 
     # ------------------------------------------------------------ leader
 
     def lead(self) -> None:
         r = self.r
-        rp = self.plan.robot(r.me)
+        rp = self.plan.robot(r.ctx.me)
         start = np.asarray(rp.start, dtype=np.float64).reshape(2)
         goal = np.asarray(rp.target, dtype=np.float64).reshape(2) + self.v - start
-        origin = r.position.copy()
-        for _ in range(int(self.length / r.cfg.march_step) * 4 + 200):
+        origin = r.ctx.beliefs.position.copy()
+        for _ in range(int(self.length / r.ctx.cfg.march_step) * 4 + 200):
             r.pump(0.0)
             self.check_fleet()
             lost = self.lost_followers()
             if lost:
-                r.status("march", self._progress(origin), f"waiting: {lost} lost their parent")
+                r.ctx.status("march", self._progress(origin), f"waiting: {lost} lost their parent")
                 r.pump(0.2)
                 continue
-            leg = next_leg(r.position, r.heading, goal, step=r.cfg.march_step, tolerance=0.05)
+            leg = next_leg(
+                r.ctx.beliefs.position,
+                r.ctx.beliefs.heading,
+                goal,
+                step=r.ctx.cfg.march_step,
+                tolerance=0.05,
+            )
             if leg is None:
                 return
-            if abs(leg.turn) > r.cfg.rotation_tolerance:
+            if abs(leg.turn) > r.ctx.cfg.rotation_tolerance:
                 big = abs(leg.turn) >= math.radians(15)
                 r.rotate(leg.turn, PAPER_GAINS if big else STEP_GAINS)
-            walk = safe_walk(leg.walk, r.heading, self._others_ahead(), CLEARANCE)
+            walk = safe_walk(leg.walk, r.ctx.beliefs.heading, self._others_ahead(), CLEARANCE)
             if walk == 0.0:
-                r.status("march", self._progress(origin), "a robot ahead: waiting")
+                r.ctx.status("march", self._progress(origin), "a robot ahead: waiting")
                 r.pump(0.5)
                 continue
-            t0 = r.clock()
+            t0 = r.ctx.clock()
             r.walk_step(walk)
-            r.status("march", self._progress(origin), f"leading: {leg.remaining:.2f} m to go")
-            rest = r.clock() + r.cfg.march_pause * (r.clock() - t0)
-            while r.clock() < rest:
-                r.pump(min(0.2, max(0.0, rest - r.clock())))
+            r.ctx.status("march", self._progress(origin), f"leading: {leg.remaining:.2f} m to go")
+            rest = r.ctx.clock() + r.ctx.cfg.march_pause * (r.ctx.clock() - t0)
+            while r.ctx.clock() < rest:
+                r.pump(min(0.2, max(0.0, rest - r.ctx.clock())))
         raise MarchHalt("the leader did not reach the end of the route")
 
     def _others_ahead(self) -> np.ndarray:
@@ -186,21 +198,21 @@ class Marcher:
         frame = self.r._last_frame
         if frame is None:
             frame = self.r.look(0.0)
-        pts, _, _ = self.r.perception.to_fixed(
-            self.r.perception.detect(frame.image, 0.0), self.r.heading
+        pts, _, _ = self.r.ctx.perception.to_fixed(
+            self.r.ctx.perception.detect(frame.image, 0.0), self.r.ctx.beliefs.heading
         )
         return np.asarray(pts, dtype=np.float64).reshape(-1, 2)
 
     def _progress(self, origin: np.ndarray) -> float:
         if self.length <= 0.0:
             return 1.0
-        return float(np.dot(self.r.position - origin, self.v)) / self.length**2
+        return float(np.dot(self.r.ctx.beliefs.position - origin, self.v)) / self.length**2
 
     # ------------------------------------------------------------ follower
 
     def follow(self, parent: int) -> None:
         r = self.r
-        offset = station_offset(self.plan, r.me)
+        offset = station_offset(self.plan, r.ctx.me)
         beta_ref = math.atan2(offset[1], offset[0])
         keeper = StationKeeper(float(np.hypot(*offset)), beta_ref, GAINS)
         # face the march direction, or march backwards when the parent would be behind
@@ -209,13 +221,13 @@ class Marcher:
         if abs(wrap_pi(beta_ref - ref)) > math.pi / 2:
             ref = wrap_pi(ref + math.pi)
         predicted = offset.copy()
-        origin = r.position.copy()
+        origin = r.ctx.beliefs.position.copy()
         margin = max(0.3, 0.15 * self.length)
         still = 0
-        still_since = r.clock()
-        moves = int(self.length / r.cfg.march_step) * 6 + 120  # steps allowed
-        deadline = r.clock() + r.cfg.wave_timeout  # waiting for the parent, bounded
-        while moves > 0 and r.clock() < deadline:
+        still_since = r.ctx.clock()
+        moves = int(self.length / r.ctx.cfg.march_step) * 6 + 120  # steps allowed
+        deadline = r.ctx.clock() + r.ctx.cfg.wave_timeout  # waiting for the parent, bounded
+        while moves > 0 and r.ctx.clock() < deadline:
             r.pump(0.0)
             self.check_fleet()
             seen = self.sight((predicted, offset), GATE, (0.0,))
@@ -224,20 +236,20 @@ class Marcher:
                 keeper.reset()
             rel, others = seen
             rho, beta = float(np.hypot(*rel)), math.atan2(float(rel[1]), float(rel[0]))
-            here = (float(r.position[0]), float(r.position[1]))
+            here = (float(r.ctx.beliefs.position[0]), float(r.ctx.beliefs.position[1]))
             cmd = keeper.update(rho, beta, here)
             self.worst_range = max(self.worst_range, abs(cmd.e_range) / keeper.d_ref)
             self.worst_bearing = max(self.worst_bearing, abs(cmd.e_bearing))
             travelled = self._progress(origin) * self.length
-            r.status(
+            r.ctx.status(
                 "march", self._progress(origin),
                 f"parent {parent} at {rho:.2f} m, {math.degrees(beta):+.0f}°",
             )  # fmt: skip
             still = still + 1 if cmd.size == 0.0 else 0
             if still <= 1:
-                still_since = r.clock()
+                still_since = r.ctx.clock()
             parent_done = getattr(r.peers.get(parent), "phase", "") == "done"
-            quiet = r.clock() - still_since >= QUIET and travelled >= self.length - margin
+            quiet = r.ctx.clock() - still_since >= QUIET and travelled >= self.length - margin
             if still >= 2 and (parent_done or quiet):
                 log.info("march over: travelled %.2f m, parent at %.2f m %+.1f°", travelled,
                          rho, math.degrees(beta))  # fmt: skip
@@ -247,22 +259,22 @@ class Marcher:
                 predicted = rel + ahead
                 r.pump(0.3)  # the parent has not moved: give it time to
                 continue
-            turn, _ = unicycle_step(cmd.dx, cmd.dy, r.heading)
+            turn, _ = unicycle_step(cmd.dx, cmd.dy, r.ctx.beliefs.heading)
             # keep the body within MAX_OFF of the march direction: the parent stays
             # within the head's reach (±119.5°), and drift is turned back
-            off = wrap_pi(r.heading + turn - ref)
+            off = wrap_pi(r.ctx.beliefs.heading + turn - ref)
             if abs(off) > MAX_OFF:
-                turn = wrap_pi(ref + math.copysign(MAX_OFF, off) - r.heading)
-            h = r.heading + turn
+                turn = wrap_pi(ref + math.copysign(MAX_OFF, off) - r.ctx.beliefs.heading)
+            h = r.ctx.beliefs.heading + turn
             walk = cmd.dx * math.cos(h) + cmd.dy * math.sin(h)
-            before = r.position.copy()
+            before = r.ctx.beliefs.position.copy()
             moves -= 1
             if turn != 0.0:
                 r.rotate(turn, STEP_GAINS)
-            walk = safe_walk(walk, r.heading, others, CLEARANCE)
+            walk = safe_walk(walk, r.ctx.beliefs.heading, others, CLEARANCE)
             if abs(walk) >= 0.01:
                 r.walk_step(walk)
-            predicted = rel - (r.position - before) + ahead
+            predicted = rel - (r.ctx.beliefs.position - before) + ahead
         raise MarchHalt(f"station keeping on parent {parent} did not settle")
 
     def sight(
@@ -282,11 +294,11 @@ class Marcher:
         predicted = centres[0]
         bearing = math.atan2(float(predicted[1]), float(predicted[0]))
         for off in offsets:
-            yaw = wrap_pi(bearing - r.heading + off)
+            yaw = wrap_pi(bearing - r.ctx.beliefs.heading + off)
             yaw = float(np.clip(yaw, -HEAD_YAW_LIMIT, HEAD_YAW_LIMIT))
             frame = r.look(yaw)
-            dets = r.perception.detect(frame.image, yaw)
-            pts, _, _ = r.perception.to_fixed(dets, r.heading)
+            dets = r.ctx.perception.detect(frame.image, yaw)
+            pts, _, _ = r.ctx.perception.to_fixed(dets, r.ctx.beliefs.heading)
             pts = np.asarray(pts, dtype=np.float64).reshape(-1, 2)
             if len(pts) == 0:
                 continue
@@ -316,19 +328,19 @@ class Marcher:
     ) -> tuple[np.ndarray, np.ndarray]:
         """Lost: stop, say so, search with the head (never the body); halt if not found."""
         r = self.r
-        for k in range(r.cfg.lost_rounds):
-            r.status("march", 0.0, f"{LOST} {parent}: head search {k + 1}", force=True)
+        for k in range(r.ctx.cfg.lost_rounds):
+            r.ctx.status("march", 0.0, f"{LOST} {parent}: head search {k + 1}", force=True)
             log.warning("lost parent %d (predicted at %s, heading %.1f°; last seen %s): "
                         "head search %d", parent, predicted.round(2).tolist(),
-                        math.degrees(r.heading), self.seen_last.round(2).tolist(),
+                        math.degrees(r.ctx.beliefs.heading), self.seen_last.round(2).tolist(),
                         k + 1)  # fmt: skip
             seen = self.sight((predicted, offset), SEARCH_GATE, SEARCH_OFFSETS, search=True)
             if seen is not None:
-                r.status("march", 0.0, f"reacquired parent {parent}", force=True)
+                r.ctx.status("march", 0.0, f"reacquired parent {parent}", force=True)
                 return seen
             r.pump(1.0)  # the fleet stops for us meanwhile
             self.check_fleet()
         raise MarchHalt(
             f"lost sight of parent {parent} on the march: not found in "
-            f"{r.cfg.lost_rounds} head searches around {predicted.round(2).tolist()}"
+            f"{r.ctx.cfg.lost_rounds} head searches around {predicted.round(2).tolist()}"
         )

@@ -39,7 +39,8 @@ import numpy as np
 from agent.body.zenoh_world import retry_no_route
 from agent.core.agreement import Agreement, Decision, params_digest
 from agent.core.control import PAPER_GAINS, advance, wrap_pi
-from agent.net.bus import BusError
+from agent.net.bus import Bus, BusError
+from agent.phases.context import AgentFailure
 from agent.phases.journal import Journal, JournalError, JournalState
 from agent.wire import (
     KEY_RECORDS_ALL,
@@ -109,7 +110,7 @@ def records_of(
     return recs
 
 
-def agreed_by_others(runner: Runner, own: NeighborRecordMsg) -> tuple[str, tuple[int, ...]] | None:
+def agreed_by_others(bus: Bus, own: NeighborRecordMsg) -> tuple[str, tuple[int, ...]] | None:
     """(digest, members) of a record set the others agreed on while this agent was down
     (after its digest had matched theirs), holding its record exactly as journaled; None
     when nobody has agreed. Asks once for any agreed set (``RecordSetRequest("")``)."""
@@ -133,7 +134,7 @@ def agreed_by_others(runner: Runner, own: NeighborRecordMsg) -> tuple[str, tuple
 
     try:
         rep = retry_no_route(
-            lambda: runner.bus.query(
+            lambda: bus.query(
                 KEY_RECORDS_ALL, RecordSetRequest(digest=""), RecordSetReply, QUERY_TIMEOUT, accept
             ),
             QUERY_TIMEOUT,
@@ -155,12 +156,12 @@ def fetch_records(
             return str(exc)
         return ""
 
-    end = runner.clock() + timeout
+    end = runner.ctx.clock() + timeout
     last = "no reply"
-    while runner.clock() < end:
+    while runner.ctx.clock() < end:
         try:
             rep = retry_no_route(
-                lambda: runner.bus.query(
+                lambda: runner.ctx.bus.query(
                     KEY_RECORDS_ALL,
                     RecordSetRequest(digest=digest),
                     RecordSetReply,
@@ -203,18 +204,16 @@ def resume(runner: Runner, st: JournalState) -> tuple[str, NeighborRecordMsg | N
 
     The journal is not written while resuming: a crash during the resumption resumes
     from the same journal again."""
-    journal, runner.journal = runner.journal, None
+    journal, runner.ctx.journal = runner.ctx.journal, None
     try:
         return _resume(runner, st, journal)
     finally:
-        runner.journal = journal
+        runner.ctx.journal = journal
 
 
 def _resume(
     runner: Runner, st: JournalState, journal: Journal | None
 ) -> tuple[str, NeighborRecordMsg | None]:
-    from agent.phases.runner import AgentFailure
-
     # not resumed: a failed run; the march (by design); an exploration move of a
     # re-search round (4.1.3 rule 2), whose record and origin were being replaced
     if st.phase in ("failed", "march", "explore"):
@@ -222,51 +221,53 @@ def _resume(
             f"journal says phase {st.phase} at the crash: not resumed "
             "(clear the state folder for a new run)"
         )
-    runner.compass_gain = st.compass_gain
-    runner.heading = st.heading
-    runner.position = np.array(st.position, dtype=np.float64)
+    runner.ctx.beliefs.compass_gain = st.compass_gain
+    runner.ctx.beliefs.heading = st.heading
+    runner.ctx.beliefs.position = np.array(st.position, dtype=np.float64)
     if st.command == "turn":
-        runner.heading = wrap_pi(st.heading + st.command_value)
+        runner.ctx.beliefs.heading = wrap_pi(st.heading + st.command_value)
     elif st.command == "walk":
-        runner.position = advance(runner.position, st.heading, st.heading, st.command_value)
-    moved = st.command != "" or abs(wrap_pi(runner.heading - NORTH)) > REORIENT_MIN
+        runner.ctx.beliefs.position = advance(
+            runner.ctx.beliefs.position, st.heading, st.heading, st.command_value
+        )
+    moved = st.command != "" or abs(wrap_pi(runner.ctx.beliefs.heading - NORTH)) > REORIENT_MIN
     if st.record is None:
         if moved:
             remeasure_heading(runner, journal)
-        runner.heading = NORTH  # the new search defines the fixed frame again from here
+        runner.ctx.beliefs.heading = NORTH  # the new search defines the fixed frame again from here
         return "search", None
-    runner.record_round = st.record.round
-    runner.own_record = st.record
+    runner.ctx.record_round = st.record.round
+    runner.ctx.own_record = st.record
     digest, members, phase = st.agreed_digest, st.agreed_members, st.phase
     if not digest:
-        found = agreed_by_others(runner, st.record)
+        found = agreed_by_others(runner.ctx.bus, st.record)
         if found is None:
             return "agree", st.record
         digest, members = found
         phase = "plan"
         log.info("the others agreed on %s with this robot's record: adopted", digest[:12])
-    runner.status("plan", 0.0, "resumed: fetching the agreed records", force=True)
+    runner.ctx.status("plan", 0.0, "resumed: fetching the agreed records", force=True)
     records = fetch_records(runner, digest, members)
     agr = Agreement.restored(
-        runner.me,
+        runner.ctx.me,
         records,
-        runner.clock(),
+        runner.ctx.clock(),
         digest_fn=canonical_digest,
-        params=params_digest(runner.cfg.agreed_params()),
-        backoff_max=runner.cfg.backoff_max,
+        params=params_digest(runner.ctx.cfg.agreed_params()),
+        backoff_max=runner.ctx.cfg.backoff_max,
     )
     runner.agreement = agr
-    decision = agr.decide(runner.clock())
+    decision = agr.decide(runner.ctx.clock())
     runner.make_plan(decision)
-    if st.plan_digest and runner.plan_digest != st.plan_digest:
+    if st.plan_digest and runner.ctx.plan_digest != st.plan_digest:
         raise AgentFailure(
-            f"recomputed plan {runner.plan_digest[:12]} differs from the journaled "
+            f"recomputed plan {runner.ctx.plan_digest[:12]} differs from the journaled "
             f"{st.plan_digest[:12]}: not moving"
         )
     stage = AGREED_STAGES.get(phase, "wait")
     if stage in ("move", "hold") and (moved or st.command):
         remeasure_heading(runner, journal)
-    runner.leg = st.leg
+    runner.ctx.leg = st.leg
     return stage, st.record
 
 
@@ -280,24 +281,25 @@ def remeasure_heading(runner: Runner, journal: Journal | None) -> None:
             log.error("reference view unusable: %s", exc)
     if ref is None:
         log.warning(
-            "no reference view: heading %.1f° by dead reckoning", math.degrees(runner.heading)
+            "no reference view: heading %.1f° by dead reckoning",
+            math.degrees(runner.ctx.beliefs.heading),
         )
         return
     runner._last_frame = None
-    turn = wrap_pi(NORTH - runner.heading)
+    turn = wrap_pi(NORTH - runner.ctx.beliefs.heading)
     if abs(turn) > REORIENT_MIN:
         runner.rotate(turn, PAPER_GAINS, "resumed: turn to θ = 0° to re-measure")
     frame = runner.look(0.0)
-    res = runner.perception.measure_turn(ref, frame.image)
+    res = runner.ctx.perception.measure_turn(ref, frame.image)
     if not res.ok:
         log.warning(
             "heading re-measurement failed (%s): kept %.1f°",
             res.reason,
-            math.degrees(runner.heading),
+            math.degrees(runner.ctx.beliefs.heading),
         )
         return
     measured = wrap_pi(NORTH + float(res.dtheta))
-    off = wrap_pi(measured - runner.heading)
+    off = wrap_pi(measured - runner.ctx.beliefs.heading)
     if abs(off) > REMEASURE_LIMIT:
         log.warning(
             "heading re-measured %.1f°, %.1f° off the estimate: kept the estimate",
@@ -306,28 +308,28 @@ def remeasure_heading(runner: Runner, journal: Journal | None) -> None:
         return
     log.info(
         "heading re-measured against the reference view: %.1f° (estimate %.1f°)",
-        math.degrees(measured), math.degrees(runner.heading),
+        math.degrees(measured), math.degrees(runner.ctx.beliefs.heading),
     )  # fmt: skip
-    runner.heading = measured
+    runner.ctx.beliefs.heading = measured
     runner._last_frame = frame
 
 
 def journal_state(runner: Runner, command: str = "", value: float = 0.0) -> JournalState:
     """The runner's state to journal now (with the command about to be sent)."""
     agr = runner.agreement
-    decided = agr.decide(runner.clock()) if agr is not None and agr.agreed else None
-    record = agr.records.get(runner.me) if agr is not None else runner.own_record
+    decided = agr.decide(runner.ctx.clock()) if agr is not None and agr.agreed else None
+    record = agr.records.get(runner.ctx.me) if agr is not None else runner.ctx.own_record
     return JournalState(
-        robot_id=runner.me,
-        phase=runner.phase,
-        heading=float(wrap_pi(runner.heading)),
-        position=(float(runner.position[0]), float(runner.position[1])),
-        compass_gain=runner.compass_gain,
+        robot_id=runner.ctx.me,
+        phase=runner.ctx.phase,
+        heading=float(wrap_pi(runner.ctx.beliefs.heading)),
+        position=(float(runner.ctx.beliefs.position[0]), float(runner.ctx.beliefs.position[1])),
+        compass_gain=runner.ctx.beliefs.compass_gain,
         record=record,
         agreed_digest=decided.digest if decided else "",
         agreed_members=tuple(int(m) for m in decided.members) if decided else (),
-        plan_digest=runner.plan_digest,
-        leg=runner.leg,
+        plan_digest=runner.ctx.plan_digest,
+        leg=runner.ctx.leg,
         command=command,
         command_value=float(value),
     )

@@ -42,7 +42,7 @@ import math
 import time
 import traceback
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from typing import TypeVar
 
 import numpy as np
@@ -78,7 +78,7 @@ from agent.core.perception.detector import Detection
 from agent.core.perception.obstacles import ObstacleDetection
 from agent.net.bus import Bus, Event
 from agent.phases.config import AgentConfig
-from agent.phases.journal import Journal
+from agent.phases.context import NORTH, AgentFailure, Context
 from agent.phases.march import Marcher, MarchHalt
 from agent.phases.seams import Formation, Perception, Sightings
 from agent.wire import (
@@ -102,10 +102,8 @@ from agent.wire import (
 
 log = logging.getLogger("agent.phases.runner")
 
-NORTH = math.pi / 2
 ARRIVED = ("hold", "march", "done", "failed")  # phases of a member that has arrived
 MAX_TURN_STEP = math.radians(40.0)  # largest turn taken to re-measure a step's drift
-STATUS_MIN_INTERVAL = 3.0  # s between progress statuses of the same phase
 HEARTBEAT = 3.0  # s between statuses while waiting
 
 
@@ -130,10 +128,6 @@ def _keep_newest(store: dict[int, _Round], msg: _Round) -> None:
         store[msg.sender] = msg
 
 
-class AgentFailure(RuntimeError):
-    """A reason to stop safely (status ``failed``); the text is the reason."""
-
-
 @dataclass
 class Peer:
     alive: bool = False
@@ -142,16 +136,6 @@ class Peer:
     wave: int = -1
     plan_digest: str = ""
     seen_alive: bool = False
-
-
-@dataclass
-class Timeline:
-    """Wall and sim time at each phase start (for the report)."""
-
-    marks: list[tuple[str, float, float]] = field(default_factory=list)
-
-    def mark(self, phase: str, t_sim: float) -> None:
-        self.marks.append((phase, time.monotonic(), t_sim))
 
 
 class Runner:
@@ -173,16 +157,8 @@ class Runner:
     ) -> None:
         if body.robot_id != config.robot_id:
             raise ValueError(f"robot {body.robot_id} driven with config for {config.robot_id}")
-        self.bus = bus
-        self.body = body
-        self.cfg = config
-        self.me = config.robot_id
-        self.clock = clock
-        self.perception = perception
-        self.formation = formation
-        self.heading = NORTH
-        self.position = np.zeros(2)
-        self.phase = "start"
+        self.ctx = Context(bus, body, config, perception, formation, clock)
+        self.ctx.journal_hook = self._journal
         self.peers: dict[int, Peer] = {}
         self.grace = Grace(config.member_grace)  # a vanished token is gone only after it
         self.early_records: dict[int, NeighborRecordMsg] = {}
@@ -193,18 +169,10 @@ class Runner:
         self.retired: list[
             Agreement[NeighborRecordMsg]
         ] = []  # agreed earlier rounds, still acknowledged
-        self._plan: Plan | None = None
-        self.plan_digest = ""
-        self.wave = -1
-        self.record_round = 0
         self.obstacle_sightings: list[np.ndarray] = []  # fixed frame, one array per image
-        self.timeline = Timeline()
-        self._last_status = -math.inf
         self._last_frame: Frame | None = None
         self.compass_failures = 0
         self.compass_uses = 0
-        self.compass_gain = 1.0
-        self.final_heading = NORTH
         self.corridor = CorridorParams()  # the safe-step check before each step
         self.drift_checks = 0  # implausible step drifts re-measured (_confirm_drift)
         self.waits = 0  # polls spent waiting for a clear corridor
@@ -213,95 +181,51 @@ class Runner:
         self._seen: list[tuple[np.ndarray, int]] = []  # (NAO seen, fixed frame; at step)
         # (records held, digest of their plan) for adopting a member's plan (_adopt_plan)
         self._candidate: tuple[tuple[NeighborRecordMsg, ...], str] | None = None
-        # issue #9: the durable journal (None: not kept), what it holds, what we serve
-        self.journal: Journal | None = None
-        self.own_record: NeighborRecordMsg | None = None
-        self.leg = 0  # the move's current leg
-        self._served: RecordSetReply | None = None
+        self._served: RecordSetReply | None = None  # the agreed record set we serve
 
     # ================================================================= plumbing
 
-    @property
-    def plan(self) -> Plan:
-        """The agreed plan (after :meth:`make_plan`)."""
-        if self._plan is None:
-            raise AgentFailure("no plan yet")
-        return self._plan
-
-    @plan.setter
-    def plan(self, plan: Plan) -> None:
-        self._plan = plan
-
     def start_bus(self) -> None:
         for key in (KEY_RECORD_ALL, KEY_DIGEST_ALL, KEY_STATUS_ALL):
-            self.bus.subscribe(key)
-        self.bus.watch_alive(KEY_ALIVE_ALL)
-        self.bus.declare_alive(key_alive(self.me))
+            self.ctx.bus.subscribe(key)
+        self.ctx.bus.watch_alive(KEY_ALIVE_ALL)
+        self.ctx.bus.declare_alive(key_alive(self.ctx.me))
         from agent.phases.resume import answer
 
-        self.bus.serve(key_records(self.me), lambda req: answer(self._served, req))
+        self.ctx.bus.serve(key_records(self.ctx.me), lambda req: answer(self._served, req))
 
     def _journal(self, command: str = "", value: float = 0.0) -> None:
         """Write the journal (issue #9), before ``command`` is sent; a failing disk is
         logged and the journal given up, never fatal."""
-        if self.journal is None:
+        if self.ctx.journal is None:
             return
         from agent.phases.resume import journal_state
 
         try:
-            self.journal.save(journal_state(self, command, value))
+            self.ctx.journal.save(journal_state(self, command, value))
         except (OSError, ValueError) as exc:
             log.error("journal write failed, journal given up: %s", reason(exc))
-            self.journal = None
-
-    def status(
-        self,
-        phase: str,
-        progress: float = 0.0,
-        detail: str = "",
-        error: str = "",
-        force: bool = False,
-    ) -> None:
-        now = self.clock()
-        changed = phase != self.phase
-        if changed:
-            self.timeline.mark(phase, self.body.t_sim)
-        self.phase = phase
-        if changed:
-            self._journal()
-        if not (changed or force or now - self._last_status >= STATUS_MIN_INTERVAL):
-            return
-        self._last_status = now
-        msg = StatusMsg(
-            sender=self.me,
-            phase=phase,
-            progress=min(1.0, max(0.0, progress)),
-            detail=detail[:500],
-            plan_digest=self.plan_digest,
-            wave=self.wave,
-            error=error[:500],
-            t_sim=self.body.t_sim,
-            bytes_sent=self.bus.stats.total_published,
-        )
-        self.bus.publish(key_status(self.me), msg, "status")
+            self.ctx.journal = None
 
     def pump(self, timeout: float = 0.0) -> None:
         """Handle what arrived; (re-)publish what the agreement says is due."""
-        for ev in self.bus.drain(timeout):
+        for ev in self.ctx.bus.drain(timeout):
             try:
                 self._handle(ev)
             except Exception as exc:  # one bad event is counted and skipped, never fatal
-                self.bus.guard.reject(f"event on {ev.key}", exc)
+                self.ctx.bus.guard.reject(f"event on {ev.key}", exc)
         self._expire_members()
         for agr in self._agreements():
-            now = self.clock()
+            now = self.ctx.clock()
             due = agr.due(now)
             for what in due:
                 if what == "record":
-                    self.bus.publish(key_record(self.me), agr.records[self.me], "record")
+                    self.ctx.bus.publish(
+                        key_record(self.ctx.me), agr.records[self.ctx.me], "record"
+                    )
                 else:
-                    self.bus.publish(
-                        key_digest(self.me), DigestMsg(**asdict(agr.digest_note())), "digest"
+                    self.ctx.bus.publish(
+                        key_digest(self.ctx.me), DigestMsg(**asdict(agr.digest_note())), "digest"
                     )
             agr.sent(due, now)
 
@@ -311,14 +235,14 @@ class Runner:
         return [*self.retired, *([self.agreement] if self.agreement is not None else [])]
 
     def _handle(self, ev: Event) -> None:
-        now = self.clock()
+        now = self.ctx.clock()
         agr = self.agreement
         if ev.kind in ("alive", "gone"):
             peer = self.peers.setdefault(ev.robot_id, Peer())
             self.grace.token(ev.robot_id, ev.kind == "alive", now)
             if ev.kind == "alive":  # a vanished token counts as gone in _expire_members
                 peer.alive = peer.seen_alive = True
-                if agr is not None and ev.robot_id != self.me:
+                if agr is not None and ev.robot_id != self.ctx.me:
                     agr.member_joined(ev.robot_id, now)
             return
         msg = ev.msg
@@ -344,14 +268,14 @@ class Runner:
                     a.on_digest(msg, now)
             # kept for the next round: before our agreement, or newer than its round
             early = agr is None or msg.round > agr.round
-            if early and msg.sender != self.me and self._member(msg.sender):
+            if early and msg.sender != self.ctx.me and self._member(msg.sender):
                 if isinstance(msg, NeighborRecordMsg):
                     _keep_newest(self.early_records, msg)
                 else:
                     _keep_newest(self.early_digests, msg)
         elif isinstance(msg, StatusMsg):
             member = self.peers.get(msg.sender)
-            if msg.sender == self.me or member is None or not member.seen_alive:
+            if msg.sender == self.ctx.me or member is None or not member.seen_alive:
                 return  # per-sender state only for members (their token came first)
             member.phase, member.wave, member.plan_digest = msg.phase, msg.wave, msg.plan_digest
             member.detail = msg.detail
@@ -360,14 +284,14 @@ class Runner:
 
     def _expire_members(self) -> None:
         """Members whose token vanished and who stayed silent for the grace period are gone."""
-        now = self.clock()
+        now = self.ctx.clock()
         for rid in self.grace.expired(now):
             peer = self.peers.get(rid)
             if peer is None or not peer.alive:
                 continue
             peer.alive = False
             log.warning("robot %d is gone (token lost, silent for %g s)", rid, self.grace.grace)
-            if self.agreement is not None and rid != self.me:
+            if self.agreement is not None and rid != self.ctx.me:
                 self.agreement.member_left(rid, now)
 
     def _proves_agreement(self, msg: object) -> bool:
@@ -380,8 +304,8 @@ class Runner:
             return msg.digest == digest and msg.members == members and msg.params == agr.params
         return (
             isinstance(msg, StatusMsg)
-            and bool(self.plan_digest)
-            and (msg.plan_digest == self.plan_digest)
+            and bool(self.ctx.plan_digest)
+            and (msg.plan_digest == self.ctx.plan_digest)
         )
 
     def _member(self, rid: int) -> bool:
@@ -413,7 +337,7 @@ class Runner:
     # ================================================================= motion
 
     def look(self, yaw: float = 0.0) -> Frame:
-        frame = self.body.camera(yaw)
+        frame = self.ctx.body.camera(yaw)
         self.pump()
         return frame
 
@@ -421,24 +345,26 @@ class Runner:
         """Turn the body by ``angle`` (rad, + CCW) with the rotation control (5.2.2 (1)).
 
         Returns the rotation completed according to the compass (rad)."""
-        rc = RotationControl(angle, gains=gains, tolerance=self.cfg.rotation_tolerance)
+        rc = RotationControl(angle, gains=gains, tolerance=self.ctx.cfg.rotation_tolerance)
         before = self._last_frame if self._last_frame is not None else self.look(0.0)
         while not (rc.done or rc.exhausted):
             u = rc.next_step()
             self._journal("turn", u)
-            rep = self.body.turn(u)
+            rep = self.ctx.body.turn(u)
             self.pump()
             after = self.look(0.0)
             measured = self._compass(before, after, u)
             rc.record(measured)
-            self.heading = wrap_pi(self.heading + measured)
+            self.ctx.beliefs.heading = wrap_pi(self.ctx.beliefs.heading + measured)
             log.debug(
                 "turn t_sim %.2f cmd %+.2f° measured %+.2f° heading %.2f°",
-                rep.t_sim, math.degrees(u), math.degrees(measured), math.degrees(self.heading),
+                rep.t_sim, math.degrees(u), math.degrees(measured), math.degrees(self.ctx.beliefs.heading),
             )  # fmt: skip
             before = after
             if label:
-                self.status(self.phase, detail=f"{label}: {math.degrees(rc.error):+.1f}° to go")
+                self.ctx.status(
+                    self.ctx.phase, detail=f"{label}: {math.degrees(rc.error):+.1f}° to go"
+                )
             if rep.status == "contact":
                 log.warning("contact while turning")
         self._last_frame = before
@@ -463,9 +389,9 @@ class Runner:
         command, the command is believed and the match is returned as ``suspect``
         (a step's real drift may be that large: :meth:`_confirm_drift`)."""
         if walking:
-            res = self.perception.measure_walk(before.image, after.image)
+            res = self.ctx.perception.measure_walk(before.image, after.image)
         else:
-            res = self.perception.measure_turn(before.image, after.image)
+            res = self.ctx.perception.measure_turn(before.image, after.image)
         self.compass_uses += 1
         if not res.ok:
             self.compass_failures += 1
@@ -475,7 +401,7 @@ class Runner:
                 math.degrees(commanded),
             )  # fmt: skip
             return commanded, None
-        dtheta = float(res.dtheta) * self.compass_gain
+        dtheta = float(res.dtheta) * self.ctx.beliefs.compass_gain
         if not _plausible(dtheta, commanded, walking):
             self.compass_failures += 1
             log.warning(
@@ -499,12 +425,12 @@ class Runner:
         fits neither case, the drift is taken as 0 and the turn as commanded (the
         behaviour without this check)."""
         u = float(np.clip(-suspect, -MAX_TURN_STEP, MAX_TURN_STEP))
-        self.body.turn(u)
+        self.ctx.body.turn(u)
         self.pump()
         after = self.look(0.0)
-        res = self.perception.measure_walk(before.image, after.image)
+        res = self.ctx.perception.measure_walk(before.image, after.image)
         self.compass_uses += 1
-        net = float(res.dtheta) * self.compass_gain if res.ok else math.nan
+        net = float(res.dtheta) * self.ctx.beliefs.compass_gain if res.ok else math.nan
         if res.ok and (_plausible(net, 0.0, True) or _plausible(net, u, True)):
             self.drift_checks += 1
             log.info(
@@ -526,25 +452,36 @@ class Runner:
         """Distance control to ``goal`` (fixed frame, m) from the dead-reckoned position,
         each step checked first (:meth:`clear_way`): a blocked step waits, then detours by
         tangent steps round the blocker until the way to the goal is clear again."""
-        total = float(np.hypot(*(goal - self.position))) or 1.0
+        total = float(np.hypot(*(goal - self.ctx.beliefs.position))) or 1.0
         cp = self.corridor
         side = 0  # the side of the detour under way (0: none)
         for _ in range(200):
-            leg = next_leg(self.position, self.heading, goal, backward_within=backward_within)
+            leg = next_leg(
+                self.ctx.beliefs.position,
+                self.ctx.beliefs.heading,
+                goal,
+                backward_within=backward_within,
+            )
             if leg is None:
                 return
             if side:  # detouring: do the NAOs seen lately still block the way to the goal?
-                to_goal = wrap_pi(self.heading + leg.turn)
+                to_goal = wrap_pi(self.ctx.beliefs.heading + leg.turn)
                 wait = patience(self._rank(), cp)
                 rel = self._remembered()
                 v = check_step(
-                    leg.walk, to_goal, rel, cp, wait, side=side, goal=goal - self.position
+                    leg.walk,
+                    to_goal,
+                    rel,
+                    cp,
+                    wait,
+                    side=side,
+                    goal=goal - self.ctx.beliefs.position,
                 )
                 if v.action == VIA:
                     self._via_step(v)
                     continue
                 side = 0
-            if abs(leg.turn) > self.cfg.rotation_tolerance:
+            if abs(leg.turn) > self.ctx.cfg.rotation_tolerance:
                 self.rotate(
                     leg.turn, STEP_GAINS if abs(leg.turn) < math.radians(15) else PAPER_GAINS
                 )
@@ -559,8 +496,8 @@ class Runner:
 
     def _via_step(self, v: Verdict) -> None:
         """Turn to the via step's heading, check its corridor again (no further via), walk."""
-        turn = wrap_pi(v.heading - self.heading)
-        if abs(turn) > self.cfg.rotation_tolerance:
+        turn = wrap_pi(v.heading - self.ctx.beliefs.heading)
+        if abs(turn) > self.ctx.cfg.rotation_tolerance:
             self.rotate(turn, STEP_GAINS if abs(turn) < math.radians(15) else PAPER_GAINS)
         self.vias += 1
         self.clear_way(v.walk, via=False)
@@ -574,7 +511,7 @@ class Runner:
         self._seen = keep
         if not keep:
             return np.zeros((0, 2))
-        return np.array([p for p, _ in keep]) - self.position
+        return np.array([p for p, _ in keep]) - self.ctx.beliefs.position
 
     def clear_way(self, walk: float, via: bool = True, goal: np.ndarray | None = None) -> Verdict:
         """Check the next step's corridor (agent/core/control/corridor.py) against the NAOs in
@@ -587,21 +524,23 @@ class Runner:
         for waited in range(cp.max_polls + 1):
             frame = self._last_frame if self._last_frame is not None else self.look(0.0)
             self._last_frame = frame
-            seen, _, _ = self.perception.to_fixed(
-                self.perception.detect(frame.image, 0.0), self.heading
+            seen, _, _ = self.ctx.perception.to_fixed(
+                self.ctx.perception.detect(frame.image, 0.0), self.ctx.beliefs.heading
             )
             for p in np.asarray(seen, dtype=np.float64).reshape(-1, 2):
-                self._seen.append((self.position + p, self.steps))
+                self._seen.append((self.ctx.beliefs.position + p, self.steps))
             v = check_step(
-                walk, self.heading, self._remembered(), cp, waited if via else 0, rank,
-                goal=None if goal is None else goal - self.position,
+                walk, self.ctx.beliefs.heading, self._remembered(), cp, waited if via else 0, rank,
+                goal=None if goal is None else goal - self.ctx.beliefs.position,
             )  # fmt: skip
             if v.action == GO or (v.action == VIA and via):
                 if waited:
                     log.info("corridor: %s after %d poll(s)", v.action, waited)
                 return v
-            where = (self.position + v.blockers[0]).round(2).tolist()
-            self.status(self.phase, detail=f"waiting: NAO ahead at {where}", force=waited == 0)
+            where = (self.ctx.beliefs.position + v.blockers[0]).round(2).tolist()
+            self.ctx.status(
+                self.ctx.phase, detail=f"waiting: NAO ahead at {where}", force=waited == 0
+            )
             self.waits += 1
             self.pump(cp.poll)
             if waited and not confirmed(v.blockers[0], seen, cp):
@@ -609,11 +548,11 @@ class Runner:
             self._last_frame = None  # look again
             # what the next image shows is seen afresh: a NAO that walked on is forgotten
             if self._seen:
-                rel = np.array([p for p, _ in self._seen]) - self.position
-                shown = in_view(rel, self.heading, CAMERA_HFOV)
+                rel = np.array([p for p, _ in self._seen]) - self.ctx.beliefs.position
+                shown = in_view(rel, self.ctx.beliefs.heading, CAMERA_HFOV)
                 self._seen = [e for e, gone in zip(self._seen, shown, strict=True) if not gone]
         raise AgentFailure(
-            f"way blocked for {cp.max_polls} polls at believed {self.position.round(2).tolist()}"
+            f"way blocked for {cp.max_polls} polls at believed {self.ctx.beliefs.position.round(2).tolist()}"
         )
 
     def _recheck(self, blocker: np.ndarray, seen: np.ndarray, where: list[float]) -> None:
@@ -622,25 +561,29 @@ class Runner:
         the yaw-0 image (beside the robot): look at it with the head, forget what that
         image should show and does not, remember what it shows. Otherwise the memory
         would keep a NAO that walked away until this robot's patience ran out."""
-        back = back_off(blocker[None, :], seen, self.heading, CAMERA_HFOV, self.corridor)
+        back = back_off(
+            blocker[None, :], seen, self.ctx.beliefs.heading, CAMERA_HFOV, self.corridor
+        )
         if back > 0.01:
             log.info("corridor: NAO remembered at %s, too near to see: %.2f m back", where, back)
             self.walk_step(-back)
             return
-        if bool(in_view(blocker[None, :], self.heading, CAMERA_HFOV, near=0.0)[0]):
+        if bool(in_view(blocker[None, :], self.ctx.beliefs.heading, CAMERA_HFOV, near=0.0)[0]):
             return  # the yaw-0 image covers it: the loop's own look decides
         bearing = math.atan2(float(blocker[1]), float(blocker[0]))
-        yaw = float(np.clip(wrap_pi(bearing - self.heading), -HEAD_YAW_LIMIT, HEAD_YAW_LIMIT))
+        yaw = float(
+            np.clip(wrap_pi(bearing - self.ctx.beliefs.heading), -HEAD_YAW_LIMIT, HEAD_YAW_LIMIT)
+        )
         frame = self.look(yaw)
-        fresh, _, _ = self.perception.to_fixed(
-            self.perception.detect(frame.image, yaw), self.heading
+        fresh, _, _ = self.ctx.perception.to_fixed(
+            self.ctx.perception.detect(frame.image, yaw), self.ctx.beliefs.heading
         )
         if self._seen:
-            rel = np.array([p for p, _ in self._seen]) - self.position
-            shown = in_view(rel, self.heading + yaw, CAMERA_HFOV)
+            rel = np.array([p for p, _ in self._seen]) - self.ctx.beliefs.position
+            shown = in_view(rel, self.ctx.beliefs.heading + yaw, CAMERA_HFOV)
             self._seen = [e for e, gone in zip(self._seen, shown, strict=True) if not gone]
         for p in np.asarray(fresh, dtype=np.float64).reshape(-1, 2):
-            self._seen.append((self.position + p, self.steps))
+            self._seen.append((self.ctx.beliefs.position + p, self.steps))
         log.info(
             "corridor: looked at the NAO remembered at %s (head %+.0f°): %d NAO(s) in view",
             where, math.degrees(yaw), len(fresh),
@@ -648,17 +591,19 @@ class Runner:
 
     def _rank(self) -> int:
         """This robot's rank in the shared plan, (wave, id) order (0 without a plan)."""
-        if self._plan is None:
+        if self.ctx.planned is None:
             return 0
-        return plan_rank([(int(rp.wave), int(rp.robot_id)) for rp in self._plan.robots], self.me)
+        return plan_rank(
+            [(int(rp.wave), int(rp.robot_id)) for rp in self.ctx.planned.robots], self.ctx.me
+        )
 
     def walk_step(self, distance: float) -> MotionResult:
         """One straight step, the compass's drift and dead reckoning (4.2, eq. 2); a
         drift too large to be plausible is re-measured (:meth:`_confirm_drift`)."""
         before = self._last_frame if self._last_frame is not None else self.look(0.0)
-        h0 = self.heading
+        h0 = self.ctx.beliefs.heading
         self._journal("walk", distance)
-        rep = self.body.walk(distance)
+        rep = self.ctx.body.walk(distance)
         self.steps += 1
         self.pump()
         after = self.look(0.0)
@@ -668,17 +613,19 @@ class Runner:
             after, net = self._confirm_drift(before, h0, suspect)
             turned = float(np.clip(-suspect, -MAX_TURN_STEP, MAX_TURN_STEP))
             drift = net - turned  # the turn taken as commanded, for dead reckoning
-        self.heading = wrap_pi(h0 + drift + turned)
+        self.ctx.beliefs.heading = wrap_pi(h0 + drift + turned)
         self._last_frame = after
-        self.position = advance(self.position, h0, wrap_pi(h0 + drift), distance)
+        self.ctx.beliefs.position = advance(
+            self.ctx.beliefs.position, h0, wrap_pi(h0 + drift), distance
+        )
         log.debug(
             "walk t_sim %.2f %.3f m drift %+.2f° heading %.2f° position %s",
-            rep.t_sim, distance, math.degrees(drift), math.degrees(self.heading),
-            self.position.round(3).tolist(),
+            rep.t_sim, distance, math.degrees(drift), math.degrees(self.ctx.beliefs.heading),
+            self.ctx.beliefs.position.round(3).tolist(),
         )  # fmt: skip
         if rep.status == "contact":
             raise AgentFailure(
-                f"contact while walking at believed {self.position.round(2).tolist()}"
+                f"contact while walking at believed {self.ctx.beliefs.position.round(2).tolist()}"
             )
         return rep
 
@@ -694,9 +641,11 @@ class Runner:
         removes the compass's scale error (parallax of the off-axis camera) from the
         θ = 180° sweep and from every later turn, and the heading is known absolutely.
         """
-        self.status("search", 0.0, "sweep at θ = 0°")
-        h0 = self.heading  # north at the start; kept from the compass in re-search rounds
-        n = 2 * len(self.cfg.search_yaws)
+        self.ctx.status("search", 0.0, "sweep at θ = 0°")
+        h0 = (
+            self.ctx.beliefs.heading
+        )  # north at the start; kept from the compass in re-search rounds
+        n = 2 * len(self.ctx.cfg.search_yaws)
         raw: list[tuple[int, list[Detection]]] = []
         obst: list[tuple[int, list[ObstacleDetection]]] = []  # 5.1.2: obstacles seen
         done = 0
@@ -705,46 +654,47 @@ class Runner:
         for sweep in range(2):
             if sweep == 1:
                 turned[0] = self.rotate(math.pi, PAPER_GAINS, "turn to θ = 180°")
-            for yaw in self.cfg.search_yaws:
+            for yaw in self.ctx.cfg.search_yaws:
                 frame = self.look(yaw)
                 if abs(yaw) < 1e-9:
                     self._last_frame = frame
                     if sweep == 0:
                         origin = frame
-                raw.append((sweep, self.perception.detect(frame.image, yaw)))
-                obst.append((sweep, self.perception.detect_obstacles(frame.image, yaw)))
+                raw.append((sweep, self.ctx.perception.detect(frame.image, yaw)))
+                obst.append((sweep, self.ctx.perception.detect_obstacles(frame.image, yaw)))
                 done += 1
-                self.status(
+                self.ctx.status(
                     "search", done / n, f"θ = {180 * sweep}°, head {math.degrees(yaw):+.0f}°"
                 )
             # the last image of the sweep was not at yaw 0: refresh the compass reference
             self._last_frame = self.look(0.0)
             if origin is None:
                 origin = self._last_frame
-            if sweep == 0 and self.journal is not None:  # the view that defines the fixed frame
+            if sweep == 0 and self.ctx.journal is not None:  # the view that defines the fixed frame
                 try:
-                    self.journal.save_reference(origin.image)
+                    self.ctx.journal.save_reference(origin.image)
                 except (OSError, ValueError) as exc:
                     log.error("reference view not journaled: %s", reason(exc))
-        heading_180 = self.heading
+        heading_180 = self.ctx.beliefs.heading
         turned[1] = self.rotate(math.pi, PAPER_GAINS, "complete the circle to θ = 0°")
         assert origin is not None and self._last_frame is not None
         self._calibrate(origin, self._last_frame, turned, h0)
-        if self.compass_gain != 1.0:
-            heading_180 = wrap_pi(h0 + self.compass_gain * turned[0])
+        if self.ctx.beliefs.compass_gain != 1.0:
+            heading_180 = wrap_pi(h0 + self.ctx.beliefs.compass_gain * turned[0])
         self.obstacle_sightings = [
-            self.perception.obstacles_fixed(o, h0 if sweep == 0 else heading_180)
+            self.ctx.perception.obstacles_fixed(o, h0 if sweep == 0 else heading_180)
             for sweep, o in obst
         ]
         return [
-            self.perception.to_fixed(dets, h0 if sweep == 0 else heading_180) for sweep, dets in raw
+            self.ctx.perception.to_fixed(dets, h0 if sweep == 0 else heading_180)
+            for sweep, dets in raw
         ]
 
     def _calibrate(
         self, origin: Frame, final: Frame, turned: list[float], h0: float = NORTH
     ) -> None:
         """Compass gain and absolute heading from the full circle (see :meth:`search`)."""
-        res = self.perception.measure_turn(origin.image, final.image)
+        res = self.ctx.perception.measure_turn(origin.image, final.image)
         total = turned[0] + turned[1]
         if not res.ok or total < math.pi:
             log.warning("compass calibration skipped: %s", res.reason if not res.ok else "no turn")
@@ -754,50 +704,50 @@ class Runner:
         if not 0.9 <= gain <= 1.1:
             log.warning("compass gain %.4f implausible: kept 1.0", gain)
             return
-        self.compass_gain = gain
-        self.heading = wrap_pi(h0 + r)
+        self.ctx.beliefs.compass_gain = gain
+        self.ctx.beliefs.heading = wrap_pi(h0 + r)
         log.info(
             "compass calibrated over the circle: gain %.4f, residual %+.2f°", gain, math.degrees(r)
         )
 
     def localise(self, sightings: list[Sightings]) -> NeighborRecordMsg:
-        self.status("localise", 0.0)
-        pts, ori, conf = self.perception.merge(sightings)
-        obstacles = self.perception.merge_obstacles(self.obstacle_sightings)
+        self.ctx.status("localise", 0.0)
+        pts, ori, conf = self.ctx.perception.merge(sightings)
+        obstacles = self.ctx.perception.merge_obstacles(self.obstacle_sightings)
         rec = NeighborRecordMsg(
-            sender=self.me,
-            round=self.record_round,
+            sender=self.ctx.me,
+            round=self.ctx.record_round,
             neighbours=tuple((float(x), float(y)) for x, y in pts),
             orientations=tuple(float(o) for o in ori),
             confidences=tuple(float(c) for c in conf),
             obstacles=tuple((float(x), float(y)) for x, y in obstacles),
         )
-        self.own_record = rec
-        self.status("localise", 1.0, f"{len(pts)} neighbours, {len(obstacles)} obstacles")
+        self.ctx.own_record = rec
+        self.ctx.status("localise", 1.0, f"{len(pts)} neighbours, {len(obstacles)} obstacles")
         return rec
 
     def agree(self, record: NeighborRecordMsg) -> Decision[NeighborRecordMsg]:
-        now = self.clock()
+        now = self.ctx.clock()
         agr = Agreement(
-            self.me,
+            self.ctx.me,
             record,
             now,
-            fleet_size=self.cfg.fleet_size,
-            timeout=self.cfg.timeout,
-            settle=self.cfg.settle,
-            backoff_max=self.cfg.backoff_max,
+            fleet_size=self.ctx.cfg.fleet_size,
+            timeout=self.ctx.cfg.timeout,
+            settle=self.ctx.cfg.settle,
+            backoff_max=self.ctx.cfg.backoff_max,
             digest_fn=canonical_digest,
-            params=params_digest(self.cfg.agreed_params()),
+            params=params_digest(self.ctx.cfg.agreed_params()),
         )
         for rid, peer in sorted(self.peers.items()):
-            if rid != self.me and peer.seen_alive:
+            if rid != self.ctx.me and peer.seen_alive:
                 agr.member_joined(rid, now)
         for msg in self.early_records.values():
             agr.on_record(msg, now)
         for dmsg in self.early_digests.values():
             agr.on_digest(dmsg, now)
         for rid, peer in sorted(self.peers.items()):
-            if rid != self.me and peer.seen_alive and not peer.alive:
+            if rid != self.ctx.me and peer.seen_alive and not peer.alive:
                 # it was a member and left while we searched: a departure too (with its
                 # record held, one it may return from, agent.core.agreement)
                 agr.member_left(rid, now)
@@ -806,10 +756,10 @@ class Runner:
         for rid, peer in self.peers.items():
             agr.on_peer_phase(rid, peer.phase)
         self.agreement = agr
-        self.status("exchange", 0.0, "publishing record")
+        self.ctx.status("exchange", 0.0, "publishing record")
         while True:
             self.pump(0.05)
-            d = agr.decide(self.clock())
+            d = agr.decide(self.ctx.clock())
             if d.kind == "wait":
                 d = self._adopt_plan(agr) or d
             if d.kind != "wait":
@@ -818,7 +768,7 @@ class Runner:
             held = len(agr.held_members())
             agreeing = n - len(agr.disagreeing())
             phase = "exchange" if agr.missing_records() else "agree"
-            self.status(phase, (held + agreeing) / (2 * n), d.reason)
+            self.ctx.status(phase, (held + agreeing) / (2 * n), d.reason)
 
     def _adopt_plan(self, agr: Agreement[NeighborRecordMsg]) -> Decision[NeighborRecordMsg] | None:
         """Agreed, when a member already acts on the plan of exactly our records (issue #9).
@@ -831,12 +781,12 @@ class Runner:
         planned from the same inputs: we adopt (:meth:`Agreement.adopt`). The candidate
         plan is computed once per record set.
         """
-        if self.cfg.fleet_size is None or len(agr.records) != self.cfg.fleet_size:
+        if self.ctx.cfg.fleet_size is None or len(agr.records) != self.ctx.cfg.fleet_size:
             return None
         claims = {
             i: self.peers[i].plan_digest
             for i in sorted(agr.records)
-            if i != self.me
+            if i != self.ctx.me
             and i in self.peers
             and self.peers[i].plan_digest
             and agr.params_of.get(i) == agr.params
@@ -846,7 +796,7 @@ class Runner:
         recs = tuple(agr.records[i] for i in sorted(agr.records))
         if self._candidate is None or self._candidate[0] != recs:
             try:
-                digest = str(self.formation.plan(recs, self.cfg.plan_params()).digest)
+                digest = str(self.ctx.formation.plan(recs, self.ctx.cfg.plan_params()).digest)
             except ValueError:
                 digest = ""
             self._candidate = (recs, digest)
@@ -856,7 +806,7 @@ class Runner:
             return None
         why = f"robot(s) {same} act on the plan of the records held here (plan {digest[:12]})"
         log.info("agreed by adoption: %s", why)
-        return agr.adopt(self.clock(), why)
+        return agr.adopt(self.ctx.clock(), why)
 
     def research(self, decision: Decision[NeighborRecordMsg]) -> NeighborRecordMsg | None:
         """Re-search (NAO paper 4.1.3 rule 2) on the agreed records: ``None`` when the
@@ -872,26 +822,26 @@ class Runner:
         the caller agrees the new round. After ``research_rounds`` rounds the fleet
         stops: the reason names who is still outside.
         """
-        k = self.record_round + 1
-        verdict = self.formation.research(decision.records, k, self.cfg.explore_step)
+        k = self.ctx.record_round + 1
+        verdict = self.ctx.formation.research(decision.records, k, self.ctx.cfg.explore_step)
         if verdict.connected:
             return None
-        if k > self.cfg.research_rounds:
+        if k > self.ctx.cfg.research_rounds:
             raise AgentFailure(
-                f"{verdict.reason} after {self.cfg.research_rounds} re-search round(s): "
+                f"{verdict.reason} after {self.ctx.cfg.research_rounds} re-search round(s): "
                 "stopping (4.1.3 rule 2)"
             )
         log.info("re-search round %d: %s", k, verdict.reason)
-        self.record_round = k
+        self.ctx.record_round = k
         if self.agreement is not None:
             self.retired.append(self.agreement)
         self.agreement = None
-        if self.me in verdict.searchers:
-            self.status("explore", 0.0, f"round {k}: {verdict.reason}", force=True)
-            self.explore(verdict.move(self.me))
+        if self.ctx.me in verdict.searchers:
+            self.ctx.status("explore", 0.0, f"round {k}: {verdict.reason}", force=True)
+            self.explore(verdict.move(self.ctx.me))
         else:
             self._wait_for_searchers(verdict.searchers)
-        self.position = np.zeros(2)  # the new record's origin: here
+        self.ctx.beliefs.position = np.zeros(2)  # the new record's origin: here
         self._last_frame = None
         return self.localise(self.search())
 
@@ -899,40 +849,40 @@ class Runner:
         """Walk the exploration ``move`` (fixed frame, m) in steps; before each step the
         yaw-0 image is checked: a NAO inside the step's sweep (2·radius + 0.1 m wide,
         :func:`~agent.core.formation.research.step_blocked`) ends the move there."""
-        goal = self.position + np.asarray(move, dtype=np.float64)
+        goal = self.ctx.beliefs.position + np.asarray(move, dtype=np.float64)
         total = float(np.hypot(*move)) or 1.0
-        clearance = 2.0 * self.cfg.radius + 0.1
+        clearance = 2.0 * self.ctx.cfg.radius + 0.1
         self._last_frame = None
         for _ in range(200):
-            leg = next_leg(self.position, self.heading, goal)
+            leg = next_leg(self.ctx.beliefs.position, self.ctx.beliefs.heading, goal)
             if leg is None:
                 return
-            if abs(leg.turn) > self.cfg.rotation_tolerance:
+            if abs(leg.turn) > self.ctx.cfg.rotation_tolerance:
                 self.rotate(leg.turn, PAPER_GAINS, "explore: turn")
             frame = self._last_frame if self._last_frame is not None else self.look(0.0)
             self._last_frame = frame
-            pts, _, _ = self.perception.to_fixed(
-                self.perception.detect(frame.image, frame.yaw), self.heading
+            pts, _, _ = self.ctx.perception.to_fixed(
+                self.ctx.perception.detect(frame.image, frame.yaw), self.ctx.beliefs.heading
             )
-            hit = step_blocked(pts, self.heading, leg.walk, clearance)
+            hit = step_blocked(pts, self.ctx.beliefs.heading, leg.walk, clearance)
             if hit is not None:
                 log.info(
                     "explore: a NAO at %s blocks the next step: move ends at believed %s",
-                    pts[hit].round(2).tolist(), self.position.round(2).tolist(),
+                    pts[hit].round(2).tolist(), self.ctx.beliefs.position.round(2).tolist(),
                 )  # fmt: skip
-                self.status("explore", 1.0, "a NAO ahead: move ended", force=True)
+                self.ctx.status("explore", 1.0, "a NAO ahead: move ended", force=True)
                 return
             self.walk_step(leg.walk)
             done = 1.0 - max(0.0, leg.remaining - abs(leg.walk)) / total
-            self.status("explore", done, f"round {self.record_round}: exploring")
+            self.ctx.status("explore", done, f"round {self.ctx.record_round}: exploring")
         raise AgentFailure("exploration move did not converge in 200 steps")
 
     def _wait_for_searchers(self, searchers: tuple[int, ...]) -> None:
         """Stand still until every searcher published a record or digest of this round."""
-        k = self.record_round
-        deadline = self.clock() + self.cfg.research_timeout
+        k = self.ctx.record_round
+        deadline = self.ctx.clock() + self.ctx.cfg.research_timeout
         text = f"round {k}: waiting for robots {list(searchers)} to explore and search"
-        self.status("explore", 0.0, text, force=True)
+        self.ctx.status("explore", 0.0, text, force=True)
         while True:
             self.pump(0.1)
             pending = []
@@ -948,40 +898,42 @@ class Runner:
                 pending.append(i)
             if not pending:
                 return
-            if self.clock() > deadline:
+            if self.ctx.clock() > deadline:
                 raise AgentFailure(
                     f"robots {pending} did not search again within "
-                    f"{self.cfg.research_timeout:g} s (re-search round {k})"
+                    f"{self.ctx.cfg.research_timeout:g} s (re-search round {k})"
                 )
-            self.status("explore", 0.0, text)
+            self.ctx.status("explore", 0.0, text)
 
     def make_plan(self, decision: Decision[NeighborRecordMsg]) -> Plan:
-        self.status("plan", 0.0, decision.reason)
+        self.ctx.status("plan", 0.0, decision.reason)
         try:
-            plan = self.formation.plan(decision.records, self.cfg.plan_params())
+            plan = self.ctx.formation.plan(decision.records, self.ctx.cfg.plan_params())
         except ValueError as exc:
             raise AgentFailure(f"planning failed on the agreed records: {exc}") from None
-        self.plan = plan
-        self.plan_digest = str(plan.digest)
+        self.ctx.plan = plan
+        self.ctx.plan_digest = str(plan.digest)
         from agent.phases.resume import record_set
 
-        self._served = record_set(self.me, decision)
-        members = {int(r) for r in self.formation.members(plan)}
+        self._served = record_set(self.ctx.me, decision)
+        members = {int(r) for r in self.ctx.formation.members(plan)}
         self.agreed_epochs = {r: e for r, e in self.epochs.items() if r in members}
-        rp = plan.robot(self.me)
-        self.wave = int(rp.wave)
-        self.status("plan", 1.0, f"wave {self.wave}, leader {plan.leader}", force=True)
+        rp = plan.robot(self.ctx.me)
+        self.ctx.wave = int(rp.wave)
+        self.ctx.status("plan", 1.0, f"wave {self.ctx.wave}, leader {plan.leader}", force=True)
         return plan
 
     def wait_for_earlier_waves(self) -> None:
         """Start once every robot of this robot's ``after`` list holds its slot (the plan's
         execution rule, ``agent/core/formation/execution.py``; the leader's list is empty)."""
-        plan = self.plan
-        members = set(self.formation.members(plan))
+        plan = self.ctx.plan
+        members = set(self.ctx.formation.members(plan))
         earlier = sorted(
-            int(i) for i in plan.robot(self.me).after if int(i) in members and int(i) != self.me
+            int(i)
+            for i in plan.robot(self.ctx.me).after
+            if int(i) in members and int(i) != self.ctx.me
         )
-        deadline = self.clock() + self.cfg.wave_timeout
+        deadline = self.ctx.clock() + self.ctx.cfg.wave_timeout
         while True:
             self.pump(0.1)
             pending = []
@@ -998,34 +950,36 @@ class Runner:
                 pending.append(i)
             if not pending:
                 return
-            if self.clock() > deadline:
+            if self.ctx.clock() > deadline:
                 raise AgentFailure(f"robots {pending} of earlier waves did not hold in time")
-            self.status("wait", 0.0, f"waiting for wave(s) of {pending}")
+            self.ctx.status("wait", 0.0, f"waiting for wave(s) of {pending}")
 
     def move(self) -> None:
-        plan = self.plan
+        plan = self.ctx.plan
         self._last_frame = None  # others moved meanwhile: a fresh compass reference
         self._seen = []  # and the NAOs seen before are elsewhere now
-        goals, final_heading = self.formation.goals(plan, self.me)
-        self.final_heading = final_heading
-        self.status("move", 0.0, f"{len(goals)} leg(s)")
+        goals, final_heading = self.ctx.formation.goals(plan, self.ctx.me)
+        self.ctx.final_heading = final_heading
+        self.ctx.status("move", 0.0, f"{len(goals)} leg(s)")
         n = len(goals)
         for k, goal in enumerate(goals):
-            if k < self.leg:
+            if k < self.ctx.leg:
                 continue  # walked before a restart (issue #9)
-            self.leg = k
+            self.ctx.leg = k
 
             def progress(p: float, k: int = k) -> None:
-                self.status("move", (k + p) / n, f"leg {k + 1}/{n}")
+                self.ctx.status("move", (k + p) / n, f"leg {k + 1}/{n}")
 
             self.walk_to(goal, progress)
-        self.rotate(wrap_pi(final_heading - self.heading), PAPER_GAINS, "turn to pyramid axis")
+        self.rotate(
+            wrap_pi(final_heading - self.ctx.beliefs.heading), PAPER_GAINS, "turn to pyramid axis"
+        )
 
     def _all_arrived(self) -> bool:
         members = self.agreement.held_members() if self.agreement else ()
         for i in members:
             peer = self.peers.get(i, Peer())
-            if i != self.me and peer.alive and peer.phase not in ARRIVED:
+            if i != self.ctx.me and peer.alive and peer.phase not in ARRIVED:
                 return False
         return True
 
@@ -1042,12 +996,12 @@ class Runner:
         ``max_correction`` of the planned offset (:meth:`_find_parent`); a NAO farther
         off is another robot or a wrong match, and corrections below 3 cm are not walked.
         """
-        plan = self.plan
-        rp = plan.robot(self.me)
+        plan = self.ctx.plan
+        rp = plan.robot(self.ctx.me)
         parent = int(rp.parent)
-        if parent < 0 or not self.cfg.correct:
+        if parent < 0 or not self.ctx.cfg.correct:
             return
-        deadline = self.clock() + self.cfg.wave_timeout
+        deadline = self.ctx.clock() + self.ctx.cfg.wave_timeout
         while True:
             self.pump(0.1)
             peer = self.peers.get(parent, Peer())
@@ -1056,10 +1010,10 @@ class Runner:
                 return
             if peer.phase in ("done", "march") and self._all_arrived():
                 break
-            if self.clock() > deadline:
+            if self.ctx.clock() > deadline:
                 log.warning("parent %d did not finish in time: no correction", parent)
                 return
-            self.status("hold", 0.5, f"arrived; waiting for parent {parent}")
+            self.ctx.status("hold", 0.5, f"arrived; waiting for parent {parent}")
         expected = np.asarray(plan.robot(parent).target, dtype=np.float64) - np.asarray(
             rp.target, dtype=np.float64
         )
@@ -1075,10 +1029,10 @@ class Runner:
             )  # fmt: skip
             if size < 0.03:
                 break
-            self.status("hold", 0.75, f"correcting {size:.2f} m towards parent {parent}")
+            self.ctx.status("hold", 0.75, f"correcting {size:.2f} m towards parent {parent}")
             self._last_frame = None
-            self.walk_to(self.position + err, lambda p: None, backward_within=0.5)
-            self.rotate(wrap_pi(self.final_heading - self.heading), PAPER_GAINS)
+            self.walk_to(self.ctx.beliefs.position + err, lambda p: None, backward_within=0.5)
+            self.rotate(wrap_pi(self.ctx.final_heading - self.ctx.beliefs.heading), PAPER_GAINS)
 
     def _find_parent(self, expected: np.ndarray, parent: int) -> np.ndarray | None:
         """The parent's measured offset (fixed frame), or None: the head looks at the
@@ -1087,12 +1041,12 @@ class Runner:
         a NAO farther off is another robot, or a wrong match)."""
         bearing = math.atan2(float(expected[1]), float(expected[0]))
         nearest = math.inf
-        for yaw in look_yaws(bearing, self.heading, CAMERA_HFOV / 3.0, HEAD_YAW_LIMIT):
+        for yaw in look_yaws(bearing, self.ctx.beliefs.heading, CAMERA_HFOV / 3.0, HEAD_YAW_LIMIT):
             frame = self.look(yaw)
-            dets = self.perception.detect(frame.image, yaw)
-            pts, _, _ = self.perception.to_fixed(dets, self.heading)
+            dets = self.ctx.perception.detect(frame.image, yaw)
+            pts, _, _ = self.ctx.perception.to_fixed(dets, self.ctx.beliefs.heading)
             pts = np.asarray(pts, dtype=np.float64).reshape(-1, 2)
-            k = match_parent(pts, expected, self.cfg.max_correction)
+            k = match_parent(pts, expected, self.ctx.cfg.max_correction)
             if k is not None:
                 return np.asarray(pts[k], dtype=np.float64)
             if len(pts):
@@ -1100,7 +1054,7 @@ class Runner:
         if math.isfinite(nearest):
             log.warning(
                 "correction: parent %d not seen within %.2f m of %s (nearest NAO %.2f m off)",
-                parent, self.cfg.max_correction, expected.round(3).tolist(), nearest,
+                parent, self.ctx.cfg.max_correction, expected.round(3).tolist(), nearest,
             )  # fmt: skip
         else:
             log.warning("correction: parent %d not seen", parent)
@@ -1109,31 +1063,34 @@ class Runner:
     def hold(self) -> None:
         """Arrived: correct against the parent, march if there is a route, report
         ``done`` and stay until all are."""
-        self.status(
-            "hold", 0.5, f"arrived at believed {self.position.round(2).tolist()}", force=True
+        self.ctx.status(
+            "hold",
+            0.5,
+            f"arrived at believed {self.ctx.beliefs.position.round(2).tolist()}",
+            force=True,
         )
         self.correct()
-        if self.cfg.march is not None:
-            self.status("march", 0.0, "formation held; waiting for the fleet", force=True)
+        if self.ctx.cfg.march is not None:
+            self.ctx.status("march", 0.0, "formation held; waiting for the fleet", force=True)
             self._wait_all(("march", "done", "failed"), "march", "waiting for")
             failed = [i for i, p in self.peers.items() if p.phase == "failed"]
             if failed:
                 raise AgentFailure(f"not marching: robot(s) {sorted(failed)} failed")
-            self.status("march", 0.01, "marching", force=True)
-            marcher = Marcher(self, self.cfg.march, self.final_heading)
+            self.ctx.status("march", 0.01, "marching", force=True)
+            marcher = Marcher(self, self.ctx.cfg.march, self.ctx.final_heading)
             marcher.run()
             log.info(
                 "march done at believed %s; worst seen |e_d| %.1f %%, |e_phi| %.1f°",
-                self.position.round(2).tolist(), 100 * marcher.worst_range,
+                self.ctx.beliefs.position.round(2).tolist(), 100 * marcher.worst_range,
                 math.degrees(marcher.worst_bearing),
             )  # fmt: skip
         self.finish()
 
     def finish(self) -> None:
         """``done``, and stay until every member is."""
-        self.status("done", 1.0, "formation held", force=True)
+        self.ctx.status("done", 1.0, "formation held", force=True)
         self._wait_all(
-            ("done", "failed"), "done", "formation held; waiting for", self.cfg.member_grace
+            ("done", "failed"), "done", "formation held; waiting for", self.ctx.cfg.member_grace
         )
 
     def _wait_all(self, phases: tuple[str, ...], mine: str, text: str, linger: float = 0.0) -> None:
@@ -1145,24 +1102,26 @@ class Runner:
         grace, and a final ``done`` published once into a cut session reaches nobody.
         """
         # the plan's members (a member out of reach has left the live set since)
-        plan = self._plan
-        members = tuple(self.formation.members(plan)) if plan is not None else ()
-        start = self.clock()
-        deadline = start + self.cfg.wave_timeout
-        while self.clock() < deadline:
+        plan = self.ctx.planned
+        members = tuple(self.ctx.formation.members(plan)) if plan is not None else ()
+        start = self.ctx.clock()
+        deadline = start + self.ctx.cfg.wave_timeout
+        while self.ctx.clock() < deadline:
             self.pump(0.2)
-            patient = self.clock() - start < linger
+            patient = self.ctx.clock() - start < linger
             waiting = [
                 i
                 for i in members
-                if i != self.me
+                if i != self.ctx.me
                 and self.peers.get(i, Peer()).phase not in phases
                 and (self.peers.get(i, Peer()).alive or patient)
             ]
-            if not waiting and (self.agreement is None or not self.agreement.due(self.clock())):
+            if not waiting and (self.agreement is None or not self.agreement.due(self.ctx.clock())):
                 return
-            if self.clock() - self._last_status >= HEARTBEAT:
-                self.status(mine, 1.0 if mine == "done" else 0.0, f"{text} {waiting}", force=True)
+            if self.ctx.clock() - self.ctx.last_status >= HEARTBEAT:
+                self.ctx.status(
+                    mine, 1.0 if mine == "done" else 0.0, f"{text} {waiting}", force=True
+                )
         if mine == "march":
             raise AgentFailure("the fleet did not get ready to march in time")
 
@@ -1173,7 +1132,7 @@ class Runner:
             self.start_bus()
             stage, record = self.resume()
             if stage == "search":
-                self.status("start", 0.0, "joined", force=True)
+                self.ctx.status("start", 0.0, "joined", force=True)
                 record = self.localise(self.search())
             if stage in ("search", "agree"):
                 assert record is not None
@@ -1200,39 +1159,39 @@ class Runner:
         except Exception as exc:  # a bug or an input nobody foresaw: stop safely, never crash
             log.error(
                 "robot %d: unexpected %s\n%s",
-                self.me,
+                self.ctx.me,
                 reason(exc),
                 "".join(traceback.format_tb(exc.__traceback__))[-2000:],
             )
             try:
                 return self.fail(f"unexpected {reason(exc)}")
             except Exception as exc2:
-                log.error("robot %d could not publish failed: %s", self.me, reason(exc2))
+                log.error("robot %d could not publish failed: %s", self.ctx.me, reason(exc2))
                 return 1
         finally:
             with contextlib.suppress(BodyError):
-                self.body.stop()
+                self.ctx.body.stop()
 
     def resume(self) -> tuple[str, NeighborRecordMsg | None]:
         """Where to start: ``search`` afresh, or what the journal says (agent/phases/resume.py)."""
-        if self.journal is None:
+        if self.ctx.journal is None:
             return "search", None
         from agent.phases import resume
 
-        st = resume.load(self.journal)
+        st = resume.load(self.ctx.journal)
         if st is None:
             return "search", None
         stage, record = resume.resume(self, st)
-        log.info("robot %d resumes at %s (journaled phase %s)", self.me, stage, st.phase)
+        log.info("robot %d resumes at %s (journaled phase %s)", self.ctx.me, stage, st.phase)
         return stage, record
 
     def fail(self, reason: str) -> int:
         """Stop safely: publish ``failed`` with ``reason``, let it reach the others; 1."""
-        log.error("robot %d failed: %s", self.me, reason)
-        self.status("failed", 0.0, error=reason, force=True)
+        log.error("robot %d failed: %s", self.ctx.me, reason)
+        self.ctx.status("failed", 0.0, error=reason, force=True)
         # let the failure status and any pending digest reach the others
-        end = self.clock() + 1.0
-        while self.clock() < end:
+        end = self.ctx.clock() + 1.0
+        while self.ctx.clock() < end:
             self.pump(0.1)
         return 1
 

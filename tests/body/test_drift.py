@@ -22,7 +22,8 @@ from agent.core.perception.compass import CompassResult
 from agent.net.bus import Bus
 from agent.phases.adapters import FormationAdapter, PerceptionAdapter
 from agent.phases.config import AgentConfig
-from agent.phases.runner import NORTH, Runner, _plausible
+from agent.phases.context import NORTH
+from agent.phases.runner import Runner, _plausible
 from sim.locomotion import NoiseModel
 from sim.scenarios import RobotSpec, Scenario
 from sim.world import World
@@ -74,7 +75,7 @@ def test_a_real_large_drift_is_confirmed_and_believed(
     r.walk_step(0.2)
     true = _true_heading_change(alone, h0)
     assert r.drift_checks == 1
-    assert wrap_pi(r.heading - NORTH) == pytest.approx(true, abs=math.radians(2))
+    assert wrap_pi(r.ctx.beliefs.heading - NORTH) == pytest.approx(true, abs=math.radians(2))
     # after the re-measuring turn the robot faces about where it faced before the step
     assert abs(true) < math.radians(8)
 
@@ -87,7 +88,7 @@ def test_walking_to_a_goal_with_large_drifts_keeps_the_heading(
     x0, y0, h0 = alone.pose(1)
     goal = np.array([0.0, 0.8])  # four steps north
     r.walk_to(goal, lambda p: None)
-    r.rotate(wrap_pi(NORTH - r.heading))
+    r.rotate(wrap_pi(NORTH - r.ctx.beliefs.heading))
     x, y, _ = alone.pose(1)
     assert r.drift_checks >= 2
     assert abs(_true_heading_change(alone, h0)) < math.radians(4)  # faces north again
@@ -121,8 +122,8 @@ def test_a_wrong_match_is_found_out_by_the_re_measurement(
     # compass between the images before the step and after the turn says so
     true = _true_heading_change(alone, h0)
     assert true == pytest.approx(math.radians(30.0), abs=math.radians(2))
-    assert wrap_pi(r.heading - NORTH) == pytest.approx(true, abs=math.radians(2))
-    assert r.position == pytest.approx([0.0, 0.2], abs=0.01)
+    assert wrap_pi(r.ctx.beliefs.heading - NORTH) == pytest.approx(true, abs=math.radians(2))
+    assert r.ctx.beliefs.position == pytest.approx([0.0, 0.2], abs=0.01)
 
 
 class _Unconfirmed(PerceptionAdapter):
@@ -152,6 +153,6 @@ def test_an_unconfirmed_drift_counts_as_none(
     )  # fmt: skip
     r.walk_step(0.2)
     # the behaviour without the re-measurement: no drift, and the turn as commanded
-    assert r.heading == pytest.approx(NORTH + math.radians(30.0), abs=1e-9)
-    assert r.position == pytest.approx([0.0, 0.2], abs=1e-9)
+    assert r.ctx.beliefs.heading == pytest.approx(NORTH + math.radians(30.0), abs=1e-9)
+    assert r.ctx.beliefs.position == pytest.approx([0.0, 0.2], abs=1e-9)
     assert r.drift_checks == 0 and r.compass_failures == 2

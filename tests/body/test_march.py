@@ -78,8 +78,10 @@ def child_runner(
         march=Route(distance=0.6), **settings,  # type: ignore[arg-type]
     )  # fmt: skip
     r = Runner(bus, body, config, perception, FormationAdapter())
-    r.plan = plan
-    r.heading = r.final_heading = wrap_pi(axis)  # fixed frames are world-parallel here
+    r.ctx.plan = plan
+    r.ctx.beliefs.heading = r.ctx.final_heading = wrap_pi(
+        axis
+    )  # fixed frames are world-parallel here
     for rp in plan.robots:
         if rp.robot_id != body.robot_id:
             r.peers[rp.robot_id] = Peer(alive=True, phase="march", seen_alive=True)
@@ -138,7 +140,7 @@ def test_lost_parent_halts_with_the_reason_after_a_head_search(
     with pytest.raises(MarchHalt, match=f"lost sight of parent {child.parent}"):
         Marcher(r, Route(distance=0.6), axis).run()
     assert world.pose(child.robot_id)[2] == pytest.approx(h0)  # searched with the head only
-    assert r.phase == "march"
+    assert r.ctx.phase == "march"
 
 
 def test_a_failed_member_halts_the_march(

@@ -21,7 +21,8 @@ from agent.core.formation.plan import PlanParams
 from agent.net.bus import Bus
 from agent.phases.adapters import FormationAdapter, PerceptionAdapter
 from agent.phases.config import AgentConfig
-from agent.phases.runner import NORTH, Peer, Runner
+from agent.phases.context import NORTH
+from agent.phases.runner import Peer, Runner
 from agent.wire import NeighborRecordMsg
 from sim.world import World
 
@@ -44,8 +45,8 @@ def test_search_sees_every_neighbour_where_it_stands(
         assert d < 0.05 + 0.12 * float(np.hypot(*p)), (j, p, rec.neighbours)
     # the full circle brought the robot back near θ = 0, and it knows its heading
     h = world.pose(1)[2]
-    assert abs(wrap_pi(r.heading - (NORTH + wrap_pi(h - h0)))) < math.radians(3)
-    assert r.compass_gain != 1.0 and 0.9 <= r.compass_gain <= 1.1
+    assert abs(wrap_pi(r.ctx.beliefs.heading - (NORTH + wrap_pi(h - h0)))) < math.radians(3)
+    assert r.ctx.beliefs.compass_gain != 1.0 and 0.9 <= r.ctx.beliefs.compass_gain <= 1.1
 
 
 def test_rotate_turns_by_the_compass(world: World, bus: Bus, perception: PerceptionAdapter) -> None:
@@ -55,7 +56,7 @@ def test_rotate_turns_by_the_compass(world: World, bus: Bus, perception: Percept
     turned = wrap_pi(world.pose(2)[2] - h0)
     assert turned == pytest.approx(math.pi / 2, abs=math.radians(4))
     assert done == pytest.approx(turned, abs=math.radians(3))
-    assert r.heading == pytest.approx(NORTH + done, abs=1e-9)
+    assert r.ctx.beliefs.heading == pytest.approx(NORTH + done, abs=1e-9)
     assert r.compass_failures == 0
 
 
@@ -69,7 +70,7 @@ def test_walk_to_reaches_the_goal_in_steps(
     r.walk_to(goal, seen.append)
     x, y, _ = world.pose(3)
     assert np.hypot(x - x0 - goal[0], y - y0 - goal[1]) < 0.08
-    assert float(np.hypot(*(r.position - goal))) < 0.05  # what it believes
+    assert float(np.hypot(*(r.ctx.beliefs.position - goal))) < 0.05  # what it believes
     assert len(seen) >= 3 and seen[-1] == pytest.approx(1.0, abs=0.05)
     assert world.locomotion.contacts == 0
 
@@ -107,8 +108,10 @@ def test_correct_steps_towards_the_planned_offset_to_the_parent(
     world.set_pose(child.robot_id, x + off[0], y + off[1], h)
 
     r = runner_for(child.robot_id, world, bus, perception)
-    r.plan = plan
-    r.heading = r.final_heading = wrap_pi(axis)  # fixed frames are world-parallel here
+    r.ctx.plan = plan
+    r.ctx.beliefs.heading = r.ctx.final_heading = wrap_pi(
+        axis
+    )  # fixed frames are world-parallel here
     r.peers[parent.robot_id] = Peer(alive=True, phase="done", seen_alive=True)
 
     def offset_error() -> float:

@@ -19,7 +19,8 @@ from agent.core.control.corridor import CorridorParams
 from agent.net.bus import Bus
 from agent.phases.adapters import FormationAdapter, PerceptionAdapter
 from agent.phases.config import AgentConfig
-from agent.phases.runner import AgentFailure, Runner
+from agent.phases.context import AgentFailure
+from agent.phases.runner import Runner
 from sim.nao_model import FOOTPRINT_RADIUS
 from sim.scenarios import RobotSpec, Scenario
 from sim.world import World
@@ -56,13 +57,13 @@ def test_a_nao_in_the_corridor_is_waited_for_then_walked_round(
 ) -> None:
     r = _runner(blocked, bus, perception)
     details: list[str] = []
-    status = r.status
+    status = r.ctx.status
 
     def record(phase: str, progress: float = 0.0, detail: str = "", **kw: object) -> None:
         details.append(detail)
         status(phase, progress, detail, **kw)  # type: ignore[arg-type]
 
-    r.status = record  # type: ignore[method-assign]
+    r.ctx.status = record  # type: ignore[method-assign]
     seps: list[float] = []
     walk_step = r.walk_step
 

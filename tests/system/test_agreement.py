@@ -58,16 +58,16 @@ class Peer:
         self.thread = threading.Thread(target=self._run, daemon=True)
 
     def _run(self) -> None:
-        d = self.runner.agree(record(self.runner.me))
+        d = self.runner.agree(record(self.runner.ctx.me))
         self.decision = d
         if d.kind == "agreed":
             # what the runner does next: a post-agreement status acknowledges the digest
-            self.runner.status("plan", 0.0, force=True)
-            end = self.runner.clock() + 3.0
+            self.runner.ctx.status("plan", 0.0, force=True)
+            end = self.runner.ctx.clock() + 3.0
             while (
-                self.runner.clock() < end
+                self.runner.ctx.clock() < end
                 and self.runner.agreement is not None
-                and (self.runner.agreement.due(self.runner.clock() + 100.0))
+                and (self.runner.agreement.due(self.runner.ctx.clock() + 100.0))
             ):
                 self.runner.pump(0.1)
 
@@ -120,7 +120,7 @@ def test_late_joiner_is_waited_for(endpoint: str) -> None:
     try:
         early[0].thread.join(3.0)
         assert early[0].decision is None  # still waiting for the third member
-        assert "2 of 3" in early[0].runner.agreement.decide(early[0].runner.clock()).reason  # type: ignore[union-attr]
+        assert "2 of 3" in early[0].runner.agreement.decide(early[0].runner.ctx.clock()).reason  # type: ignore[union-attr]
         late = Peer(3, endpoint, 3).start()
         ds = [p.join() for p in [*early, late]]
     finally:
@@ -166,8 +166,8 @@ def test_member_that_dies_stops_everyone_safely(endpoint: str) -> None:
         p.start()
     try:
         # ... and dies once the others know it is a member
-        end = peers[0].runner.clock() + 20
-        while peers[0].runner.clock() < end:
+        end = peers[0].runner.ctx.clock() + 20
+        while peers[0].runner.ctx.clock() < end:
             agr = peers[0].runner.agreement
             if agr is not None and 3 in agr.live:
                 break
@@ -213,8 +213,11 @@ def test_status_is_valid_and_counts_bytes(endpoint: str) -> None:
     p = Peer(5, endpoint, 1)
     got: list[Any] = []
     try:
-        p.runner.status("search", 0.5, "sweep", force=True)
-        got = [p.runner.bus.stats.published_count["status"], p.runner.bus.stats.total_published]
+        p.runner.ctx.status("search", 0.5, "sweep", force=True)
+        got = [
+            p.runner.ctx.bus.stats.published_count["status"],
+            p.runner.ctx.bus.stats.total_published,
+        ]
     finally:
         p.bus.close()
     assert got[0] == 1 and got[1] > 0
