@@ -21,7 +21,8 @@ from agent.net.bus import Bus, BusConfig
 from agent.phases.adapters import FormationAdapter, PerceptionAdapter
 from agent.phases.config import AgentConfig, Route
 from agent.phases.context import AgentFailure
-from agent.phases.runner import Peer, Runner, report_unavailable
+from agent.phases.membership import Peer
+from agent.phases.runner import Runner, report_unavailable
 from agent.wire import NeighborRecordMsg, StatusMsg, canonical_digest
 
 # robots 1, 2, 3 at known world positions; every robot sees every other one
@@ -217,37 +218,37 @@ def test_runner_rejects_config_for_another_robot(perception: PerceptionAdapter) 
 
 def test_a_robot_with_an_empty_after_list_starts_at_once(runner: Runner) -> None:
     after(runner, ())
-    runner.peers[1] = Peer(alive=True, phase="move", seen_alive=True)
+    runner.membership.peers[1] = Peer(alive=True, phase="move", seen_alive=True)
     runner.wait_for_earlier_waves()  # returns although robot 1 still moves
 
 
 def test_waits_pass_when_earlier_waves_hold(runner: Runner) -> None:
     after(runner, (1, 2))
     for i in (1, 2):
-        runner.peers[i] = Peer(alive=True, phase="hold", seen_alive=True)
+        runner.membership.peers[i] = Peer(alive=True, phase="hold", seen_alive=True)
     runner.wait_for_earlier_waves()
 
 
 def test_member_of_an_earlier_wave_that_leaves_stops_us(runner: Runner) -> None:
     after(runner, (1, 2))
-    runner.peers[1] = Peer(alive=False, phase="move", seen_alive=True)
-    runner.peers[2] = Peer(alive=True, phase="hold", seen_alive=True)
+    runner.membership.peers[1] = Peer(alive=False, phase="move", seen_alive=True)
+    runner.membership.peers[2] = Peer(alive=True, phase="hold", seen_alive=True)
     with pytest.raises(AgentFailure, match=r"robot 1 of wave .* left before holding"):
         runner.wait_for_earlier_waves()
 
 
 def test_failed_member_of_an_earlier_wave_stops_us(runner: Runner) -> None:
     after(runner, (1, 2))
-    runner.peers[1] = Peer(alive=True, phase="hold", seen_alive=True)
-    runner.peers[2] = Peer(alive=True, phase="failed", seen_alive=True)
+    runner.membership.peers[1] = Peer(alive=True, phase="hold", seen_alive=True)
+    runner.membership.peers[2] = Peer(alive=True, phase="failed", seen_alive=True)
     with pytest.raises(AgentFailure, match=r"robot 2 of wave .* failed"):
         runner.wait_for_earlier_waves()
 
 
 def test_earlier_wave_that_never_holds_times_out(runner: Runner) -> None:
     after(runner, (1, 2))
-    runner.peers[1] = Peer(alive=True, phase="move", seen_alive=True)
-    runner.peers[2] = Peer(alive=True, phase="hold", seen_alive=True)
+    runner.membership.peers[1] = Peer(alive=True, phase="move", seen_alive=True)
+    runner.membership.peers[2] = Peer(alive=True, phase="hold", seen_alive=True)
     with pytest.raises(AgentFailure, match=r"robots \[1\] of earlier waves did not hold"):
         runner.wait_for_earlier_waves()
 
@@ -262,27 +263,31 @@ def test_messages_whose_sender_does_not_own_the_key_are_dropped(runner: Runner) 
     from agent.net.bus import Event
 
     impostor = NeighborRecordMsg(sender=2, round=0, neighbours=((1.0, 0.0),))
-    runner._handle(Event("msg", "nao/1/record", impostor))
-    assert runner.early_records == {}
-    runner._handle(Event("msg", "nao/2/record", impostor))
-    assert runner.early_records == {}  # 2 is no member yet: no state kept for it
-    runner._handle(Event("alive", "nao/alive/2", robot_id=2))
-    runner._handle(Event("msg", "nao/2/record", impostor))
-    assert runner.early_records == {2: impostor}
+    runner.membership.handle(Event("msg", "nao/1/record", impostor))
+    assert runner.membership.early_records == {}
+    runner.membership.handle(Event("msg", "nao/2/record", impostor))
+    assert runner.membership.early_records == {}  # 2 is no member yet: no state kept for it
+    runner.membership.handle(Event("alive", "nao/alive/2", robot_id=2))
+    runner.membership.handle(Event("msg", "nao/2/record", impostor))
+    assert runner.membership.early_records == {2: impostor}
 
 
 def test_only_the_current_session_of_a_member_counts(runner: Runner) -> None:
     from agent.net.bus import Event
 
-    runner._handle(Event("alive", "nao/alive/2", robot_id=2))
+    runner.membership.handle(Event("alive", "nao/alive/2", robot_id=2))
     new = NeighborRecordMsg(sender=2, round=0, neighbours=((1.0, 0.0),))
     old = NeighborRecordMsg(sender=2, round=3, neighbours=((9.0, 0.0),))
-    runner._handle(Event("msg", "nao/2/record", new, signer="robot-2", epoch=200))
-    runner._handle(Event("msg", "nao/2/record", old, signer="robot-2", epoch=100))
-    assert runner.early_records == {2: new}  # the older session (a replay) is ignored
-    runner.agreed_epochs = {2: 200}
-    runner._handle(Event("msg", "nao/2/status", StatusMsg(sender=2, phase="done"), epoch=300))
-    assert runner.peers[2].phase != "done"  # after agreement only the agreed session counts
+    runner.membership.handle(Event("msg", "nao/2/record", new, signer="robot-2", epoch=200))
+    runner.membership.handle(Event("msg", "nao/2/record", old, signer="robot-2", epoch=100))
+    assert runner.membership.early_records == {2: new}  # the older session (a replay) is ignored
+    runner.membership.agreed_epochs = {2: 200}
+    runner.membership.handle(
+        Event("msg", "nao/2/status", StatusMsg(sender=2, phase="done"), epoch=300)
+    )
+    assert (
+        runner.membership.peers[2].phase != "done"
+    )  # after agreement only the agreed session counts
 
 
 def test_a_vanished_token_is_a_departure_only_after_the_grace_period(
@@ -298,24 +303,30 @@ def test_a_vanished_token_is_a_departure_only_after_the_grace_period(
         r = Runner(
             bus, ZenohBody(bus, 3), cfg, perception, FormationAdapter(), clock=lambda: now[0]
         )
-        r.agreement = Agreement(3, records()[2], 0.0, fleet_size=3, digest_fn=canonical_digest)
+        r.membership.agreement = Agreement(
+            3, records()[2], 0.0, fleet_size=3, digest_fn=canonical_digest
+        )
         for i in (1, 2):
-            r._handle(Event("alive", f"nao/alive/{i}", robot_id=i))
-        r._handle(Event("gone", "nao/alive/1", robot_id=1))
-        r._handle(Event("gone", "nao/alive/2", robot_id=2))
+            r.membership.handle(Event("alive", f"nao/alive/{i}", robot_id=i))
+        r.membership.handle(Event("gone", "nao/alive/1", robot_id=1))
+        r.membership.handle(Event("gone", "nao/alive/2", robot_id=2))
         now[0] = 8.0  # robot 2 is heard from: a heartbeat
-        r._handle(Event("msg", "nao/2/status", StatusMsg(sender=2, phase="agree")))
+        r.membership.handle(Event("msg", "nao/2/status", StatusMsg(sender=2, phase="agree")))
         now[0] = 9.9
-        r.pump()
-        assert r.peers[1].alive and r.peers[2].alive and r.agreement.left == set()
+        r.membership.pump()
+        assert (
+            r.membership.peers[1].alive
+            and r.membership.peers[2].alive
+            and r.membership.agreement.left == set()
+        )
         now[0] = 10.0
-        r.pump()
-        assert not r.peers[1].alive and r.agreement.left == {1}
-        assert r.peers[2].alive  # its grace runs from its last status
-        r._handle(Event("alive", "nao/alive/2", robot_id=2))  # reconnected
+        r.membership.pump()
+        assert not r.membership.peers[1].alive and r.membership.agreement.left == {1}
+        assert r.membership.peers[2].alive  # its grace runs from its last status
+        r.membership.handle(Event("alive", "nao/alive/2", robot_id=2))  # reconnected
         now[0] = 30.0
-        r.pump()
-        assert r.peers[2].alive and r.agreement.left == {1}
+        r.membership.pump()
+        assert r.membership.peers[2].alive and r.membership.agreement.left == {1}
     finally:
         bus.close()
 
@@ -346,18 +357,18 @@ def test_research_stops_the_fleet_after_the_last_round(runner: Runner) -> None:
 
 def test_a_waiting_robot_stops_when_a_searcher_failed(runner: Runner) -> None:
     runner.ctx.record_round = 1
-    runner.peers[1] = Peer(alive=True, phase="failed", seen_alive=True)
+    runner.membership.peers[1] = Peer(alive=True, phase="failed", seen_alive=True)
     with pytest.raises(AgentFailure, match="robot 1 failed in re-search round 1"):
         runner._wait_for_searchers((1,))
-    runner.peers[1] = Peer(alive=False, phase="explore", seen_alive=True)
+    runner.membership.peers[1] = Peer(alive=False, phase="explore", seen_alive=True)
     with pytest.raises(AgentFailure, match="robot 1 left in re-search round 1"):
         runner._wait_for_searchers((1,))
-    runner.peers[1] = Peer(alive=True, phase="explore", seen_alive=True)
+    runner.membership.peers[1] = Peer(alive=True, phase="explore", seen_alive=True)
     runner.ctx.cfg = dataclasses.replace(runner.ctx.cfg, research_timeout=0.3)
     with pytest.raises(AgentFailure, match=r"robots \[1\] did not search again within 0.3 s"):
         runner._wait_for_searchers((1,))
     # a record of the round from the searcher ends the wait
-    runner.early_records[1] = NeighborRecordMsg(sender=1, round=1, neighbours=())
+    runner.membership.early_records[1] = NeighborRecordMsg(sender=1, round=1, neighbours=())
     runner._wait_for_searchers((1,))
 
 
@@ -386,7 +397,7 @@ def _lingering(perception: PerceptionAdapter, peers: dict[int, Peer]) -> tuple[R
     cfg = AgentConfig(robot_id=3, fleet_size=3, wave_timeout=60.0, member_grace=10.0)
     r = Runner(bus, ZenohBody(bus, 3), cfg, perception, FormationAdapter(), clock=clock)
     r.ctx.plan = r.ctx.formation.plan(records(), PlanParams())
-    r.peers.update(peers)
+    r.membership.peers.update(peers)
     return r, bus
 
 
@@ -443,11 +454,11 @@ def _waiting(perception: PerceptionAdapter) -> tuple[Runner, Bus]:
     bus = Bus(BusConfig(multicast_scouting=False))
     r = Runner(bus, ZenohBody(bus, 3), AgentConfig(robot_id=3, fleet_size=3), perception,
                FormationAdapter())  # fmt: skip
-    r.agreement = Agreement(3, records()[2], 0.0, fleet_size=3,
+    r.membership.agreement = Agreement(3, records()[2], 0.0, fleet_size=3,
                             params=params_digest(r.ctx.cfg.agreed_params()), digest_fn=canonical_digest)  # fmt: skip
     for i in (1, 2):
-        r._handle(Event("alive", f"nao/alive/{i}", robot_id=i))
-        r.agreement.on_record(records()[i - 1], 0.0)
+        r.membership.handle(Event("alive", f"nao/alive/{i}", robot_id=i))
+        r.membership.agreement.on_record(records()[i - 1], 0.0)
     return r, bus
 
 
@@ -455,11 +466,11 @@ def _claim(r: Runner, i: int, plan_digest: str, params: str) -> None:
     from agent.net.bus import Event
     from agent.wire import DigestMsg
 
-    assert r.agreement is not None
-    r.agreement.on_digest(
+    assert r.membership.agreement is not None
+    r.membership.agreement.on_digest(
         DigestMsg(sender=i, round=0, digest="0" * 64, members=(i,), params=params), 0.0
     )
-    r._handle(Event("msg", f"nao/{i}/status", StatusMsg(sender=i, phase="move",
+    r.membership.handle(Event("msg", f"nao/{i}/status", StatusMsg(sender=i, phase="move",
                                                         plan_digest=plan_digest)))  # fmt: skip
 
 
@@ -468,7 +479,7 @@ def test_a_member_moving_on_the_plan_of_our_records_is_adopted(
 ) -> None:
     r, bus = _waiting(perception)
     try:
-        agr = r.agreement
+        agr = r.membership.agreement
         assert agr is not None and agr.decide(0.0).kind == "wait"
         assert r._adopt_plan(agr) is None  # nobody has a plan yet
         ours = str(r.ctx.formation.plan(records(), r.ctx.cfg.plan_params()).digest)
@@ -487,7 +498,7 @@ def test_a_member_on_another_plan_or_with_other_params_is_not_adopted(
 ) -> None:
     r, bus = _waiting(perception)
     try:
-        agr = r.agreement
+        agr = r.membership.agreement
         assert agr is not None
         ours = str(r.ctx.formation.plan(records(), r.ctx.cfg.plan_params()).digest)
         _claim(r, 2, "f" * 64 if other == "plan" else ours,

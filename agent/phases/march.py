@@ -121,7 +121,7 @@ class Marcher:
     def check_fleet(self) -> None:
         """Halt if a member failed or left (the fleet halts cleanly)."""
         for i in self.members:
-            peer = self.r.peers.get(i)
+            peer = self.r.membership.peers.get(i)
             if peer is None:
                 continue
             if peer.phase == "failed":
@@ -133,7 +133,7 @@ class Marcher:
         return [
             i
             for i in self.members
-            if (p := self.r.peers.get(i)) is not None
+            if (p := self.r.membership.peers.get(i)) is not None
             and p.phase == "march"
             and p.detail.startswith(LOST)
         ]
@@ -161,12 +161,12 @@ class Marcher:
         goal = np.asarray(rp.target, dtype=np.float64).reshape(2) + self.v - start
         origin = r.ctx.beliefs.position.copy()
         for _ in range(int(self.length / r.ctx.cfg.march_step) * 4 + 200):
-            r.pump(0.0)
+            r.membership.pump(0.0)
             self.check_fleet()
             lost = self.lost_followers()
             if lost:
                 r.ctx.status("march", self._progress(origin), f"waiting: {lost} lost their parent")
-                r.pump(0.2)
+                r.membership.pump(0.2)
                 continue
             leg = next_leg(
                 r.ctx.beliefs.position,
@@ -183,14 +183,14 @@ class Marcher:
             walk = safe_walk(leg.walk, r.ctx.beliefs.heading, self._others_ahead(), CLEARANCE)
             if walk == 0.0:
                 r.ctx.status("march", self._progress(origin), "a robot ahead: waiting")
-                r.pump(0.5)
+                r.membership.pump(0.5)
                 continue
             t0 = r.ctx.clock()
             r.walk_step(walk)
             r.ctx.status("march", self._progress(origin), f"leading: {leg.remaining:.2f} m to go")
             rest = r.ctx.clock() + r.ctx.cfg.march_pause * (r.ctx.clock() - t0)
             while r.ctx.clock() < rest:
-                r.pump(min(0.2, max(0.0, rest - r.ctx.clock())))
+                r.membership.pump(min(0.2, max(0.0, rest - r.ctx.clock())))
         raise MarchHalt("the leader did not reach the end of the route")
 
     def _others_ahead(self) -> np.ndarray:
@@ -228,7 +228,7 @@ class Marcher:
         moves = int(self.length / r.ctx.cfg.march_step) * 6 + 120  # steps allowed
         deadline = r.ctx.clock() + r.ctx.cfg.wave_timeout  # waiting for the parent, bounded
         while moves > 0 and r.ctx.clock() < deadline:
-            r.pump(0.0)
+            r.membership.pump(0.0)
             self.check_fleet()
             seen = self.sight((predicted, offset), GATE, (0.0,))
             if seen is None:
@@ -248,7 +248,7 @@ class Marcher:
             still = still + 1 if cmd.size == 0.0 else 0
             if still <= 1:
                 still_since = r.ctx.clock()
-            parent_done = getattr(r.peers.get(parent), "phase", "") == "done"
+            parent_done = getattr(r.membership.peers.get(parent), "phase", "") == "done"
             quiet = r.ctx.clock() - still_since >= QUIET and travelled >= self.length - margin
             if still >= 2 and (parent_done or quiet):
                 log.info("march over: travelled %.2f m, parent at %.2f m %+.1f°", travelled,
@@ -257,7 +257,7 @@ class Marcher:
             ahead = np.asarray(keeper.advance)  # where the parent goes meanwhile
             if cmd.size == 0.0:
                 predicted = rel + ahead
-                r.pump(0.3)  # the parent has not moved: give it time to
+                r.membership.pump(0.3)  # the parent has not moved: give it time to
                 continue
             turn, _ = unicycle_step(cmd.dx, cmd.dy, r.ctx.beliefs.heading)
             # keep the body within MAX_OFF of the march direction: the parent stays
@@ -338,7 +338,7 @@ class Marcher:
             if seen is not None:
                 r.ctx.status("march", 0.0, f"reacquired parent {parent}", force=True)
                 return seen
-            r.pump(1.0)  # the fleet stops for us meanwhile
+            r.membership.pump(1.0)  # the fleet stops for us meanwhile
             self.check_fleet()
         raise MarchHalt(
             f"lost sight of parent {parent} on the march: not found in "

@@ -37,21 +37,20 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from agent.body.zenoh_world import retry_no_route
-from agent.core.agreement import Agreement, Decision, params_digest
+from agent.core.agreement import Agreement, params_digest
 from agent.core.control import PAPER_GAINS, advance, wrap_pi
 from agent.net.bus import Bus, BusError
-from agent.phases.context import AgentFailure
+from agent.phases.context import NORTH, AgentFailure
 from agent.phases.journal import Journal, JournalError, JournalState
+from agent.phases.record_sets import records_of
 from agent.wire import (
     KEY_RECORDS_ALL,
-    Message,
     NeighborRecordMsg,
     ProtocolError,
     RecordSetReply,
     RecordSetRequest,
     canonical_digest,
     decode,
-    encode,
 )
 
 if TYPE_CHECKING:
@@ -59,7 +58,6 @@ if TYPE_CHECKING:
 
 log = logging.getLogger("agent.phases.resume")
 
-NORTH = math.pi / 2
 #: s a restarted agent keeps asking the fleet for its agreed records.
 FETCH_TIMEOUT = 60.0
 #: s one record-set query waits for replies.
@@ -72,42 +70,7 @@ REORIENT_MIN = math.radians(5.0)
 AGREED_STAGES = {"plan": "wait", "wait": "wait", "move": "move", "hold": "hold", "done": "done"}
 
 
-# --------------------------------------------------------------------------- record sets
-
-
-def record_set(me: int, decision: Decision[NeighborRecordMsg]) -> RecordSetReply:
-    """What this agent serves once agreed: the records of ``decision`` in wire form."""
-    return RecordSetReply(
-        sender=me, digest=decision.digest, records=tuple(encode(r) for r in decision.records)
-    )
-
-
-def answer(served: RecordSetReply | None, request: Message) -> RecordSetReply | None:
-    """The reply to a record-set query: the set when it is the one asked for (or any was
-    asked for: an empty digest), else none."""
-    if not isinstance(request, RecordSetRequest) or served is None:
-        return None
-    return served if request.digest in ("", served.digest) else None
-
-
-def records_of(
-    reply: RecordSetReply, digest: str, members: Sequence[int]
-) -> tuple[NeighborRecordMsg, ...]:
-    """The records of ``reply`` once checked: the digest asked for, records that decode,
-    one per member, sorted by sender, hashing to ``digest``. ``ValueError`` otherwise."""
-    if reply.digest != digest:
-        raise ValueError(f"record set {reply.digest[:12]} is not the one asked for")
-    try:
-        recs = tuple(decode(r, NeighborRecordMsg) for r in reply.records)
-    except ProtocolError as exc:
-        raise ValueError(f"record set from robot {reply.sender}: {exc}") from None
-    senders = [r.sender for r in recs]
-    if senders != sorted(set(senders)) or tuple(senders) != tuple(members):
-        raise ValueError(f"record set covers {senders}, the agreement {list(members)}")
-    got = canonical_digest(recs)
-    if got != digest:
-        raise ValueError(f"record set hashes to {got[:12]}, not {digest[:12]}")
-    return recs
+# --------------------------------------------------------------------------- asking the fleet
 
 
 def agreed_by_others(bus: Bus, own: NeighborRecordMsg) -> tuple[str, tuple[int, ...]] | None:
@@ -174,7 +137,7 @@ def fetch_records(
             return records_of(rep, digest, members)
         except BusError as exc:
             last = str(exc)
-        runner.pump(0.5)  # keep hearing the fleet while nobody answers
+        runner.membership.pump(0.5)  # keep hearing the fleet while nobody answers
     raise ValueError(f"nobody served the agreed records {digest[:12]} in {timeout:g} s: {last}")
 
 
@@ -256,7 +219,7 @@ def _resume(
         params=params_digest(runner.ctx.cfg.agreed_params()),
         backoff_max=runner.ctx.cfg.backoff_max,
     )
-    runner.agreement = agr
+    runner.membership.agreement = agr
     decision = agr.decide(runner.ctx.clock())
     runner.make_plan(decision)
     if st.plan_digest and runner.ctx.plan_digest != st.plan_digest:
@@ -316,7 +279,7 @@ def remeasure_heading(runner: Runner, journal: Journal | None) -> None:
 
 def journal_state(runner: Runner, command: str = "", value: float = 0.0) -> JournalState:
     """The runner's state to journal now (with the command about to be sent)."""
-    agr = runner.agreement
+    agr = runner.membership.agreement
     decided = agr.decide(runner.ctx.clock()) if agr is not None and agr.agreed else None
     record = agr.records.get(runner.ctx.me) if agr is not None else runner.ctx.own_record
     return JournalState(

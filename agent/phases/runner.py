@@ -42,13 +42,11 @@ import math
 import time
 import traceback
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
-from typing import TypeVar
 
 import numpy as np
 
 from agent.body.base import Body, BodyError, Frame, MotionResult
-from agent.core.agreement import Agreement, Decision, Grace, params_digest
+from agent.core.agreement import Agreement, Decision, params_digest
 from agent.core.control import (
     PAPER_GAINS,
     STEP_GAINS,
@@ -76,38 +74,26 @@ from agent.core.formation.research import step_blocked
 from agent.core.nao import CAMERA_HFOV, HEAD_YAW_LIMIT
 from agent.core.perception.detector import Detection
 from agent.core.perception.obstacles import ObstacleDetection
-from agent.net.bus import Bus, Event
+from agent.net.bus import Bus
 from agent.phases.config import AgentConfig
 from agent.phases.context import NORTH, AgentFailure, Context
 from agent.phases.march import Marcher, MarchHalt
+from agent.phases.membership import Membership
+from agent.phases.record_sets import record_set
 from agent.phases.seams import Formation, Perception, Sightings
 from agent.wire import (
-    KEY_ALIVE_ALL,
-    KEY_DIGEST_ALL,
-    KEY_RECORD_ALL,
-    KEY_STATUS_ALL,
-    DigestMsg,
     NeighborRecordMsg,
-    RecordSetReply,
     StatusMsg,
     canonical_digest,
-    id_from_key,
     key_alive,
-    key_digest,
-    key_record,
-    key_records,
     key_status,
     reason,
 )
 
 log = logging.getLogger("agent.phases.runner")
 
-ARRIVED = ("hold", "march", "done", "failed")  # phases of a member that has arrived
 MAX_TURN_STEP = math.radians(40.0)  # largest turn taken to re-measure a step's drift
 HEARTBEAT = 3.0  # s between statuses while waiting
-
-
-_Round = TypeVar("_Round", NeighborRecordMsg, DigestMsg)
 
 
 def _plausible(measured: float, commanded: float, walking: bool) -> bool:
@@ -119,23 +105,6 @@ def _plausible(measured: float, commanded: float, walking: bool) -> bool:
     """
     limit = math.radians(20.0 if walking else 10.0)
     return abs(measured - commanded) <= max(limit, 0.6 * abs(commanded))
-
-
-def _keep_newest(store: dict[int, _Round], msg: _Round) -> None:
-    """Keep ``msg`` for its sender unless a message of a newer round is held."""
-    old = store.get(msg.sender)
-    if old is None or old.round <= msg.round:
-        store[msg.sender] = msg
-
-
-@dataclass
-class Peer:
-    alive: bool = False
-    phase: str = ""
-    detail: str = ""
-    wave: int = -1
-    plan_digest: str = ""
-    seen_alive: bool = False
 
 
 class Runner:
@@ -159,16 +128,7 @@ class Runner:
             raise ValueError(f"robot {body.robot_id} driven with config for {config.robot_id}")
         self.ctx = Context(bus, body, config, perception, formation, clock)
         self.ctx.journal_hook = self._journal
-        self.peers: dict[int, Peer] = {}
-        self.grace = Grace(config.member_grace)  # a vanished token is gone only after it
-        self.early_records: dict[int, NeighborRecordMsg] = {}
-        self.epochs: dict[int, int] = {}  # newest session (epoch) heard per sender
-        self.agreed_epochs: dict[int, int] = {}  # the sessions the agreement was made with
-        self.early_digests: dict[int, DigestMsg] = {}
-        self.agreement: Agreement[NeighborRecordMsg] | None = None
-        self.retired: list[
-            Agreement[NeighborRecordMsg]
-        ] = []  # agreed earlier rounds, still acknowledged
+        self.membership = Membership(self.ctx)
         self.obstacle_sightings: list[np.ndarray] = []  # fixed frame, one array per image
         self._last_frame: Frame | None = None
         self.compass_failures = 0
@@ -181,18 +141,8 @@ class Runner:
         self._seen: list[tuple[np.ndarray, int]] = []  # (NAO seen, fixed frame; at step)
         # (records held, digest of their plan) for adopting a member's plan (_adopt_plan)
         self._candidate: tuple[tuple[NeighborRecordMsg, ...], str] | None = None
-        self._served: RecordSetReply | None = None  # the agreed record set we serve
 
     # ================================================================= plumbing
-
-    def start_bus(self) -> None:
-        for key in (KEY_RECORD_ALL, KEY_DIGEST_ALL, KEY_STATUS_ALL):
-            self.ctx.bus.subscribe(key)
-        self.ctx.bus.watch_alive(KEY_ALIVE_ALL)
-        self.ctx.bus.declare_alive(key_alive(self.ctx.me))
-        from agent.phases.resume import answer
-
-        self.ctx.bus.serve(key_records(self.ctx.me), lambda req: answer(self._served, req))
 
     def _journal(self, command: str = "", value: float = 0.0) -> None:
         """Write the journal (issue #9), before ``command`` is sent; a failing disk is
@@ -207,138 +157,11 @@ class Runner:
             log.error("journal write failed, journal given up: %s", reason(exc))
             self.ctx.journal = None
 
-    def pump(self, timeout: float = 0.0) -> None:
-        """Handle what arrived; (re-)publish what the agreement says is due."""
-        for ev in self.ctx.bus.drain(timeout):
-            try:
-                self._handle(ev)
-            except Exception as exc:  # one bad event is counted and skipped, never fatal
-                self.ctx.bus.guard.reject(f"event on {ev.key}", exc)
-        self._expire_members()
-        for agr in self._agreements():
-            now = self.ctx.clock()
-            due = agr.due(now)
-            for what in due:
-                if what == "record":
-                    self.ctx.bus.publish(
-                        key_record(self.ctx.me), agr.records[self.ctx.me], "record"
-                    )
-                else:
-                    self.ctx.bus.publish(
-                        key_digest(self.ctx.me), DigestMsg(**asdict(agr.digest_note())), "digest"
-                    )
-            agr.sent(due, now)
-
-    def _agreements(self) -> list[Agreement[NeighborRecordMsg]]:
-        """The current agreement and the agreed ones of earlier re-search rounds (their
-        digests are re-published until every member has moved on)."""
-        return [*self.retired, *([self.agreement] if self.agreement is not None else [])]
-
-    def _handle(self, ev: Event) -> None:
-        now = self.ctx.clock()
-        agr = self.agreement
-        if ev.kind in ("alive", "gone"):
-            peer = self.peers.setdefault(ev.robot_id, Peer())
-            self.grace.token(ev.robot_id, ev.kind == "alive", now)
-            if ev.kind == "alive":  # a vanished token counts as gone in _expire_members
-                peer.alive = peer.seen_alive = True
-                if agr is not None and ev.robot_id != self.ctx.me:
-                    agr.member_joined(ev.robot_id, now)
-            return
-        msg = ev.msg
-        if not isinstance(msg, NeighborRecordMsg | DigestMsg | StatusMsg):
-            return
-        try:
-            key_id = id_from_key(ev.key)
-        except ValueError:
-            key_id = None
-        if key_id != msg.sender:
-            log.warning(
-                "dropped %s on %s: sender %s does not own the key", msg.TAG, ev.key, msg.sender
-            )
-            return
-        if not self._current_session(ev, msg.sender):
-            return
-        self.grace.heard(msg.sender, now)  # a member's publication is a heartbeat
-        if isinstance(msg, NeighborRecordMsg | DigestMsg):
-            for a in self._agreements():
-                if isinstance(msg, NeighborRecordMsg):
-                    a.on_record(msg, now)
-                else:
-                    a.on_digest(msg, now)
-            # kept for the next round: before our agreement, or newer than its round
-            early = agr is None or msg.round > agr.round
-            if early and msg.sender != self.ctx.me and self._member(msg.sender):
-                if isinstance(msg, NeighborRecordMsg):
-                    _keep_newest(self.early_records, msg)
-                else:
-                    _keep_newest(self.early_digests, msg)
-        elif isinstance(msg, StatusMsg):
-            member = self.peers.get(msg.sender)
-            if msg.sender == self.ctx.me or member is None or not member.seen_alive:
-                return  # per-sender state only for members (their token came first)
-            member.phase, member.wave, member.plan_digest = msg.phase, msg.wave, msg.plan_digest
-            member.detail = msg.detail
-            for a in self._agreements():
-                a.on_peer_phase(msg.sender, msg.phase)
-
-    def _expire_members(self) -> None:
-        """Members whose token vanished and who stayed silent for the grace period are gone."""
-        now = self.ctx.clock()
-        for rid in self.grace.expired(now):
-            peer = self.peers.get(rid)
-            if peer is None or not peer.alive:
-                continue
-            peer.alive = False
-            log.warning("robot %d is gone (token lost, silent for %g s)", rid, self.grace.grace)
-            if self.agreement is not None and rid != self.ctx.me:
-                self.agreement.member_left(rid, now)
-
-    def _proves_agreement(self, msg: object) -> bool:
-        """Whether ``msg`` shows the record-set digest (or plan digest) we agreed on."""
-        agr = self.agreement
-        if agr is None or not agr.agreed:
-            return False
-        if isinstance(msg, DigestMsg):
-            members, digest = agr.digest()
-            return msg.digest == digest and msg.members == members and msg.params == agr.params
-        return (
-            isinstance(msg, StatusMsg)
-            and bool(self.ctx.plan_digest)
-            and (msg.plan_digest == self.ctx.plan_digest)
-        )
-
-    def _member(self, rid: int) -> bool:
-        peer = self.peers.get(rid)
-        return peer is not None and peer.alive
-
-    def _current_session(self, ev: Event, sender: int) -> bool:
-        """Whether ``ev`` comes from the member's current session (DESIGN.md §8).
-
-        Secure buses tag each message with its signer's epoch (the sending process's
-        start). A message from an older session of a member than one already heard is
-        stale (a replay, or a process since replaced); once the fleet has agreed, only
-        the session whose record was agreed counts. Insecure buses carry no epoch.
-        """
-        if ev.epoch < 0:
-            return True
-        pinned = self.agreed_epochs.get(sender)
-        if pinned is not None:
-            if ev.epoch > pinned and self._proves_agreement(ev.msg):
-                # a member restarted after agreeing (issue #9): its new session counts
-                log.info("robot %d resumed in a new session with the agreed digest", sender)
-                self.agreed_epochs[sender] = self.epochs[sender] = ev.epoch
-            return ev.epoch == self.agreed_epochs[sender]
-        if ev.epoch < self.epochs.get(sender, -1):
-            return False
-        self.epochs[sender] = ev.epoch
-        return True
-
     # ================================================================= motion
 
     def look(self, yaw: float = 0.0) -> Frame:
         frame = self.ctx.body.camera(yaw)
-        self.pump()
+        self.membership.pump()
         return frame
 
     def rotate(self, angle: float, gains: PidGains = PAPER_GAINS, label: str = "") -> float:
@@ -351,7 +174,7 @@ class Runner:
             u = rc.next_step()
             self._journal("turn", u)
             rep = self.ctx.body.turn(u)
-            self.pump()
+            self.membership.pump()
             after = self.look(0.0)
             measured = self._compass(before, after, u)
             rc.record(measured)
@@ -426,7 +249,7 @@ class Runner:
         behaviour without this check)."""
         u = float(np.clip(-suspect, -MAX_TURN_STEP, MAX_TURN_STEP))
         self.ctx.body.turn(u)
-        self.pump()
+        self.membership.pump()
         after = self.look(0.0)
         res = self.ctx.perception.measure_walk(before.image, after.image)
         self.compass_uses += 1
@@ -542,7 +365,7 @@ class Runner:
                 self.ctx.phase, detail=f"waiting: NAO ahead at {where}", force=waited == 0
             )
             self.waits += 1
-            self.pump(cp.poll)
+            self.membership.pump(cp.poll)
             if waited and not confirmed(v.blockers[0], seen, cp):
                 self._recheck(v.blockers[0], seen, where)
             self._last_frame = None  # look again
@@ -605,7 +428,7 @@ class Runner:
         self._journal("walk", distance)
         rep = self.ctx.body.walk(distance)
         self.steps += 1
-        self.pump()
+        self.membership.pump()
         after = self.look(0.0)
         drift, suspect = self._read(before, after, 0.0, walking=True)
         turned = 0.0
@@ -739,26 +562,10 @@ class Runner:
             digest_fn=canonical_digest,
             params=params_digest(self.ctx.cfg.agreed_params()),
         )
-        for rid, peer in sorted(self.peers.items()):
-            if rid != self.ctx.me and peer.seen_alive:
-                agr.member_joined(rid, now)
-        for msg in self.early_records.values():
-            agr.on_record(msg, now)
-        for dmsg in self.early_digests.values():
-            agr.on_digest(dmsg, now)
-        for rid, peer in sorted(self.peers.items()):
-            if rid != self.ctx.me and peer.seen_alive and not peer.alive:
-                # it was a member and left while we searched: a departure too (with its
-                # record held, one it may return from, agent.core.agreement)
-                agr.member_left(rid, now)
-        self.early_records = {i: m for i, m in self.early_records.items() if m.round > agr.round}
-        self.early_digests = {i: m for i, m in self.early_digests.items() if m.round > agr.round}
-        for rid, peer in self.peers.items():
-            agr.on_peer_phase(rid, peer.phase)
-        self.agreement = agr
+        self.membership.open_round(agr)
         self.ctx.status("exchange", 0.0, "publishing record")
         while True:
-            self.pump(0.05)
+            self.membership.pump(0.05)
             d = agr.decide(self.ctx.clock())
             if d.kind == "wait":
                 d = self._adopt_plan(agr) or d
@@ -784,11 +591,11 @@ class Runner:
         if self.ctx.cfg.fleet_size is None or len(agr.records) != self.ctx.cfg.fleet_size:
             return None
         claims = {
-            i: self.peers[i].plan_digest
+            i: self.membership.peers[i].plan_digest
             for i in sorted(agr.records)
             if i != self.ctx.me
-            and i in self.peers
-            and self.peers[i].plan_digest
+            and i in self.membership.peers
+            and self.membership.peers[i].plan_digest
             and agr.params_of.get(i) == agr.params
         }
         if not claims:
@@ -833,9 +640,7 @@ class Runner:
             )
         log.info("re-search round %d: %s", k, verdict.reason)
         self.ctx.record_round = k
-        if self.agreement is not None:
-            self.retired.append(self.agreement)
-        self.agreement = None
+        self.membership.retire()
         if self.ctx.me in verdict.searchers:
             self.ctx.status("explore", 0.0, f"round {k}: {verdict.reason}", force=True)
             self.explore(verdict.move(self.ctx.me))
@@ -884,13 +689,16 @@ class Runner:
         text = f"round {k}: waiting for robots {list(searchers)} to explore and search"
         self.ctx.status("explore", 0.0, text, force=True)
         while True:
-            self.pump(0.1)
+            self.membership.pump(0.1)
             pending = []
             for i in searchers:
-                rec, dig = self.early_records.get(i), self.early_digests.get(i)
+                rec, dig = (
+                    self.membership.early_records.get(i),
+                    self.membership.early_digests.get(i),
+                )
                 if (rec is not None and rec.round >= k) or (dig is not None and dig.round >= k):
                     continue
-                peer = self.peers.get(i, Peer())
+                peer = self.membership.peer(i)
                 if peer.phase == "failed":
                     raise AgentFailure(f"robot {i} failed in re-search round {k}")
                 if peer.seen_alive and not peer.alive:
@@ -913,11 +721,8 @@ class Runner:
             raise AgentFailure(f"planning failed on the agreed records: {exc}") from None
         self.ctx.plan = plan
         self.ctx.plan_digest = str(plan.digest)
-        from agent.phases.resume import record_set
-
-        self._served = record_set(self.ctx.me, decision)
-        members = {int(r) for r in self.ctx.formation.members(plan)}
-        self.agreed_epochs = {r: e for r, e in self.epochs.items() if r in members}
+        self.membership.served = record_set(self.ctx.me, decision)
+        self.membership.pin_sessions({int(r) for r in self.ctx.formation.members(plan)})
         rp = plan.robot(self.ctx.me)
         self.ctx.wave = int(rp.wave)
         self.ctx.status("plan", 1.0, f"wave {self.ctx.wave}, leader {plan.leader}", force=True)
@@ -935,10 +740,10 @@ class Runner:
         )
         deadline = self.ctx.clock() + self.ctx.cfg.wave_timeout
         while True:
-            self.pump(0.1)
+            self.membership.pump(0.1)
             pending = []
             for i in earlier:
-                peer = self.peers.get(i, Peer())
+                peer = self.membership.peer(i)
                 if peer.phase in ("hold", "march", "done"):
                     continue
                 if peer.seen_alive and not peer.alive:
@@ -975,14 +780,6 @@ class Runner:
             wrap_pi(final_heading - self.ctx.beliefs.heading), PAPER_GAINS, "turn to pyramid axis"
         )
 
-    def _all_arrived(self) -> bool:
-        members = self.agreement.held_members() if self.agreement else ()
-        for i in members:
-            peer = self.peers.get(i, Peer())
-            if i != self.ctx.me and peer.alive and peer.phase not in ARRIVED:
-                return False
-        return True
-
     def correct(self) -> None:
         """Visual alignment to the parent, once everyone has arrived (an addition).
 
@@ -1003,12 +800,12 @@ class Runner:
             return
         deadline = self.ctx.clock() + self.ctx.cfg.wave_timeout
         while True:
-            self.pump(0.1)
-            peer = self.peers.get(parent, Peer())
+            self.membership.pump(0.1)
+            peer = self.membership.peer(parent)
             if peer.phase == "failed" or (peer.seen_alive and not peer.alive):
                 log.warning("parent %d is gone: no correction", parent)
                 return
-            if peer.phase in ("done", "march") and self._all_arrived():
+            if peer.phase in ("done", "march") and self.membership.all_arrived():
                 break
             if self.ctx.clock() > deadline:
                 log.warning("parent %d did not finish in time: no correction", parent)
@@ -1073,7 +870,7 @@ class Runner:
         if self.ctx.cfg.march is not None:
             self.ctx.status("march", 0.0, "formation held; waiting for the fleet", force=True)
             self._wait_all(("march", "done", "failed"), "march", "waiting for")
-            failed = [i for i, p in self.peers.items() if p.phase == "failed"]
+            failed = [i for i, p in self.membership.peers.items() if p.phase == "failed"]
             if failed:
                 raise AgentFailure(f"not marching: robot(s) {sorted(failed)} failed")
             self.ctx.status("march", 0.01, "marching", force=True)
@@ -1107,16 +904,19 @@ class Runner:
         start = self.ctx.clock()
         deadline = start + self.ctx.cfg.wave_timeout
         while self.ctx.clock() < deadline:
-            self.pump(0.2)
+            self.membership.pump(0.2)
             patient = self.ctx.clock() - start < linger
             waiting = [
                 i
                 for i in members
                 if i != self.ctx.me
-                and self.peers.get(i, Peer()).phase not in phases
-                and (self.peers.get(i, Peer()).alive or patient)
+                and self.membership.peer(i).phase not in phases
+                and (self.membership.peer(i).alive or patient)
             ]
-            if not waiting and (self.agreement is None or not self.agreement.due(self.ctx.clock())):
+            if not waiting and (
+                self.membership.agreement is None
+                or not self.membership.agreement.due(self.ctx.clock())
+            ):
                 return
             if self.ctx.clock() - self.ctx.last_status >= HEARTBEAT:
                 self.ctx.status(
@@ -1129,7 +929,7 @@ class Runner:
 
     def run(self) -> int:
         try:
-            self.start_bus()
+            self.membership.start()
             stage, record = self.resume()
             if stage == "search":
                 self.ctx.status("start", 0.0, "joined", force=True)
@@ -1192,7 +992,7 @@ class Runner:
         # let the failure status and any pending digest reach the others
         end = self.ctx.clock() + 1.0
         while self.ctx.clock() < end:
-            self.pump(0.1)
+            self.membership.pump(0.1)
         return 1
 
 

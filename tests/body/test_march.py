@@ -22,7 +22,8 @@ from agent.net.bus import Bus
 from agent.phases.adapters import FormationAdapter, PerceptionAdapter
 from agent.phases.config import AgentConfig, Route
 from agent.phases.march import LOST, Marcher, MarchHalt, route_vector, station_offset
-from agent.phases.runner import Peer, Runner
+from agent.phases.membership import Peer
+from agent.phases.runner import Runner
 from agent.wire import NeighborRecordMsg
 from sim.world import World
 
@@ -84,7 +85,7 @@ def child_runner(
     )  # fixed frames are world-parallel here
     for rp in plan.robots:
         if rp.robot_id != body.robot_id:
-            r.peers[rp.robot_id] = Peer(alive=True, phase="march", seen_alive=True)
+            r.membership.peers[rp.robot_id] = Peer(alive=True, phase="march", seen_alive=True)
     return r
 
 
@@ -113,7 +114,7 @@ def test_follower_keeps_station_on_a_marching_parent(
     # the bound on waiting for the parent is wall time: generous, so that a loaded
     # machine (slow renders) never ends the march early; the parent's moves end it
     r = child_runner(world, bus, perception, body, plan, axis, wave_timeout=120.0)
-    body.on_arrival.append(r.peers[child.parent])
+    body.on_arrival.append(r.membership.peers[child.parent])
     want = station_offset(plan, child.robot_id)
     start = np.asarray(world.pose(child.robot_id)[:2])
     m = Marcher(r, Route(distance=0.6), axis)
@@ -150,10 +151,10 @@ def test_a_failed_member_halts_the_march(
     child = next(rp for rp in plan.robots if rp.parent >= 0)
     r = child_runner(world, bus, perception, WorldBody(world, child.robot_id), plan, axis)
     other = next(i for i in plan.ids if i != child.robot_id)
-    r.peers[other].phase = "failed"
+    r.membership.peers[other].phase = "failed"
     with pytest.raises(MarchHalt, match=f"robot {other} failed"):
         Marcher(r, Route(distance=0.6), axis).run()
-    r.peers[other] = Peer(alive=False, phase="march", seen_alive=True)
+    r.membership.peers[other] = Peer(alive=False, phase="march", seen_alive=True)
     with pytest.raises(MarchHalt, match=f"robot {other} left"):
         Marcher(r, Route(distance=0.6), axis).check_fleet()
 
@@ -167,7 +168,7 @@ def test_the_leader_sees_who_lost_its_parent(
     m = Marcher(r, Route(distance=0.6), axis)
     assert m.lost_followers() == []
     lost = next(i for i in plan.ids if i != lead)
-    r.peers[lost].detail = f"{LOST} {lead}: head search 1"
+    r.membership.peers[lost].detail = f"{LOST} {lead}: head search 1"
     assert m.lost_followers() == [lost]
-    r.peers[lost].phase = "done"  # only a marching follower holds the fleet
+    r.membership.peers[lost].phase = "done"  # only a marching follower holds the fleet
     assert m.lost_followers() == []

@@ -22,7 +22,8 @@ from agent.net.bus import Bus
 from agent.phases.adapters import FormationAdapter, PerceptionAdapter
 from agent.phases.config import AgentConfig
 from agent.phases.context import NORTH
-from agent.phases.runner import Peer, Runner
+from agent.phases.membership import Peer
+from agent.phases.runner import Runner
 from agent.wire import NeighborRecordMsg
 from sim.world import World
 
@@ -112,7 +113,7 @@ def test_correct_steps_towards_the_planned_offset_to_the_parent(
     r.ctx.beliefs.heading = r.ctx.final_heading = wrap_pi(
         axis
     )  # fixed frames are world-parallel here
-    r.peers[parent.robot_id] = Peer(alive=True, phase="done", seen_alive=True)
+    r.membership.peers[parent.robot_id] = Peer(alive=True, phase="done", seen_alive=True)
 
     def offset_error() -> float:
         d = np.subtract(world.pose(parent.robot_id)[:2], world.pose(child.robot_id)[:2])

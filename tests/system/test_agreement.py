@@ -53,7 +53,7 @@ class Peer:
             _perception(),
             FormationAdapter(),
         )
-        self.runner.start_bus()
+        self.runner.membership.start()
         self.decision: Decision | None = None
         self.thread = threading.Thread(target=self._run, daemon=True)
 
@@ -66,10 +66,10 @@ class Peer:
             end = self.runner.ctx.clock() + 3.0
             while (
                 self.runner.ctx.clock() < end
-                and self.runner.agreement is not None
-                and (self.runner.agreement.due(self.runner.ctx.clock() + 100.0))
+                and self.runner.membership.agreement is not None
+                and (self.runner.membership.agreement.due(self.runner.ctx.clock() + 100.0))
             ):
-                self.runner.pump(0.1)
+                self.runner.membership.pump(0.1)
 
     def start(self) -> Peer:
         self.thread.start()
@@ -120,7 +120,10 @@ def test_late_joiner_is_waited_for(endpoint: str) -> None:
     try:
         early[0].thread.join(3.0)
         assert early[0].decision is None  # still waiting for the third member
-        assert "2 of 3" in early[0].runner.agreement.decide(early[0].runner.ctx.clock()).reason  # type: ignore[union-attr]
+        assert (
+            "2 of 3"
+            in early[0].runner.membership.agreement.decide(early[0].runner.ctx.clock()).reason
+        )  # type: ignore[union-attr]
         late = Peer(3, endpoint, 3).start()
         ds = [p.join() for p in [*early, late]]
     finally:
@@ -168,7 +171,7 @@ def test_member_that_dies_stops_everyone_safely(endpoint: str) -> None:
         # ... and dies once the others know it is a member
         end = peers[0].runner.ctx.clock() + 20
         while peers[0].runner.ctx.clock() < end:
-            agr = peers[0].runner.agreement
+            agr = peers[0].runner.membership.agreement
             if agr is not None and 3 in agr.live:
                 break
             peers[0].thread.join(0.1)

@@ -1,0 +1,44 @@
+"""The roles the runner's collaborators play for each other (typed seams; DESIGN.md §1, §8).
+
+The phase machine (:mod:`agent.phases.runner`) composes one collaborator per concern; each
+depends on the shared :class:`~agent.phases.context.Context` and on these protocols,
+never on another collaborator's class nor on the runner:
+
+- :class:`Hearing`: keep hearing the fleet while waiting (:class:`~agent.phases.membership.Membership`);
+- :class:`Fleet`: the members, the agreement under way, the early records
+  (:class:`~agent.phases.membership.Membership`).
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+from agent.core.agreement import Agreement
+from agent.phases.membership import Peer
+from agent.wire import DigestMsg, NeighborRecordMsg, RecordSetReply
+
+
+class Hearing(Protocol):
+    """What every wait needs: hear the fleet and answer it (NAO paper 4.1.2)."""
+
+    def pump(self, timeout: float = 0.0) -> None: ...
+
+
+class Fleet(Hearing, Protocol):
+    """The fleet as one agent knows it (DESIGN.md §8 "Faults")."""
+
+    peers: dict[int, Peer]
+    agreement: Agreement[NeighborRecordMsg] | None
+    early_records: dict[int, NeighborRecordMsg]
+    early_digests: dict[int, DigestMsg]
+    served: RecordSetReply | None
+
+    def peer(self, rid: int) -> Peer: ...
+
+    def open_round(self, agr: Agreement[NeighborRecordMsg]) -> None: ...
+
+    def retire(self) -> None: ...
+
+    def pin_sessions(self, members: set[int]) -> None: ...
+
+    def all_arrived(self) -> bool: ...
