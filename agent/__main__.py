@@ -338,9 +338,9 @@ def main(argv: list[str] | None = None) -> int:
             ", ".join(
                 f"{k} {v} B/{st.published_count[k]}" for k, v in sorted(st.published_bytes.items())
             ),
-            runner.compass_failures,
-            runner.compass_uses,
-            runner.drift_checks,
+            runner.motion.compass_failures,
+            runner.motion.compass_uses,
+            runner.motion.drift_checks,
             st.rejected,
             st.untrusted,
             st.dropped,

@@ -146,7 +146,7 @@ class Marcher:
             self.lead()
         else:
             self.follow(int(rp.parent))
-        self.r.rotate(
+        self.r.motion.rotate(
             wrap_pi(self.r.ctx.final_heading - self.r.ctx.beliefs.heading),
             PAPER_GAINS,
             "turn to axis",
@@ -179,14 +179,14 @@ class Marcher:
                 return
             if abs(leg.turn) > r.ctx.cfg.rotation_tolerance:
                 big = abs(leg.turn) >= math.radians(15)
-                r.rotate(leg.turn, PAPER_GAINS if big else STEP_GAINS)
+                r.motion.rotate(leg.turn, PAPER_GAINS if big else STEP_GAINS)
             walk = safe_walk(leg.walk, r.ctx.beliefs.heading, self._others_ahead(), CLEARANCE)
             if walk == 0.0:
                 r.ctx.status("march", self._progress(origin), "a robot ahead: waiting")
                 r.membership.pump(0.5)
                 continue
             t0 = r.ctx.clock()
-            r.walk_step(walk)
+            r.motion.walk_step(walk)
             r.ctx.status("march", self._progress(origin), f"leading: {leg.remaining:.2f} m to go")
             rest = r.ctx.clock() + r.ctx.cfg.march_pause * (r.ctx.clock() - t0)
             while r.ctx.clock() < rest:
@@ -195,9 +195,9 @@ class Marcher:
 
     def _others_ahead(self) -> np.ndarray:
         """Robots in the last yaw-0 image (fixed frame, relative to me)."""
-        frame = self.r._last_frame
+        frame = self.r.motion.last_frame
         if frame is None:
-            frame = self.r.look(0.0)
+            frame = self.r.motion.look(0.0)
         pts, _, _ = self.r.ctx.perception.to_fixed(
             self.r.ctx.perception.detect(frame.image, 0.0), self.r.ctx.beliefs.heading
         )
@@ -270,10 +270,10 @@ class Marcher:
             before = r.ctx.beliefs.position.copy()
             moves -= 1
             if turn != 0.0:
-                r.rotate(turn, STEP_GAINS)
+                r.motion.rotate(turn, STEP_GAINS)
             walk = safe_walk(walk, r.ctx.beliefs.heading, others, CLEARANCE)
             if abs(walk) >= 0.01:
-                r.walk_step(walk)
+                r.motion.walk_step(walk)
             predicted = rel - (r.ctx.beliefs.position - before) + ahead
         raise MarchHalt(f"station keeping on parent {parent} did not settle")
 
@@ -296,7 +296,7 @@ class Marcher:
         for off in offsets:
             yaw = wrap_pi(bearing - r.ctx.beliefs.heading + off)
             yaw = float(np.clip(yaw, -HEAD_YAW_LIMIT, HEAD_YAW_LIMIT))
-            frame = r.look(yaw)
+            frame = r.motion.look(yaw)
             dets = r.ctx.perception.detect(frame.image, yaw)
             pts, _, _ = r.ctx.perception.to_fixed(dets, r.ctx.beliefs.heading)
             pts = np.asarray(pts, dtype=np.float64).reshape(-1, 2)

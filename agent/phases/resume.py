@@ -248,11 +248,11 @@ def remeasure_heading(runner: Runner, journal: Journal | None) -> None:
             math.degrees(runner.ctx.beliefs.heading),
         )
         return
-    runner._last_frame = None
+    runner.motion.last_frame = None
     turn = wrap_pi(NORTH - runner.ctx.beliefs.heading)
     if abs(turn) > REORIENT_MIN:
-        runner.rotate(turn, PAPER_GAINS, "resumed: turn to θ = 0° to re-measure")
-    frame = runner.look(0.0)
+        runner.motion.rotate(turn, PAPER_GAINS, "resumed: turn to θ = 0° to re-measure")
+    frame = runner.motion.look(0.0)
     res = runner.ctx.perception.measure_turn(ref, frame.image)
     if not res.ok:
         log.warning(
@@ -274,7 +274,7 @@ def remeasure_heading(runner: Runner, journal: Journal | None) -> None:
         math.degrees(measured), math.degrees(runner.ctx.beliefs.heading),
     )  # fmt: skip
     runner.ctx.beliefs.heading = measured
-    runner._last_frame = frame
+    runner.motion.last_frame = frame
 
 
 def journal_state(runner: Runner, command: str = "", value: float = 0.0) -> JournalState:

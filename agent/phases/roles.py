@@ -6,14 +6,18 @@ never on another collaborator's class nor on the runner:
 
 - :class:`Hearing`: keep hearing the fleet while waiting (:class:`~agent.phases.membership.Membership`);
 - :class:`Fleet`: the members, the agreement under way, the early records
-  (:class:`~agent.phases.membership.Membership`).
+  (:class:`~agent.phases.membership.Membership`);
+- :class:`Mover`: look, turn and step, measured by the visual compass
+  (:class:`~agent.phases.motion.Motion`).
 """
 
 from __future__ import annotations
 
 from typing import Protocol
 
+from agent.body.base import Frame, MotionResult
 from agent.core.agreement import Agreement
+from agent.core.control import PidGains
 from agent.phases.membership import Peer
 from agent.wire import DigestMsg, NeighborRecordMsg, RecordSetReply
 
@@ -42,3 +46,18 @@ class Fleet(Hearing, Protocol):
     def pin_sessions(self, members: set[int]) -> None: ...
 
     def all_arrived(self) -> bool: ...
+
+
+class Mover(Protocol):
+    """Turns and steps measured by the visual compass (NAO paper 4.2, 5.2.2)."""
+
+    last_frame: Frame | None  # the compass reference (head yaw 0); None: look afresh
+    steps: int  # straight steps walked so far
+
+    def look(self, yaw: float = 0.0) -> Frame: ...
+
+    def reference(self) -> Frame: ...
+
+    def rotate(self, angle: float, gains: PidGains = ..., label: str = "") -> float: ...
+
+    def walk_step(self, distance: float) -> MotionResult: ...

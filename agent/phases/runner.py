@@ -45,30 +45,14 @@ from collections.abc import Callable
 
 import numpy as np
 
-from agent.body.base import Body, BodyError, Frame, MotionResult
+from agent.body.base import Body, BodyError, Frame
 from agent.core.agreement import Agreement, Decision, params_digest
 from agent.core.control import (
     PAPER_GAINS,
-    STEP_GAINS,
-    PidGains,
-    RotationControl,
-    advance,
     next_leg,
     wrap_pi,
 )
 from agent.core.control.alignment import look_yaws, match_parent
-from agent.core.control.corridor import (
-    GO,
-    VIA,
-    CorridorParams,
-    Verdict,
-    back_off,
-    check_step,
-    confirmed,
-    in_view,
-    patience,
-    plan_rank,
-)
 from agent.core.formation.plan import Plan
 from agent.core.formation.research import step_blocked
 from agent.core.nao import CAMERA_HFOV, HEAD_YAW_LIMIT
@@ -79,7 +63,9 @@ from agent.phases.config import AgentConfig
 from agent.phases.context import NORTH, AgentFailure, Context
 from agent.phases.march import Marcher, MarchHalt
 from agent.phases.membership import Membership
+from agent.phases.motion import Motion
 from agent.phases.record_sets import record_set
+from agent.phases.safe_steps import SafeSteps
 from agent.phases.seams import Formation, Perception, Sightings
 from agent.wire import (
     NeighborRecordMsg,
@@ -92,19 +78,7 @@ from agent.wire import (
 
 log = logging.getLogger("agent.phases.runner")
 
-MAX_TURN_STEP = math.radians(40.0)  # largest turn taken to re-measure a step's drift
 HEARTBEAT = 3.0  # s between statuses while waiting
-
-
-def _plausible(measured: float, commanded: float, walking: bool) -> bool:
-    """Whether a compass rotation is believable against the command (rad).
-
-    A measurement far from the command is more likely a mismatch than a fall: 10° (or
-    60 % of the command) for a turn; 20° for a step, whose drift reaches ~9° in the
-    simulator at noise 1 (a larger one is re-measured, :meth:`Runner._confirm_drift`).
-    """
-    limit = math.radians(20.0 if walking else 10.0)
-    return abs(measured - commanded) <= max(limit, 0.6 * abs(commanded))
 
 
 class Runner:
@@ -130,15 +104,8 @@ class Runner:
         self.ctx.journal_hook = self._journal
         self.membership = Membership(self.ctx)
         self.obstacle_sightings: list[np.ndarray] = []  # fixed frame, one array per image
-        self._last_frame: Frame | None = None
-        self.compass_failures = 0
-        self.compass_uses = 0
-        self.corridor = CorridorParams()  # the safe-step check before each step
-        self.drift_checks = 0  # implausible step drifts re-measured (_confirm_drift)
-        self.waits = 0  # polls spent waiting for a clear corridor
-        self.vias = 0  # via (tangent) steps taken round a blocking NAO
-        self.steps = 0  # straight steps walked (the age of a sighting)
-        self._seen: list[tuple[np.ndarray, int]] = []  # (NAO seen, fixed frame; at step)
+        self.motion = Motion(self.ctx, self.membership)
+        self.safe_steps = SafeSteps(self.ctx, self.membership, self.motion)
         # (records held, digest of their plan) for adopting a member's plan (_adopt_plan)
         self._candidate: tuple[tuple[NeighborRecordMsg, ...], str] | None = None
 
@@ -158,299 +125,6 @@ class Runner:
             self.ctx.journal = None
 
     # ================================================================= motion
-
-    def look(self, yaw: float = 0.0) -> Frame:
-        frame = self.ctx.body.camera(yaw)
-        self.membership.pump()
-        return frame
-
-    def rotate(self, angle: float, gains: PidGains = PAPER_GAINS, label: str = "") -> float:
-        """Turn the body by ``angle`` (rad, + CCW) with the rotation control (5.2.2 (1)).
-
-        Returns the rotation completed according to the compass (rad)."""
-        rc = RotationControl(angle, gains=gains, tolerance=self.ctx.cfg.rotation_tolerance)
-        before = self._last_frame if self._last_frame is not None else self.look(0.0)
-        while not (rc.done or rc.exhausted):
-            u = rc.next_step()
-            self._journal("turn", u)
-            rep = self.ctx.body.turn(u)
-            self.membership.pump()
-            after = self.look(0.0)
-            measured = self._compass(before, after, u)
-            rc.record(measured)
-            self.ctx.beliefs.heading = wrap_pi(self.ctx.beliefs.heading + measured)
-            log.debug(
-                "turn t_sim %.2f cmd %+.2f° measured %+.2f° heading %.2f°",
-                rep.t_sim, math.degrees(u), math.degrees(measured), math.degrees(self.ctx.beliefs.heading),
-            )  # fmt: skip
-            before = after
-            if label:
-                self.ctx.status(
-                    self.ctx.phase, detail=f"{label}: {math.degrees(rc.error):+.1f}° to go"
-                )
-            if rep.status == "contact":
-                log.warning("contact while turning")
-        self._last_frame = before
-        return rc.completed
-
-    def _compass(
-        self, before: Frame, after: Frame, commanded: float, walking: bool = False
-    ) -> float:
-        """The rotation between two head-yaw-0 frames; the command when the compass fails
-        or its match is implausible (:meth:`_read`)."""
-        value, _ = self._read(before, after, commanded, walking)
-        return value
-
-    def _read(
-        self, before: Frame, after: Frame, commanded: float, walking: bool = False
-    ) -> tuple[float, float | None]:
-        """(rotation to believe, suspect): the compass between two head-yaw-0 frames.
-
-        ``walking``: the frames are 20 cm apart, so only the central band of the image
-        is matched (see :meth:`agent.phases.adapters.PerceptionAdapter.measure_walk`). When the
-        compass fails, the command is believed; when it matches but far from the
-        command, the command is believed and the match is returned as ``suspect``
-        (a step's real drift may be that large: :meth:`_confirm_drift`)."""
-        if walking:
-            res = self.ctx.perception.measure_walk(before.image, after.image)
-        else:
-            res = self.ctx.perception.measure_turn(before.image, after.image)
-        self.compass_uses += 1
-        if not res.ok:
-            self.compass_failures += 1
-            log.warning(
-                "compass failed (%s): assuming the %s %+.1f°",
-                res.reason, "drift" if walking else "command",
-                math.degrees(commanded),
-            )  # fmt: skip
-            return commanded, None
-        dtheta = float(res.dtheta) * self.ctx.beliefs.compass_gain
-        if not _plausible(dtheta, commanded, walking):
-            self.compass_failures += 1
-            log.warning(
-                "compass %+.1f° implausible against %+.1f°: ignored",
-                math.degrees(dtheta), math.degrees(commanded),
-            )  # fmt: skip
-            return commanded, dtheta
-        return dtheta, None
-
-    def _confirm_drift(self, before: Frame, h0: float, suspect: float) -> tuple[Frame, float]:
-        """Re-measure a step's drift that the compass reported implausibly large.
-
-        A large drift may be real (a NAO veering strongly: ~9° per 20 cm step in the
-        paper's Table 2, several times that under heavy noise) or a wrong match. The
-        robot turns by ``-suspect``, the turn the distance control would make next if
-        the drift were real, and measures the rotation between the image *before the
-        step* and the new one: close to 0 if the drift was real, close to the turn if it
-        was a mismatch. Either way that net rotation is the new heading's measurement
-        against ``h0``, taken with little image shift in the likely case. Returns (the
-        new image, the net rotation since ``before``); when the re-measurement fails or
-        fits neither case, the drift is taken as 0 and the turn as commanded (the
-        behaviour without this check)."""
-        u = float(np.clip(-suspect, -MAX_TURN_STEP, MAX_TURN_STEP))
-        self.ctx.body.turn(u)
-        self.membership.pump()
-        after = self.look(0.0)
-        res = self.ctx.perception.measure_walk(before.image, after.image)
-        self.compass_uses += 1
-        net = float(res.dtheta) * self.ctx.beliefs.compass_gain if res.ok else math.nan
-        if res.ok and (_plausible(net, 0.0, True) or _plausible(net, u, True)):
-            self.drift_checks += 1
-            log.info(
-                "drift %+.1f° re-measured after a %+.1f° turn: net %+.1f° (%s)",
-                math.degrees(suspect), math.degrees(u), math.degrees(net),
-                "real" if abs(net) < abs(net - u) else "mismatch",
-            )  # fmt: skip
-            return after, net
-        self.compass_failures += 1
-        log.warning(
-            "drift %+.1f° not confirmed (%s): assuming none",
-            math.degrees(suspect), res.reason if not res.ok else f"net {math.degrees(net):+.1f}°",
-        )  # fmt: skip
-        return after, u
-
-    def walk_to(
-        self, goal: np.ndarray, progress: Callable[[float], None], backward_within: float = 0.0
-    ) -> None:
-        """Distance control to ``goal`` (fixed frame, m) from the dead-reckoned position,
-        each step checked first (:meth:`clear_way`): a blocked step waits, then detours by
-        tangent steps round the blocker until the way to the goal is clear again."""
-        total = float(np.hypot(*(goal - self.ctx.beliefs.position))) or 1.0
-        cp = self.corridor
-        side = 0  # the side of the detour under way (0: none)
-        for _ in range(200):
-            leg = next_leg(
-                self.ctx.beliefs.position,
-                self.ctx.beliefs.heading,
-                goal,
-                backward_within=backward_within,
-            )
-            if leg is None:
-                return
-            if side:  # detouring: do the NAOs seen lately still block the way to the goal?
-                to_goal = wrap_pi(self.ctx.beliefs.heading + leg.turn)
-                wait = patience(self._rank(), cp)
-                rel = self._remembered()
-                v = check_step(
-                    leg.walk,
-                    to_goal,
-                    rel,
-                    cp,
-                    wait,
-                    side=side,
-                    goal=goal - self.ctx.beliefs.position,
-                )
-                if v.action == VIA:
-                    self._via_step(v)
-                    continue
-                side = 0
-            if abs(leg.turn) > self.ctx.cfg.rotation_tolerance:
-                self.rotate(
-                    leg.turn, STEP_GAINS if abs(leg.turn) < math.radians(15) else PAPER_GAINS
-                )
-            v = self.clear_way(leg.walk, goal=goal)
-            if v.action == VIA:
-                side = v.side
-                self._via_step(v)
-                continue
-            self.walk_step(leg.walk)
-            progress(1.0 - max(0.0, leg.remaining - abs(leg.walk)) / total)
-        raise AgentFailure("distance control did not converge in 200 steps")
-
-    def _via_step(self, v: Verdict) -> None:
-        """Turn to the via step's heading, check its corridor again (no further via), walk."""
-        turn = wrap_pi(v.heading - self.ctx.beliefs.heading)
-        if abs(turn) > self.ctx.cfg.rotation_tolerance:
-            self.rotate(turn, STEP_GAINS if abs(turn) < math.radians(15) else PAPER_GAINS)
-        self.vias += 1
-        self.clear_way(v.walk, via=False)
-        self.walk_step(v.walk)
-
-    def _remembered(self) -> np.ndarray:
-        """The NAOs seen in the last ``memory_steps`` steps, relative to here (fixed frame):
-        a NAO closer than the detector's range, or beside the robot, is not in the image
-        but is still there."""
-        keep = [(p, k) for p, k in self._seen if self.steps - k <= self.corridor.memory_steps]
-        self._seen = keep
-        if not keep:
-            return np.zeros((0, 2))
-        return np.array([p for p, _ in keep]) - self.ctx.beliefs.position
-
-    def clear_way(self, walk: float, via: bool = True, goal: np.ndarray | None = None) -> Verdict:
-        """Check the next step's corridor (agent/core/control/corridor.py) against the NAOs in
-        the yaw-0 image the compass takes anyway and those seen lately: returns GO, or
-        (``via``) VIA once this robot's patience (its plan rank) is spent; waits
-        meanwhile, looking again every poll (status detail ``waiting: NAO ahead at
-        [x, y]``, fixed frame). Bounded: AgentFailure after ``max_polls`` polls."""
-        cp = self.corridor
-        rank = self._rank()
-        for waited in range(cp.max_polls + 1):
-            frame = self._last_frame if self._last_frame is not None else self.look(0.0)
-            self._last_frame = frame
-            seen, _, _ = self.ctx.perception.to_fixed(
-                self.ctx.perception.detect(frame.image, 0.0), self.ctx.beliefs.heading
-            )
-            for p in np.asarray(seen, dtype=np.float64).reshape(-1, 2):
-                self._seen.append((self.ctx.beliefs.position + p, self.steps))
-            v = check_step(
-                walk, self.ctx.beliefs.heading, self._remembered(), cp, waited if via else 0, rank,
-                goal=None if goal is None else goal - self.ctx.beliefs.position,
-            )  # fmt: skip
-            if v.action == GO or (v.action == VIA and via):
-                if waited:
-                    log.info("corridor: %s after %d poll(s)", v.action, waited)
-                return v
-            where = (self.ctx.beliefs.position + v.blockers[0]).round(2).tolist()
-            self.ctx.status(
-                self.ctx.phase, detail=f"waiting: NAO ahead at {where}", force=waited == 0
-            )
-            self.waits += 1
-            self.membership.pump(cp.poll)
-            if waited and not confirmed(v.blockers[0], seen, cp):
-                self._recheck(v.blockers[0], seen, where)
-            self._last_frame = None  # look again
-            # what the next image shows is seen afresh: a NAO that walked on is forgotten
-            if self._seen:
-                rel = np.array([p for p, _ in self._seen]) - self.ctx.beliefs.position
-                shown = in_view(rel, self.ctx.beliefs.heading, CAMERA_HFOV)
-                self._seen = [e for e, gone in zip(self._seen, shown, strict=True) if not gone]
-        raise AgentFailure(
-            f"way blocked for {cp.max_polls} polls at believed {self.ctx.beliefs.position.round(2).tolist()}"
-        )
-
-    def _recheck(self, blocker: np.ndarray, seen: np.ndarray, where: list[float]) -> None:
-        """A blocker only remembered, not in the yaw-0 image: find out whether it is still
-        there. Too near ahead to be seen (< VIEW_NEAR): step back (``back_off``); out of
-        the yaw-0 image (beside the robot): look at it with the head, forget what that
-        image should show and does not, remember what it shows. Otherwise the memory
-        would keep a NAO that walked away until this robot's patience ran out."""
-        back = back_off(
-            blocker[None, :], seen, self.ctx.beliefs.heading, CAMERA_HFOV, self.corridor
-        )
-        if back > 0.01:
-            log.info("corridor: NAO remembered at %s, too near to see: %.2f m back", where, back)
-            self.walk_step(-back)
-            return
-        if bool(in_view(blocker[None, :], self.ctx.beliefs.heading, CAMERA_HFOV, near=0.0)[0]):
-            return  # the yaw-0 image covers it: the loop's own look decides
-        bearing = math.atan2(float(blocker[1]), float(blocker[0]))
-        yaw = float(
-            np.clip(wrap_pi(bearing - self.ctx.beliefs.heading), -HEAD_YAW_LIMIT, HEAD_YAW_LIMIT)
-        )
-        frame = self.look(yaw)
-        fresh, _, _ = self.ctx.perception.to_fixed(
-            self.ctx.perception.detect(frame.image, yaw), self.ctx.beliefs.heading
-        )
-        if self._seen:
-            rel = np.array([p for p, _ in self._seen]) - self.ctx.beliefs.position
-            shown = in_view(rel, self.ctx.beliefs.heading + yaw, CAMERA_HFOV)
-            self._seen = [e for e, gone in zip(self._seen, shown, strict=True) if not gone]
-        for p in np.asarray(fresh, dtype=np.float64).reshape(-1, 2):
-            self._seen.append((self.ctx.beliefs.position + p, self.steps))
-        log.info(
-            "corridor: looked at the NAO remembered at %s (head %+.0f°): %d NAO(s) in view",
-            where, math.degrees(yaw), len(fresh),
-        )  # fmt: skip
-
-    def _rank(self) -> int:
-        """This robot's rank in the shared plan, (wave, id) order (0 without a plan)."""
-        if self.ctx.planned is None:
-            return 0
-        return plan_rank(
-            [(int(rp.wave), int(rp.robot_id)) for rp in self.ctx.planned.robots], self.ctx.me
-        )
-
-    def walk_step(self, distance: float) -> MotionResult:
-        """One straight step, the compass's drift and dead reckoning (4.2, eq. 2); a
-        drift too large to be plausible is re-measured (:meth:`_confirm_drift`)."""
-        before = self._last_frame if self._last_frame is not None else self.look(0.0)
-        h0 = self.ctx.beliefs.heading
-        self._journal("walk", distance)
-        rep = self.ctx.body.walk(distance)
-        self.steps += 1
-        self.membership.pump()
-        after = self.look(0.0)
-        drift, suspect = self._read(before, after, 0.0, walking=True)
-        turned = 0.0
-        if suspect is not None and rep.status != "contact":
-            after, net = self._confirm_drift(before, h0, suspect)
-            turned = float(np.clip(-suspect, -MAX_TURN_STEP, MAX_TURN_STEP))
-            drift = net - turned  # the turn taken as commanded, for dead reckoning
-        self.ctx.beliefs.heading = wrap_pi(h0 + drift + turned)
-        self._last_frame = after
-        self.ctx.beliefs.position = advance(
-            self.ctx.beliefs.position, h0, wrap_pi(h0 + drift), distance
-        )
-        log.debug(
-            "walk t_sim %.2f %.3f m drift %+.2f° heading %.2f° position %s",
-            rep.t_sim, distance, math.degrees(drift), math.degrees(self.ctx.beliefs.heading),
-            self.ctx.beliefs.position.round(3).tolist(),
-        )  # fmt: skip
-        if rep.status == "contact":
-            raise AgentFailure(
-                f"contact while walking at believed {self.ctx.beliefs.position.round(2).tolist()}"
-            )
-        return rep
 
     # ================================================================= phases
 
@@ -476,11 +150,11 @@ class Runner:
         turned = [0.0, 0.0]
         for sweep in range(2):
             if sweep == 1:
-                turned[0] = self.rotate(math.pi, PAPER_GAINS, "turn to θ = 180°")
+                turned[0] = self.motion.rotate(math.pi, PAPER_GAINS, "turn to θ = 180°")
             for yaw in self.ctx.cfg.search_yaws:
-                frame = self.look(yaw)
+                frame = self.motion.look(yaw)
                 if abs(yaw) < 1e-9:
-                    self._last_frame = frame
+                    self.motion.last_frame = frame
                     if sweep == 0:
                         origin = frame
                 raw.append((sweep, self.ctx.perception.detect(frame.image, yaw)))
@@ -490,18 +164,18 @@ class Runner:
                     "search", done / n, f"θ = {180 * sweep}°, head {math.degrees(yaw):+.0f}°"
                 )
             # the last image of the sweep was not at yaw 0: refresh the compass reference
-            self._last_frame = self.look(0.0)
+            self.motion.last_frame = self.motion.look(0.0)
             if origin is None:
-                origin = self._last_frame
+                origin = self.motion.last_frame
             if sweep == 0 and self.ctx.journal is not None:  # the view that defines the fixed frame
                 try:
                     self.ctx.journal.save_reference(origin.image)
                 except (OSError, ValueError) as exc:
                     log.error("reference view not journaled: %s", reason(exc))
         heading_180 = self.ctx.beliefs.heading
-        turned[1] = self.rotate(math.pi, PAPER_GAINS, "complete the circle to θ = 0°")
-        assert origin is not None and self._last_frame is not None
-        self._calibrate(origin, self._last_frame, turned, h0)
+        turned[1] = self.motion.rotate(math.pi, PAPER_GAINS, "complete the circle to θ = 0°")
+        assert origin is not None and self.motion.last_frame is not None
+        self._calibrate(origin, self.motion.last_frame, turned, h0)
         if self.ctx.beliefs.compass_gain != 1.0:
             heading_180 = wrap_pi(h0 + self.ctx.beliefs.compass_gain * turned[0])
         self.obstacle_sightings = [
@@ -647,7 +321,7 @@ class Runner:
         else:
             self._wait_for_searchers(verdict.searchers)
         self.ctx.beliefs.position = np.zeros(2)  # the new record's origin: here
-        self._last_frame = None
+        self.motion.last_frame = None
         return self.localise(self.search())
 
     def explore(self, move: np.ndarray) -> None:
@@ -657,15 +331,19 @@ class Runner:
         goal = self.ctx.beliefs.position + np.asarray(move, dtype=np.float64)
         total = float(np.hypot(*move)) or 1.0
         clearance = 2.0 * self.ctx.cfg.radius + 0.1
-        self._last_frame = None
+        self.motion.last_frame = None
         for _ in range(200):
             leg = next_leg(self.ctx.beliefs.position, self.ctx.beliefs.heading, goal)
             if leg is None:
                 return
             if abs(leg.turn) > self.ctx.cfg.rotation_tolerance:
-                self.rotate(leg.turn, PAPER_GAINS, "explore: turn")
-            frame = self._last_frame if self._last_frame is not None else self.look(0.0)
-            self._last_frame = frame
+                self.motion.rotate(leg.turn, PAPER_GAINS, "explore: turn")
+            frame = (
+                self.motion.last_frame
+                if self.motion.last_frame is not None
+                else self.motion.look(0.0)
+            )
+            self.motion.last_frame = frame
             pts, _, _ = self.ctx.perception.to_fixed(
                 self.ctx.perception.detect(frame.image, frame.yaw), self.ctx.beliefs.heading
             )
@@ -677,7 +355,7 @@ class Runner:
                 )  # fmt: skip
                 self.ctx.status("explore", 1.0, "a NAO ahead: move ended", force=True)
                 return
-            self.walk_step(leg.walk)
+            self.motion.walk_step(leg.walk)
             done = 1.0 - max(0.0, leg.remaining - abs(leg.walk)) / total
             self.ctx.status("explore", done, f"round {self.ctx.record_round}: exploring")
         raise AgentFailure("exploration move did not converge in 200 steps")
@@ -761,8 +439,8 @@ class Runner:
 
     def move(self) -> None:
         plan = self.ctx.plan
-        self._last_frame = None  # others moved meanwhile: a fresh compass reference
-        self._seen = []  # and the NAOs seen before are elsewhere now
+        self.motion.last_frame = None  # others moved meanwhile: a fresh compass reference
+        self.safe_steps.forget()  # and the NAOs seen before are elsewhere now
         goals, final_heading = self.ctx.formation.goals(plan, self.ctx.me)
         self.ctx.final_heading = final_heading
         self.ctx.status("move", 0.0, f"{len(goals)} leg(s)")
@@ -775,8 +453,8 @@ class Runner:
             def progress(p: float, k: int = k) -> None:
                 self.ctx.status("move", (k + p) / n, f"leg {k + 1}/{n}")
 
-            self.walk_to(goal, progress)
-        self.rotate(
+            self.safe_steps.walk_to(goal, progress)
+        self.motion.rotate(
             wrap_pi(final_heading - self.ctx.beliefs.heading), PAPER_GAINS, "turn to pyramid axis"
         )
 
@@ -827,9 +505,13 @@ class Runner:
             if size < 0.03:
                 break
             self.ctx.status("hold", 0.75, f"correcting {size:.2f} m towards parent {parent}")
-            self._last_frame = None
-            self.walk_to(self.ctx.beliefs.position + err, lambda p: None, backward_within=0.5)
-            self.rotate(wrap_pi(self.ctx.final_heading - self.ctx.beliefs.heading), PAPER_GAINS)
+            self.motion.last_frame = None
+            self.safe_steps.walk_to(
+                self.ctx.beliefs.position + err, lambda p: None, backward_within=0.5
+            )
+            self.motion.rotate(
+                wrap_pi(self.ctx.final_heading - self.ctx.beliefs.heading), PAPER_GAINS
+            )
 
     def _find_parent(self, expected: np.ndarray, parent: int) -> np.ndarray | None:
         """The parent's measured offset (fixed frame), or None: the head looks at the
@@ -839,7 +521,7 @@ class Runner:
         bearing = math.atan2(float(expected[1]), float(expected[0]))
         nearest = math.inf
         for yaw in look_yaws(bearing, self.ctx.beliefs.heading, CAMERA_HFOV / 3.0, HEAD_YAW_LIMIT):
-            frame = self.look(yaw)
+            frame = self.motion.look(yaw)
             dets = self.ctx.perception.detect(frame.image, yaw)
             pts, _, _ = self.ctx.perception.to_fixed(dets, self.ctx.beliefs.heading)
             pts = np.asarray(pts, dtype=np.float64).reshape(-1, 2)

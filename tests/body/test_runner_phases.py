@@ -53,12 +53,12 @@ def test_search_sees_every_neighbour_where_it_stands(
 def test_rotate_turns_by_the_compass(world: World, bus: Bus, perception: PerceptionAdapter) -> None:
     r = runner_for(2, world, bus, perception)
     h0 = world.pose(2)[2]
-    done = r.rotate(math.pi / 2)
+    done = r.motion.rotate(math.pi / 2)
     turned = wrap_pi(world.pose(2)[2] - h0)
     assert turned == pytest.approx(math.pi / 2, abs=math.radians(4))
     assert done == pytest.approx(turned, abs=math.radians(3))
     assert r.ctx.beliefs.heading == pytest.approx(NORTH + done, abs=1e-9)
-    assert r.compass_failures == 0
+    assert r.motion.compass_failures == 0
 
 
 def test_walk_to_reaches_the_goal_in_steps(
@@ -68,7 +68,7 @@ def test_walk_to_reaches_the_goal_in_steps(
     x0, y0, _ = world.pose(3)
     seen: list[float] = []
     goal = np.array([0.0, -0.5])  # behind: turn round, then about three 20 cm steps
-    r.walk_to(goal, seen.append)
+    r.safe_steps.walk_to(goal, seen.append)
     x, y, _ = world.pose(3)
     assert np.hypot(x - x0 - goal[0], y - y0 - goal[1]) < 0.08
     assert float(np.hypot(*(r.ctx.beliefs.position - goal))) < 0.05  # what it believes
