@@ -344,14 +344,14 @@ def _lost_records() -> tuple[NeighborRecordMsg, ...]:
 
 
 def test_research_returns_nothing_for_a_connected_fleet(runner: Runner) -> None:
-    assert runner.research(Decision("agreed", records=records())) is None
+    assert runner.research.next_round(Decision("agreed", records=records())) is None
     assert runner.ctx.record_round == 0
 
 
 def test_research_stops_the_fleet_after_the_last_round(runner: Runner) -> None:
     runner.ctx.cfg = dataclasses.replace(runner.ctx.cfg, research_rounds=0)
     with pytest.raises(AgentFailure, match=r"robots \[3\] outside .* after 0 re-search round"):
-        runner.research(Decision("agreed", records=_lost_records()))
+        runner.research.next_round(Decision("agreed", records=_lost_records()))
     assert runner.ctx.record_round == 0  # nobody moved on to another round
 
 
@@ -359,17 +359,17 @@ def test_a_waiting_robot_stops_when_a_searcher_failed(runner: Runner) -> None:
     runner.ctx.record_round = 1
     runner.membership.peers[1] = Peer(alive=True, phase="failed", seen_alive=True)
     with pytest.raises(AgentFailure, match="robot 1 failed in re-search round 1"):
-        runner._wait_for_searchers((1,))
+        runner.research.wait_for_searchers((1,))
     runner.membership.peers[1] = Peer(alive=False, phase="explore", seen_alive=True)
     with pytest.raises(AgentFailure, match="robot 1 left in re-search round 1"):
-        runner._wait_for_searchers((1,))
+        runner.research.wait_for_searchers((1,))
     runner.membership.peers[1] = Peer(alive=True, phase="explore", seen_alive=True)
     runner.ctx.cfg = dataclasses.replace(runner.ctx.cfg, research_timeout=0.3)
     with pytest.raises(AgentFailure, match=r"robots \[1\] did not search again within 0.3 s"):
-        runner._wait_for_searchers((1,))
+        runner.research.wait_for_searchers((1,))
     # a record of the round from the searcher ends the wait
     runner.membership.early_records[1] = NeighborRecordMsg(sender=1, round=1, neighbours=())
-    runner._wait_for_searchers((1,))
+    runner.research.wait_for_searchers((1,))
 
 
 def test_research_config_is_validated() -> None:
@@ -481,10 +481,10 @@ def test_a_member_moving_on_the_plan_of_our_records_is_adopted(
     try:
         agr = r.membership.agreement
         assert agr is not None and agr.decide(0.0).kind == "wait"
-        assert r._adopt_plan(agr) is None  # nobody has a plan yet
+        assert r.agreeing.adopt_plan(agr) is None  # nobody has a plan yet
         ours = str(r.ctx.formation.plan(records(), r.ctx.cfg.plan_params()).digest)
         _claim(r, 2, ours, agr.params)
-        d = r._adopt_plan(agr)
+        d = r.agreeing.adopt_plan(agr)
         assert d is not None and d.kind == "agreed" and d.members == (1, 2, 3)
         assert "robot(s) [2] act on the plan" in d.reason
         assert agr.decide(1.0) is d
@@ -503,7 +503,7 @@ def test_a_member_on_another_plan_or_with_other_params_is_not_adopted(
         ours = str(r.ctx.formation.plan(records(), r.ctx.cfg.plan_params()).digest)
         _claim(r, 2, "f" * 64 if other == "plan" else ours,
                agr.params if other == "plan" else "e" * 64)  # fmt: skip
-        assert r._adopt_plan(agr) is None
+        assert r.agreeing.adopt_plan(agr) is None
         assert agr.decide(0.0).kind != "agreed"
     finally:
         bus.close()

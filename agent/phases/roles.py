@@ -4,11 +4,14 @@ The phase machine (:mod:`agent.phases.runner`) composes one collaborator per con
 depends on the shared :class:`~agent.phases.context.Context` and on these protocols,
 never on another collaborator's class nor on the runner:
 
-- :class:`Hearing`: keep hearing the fleet while waiting (:class:`~agent.phases.membership.Membership`);
+- :class:`Hearing`: keep hearing the fleet while waiting
+  (:class:`~agent.phases.membership.Membership`);
 - :class:`Fleet`: the members, the agreement under way, the early records
   (:class:`~agent.phases.membership.Membership`);
 - :class:`Mover`: look, turn and step, measured by the visual compass
-  (:class:`~agent.phases.motion.Motion`).
+  (:class:`~agent.phases.motion.Motion`);
+- :class:`Surveyor`: search where the robot stands and make its record
+  (:class:`~agent.phases.search.Search`).
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ from agent.body.base import Frame, MotionResult
 from agent.core.agreement import Agreement
 from agent.core.control import PidGains
 from agent.phases.membership import Peer
+from agent.phases.seams import Sightings
 from agent.wire import DigestMsg, NeighborRecordMsg, RecordSetReply
 
 
@@ -61,3 +65,11 @@ class Mover(Protocol):
     def rotate(self, angle: float, gains: PidGains = ..., label: str = "") -> float: ...
 
     def walk_step(self, distance: float) -> MotionResult: ...
+
+
+class Surveyor(Protocol):
+    """Search and localise (NAO paper 5.2.2 (iii), 3.1–3.2, 4.1.2)."""
+
+    def sweep(self) -> list[Sightings]: ...
+
+    def localise(self, sightings: list[Sightings]) -> NeighborRecordMsg: ...

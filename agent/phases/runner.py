@@ -45,32 +45,30 @@ from collections.abc import Callable
 
 import numpy as np
 
-from agent.body.base import Body, BodyError, Frame
-from agent.core.agreement import Agreement, Decision, params_digest
+from agent.body.base import Body, BodyError
+from agent.core.agreement import Decision
 from agent.core.control import (
     PAPER_GAINS,
-    next_leg,
     wrap_pi,
 )
 from agent.core.control.alignment import look_yaws, match_parent
 from agent.core.formation.plan import Plan
-from agent.core.formation.research import step_blocked
 from agent.core.nao import CAMERA_HFOV, HEAD_YAW_LIMIT
-from agent.core.perception.detector import Detection
-from agent.core.perception.obstacles import ObstacleDetection
 from agent.net.bus import Bus
+from agent.phases.agreeing import Agreeing
 from agent.phases.config import AgentConfig
-from agent.phases.context import NORTH, AgentFailure, Context
+from agent.phases.context import AgentFailure, Context
 from agent.phases.march import Marcher, MarchHalt
 from agent.phases.membership import Membership
 from agent.phases.motion import Motion
 from agent.phases.record_sets import record_set
+from agent.phases.research import Research
 from agent.phases.safe_steps import SafeSteps
-from agent.phases.seams import Formation, Perception, Sightings
+from agent.phases.seams import Formation, Perception
+from agent.phases.search import Search
 from agent.wire import (
     NeighborRecordMsg,
     StatusMsg,
-    canonical_digest,
     key_alive,
     key_status,
     reason,
@@ -103,11 +101,11 @@ class Runner:
         self.ctx = Context(bus, body, config, perception, formation, clock)
         self.ctx.journal_hook = self._journal
         self.membership = Membership(self.ctx)
-        self.obstacle_sightings: list[np.ndarray] = []  # fixed frame, one array per image
         self.motion = Motion(self.ctx, self.membership)
         self.safe_steps = SafeSteps(self.ctx, self.membership, self.motion)
-        # (records held, digest of their plan) for adopting a member's plan (_adopt_plan)
-        self._candidate: tuple[tuple[NeighborRecordMsg, ...], str] | None = None
+        self.search = Search(self.ctx, self.motion)
+        self.agreeing = Agreeing(self.ctx, self.membership)
+        self.research = Research(self.ctx, self.membership, self.motion, self.search)
 
     # ================================================================= plumbing
 
@@ -124,272 +122,7 @@ class Runner:
             log.error("journal write failed, journal given up: %s", reason(exc))
             self.ctx.journal = None
 
-    # ================================================================= motion
-
     # ================================================================= phases
-
-    def search(self) -> list[Sightings]:
-        """Sweeps at θ = 0 and θ = 180° (5.2.2 (iii)); returns fixed-frame sightings.
-
-        Addition to the paper: after the second sweep the robot completes the circle
-        back to θ = 0. The yaw-0 image taken at the start *defines* the fixed frame, so
-        the compass between it and the image after the full circle gives the absolute
-        residual r; the compass gain is then (2π + r) / (sum of compass steps), which
-        removes the compass's scale error (parallax of the off-axis camera) from the
-        θ = 180° sweep and from every later turn, and the heading is known absolutely.
-        """
-        self.ctx.status("search", 0.0, "sweep at θ = 0°")
-        h0 = (
-            self.ctx.beliefs.heading
-        )  # north at the start; kept from the compass in re-search rounds
-        n = 2 * len(self.ctx.cfg.search_yaws)
-        raw: list[tuple[int, list[Detection]]] = []
-        obst: list[tuple[int, list[ObstacleDetection]]] = []  # 5.1.2: obstacles seen
-        done = 0
-        origin: Frame | None = None
-        turned = [0.0, 0.0]
-        for sweep in range(2):
-            if sweep == 1:
-                turned[0] = self.motion.rotate(math.pi, PAPER_GAINS, "turn to θ = 180°")
-            for yaw in self.ctx.cfg.search_yaws:
-                frame = self.motion.look(yaw)
-                if abs(yaw) < 1e-9:
-                    self.motion.last_frame = frame
-                    if sweep == 0:
-                        origin = frame
-                raw.append((sweep, self.ctx.perception.detect(frame.image, yaw)))
-                obst.append((sweep, self.ctx.perception.detect_obstacles(frame.image, yaw)))
-                done += 1
-                self.ctx.status(
-                    "search", done / n, f"θ = {180 * sweep}°, head {math.degrees(yaw):+.0f}°"
-                )
-            # the last image of the sweep was not at yaw 0: refresh the compass reference
-            self.motion.last_frame = self.motion.look(0.0)
-            if origin is None:
-                origin = self.motion.last_frame
-            if sweep == 0 and self.ctx.journal is not None:  # the view that defines the fixed frame
-                try:
-                    self.ctx.journal.save_reference(origin.image)
-                except (OSError, ValueError) as exc:
-                    log.error("reference view not journaled: %s", reason(exc))
-        heading_180 = self.ctx.beliefs.heading
-        turned[1] = self.motion.rotate(math.pi, PAPER_GAINS, "complete the circle to θ = 0°")
-        assert origin is not None and self.motion.last_frame is not None
-        self._calibrate(origin, self.motion.last_frame, turned, h0)
-        if self.ctx.beliefs.compass_gain != 1.0:
-            heading_180 = wrap_pi(h0 + self.ctx.beliefs.compass_gain * turned[0])
-        self.obstacle_sightings = [
-            self.ctx.perception.obstacles_fixed(o, h0 if sweep == 0 else heading_180)
-            for sweep, o in obst
-        ]
-        return [
-            self.ctx.perception.to_fixed(dets, h0 if sweep == 0 else heading_180)
-            for sweep, dets in raw
-        ]
-
-    def _calibrate(
-        self, origin: Frame, final: Frame, turned: list[float], h0: float = NORTH
-    ) -> None:
-        """Compass gain and absolute heading from the full circle (see :meth:`search`)."""
-        res = self.ctx.perception.measure_turn(origin.image, final.image)
-        total = turned[0] + turned[1]
-        if not res.ok or total < math.pi:
-            log.warning("compass calibration skipped: %s", res.reason if not res.ok else "no turn")
-            return
-        r = float(res.dtheta)
-        gain = (2.0 * math.pi + r) / total
-        if not 0.9 <= gain <= 1.1:
-            log.warning("compass gain %.4f implausible: kept 1.0", gain)
-            return
-        self.ctx.beliefs.compass_gain = gain
-        self.ctx.beliefs.heading = wrap_pi(h0 + r)
-        log.info(
-            "compass calibrated over the circle: gain %.4f, residual %+.2f°", gain, math.degrees(r)
-        )
-
-    def localise(self, sightings: list[Sightings]) -> NeighborRecordMsg:
-        self.ctx.status("localise", 0.0)
-        pts, ori, conf = self.ctx.perception.merge(sightings)
-        obstacles = self.ctx.perception.merge_obstacles(self.obstacle_sightings)
-        rec = NeighborRecordMsg(
-            sender=self.ctx.me,
-            round=self.ctx.record_round,
-            neighbours=tuple((float(x), float(y)) for x, y in pts),
-            orientations=tuple(float(o) for o in ori),
-            confidences=tuple(float(c) for c in conf),
-            obstacles=tuple((float(x), float(y)) for x, y in obstacles),
-        )
-        self.ctx.own_record = rec
-        self.ctx.status("localise", 1.0, f"{len(pts)} neighbours, {len(obstacles)} obstacles")
-        return rec
-
-    def agree(self, record: NeighborRecordMsg) -> Decision[NeighborRecordMsg]:
-        now = self.ctx.clock()
-        agr = Agreement(
-            self.ctx.me,
-            record,
-            now,
-            fleet_size=self.ctx.cfg.fleet_size,
-            timeout=self.ctx.cfg.timeout,
-            settle=self.ctx.cfg.settle,
-            backoff_max=self.ctx.cfg.backoff_max,
-            digest_fn=canonical_digest,
-            params=params_digest(self.ctx.cfg.agreed_params()),
-        )
-        self.membership.open_round(agr)
-        self.ctx.status("exchange", 0.0, "publishing record")
-        while True:
-            self.membership.pump(0.05)
-            d = agr.decide(self.ctx.clock())
-            if d.kind == "wait":
-                d = self._adopt_plan(agr) or d
-            if d.kind != "wait":
-                return d
-            n = max(1, len(agr.live))
-            held = len(agr.held_members())
-            agreeing = n - len(agr.disagreeing())
-            phase = "exchange" if agr.missing_records() else "agree"
-            self.ctx.status(phase, (held + agreeing) / (2 * n), d.reason)
-
-    def _adopt_plan(self, agr: Agreement[NeighborRecordMsg]) -> Decision[NeighborRecordMsg] | None:
-        """Agreed, when a member already acts on the plan of exactly our records (issue #9).
-
-        Agreement is asymmetric: a member agrees once it holds every matching digest, and
-        ours may reach it while its own never reaches us (a session cut until it exits).
-        A member whose status carries a plan digest has agreed; when it plans with our
-        parameters (its digest's ``params``) and that plan digest is the digest of the
-        plan we compute from the records we hold (a record from every fleet member), it
-        planned from the same inputs: we adopt (:meth:`Agreement.adopt`). The candidate
-        plan is computed once per record set.
-        """
-        if self.ctx.cfg.fleet_size is None or len(agr.records) != self.ctx.cfg.fleet_size:
-            return None
-        claims = {
-            i: self.membership.peers[i].plan_digest
-            for i in sorted(agr.records)
-            if i != self.ctx.me
-            and i in self.membership.peers
-            and self.membership.peers[i].plan_digest
-            and agr.params_of.get(i) == agr.params
-        }
-        if not claims:
-            return None
-        recs = tuple(agr.records[i] for i in sorted(agr.records))
-        if self._candidate is None or self._candidate[0] != recs:
-            try:
-                digest = str(self.ctx.formation.plan(recs, self.ctx.cfg.plan_params()).digest)
-            except ValueError:
-                digest = ""
-            self._candidate = (recs, digest)
-        digest = self._candidate[1]
-        same = [i for i, d in claims.items() if d == digest]
-        if not digest or not same:
-            return None
-        why = f"robot(s) {same} act on the plan of the records held here (plan {digest[:12]})"
-        log.info("agreed by adoption: %s", why)
-        return agr.adopt(self.ctx.clock(), why)
-
-    def research(self, decision: Decision[NeighborRecordMsg]) -> NeighborRecordMsg | None:
-        """Re-search (NAO paper 4.1.3 rule 2) on the agreed records: ``None`` when the
-        fleet is connected, else this robot's record of the next round.
-
-        Every agent decides alike from the agreed records (agent/core/formation/research.py).
-        The robots outside the kept group make their exploration move, checked with the
-        camera before each step (:meth:`explore`); the others wait until each of them
-        has published a record or digest of the new round (it has walked and searched),
-        so that the robots it now sees look again too (eq. 9 needs both sides). Then
-        every robot searches again with its record's origin where it stands (the fixed
-        frame moves with it, 4.1.1; the heading belief is kept from the compass), and
-        the caller agrees the new round. After ``research_rounds`` rounds the fleet
-        stops: the reason names who is still outside.
-        """
-        k = self.ctx.record_round + 1
-        verdict = self.ctx.formation.research(decision.records, k, self.ctx.cfg.explore_step)
-        if verdict.connected:
-            return None
-        if k > self.ctx.cfg.research_rounds:
-            raise AgentFailure(
-                f"{verdict.reason} after {self.ctx.cfg.research_rounds} re-search round(s): "
-                "stopping (4.1.3 rule 2)"
-            )
-        log.info("re-search round %d: %s", k, verdict.reason)
-        self.ctx.record_round = k
-        self.membership.retire()
-        if self.ctx.me in verdict.searchers:
-            self.ctx.status("explore", 0.0, f"round {k}: {verdict.reason}", force=True)
-            self.explore(verdict.move(self.ctx.me))
-        else:
-            self._wait_for_searchers(verdict.searchers)
-        self.ctx.beliefs.position = np.zeros(2)  # the new record's origin: here
-        self.motion.last_frame = None
-        return self.localise(self.search())
-
-    def explore(self, move: np.ndarray) -> None:
-        """Walk the exploration ``move`` (fixed frame, m) in steps; before each step the
-        yaw-0 image is checked: a NAO inside the step's sweep (2·radius + 0.1 m wide,
-        :func:`~agent.core.formation.research.step_blocked`) ends the move there."""
-        goal = self.ctx.beliefs.position + np.asarray(move, dtype=np.float64)
-        total = float(np.hypot(*move)) or 1.0
-        clearance = 2.0 * self.ctx.cfg.radius + 0.1
-        self.motion.last_frame = None
-        for _ in range(200):
-            leg = next_leg(self.ctx.beliefs.position, self.ctx.beliefs.heading, goal)
-            if leg is None:
-                return
-            if abs(leg.turn) > self.ctx.cfg.rotation_tolerance:
-                self.motion.rotate(leg.turn, PAPER_GAINS, "explore: turn")
-            frame = (
-                self.motion.last_frame
-                if self.motion.last_frame is not None
-                else self.motion.look(0.0)
-            )
-            self.motion.last_frame = frame
-            pts, _, _ = self.ctx.perception.to_fixed(
-                self.ctx.perception.detect(frame.image, frame.yaw), self.ctx.beliefs.heading
-            )
-            hit = step_blocked(pts, self.ctx.beliefs.heading, leg.walk, clearance)
-            if hit is not None:
-                log.info(
-                    "explore: a NAO at %s blocks the next step: move ends at believed %s",
-                    pts[hit].round(2).tolist(), self.ctx.beliefs.position.round(2).tolist(),
-                )  # fmt: skip
-                self.ctx.status("explore", 1.0, "a NAO ahead: move ended", force=True)
-                return
-            self.motion.walk_step(leg.walk)
-            done = 1.0 - max(0.0, leg.remaining - abs(leg.walk)) / total
-            self.ctx.status("explore", done, f"round {self.ctx.record_round}: exploring")
-        raise AgentFailure("exploration move did not converge in 200 steps")
-
-    def _wait_for_searchers(self, searchers: tuple[int, ...]) -> None:
-        """Stand still until every searcher published a record or digest of this round."""
-        k = self.ctx.record_round
-        deadline = self.ctx.clock() + self.ctx.cfg.research_timeout
-        text = f"round {k}: waiting for robots {list(searchers)} to explore and search"
-        self.ctx.status("explore", 0.0, text, force=True)
-        while True:
-            self.membership.pump(0.1)
-            pending = []
-            for i in searchers:
-                rec, dig = (
-                    self.membership.early_records.get(i),
-                    self.membership.early_digests.get(i),
-                )
-                if (rec is not None and rec.round >= k) or (dig is not None and dig.round >= k):
-                    continue
-                peer = self.membership.peer(i)
-                if peer.phase == "failed":
-                    raise AgentFailure(f"robot {i} failed in re-search round {k}")
-                if peer.seen_alive and not peer.alive:
-                    raise AgentFailure(f"robot {i} left in re-search round {k}")
-                pending.append(i)
-            if not pending:
-                return
-            if self.ctx.clock() > deadline:
-                raise AgentFailure(
-                    f"robots {pending} did not search again within "
-                    f"{self.ctx.cfg.research_timeout:g} s (re-search round {k})"
-                )
-            self.ctx.status("explore", 0.0, text)
 
     def make_plan(self, decision: Decision[NeighborRecordMsg]) -> Plan:
         self.ctx.status("plan", 0.0, decision.reason)
@@ -615,14 +348,14 @@ class Runner:
             stage, record = self.resume()
             if stage == "search":
                 self.ctx.status("start", 0.0, "joined", force=True)
-                record = self.localise(self.search())
+                record = self.search.localise(self.search.sweep())
             if stage in ("search", "agree"):
                 assert record is not None
                 while True:  # re-search rounds (4.1.3 rule 2) until the fleet is connected
-                    decision = self.agree(record)
+                    decision = self.agreeing.agree(record)
                     if decision.kind != "agreed":
                         raise AgentFailure(decision.reason)
-                    again = self.research(decision)
+                    again = self.research.next_round(decision)
                     if again is None:
                         break
                     record = again

@@ -38,7 +38,7 @@ def test_search_sees_every_neighbour_where_it_stands(
 ) -> None:
     r = runner_for(1, world, bus, perception)
     x0, y0, h0 = world.pose(1)
-    rec = r.localise(r.search())
+    rec = r.search.localise(r.search.sweep())
     truth = {j: np.subtract(world.pose(j)[:2], (x0, y0)) for j in (2, 3)}
     assert len(rec.neighbours) == 2, rec
     for j, p in truth.items():

@@ -58,7 +58,7 @@ class Peer:
         self.thread = threading.Thread(target=self._run, daemon=True)
 
     def _run(self) -> None:
-        d = self.runner.agree(record(self.runner.ctx.me))
+        d = self.runner.agreeing.agree(record(self.runner.ctx.me))
         self.decision = d
         if d.kind == "agreed":
             # what the runner does next: a post-agreement status acknowledges the digest
