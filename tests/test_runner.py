@@ -186,7 +186,7 @@ def test_make_plan_plans_with_the_agents_parameters(perception: PerceptionAdapte
     try:
         cfg = AgentConfig(robot_id=3, fleet_size=3, orientation="cp", strategy="paper")
         r = Runner(bus, ZenohBody(bus, 3), cfg, perception, FormationAdapter())
-        plan = r.make_plan(
+        plan = r.waves.make_plan(
             Decision("agreed", records=records(), digest=canonical_digest(records()))
         )
     finally:
@@ -219,14 +219,14 @@ def test_runner_rejects_config_for_another_robot(perception: PerceptionAdapter) 
 def test_a_robot_with_an_empty_after_list_starts_at_once(runner: Runner) -> None:
     after(runner, ())
     runner.membership.peers[1] = Peer(alive=True, phase="move", seen_alive=True)
-    runner.wait_for_earlier_waves()  # returns although robot 1 still moves
+    runner.waves.wait_for_earlier_waves()  # returns although robot 1 still moves
 
 
 def test_waits_pass_when_earlier_waves_hold(runner: Runner) -> None:
     after(runner, (1, 2))
     for i in (1, 2):
         runner.membership.peers[i] = Peer(alive=True, phase="hold", seen_alive=True)
-    runner.wait_for_earlier_waves()
+    runner.waves.wait_for_earlier_waves()
 
 
 def test_member_of_an_earlier_wave_that_leaves_stops_us(runner: Runner) -> None:
@@ -234,7 +234,7 @@ def test_member_of_an_earlier_wave_that_leaves_stops_us(runner: Runner) -> None:
     runner.membership.peers[1] = Peer(alive=False, phase="move", seen_alive=True)
     runner.membership.peers[2] = Peer(alive=True, phase="hold", seen_alive=True)
     with pytest.raises(AgentFailure, match=r"robot 1 of wave .* left before holding"):
-        runner.wait_for_earlier_waves()
+        runner.waves.wait_for_earlier_waves()
 
 
 def test_failed_member_of_an_earlier_wave_stops_us(runner: Runner) -> None:
@@ -242,7 +242,7 @@ def test_failed_member_of_an_earlier_wave_stops_us(runner: Runner) -> None:
     runner.membership.peers[1] = Peer(alive=True, phase="hold", seen_alive=True)
     runner.membership.peers[2] = Peer(alive=True, phase="failed", seen_alive=True)
     with pytest.raises(AgentFailure, match=r"robot 2 of wave .* failed"):
-        runner.wait_for_earlier_waves()
+        runner.waves.wait_for_earlier_waves()
 
 
 def test_earlier_wave_that_never_holds_times_out(runner: Runner) -> None:
@@ -250,7 +250,7 @@ def test_earlier_wave_that_never_holds_times_out(runner: Runner) -> None:
     runner.membership.peers[1] = Peer(alive=True, phase="move", seen_alive=True)
     runner.membership.peers[2] = Peer(alive=True, phase="hold", seen_alive=True)
     with pytest.raises(AgentFailure, match=r"robots \[1\] of earlier waves did not hold"):
-        runner.wait_for_earlier_waves()
+        runner.waves.wait_for_earlier_waves()
 
 
 def test_unavailable_perception_fails_safely_with_reason() -> None:
@@ -408,7 +408,7 @@ def test_done_lingers_with_heartbeats_for_members_out_of_reach(
     r, bus = _lingering(perception, out_of_reach)
     try:
         r.ctx.status("done", 1.0, force=True)
-        r._wait_all(("done", "failed"), "done", "waiting for", linger=r.ctx.cfg.member_grace)
+        r.hold.wait_all(("done", "failed"), "done", "waiting for", linger=r.ctx.cfg.member_grace)
         # returned once the linger passed, having re-published ``done`` meanwhile
         assert r.ctx.clock() >= r.ctx.cfg.member_grace
         assert bus.stats.published_count["status"] >= 3
@@ -428,7 +428,7 @@ def test_done_does_not_linger_once_every_member_is_seen_done(
     )
     try:
         r.ctx.status("done", 1.0, force=True)
-        r._wait_all(("done", "failed"), "done", "waiting for", linger=r.ctx.cfg.member_grace)
+        r.hold.wait_all(("done", "failed"), "done", "waiting for", linger=r.ctx.cfg.member_grace)
         assert r.ctx.clock() < 3.0  # no heartbeat was due
         assert bus.stats.published_count["status"] == 1
     finally:
@@ -441,7 +441,7 @@ def test_without_linger_members_out_of_reach_are_not_waited_for(
     out_of_reach = {i: Peer(alive=False, phase="hold", seen_alive=True) for i in (1, 2)}
     r, bus = _lingering(perception, out_of_reach)
     try:
-        r._wait_all(("done", "failed"), "done", "waiting for")
+        r.hold.wait_all(("done", "failed"), "done", "waiting for")
         assert r.ctx.clock() < 3.0
     finally:
         bus.close()

@@ -221,7 +221,7 @@ def _resume(
     )
     runner.membership.agreement = agr
     decision = agr.decide(runner.ctx.clock())
-    runner.make_plan(decision)
+    runner.waves.make_plan(decision)
     if st.plan_digest and runner.ctx.plan_digest != st.plan_digest:
         raise AgentFailure(
             f"recomputed plan {runner.ctx.plan_digest[:12]} differs from the journaled "

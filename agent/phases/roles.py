@@ -11,16 +11,23 @@ never on another collaborator's class nor on the runner:
 - :class:`Mover`: look, turn and step, measured by the visual compass
   (:class:`~agent.phases.motion.Motion`);
 - :class:`Surveyor`: search where the robot stands and make its record
-  (:class:`~agent.phases.search.Search`).
+  (:class:`~agent.phases.search.Search`);
+- :class:`Stepper`: walk to a goal, every step checked first
+  (:class:`~agent.phases.safe_steps.SafeSteps`);
+- :class:`Planner`: the plan of an agreed record set (:class:`~agent.phases.waves.Waves`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Protocol
 
+import numpy as np
+
 from agent.body.base import Frame, MotionResult
-from agent.core.agreement import Agreement
+from agent.core.agreement import Agreement, Decision
 from agent.core.control import PidGains
+from agent.core.formation.plan import Plan
 from agent.phases.membership import Peer
 from agent.phases.seams import Sightings
 from agent.wire import DigestMsg, NeighborRecordMsg, RecordSetReply
@@ -73,3 +80,19 @@ class Surveyor(Protocol):
     def sweep(self) -> list[Sightings]: ...
 
     def localise(self, sightings: list[Sightings]) -> NeighborRecordMsg: ...
+
+
+class Stepper(Protocol):
+    """Distance control to a goal with safe steps (NAO paper 4.2; issue #10)."""
+
+    def walk_to(
+        self, goal: np.ndarray, progress: Callable[[float], None], backward_within: float = 0.0
+    ) -> None: ...
+
+    def forget(self) -> None: ...
+
+
+class Planner(Protocol):
+    """The plan of the agreed records (NAO paper 4.1.2–4.2, AUV III)."""
+
+    def make_plan(self, decision: Decision[NeighborRecordMsg]) -> Plan: ...

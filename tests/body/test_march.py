@@ -117,7 +117,7 @@ def test_follower_keeps_station_on_a_marching_parent(
     body.on_arrival.append(r.membership.peers[child.parent])
     want = station_offset(plan, child.robot_id)
     start = np.asarray(world.pose(child.robot_id)[:2])
-    m = Marcher(r, Route(distance=0.6), axis)
+    m = Marcher(r.ctx, r.membership, r.motion, Route(distance=0.6), axis)
     m.run()
     now = np.asarray(world.pose(child.robot_id)[:2])
     err = np.subtract(world.pose(child.parent)[:2], now) - want
@@ -139,7 +139,7 @@ def test_lost_parent_halts_with_the_reason_after_a_head_search(
     world.set_pose(child.parent, x + 3.0 * math.cos(axis), y + 3.0 * math.sin(axis), h)
     h0 = world.pose(child.robot_id)[2]
     with pytest.raises(MarchHalt, match=f"lost sight of parent {child.parent}"):
-        Marcher(r, Route(distance=0.6), axis).run()
+        Marcher(r.ctx, r.membership, r.motion, Route(distance=0.6), axis).run()
     assert world.pose(child.robot_id)[2] == pytest.approx(h0)  # searched with the head only
     assert r.ctx.phase == "march"
 
@@ -153,10 +153,10 @@ def test_a_failed_member_halts_the_march(
     other = next(i for i in plan.ids if i != child.robot_id)
     r.membership.peers[other].phase = "failed"
     with pytest.raises(MarchHalt, match=f"robot {other} failed"):
-        Marcher(r, Route(distance=0.6), axis).run()
+        Marcher(r.ctx, r.membership, r.motion, Route(distance=0.6), axis).run()
     r.membership.peers[other] = Peer(alive=False, phase="march", seen_alive=True)
     with pytest.raises(MarchHalt, match=f"robot {other} left"):
-        Marcher(r, Route(distance=0.6), axis).check_fleet()
+        Marcher(r.ctx, r.membership, r.motion, Route(distance=0.6), axis).check_fleet()
 
 
 def test_the_leader_sees_who_lost_its_parent(
@@ -165,7 +165,7 @@ def test_the_leader_sees_who_lost_its_parent(
     plan, axis = formed(world)
     lead = plan.leader
     r = child_runner(world, bus, perception, WorldBody(world, lead), plan, axis)
-    m = Marcher(r, Route(distance=0.6), axis)
+    m = Marcher(r.ctx, r.membership, r.motion, Route(distance=0.6), axis)
     assert m.lost_followers() == []
     lost = next(i for i in plan.ids if i != lead)
     r.membership.peers[lost].detail = f"{LOST} {lead}: head search 1"

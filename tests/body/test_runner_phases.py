@@ -120,6 +120,6 @@ def test_correct_steps_towards_the_planned_offset_to_the_parent(
         return float(np.hypot(*(d - want)))
 
     assert offset_error() == pytest.approx(0.15, abs=1e-6)
-    r.correct()
+    r.hold.correct()
     assert offset_error() < 0.06
     assert world.locomotion.contacts == 0
