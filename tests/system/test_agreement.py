@@ -1,7 +1,7 @@
 """Agreement over real zenoh sessions: the runner's exchange phase in several peers.
 
 Each peer is a real :class:`agent.net.bus.Bus` (its own zenoh session, loopback TCP, no
-multicast) driving :meth:`agent.phases.runner.Runner.agree`, the code every agent process
+multicast) driving :meth:`agent.phases.agreeing.Agreeing.agree`, the code every agent process
 runs. Covered: all agree on one digest; a late joiner is waited for; a lost record is
 re-sent; a member that dies before agreement stops everyone safely.
 """
