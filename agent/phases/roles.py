@@ -1,8 +1,9 @@
 """The roles the runner's collaborators play for each other (typed seams; DESIGN.md §1, §8).
 
 The phase machine (:mod:`agent.phases.runner`) composes one collaborator per concern; each
-depends on the shared :class:`~agent.phases.context.Context` and on these protocols,
-never on another collaborator's class nor on the runner:
+depends on the shared :class:`~agent.phases.context.Context` and on these protocols, never
+on the runner nor on the class of a collaborator it is handed (the hold phase builds its
+own :class:`~agent.phases.march.Marcher`):
 
 - :class:`Hearing`: keep hearing the fleet while waiting
   (:class:`~agent.phases.membership.Membership`);
