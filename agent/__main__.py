@@ -322,7 +322,7 @@ def main(argv: list[str] | None = None) -> int:
                 from agent.phases.journal import Journal
 
                 try:
-                    runner.journal = Journal(args.state_dir, rid)
+                    runner.ctx.journal = Journal(args.state_dir, rid)
                 except (OSError, ValueError) as exc:
                     log.error("no journal in %s: %s", args.state_dir, exc)
             code = runner.run()
@@ -338,9 +338,9 @@ def main(argv: list[str] | None = None) -> int:
             ", ".join(
                 f"{k} {v} B/{st.published_count[k]}" for k, v in sorted(st.published_bytes.items())
             ),
-            runner.compass_failures,
-            runner.compass_uses,
-            runner.drift_checks,
+            runner.motion.compass_failures,
+            runner.motion.compass_uses,
+            runner.motion.drift_checks,
             st.rejected,
             st.untrusted,
             st.dropped,

@@ -14,13 +14,13 @@ import sys
 import time
 from pathlib import Path
 from types import SimpleNamespace
-from typing import cast
 
 import pytest
 
 from agent.core.agreement import Agreement
 from agent.net.bus import Bus, BusConfig, BusError, Event
-from agent.phases.resume import agreed_by_others, answer, record_set, records_of
+from agent.phases.record_sets import answer, record_set, records_of
+from agent.phases.resume import agreed_by_others
 from agent.phases.runner import Runner
 from agent.wire import (
     KEY_RECORDS_ALL,
@@ -113,29 +113,29 @@ def test_records_of_each_error_branch(case: str, match: str) -> None:
 
 def test_a_restarted_member_counts_once_it_shows_the_agreed_digest(runner: Runner) -> None:  # noqa: F811
     r = runner
-    r.agreement = agreed()
-    r.plan_digest = "cd" * 32
-    r._handle(Event("alive", "nao/alive/2", robot_id=2))
-    r.agreed_epochs = {2: 100}
-    r.epochs = {2: 100}
-    _, digest = r.agreement.digest()
+    r.membership.agreement = agreed()
+    r.ctx.plan_digest = "cd" * 32
+    r.membership.handle(Event("alive", "nao/alive/2", robot_id=2))
+    r.membership.agreed_epochs = {2: 100}
+    r.membership.epochs = {2: 100}
+    _, digest = r.membership.agreement.digest()
     # a new session that does not show the agreed digest is ignored
     wrong = DigestMsg(sender=2, round=0, digest="0" * 64, members=(1, 2, 3), params="ab" * 32)
-    r._handle(Event("msg", "nao/2/digest", wrong, epoch=300))
-    r._handle(Event("msg", "nao/2/status", StatusMsg(sender=2, phase="wait"), epoch=300))
-    assert r.agreed_epochs[2] == 100 and r.peers[2].phase != "wait"
+    r.membership.handle(Event("msg", "nao/2/digest", wrong, epoch=300))
+    r.membership.handle(Event("msg", "nao/2/status", StatusMsg(sender=2, phase="wait"), epoch=300))
+    assert r.membership.agreed_epochs[2] == 100 and r.membership.peers[2].phase != "wait"
     # ... one that does is the same member from now on; the old session no longer counts
     right = DigestMsg(sender=2, round=0, digest=digest, members=(1, 2, 3), params="ab" * 32)
-    r._handle(Event("msg", "nao/2/digest", right, epoch=300))
-    assert r.agreed_epochs[2] == 300
-    r._handle(Event("msg", "nao/2/status", StatusMsg(sender=2, phase="move"), epoch=300))
-    assert r.peers[2].phase == "move"
-    r._handle(Event("msg", "nao/2/status", StatusMsg(sender=2, phase="done"), epoch=100))
-    assert r.peers[2].phase == "move"
+    r.membership.handle(Event("msg", "nao/2/digest", right, epoch=300))
+    assert r.membership.agreed_epochs[2] == 300
+    r.membership.handle(Event("msg", "nao/2/status", StatusMsg(sender=2, phase="move"), epoch=300))
+    assert r.membership.peers[2].phase == "move"
+    r.membership.handle(Event("msg", "nao/2/status", StatusMsg(sender=2, phase="done"), epoch=100))
+    assert r.membership.peers[2].phase == "move"
     # a status with the agreed plan digest proves it too
     st = StatusMsg(sender=2, phase="hold", plan_digest="cd" * 32)
-    r._handle(Event("msg", "nao/2/status", st, epoch=400))
-    assert r.agreed_epochs[2] == 400 and r.peers[2].phase == "hold"
+    r.membership.handle(Event("msg", "nao/2/status", st, epoch=400))
+    assert r.membership.agreed_epochs[2] == 400 and r.membership.peers[2].phase == "hold"
 
 
 def test_reply_signed_by_another_robot_than_the_key_names_is_refused(tmp_path: Path) -> None:
@@ -194,10 +194,9 @@ def test_record_set_query_over_plain_sessions() -> None:
         rep = _fetch(b, d.digest, d.members)
         assert rep == served
         # a restarted agent whose record the others agreed on adopts their set
-        asker = cast("Runner", SimpleNamespace(bus=b))
-        assert agreed_by_others(asker, records()[0]) == (d.digest, (1, 2, 3))
+        assert agreed_by_others(b, records()[0]) == (d.digest, (1, 2, 3))
         stranger = NeighborRecordMsg(sender=1, round=0, neighbours=((3.0, 3.0),))
-        assert agreed_by_others(asker, stranger) is None  # not with another record of ours
+        assert agreed_by_others(b, stranger) is None  # not with another record of ours
         # an unknown digest: nobody answers (no reply), never a wrong set
         with pytest.raises(BusError):
             b.query(KEY_RECORDS_ALL, RecordSetRequest(digest="0" * 64), RecordSetReply, 1.0)

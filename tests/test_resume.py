@@ -15,20 +15,21 @@ import numpy as np
 import pytest
 
 from agent.phases import resume
+from agent.phases.context import NORTH, AgentFailure
 from agent.phases.journal import Journal, JournalState
-from agent.phases.runner import NORTH, AgentFailure, Runner
+from agent.phases.runner import Runner
 from agent.wire import NeighborRecordMsg
 from tests.test_runner import perception, records, runner  # noqa: F401  (fixtures)
 
 
 def test_the_runner_journals_the_command_before_sending_it(runner: Runner, tmp_path: Path) -> None:  # noqa: F811
-    runner.journal = Journal(tmp_path, 3)
-    runner.heading, runner.position = 1.0, np.array([0.5, -0.25])
-    runner._journal("walk", 0.2)
+    runner.ctx.journal = Journal(tmp_path, 3)
+    runner.ctx.beliefs.heading, runner.ctx.beliefs.position = 1.0, np.array([0.5, -0.25])
+    runner.journaling.save("walk", 0.2)
     st = Journal(tmp_path, 3).load()
     assert st is not None and (st.command, st.command_value) == ("walk", 0.2)
     assert st.heading == 1.0 and st.position == (0.5, -0.25) and st.record is None
-    runner.status("search", 0.1)  # a phase change is journaled, without a command
+    runner.ctx.status("search", 0.1)  # a phase change is journaled, without a command
     st = Journal(tmp_path, 3).load()
     assert st is not None and st.phase == "search" and st.command == ""
 
@@ -38,11 +39,11 @@ def test_a_failing_disk_gives_the_journal_up_never_the_agent(
     tmp_path: Path,
     caplog: pytest.LogCaptureFixture,
 ) -> None:
-    runner.journal = Journal(tmp_path / "state", 3)
+    runner.ctx.journal = Journal(tmp_path / "state", 3)
     shutil.rmtree(tmp_path / "state")
     with caplog.at_level(logging.ERROR):
-        runner._journal("turn", 0.1)
-    assert runner.journal is None and "journal write failed" in caplog.text
+        runner.journaling.save("turn", 0.1)
+    assert runner.ctx.journal is None and "journal write failed" in caplog.text
 
 
 def test_a_corrupt_journal_is_reported_and_ignored(
@@ -59,26 +60,26 @@ def test_a_corrupt_journal_is_reported_and_ignored(
 @pytest.mark.parametrize("phase", ["failed", "march", "explore"])
 def test_a_failed_marching_or_exploring_robot_is_not_resumed(runner: Runner, phase: str) -> None:  # noqa: F811
     with pytest.raises(AgentFailure, match=f"phase {phase} at the crash"):
-        resume.resume(runner, JournalState(robot_id=3, phase=phase))
+        runner.resumption.resume(JournalState(robot_id=3, phase=phase))
 
 
 def test_before_the_record_it_searches_again_facing_north(runner: Runner) -> None:  # noqa: F811
     st = JournalState(robot_id=3, phase="search", heading=NORTH)
-    assert resume.resume(runner, st) == ("search", None)
-    assert runner.heading == NORTH
+    assert runner.resumption.resume(st) == ("search", None)
+    assert runner.ctx.beliefs.heading == NORTH
 
 
 def test_with_a_record_it_rejoins_the_exchange(runner: Runner, tmp_path: Path) -> None:  # noqa: F811
     rec = NeighborRecordMsg(sender=3, round=2, neighbours=((1.0, 0.0),))
-    runner.journal = Journal(tmp_path, 3)
+    runner.ctx.journal = Journal(tmp_path, 3)
     st = JournalState(
         robot_id=3, phase="exchange", heading=1.4, compass_gain=1.02, record=rec, seq=5
     )
     # nobody answers for an agreed set (no fleet): the exchange again, with the record
-    assert resume.resume(runner, st) == ("agree", rec)
-    assert runner.own_record == rec and runner.record_round == 2
-    assert runner.compass_gain == 1.02 and runner.heading == 1.4
-    assert runner.journal is not None  # journaling goes on after the resumption
+    assert runner.resumption.resume(st) == ("agree", rec)
+    assert runner.ctx.own_record == rec and runner.ctx.record_round == 2
+    assert runner.ctx.beliefs.compass_gain == 1.02 and runner.ctx.beliefs.heading == 1.4
+    assert runner.ctx.journal is not None  # journaling goes on after the resumption
 
 
 def test_the_command_in_flight_counts_as_executed(runner: Runner) -> None:  # noqa: F811
@@ -86,13 +87,13 @@ def test_the_command_in_flight_counts_as_executed(runner: Runner) -> None:  # no
     st = JournalState(
         robot_id=3, phase="exchange", heading=NORTH, record=rec, command="walk", command_value=0.2
     )
-    resume.resume(runner, st)
-    assert np.allclose(runner.position, [0.0, 0.2])
+    runner.resumption.resume(st)
+    assert np.allclose(runner.ctx.beliefs.position, [0.0, 0.2])
     st = JournalState(
         robot_id=3, phase="exchange", heading=1.0, record=rec, command="turn", command_value=0.25
     )
-    resume.resume(runner, st)
-    assert math.isclose(runner.heading, 1.25)
+    runner.resumption.resume(st)
+    assert math.isclose(runner.ctx.beliefs.heading, 1.25)
 
 
 def test_after_agreement_without_a_fleet_it_stops_safely(runner: Runner) -> None:  # noqa: F811
@@ -104,4 +105,6 @@ def test_after_agreement_without_a_fleet_it_stops_safely(runner: Runner) -> None
         agreed_members=(1, 2, 3),
     )
     with pytest.raises(ValueError, match="nobody served the agreed records"):
-        resume.fetch_records(runner, st.agreed_digest, st.agreed_members, timeout=0.5)
+        resume.fetch_records(
+            runner.ctx, runner.membership, st.agreed_digest, st.agreed_members, timeout=0.5
+        )

@@ -21,7 +21,9 @@ from agent.core.formation.params import PlanParams
 from agent.net.bus import Bus, BusConfig
 from agent.phases.adapters import FormationAdapter, PerceptionAdapter
 from agent.phases.config import AgentConfig, Route
-from agent.phases.runner import AgentFailure, Peer, Runner, report_unavailable
+from agent.phases.context import AgentFailure
+from agent.phases.membership import Peer
+from agent.phases.runner import Runner, report_unavailable
 from agent.wire import NeighborRecordMsg, StatusMsg, canonical_digest
 
 # robots 1, 2, 3 at known world positions; every robot sees every other one
@@ -173,7 +175,7 @@ def runner(perception: PerceptionAdapter) -> Iterator[Runner]:
     bus = Bus(BusConfig(multicast_scouting=False))
     cfg = AgentConfig(robot_id=3, fleet_size=3, wave_timeout=2.0)
     r = Runner(bus, ZenohBody(bus, 3), cfg, perception, FormationAdapter())
-    r.plan = r.formation.plan(records(), PlanParams())
+    r.ctx.plan = r.ctx.formation.plan(records(), PlanParams())
     try:
         yield r
     finally:
@@ -185,7 +187,7 @@ def test_make_plan_plans_with_the_agents_parameters(perception: PerceptionAdapte
     try:
         cfg = AgentConfig(robot_id=3, fleet_size=3, orientation="cp", strategy="paper")
         r = Runner(bus, ZenohBody(bus, 3), cfg, perception, FormationAdapter())
-        plan = r.make_plan(
+        plan = r.waves.make_plan(
             Decision("agreed", records=records(), digest=canonical_digest(records()))
         )
     finally:
@@ -195,15 +197,15 @@ def test_make_plan_plans_with_the_agents_parameters(perception: PerceptionAdapte
 
 
 def earlier(r: Runner) -> list[int]:
-    return [i for i in (1, 2, 3) if r.plan.robot(i).wave < r.plan.robot(3).wave]
+    return [i for i in (1, 2, 3) if r.ctx.plan.robot(i).wave < r.ctx.plan.robot(3).wave]
 
 
 def after(r: Runner, ids: tuple[int, ...]) -> None:
     """Make robot 3 of ``r``'s plan wait for ``ids`` (its ``after`` list)."""
     robots = tuple(
-        dataclasses.replace(rp, after=ids) if rp.robot_id == 3 else rp for rp in r.plan.robots
+        dataclasses.replace(rp, after=ids) if rp.robot_id == 3 else rp for rp in r.ctx.plan.robots
     )
-    r.plan = dataclasses.replace(r.plan, robots=robots)
+    r.ctx.plan = dataclasses.replace(r.ctx.plan, robots=robots)
 
 
 def test_runner_rejects_config_for_another_robot(perception: PerceptionAdapter) -> None:
@@ -217,39 +219,39 @@ def test_runner_rejects_config_for_another_robot(perception: PerceptionAdapter) 
 
 def test_a_robot_with_an_empty_after_list_starts_at_once(runner: Runner) -> None:
     after(runner, ())
-    runner.peers[1] = Peer(alive=True, phase="move", seen_alive=True)
-    runner.wait_for_earlier_waves()  # returns although robot 1 still moves
+    runner.membership.peers[1] = Peer(alive=True, phase="move", seen_alive=True)
+    runner.waves.wait_for_earlier_waves()  # returns although robot 1 still moves
 
 
 def test_waits_pass_when_earlier_waves_hold(runner: Runner) -> None:
     after(runner, (1, 2))
     for i in (1, 2):
-        runner.peers[i] = Peer(alive=True, phase="hold", seen_alive=True)
-    runner.wait_for_earlier_waves()
+        runner.membership.peers[i] = Peer(alive=True, phase="hold", seen_alive=True)
+    runner.waves.wait_for_earlier_waves()
 
 
 def test_member_of_an_earlier_wave_that_leaves_stops_us(runner: Runner) -> None:
     after(runner, (1, 2))
-    runner.peers[1] = Peer(alive=False, phase="move", seen_alive=True)
-    runner.peers[2] = Peer(alive=True, phase="hold", seen_alive=True)
+    runner.membership.peers[1] = Peer(alive=False, phase="move", seen_alive=True)
+    runner.membership.peers[2] = Peer(alive=True, phase="hold", seen_alive=True)
     with pytest.raises(AgentFailure, match=r"robot 1 of wave .* left before holding"):
-        runner.wait_for_earlier_waves()
+        runner.waves.wait_for_earlier_waves()
 
 
 def test_failed_member_of_an_earlier_wave_stops_us(runner: Runner) -> None:
     after(runner, (1, 2))
-    runner.peers[1] = Peer(alive=True, phase="hold", seen_alive=True)
-    runner.peers[2] = Peer(alive=True, phase="failed", seen_alive=True)
+    runner.membership.peers[1] = Peer(alive=True, phase="hold", seen_alive=True)
+    runner.membership.peers[2] = Peer(alive=True, phase="failed", seen_alive=True)
     with pytest.raises(AgentFailure, match=r"robot 2 of wave .* failed"):
-        runner.wait_for_earlier_waves()
+        runner.waves.wait_for_earlier_waves()
 
 
 def test_earlier_wave_that_never_holds_times_out(runner: Runner) -> None:
     after(runner, (1, 2))
-    runner.peers[1] = Peer(alive=True, phase="move", seen_alive=True)
-    runner.peers[2] = Peer(alive=True, phase="hold", seen_alive=True)
+    runner.membership.peers[1] = Peer(alive=True, phase="move", seen_alive=True)
+    runner.membership.peers[2] = Peer(alive=True, phase="hold", seen_alive=True)
     with pytest.raises(AgentFailure, match=r"robots \[1\] of earlier waves did not hold"):
-        runner.wait_for_earlier_waves()
+        runner.waves.wait_for_earlier_waves()
 
 
 def test_unavailable_perception_fails_safely_with_reason() -> None:
@@ -262,27 +264,31 @@ def test_messages_whose_sender_does_not_own_the_key_are_dropped(runner: Runner) 
     from agent.net.bus import Event
 
     impostor = NeighborRecordMsg(sender=2, round=0, neighbours=((1.0, 0.0),))
-    runner._handle(Event("msg", "nao/1/record", impostor))
-    assert runner.early_records == {}
-    runner._handle(Event("msg", "nao/2/record", impostor))
-    assert runner.early_records == {}  # 2 is no member yet: no state kept for it
-    runner._handle(Event("alive", "nao/alive/2", robot_id=2))
-    runner._handle(Event("msg", "nao/2/record", impostor))
-    assert runner.early_records == {2: impostor}
+    runner.membership.handle(Event("msg", "nao/1/record", impostor))
+    assert runner.membership.early_records == {}
+    runner.membership.handle(Event("msg", "nao/2/record", impostor))
+    assert runner.membership.early_records == {}  # 2 is no member yet: no state kept for it
+    runner.membership.handle(Event("alive", "nao/alive/2", robot_id=2))
+    runner.membership.handle(Event("msg", "nao/2/record", impostor))
+    assert runner.membership.early_records == {2: impostor}
 
 
 def test_only_the_current_session_of_a_member_counts(runner: Runner) -> None:
     from agent.net.bus import Event
 
-    runner._handle(Event("alive", "nao/alive/2", robot_id=2))
+    runner.membership.handle(Event("alive", "nao/alive/2", robot_id=2))
     new = NeighborRecordMsg(sender=2, round=0, neighbours=((1.0, 0.0),))
     old = NeighborRecordMsg(sender=2, round=3, neighbours=((9.0, 0.0),))
-    runner._handle(Event("msg", "nao/2/record", new, signer="robot-2", epoch=200))
-    runner._handle(Event("msg", "nao/2/record", old, signer="robot-2", epoch=100))
-    assert runner.early_records == {2: new}  # the older session (a replay) is ignored
-    runner.agreed_epochs = {2: 200}
-    runner._handle(Event("msg", "nao/2/status", StatusMsg(sender=2, phase="done"), epoch=300))
-    assert runner.peers[2].phase != "done"  # after agreement only the agreed session counts
+    runner.membership.handle(Event("msg", "nao/2/record", new, signer="robot-2", epoch=200))
+    runner.membership.handle(Event("msg", "nao/2/record", old, signer="robot-2", epoch=100))
+    assert runner.membership.early_records == {2: new}  # the older session (a replay) is ignored
+    runner.membership.agreed_epochs = {2: 200}
+    runner.membership.handle(
+        Event("msg", "nao/2/status", StatusMsg(sender=2, phase="done"), epoch=300)
+    )
+    assert (
+        runner.membership.peers[2].phase != "done"
+    )  # after agreement only the agreed session counts
 
 
 def test_a_vanished_token_is_a_departure_only_after_the_grace_period(
@@ -298,24 +304,30 @@ def test_a_vanished_token_is_a_departure_only_after_the_grace_period(
         r = Runner(
             bus, ZenohBody(bus, 3), cfg, perception, FormationAdapter(), clock=lambda: now[0]
         )
-        r.agreement = Agreement(3, records()[2], 0.0, fleet_size=3, digest_fn=canonical_digest)
+        r.membership.agreement = Agreement(
+            3, records()[2], 0.0, fleet_size=3, digest_fn=canonical_digest
+        )
         for i in (1, 2):
-            r._handle(Event("alive", f"nao/alive/{i}", robot_id=i))
-        r._handle(Event("gone", "nao/alive/1", robot_id=1))
-        r._handle(Event("gone", "nao/alive/2", robot_id=2))
+            r.membership.handle(Event("alive", f"nao/alive/{i}", robot_id=i))
+        r.membership.handle(Event("gone", "nao/alive/1", robot_id=1))
+        r.membership.handle(Event("gone", "nao/alive/2", robot_id=2))
         now[0] = 8.0  # robot 2 is heard from: a heartbeat
-        r._handle(Event("msg", "nao/2/status", StatusMsg(sender=2, phase="agree")))
+        r.membership.handle(Event("msg", "nao/2/status", StatusMsg(sender=2, phase="agree")))
         now[0] = 9.9
-        r.pump()
-        assert r.peers[1].alive and r.peers[2].alive and r.agreement.left == set()
+        r.membership.pump()
+        assert (
+            r.membership.peers[1].alive
+            and r.membership.peers[2].alive
+            and r.membership.agreement.left == set()
+        )
         now[0] = 10.0
-        r.pump()
-        assert not r.peers[1].alive and r.agreement.left == {1}
-        assert r.peers[2].alive  # its grace runs from its last status
-        r._handle(Event("alive", "nao/alive/2", robot_id=2))  # reconnected
+        r.membership.pump()
+        assert not r.membership.peers[1].alive and r.membership.agreement.left == {1}
+        assert r.membership.peers[2].alive  # its grace runs from its last status
+        r.membership.handle(Event("alive", "nao/alive/2", robot_id=2))  # reconnected
         now[0] = 30.0
-        r.pump()
-        assert r.peers[2].alive and r.agreement.left == {1}
+        r.membership.pump()
+        assert r.membership.peers[2].alive and r.membership.agreement.left == {1}
     finally:
         bus.close()
 
@@ -333,32 +345,32 @@ def _lost_records() -> tuple[NeighborRecordMsg, ...]:
 
 
 def test_research_returns_nothing_for_a_connected_fleet(runner: Runner) -> None:
-    assert runner.research(Decision("agreed", records=records())) is None
-    assert runner.record_round == 0
+    assert runner.research.next_round(Decision("agreed", records=records())) is None
+    assert runner.ctx.record_round == 0
 
 
 def test_research_stops_the_fleet_after_the_last_round(runner: Runner) -> None:
-    runner.cfg = dataclasses.replace(runner.cfg, research_rounds=0)
+    runner.ctx.cfg = dataclasses.replace(runner.ctx.cfg, research_rounds=0)
     with pytest.raises(AgentFailure, match=r"robots \[3\] outside .* after 0 re-search round"):
-        runner.research(Decision("agreed", records=_lost_records()))
-    assert runner.record_round == 0  # nobody moved on to another round
+        runner.research.next_round(Decision("agreed", records=_lost_records()))
+    assert runner.ctx.record_round == 0  # nobody moved on to another round
 
 
 def test_a_waiting_robot_stops_when_a_searcher_failed(runner: Runner) -> None:
-    runner.record_round = 1
-    runner.peers[1] = Peer(alive=True, phase="failed", seen_alive=True)
+    runner.ctx.record_round = 1
+    runner.membership.peers[1] = Peer(alive=True, phase="failed", seen_alive=True)
     with pytest.raises(AgentFailure, match="robot 1 failed in re-search round 1"):
-        runner._wait_for_searchers((1,))
-    runner.peers[1] = Peer(alive=False, phase="explore", seen_alive=True)
+        runner.research.wait_for_searchers((1,))
+    runner.membership.peers[1] = Peer(alive=False, phase="explore", seen_alive=True)
     with pytest.raises(AgentFailure, match="robot 1 left in re-search round 1"):
-        runner._wait_for_searchers((1,))
-    runner.peers[1] = Peer(alive=True, phase="explore", seen_alive=True)
-    runner.cfg = dataclasses.replace(runner.cfg, research_timeout=0.3)
+        runner.research.wait_for_searchers((1,))
+    runner.membership.peers[1] = Peer(alive=True, phase="explore", seen_alive=True)
+    runner.ctx.cfg = dataclasses.replace(runner.ctx.cfg, research_timeout=0.3)
     with pytest.raises(AgentFailure, match=r"robots \[1\] did not search again within 0.3 s"):
-        runner._wait_for_searchers((1,))
+        runner.research.wait_for_searchers((1,))
     # a record of the round from the searcher ends the wait
-    runner.early_records[1] = NeighborRecordMsg(sender=1, round=1, neighbours=())
-    runner._wait_for_searchers((1,))
+    runner.membership.early_records[1] = NeighborRecordMsg(sender=1, round=1, neighbours=())
+    runner.research.wait_for_searchers((1,))
 
 
 def test_research_config_is_validated() -> None:
@@ -385,8 +397,8 @@ def _lingering(perception: PerceptionAdapter, peers: dict[int, Peer]) -> tuple[R
     bus = Bus(BusConfig(multicast_scouting=False))
     cfg = AgentConfig(robot_id=3, fleet_size=3, wave_timeout=60.0, member_grace=10.0)
     r = Runner(bus, ZenohBody(bus, 3), cfg, perception, FormationAdapter(), clock=clock)
-    r.plan = r.formation.plan(records(), PlanParams())
-    r.peers.update(peers)
+    r.ctx.plan = r.ctx.formation.plan(records(), PlanParams())
+    r.membership.peers.update(peers)
     return r, bus
 
 
@@ -396,10 +408,10 @@ def test_done_lingers_with_heartbeats_for_members_out_of_reach(
     out_of_reach = {i: Peer(alive=False, phase="hold", seen_alive=True) for i in (1, 2)}
     r, bus = _lingering(perception, out_of_reach)
     try:
-        r.status("done", 1.0, force=True)
-        r._wait_all(("done", "failed"), "done", "waiting for", linger=r.cfg.member_grace)
+        r.ctx.status("done", 1.0, force=True)
+        r.hold.wait_all(("done", "failed"), "done", "waiting for", linger=r.ctx.cfg.member_grace)
         # returned once the linger passed, having re-published ``done`` meanwhile
-        assert r.clock() >= r.cfg.member_grace
+        assert r.ctx.clock() >= r.ctx.cfg.member_grace
         assert bus.stats.published_count["status"] >= 3
     finally:
         bus.close()
@@ -416,9 +428,9 @@ def test_done_does_not_linger_once_every_member_is_seen_done(
         },
     )
     try:
-        r.status("done", 1.0, force=True)
-        r._wait_all(("done", "failed"), "done", "waiting for", linger=r.cfg.member_grace)
-        assert r.clock() < 3.0  # no heartbeat was due
+        r.ctx.status("done", 1.0, force=True)
+        r.hold.wait_all(("done", "failed"), "done", "waiting for", linger=r.ctx.cfg.member_grace)
+        assert r.ctx.clock() < 3.0  # no heartbeat was due
         assert bus.stats.published_count["status"] == 1
     finally:
         bus.close()
@@ -430,8 +442,8 @@ def test_without_linger_members_out_of_reach_are_not_waited_for(
     out_of_reach = {i: Peer(alive=False, phase="hold", seen_alive=True) for i in (1, 2)}
     r, bus = _lingering(perception, out_of_reach)
     try:
-        r._wait_all(("done", "failed"), "done", "waiting for")
-        assert r.clock() < 3.0
+        r.hold.wait_all(("done", "failed"), "done", "waiting for")
+        assert r.ctx.clock() < 3.0
     finally:
         bus.close()
 
@@ -443,11 +455,11 @@ def _waiting(perception: PerceptionAdapter) -> tuple[Runner, Bus]:
     bus = Bus(BusConfig(multicast_scouting=False))
     r = Runner(bus, ZenohBody(bus, 3), AgentConfig(robot_id=3, fleet_size=3), perception,
                FormationAdapter())  # fmt: skip
-    r.agreement = Agreement(3, records()[2], 0.0, fleet_size=3,
-                            params=params_digest(r.cfg.agreed_params()), digest_fn=canonical_digest)  # fmt: skip
+    r.membership.agreement = Agreement(3, records()[2], 0.0, fleet_size=3,
+                            params=params_digest(r.ctx.cfg.agreed_params()), digest_fn=canonical_digest)  # fmt: skip
     for i in (1, 2):
-        r._handle(Event("alive", f"nao/alive/{i}", robot_id=i))
-        r.agreement.on_record(records()[i - 1], 0.0)
+        r.membership.handle(Event("alive", f"nao/alive/{i}", robot_id=i))
+        r.membership.agreement.on_record(records()[i - 1], 0.0)
     return r, bus
 
 
@@ -455,11 +467,11 @@ def _claim(r: Runner, i: int, plan_digest: str, params: str) -> None:
     from agent.net.bus import Event
     from agent.wire import DigestMsg
 
-    assert r.agreement is not None
-    r.agreement.on_digest(
+    assert r.membership.agreement is not None
+    r.membership.agreement.on_digest(
         DigestMsg(sender=i, round=0, digest="0" * 64, members=(i,), params=params), 0.0
     )
-    r._handle(Event("msg", f"nao/{i}/status", StatusMsg(sender=i, phase="move",
+    r.membership.handle(Event("msg", f"nao/{i}/status", StatusMsg(sender=i, phase="move",
                                                         plan_digest=plan_digest)))  # fmt: skip
 
 
@@ -468,12 +480,12 @@ def test_a_member_moving_on_the_plan_of_our_records_is_adopted(
 ) -> None:
     r, bus = _waiting(perception)
     try:
-        agr = r.agreement
+        agr = r.membership.agreement
         assert agr is not None and agr.decide(0.0).kind == "wait"
-        assert r._adopt_plan(agr) is None  # nobody has a plan yet
-        ours = str(r.formation.plan(records(), r.cfg.plan_params()).digest)
+        assert r.agreeing.adopt_plan(agr) is None  # nobody has a plan yet
+        ours = str(r.ctx.formation.plan(records(), r.ctx.cfg.plan_params()).digest)
         _claim(r, 2, ours, agr.params)
-        d = r._adopt_plan(agr)
+        d = r.agreeing.adopt_plan(agr)
         assert d is not None and d.kind == "agreed" and d.members == (1, 2, 3)
         assert "robot(s) [2] act on the plan" in d.reason
         assert agr.decide(1.0) is d
@@ -487,12 +499,12 @@ def test_a_member_on_another_plan_or_with_other_params_is_not_adopted(
 ) -> None:
     r, bus = _waiting(perception)
     try:
-        agr = r.agreement
+        agr = r.membership.agreement
         assert agr is not None
-        ours = str(r.formation.plan(records(), r.cfg.plan_params()).digest)
+        ours = str(r.ctx.formation.plan(records(), r.ctx.cfg.plan_params()).digest)
         _claim(r, 2, "f" * 64 if other == "plan" else ours,
                agr.params if other == "plan" else "e" * 64)  # fmt: skip
-        assert r._adopt_plan(agr) is None
+        assert r.agreeing.adopt_plan(agr) is None
         assert agr.decide(0.0).kind != "agreed"
     finally:
         bus.close()

@@ -97,7 +97,7 @@ class AgentConfig:
     # Re-publication backoff cap: a peer that lacks our record says so in its digest,
     # which re-arms us at once, so long waits (others still searching) need few re-sends.
     backoff_max: float = 16.0
-    correct: bool = True  # final visual alignment to the parent (see Runner.correct)
+    correct: bool = True  # final visual alignment to the parent (see Hold.correct)
     max_correction: float = 0.3  # m
     march: Route | None = None  # the march after hold (issue #13); None: stop at hold
     march_step: float = 0.1  # m per leader step: half a follower's 20 cm, so they keep up

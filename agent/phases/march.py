@@ -10,8 +10,8 @@ its direction (a route at 90° to the axis moves the pyramid sideways; nobody re
 so every child keeps its parent at the plan's offset, parent target − child target.
 
 **Leader.** Walks from its planned target to target + V in steps of ``march_step``
-(10 cm, half a follower's 20 cm), with the visual compass after each step (runner's
-``walk_step``), then turns to the axis. After each step it rests ``march_pause`` times
+(10 cm, half a follower's 20 cm), with the visual compass after each step
+(``Motion.walk_step``), then turns to the axis. After each step it rests ``march_pause`` times
 as long as the step took (a duty cycle of 1 / (1 + pause)): a follower's cycle (look
 at the parent, detect, turn, step, compass) takes about three times the leader's
 (pause 4: the leader moves at most 10 cm per 5 of its step times), so
@@ -59,10 +59,11 @@ from agent.core.control.station import StationGains, StationKeeper, safe_walk, u
 from agent.core.formation.params import PlanParams
 from agent.core.formation.plan import Plan
 from agent.core.nao import HEAD_YAW_LIMIT
+from agent.phases.context import Context
+from agent.phases.roles import Fleet, Mover
 
 if TYPE_CHECKING:
     from agent.phases.config import Route
-    from agent.phases.runner import Runner
 
 log = logging.getLogger("agent.phases.march")
 
@@ -102,15 +103,19 @@ def station_offset(plan: Plan, me: int) -> np.ndarray:
 class Marcher:
     """One agent's march; :meth:`run` returns when it is over or raises MarchHalt."""
 
-    def __init__(self, runner: Runner, route: Route, axis: float) -> None:
-        self.r = runner
-        self.plan = runner.plan
+    def __init__(
+        self, ctx: Context, fleet: Fleet, motion: Mover, route: Route, axis: float
+    ) -> None:
+        self.ctx = ctx
+        self.fleet = fleet
+        self.motion = motion
+        self.plan = ctx.plan
         self.route = route
         self.axis = axis
         self.v = route_vector(self.plan, route, axis)
         self.length = float(np.hypot(*self.v))
         self.direction = math.atan2(float(self.v[1]), float(self.v[0]))
-        self.members = [int(i) for i in runner.formation.members(self.plan) if i != runner.me]
+        self.members = [int(i) for i in ctx.formation.members(self.plan) if i != ctx.me]
         self.worst_range = 0.0  # largest |e_ρ| / d_ref measured by a follower (its own view)
         self.worst_bearing = 0.0  # largest |e_β| (rad)
         self.seen_last = np.zeros((0, 2))  # the robots in the last image (for the log)
@@ -120,7 +125,7 @@ class Marcher:
     def check_fleet(self) -> None:
         """Halt if a member failed or left (the fleet halts cleanly)."""
         for i in self.members:
-            peer = self.r.peers.get(i)
+            peer = self.fleet.peers.get(i)
             if peer is None:
                 continue
             if peer.phase == "failed":
@@ -132,76 +137,75 @@ class Marcher:
         return [
             i
             for i in self.members
-            if (p := self.r.peers.get(i)) is not None
+            if (p := self.fleet.peers.get(i)) is not None
             and p.phase == "march"
             and p.detail.startswith(LOST)
         ]
 
     def run(self) -> None:
-        rp = self.plan.robot(self.r.me)
+        rp = self.plan.robot(self.ctx.me)
         log.info("march: V = %s (%.2f m), axis %.1f°", self.v.round(3).tolist(), self.length,
                  math.degrees(self.axis))  # fmt: skip
         if int(rp.parent) < 0:
             self.lead()
         else:
             self.follow(int(rp.parent))
-        self.r.rotate(wrap_pi(self.r.final_heading - self.r.heading), PAPER_GAINS, "turn to axis")
+        turn = wrap_pi(self.ctx.final_heading - self.ctx.beliefs.heading)
+        self.motion.rotate(turn, PAPER_GAINS, "turn to axis")
 
     # ------------------------------------------------------------ leader
 
     def lead(self) -> None:
-        r = self.r
-        rp = self.plan.robot(r.me)
+        ctx, b = self.ctx, self.ctx.beliefs
+        rp = self.plan.robot(ctx.me)
         start = np.asarray(rp.start, dtype=np.float64).reshape(2)
         goal = np.asarray(rp.target, dtype=np.float64).reshape(2) + self.v - start
-        origin = r.position.copy()
-        for _ in range(int(self.length / r.cfg.march_step) * 4 + 200):
-            r.pump(0.0)
+        origin = b.position.copy()
+        for _ in range(int(self.length / ctx.cfg.march_step) * 4 + 200):
+            self.fleet.pump(0.0)
             self.check_fleet()
             lost = self.lost_followers()
             if lost:
-                r.status("march", self._progress(origin), f"waiting: {lost} lost their parent")
-                r.pump(0.2)
+                ctx.status("march", self._progress(origin), f"waiting: {lost} lost their parent")
+                self.fleet.pump(0.2)
                 continue
-            leg = next_leg(r.position, r.heading, goal, step=r.cfg.march_step, tolerance=0.05)
+            leg = next_leg(b.position, b.heading, goal, step=ctx.cfg.march_step, tolerance=0.05)
             if leg is None:
                 return
-            if abs(leg.turn) > r.cfg.rotation_tolerance:
+            if abs(leg.turn) > ctx.cfg.rotation_tolerance:
                 big = abs(leg.turn) >= math.radians(15)
-                r.rotate(leg.turn, PAPER_GAINS if big else STEP_GAINS)
-            walk = safe_walk(leg.walk, r.heading, self._others_ahead(), CLEARANCE)
+                self.motion.rotate(leg.turn, PAPER_GAINS if big else STEP_GAINS)
+            walk = safe_walk(leg.walk, b.heading, self._others_ahead(), CLEARANCE)
             if walk == 0.0:
-                r.status("march", self._progress(origin), "a robot ahead: waiting")
-                r.pump(0.5)
+                ctx.status("march", self._progress(origin), "a robot ahead: waiting")
+                self.fleet.pump(0.5)
                 continue
-            t0 = r.clock()
-            r.walk_step(walk)
-            r.status("march", self._progress(origin), f"leading: {leg.remaining:.2f} m to go")
-            rest = r.clock() + r.cfg.march_pause * (r.clock() - t0)
-            while r.clock() < rest:
-                r.pump(min(0.2, max(0.0, rest - r.clock())))
+            t0 = ctx.clock()
+            self.motion.walk_step(walk)
+            ctx.status("march", self._progress(origin), f"leading: {leg.remaining:.2f} m to go")
+            rest = ctx.clock() + ctx.cfg.march_pause * (ctx.clock() - t0)
+            while ctx.clock() < rest:
+                self.fleet.pump(min(0.2, max(0.0, rest - ctx.clock())))
         raise MarchHalt("the leader did not reach the end of the route")
 
     def _others_ahead(self) -> np.ndarray:
         """Robots in the last yaw-0 image (fixed frame, relative to me)."""
-        frame = self.r._last_frame
-        if frame is None:
-            frame = self.r.look(0.0)
-        pts, _, _ = self.r.perception.to_fixed(
-            self.r.perception.detect(frame.image, 0.0), self.r.heading
+        frame = self.motion.reference()
+        pts, _, _ = self.ctx.perception.to_fixed(
+            self.ctx.perception.detect(frame.image, 0.0), self.ctx.beliefs.heading
         )
         return np.asarray(pts, dtype=np.float64).reshape(-1, 2)
 
     def _progress(self, origin: np.ndarray) -> float:
         if self.length <= 0.0:
             return 1.0
-        return float(np.dot(self.r.position - origin, self.v)) / self.length**2
+        return float(np.dot(self.ctx.beliefs.position - origin, self.v)) / self.length**2
 
     # ------------------------------------------------------------ follower
 
     def follow(self, parent: int) -> None:
-        r = self.r
-        offset = station_offset(self.plan, r.me)
+        ctx, b = self.ctx, self.ctx.beliefs
+        offset = station_offset(self.plan, ctx.me)
         beta_ref = math.atan2(offset[1], offset[0])
         keeper = StationKeeper(float(np.hypot(*offset)), beta_ref, GAINS)
         # face the march direction, or march backwards when the parent would be behind
@@ -210,14 +214,14 @@ class Marcher:
         if abs(wrap_pi(beta_ref - ref)) > math.pi / 2:
             ref = wrap_pi(ref + math.pi)
         predicted = offset.copy()
-        origin = r.position.copy()
+        origin = b.position.copy()
         margin = max(0.3, 0.15 * self.length)
         still = 0
-        still_since = r.clock()
-        moves = int(self.length / r.cfg.march_step) * 6 + 120  # steps allowed
-        deadline = r.clock() + r.cfg.wave_timeout  # waiting for the parent, bounded
-        while moves > 0 and r.clock() < deadline:
-            r.pump(0.0)
+        still_since = ctx.clock()
+        moves = int(self.length / ctx.cfg.march_step) * 6 + 120  # steps allowed
+        deadline = ctx.clock() + ctx.cfg.wave_timeout  # waiting for the parent, bounded
+        while moves > 0 and ctx.clock() < deadline:
+            self.fleet.pump(0.0)
             self.check_fleet()
             seen = self.sight((predicted, offset), GATE, (0.0,))
             if seen is None:
@@ -225,20 +229,20 @@ class Marcher:
                 keeper.reset()
             rel, others = seen
             rho, beta = float(np.hypot(*rel)), math.atan2(float(rel[1]), float(rel[0]))
-            here = (float(r.position[0]), float(r.position[1]))
+            here = (float(b.position[0]), float(b.position[1]))
             cmd = keeper.update(rho, beta, here)
             self.worst_range = max(self.worst_range, abs(cmd.e_range) / keeper.d_ref)
             self.worst_bearing = max(self.worst_bearing, abs(cmd.e_bearing))
             travelled = self._progress(origin) * self.length
-            r.status(
+            ctx.status(
                 "march", self._progress(origin),
                 f"parent {parent} at {rho:.2f} m, {math.degrees(beta):+.0f}°",
             )  # fmt: skip
             still = still + 1 if cmd.size == 0.0 else 0
             if still <= 1:
-                still_since = r.clock()
-            parent_done = getattr(r.peers.get(parent), "phase", "") == "done"
-            quiet = r.clock() - still_since >= QUIET and travelled >= self.length - margin
+                still_since = ctx.clock()
+            parent_done = self.fleet.peer(parent).phase == "done"
+            quiet = ctx.clock() - still_since >= QUIET and travelled >= self.length - margin
             if still >= 2 and (parent_done or quiet):
                 log.info("march over: travelled %.2f m, parent at %.2f m %+.1f°", travelled,
                          rho, math.degrees(beta))  # fmt: skip
@@ -246,24 +250,24 @@ class Marcher:
             ahead = np.asarray(keeper.advance)  # where the parent goes meanwhile
             if cmd.size == 0.0:
                 predicted = rel + ahead
-                r.pump(0.3)  # the parent has not moved: give it time to
+                self.fleet.pump(0.3)  # the parent has not moved: give it time to
                 continue
-            turn, _ = unicycle_step(cmd.dx, cmd.dy, r.heading)
+            turn, _ = unicycle_step(cmd.dx, cmd.dy, b.heading)
             # keep the body within MAX_OFF of the march direction: the parent stays
             # within the head's reach (±119.5°), and drift is turned back
-            off = wrap_pi(r.heading + turn - ref)
+            off = wrap_pi(b.heading + turn - ref)
             if abs(off) > MAX_OFF:
-                turn = wrap_pi(ref + math.copysign(MAX_OFF, off) - r.heading)
-            h = r.heading + turn
+                turn = wrap_pi(ref + math.copysign(MAX_OFF, off) - b.heading)
+            h = b.heading + turn
             walk = cmd.dx * math.cos(h) + cmd.dy * math.sin(h)
-            before = r.position.copy()
+            before = b.position.copy()
             moves -= 1
             if turn != 0.0:
-                r.rotate(turn, STEP_GAINS)
-            walk = safe_walk(walk, r.heading, others, CLEARANCE)
+                self.motion.rotate(turn, STEP_GAINS)
+            walk = safe_walk(walk, b.heading, others, CLEARANCE)
             if abs(walk) >= 0.01:
-                r.walk_step(walk)
-            predicted = rel - (r.position - before) + ahead
+                self.motion.walk_step(walk)
+            predicted = rel - (b.position - before) + ahead
         raise MarchHalt(f"station keeping on parent {parent} did not settle")
 
     def sight(
@@ -279,15 +283,15 @@ class Marcher:
         (the plan's offset: where the parent is if the pyramid holds); while
         ``search``ing, else the detection at the predicted range (± 0.3 m) and bearing
         (± 35°: the heading belief may have drifted); None if none."""
-        r = self.r
+        ctx, b = self.ctx, self.ctx.beliefs
         predicted = centres[0]
         bearing = math.atan2(float(predicted[1]), float(predicted[0]))
         for off in offsets:
-            yaw = wrap_pi(bearing - r.heading + off)
+            yaw = wrap_pi(bearing - b.heading + off)
             yaw = float(np.clip(yaw, -HEAD_YAW_LIMIT, HEAD_YAW_LIMIT))
-            frame = r.look(yaw)
-            dets = r.perception.detect(frame.image, yaw)
-            pts, _, _ = r.perception.to_fixed(dets, r.heading)
+            frame = self.motion.look(yaw)
+            dets = ctx.perception.detect(frame.image, yaw)
+            pts, _, _ = ctx.perception.to_fixed(dets, b.heading)
             pts = np.asarray(pts, dtype=np.float64).reshape(-1, 2)
             if len(pts) == 0:
                 continue
@@ -316,20 +320,20 @@ class Marcher:
         self, parent: int, predicted: np.ndarray, offset: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
         """Lost: stop, say so, search with the head (never the body); halt if not found."""
-        r = self.r
-        for k in range(r.cfg.lost_rounds):
-            r.status("march", 0.0, f"{LOST} {parent}: head search {k + 1}", force=True)
+        ctx, b = self.ctx, self.ctx.beliefs
+        for k in range(ctx.cfg.lost_rounds):
+            ctx.status("march", 0.0, f"{LOST} {parent}: head search {k + 1}", force=True)
             log.warning("lost parent %d (predicted at %s, heading %.1f°; last seen %s): "
                         "head search %d", parent, predicted.round(2).tolist(),
-                        math.degrees(r.heading), self.seen_last.round(2).tolist(),
+                        math.degrees(b.heading), self.seen_last.round(2).tolist(),
                         k + 1)  # fmt: skip
             seen = self.sight((predicted, offset), SEARCH_GATE, SEARCH_OFFSETS, search=True)
             if seen is not None:
-                r.status("march", 0.0, f"reacquired parent {parent}", force=True)
+                ctx.status("march", 0.0, f"reacquired parent {parent}", force=True)
                 return seen
-            r.pump(1.0)  # the fleet stops for us meanwhile
+            self.fleet.pump(1.0)  # the fleet stops for us meanwhile
             self.check_fleet()
         raise MarchHalt(
             f"lost sight of parent {parent} on the march: not found in "
-            f"{r.cfg.lost_rounds} head searches around {predicted.round(2).tolist()}"
+            f"{ctx.cfg.lost_rounds} head searches around {predicted.round(2).tolist()}"
         )

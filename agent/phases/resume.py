@@ -1,7 +1,8 @@
 """Resuming an agent after a crash (issue #9; DESIGN.md §1 phases, NAO paper 4.1–5.2).
 
 The papers assume no robot ever crashes. An agent started with ``--state-dir`` journals
-its state (:mod:`agent.phases.journal`); restarted after a crash it resumes where it was:
+its state (:mod:`agent.phases.journal`, written by :mod:`agent.phases.journaling`);
+restarted after a crash it resumes where it was (:class:`Resumption`):
 
 * **Before the search ended** (no record yet): it searches again. If it crashed during
   a turn it first turns back to θ = 0 and re-measures its heading against the journaled
@@ -13,14 +14,14 @@ its state (:mod:`agent.phases.journal`); restarted after a crash it resumes wher
   was down (its digest had matched theirs before the crash), it asks for any agreed set
   and adopts it when that set holds its own record exactly as journaled.
 * **After agreement**: it asks the fleet for the agreed record set by its digest (every
-  agent serves ``nao/{id}/records``: :func:`answer`), checks the set against the
-  digest and the members (:func:`records_of`), recomputes the plan (identical: the same
-  bit-identical inputs) and checks it against the journaled plan digest, then goes on:
-  waiting for earlier waves, the move from the journaled leg (after re-measuring its
-  heading: the command in flight is taken as executed, the world having received it),
-  holding, or ``done``. The others accept its new session once it shows the agreed
-  digest (``Runner._current_session``). A crash during the march is not resumed: the
-  agent stops safely (``failed``).
+  agent serves ``nao/{id}/records``: agent/phases/record_sets.py), checks the set against
+  the digest and the members (:func:`~agent.phases.record_sets.records_of`), recomputes
+  the plan (identical: the same bit-identical inputs) and checks it against the journaled
+  plan digest, then goes on: waiting for earlier waves, the move from the journaled leg
+  (after re-measuring its heading: the command in flight is taken as executed, the world
+  having received it), holding, or ``done``. The others accept its new session once it
+  shows the agreed digest (``Membership.current_session``). A crash during the march is
+  not resumed: the agent stops safely (``failed``).
 
 Tie-breaks: a command in flight at the crash counts as executed (the world executes a
 request it received; the agent spends nearly all of a motion waiting for the reply);
@@ -32,34 +33,30 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from agent.body.zenoh_world import retry_no_route
 from agent.core.agreed_params import params_digest
-from agent.core.agreement import Agreement, Decision
+from agent.core.agreement import Agreement
 from agent.core.control import PAPER_GAINS, advance, wrap_pi
-from agent.net.bus import BusError
+from agent.net.bus import Bus, BusError
+from agent.phases.context import NORTH, AgentFailure, Context
 from agent.phases.journal import Journal, JournalError, JournalState
+from agent.phases.record_sets import records_of
+from agent.phases.roles import Fleet, Hearing, Mover, Planner
 from agent.wire import (
     KEY_RECORDS_ALL,
-    Message,
     NeighborRecordMsg,
     ProtocolError,
     RecordSetReply,
     RecordSetRequest,
     canonical_digest,
     decode,
-    encode,
 )
-
-if TYPE_CHECKING:
-    from agent.phases.runner import Runner
 
 log = logging.getLogger("agent.phases.resume")
 
-NORTH = math.pi / 2
 #: s a restarted agent keeps asking the fleet for its agreed records.
 FETCH_TIMEOUT = 60.0
 #: s one record-set query waits for replies.
@@ -72,45 +69,10 @@ REORIENT_MIN = math.radians(5.0)
 AGREED_STAGES = {"plan": "wait", "wait": "wait", "move": "move", "hold": "hold", "done": "done"}
 
 
-# --------------------------------------------------------------------------- record sets
+# --------------------------------------------------------------------------- asking the fleet
 
 
-def record_set(me: int, decision: Decision[NeighborRecordMsg]) -> RecordSetReply:
-    """What this agent serves once agreed: the records of ``decision`` in wire form."""
-    return RecordSetReply(
-        sender=me, digest=decision.digest, records=tuple(encode(r) for r in decision.records)
-    )
-
-
-def answer(served: RecordSetReply | None, request: Message) -> RecordSetReply | None:
-    """The reply to a record-set query: the set when it is the one asked for (or any was
-    asked for: an empty digest), else none."""
-    if not isinstance(request, RecordSetRequest) or served is None:
-        return None
-    return served if request.digest in ("", served.digest) else None
-
-
-def records_of(
-    reply: RecordSetReply, digest: str, members: Sequence[int]
-) -> tuple[NeighborRecordMsg, ...]:
-    """The records of ``reply`` once checked: the digest asked for, records that decode,
-    one per member, sorted by sender, hashing to ``digest``. ``ValueError`` otherwise."""
-    if reply.digest != digest:
-        raise ValueError(f"record set {reply.digest[:12]} is not the one asked for")
-    try:
-        recs = tuple(decode(r, NeighborRecordMsg) for r in reply.records)
-    except ProtocolError as exc:
-        raise ValueError(f"record set from robot {reply.sender}: {exc}") from None
-    senders = [r.sender for r in recs]
-    if senders != sorted(set(senders)) or tuple(senders) != tuple(members):
-        raise ValueError(f"record set covers {senders}, the agreement {list(members)}")
-    got = canonical_digest(recs)
-    if got != digest:
-        raise ValueError(f"record set hashes to {got[:12]}, not {digest[:12]}")
-    return recs
-
-
-def agreed_by_others(runner: Runner, own: NeighborRecordMsg) -> tuple[str, tuple[int, ...]] | None:
+def agreed_by_others(bus: Bus, own: NeighborRecordMsg) -> tuple[str, tuple[int, ...]] | None:
     """(digest, members) of a record set the others agreed on while this agent was down
     (after its digest had matched theirs), holding its record exactly as journaled; None
     when nobody has agreed. Asks once for any agreed set (``RecordSetRequest("")``)."""
@@ -134,7 +96,7 @@ def agreed_by_others(runner: Runner, own: NeighborRecordMsg) -> tuple[str, tuple
 
     try:
         rep = retry_no_route(
-            lambda: runner.bus.query(
+            lambda: bus.query(
                 KEY_RECORDS_ALL, RecordSetRequest(digest=""), RecordSetReply, QUERY_TIMEOUT, accept
             ),
             QUERY_TIMEOUT,
@@ -145,7 +107,11 @@ def agreed_by_others(runner: Runner, own: NeighborRecordMsg) -> tuple[str, tuple
 
 
 def fetch_records(
-    runner: Runner, digest: str, members: Sequence[int], timeout: float = FETCH_TIMEOUT
+    ctx: Context,
+    fleet: Hearing,
+    digest: str,
+    members: Sequence[int],
+    timeout: float = FETCH_TIMEOUT,
 ) -> tuple[NeighborRecordMsg, ...]:
     """Ask every agent for the record set ``digest`` until one answers with it."""
 
@@ -156,12 +122,12 @@ def fetch_records(
             return str(exc)
         return ""
 
-    end = runner.clock() + timeout
+    end = ctx.clock() + timeout
     last = "no reply"
-    while runner.clock() < end:
+    while ctx.clock() < end:
         try:
             rep = retry_no_route(
-                lambda: runner.bus.query(
+                lambda: ctx.bus.query(
                     KEY_RECORDS_ALL,
                     RecordSetRequest(digest=digest),
                     RecordSetReply,
@@ -174,7 +140,7 @@ def fetch_records(
             return records_of(rep, digest, members)
         except BusError as exc:
             last = str(exc)
-        runner.pump(0.5)  # keep hearing the fleet while nobody answers
+        fleet.pump(0.5)  # keep hearing the fleet while nobody answers
     raise ValueError(f"nobody served the agreed records {digest[:12]} in {timeout:g} s: {last}")
 
 
@@ -197,138 +163,135 @@ def load(journal: Journal) -> JournalState | None:
     return st
 
 
-def resume(runner: Runner, st: JournalState) -> tuple[str, NeighborRecordMsg | None]:
-    """Restore ``runner`` from ``st``; the stage to go on with (``search``, ``agree``,
-    ``wait``, ``move``, ``hold``, ``done``) and the record to agree on. Raises
-    ``AgentFailure`` (a safe stop) when it cannot resume safely.
+class Resumption:
+    """Where a (restarted) agent starts, and its state restored from the journal."""
 
-    The journal is not written while resuming: a crash during the resumption resumes
-    from the same journal again."""
-    journal, runner.journal = runner.journal, None
-    try:
-        return _resume(runner, st, journal)
-    finally:
-        runner.journal = journal
+    def __init__(self, ctx: Context, fleet: Fleet, motion: Mover, planner: Planner) -> None:
+        self.ctx = ctx
+        self.fleet = fleet
+        self.motion = motion
+        self.planner = planner
 
+    def start(self) -> tuple[str, NeighborRecordMsg | None]:
+        """Where to start: ``search`` afresh, or what the journal says."""
+        if self.ctx.journal is None:
+            return "search", None
+        st = load(self.ctx.journal)
+        if st is None:
+            return "search", None
+        stage, record = self.resume(st)
+        log.info("robot %d resumes at %s (journaled phase %s)", self.ctx.me, stage, st.phase)
+        return stage, record
 
-def _resume(
-    runner: Runner, st: JournalState, journal: Journal | None
-) -> tuple[str, NeighborRecordMsg | None]:
-    from agent.phases.runner import AgentFailure
+    def resume(self, st: JournalState) -> tuple[str, NeighborRecordMsg | None]:
+        """Restore the agent from ``st``; the stage to go on with (``search``, ``agree``,
+        ``wait``, ``move``, ``hold``, ``done``) and the record to agree on. Raises
+        ``AgentFailure`` (a safe stop) when it cannot resume safely.
 
-    # not resumed: a failed run; the march (by design); an exploration move of a
-    # re-search round (4.1.3 rule 2), whose record and origin were being replaced
-    if st.phase in ("failed", "march", "explore"):
-        raise AgentFailure(
-            f"journal says phase {st.phase} at the crash: not resumed "
-            "(clear the state folder for a new run)"
-        )
-    runner.compass_gain = st.compass_gain
-    runner.heading = st.heading
-    runner.position = np.array(st.position, dtype=np.float64)
-    if st.command == "turn":
-        runner.heading = wrap_pi(st.heading + st.command_value)
-    elif st.command == "walk":
-        runner.position = advance(runner.position, st.heading, st.heading, st.command_value)
-    moved = st.command != "" or abs(wrap_pi(runner.heading - NORTH)) > REORIENT_MIN
-    if st.record is None:
-        if moved:
-            remeasure_heading(runner, journal)
-        runner.heading = NORTH  # the new search defines the fixed frame again from here
-        return "search", None
-    runner.record_round = st.record.round
-    runner.own_record = st.record
-    digest, members, phase = st.agreed_digest, st.agreed_members, st.phase
-    if not digest:
-        found = agreed_by_others(runner, st.record)
-        if found is None:
-            return "agree", st.record
-        digest, members = found
-        phase = "plan"
-        log.info("the others agreed on %s with this robot's record: adopted", digest[:12])
-    runner.status("plan", 0.0, "resumed: fetching the agreed records", force=True)
-    records = fetch_records(runner, digest, members)
-    agr = Agreement.restored(
-        runner.me,
-        records,
-        runner.clock(),
-        digest_fn=canonical_digest,
-        params=params_digest(runner.cfg.agreed_params()),
-        backoff_max=runner.cfg.backoff_max,
-    )
-    runner.agreement = agr
-    decision = agr.decide(runner.clock())
-    runner.make_plan(decision)
-    if st.plan_digest and runner.plan_digest != st.plan_digest:
-        raise AgentFailure(
-            f"recomputed plan {runner.plan_digest[:12]} differs from the journaled "
-            f"{st.plan_digest[:12]}: not moving"
-        )
-    stage = AGREED_STAGES.get(phase, "wait")
-    if stage in ("move", "hold") and (moved or st.command):
-        remeasure_heading(runner, journal)
-    runner.leg = st.leg
-    return stage, st.record
-
-
-def remeasure_heading(runner: Runner, journal: Journal | None) -> None:
-    """Turn to θ = 0 (by the estimate) and measure the heading against the reference view."""
-    ref = None
-    if journal is not None:
+        The journal is not written while resuming: a crash during the resumption resumes
+        from the same journal again."""
+        journal, self.ctx.journal = self.ctx.journal, None
         try:
-            ref = journal.load_reference()
-        except JournalError as exc:
-            log.error("reference view unusable: %s", exc)
-    if ref is None:
-        log.warning(
-            "no reference view: heading %.1f° by dead reckoning", math.degrees(runner.heading)
+            return self._resume(st, journal)
+        finally:
+            self.ctx.journal = journal
+
+    def _resume(
+        self, st: JournalState, journal: Journal | None
+    ) -> tuple[str, NeighborRecordMsg | None]:
+        ctx, b = self.ctx, self.ctx.beliefs
+        # not resumed: a failed run; the march (by design); an exploration move of a
+        # re-search round (4.1.3 rule 2), whose record and origin were being replaced
+        if st.phase in ("failed", "march", "explore"):
+            raise AgentFailure(
+                f"journal says phase {st.phase} at the crash: not resumed "
+                "(clear the state folder for a new run)"
+            )
+        b.compass_gain = st.compass_gain
+        b.heading = st.heading
+        b.position = np.array(st.position, dtype=np.float64)
+        if st.command == "turn":
+            b.heading = wrap_pi(st.heading + st.command_value)
+        elif st.command == "walk":
+            b.position = advance(b.position, st.heading, st.heading, st.command_value)
+        moved = st.command != "" or abs(wrap_pi(b.heading - NORTH)) > REORIENT_MIN
+        if st.record is None:
+            if moved:
+                self.remeasure_heading(journal)
+            b.heading = NORTH  # the new search defines the fixed frame again from here
+            return "search", None
+        ctx.record_round = st.record.round
+        ctx.own_record = st.record
+        digest, members, phase = st.agreed_digest, st.agreed_members, st.phase
+        if not digest:
+            found = agreed_by_others(ctx.bus, st.record)
+            if found is None:
+                return "agree", st.record
+            digest, members = found
+            phase = "plan"
+            log.info("the others agreed on %s with this robot's record: adopted", digest[:12])
+        ctx.status("plan", 0.0, "resumed: fetching the agreed records", force=True)
+        records = fetch_records(ctx, self.fleet, digest, members)
+        agr = Agreement.restored(
+            ctx.me,
+            records,
+            ctx.clock(),
+            digest_fn=canonical_digest,
+            params=params_digest(ctx.cfg.agreed_params()),
+            backoff_max=ctx.cfg.backoff_max,
         )
-        return
-    runner._last_frame = None
-    turn = wrap_pi(NORTH - runner.heading)
-    if abs(turn) > REORIENT_MIN:
-        runner.rotate(turn, PAPER_GAINS, "resumed: turn to θ = 0° to re-measure")
-    frame = runner.look(0.0)
-    res = runner.perception.measure_turn(ref, frame.image)
-    if not res.ok:
-        log.warning(
-            "heading re-measurement failed (%s): kept %.1f°",
-            res.reason,
-            math.degrees(runner.heading),
-        )
-        return
-    measured = wrap_pi(NORTH + float(res.dtheta))
-    off = wrap_pi(measured - runner.heading)
-    if abs(off) > REMEASURE_LIMIT:
-        log.warning(
-            "heading re-measured %.1f°, %.1f° off the estimate: kept the estimate",
-            math.degrees(measured), math.degrees(off),
+        self.fleet.agreement = agr
+        decision = agr.decide(ctx.clock())
+        self.planner.make_plan(decision)
+        if st.plan_digest and ctx.plan_digest != st.plan_digest:
+            raise AgentFailure(
+                f"recomputed plan {ctx.plan_digest[:12]} differs from the journaled "
+                f"{st.plan_digest[:12]}: not moving"
+            )
+        stage = AGREED_STAGES.get(phase, "wait")
+        if stage in ("move", "hold") and (moved or st.command):
+            self.remeasure_heading(journal)
+        ctx.leg = st.leg
+        return stage, st.record
+
+    def remeasure_heading(self, journal: Journal | None) -> None:
+        """Turn to θ = 0 (by the estimate) and measure the heading against the reference view."""
+        ctx, b = self.ctx, self.ctx.beliefs
+        ref = None
+        if journal is not None:
+            try:
+                ref = journal.load_reference()
+            except JournalError as exc:
+                log.error("reference view unusable: %s", exc)
+        if ref is None:
+            log.warning(
+                "no reference view: heading %.1f° by dead reckoning", math.degrees(b.heading)
+            )
+            return
+        self.motion.last_frame = None
+        turn = wrap_pi(NORTH - b.heading)
+        if abs(turn) > REORIENT_MIN:
+            self.motion.rotate(turn, PAPER_GAINS, "resumed: turn to θ = 0° to re-measure")
+        frame = self.motion.look(0.0)
+        res = ctx.perception.measure_turn(ref, frame.image)
+        if not res.ok:
+            log.warning(
+                "heading re-measurement failed (%s): kept %.1f°",
+                res.reason,
+                math.degrees(b.heading),
+            )
+            return
+        measured = wrap_pi(NORTH + float(res.dtheta))
+        off = wrap_pi(measured - b.heading)
+        if abs(off) > REMEASURE_LIMIT:
+            log.warning(
+                "heading re-measured %.1f°, %.1f° off the estimate: kept the estimate",
+                math.degrees(measured), math.degrees(off),
+            )  # fmt: skip
+            return
+        log.info(
+            "heading re-measured against the reference view: %.1f° (estimate %.1f°)",
+            math.degrees(measured), math.degrees(b.heading),
         )  # fmt: skip
-        return
-    log.info(
-        "heading re-measured against the reference view: %.1f° (estimate %.1f°)",
-        math.degrees(measured), math.degrees(runner.heading),
-    )  # fmt: skip
-    runner.heading = measured
-    runner._last_frame = frame
-
-
-def journal_state(runner: Runner, command: str = "", value: float = 0.0) -> JournalState:
-    """The runner's state to journal now (with the command about to be sent)."""
-    agr = runner.agreement
-    decided = agr.decide(runner.clock()) if agr is not None and agr.agreed else None
-    record = agr.records.get(runner.me) if agr is not None else runner.own_record
-    return JournalState(
-        robot_id=runner.me,
-        phase=runner.phase,
-        heading=float(wrap_pi(runner.heading)),
-        position=(float(runner.position[0]), float(runner.position[1])),
-        compass_gain=runner.compass_gain,
-        record=record,
-        agreed_digest=decided.digest if decided else "",
-        agreed_members=tuple(int(m) for m in decided.members) if decided else (),
-        plan_digest=runner.plan_digest,
-        leg=runner.leg,
-        command=command,
-        command_value=float(value),
-    )
+        b.heading = measured
+        self.motion.last_frame = frame

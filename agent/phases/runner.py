@@ -1,165 +1,67 @@
-"""The phase machine of one agent (DESIGN.md §1; NAO paper 5.2.2 (iii) steps 1–7).
+"""The phase machine of one agent (DESIGN.md §1, §8; NAO paper 5.2.2 (iii) steps 1–7).
 
-SEARCH   sweep the head over [-119.5°, 119.5°] at θ = 0, turn to θ = 180° with the
-         rotation control, sweep again (5.2.2 (iii) step 2); complete the circle to
-         calibrate the compass against the first image (an addition).
-LOCALISE detections → fixed frame (eqs. 7–8) with the compass-estimated heading,
-         merged across images.
-EXCHANGE/AGREE publish the record, collect every member's, move only once every live
-         member published the same digest (agent/core/agreement.py).
-EXPLORE  re-search (4.1.3 rule 2, agent/core/formation/research.py): when the agreed records
-         leave robots outside the connected fleet, those robots make a deterministic
-         exploration move (camera check before each step), and then every robot
-         searches again and a new exchange round is agreed; after
-         ``research_rounds`` rounds the fleet stops with the reason
-         (:meth:`Runner.research`).
-PLAN     formation core on the agreed records (4.1.2–4.2): identical on every agent.
-WAIT     for every robot of earlier waves to hold (leader first, 5.2.2 step 7).
-MOVE     rotation control to face the goal, distance control in 20 cm steps with the
-         heading corrected after each (4.2, 5.2.2), then turn to the pyramid axis;
-         each step's corridor checked first (an addition, agent/core/control/corridor.py);
-         a step's drift too large to be plausible is re-measured, not discarded
-         (an addition, :meth:`Runner._confirm_drift`).
-HOLD     arrived (status ``hold``); once the whole fleet has arrived and the parent is
-         ``done`` (``march``), look at the parent and step by the measured offset error
-         (an addition, see :meth:`Runner.correct`), then ``done`` and stay until all are.
-MARCH    with a route (issue #13, agent/phases/march.py): after the correction, ``march`` and
-         wait until every member is marching; the leader walks the route, followers
-         keep station on their parent by vision; then ``done`` as above.
+::
 
-Heading belief: the agent's heading in its fixed frame starts at pi/2 (every robot
-faces north at the start, 4.1.1) and changes only by visual-compass measurements of its
-own turns and steps (eq. 2), or, when the compass fails, by the turn it commanded.
-Position belief: (0, 0) in the fixed frame at the start, dead-reckoned from the
-commanded steps along the believed heading. Agents never read ground truth.
+    SEARCH ─► LOCALISE ─► EXCHANGE/AGREE ─► PLAN ─► WAIT ─► MOVE ─► HOLD ─► (MARCH) ─► DONE
+      ▲ re-search when the agreed set leaves a robot unseen │
+      └─────────────────────────────────────────────────────┘
+    RESUME: a restarted agent enters where its journal says; FAIL: any phase stops safely.
+
+SEARCH/LOCALISE  head sweeps at θ = 0 and θ = 180°, the compass calibrated over the full
+                 circle; detections into the fixed frame, merged into this robot's record
+                 (agent/phases/search.py).
+EXCHANGE/AGREE   publish the record, collect every member's, go on only once every live
+                 member published the same digest (agent/phases/agreeing.py over
+                 agent/core/agreement.py).
+RE-SEARCH        when the agreed records leave robots outside the connected fleet, those
+                 robots explore and every robot searches again (4.1.3 rule 2,
+                 agent/phases/research.py); a new round is agreed.
+PLAN/WAIT/MOVE   the formation core on the agreed records, identical on every agent; wait
+                 for the earlier waves to hold; walk the legs in checked 20 cm steps
+                 (agent/phases/waves.py, safe_steps.py, motion.py).
+HOLD/MARCH/DONE  correct against the parent, march the route if there is one, ``done``
+                 and stay until all are (agent/phases/hold.py, march.py).
+
+The :class:`Runner` only composes the collaborators around one shared
+:class:`~agent.phases.context.Context` (the typed roles between them are in
+agent/phases/roles.py) and walks the phases in order; every wait in every phase hears
+the fleet (agent/phases/membership.py).
 """
 
 from __future__ import annotations
 
 import contextlib
 import logging
-import math
 import time
 import traceback
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
-from typing import TypeVar
 
-import numpy as np
-
-from agent.body.base import Body, BodyError, Frame, MotionResult
-from agent.core.agreed_params import params_digest
-from agent.core.agreement import Agreement, Decision
-from agent.core.control import (
-    PAPER_GAINS,
-    STEP_GAINS,
-    PidGains,
-    RotationControl,
-    advance,
-    next_leg,
-    wrap_pi,
-)
-from agent.core.control.alignment import look_yaws, match_parent
-from agent.core.control.corridor import (
-    GO,
-    VIA,
-    CorridorParams,
-    Verdict,
-    back_off,
-    check_step,
-    confirmed,
-    in_view,
-    patience,
-    plan_rank,
-)
-from agent.core.formation.plan import Plan
-from agent.core.formation.research import step_blocked
-from agent.core.grace import Grace
-from agent.core.nao import CAMERA_HFOV, HEAD_YAW_LIMIT
-from agent.core.perception.detector import Detection
-from agent.core.perception.obstacles import ObstacleDetection
-from agent.net.bus import Bus, Event
+from agent.body.base import Body, BodyError
+from agent.core.agreement import Decision
+from agent.net.bus import Bus
+from agent.phases.agreeing import Agreeing
 from agent.phases.config import AgentConfig
-from agent.phases.journal import Journal
-from agent.phases.march import Marcher, MarchHalt
-from agent.phases.seams import Formation, Perception, Sightings
-from agent.wire import (
-    KEY_ALIVE_ALL,
-    KEY_DIGEST_ALL,
-    KEY_RECORD_ALL,
-    KEY_STATUS_ALL,
-    DigestMsg,
-    NeighborRecordMsg,
-    RecordSetReply,
-    StatusMsg,
-    canonical_digest,
-    id_from_key,
-    key_alive,
-    key_digest,
-    key_record,
-    key_records,
-    key_status,
-    reason,
-)
+from agent.phases.context import AgentFailure, Context
+from agent.phases.hold import Hold
+from agent.phases.journaling import Journaling
+from agent.phases.march import MarchHalt
+from agent.phases.membership import Membership
+from agent.phases.motion import Motion
+from agent.phases.research import Research
+from agent.phases.resume import Resumption
+from agent.phases.safe_steps import SafeSteps
+from agent.phases.seams import Formation, Perception
+from agent.phases.search import Search
+from agent.phases.waves import Waves
+from agent.wire import NeighborRecordMsg, StatusMsg, key_alive, key_status, reason
 
 log = logging.getLogger("agent.phases.runner")
-
-NORTH = math.pi / 2
-ARRIVED = ("hold", "march", "done", "failed")  # phases of a member that has arrived
-MAX_TURN_STEP = math.radians(40.0)  # largest turn taken to re-measure a step's drift
-STATUS_MIN_INTERVAL = 3.0  # s between progress statuses of the same phase
-HEARTBEAT = 3.0  # s between statuses while waiting
-
-
-_Round = TypeVar("_Round", NeighborRecordMsg, DigestMsg)
-
-
-def _plausible(measured: float, commanded: float, walking: bool) -> bool:
-    """Whether a compass rotation is believable against the command (rad).
-
-    A measurement far from the command is more likely a mismatch than a fall: 10° (or
-    60 % of the command) for a turn; 20° for a step, whose drift reaches ~9° in the
-    simulator at noise 1 (a larger one is re-measured, :meth:`Runner._confirm_drift`).
-    """
-    limit = math.radians(20.0 if walking else 10.0)
-    return abs(measured - commanded) <= max(limit, 0.6 * abs(commanded))
-
-
-def _keep_newest(store: dict[int, _Round], msg: _Round) -> None:
-    """Keep ``msg`` for its sender unless a message of a newer round is held."""
-    old = store.get(msg.sender)
-    if old is None or old.round <= msg.round:
-        store[msg.sender] = msg
-
-
-class AgentFailure(RuntimeError):
-    """A reason to stop safely (status ``failed``); the text is the reason."""
-
-
-@dataclass
-class Peer:
-    alive: bool = False
-    phase: str = ""
-    detail: str = ""
-    wave: int = -1
-    plan_digest: str = ""
-    seen_alive: bool = False
-
-
-@dataclass
-class Timeline:
-    """Wall and sim time at each phase start (for the report)."""
-
-    marks: list[tuple[str, float, float]] = field(default_factory=list)
-
-    def mark(self, phase: str, t_sim: float) -> None:
-        self.marks.append((phase, time.monotonic(), t_sim))
 
 
 class Runner:
     """Drives one robot through the phases; :meth:`run` returns the exit code.
 
-    It depends only on the seams of :mod:`agent.phases.seams`: a :class:`~agent.phases.seams.Body`
+    It depends only on the seams of :mod:`agent.phases.seams`: a :class:`~agent.body.base.Body`
     (zenoh world, NAOqi or in-process world), a :class:`~agent.phases.seams.Perception` and a
     :class:`~agent.phases.seams.Formation`; the bus carries the exchange between agents.
     """
@@ -175,1067 +77,82 @@ class Runner:
     ) -> None:
         if body.robot_id != config.robot_id:
             raise ValueError(f"robot {body.robot_id} driven with config for {config.robot_id}")
-        self.bus = bus
-        self.body = body
-        self.cfg = config
-        self.me = config.robot_id
-        self.clock = clock
-        self.perception = perception
-        self.formation = formation
-        self.heading = NORTH
-        self.position = np.zeros(2)
-        self.phase = "start"
-        self.peers: dict[int, Peer] = {}
-        self.grace = Grace(config.member_grace)  # a vanished token is gone only after it
-        self.early_records: dict[int, NeighborRecordMsg] = {}
-        self.epochs: dict[int, int] = {}  # newest session (epoch) heard per sender
-        self.agreed_epochs: dict[int, int] = {}  # the sessions the agreement was made with
-        self.early_digests: dict[int, DigestMsg] = {}
-        self.agreement: Agreement[NeighborRecordMsg] | None = None
-        self.retired: list[
-            Agreement[NeighborRecordMsg]
-        ] = []  # agreed earlier rounds, still acknowledged
-        self._plan: Plan | None = None
-        self.plan_digest = ""
-        self.wave = -1
-        self.record_round = 0
-        self.obstacle_sightings: list[np.ndarray] = []  # fixed frame, one array per image
-        self.timeline = Timeline()
-        self._last_status = -math.inf
-        self._last_frame: Frame | None = None
-        self.compass_failures = 0
-        self.compass_uses = 0
-        self.compass_gain = 1.0
-        self.final_heading = NORTH
-        self.corridor = CorridorParams()  # the safe-step check before each step
-        self.drift_checks = 0  # implausible step drifts re-measured (_confirm_drift)
-        self.waits = 0  # polls spent waiting for a clear corridor
-        self.vias = 0  # via (tangent) steps taken round a blocking NAO
-        self.steps = 0  # straight steps walked (the age of a sighting)
-        self._seen: list[tuple[np.ndarray, int]] = []  # (NAO seen, fixed frame; at step)
-        # (records held, digest of their plan) for adopting a member's plan (_adopt_plan)
-        self._candidate: tuple[tuple[NeighborRecordMsg, ...], str] | None = None
-        # issue #9: the durable journal (None: not kept), what it holds, what we serve
-        self.journal: Journal | None = None
-        self.own_record: NeighborRecordMsg | None = None
-        self.leg = 0  # the move's current leg
-        self._served: RecordSetReply | None = None
-
-    # ================================================================= plumbing
-
-    @property
-    def plan(self) -> Plan:
-        """The agreed plan (after :meth:`make_plan`)."""
-        if self._plan is None:
-            raise AgentFailure("no plan yet")
-        return self._plan
-
-    @plan.setter
-    def plan(self, plan: Plan) -> None:
-        self._plan = plan
-
-    def start_bus(self) -> None:
-        for key in (KEY_RECORD_ALL, KEY_DIGEST_ALL, KEY_STATUS_ALL):
-            self.bus.subscribe(key)
-        self.bus.watch_alive(KEY_ALIVE_ALL)
-        self.bus.declare_alive(key_alive(self.me))
-        from agent.phases.resume import answer
-
-        self.bus.serve(key_records(self.me), lambda req: answer(self._served, req))
-
-    def _journal(self, command: str = "", value: float = 0.0) -> None:
-        """Write the journal (issue #9), before ``command`` is sent; a failing disk is
-        logged and the journal given up, never fatal."""
-        if self.journal is None:
-            return
-        from agent.phases.resume import journal_state
-
-        try:
-            self.journal.save(journal_state(self, command, value))
-        except (OSError, ValueError) as exc:
-            log.error("journal write failed, journal given up: %s", reason(exc))
-            self.journal = None
-
-    def status(
-        self,
-        phase: str,
-        progress: float = 0.0,
-        detail: str = "",
-        error: str = "",
-        force: bool = False,
-    ) -> None:
-        now = self.clock()
-        changed = phase != self.phase
-        if changed:
-            self.timeline.mark(phase, self.body.t_sim)
-        self.phase = phase
-        if changed:
-            self._journal()
-        if not (changed or force or now - self._last_status >= STATUS_MIN_INTERVAL):
-            return
-        self._last_status = now
-        msg = StatusMsg(
-            sender=self.me,
-            phase=phase,
-            progress=min(1.0, max(0.0, progress)),
-            detail=detail[:500],
-            plan_digest=self.plan_digest,
-            wave=self.wave,
-            error=error[:500],
-            t_sim=self.body.t_sim,
-            bytes_sent=self.bus.stats.total_published,
-        )
-        self.bus.publish(key_status(self.me), msg, "status")
-
-    def pump(self, timeout: float = 0.0) -> None:
-        """Handle what arrived; (re-)publish what the agreement says is due."""
-        for ev in self.bus.drain(timeout):
-            try:
-                self._handle(ev)
-            except Exception as exc:  # one bad event is counted and skipped, never fatal
-                self.bus.guard.reject(f"event on {ev.key}", exc)
-        self._expire_members()
-        for agr in self._agreements():
-            now = self.clock()
-            due = agr.due(now)
-            for what in due:
-                if what == "record":
-                    self.bus.publish(key_record(self.me), agr.records[self.me], "record")
-                else:
-                    self.bus.publish(
-                        key_digest(self.me), DigestMsg(**asdict(agr.digest_note())), "digest"
-                    )
-            agr.sent(due, now)
-
-    def _agreements(self) -> list[Agreement[NeighborRecordMsg]]:
-        """The current agreement and the agreed ones of earlier re-search rounds (their
-        digests are re-published until every member has moved on)."""
-        return [*self.retired, *([self.agreement] if self.agreement is not None else [])]
-
-    def _handle(self, ev: Event) -> None:
-        now = self.clock()
-        agr = self.agreement
-        if ev.kind in ("alive", "gone"):
-            peer = self.peers.setdefault(ev.robot_id, Peer())
-            self.grace.token(ev.robot_id, ev.kind == "alive", now)
-            if ev.kind == "alive":  # a vanished token counts as gone in _expire_members
-                peer.alive = peer.seen_alive = True
-                if agr is not None and ev.robot_id != self.me:
-                    agr.member_joined(ev.robot_id, now)
-            return
-        msg = ev.msg
-        if not isinstance(msg, NeighborRecordMsg | DigestMsg | StatusMsg):
-            return
-        try:
-            key_id = id_from_key(ev.key)
-        except ValueError:
-            key_id = None
-        if key_id != msg.sender:
-            log.warning(
-                "dropped %s on %s: sender %s does not own the key", msg.TAG, ev.key, msg.sender
-            )
-            return
-        if not self._current_session(ev, msg.sender):
-            return
-        self.grace.heard(msg.sender, now)  # a member's publication is a heartbeat
-        if isinstance(msg, NeighborRecordMsg | DigestMsg):
-            for a in self._agreements():
-                if isinstance(msg, NeighborRecordMsg):
-                    a.on_record(msg, now)
-                else:
-                    a.on_digest(msg, now)
-            # kept for the next round: before our agreement, or newer than its round
-            early = agr is None or msg.round > agr.round
-            if early and msg.sender != self.me and self._member(msg.sender):
-                if isinstance(msg, NeighborRecordMsg):
-                    _keep_newest(self.early_records, msg)
-                else:
-                    _keep_newest(self.early_digests, msg)
-        elif isinstance(msg, StatusMsg):
-            member = self.peers.get(msg.sender)
-            if msg.sender == self.me or member is None or not member.seen_alive:
-                return  # per-sender state only for members (their token came first)
-            member.phase, member.wave, member.plan_digest = msg.phase, msg.wave, msg.plan_digest
-            member.detail = msg.detail
-            for a in self._agreements():
-                a.on_peer_phase(msg.sender, msg.phase)
-
-    def _expire_members(self) -> None:
-        """Members whose token vanished and who stayed silent for the grace period are gone."""
-        now = self.clock()
-        for rid in self.grace.expired(now):
-            peer = self.peers.get(rid)
-            if peer is None or not peer.alive:
-                continue
-            peer.alive = False
-            log.warning("robot %d is gone (token lost, silent for %g s)", rid, self.grace.grace)
-            if self.agreement is not None and rid != self.me:
-                self.agreement.member_left(rid, now)
-
-    def _proves_agreement(self, msg: object) -> bool:
-        """Whether ``msg`` shows the record-set digest (or plan digest) we agreed on."""
-        agr = self.agreement
-        if agr is None or not agr.agreed:
-            return False
-        if isinstance(msg, DigestMsg):
-            members, digest = agr.digest()
-            return msg.digest == digest and msg.members == members and msg.params == agr.params
-        return (
-            isinstance(msg, StatusMsg)
-            and bool(self.plan_digest)
-            and (msg.plan_digest == self.plan_digest)
-        )
-
-    def _member(self, rid: int) -> bool:
-        peer = self.peers.get(rid)
-        return peer is not None and peer.alive
-
-    def _current_session(self, ev: Event, sender: int) -> bool:
-        """Whether ``ev`` comes from the member's current session (DESIGN.md §8).
-
-        Secure buses tag each message with its signer's epoch (the sending process's
-        start). A message from an older session of a member than one already heard is
-        stale (a replay, or a process since replaced); once the fleet has agreed, only
-        the session whose record was agreed counts. Insecure buses carry no epoch.
-        """
-        if ev.epoch < 0:
-            return True
-        pinned = self.agreed_epochs.get(sender)
-        if pinned is not None:
-            if ev.epoch > pinned and self._proves_agreement(ev.msg):
-                # a member restarted after agreeing (issue #9): its new session counts
-                log.info("robot %d resumed in a new session with the agreed digest", sender)
-                self.agreed_epochs[sender] = self.epochs[sender] = ev.epoch
-            return ev.epoch == self.agreed_epochs[sender]
-        if ev.epoch < self.epochs.get(sender, -1):
-            return False
-        self.epochs[sender] = ev.epoch
-        return True
-
-    # ================================================================= motion
-
-    def look(self, yaw: float = 0.0) -> Frame:
-        frame = self.body.camera(yaw)
-        self.pump()
-        return frame
-
-    def rotate(self, angle: float, gains: PidGains = PAPER_GAINS, label: str = "") -> float:
-        """Turn the body by ``angle`` (rad, + CCW) with the rotation control (5.2.2 (1)).
-
-        Returns the rotation completed according to the compass (rad)."""
-        rc = RotationControl(angle, gains=gains, tolerance=self.cfg.rotation_tolerance)
-        before = self._last_frame if self._last_frame is not None else self.look(0.0)
-        while not (rc.done or rc.exhausted):
-            u = rc.next_step()
-            self._journal("turn", u)
-            rep = self.body.turn(u)
-            self.pump()
-            after = self.look(0.0)
-            measured = self._compass(before, after, u)
-            rc.record(measured)
-            self.heading = wrap_pi(self.heading + measured)
-            log.debug(
-                "turn t_sim %.2f cmd %+.2f° measured %+.2f° heading %.2f°",
-                rep.t_sim, math.degrees(u), math.degrees(measured), math.degrees(self.heading),
-            )  # fmt: skip
-            before = after
-            if label:
-                self.status(self.phase, detail=f"{label}: {math.degrees(rc.error):+.1f}° to go")
-            if rep.status == "contact":
-                log.warning("contact while turning")
-        self._last_frame = before
-        return rc.completed
-
-    def _compass(
-        self, before: Frame, after: Frame, commanded: float, walking: bool = False
-    ) -> float:
-        """The rotation between two head-yaw-0 frames; the command when the compass fails
-        or its match is implausible (:meth:`_read`)."""
-        value, _ = self._read(before, after, commanded, walking)
-        return value
-
-    def _read(
-        self, before: Frame, after: Frame, commanded: float, walking: bool = False
-    ) -> tuple[float, float | None]:
-        """(rotation to believe, suspect): the compass between two head-yaw-0 frames.
-
-        ``walking``: the frames are 20 cm apart, so only the central band of the image
-        is matched (see :meth:`agent.phases.adapters.PerceptionAdapter.measure_walk`). When the
-        compass fails, the command is believed; when it matches but far from the
-        command, the command is believed and the match is returned as ``suspect``
-        (a step's real drift may be that large: :meth:`_confirm_drift`)."""
-        if walking:
-            res = self.perception.measure_walk(before.image, after.image)
-        else:
-            res = self.perception.measure_turn(before.image, after.image)
-        self.compass_uses += 1
-        if not res.ok:
-            self.compass_failures += 1
-            log.warning(
-                "compass failed (%s): assuming the %s %+.1f°",
-                res.reason, "drift" if walking else "command",
-                math.degrees(commanded),
-            )  # fmt: skip
-            return commanded, None
-        dtheta = float(res.dtheta) * self.compass_gain
-        if not _plausible(dtheta, commanded, walking):
-            self.compass_failures += 1
-            log.warning(
-                "compass %+.1f° implausible against %+.1f°: ignored",
-                math.degrees(dtheta), math.degrees(commanded),
-            )  # fmt: skip
-            return commanded, dtheta
-        return dtheta, None
-
-    def _confirm_drift(self, before: Frame, h0: float, suspect: float) -> tuple[Frame, float]:
-        """Re-measure a step's drift that the compass reported implausibly large.
-
-        A large drift may be real (a NAO veering strongly: ~9° per 20 cm step in the
-        paper's Table 2, several times that under heavy noise) or a wrong match. The
-        robot turns by ``-suspect``, the turn the distance control would make next if
-        the drift were real, and measures the rotation between the image *before the
-        step* and the new one: close to 0 if the drift was real, close to the turn if it
-        was a mismatch. Either way that net rotation is the new heading's measurement
-        against ``h0``, taken with little image shift in the likely case. Returns (the
-        new image, the net rotation since ``before``); when the re-measurement fails or
-        fits neither case, the drift is taken as 0 and the turn as commanded (the
-        behaviour without this check)."""
-        u = float(np.clip(-suspect, -MAX_TURN_STEP, MAX_TURN_STEP))
-        self.body.turn(u)
-        self.pump()
-        after = self.look(0.0)
-        res = self.perception.measure_walk(before.image, after.image)
-        self.compass_uses += 1
-        net = float(res.dtheta) * self.compass_gain if res.ok else math.nan
-        if res.ok and (_plausible(net, 0.0, True) or _plausible(net, u, True)):
-            self.drift_checks += 1
-            log.info(
-                "drift %+.1f° re-measured after a %+.1f° turn: net %+.1f° (%s)",
-                math.degrees(suspect), math.degrees(u), math.degrees(net),
-                "real" if abs(net) < abs(net - u) else "mismatch",
-            )  # fmt: skip
-            return after, net
-        self.compass_failures += 1
-        log.warning(
-            "drift %+.1f° not confirmed (%s): assuming none",
-            math.degrees(suspect), res.reason if not res.ok else f"net {math.degrees(net):+.1f}°",
-        )  # fmt: skip
-        return after, u
-
-    def walk_to(
-        self, goal: np.ndarray, progress: Callable[[float], None], backward_within: float = 0.0
-    ) -> None:
-        """Distance control to ``goal`` (fixed frame, m) from the dead-reckoned position,
-        each step checked first (:meth:`clear_way`): a blocked step waits, then detours by
-        tangent steps round the blocker until the way to the goal is clear again."""
-        total = float(np.hypot(*(goal - self.position))) or 1.0
-        cp = self.corridor
-        side = 0  # the side of the detour under way (0: none)
-        for _ in range(200):
-            leg = next_leg(self.position, self.heading, goal, backward_within=backward_within)
-            if leg is None:
-                return
-            if side:  # detouring: do the NAOs seen lately still block the way to the goal?
-                to_goal = wrap_pi(self.heading + leg.turn)
-                wait = patience(self._rank(), cp)
-                rel = self._remembered()
-                v = check_step(
-                    leg.walk, to_goal, rel, cp, wait, side=side, goal=goal - self.position
-                )
-                if v.action == VIA:
-                    self._via_step(v)
-                    continue
-                side = 0
-            if abs(leg.turn) > self.cfg.rotation_tolerance:
-                self.rotate(
-                    leg.turn, STEP_GAINS if abs(leg.turn) < math.radians(15) else PAPER_GAINS
-                )
-            v = self.clear_way(leg.walk, goal=goal)
-            if v.action == VIA:
-                side = v.side
-                self._via_step(v)
-                continue
-            self.walk_step(leg.walk)
-            progress(1.0 - max(0.0, leg.remaining - abs(leg.walk)) / total)
-        raise AgentFailure("distance control did not converge in 200 steps")
-
-    def _via_step(self, v: Verdict) -> None:
-        """Turn to the via step's heading, check its corridor again (no further via), walk."""
-        turn = wrap_pi(v.heading - self.heading)
-        if abs(turn) > self.cfg.rotation_tolerance:
-            self.rotate(turn, STEP_GAINS if abs(turn) < math.radians(15) else PAPER_GAINS)
-        self.vias += 1
-        self.clear_way(v.walk, via=False)
-        self.walk_step(v.walk)
-
-    def _remembered(self) -> np.ndarray:
-        """The NAOs seen in the last ``memory_steps`` steps, relative to here (fixed frame):
-        a NAO closer than the detector's range, or beside the robot, is not in the image
-        but is still there."""
-        keep = [(p, k) for p, k in self._seen if self.steps - k <= self.corridor.memory_steps]
-        self._seen = keep
-        if not keep:
-            return np.zeros((0, 2))
-        return np.array([p for p, _ in keep]) - self.position
-
-    def clear_way(self, walk: float, via: bool = True, goal: np.ndarray | None = None) -> Verdict:
-        """Check the next step's corridor (agent/core/control/corridor.py) against the NAOs in
-        the yaw-0 image the compass takes anyway and those seen lately: returns GO, or
-        (``via``) VIA once this robot's patience (its plan rank) is spent; waits
-        meanwhile, looking again every poll (status detail ``waiting: NAO ahead at
-        [x, y]``, fixed frame). Bounded: AgentFailure after ``max_polls`` polls."""
-        cp = self.corridor
-        rank = self._rank()
-        for waited in range(cp.max_polls + 1):
-            frame = self._last_frame if self._last_frame is not None else self.look(0.0)
-            self._last_frame = frame
-            seen, _, _ = self.perception.to_fixed(
-                self.perception.detect(frame.image, 0.0), self.heading
-            )
-            for p in np.asarray(seen, dtype=np.float64).reshape(-1, 2):
-                self._seen.append((self.position + p, self.steps))
-            v = check_step(
-                walk, self.heading, self._remembered(), cp, waited if via else 0, rank,
-                goal=None if goal is None else goal - self.position,
-            )  # fmt: skip
-            if v.action == GO or (v.action == VIA and via):
-                if waited:
-                    log.info("corridor: %s after %d poll(s)", v.action, waited)
-                return v
-            where = (self.position + v.blockers[0]).round(2).tolist()
-            self.status(self.phase, detail=f"waiting: NAO ahead at {where}", force=waited == 0)
-            self.waits += 1
-            self.pump(cp.poll)
-            if waited and not confirmed(v.blockers[0], seen, cp):
-                self._recheck(v.blockers[0], seen, where)
-            self._last_frame = None  # look again
-            # what the next image shows is seen afresh: a NAO that walked on is forgotten
-            if self._seen:
-                rel = np.array([p for p, _ in self._seen]) - self.position
-                shown = in_view(rel, self.heading, CAMERA_HFOV)
-                self._seen = [e for e, gone in zip(self._seen, shown, strict=True) if not gone]
-        raise AgentFailure(
-            f"way blocked for {cp.max_polls} polls at believed {self.position.round(2).tolist()}"
-        )
-
-    def _recheck(self, blocker: np.ndarray, seen: np.ndarray, where: list[float]) -> None:
-        """A blocker only remembered, not in the yaw-0 image: find out whether it is still
-        there. Too near ahead to be seen (< VIEW_NEAR): step back (``back_off``); out of
-        the yaw-0 image (beside the robot): look at it with the head, forget what that
-        image should show and does not, remember what it shows. Otherwise the memory
-        would keep a NAO that walked away until this robot's patience ran out."""
-        back = back_off(blocker[None, :], seen, self.heading, CAMERA_HFOV, self.corridor)
-        if back > 0.01:
-            log.info("corridor: NAO remembered at %s, too near to see: %.2f m back", where, back)
-            self.walk_step(-back)
-            return
-        if bool(in_view(blocker[None, :], self.heading, CAMERA_HFOV, near=0.0)[0]):
-            return  # the yaw-0 image covers it: the loop's own look decides
-        bearing = math.atan2(float(blocker[1]), float(blocker[0]))
-        yaw = float(np.clip(wrap_pi(bearing - self.heading), -HEAD_YAW_LIMIT, HEAD_YAW_LIMIT))
-        frame = self.look(yaw)
-        fresh, _, _ = self.perception.to_fixed(
-            self.perception.detect(frame.image, yaw), self.heading
-        )
-        if self._seen:
-            rel = np.array([p for p, _ in self._seen]) - self.position
-            shown = in_view(rel, self.heading + yaw, CAMERA_HFOV)
-            self._seen = [e for e, gone in zip(self._seen, shown, strict=True) if not gone]
-        for p in np.asarray(fresh, dtype=np.float64).reshape(-1, 2):
-            self._seen.append((self.position + p, self.steps))
-        log.info(
-            "corridor: looked at the NAO remembered at %s (head %+.0f°): %d NAO(s) in view",
-            where, math.degrees(yaw), len(fresh),
-        )  # fmt: skip
-
-    def _rank(self) -> int:
-        """This robot's rank in the shared plan, (wave, id) order (0 without a plan)."""
-        if self._plan is None:
-            return 0
-        return plan_rank([(int(rp.wave), int(rp.robot_id)) for rp in self._plan.robots], self.me)
-
-    def walk_step(self, distance: float) -> MotionResult:
-        """One straight step, the compass's drift and dead reckoning (4.2, eq. 2); a
-        drift too large to be plausible is re-measured (:meth:`_confirm_drift`)."""
-        before = self._last_frame if self._last_frame is not None else self.look(0.0)
-        h0 = self.heading
-        self._journal("walk", distance)
-        rep = self.body.walk(distance)
-        self.steps += 1
-        self.pump()
-        after = self.look(0.0)
-        drift, suspect = self._read(before, after, 0.0, walking=True)
-        turned = 0.0
-        if suspect is not None and rep.status != "contact":
-            after, net = self._confirm_drift(before, h0, suspect)
-            turned = float(np.clip(-suspect, -MAX_TURN_STEP, MAX_TURN_STEP))
-            drift = net - turned  # the turn taken as commanded, for dead reckoning
-        self.heading = wrap_pi(h0 + drift + turned)
-        self._last_frame = after
-        self.position = advance(self.position, h0, wrap_pi(h0 + drift), distance)
-        log.debug(
-            "walk t_sim %.2f %.3f m drift %+.2f° heading %.2f° position %s",
-            rep.t_sim, distance, math.degrees(drift), math.degrees(self.heading),
-            self.position.round(3).tolist(),
-        )  # fmt: skip
-        if rep.status == "contact":
-            raise AgentFailure(
-                f"contact while walking at believed {self.position.round(2).tolist()}"
-            )
-        return rep
-
-    # ================================================================= phases
-
-    def search(self) -> list[Sightings]:
-        """Sweeps at θ = 0 and θ = 180° (5.2.2 (iii)); returns fixed-frame sightings.
-
-        Addition to the paper: after the second sweep the robot completes the circle
-        back to θ = 0. The yaw-0 image taken at the start *defines* the fixed frame, so
-        the compass between it and the image after the full circle gives the absolute
-        residual r; the compass gain is then (2π + r) / (sum of compass steps), which
-        removes the compass's scale error (parallax of the off-axis camera) from the
-        θ = 180° sweep and from every later turn, and the heading is known absolutely.
-        """
-        self.status("search", 0.0, "sweep at θ = 0°")
-        h0 = self.heading  # north at the start; kept from the compass in re-search rounds
-        n = 2 * len(self.cfg.search_yaws)
-        raw: list[tuple[int, list[Detection]]] = []
-        obst: list[tuple[int, list[ObstacleDetection]]] = []  # 5.1.2: obstacles seen
-        done = 0
-        origin: Frame | None = None
-        turned = [0.0, 0.0]
-        for sweep in range(2):
-            if sweep == 1:
-                turned[0] = self.rotate(math.pi, PAPER_GAINS, "turn to θ = 180°")
-            for yaw in self.cfg.search_yaws:
-                frame = self.look(yaw)
-                if abs(yaw) < 1e-9:
-                    self._last_frame = frame
-                    if sweep == 0:
-                        origin = frame
-                raw.append((sweep, self.perception.detect(frame.image, yaw)))
-                obst.append((sweep, self.perception.detect_obstacles(frame.image, yaw)))
-                done += 1
-                self.status(
-                    "search", done / n, f"θ = {180 * sweep}°, head {math.degrees(yaw):+.0f}°"
-                )
-            # the last image of the sweep was not at yaw 0: refresh the compass reference
-            self._last_frame = self.look(0.0)
-            if origin is None:
-                origin = self._last_frame
-            if sweep == 0 and self.journal is not None:  # the view that defines the fixed frame
-                try:
-                    self.journal.save_reference(origin.image)
-                except (OSError, ValueError) as exc:
-                    log.error("reference view not journaled: %s", reason(exc))
-        heading_180 = self.heading
-        turned[1] = self.rotate(math.pi, PAPER_GAINS, "complete the circle to θ = 0°")
-        assert origin is not None and self._last_frame is not None
-        self._calibrate(origin, self._last_frame, turned, h0)
-        if self.compass_gain != 1.0:
-            heading_180 = wrap_pi(h0 + self.compass_gain * turned[0])
-        self.obstacle_sightings = [
-            self.perception.obstacles_fixed(o, h0 if sweep == 0 else heading_180)
-            for sweep, o in obst
-        ]
-        return [
-            self.perception.to_fixed(dets, h0 if sweep == 0 else heading_180) for sweep, dets in raw
-        ]
-
-    def _calibrate(
-        self, origin: Frame, final: Frame, turned: list[float], h0: float = NORTH
-    ) -> None:
-        """Compass gain and absolute heading from the full circle (see :meth:`search`)."""
-        res = self.perception.measure_turn(origin.image, final.image)
-        total = turned[0] + turned[1]
-        if not res.ok or total < math.pi:
-            log.warning("compass calibration skipped: %s", res.reason if not res.ok else "no turn")
-            return
-        r = float(res.dtheta)
-        gain = (2.0 * math.pi + r) / total
-        if not 0.9 <= gain <= 1.1:
-            log.warning("compass gain %.4f implausible: kept 1.0", gain)
-            return
-        self.compass_gain = gain
-        self.heading = wrap_pi(h0 + r)
-        log.info(
-            "compass calibrated over the circle: gain %.4f, residual %+.2f°", gain, math.degrees(r)
-        )
-
-    def localise(self, sightings: list[Sightings]) -> NeighborRecordMsg:
-        self.status("localise", 0.0)
-        pts, ori, conf = self.perception.merge(sightings)
-        obstacles = self.perception.merge_obstacles(self.obstacle_sightings)
-        rec = NeighborRecordMsg(
-            sender=self.me,
-            round=self.record_round,
-            neighbours=tuple((float(x), float(y)) for x, y in pts),
-            orientations=tuple(float(o) for o in ori),
-            confidences=tuple(float(c) for c in conf),
-            obstacles=tuple((float(x), float(y)) for x, y in obstacles),
-        )
-        self.own_record = rec
-        self.status("localise", 1.0, f"{len(pts)} neighbours, {len(obstacles)} obstacles")
-        return rec
-
-    def agree(self, record: NeighborRecordMsg) -> Decision[NeighborRecordMsg]:
-        now = self.clock()
-        agr = Agreement(
-            self.me,
-            record,
-            now,
-            fleet_size=self.cfg.fleet_size,
-            timeout=self.cfg.timeout,
-            settle=self.cfg.settle,
-            backoff_max=self.cfg.backoff_max,
-            digest_fn=canonical_digest,
-            params=params_digest(self.cfg.agreed_params()),
-        )
-        for rid, peer in sorted(self.peers.items()):
-            if rid != self.me and peer.seen_alive:
-                agr.member_joined(rid, now)
-        for msg in self.early_records.values():
-            agr.on_record(msg, now)
-        for dmsg in self.early_digests.values():
-            agr.on_digest(dmsg, now)
-        for rid, peer in sorted(self.peers.items()):
-            if rid != self.me and peer.seen_alive and not peer.alive:
-                # it was a member and left while we searched: a departure too (with its
-                # record held, one it may return from, agent.core.agreement)
-                agr.member_left(rid, now)
-        self.early_records = {i: m for i, m in self.early_records.items() if m.round > agr.round}
-        self.early_digests = {i: m for i, m in self.early_digests.items() if m.round > agr.round}
-        for rid, peer in self.peers.items():
-            agr.on_peer_phase(rid, peer.phase)
-        self.agreement = agr
-        self.status("exchange", 0.0, "publishing record")
-        while True:
-            self.pump(0.05)
-            d = agr.decide(self.clock())
-            if d.kind == "wait":
-                d = self._adopt_plan(agr) or d
-            if d.kind != "wait":
-                return d
-            n = max(1, len(agr.live))
-            held = len(agr.held_members())
-            agreeing = n - len(agr.disagreeing())
-            phase = "exchange" if agr.missing_records() else "agree"
-            self.status(phase, (held + agreeing) / (2 * n), d.reason)
-
-    def _adopt_plan(self, agr: Agreement[NeighborRecordMsg]) -> Decision[NeighborRecordMsg] | None:
-        """Agreed, when a member already acts on the plan of exactly our records (issue #9).
-
-        Agreement is asymmetric: a member agrees once it holds every matching digest, and
-        ours may reach it while its own never reaches us (a session cut until it exits).
-        A member whose status carries a plan digest has agreed; when it plans with our
-        parameters (its digest's ``params``) and that plan digest is the digest of the
-        plan we compute from the records we hold (a record from every fleet member), it
-        planned from the same inputs: we adopt (:meth:`Agreement.adopt`). The candidate
-        plan is computed once per record set.
-        """
-        if self.cfg.fleet_size is None or len(agr.records) != self.cfg.fleet_size:
-            return None
-        claims = {
-            i: self.peers[i].plan_digest
-            for i in sorted(agr.records)
-            if i != self.me
-            and i in self.peers
-            and self.peers[i].plan_digest
-            and agr.params_of.get(i) == agr.params
-        }
-        if not claims:
-            return None
-        recs = tuple(agr.records[i] for i in sorted(agr.records))
-        if self._candidate is None or self._candidate[0] != recs:
-            try:
-                digest = str(self.formation.plan(recs, self.cfg.plan_params()).digest)
-            except ValueError:
-                digest = ""
-            self._candidate = (recs, digest)
-        digest = self._candidate[1]
-        same = [i for i, d in claims.items() if d == digest]
-        if not digest or not same:
-            return None
-        why = f"robot(s) {same} act on the plan of the records held here (plan {digest[:12]})"
-        log.info("agreed by adoption: %s", why)
-        return agr.adopt(self.clock(), why)
-
-    def research(self, decision: Decision[NeighborRecordMsg]) -> NeighborRecordMsg | None:
-        """Re-search (NAO paper 4.1.3 rule 2) on the agreed records: ``None`` when the
-        fleet is connected, else this robot's record of the next round.
-
-        Every agent decides alike from the agreed records (agent/core/formation/research.py).
-        The robots outside the kept group make their exploration move, checked with the
-        camera before each step (:meth:`explore`); the others wait until each of them
-        has published a record or digest of the new round (it has walked and searched),
-        so that the robots it now sees look again too (eq. 9 needs both sides). Then
-        every robot searches again with its record's origin where it stands (the fixed
-        frame moves with it, 4.1.1; the heading belief is kept from the compass), and
-        the caller agrees the new round. After ``research_rounds`` rounds the fleet
-        stops: the reason names who is still outside.
-        """
-        k = self.record_round + 1
-        verdict = self.formation.research(decision.records, k, self.cfg.explore_step)
-        if verdict.connected:
-            return None
-        if k > self.cfg.research_rounds:
-            raise AgentFailure(
-                f"{verdict.reason} after {self.cfg.research_rounds} re-search round(s): "
-                "stopping (4.1.3 rule 2)"
-            )
-        log.info("re-search round %d: %s", k, verdict.reason)
-        self.record_round = k
-        if self.agreement is not None:
-            self.retired.append(self.agreement)
-        self.agreement = None
-        if self.me in verdict.searchers:
-            self.status("explore", 0.0, f"round {k}: {verdict.reason}", force=True)
-            self.explore(verdict.move(self.me))
-        else:
-            self._wait_for_searchers(verdict.searchers)
-        self.position = np.zeros(2)  # the new record's origin: here
-        self._last_frame = None
-        return self.localise(self.search())
-
-    def explore(self, move: np.ndarray) -> None:
-        """Walk the exploration ``move`` (fixed frame, m) in steps; before each step the
-        yaw-0 image is checked: a NAO inside the step's sweep (2·radius + 0.1 m wide,
-        :func:`~agent.core.formation.research.step_blocked`) ends the move there."""
-        goal = self.position + np.asarray(move, dtype=np.float64)
-        total = float(np.hypot(*move)) or 1.0
-        clearance = 2.0 * self.cfg.radius + 0.1
-        self._last_frame = None
-        for _ in range(200):
-            leg = next_leg(self.position, self.heading, goal)
-            if leg is None:
-                return
-            if abs(leg.turn) > self.cfg.rotation_tolerance:
-                self.rotate(leg.turn, PAPER_GAINS, "explore: turn")
-            frame = self._last_frame if self._last_frame is not None else self.look(0.0)
-            self._last_frame = frame
-            pts, _, _ = self.perception.to_fixed(
-                self.perception.detect(frame.image, frame.yaw), self.heading
-            )
-            hit = step_blocked(pts, self.heading, leg.walk, clearance)
-            if hit is not None:
-                log.info(
-                    "explore: a NAO at %s blocks the next step: move ends at believed %s",
-                    pts[hit].round(2).tolist(), self.position.round(2).tolist(),
-                )  # fmt: skip
-                self.status("explore", 1.0, "a NAO ahead: move ended", force=True)
-                return
-            self.walk_step(leg.walk)
-            done = 1.0 - max(0.0, leg.remaining - abs(leg.walk)) / total
-            self.status("explore", done, f"round {self.record_round}: exploring")
-        raise AgentFailure("exploration move did not converge in 200 steps")
-
-    def _wait_for_searchers(self, searchers: tuple[int, ...]) -> None:
-        """Stand still until every searcher published a record or digest of this round."""
-        k = self.record_round
-        deadline = self.clock() + self.cfg.research_timeout
-        text = f"round {k}: waiting for robots {list(searchers)} to explore and search"
-        self.status("explore", 0.0, text, force=True)
-        while True:
-            self.pump(0.1)
-            pending = []
-            for i in searchers:
-                rec, dig = self.early_records.get(i), self.early_digests.get(i)
-                if (rec is not None and rec.round >= k) or (dig is not None and dig.round >= k):
-                    continue
-                peer = self.peers.get(i, Peer())
-                if peer.phase == "failed":
-                    raise AgentFailure(f"robot {i} failed in re-search round {k}")
-                if peer.seen_alive and not peer.alive:
-                    raise AgentFailure(f"robot {i} left in re-search round {k}")
-                pending.append(i)
-            if not pending:
-                return
-            if self.clock() > deadline:
-                raise AgentFailure(
-                    f"robots {pending} did not search again within "
-                    f"{self.cfg.research_timeout:g} s (re-search round {k})"
-                )
-            self.status("explore", 0.0, text)
-
-    def make_plan(self, decision: Decision[NeighborRecordMsg]) -> Plan:
-        self.status("plan", 0.0, decision.reason)
-        try:
-            plan = self.formation.plan(decision.records, self.cfg.plan_params())
-        except ValueError as exc:
-            raise AgentFailure(f"planning failed on the agreed records: {exc}") from None
-        self.plan = plan
-        self.plan_digest = str(plan.digest)
-        from agent.phases.resume import record_set
-
-        self._served = record_set(self.me, decision)
-        members = {int(r) for r in self.formation.members(plan)}
-        self.agreed_epochs = {r: e for r, e in self.epochs.items() if r in members}
-        rp = plan.robot(self.me)
-        self.wave = int(rp.wave)
-        self.status("plan", 1.0, f"wave {self.wave}, leader {plan.leader}", force=True)
-        return plan
-
-    def wait_for_earlier_waves(self) -> None:
-        """Start once every robot of this robot's ``after`` list holds its slot (the plan's
-        execution rule, ``agent/core/formation/execution.py``; the leader's list is empty)."""
-        plan = self.plan
-        members = set(self.formation.members(plan))
-        earlier = sorted(
-            int(i) for i in plan.robot(self.me).after if int(i) in members and int(i) != self.me
-        )
-        deadline = self.clock() + self.cfg.wave_timeout
-        while True:
-            self.pump(0.1)
-            pending = []
-            for i in earlier:
-                peer = self.peers.get(i, Peer())
-                if peer.phase in ("hold", "march", "done"):
-                    continue
-                if peer.seen_alive and not peer.alive:
-                    raise AgentFailure(
-                        f"robot {i} of wave {plan.robot(i).wave} left before holding"
-                    )
-                if peer.phase == "failed":
-                    raise AgentFailure(f"robot {i} of wave {plan.robot(i).wave} failed")
-                pending.append(i)
-            if not pending:
-                return
-            if self.clock() > deadline:
-                raise AgentFailure(f"robots {pending} of earlier waves did not hold in time")
-            self.status("wait", 0.0, f"waiting for wave(s) of {pending}")
-
-    def move(self) -> None:
-        plan = self.plan
-        self._last_frame = None  # others moved meanwhile: a fresh compass reference
-        self._seen = []  # and the NAOs seen before are elsewhere now
-        goals, final_heading = self.formation.goals(plan, self.me)
-        self.final_heading = final_heading
-        self.status("move", 0.0, f"{len(goals)} leg(s)")
-        n = len(goals)
-        for k, goal in enumerate(goals):
-            if k < self.leg:
-                continue  # walked before a restart (issue #9)
-            self.leg = k
-
-            def progress(p: float, k: int = k) -> None:
-                self.status("move", (k + p) / n, f"leg {k + 1}/{n}")
-
-            self.walk_to(goal, progress)
-        self.rotate(wrap_pi(final_heading - self.heading), PAPER_GAINS, "turn to pyramid axis")
-
-    def _all_arrived(self) -> bool:
-        members = self.agreement.held_members() if self.agreement else ()
-        for i in members:
-            peer = self.peers.get(i, Peer())
-            if i != self.me and peer.alive and peer.phase not in ARRIVED:
-                return False
-        return True
-
-    def correct(self) -> None:
-        """Visual alignment to the parent, once everyone has arrived (an addition).
-
-        The papers walk the plan open-loop; the residual error is dominated by the
-        distance estimates of the search (~10 % at 1.2 m, better at d_e). The pyramid
-        is defined by parent–child offsets (AUV II: robots follow the robot in front
-        by visual servoing), so once the whole fleet has arrived and the parent has
-        finished its own correction (``done``), the child looks at where the plan puts
-        its parent, measures it and steps by the difference (twice at most). The head
-        fans out around the expected bearing until it finds a NAO within
-        ``max_correction`` of the planned offset (:meth:`_find_parent`); a NAO farther
-        off is another robot or a wrong match, and corrections below 3 cm are not walked.
-        """
-        plan = self.plan
-        rp = plan.robot(self.me)
-        parent = int(rp.parent)
-        if parent < 0 or not self.cfg.correct:
-            return
-        deadline = self.clock() + self.cfg.wave_timeout
-        while True:
-            self.pump(0.1)
-            peer = self.peers.get(parent, Peer())
-            if peer.phase == "failed" or (peer.seen_alive and not peer.alive):
-                log.warning("parent %d is gone: no correction", parent)
-                return
-            if peer.phase in ("done", "march") and self._all_arrived():
-                break
-            if self.clock() > deadline:
-                log.warning("parent %d did not finish in time: no correction", parent)
-                return
-            self.status("hold", 0.5, f"arrived; waiting for parent {parent}")
-        expected = np.asarray(plan.robot(parent).target, dtype=np.float64) - np.asarray(
-            rp.target, dtype=np.float64
-        )
-        for attempt in range(2):
-            seen = self._find_parent(expected, parent)
-            if seen is None:
-                return
-            err = seen - expected
-            size = float(np.hypot(*err))
-            log.info(
-                "correction %d: parent %d seen at %s, planned %s, step %.3f m",
-                attempt + 1, parent, seen.round(3).tolist(), expected.round(3).tolist(), size,
-            )  # fmt: skip
-            if size < 0.03:
-                break
-            self.status("hold", 0.75, f"correcting {size:.2f} m towards parent {parent}")
-            self._last_frame = None
-            self.walk_to(self.position + err, lambda p: None, backward_within=0.5)
-            self.rotate(wrap_pi(self.final_heading - self.heading), PAPER_GAINS)
-
-    def _find_parent(self, expected: np.ndarray, parent: int) -> np.ndarray | None:
-        """The parent's measured offset (fixed frame), or None: the head looks at the
-        expected bearing, then fans out (agent/core/control/alignment.py look_yaws) until an
-        image shows a NAO within ``max_correction`` of the expected offset (match_parent;
-        a NAO farther off is another robot, or a wrong match)."""
-        bearing = math.atan2(float(expected[1]), float(expected[0]))
-        nearest = math.inf
-        for yaw in look_yaws(bearing, self.heading, CAMERA_HFOV / 3.0, HEAD_YAW_LIMIT):
-            frame = self.look(yaw)
-            dets = self.perception.detect(frame.image, yaw)
-            pts, _, _ = self.perception.to_fixed(dets, self.heading)
-            pts = np.asarray(pts, dtype=np.float64).reshape(-1, 2)
-            k = match_parent(pts, expected, self.cfg.max_correction)
-            if k is not None:
-                return np.asarray(pts[k], dtype=np.float64)
-            if len(pts):
-                nearest = min(nearest, float(np.min(np.hypot(*(pts - expected).T))))
-        if math.isfinite(nearest):
-            log.warning(
-                "correction: parent %d not seen within %.2f m of %s (nearest NAO %.2f m off)",
-                parent, self.cfg.max_correction, expected.round(3).tolist(), nearest,
-            )  # fmt: skip
-        else:
-            log.warning("correction: parent %d not seen", parent)
-        return None
-
-    def hold(self) -> None:
-        """Arrived: correct against the parent, march if there is a route, report
-        ``done`` and stay until all are."""
-        self.status(
-            "hold", 0.5, f"arrived at believed {self.position.round(2).tolist()}", force=True
-        )
-        self.correct()
-        if self.cfg.march is not None:
-            self.status("march", 0.0, "formation held; waiting for the fleet", force=True)
-            self._wait_all(("march", "done", "failed"), "march", "waiting for")
-            failed = [i for i, p in self.peers.items() if p.phase == "failed"]
-            if failed:
-                raise AgentFailure(f"not marching: robot(s) {sorted(failed)} failed")
-            self.status("march", 0.01, "marching", force=True)
-            marcher = Marcher(self, self.cfg.march, self.final_heading)
-            marcher.run()
-            log.info(
-                "march done at believed %s; worst seen |e_d| %.1f %%, |e_phi| %.1f°",
-                self.position.round(2).tolist(), 100 * marcher.worst_range,
-                math.degrees(marcher.worst_bearing),
-            )  # fmt: skip
-        self.finish()
-
-    def finish(self) -> None:
-        """``done``, and stay until every member is."""
-        self.status("done", 1.0, "formation held", force=True)
-        self._wait_all(
-            ("done", "failed"), "done", "formation held; waiting for", self.cfg.member_grace
-        )
-
-    def _wait_all(self, phases: tuple[str, ...], mine: str, text: str, linger: float = 0.0) -> None:
-        """Stay (heartbeats) until every live member is in ``phases`` (bounded).
-
-        ``linger``: a member out of reach (its token gone) not yet seen in ``phases`` is
-        waited for too, for up to ``linger`` s, while our heartbeats repeat our status: on
-        a lossy link (issue #9) a session can stay cut for longer than the membership
-        grace, and a final ``done`` published once into a cut session reaches nobody.
-        """
-        # the plan's members (a member out of reach has left the live set since)
-        plan = self._plan
-        members = tuple(self.formation.members(plan)) if plan is not None else ()
-        start = self.clock()
-        deadline = start + self.cfg.wave_timeout
-        while self.clock() < deadline:
-            self.pump(0.2)
-            patient = self.clock() - start < linger
-            waiting = [
-                i
-                for i in members
-                if i != self.me
-                and self.peers.get(i, Peer()).phase not in phases
-                and (self.peers.get(i, Peer()).alive or patient)
-            ]
-            if not waiting and (self.agreement is None or not self.agreement.due(self.clock())):
-                return
-            if self.clock() - self._last_status >= HEARTBEAT:
-                self.status(mine, 1.0 if mine == "done" else 0.0, f"{text} {waiting}", force=True)
-        if mine == "march":
-            raise AgentFailure("the fleet did not get ready to march in time")
-
-    # ================================================================= main
+        self.ctx = ctx = Context(bus, body, config, perception, formation, clock)
+        self.membership = fleet = Membership(ctx)
+        self.journaling = Journaling(ctx, fleet)
+        ctx.journal_hook = self.journaling.save
+        self.motion = Motion(ctx, fleet)
+        self.safe_steps = SafeSteps(ctx, fleet, self.motion)
+        self.search = Search(ctx, self.motion)
+        self.agreeing = Agreeing(ctx, fleet)
+        self.research = Research(ctx, fleet, self.motion, self.search)
+        self.waves = Waves(ctx, fleet, self.motion, self.safe_steps)
+        self.hold = Hold(ctx, fleet, self.motion, self.safe_steps)
+        self.resumption = Resumption(ctx, fleet, self.motion, self.waves)
 
     def run(self) -> int:
+        """Join, resume or start afresh, walk the phases; 0 once ``done``, 1 on a safe stop."""
         try:
-            self.start_bus()
-            stage, record = self.resume()
-            if stage == "search":
-                self.status("start", 0.0, "joined", force=True)
-                record = self.localise(self.search())
-            if stage in ("search", "agree"):
-                assert record is not None
-                while True:  # re-search rounds (4.1.3 rule 2) until the fleet is connected
-                    decision = self.agree(record)
-                    if decision.kind != "agreed":
-                        raise AgentFailure(decision.reason)
-                    again = self.research(decision)
-                    if again is None:
-                        break
-                    record = again
-                self.make_plan(decision)
-            if stage in ("search", "agree", "wait"):
-                self.wait_for_earlier_waves()
-            if stage in ("search", "agree", "wait", "move"):
-                self.move()
-            if stage == "done":
-                self.finish()
-            else:
-                self.hold()
+            self.membership.start()
+            stage, record = self.resumption.start()
+            self.phases(stage, record)
             return 0
         except (AgentFailure, MarchHalt, BodyError, ValueError) as exc:
             return self.fail(reason(exc))
         except Exception as exc:  # a bug or an input nobody foresaw: stop safely, never crash
             log.error(
                 "robot %d: unexpected %s\n%s",
-                self.me,
+                self.ctx.me,
                 reason(exc),
                 "".join(traceback.format_tb(exc.__traceback__))[-2000:],
             )
             try:
                 return self.fail(f"unexpected {reason(exc)}")
             except Exception as exc2:
-                log.error("robot %d could not publish failed: %s", self.me, reason(exc2))
+                log.error("robot %d could not publish failed: %s", self.ctx.me, reason(exc2))
                 return 1
         finally:
             with contextlib.suppress(BodyError):
-                self.body.stop()
+                self.ctx.body.stop()
 
-    def resume(self) -> tuple[str, NeighborRecordMsg | None]:
-        """Where to start: ``search`` afresh, or what the journal says (agent/phases/resume.py)."""
-        if self.journal is None:
-            return "search", None
-        from agent.phases import resume
+    def phases(self, stage: str, record: NeighborRecordMsg | None) -> None:
+        """The phases in order, entered at ``stage`` (``search`` afresh, or where the
+        journal says: ``agree``, ``wait``, ``move``, ``hold``, ``done``)."""
+        if stage == "search":
+            self.ctx.status("start", 0.0, "joined", force=True)
+            record = self.search.localise(self.search.sweep())  # SEARCH, LOCALISE
+        if stage in ("search", "agree"):
+            assert record is not None
+            self.waves.make_plan(self.agree(record))  # EXCHANGE/AGREE (→ re-search), PLAN
+        if stage in ("search", "agree", "wait"):
+            self.waves.wait_for_earlier_waves()  # WAIT
+        if stage in ("search", "agree", "wait", "move"):
+            self.waves.move()  # MOVE
+        if stage == "done":
+            self.hold.finish()  # DONE
+        else:
+            self.hold.run()  # HOLD, CORRECT, (MARCH), DONE
 
-        st = resume.load(self.journal)
-        if st is None:
-            return "search", None
-        stage, record = resume.resume(self, st)
-        log.info("robot %d resumes at %s (journaled phase %s)", self.me, stage, st.phase)
-        return stage, record
+    def agree(self, record: NeighborRecordMsg) -> Decision[NeighborRecordMsg]:
+        """Agreement rounds, with re-search rounds (4.1.3 rule 2) until the agreed records
+        leave nobody outside the fleet; AgentFailure when the fleet does not agree."""
+        while True:
+            decision = self.agreeing.agree(record)
+            if decision.kind != "agreed":
+                raise AgentFailure(decision.reason)
+            again = self.research.next_round(decision)
+            if again is None:
+                return decision
+            record = again
 
     def fail(self, reason: str) -> int:
         """Stop safely: publish ``failed`` with ``reason``, let it reach the others; 1."""
-        log.error("robot %d failed: %s", self.me, reason)
-        self.status("failed", 0.0, error=reason, force=True)
+        log.error("robot %d failed: %s", self.ctx.me, reason)
+        self.ctx.status("failed", 0.0, error=reason, force=True)
         # let the failure status and any pending digest reach the others
-        end = self.clock() + 1.0
-        while self.clock() < end:
-            self.pump(0.1)
+        end = self.ctx.clock() + 1.0
+        while self.ctx.clock() < end:
+            self.membership.pump(0.1)
         return 1
 
 

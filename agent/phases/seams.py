@@ -1,7 +1,8 @@
 """The typed seams of the runner (issue #11; DESIGN.md §8 "Bodies").
 
-The phase machine (:mod:`agent.phases.runner`) depends on the :class:`agent.body.base.Body`
-protocol and on these two:
+The phase machine (:mod:`agent.phases.runner`) and its collaborators depend on the
+:class:`agent.body.base.Body` protocol and on these two (the seams between the
+collaborators themselves are in :mod:`agent.phases.roles`):
 
 - :class:`Perception`: detector, fixed-frame conversion, merging and the visual compass
   (NAO paper §3), and the same for the static obstacles (§5.1.2;

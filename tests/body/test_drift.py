@@ -1,5 +1,5 @@
 """A step's drift the compass reports implausibly large is re-measured
-(:meth:`agent.phases.runner.Runner._confirm_drift`, issue #10).
+(:meth:`agent.phases.motion.Motion._confirm_drift`, issue #10).
 
 At ``--noise-scale 2`` a NAO that veers strongly drifts 20–30° in one 20 cm step; the
 compass measured it correctly, the runner took it for a mismatch and believed 0°, and
@@ -22,7 +22,9 @@ from agent.core.perception.compass import CompassResult
 from agent.net.bus import Bus
 from agent.phases.adapters import FormationAdapter, PerceptionAdapter
 from agent.phases.config import AgentConfig
-from agent.phases.runner import NORTH, Runner, _plausible
+from agent.phases.context import NORTH
+from agent.phases.motion import _plausible
+from agent.phases.runner import Runner
 from sim.locomotion import NoiseModel
 from sim.scenarios import RobotSpec, Scenario
 from sim.world import World
@@ -71,10 +73,10 @@ def test_a_real_large_drift_is_confirmed_and_believed(
     alone.locomotion.drift[1] = -2.0
     r = _runner(alone, bus, perception)
     h0 = alone.pose(1)[2]
-    r.walk_step(0.2)
+    r.motion.walk_step(0.2)
     true = _true_heading_change(alone, h0)
-    assert r.drift_checks == 1
-    assert wrap_pi(r.heading - NORTH) == pytest.approx(true, abs=math.radians(2))
+    assert r.motion.drift_checks == 1
+    assert wrap_pi(r.ctx.beliefs.heading - NORTH) == pytest.approx(true, abs=math.radians(2))
     # after the re-measuring turn the robot faces about where it faced before the step
     assert abs(true) < math.radians(8)
 
@@ -86,10 +88,10 @@ def test_walking_to_a_goal_with_large_drifts_keeps_the_heading(
     r = _runner(alone, bus, perception)
     x0, y0, h0 = alone.pose(1)
     goal = np.array([0.0, 0.8])  # four steps north
-    r.walk_to(goal, lambda p: None)
-    r.rotate(wrap_pi(NORTH - r.heading))
+    r.safe_steps.walk_to(goal, lambda p: None)
+    r.motion.rotate(wrap_pi(NORTH - r.ctx.beliefs.heading))
     x, y, _ = alone.pose(1)
-    assert r.drift_checks >= 2
+    assert r.motion.drift_checks >= 2
     assert abs(_true_heading_change(alone, h0)) < math.radians(4)  # faces north again
     assert math.hypot(x - x0 - goal[0], y - y0 - goal[1]) < 0.1
 
@@ -116,13 +118,13 @@ def test_a_wrong_match_is_found_out_by_the_re_measurement(
         FormationAdapter(),
     )  # fmt: skip
     h0 = alone.pose(1)[2]
-    r.walk_step(0.2)
+    r.motion.walk_step(0.2)
     # no drift at all: the re-measuring turn of +30° is all the robot turned, and the
     # compass between the images before the step and after the turn says so
     true = _true_heading_change(alone, h0)
     assert true == pytest.approx(math.radians(30.0), abs=math.radians(2))
-    assert wrap_pi(r.heading - NORTH) == pytest.approx(true, abs=math.radians(2))
-    assert r.position == pytest.approx([0.0, 0.2], abs=0.01)
+    assert wrap_pi(r.ctx.beliefs.heading - NORTH) == pytest.approx(true, abs=math.radians(2))
+    assert r.ctx.beliefs.position == pytest.approx([0.0, 0.2], abs=0.01)
 
 
 class _Unconfirmed(PerceptionAdapter):
@@ -150,8 +152,8 @@ def test_an_unconfirmed_drift_counts_as_none(
         bus, WorldBody(alone, 1), AgentConfig(robot_id=1), _Unconfirmed(perception, second),
         FormationAdapter(),
     )  # fmt: skip
-    r.walk_step(0.2)
+    r.motion.walk_step(0.2)
     # the behaviour without the re-measurement: no drift, and the turn as commanded
-    assert r.heading == pytest.approx(NORTH + math.radians(30.0), abs=1e-9)
-    assert r.position == pytest.approx([0.0, 0.2], abs=1e-9)
-    assert r.drift_checks == 0 and r.compass_failures == 2
+    assert r.ctx.beliefs.heading == pytest.approx(NORTH + math.radians(30.0), abs=1e-9)
+    assert r.ctx.beliefs.position == pytest.approx([0.0, 0.2], abs=1e-9)
+    assert r.motion.drift_checks == 0 and r.motion.compass_failures == 2

@@ -1,6 +1,6 @@
 """The exploration move of a re-search round (NAO paper 4.1.3 rule 2) on an in-process world.
 
-:meth:`agent.phases.runner.Runner.explore` walks the move in 20 cm steps and checks the yaw-0
+:meth:`agent.phases.research.Research.explore` walks the move in 20 cm steps and checks the yaw-0
 image before each one: a NAO inside the step's sweep ends the move there.
 """
 
@@ -49,22 +49,22 @@ def test_explore_stops_before_a_nao_seen_ahead(
     ahead: World, bus: Bus, perception: PerceptionAdapter
 ) -> None:
     r = runner(1, ahead, bus, perception)
-    r.explore(np.array([0.0, 2.0]))  # straight through robot 2
+    r.research.explore(np.array([0.0, 2.0]))  # straight through robot 2
     x, y, _ = ahead.pose(1)
     gap = math.dist((x, y), ahead.pose(2)[:2])
     # stopped with robot 2 inside the next step's sweep (0.2 + 0.5 m), not in contact
-    assert 0.45 < gap <= 0.2 + 2 * r.cfg.radius + 0.1 + 0.1, gap
+    assert 0.45 < gap <= 0.2 + 2 * r.ctx.cfg.radius + 0.1 + 0.1, gap
     assert y > 0.1  # it did walk while the way was clear
     assert ahead.locomotion.contacts == 0
-    assert float(np.hypot(*r.position)) == pytest.approx(y, abs=0.1)
+    assert float(np.hypot(*r.ctx.beliefs.position)) == pytest.approx(y, abs=0.1)
 
 
 def test_explore_walks_the_move_when_the_way_is_clear(
     ahead: World, bus: Bus, perception: PerceptionAdapter
 ) -> None:
     r = runner(3, ahead, bus, perception)
-    r.explore(np.array([0.0, -0.8]))  # south: nobody there (turns round first)
+    r.research.explore(np.array([0.0, -0.8]))  # south: nobody there (turns round first)
     x, y, _ = ahead.pose(3)
     assert math.hypot(x - 2.0, y + 1.8) < 0.1
-    assert float(np.hypot(*(r.position - [0.0, -0.8]))) < 0.05
+    assert float(np.hypot(*(r.ctx.beliefs.position - [0.0, -0.8]))) < 0.05
     assert ahead.locomotion.contacts == 0

@@ -23,7 +23,8 @@ from agent.net.bus import Bus
 from agent.phases.adapters import FormationAdapter, PerceptionAdapter
 from agent.phases.config import AgentConfig, Route
 from agent.phases.march import LOST, Marcher, MarchHalt, route_vector, station_offset
-from agent.phases.runner import Peer, Runner
+from agent.phases.membership import Peer
+from agent.phases.runner import Runner
 from agent.wire import NeighborRecordMsg
 from sim.world import World
 
@@ -79,11 +80,13 @@ def child_runner(
         march=Route(distance=0.6), **settings,  # type: ignore[arg-type]
     )  # fmt: skip
     r = Runner(bus, body, config, perception, FormationAdapter())
-    r.plan = plan
-    r.heading = r.final_heading = wrap_pi(axis)  # fixed frames are world-parallel here
+    r.ctx.plan = plan
+    r.ctx.beliefs.heading = r.ctx.final_heading = wrap_pi(
+        axis
+    )  # fixed frames are world-parallel here
     for rp in plan.robots:
         if rp.robot_id != body.robot_id:
-            r.peers[rp.robot_id] = Peer(alive=True, phase="march", seen_alive=True)
+            r.membership.peers[rp.robot_id] = Peer(alive=True, phase="march", seen_alive=True)
     return r
 
 
@@ -112,10 +115,10 @@ def test_follower_keeps_station_on_a_marching_parent(
     # the bound on waiting for the parent is wall time: generous, so that a loaded
     # machine (slow renders) never ends the march early; the parent's moves end it
     r = child_runner(world, bus, perception, body, plan, axis, wave_timeout=120.0)
-    body.on_arrival.append(r.peers[child.parent])
+    body.on_arrival.append(r.membership.peers[child.parent])
     want = station_offset(plan, child.robot_id)
     start = np.asarray(world.pose(child.robot_id)[:2])
-    m = Marcher(r, Route(distance=0.6), axis)
+    m = Marcher(r.ctx, r.membership, r.motion, Route(distance=0.6), axis)
     m.run()
     now = np.asarray(world.pose(child.robot_id)[:2])
     err = np.subtract(world.pose(child.parent)[:2], now) - want
@@ -137,9 +140,9 @@ def test_lost_parent_halts_with_the_reason_after_a_head_search(
     world.set_pose(child.parent, x + 3.0 * math.cos(axis), y + 3.0 * math.sin(axis), h)
     h0 = world.pose(child.robot_id)[2]
     with pytest.raises(MarchHalt, match=f"lost sight of parent {child.parent}"):
-        Marcher(r, Route(distance=0.6), axis).run()
+        Marcher(r.ctx, r.membership, r.motion, Route(distance=0.6), axis).run()
     assert world.pose(child.robot_id)[2] == pytest.approx(h0)  # searched with the head only
-    assert r.phase == "march"
+    assert r.ctx.phase == "march"
 
 
 def test_a_failed_member_halts_the_march(
@@ -149,12 +152,12 @@ def test_a_failed_member_halts_the_march(
     child = next(rp for rp in plan.robots if rp.parent >= 0)
     r = child_runner(world, bus, perception, WorldBody(world, child.robot_id), plan, axis)
     other = next(i for i in plan.ids if i != child.robot_id)
-    r.peers[other].phase = "failed"
+    r.membership.peers[other].phase = "failed"
     with pytest.raises(MarchHalt, match=f"robot {other} failed"):
-        Marcher(r, Route(distance=0.6), axis).run()
-    r.peers[other] = Peer(alive=False, phase="march", seen_alive=True)
+        Marcher(r.ctx, r.membership, r.motion, Route(distance=0.6), axis).run()
+    r.membership.peers[other] = Peer(alive=False, phase="march", seen_alive=True)
     with pytest.raises(MarchHalt, match=f"robot {other} left"):
-        Marcher(r, Route(distance=0.6), axis).check_fleet()
+        Marcher(r.ctx, r.membership, r.motion, Route(distance=0.6), axis).check_fleet()
 
 
 def test_the_leader_sees_who_lost_its_parent(
@@ -163,10 +166,10 @@ def test_the_leader_sees_who_lost_its_parent(
     plan, axis = formed(world)
     lead = plan.leader
     r = child_runner(world, bus, perception, WorldBody(world, lead), plan, axis)
-    m = Marcher(r, Route(distance=0.6), axis)
+    m = Marcher(r.ctx, r.membership, r.motion, Route(distance=0.6), axis)
     assert m.lost_followers() == []
     lost = next(i for i in plan.ids if i != lead)
-    r.peers[lost].detail = f"{LOST} {lead}: head search 1"
+    r.membership.peers[lost].detail = f"{LOST} {lead}: head search 1"
     assert m.lost_followers() == [lost]
-    r.peers[lost].phase = "done"  # only a marching follower holds the fleet
+    r.membership.peers[lost].phase = "done"  # only a marching follower holds the fleet
     assert m.lost_followers() == []

@@ -21,7 +21,9 @@ from agent.core.formation.params import PlanParams
 from agent.net.bus import Bus
 from agent.phases.adapters import FormationAdapter, PerceptionAdapter
 from agent.phases.config import AgentConfig
-from agent.phases.runner import NORTH, Peer, Runner
+from agent.phases.context import NORTH
+from agent.phases.membership import Peer
+from agent.phases.runner import Runner
 from agent.wire import NeighborRecordMsg
 from sim.world import World
 
@@ -36,7 +38,7 @@ def test_search_sees_every_neighbour_where_it_stands(
 ) -> None:
     r = runner_for(1, world, bus, perception)
     x0, y0, h0 = world.pose(1)
-    rec = r.localise(r.search())
+    rec = r.search.localise(r.search.sweep())
     truth = {j: np.subtract(world.pose(j)[:2], (x0, y0)) for j in (2, 3)}
     assert len(rec.neighbours) == 2, rec
     for j, p in truth.items():
@@ -44,19 +46,19 @@ def test_search_sees_every_neighbour_where_it_stands(
         assert d < 0.05 + 0.12 * float(np.hypot(*p)), (j, p, rec.neighbours)
     # the full circle brought the robot back near θ = 0, and it knows its heading
     h = world.pose(1)[2]
-    assert abs(wrap_pi(r.heading - (NORTH + wrap_pi(h - h0)))) < math.radians(3)
-    assert r.compass_gain != 1.0 and 0.9 <= r.compass_gain <= 1.1
+    assert abs(wrap_pi(r.ctx.beliefs.heading - (NORTH + wrap_pi(h - h0)))) < math.radians(3)
+    assert r.ctx.beliefs.compass_gain != 1.0 and 0.9 <= r.ctx.beliefs.compass_gain <= 1.1
 
 
 def test_rotate_turns_by_the_compass(world: World, bus: Bus, perception: PerceptionAdapter) -> None:
     r = runner_for(2, world, bus, perception)
     h0 = world.pose(2)[2]
-    done = r.rotate(math.pi / 2)
+    done = r.motion.rotate(math.pi / 2)
     turned = wrap_pi(world.pose(2)[2] - h0)
     assert turned == pytest.approx(math.pi / 2, abs=math.radians(4))
     assert done == pytest.approx(turned, abs=math.radians(3))
-    assert r.heading == pytest.approx(NORTH + done, abs=1e-9)
-    assert r.compass_failures == 0
+    assert r.ctx.beliefs.heading == pytest.approx(NORTH + done, abs=1e-9)
+    assert r.motion.compass_failures == 0
 
 
 def test_walk_to_reaches_the_goal_in_steps(
@@ -66,10 +68,10 @@ def test_walk_to_reaches_the_goal_in_steps(
     x0, y0, _ = world.pose(3)
     seen: list[float] = []
     goal = np.array([0.0, -0.5])  # behind: turn round, then about three 20 cm steps
-    r.walk_to(goal, seen.append)
+    r.safe_steps.walk_to(goal, seen.append)
     x, y, _ = world.pose(3)
     assert np.hypot(x - x0 - goal[0], y - y0 - goal[1]) < 0.08
-    assert float(np.hypot(*(r.position - goal))) < 0.05  # what it believes
+    assert float(np.hypot(*(r.ctx.beliefs.position - goal))) < 0.05  # what it believes
     assert len(seen) >= 3 and seen[-1] == pytest.approx(1.0, abs=0.05)
     assert world.locomotion.contacts == 0
 
@@ -107,15 +109,17 @@ def test_correct_steps_towards_the_planned_offset_to_the_parent(
     world.set_pose(child.robot_id, x + off[0], y + off[1], h)
 
     r = runner_for(child.robot_id, world, bus, perception)
-    r.plan = plan
-    r.heading = r.final_heading = wrap_pi(axis)  # fixed frames are world-parallel here
-    r.peers[parent.robot_id] = Peer(alive=True, phase="done", seen_alive=True)
+    r.ctx.plan = plan
+    r.ctx.beliefs.heading = r.ctx.final_heading = wrap_pi(
+        axis
+    )  # fixed frames are world-parallel here
+    r.membership.peers[parent.robot_id] = Peer(alive=True, phase="done", seen_alive=True)
 
     def offset_error() -> float:
         d = np.subtract(world.pose(parent.robot_id)[:2], world.pose(child.robot_id)[:2])
         return float(np.hypot(*(d - want)))
 
     assert offset_error() == pytest.approx(0.15, abs=1e-6)
-    r.correct()
+    r.hold.correct()
     assert offset_error() < 0.06
     assert world.locomotion.contacts == 0

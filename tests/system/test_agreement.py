@@ -1,7 +1,7 @@
 """Agreement over real zenoh sessions: the runner's exchange phase in several peers.
 
 Each peer is a real :class:`agent.net.bus.Bus` (its own zenoh session, loopback TCP, no
-multicast) driving :meth:`agent.phases.runner.Runner.agree`, the code every agent process
+multicast) driving :meth:`agent.phases.agreeing.Agreeing.agree`, the code every agent process
 runs. Covered: all agree on one digest; a late joiner is waited for; a lost record is
 re-sent; a member that dies before agreement stops everyone safely.
 """
@@ -53,23 +53,23 @@ class Peer:
             _perception(),
             FormationAdapter(),
         )
-        self.runner.start_bus()
+        self.runner.membership.start()
         self.decision: Decision | None = None
         self.thread = threading.Thread(target=self._run, daemon=True)
 
     def _run(self) -> None:
-        d = self.runner.agree(record(self.runner.me))
+        d = self.runner.agreeing.agree(record(self.runner.ctx.me))
         self.decision = d
         if d.kind == "agreed":
             # what the runner does next: a post-agreement status acknowledges the digest
-            self.runner.status("plan", 0.0, force=True)
-            end = self.runner.clock() + 3.0
+            self.runner.ctx.status("plan", 0.0, force=True)
+            end = self.runner.ctx.clock() + 3.0
             while (
-                self.runner.clock() < end
-                and self.runner.agreement is not None
-                and (self.runner.agreement.due(self.runner.clock() + 100.0))
+                self.runner.ctx.clock() < end
+                and self.runner.membership.agreement is not None
+                and (self.runner.membership.agreement.due(self.runner.ctx.clock() + 100.0))
             ):
-                self.runner.pump(0.1)
+                self.runner.membership.pump(0.1)
 
     def start(self) -> Peer:
         self.thread.start()
@@ -120,7 +120,10 @@ def test_late_joiner_is_waited_for(endpoint: str) -> None:
     try:
         early[0].thread.join(3.0)
         assert early[0].decision is None  # still waiting for the third member
-        assert "2 of 3" in early[0].runner.agreement.decide(early[0].runner.clock()).reason  # type: ignore[union-attr]
+        assert (
+            "2 of 3"
+            in early[0].runner.membership.agreement.decide(early[0].runner.ctx.clock()).reason
+        )  # type: ignore[union-attr]
         late = Peer(3, endpoint, 3).start()
         ds = [p.join() for p in [*early, late]]
     finally:
@@ -166,9 +169,9 @@ def test_member_that_dies_stops_everyone_safely(endpoint: str) -> None:
         p.start()
     try:
         # ... and dies once the others know it is a member
-        end = peers[0].runner.clock() + 20
-        while peers[0].runner.clock() < end:
-            agr = peers[0].runner.agreement
+        end = peers[0].runner.ctx.clock() + 20
+        while peers[0].runner.ctx.clock() < end:
+            agr = peers[0].runner.membership.agreement
             if agr is not None and 3 in agr.live:
                 break
             peers[0].thread.join(0.1)
@@ -213,8 +216,11 @@ def test_status_is_valid_and_counts_bytes(endpoint: str) -> None:
     p = Peer(5, endpoint, 1)
     got: list[Any] = []
     try:
-        p.runner.status("search", 0.5, "sweep", force=True)
-        got = [p.runner.bus.stats.published_count["status"], p.runner.bus.stats.total_published]
+        p.runner.ctx.status("search", 0.5, "sweep", force=True)
+        got = [
+            p.runner.ctx.bus.stats.published_count["status"],
+            p.runner.ctx.bus.stats.total_published,
+        ]
     finally:
         p.bus.close()
     assert got[0] == 1 and got[1] > 0

@@ -1,0 +1,146 @@
+"""What every collaborator of the phase machine shares (DESIGN.md §1, §8; NAO paper 4.1.1).
+
+The phase machine (:mod:`agent.phases.runner`) is split into collaborators, one per
+concern (membership, motion, safe steps, search, agreement, re-search, waves, hold,
+resume); they share this small :class:`Context` and nothing else of each other but the
+typed roles of :mod:`agent.phases.roles`:
+
+* the robot's seams: the bus, its :class:`~agent.body.base.Body`, its configuration,
+  its :class:`~agent.phases.seams.Perception` and :class:`~agent.phases.seams.Formation`,
+  and a clock;
+* its :class:`Beliefs`. Heading: the agent's heading in its fixed frame starts at
+  :data:`NORTH` (every robot faces north at the start, 4.1.1) and changes only by
+  visual-compass measurements of its own turns and steps (eq. 2), or, when the compass
+  fails, by the turn it commanded. Position: (0, 0) in the fixed frame at the start,
+  dead-reckoned from the commanded steps along the believed heading. Agents never read
+  ground truth;
+* where it is: the phase, its record and round, the agreed plan, its wave and leg;
+* the status publisher (:meth:`Context.status`), which marks the :class:`Timeline` and
+  writes the journal (issue #9) at every phase change through ``journal_hook``.
+
+:class:`AgentFailure` is the one way a collaborator stops the robot safely.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+from agent.body.base import Body
+from agent.core.formation.plan import Plan
+from agent.net.bus import Bus
+from agent.phases.config import AgentConfig
+from agent.phases.journal import Journal
+from agent.phases.seams import Formation, Perception
+from agent.wire import NeighborRecordMsg, StatusMsg, key_status
+
+#: Every robot faces north of its fixed frame at the start (4.1.1).
+NORTH = math.pi / 2
+STATUS_MIN_INTERVAL = 3.0  # s between progress statuses of the same phase
+
+
+class AgentFailure(RuntimeError):
+    """A reason to stop safely (status ``failed``); the text is the reason."""
+
+
+@dataclass
+class Timeline:
+    """Wall and sim time at each phase start (for the report)."""
+
+    marks: list[tuple[str, float, float]] = field(default_factory=list)
+
+    def mark(self, phase: str, t_sim: float) -> None:
+        self.marks.append((phase, time.monotonic(), t_sim))
+
+
+@dataclass
+class Beliefs:
+    """The robot's beliefs about itself in its fixed frame (see the module docstring)."""
+
+    heading: float = NORTH
+    position: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(2))
+    compass_gain: float = 1.0  # calibrated over the search's full circle
+
+
+def _no_journal(command: str = "", value: float = 0.0) -> None:
+    """The journal hook of an agent that keeps no journal."""
+
+
+@dataclass
+class Context:
+    """The seams, beliefs and progress of one robot, shared by its collaborators."""
+
+    bus: Bus
+    body: Body
+    cfg: AgentConfig
+    perception: Perception
+    formation: Formation
+    clock: Callable[[], float] = time.monotonic
+    beliefs: Beliefs = field(default_factory=Beliefs)
+    phase: str = "start"
+    record_round: int = 0  # the re-search round of the current record (4.1.3 rule 2)
+    own_record: NeighborRecordMsg | None = None
+    planned: Plan | None = None  # the agreed plan, once made (see :attr:`plan`)
+    plan_digest: str = ""
+    wave: int = -1
+    leg: int = 0  # the move's current leg
+    final_heading: float = NORTH  # the pyramid axis, once the goals are known
+    timeline: Timeline = field(default_factory=Timeline)
+    # issue #9: the durable journal (None: not kept); the hook writes it before each
+    # command and at each phase change (agent/phases/resume.py Journaling)
+    journal: Journal | None = None
+    journal_hook: Callable[[str, float], None] = _no_journal
+    last_status: float = -math.inf  # when the last status was published
+
+    @property
+    def me(self) -> int:
+        return self.cfg.robot_id
+
+    @property
+    def plan(self) -> Plan:
+        """The agreed plan (after :meth:`agent.phases.waves.Waves.make_plan`)."""
+        if self.planned is None:
+            raise AgentFailure("no plan yet")
+        return self.planned
+
+    @plan.setter
+    def plan(self, plan: Plan) -> None:
+        self.planned = plan
+
+    def status(
+        self,
+        phase: str,
+        progress: float = 0.0,
+        detail: str = "",
+        error: str = "",
+        force: bool = False,
+    ) -> None:
+        """Publish this robot's status: at once on a phase change (journaled then) or
+        with ``force``, else at most every :data:`STATUS_MIN_INTERVAL` seconds."""
+        now = self.clock()
+        changed = phase != self.phase
+        if changed:
+            self.timeline.mark(phase, self.body.t_sim)
+        self.phase = phase
+        if changed:
+            self.journal_hook("", 0.0)
+        if not (changed or force or now - self.last_status >= STATUS_MIN_INTERVAL):
+            return
+        self.last_status = now
+        msg = StatusMsg(
+            sender=self.me,
+            phase=phase,
+            progress=min(1.0, max(0.0, progress)),
+            detail=detail[:500],
+            plan_digest=self.plan_digest,
+            wave=self.wave,
+            error=error[:500],
+            t_sim=self.body.t_sim,
+            bytes_sent=self.bus.stats.total_published,
+        )
+        self.bus.publish(key_status(self.me), msg, "status")

@@ -1,0 +1,184 @@
+"""Hold, correct, march and finish: what a robot does once it has arrived (DESIGN.md §1
+HOLD, §8 MARCH; the correction follows AUV paper §II, robots follow the robot in front
+by visual servoing; NAO paper 5.2.2 (iii) step 7 for holding).
+
+HOLD     arrived (status ``hold``); once the whole fleet has arrived and the parent is
+         ``done`` (or ``march``), look at the parent and step by the measured offset
+         error (an addition, :meth:`Hold.correct`).
+MARCH    with a route (issue #13, agent/phases/march.py): ``march`` and wait until every
+         member is marching; the leader walks the route, followers keep station on their
+         parent by vision.
+DONE     ``done``, and stay until every member is, repeating the status as heartbeats
+         (:meth:`Hold.wait_all`; a final status published once into a cut session
+         reaches nobody, issue #9).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+
+import numpy as np
+
+from agent.core.control import PAPER_GAINS, wrap_pi
+from agent.core.control.alignment import look_yaws, match_parent
+from agent.core.nao import CAMERA_HFOV, HEAD_YAW_LIMIT
+from agent.phases.context import AgentFailure, Context
+from agent.phases.march import Marcher
+from agent.phases.roles import Fleet, Mover, Stepper
+
+log = logging.getLogger("agent.phases.hold")
+
+HEARTBEAT = 3.0  # s between statuses while waiting
+
+
+class Hold:
+    """The arrived robot's phases (module docstring)."""
+
+    def __init__(self, ctx: Context, fleet: Fleet, motion: Mover, steps: Stepper) -> None:
+        self.ctx = ctx
+        self.fleet = fleet
+        self.motion = motion
+        self.steps = steps
+
+    def run(self) -> None:
+        """Arrived: correct against the parent, march if there is a route, report
+        ``done`` and stay until all are."""
+        ctx = self.ctx
+        where = ctx.beliefs.position.round(2).tolist()
+        ctx.status("hold", 0.5, f"arrived at believed {where}", force=True)
+        self.correct()
+        if ctx.cfg.march is not None:
+            ctx.status("march", 0.0, "formation held; waiting for the fleet", force=True)
+            self.wait_all(("march", "done", "failed"), "march", "waiting for")
+            failed = [i for i, p in self.fleet.peers.items() if p.phase == "failed"]
+            if failed:
+                raise AgentFailure(f"not marching: robot(s) {sorted(failed)} failed")
+            ctx.status("march", 0.01, "marching", force=True)
+            marcher = Marcher(ctx, self.fleet, self.motion, ctx.cfg.march, ctx.final_heading)
+            marcher.run()
+            log.info(
+                "march done at believed %s; worst seen |e_d| %.1f %%, |e_phi| %.1f°",
+                ctx.beliefs.position.round(2).tolist(), 100 * marcher.worst_range,
+                math.degrees(marcher.worst_bearing),
+            )  # fmt: skip
+        self.finish()
+
+    def correct(self) -> None:
+        """Visual alignment to the parent, once everyone has arrived (an addition).
+
+        The papers walk the plan open-loop; the residual error is dominated by the
+        distance estimates of the search (~10 % at 1.2 m, better at d_e). The pyramid
+        is defined by parent–child offsets (AUV II: robots follow the robot in front
+        by visual servoing), so once the whole fleet has arrived and the parent has
+        finished its own correction (``done``), the child looks at where the plan puts
+        its parent, measures it and steps by the difference (twice at most). The head
+        fans out around the expected bearing until it finds a NAO within
+        ``max_correction`` of the planned offset (:meth:`_find_parent`); a NAO farther
+        off is another robot or a wrong match, and corrections below 3 cm are not walked.
+        """
+        ctx = self.ctx
+        plan = ctx.plan
+        rp = plan.robot(ctx.me)
+        parent = int(rp.parent)
+        if parent < 0 or not ctx.cfg.correct:
+            return
+        deadline = ctx.clock() + ctx.cfg.wave_timeout
+        while True:
+            self.fleet.pump(0.1)
+            peer = self.fleet.peer(parent)
+            if peer.phase == "failed" or (peer.seen_alive and not peer.alive):
+                log.warning("parent %d is gone: no correction", parent)
+                return
+            if peer.phase in ("done", "march") and self.fleet.all_arrived():
+                break
+            if ctx.clock() > deadline:
+                log.warning("parent %d did not finish in time: no correction", parent)
+                return
+            ctx.status("hold", 0.5, f"arrived; waiting for parent {parent}")
+        expected = np.asarray(plan.robot(parent).target, dtype=np.float64) - np.asarray(
+            rp.target, dtype=np.float64
+        )
+        for attempt in range(2):
+            seen = self._find_parent(expected, parent)
+            if seen is None:
+                return
+            err = seen - expected
+            size = float(np.hypot(*err))
+            log.info(
+                "correction %d: parent %d seen at %s, planned %s, step %.3f m",
+                attempt + 1, parent, seen.round(3).tolist(), expected.round(3).tolist(), size,
+            )  # fmt: skip
+            if size < 0.03:
+                break
+            ctx.status("hold", 0.75, f"correcting {size:.2f} m towards parent {parent}")
+            self.motion.last_frame = None
+            self.steps.walk_to(ctx.beliefs.position + err, lambda p: None, backward_within=0.5)
+            self.motion.rotate(wrap_pi(ctx.final_heading - ctx.beliefs.heading), PAPER_GAINS)
+
+    def _find_parent(self, expected: np.ndarray, parent: int) -> np.ndarray | None:
+        """The parent's measured offset (fixed frame), or None: the head looks at the
+        expected bearing, then fans out (agent/core/control/alignment.py look_yaws) until an
+        image shows a NAO within ``max_correction`` of the expected offset (match_parent;
+        a NAO farther off is another robot, or a wrong match)."""
+        ctx = self.ctx
+        bearing = math.atan2(float(expected[1]), float(expected[0]))
+        nearest = math.inf
+        for yaw in look_yaws(bearing, ctx.beliefs.heading, CAMERA_HFOV / 3.0, HEAD_YAW_LIMIT):
+            frame = self.motion.look(yaw)
+            dets = ctx.perception.detect(frame.image, yaw)
+            pts, _, _ = ctx.perception.to_fixed(dets, ctx.beliefs.heading)
+            pts = np.asarray(pts, dtype=np.float64).reshape(-1, 2)
+            k = match_parent(pts, expected, ctx.cfg.max_correction)
+            if k is not None:
+                return np.asarray(pts[k], dtype=np.float64)
+            if len(pts):
+                nearest = min(nearest, float(np.min(np.hypot(*(pts - expected).T))))
+        if math.isfinite(nearest):
+            log.warning(
+                "correction: parent %d not seen within %.2f m of %s (nearest NAO %.2f m off)",
+                parent, ctx.cfg.max_correction, expected.round(3).tolist(), nearest,
+            )  # fmt: skip
+        else:
+            log.warning("correction: parent %d not seen", parent)
+        return None
+
+    def finish(self) -> None:
+        """``done``, and stay until every member is."""
+        self.ctx.status("done", 1.0, "formation held", force=True)
+        self.wait_all(
+            ("done", "failed"), "done", "formation held; waiting for", self.ctx.cfg.member_grace
+        )
+
+    def wait_all(self, phases: tuple[str, ...], mine: str, text: str, linger: float = 0.0) -> None:
+        """Stay (heartbeats) until every live member is in ``phases`` (bounded).
+
+        ``linger``: a member out of reach (its token gone) not yet seen in ``phases`` is
+        waited for too, for up to ``linger`` s, while our heartbeats repeat our status: on
+        a lossy link (issue #9) a session can stay cut for longer than the membership
+        grace, and a final ``done`` published once into a cut session reaches nobody.
+        """
+        ctx, fleet = self.ctx, self.fleet
+        # the plan's members (a member out of reach has left the live set since)
+        plan = ctx.planned
+        members = tuple(ctx.formation.members(plan)) if plan is not None else ()
+        start = ctx.clock()
+        deadline = start + ctx.cfg.wave_timeout
+        while ctx.clock() < deadline:
+            fleet.pump(0.2)
+            patient = ctx.clock() - start < linger
+            waiting = [
+                i
+                for i in members
+                if i != ctx.me
+                and fleet.peer(i).phase not in phases
+                and (fleet.peer(i).alive or patient)
+            ]
+            agr = fleet.agreement
+            if not waiting and (agr is None or not agr.due(ctx.clock())):
+                return
+            if ctx.clock() - ctx.last_status >= HEARTBEAT:
+                progress = 1.0 if mine == "done" else 0.0
+                ctx.status(mine, progress, f"{text} {waiting}", force=True)
+        if mine == "march":
+            raise AgentFailure("the fleet did not get ready to march in time")

@@ -1,0 +1,272 @@
+"""Membership: what this agent hears of the fleet, and says back (DESIGN.md §8 "Faults";
+NAO paper 4.1.2, the exchange of records).
+
+The papers assume lossless WiFi and robots that never leave. Here the fleet is whoever
+holds an alive token (``nao/alive/{id}``), and one :class:`Membership` per agent keeps
+what it knows of each member (:class:`Peer`):
+
+* **Tokens and grace.** A token that appears makes a member; a vanished token is a
+  departure only once the member has also been silent for the membership grace
+  (:class:`agent.core.agreement.Grace`): on a lossy link sessions are cut and restored.
+* **Key ownership and sessions.** A record, digest or status counts only from the robot
+  its key names, and only from that robot's current session (:meth:`current_session`):
+  after agreement, from the session whose record was agreed, or a new one that shows the
+  agreed digest (a member resumed after a crash, issue #9).
+* **Early records.** Records and digests heard before this agent's own agreement round
+  (or of a later round) are kept per sender, newest round first, and handed to the
+  agreement when it opens (:meth:`open_round`).
+* **Pump.** Every wait of every phase pumps: handle what arrived, expire members, and
+  (re-)publish what the agreements say is due (agent/core/agreement.py); agreements of
+  earlier re-search rounds are retired but acknowledged until every member moved on.
+
+It also serves the agreed record set (agent/phases/record_sets.py).
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import asdict, dataclass
+from typing import TypeVar
+
+from agent.core.agreement import Agreement
+from agent.core.grace import Grace
+from agent.net.bus import Event
+from agent.phases.context import Context
+from agent.phases.record_sets import answer
+from agent.wire import (
+    KEY_ALIVE_ALL,
+    KEY_DIGEST_ALL,
+    KEY_RECORD_ALL,
+    KEY_STATUS_ALL,
+    DigestMsg,
+    NeighborRecordMsg,
+    RecordSetReply,
+    StatusMsg,
+    id_from_key,
+    key_alive,
+    key_digest,
+    key_record,
+    key_records,
+)
+
+log = logging.getLogger("agent.phases.membership")
+
+ARRIVED = ("hold", "march", "done", "failed")  # phases of a member that has arrived
+
+_Round = TypeVar("_Round", NeighborRecordMsg, DigestMsg)
+
+
+def _keep_newest(store: dict[int, _Round], msg: _Round) -> None:
+    """Keep ``msg`` for its sender unless a message of a newer round is held."""
+    old = store.get(msg.sender)
+    if old is None or old.round <= msg.round:
+        store[msg.sender] = msg
+
+
+@dataclass
+class Peer:
+    """What this agent knows of one member: its token, and its last status."""
+
+    alive: bool = False
+    phase: str = ""
+    detail: str = ""
+    wave: int = -1
+    plan_digest: str = ""
+    seen_alive: bool = False
+
+
+class Membership:
+    """The fleet as heard by one agent; see the module docstring."""
+
+    def __init__(self, ctx: Context) -> None:
+        self.ctx = ctx
+        self.peers: dict[int, Peer] = {}
+        self.grace = Grace(ctx.cfg.member_grace)  # a vanished token is gone only after it
+        self.early_records: dict[int, NeighborRecordMsg] = {}
+        self.early_digests: dict[int, DigestMsg] = {}
+        self.epochs: dict[int, int] = {}  # newest session (epoch) heard per sender
+        self.agreed_epochs: dict[int, int] = {}  # the sessions the agreement was made with
+        self.agreement: Agreement[NeighborRecordMsg] | None = None
+        self.retired: list[Agreement[NeighborRecordMsg]] = []  # agreed earlier rounds
+        self.served: RecordSetReply | None = None  # the agreed record set we serve
+
+    def start(self) -> None:
+        """Subscribe to the fleet, declare our token, serve the agreed record set."""
+        bus, me = self.ctx.bus, self.ctx.me
+        for key in (KEY_RECORD_ALL, KEY_DIGEST_ALL, KEY_STATUS_ALL):
+            bus.subscribe(key)
+        bus.watch_alive(KEY_ALIVE_ALL)
+        bus.declare_alive(key_alive(me))
+        bus.serve(key_records(me), lambda req: answer(self.served, req))
+
+    def peer(self, rid: int) -> Peer:
+        """What we know of ``rid`` (a blank :class:`Peer` if nothing)."""
+        return self.peers.get(rid, Peer())
+
+    def pump(self, timeout: float = 0.0) -> None:
+        """Handle what arrived; (re-)publish what the agreement says is due."""
+        bus, me = self.ctx.bus, self.ctx.me
+        for ev in bus.drain(timeout):
+            try:
+                self.handle(ev)
+            except Exception as exc:  # one bad event is counted and skipped, never fatal
+                bus.guard.reject(f"event on {ev.key}", exc)
+        self.expire()
+        for agr in self.agreements():
+            now = self.ctx.clock()
+            due = agr.due(now)
+            for what in due:
+                if what == "record":
+                    bus.publish(key_record(me), agr.records[me], "record")
+                else:
+                    bus.publish(key_digest(me), DigestMsg(**asdict(agr.digest_note())), "digest")
+            agr.sent(due, now)
+
+    def agreements(self) -> list[Agreement[NeighborRecordMsg]]:
+        """The current agreement and the agreed ones of earlier re-search rounds (their
+        digests are re-published until every member has moved on)."""
+        return [*self.retired, *([self.agreement] if self.agreement is not None else [])]
+
+    def handle(self, ev: Event) -> None:
+        """One bus event: a token, or a record, digest or status of a member."""
+        now = self.ctx.clock()
+        me = self.ctx.me
+        agr = self.agreement
+        if ev.kind in ("alive", "gone"):
+            peer = self.peers.setdefault(ev.robot_id, Peer())
+            self.grace.token(ev.robot_id, ev.kind == "alive", now)
+            if ev.kind == "alive":  # a vanished token counts as gone in expire
+                peer.alive = peer.seen_alive = True
+                if agr is not None and ev.robot_id != me:
+                    agr.member_joined(ev.robot_id, now)
+            return
+        msg = ev.msg
+        if not isinstance(msg, NeighborRecordMsg | DigestMsg | StatusMsg):
+            return
+        try:
+            key_id = id_from_key(ev.key)
+        except ValueError:
+            key_id = None
+        if key_id != msg.sender:
+            log.warning(
+                "dropped %s on %s: sender %s does not own the key", msg.TAG, ev.key, msg.sender
+            )
+            return
+        if not self.current_session(ev, msg.sender):
+            return
+        self.grace.heard(msg.sender, now)  # a member's publication is a heartbeat
+        if isinstance(msg, NeighborRecordMsg | DigestMsg):
+            for a in self.agreements():
+                if isinstance(msg, NeighborRecordMsg):
+                    a.on_record(msg, now)
+                else:
+                    a.on_digest(msg, now)
+            # kept for the next round: before our agreement, or newer than its round
+            early = agr is None or msg.round > agr.round
+            if early and msg.sender != me and self.member(msg.sender):
+                if isinstance(msg, NeighborRecordMsg):
+                    _keep_newest(self.early_records, msg)
+                else:
+                    _keep_newest(self.early_digests, msg)
+        elif isinstance(msg, StatusMsg):
+            member = self.peers.get(msg.sender)
+            if msg.sender == me or member is None or not member.seen_alive:
+                return  # per-sender state only for members (their token came first)
+            member.phase, member.wave, member.plan_digest = msg.phase, msg.wave, msg.plan_digest
+            member.detail = msg.detail
+            for a in self.agreements():
+                a.on_peer_phase(msg.sender, msg.phase)
+
+    def expire(self) -> None:
+        """Members whose token vanished and who stayed silent for the grace period are gone."""
+        now = self.ctx.clock()
+        for rid in self.grace.expired(now):
+            peer = self.peers.get(rid)
+            if peer is None or not peer.alive:
+                continue
+            peer.alive = False
+            log.warning("robot %d is gone (token lost, silent for %g s)", rid, self.grace.grace)
+            if self.agreement is not None and rid != self.ctx.me:
+                self.agreement.member_left(rid, now)
+
+    def proves_agreement(self, msg: object) -> bool:
+        """Whether ``msg`` shows the record-set digest (or plan digest) we agreed on."""
+        agr = self.agreement
+        if agr is None or not agr.agreed:
+            return False
+        if isinstance(msg, DigestMsg):
+            members, digest = agr.digest()
+            return msg.digest == digest and msg.members == members and msg.params == agr.params
+        plan_digest = self.ctx.plan_digest
+        return isinstance(msg, StatusMsg) and bool(plan_digest) and msg.plan_digest == plan_digest
+
+    def member(self, rid: int) -> bool:
+        peer = self.peers.get(rid)
+        return peer is not None and peer.alive
+
+    def current_session(self, ev: Event, sender: int) -> bool:
+        """Whether ``ev`` comes from the member's current session (DESIGN.md §8).
+
+        Secure buses tag each message with its signer's epoch (the sending process's
+        start). A message from an older session of a member than one already heard is
+        stale (a replay, or a process since replaced); once the fleet has agreed, only
+        the session whose record was agreed counts. Insecure buses carry no epoch.
+        """
+        if ev.epoch < 0:
+            return True
+        pinned = self.agreed_epochs.get(sender)
+        if pinned is not None:
+            if ev.epoch > pinned and self.proves_agreement(ev.msg):
+                # a member restarted after agreeing (issue #9): its new session counts
+                log.info("robot %d resumed in a new session with the agreed digest", sender)
+                self.agreed_epochs[sender] = self.epochs[sender] = ev.epoch
+            return ev.epoch == self.agreed_epochs[sender]
+        if ev.epoch < self.epochs.get(sender, -1):
+            return False
+        self.epochs[sender] = ev.epoch
+        return True
+
+    # ------------------------------------------------------------ agreement rounds
+
+    def open_round(self, agr: Agreement[NeighborRecordMsg]) -> None:
+        """Make ``agr`` the current agreement, handed all that was heard before it: the
+        members, their early records and digests, who left, every member's phase."""
+        now = self.ctx.clock()
+        me = self.ctx.me
+        for rid, peer in sorted(self.peers.items()):
+            if rid != me and peer.seen_alive:
+                agr.member_joined(rid, now)
+        for msg in self.early_records.values():
+            agr.on_record(msg, now)
+        for dmsg in self.early_digests.values():
+            agr.on_digest(dmsg, now)
+        for rid, peer in sorted(self.peers.items()):
+            if rid != me and peer.seen_alive and not peer.alive:
+                # it was a member and left while we searched: a departure too (with its
+                # record held, one it may return from, agent.core.agreement)
+                agr.member_left(rid, now)
+        self.early_records = {i: m for i, m in self.early_records.items() if m.round > agr.round}
+        self.early_digests = {i: m for i, m in self.early_digests.items() if m.round > agr.round}
+        for rid, peer in self.peers.items():
+            agr.on_peer_phase(rid, peer.phase)
+        self.agreement = agr
+
+    def retire(self) -> None:
+        """The current agreement is done with (a re-search round follows); its digest is
+        still acknowledged until every member has moved on."""
+        if self.agreement is not None:
+            self.retired.append(self.agreement)
+        self.agreement = None
+
+    def pin_sessions(self, members: set[int]) -> None:
+        """From the plan on, only the sessions the agreement was made with count."""
+        self.agreed_epochs = {r: e for r, e in self.epochs.items() if r in members}
+
+    def all_arrived(self) -> bool:
+        """Whether every live member of the agreement has arrived (:data:`ARRIVED`)."""
+        members = self.agreement.held_members() if self.agreement else ()
+        for i in members:
+            peer = self.peer(i)
+            if i != self.ctx.me and peer.alive and peer.phase not in ARRIVED:
+                return False
+        return True

@@ -1,0 +1,199 @@
+"""Safe steps: where a robot decides to take a step (an addition to NAO paper 4.2; issue #10).
+
+The papers walk each trajectory open-loop in 20 cm steps (distance control, 4.2). Here
+every step is checked first (:meth:`SafeSteps.clear_way`, the rule of
+agent/core/control/corridor.py) against the NAOs in the head-yaw-0 image the compass
+takes anyway and those seen in the last few steps (a NAO too near or beside the robot is
+out of the image but still there):
+
+* **GO**: walk the step (:meth:`agent.phases.motion.Motion.walk_step`);
+* **wait**: a NAO blocks the corridor; look again every poll (status detail
+  ``waiting: NAO ahead at [x, y]``); a blocker only remembered is re-checked
+  (:meth:`SafeSteps._recheck`: step back if too near to see, look at it with the head
+  if beside); bounded by ``max_polls``;
+* **VIA**: once this robot's patience (its rank in the plan, (wave, id) order) is
+  spent, a tangent step round the blocker, until the way to the goal is clear again.
+
+:meth:`SafeSteps.walk_to` is the distance control to a goal with these checks.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+from agent.core.control import PAPER_GAINS, STEP_GAINS, next_leg, wrap_pi
+from agent.core.control.corridor import (
+    GO,
+    VIA,
+    CorridorParams,
+    Verdict,
+    back_off,
+    check_step,
+    confirmed,
+    in_view,
+    patience,
+    plan_rank,
+)
+from agent.core.nao import CAMERA_HFOV, HEAD_YAW_LIMIT
+from agent.phases.context import AgentFailure, Context
+from agent.phases.roles import Hearing, Mover
+
+log = logging.getLogger("agent.phases.safe_steps")
+
+
+class SafeSteps:
+    """The distance control whose every step is checked first (module docstring)."""
+
+    def __init__(self, ctx: Context, fleet: Hearing, motion: Mover) -> None:
+        self.ctx = ctx
+        self.fleet = fleet
+        self.motion = motion
+        self.corridor = CorridorParams()  # the safe-step check before each step
+        self.waits = 0  # polls spent waiting for a clear corridor
+        self.vias = 0  # via (tangent) steps taken round a blocking NAO
+        self.seen: list[tuple[np.ndarray, int]] = []  # (NAO seen, fixed frame; at step)
+
+    def forget(self) -> None:
+        """Forget the NAOs seen: they have moved meanwhile (a new move begins)."""
+        self.seen = []
+
+    def walk_to(
+        self, goal: np.ndarray, progress: Callable[[float], None], backward_within: float = 0.0
+    ) -> None:
+        """Distance control to ``goal`` (fixed frame, m) from the dead-reckoned position,
+        each step checked first (:meth:`clear_way`): a blocked step waits, then detours by
+        tangent steps round the blocker until the way to the goal is clear again."""
+        b = self.ctx.beliefs
+        total = float(np.hypot(*(goal - b.position))) or 1.0
+        cp = self.corridor
+        side = 0  # the side of the detour under way (0: none)
+        for _ in range(200):
+            leg = next_leg(b.position, b.heading, goal, backward_within=backward_within)
+            if leg is None:
+                return
+            if side:  # detouring: do the NAOs seen lately still block the way to the goal?
+                to_goal = wrap_pi(b.heading + leg.turn)
+                wait = patience(self._rank(), cp)
+                rel = self._remembered()
+                v = check_step(leg.walk, to_goal, rel, cp, wait, side=side, goal=goal - b.position)
+                if v.action == VIA:
+                    self._via_step(v)
+                    continue
+                side = 0
+            if abs(leg.turn) > self.ctx.cfg.rotation_tolerance:
+                self.motion.rotate(
+                    leg.turn, STEP_GAINS if abs(leg.turn) < math.radians(15) else PAPER_GAINS
+                )
+            v = self.clear_way(leg.walk, goal=goal)
+            if v.action == VIA:
+                side = v.side
+                self._via_step(v)
+                continue
+            self.motion.walk_step(leg.walk)
+            progress(1.0 - max(0.0, leg.remaining - abs(leg.walk)) / total)
+        raise AgentFailure("distance control did not converge in 200 steps")
+
+    def _via_step(self, v: Verdict) -> None:
+        """Turn to the via step's heading, check its corridor again (no further via), walk."""
+        turn = wrap_pi(v.heading - self.ctx.beliefs.heading)
+        if abs(turn) > self.ctx.cfg.rotation_tolerance:
+            self.motion.rotate(turn, STEP_GAINS if abs(turn) < math.radians(15) else PAPER_GAINS)
+        self.vias += 1
+        self.clear_way(v.walk, via=False)
+        self.motion.walk_step(v.walk)
+
+    def _remembered(self) -> np.ndarray:
+        """The NAOs seen in the last ``memory_steps`` steps, relative to here (fixed frame):
+        a NAO closer than the detector's range, or beside the robot, is not in the image
+        but is still there."""
+        keep = [(p, k) for p, k in self.seen if self.motion.steps - k <= self.corridor.memory_steps]
+        self.seen = keep
+        if not keep:
+            return np.zeros((0, 2))
+        return np.array([p for p, _ in keep]) - self.ctx.beliefs.position
+
+    def clear_way(self, walk: float, via: bool = True, goal: np.ndarray | None = None) -> Verdict:
+        """Check the next step's corridor (agent/core/control/corridor.py) against the NAOs in
+        the yaw-0 image the compass takes anyway and those seen lately: returns GO, or
+        (``via``) VIA once this robot's patience (its plan rank) is spent; waits
+        meanwhile, looking again every poll (status detail ``waiting: NAO ahead at
+        [x, y]``, fixed frame). Bounded: AgentFailure after ``max_polls`` polls."""
+        b = self.ctx.beliefs
+        cp = self.corridor
+        rank = self._rank()
+        for waited in range(cp.max_polls + 1):
+            frame = self.motion.reference()
+            self.motion.last_frame = frame
+            seen, _, _ = self.ctx.perception.to_fixed(
+                self.ctx.perception.detect(frame.image, 0.0), b.heading
+            )
+            for p in np.asarray(seen, dtype=np.float64).reshape(-1, 2):
+                self.seen.append((b.position + p, self.motion.steps))
+            v = check_step(
+                walk, b.heading, self._remembered(), cp, waited if via else 0, rank,
+                goal=None if goal is None else goal - b.position,
+            )  # fmt: skip
+            if v.action == GO or (v.action == VIA and via):
+                if waited:
+                    log.info("corridor: %s after %d poll(s)", v.action, waited)
+                return v
+            where = (b.position + v.blockers[0]).round(2).tolist()
+            self.ctx.status(
+                self.ctx.phase, detail=f"waiting: NAO ahead at {where}", force=waited == 0
+            )
+            self.waits += 1
+            self.fleet.pump(cp.poll)
+            if waited and not confirmed(v.blockers[0], seen, cp):
+                self._recheck(v.blockers[0], seen, where)
+            self.motion.last_frame = None  # look again
+            # what the next image shows is seen afresh: a NAO that walked on is forgotten
+            if self.seen:
+                rel = np.array([p for p, _ in self.seen]) - b.position
+                shown = in_view(rel, b.heading, CAMERA_HFOV)
+                self.seen = [e for e, gone in zip(self.seen, shown, strict=True) if not gone]
+        raise AgentFailure(
+            f"way blocked for {cp.max_polls} polls at believed {b.position.round(2).tolist()}"
+        )
+
+    def _recheck(self, blocker: np.ndarray, seen: np.ndarray, where: list[float]) -> None:
+        """A blocker only remembered, not in the yaw-0 image: find out whether it is still
+        there. Too near ahead to be seen (< VIEW_NEAR): step back (``back_off``); out of
+        the yaw-0 image (beside the robot): look at it with the head, forget what that
+        image should show and does not, remember what it shows. Otherwise the memory
+        would keep a NAO that walked away until this robot's patience ran out."""
+        b = self.ctx.beliefs
+        back = back_off(blocker[None, :], seen, b.heading, CAMERA_HFOV, self.corridor)
+        if back > 0.01:
+            log.info("corridor: NAO remembered at %s, too near to see: %.2f m back", where, back)
+            self.motion.walk_step(-back)
+            return
+        if bool(in_view(blocker[None, :], b.heading, CAMERA_HFOV, near=0.0)[0]):
+            return  # the yaw-0 image covers it: the loop's own look decides
+        bearing = math.atan2(float(blocker[1]), float(blocker[0]))
+        yaw = float(np.clip(wrap_pi(bearing - b.heading), -HEAD_YAW_LIMIT, HEAD_YAW_LIMIT))
+        frame = self.motion.look(yaw)
+        fresh, _, _ = self.ctx.perception.to_fixed(
+            self.ctx.perception.detect(frame.image, yaw), b.heading
+        )
+        if self.seen:
+            rel = np.array([p for p, _ in self.seen]) - b.position
+            shown = in_view(rel, b.heading + yaw, CAMERA_HFOV)
+            self.seen = [e for e, gone in zip(self.seen, shown, strict=True) if not gone]
+        for p in np.asarray(fresh, dtype=np.float64).reshape(-1, 2):
+            self.seen.append((b.position + p, self.motion.steps))
+        log.info(
+            "corridor: looked at the NAO remembered at %s (head %+.0f°): %d NAO(s) in view",
+            where, math.degrees(yaw), len(fresh),
+        )  # fmt: skip
+
+    def _rank(self) -> int:
+        """This robot's rank in the shared plan, (wave, id) order (0 without a plan)."""
+        if self.ctx.planned is None:
+            return 0
+        return plan_rank(
+            [(int(rp.wave), int(rp.robot_id)) for rp in self.ctx.planned.robots], self.ctx.me
+        )

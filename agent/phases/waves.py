@@ -1,0 +1,102 @@
+"""Plan, wait and move: the agreed plan executed wave by wave (NAO paper 4.1.2–4.2,
+5.2.2 (iii) steps 3–7; AUV III.B–C for the pyramid; DESIGN.md §1 steps 5–6).
+
+PLAN  the formation core on the agreed records (identical on every agent): this
+      robot's slot, wave and parent (:meth:`Waves.make_plan`); from then on the agreed
+      record set is served (agent/phases/record_sets.py) and only the agreed sessions
+      count (agent/phases/membership.py).
+WAIT  for every robot of this robot's ``after`` list to hold its slot, leader first
+      (agent/core/formation/execution.py).
+MOVE  rotation control to face each leg's goal, distance control in 20 cm steps with
+      the heading corrected after each (4.2, 5.2.2), every step checked first
+      (agent/phases/safe_steps.py), then the turn to the pyramid axis. A robot restarted
+      mid-move (issue #9) goes on from its journaled leg.
+"""
+
+from __future__ import annotations
+
+from agent.core.agreement import Decision
+from agent.core.control import PAPER_GAINS, wrap_pi
+from agent.core.formation.plan import Plan
+from agent.phases.context import AgentFailure, Context
+from agent.phases.record_sets import record_set
+from agent.phases.roles import Fleet, Mover, Stepper
+from agent.wire import NeighborRecordMsg
+
+
+class Waves:
+    """This robot's part of the plan (module docstring)."""
+
+    def __init__(self, ctx: Context, fleet: Fleet, motion: Mover, steps: Stepper) -> None:
+        self.ctx = ctx
+        self.fleet = fleet
+        self.motion = motion
+        self.steps = steps
+
+    def make_plan(self, decision: Decision[NeighborRecordMsg]) -> Plan:
+        """The plan of the agreed ``decision``; AgentFailure if the core refuses it."""
+        ctx = self.ctx
+        ctx.status("plan", 0.0, decision.reason)
+        try:
+            plan = ctx.formation.plan(decision.records, ctx.cfg.plan_params())
+        except ValueError as exc:
+            raise AgentFailure(f"planning failed on the agreed records: {exc}") from None
+        ctx.plan = plan
+        ctx.plan_digest = str(plan.digest)
+        self.fleet.served = record_set(ctx.me, decision)
+        self.fleet.pin_sessions({int(r) for r in ctx.formation.members(plan)})
+        ctx.wave = int(plan.robot(ctx.me).wave)
+        ctx.status("plan", 1.0, f"wave {ctx.wave}, leader {plan.leader}", force=True)
+        return plan
+
+    def wait_for_earlier_waves(self) -> None:
+        """Start once every robot of this robot's ``after`` list holds its slot (the plan's
+        execution rule, ``agent/core/formation/execution.py``; the leader's list is empty)."""
+        ctx = self.ctx
+        plan = ctx.plan
+        members = set(ctx.formation.members(plan))
+        earlier = sorted(
+            int(i) for i in plan.robot(ctx.me).after if int(i) in members and int(i) != ctx.me
+        )
+        deadline = ctx.clock() + ctx.cfg.wave_timeout
+        while True:
+            self.fleet.pump(0.1)
+            pending = []
+            for i in earlier:
+                peer = self.fleet.peer(i)
+                if peer.phase in ("hold", "march", "done"):
+                    continue
+                if peer.seen_alive and not peer.alive:
+                    raise AgentFailure(
+                        f"robot {i} of wave {plan.robot(i).wave} left before holding"
+                    )
+                if peer.phase == "failed":
+                    raise AgentFailure(f"robot {i} of wave {plan.robot(i).wave} failed")
+                pending.append(i)
+            if not pending:
+                return
+            if ctx.clock() > deadline:
+                raise AgentFailure(f"robots {pending} of earlier waves did not hold in time")
+            ctx.status("wait", 0.0, f"waiting for wave(s) of {pending}")
+
+    def move(self) -> None:
+        """Walk the plan's legs from the journaled one on, then face the pyramid axis."""
+        ctx = self.ctx
+        plan = ctx.plan
+        self.motion.last_frame = None  # others moved meanwhile: a fresh compass reference
+        self.steps.forget()  # and the NAOs seen before are elsewhere now
+        goals, final_heading = ctx.formation.goals(plan, ctx.me)
+        ctx.final_heading = final_heading
+        ctx.status("move", 0.0, f"{len(goals)} leg(s)")
+        n = len(goals)
+        for k, goal in enumerate(goals):
+            if k < ctx.leg:
+                continue  # walked before a restart (issue #9)
+            ctx.leg = k
+
+            def progress(p: float, k: int = k) -> None:
+                ctx.status("move", (k + p) / n, f"leg {k + 1}/{n}")
+
+            self.steps.walk_to(goal, progress)
+        turn = wrap_pi(final_heading - ctx.beliefs.heading)
+        self.motion.rotate(turn, PAPER_GAINS, "turn to pyramid axis")
