@@ -37,8 +37,8 @@ import math
 import sys
 from typing import TYPE_CHECKING
 
+from agent.config import add_plan_arguments
 from agent.core.nao import NAOQI_PORT
-from agent.phases.config import add_plan_arguments
 from agent.wire import MAX_ROBOT_ID, NetworkSpec, add_network_arguments, network_spec
 
 if TYPE_CHECKING:
@@ -167,7 +167,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         p.error("--explore-step must be in [0.2, 5] m")
     args.route = None
     try:
-        from agent.phases.config import Route
+        from agent.core.formation.route import Route
 
         if args.march is not None:
             args.route = Route(distance=args.march)
@@ -257,8 +257,8 @@ def main(argv: list[str] | None = None) -> int:
     # Imported here so that `--help` and usage errors need no zenoh session.
     from agent.body.base import Body, BodyError
     from agent.body.zenoh_world import ZenohBody
+    from agent.config import AgentConfig
     from agent.net.bus import BusError
-    from agent.phases.config import AgentConfig
     from agent.phases.runner import Runner, report_unavailable
 
     try:
@@ -274,7 +274,7 @@ def main(argv: list[str] | None = None) -> int:
         if world_bus is not bus:
             stack.enter_context(world_bus)
         try:
-            from agent.phases.adapters import FormationAdapter, PerceptionAdapter
+            from agent.adapters import FormationAdapter, PerceptionAdapter
 
             perception = PerceptionAdapter()
             formation = FormationAdapter()

@@ -14,13 +14,14 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
+from agent.adapters import FormationAdapter, PerceptionAdapter
 from agent.body.zenoh_world import ZenohBody
+from agent.config import AgentConfig
 from agent.core.agreed_params import params_digest
 from agent.core.agreement import Agreement, Decision
 from agent.core.formation.params import PlanParams
+from agent.core.formation.route import Route
 from agent.net.bus import Bus, BusConfig
-from agent.phases.adapters import FormationAdapter, PerceptionAdapter
-from agent.phases.config import AgentConfig, Route
 from agent.phases.context import AgentFailure
 from agent.phases.membership import Peer
 from agent.phases.runner import Runner, report_unavailable

@@ -1,4 +1,4 @@
-"""The NAOqi body: a :class:`~agent.phases.seams.Body` on a NAO over the qi protocol (issue #11).
+"""The NAOqi body: a :class:`~agent.seams.Body` on a NAO over the qi protocol (issue #11).
 
 The only agent module that imports ``qi`` (the libqi Python bindings). It drives a real
 NAO (``tcp://nao.local:9559``) or a virtual one served by ``python -m sim --naoqi``
@@ -17,7 +17,7 @@ NAO (``tcp://nao.local:9559``) or a virtual one served by ``python -m sim --naoq
 
 Limits are checked before anything moves: head yaw within ±119.5° (``ValueError``), one
 walk at most 50 m (the protocol's bound). Every qi error (connection lost, a service
-missing, a method refusing) becomes a :class:`~agent.phases.seams.BodyError`. The session is
+missing, a method refusing) becomes a :class:`~agent.seams.BodyError`. The session is
 closed explicitly, also at interpreter exit (``atexit``): a bare qi session left to
 Python's finalisation can end the process with "terminate called without an active
 exception" (tests/body/test_naoqi.py checks a process that never calls ``close``).

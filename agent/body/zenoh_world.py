@@ -1,4 +1,4 @@
-"""The zenoh body (DESIGN.md §2–3, §8): a :class:`~agent.phases.seams.Body` on the world process.
+"""The zenoh body (DESIGN.md §2–3, §8): a :class:`~agent.seams.Body` on the world process.
 
 Forehead camera at a head yaw, walk, turn. Each action is a query to the world's
 queryables (``world/robot/{id}/camera|walk|turn``, DESIGN.md §3); walk and turn replies
@@ -44,7 +44,7 @@ from agent.wire import (
     key_walk,
 )
 
-#: Former name of :class:`~agent.phases.seams.BodyError` (kept for callers of the old API).
+#: Former name of :class:`~agent.seams.BodyError` (kept for callers of the old API).
 RobotError = BodyError
 
 T = TypeVar("T")
@@ -116,7 +116,7 @@ def register(bus: Bus, want: int = -1, timeout: float = 10.0) -> int:
 class ZenohBody:
     """Camera, walk and turn of robot ``robot_id`` through the world process.
 
-    Satisfies :class:`agent.phases.seams.Body`; :meth:`stop` and :meth:`close` do nothing: a
+    Satisfies :class:`agent.seams.Body`; :meth:`stop` and :meth:`close` do nothing: a
     motion ends in the world, and the bus belongs to the caller.
     """
 

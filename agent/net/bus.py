@@ -236,7 +236,7 @@ class Bus:
         self._keep.clear()
         self._publishers.clear()
         with contextlib.suppress(Exception):
-            self.session.close()
+            self.session.close()  # type: ignore[no-untyped-call]
 
     def __enter__(self) -> Bus:
         return self

@@ -6,7 +6,7 @@ resume); they share this small :class:`Context` and nothing else of each other b
 typed roles of :mod:`agent.phases.roles`:
 
 * the robot's seams: the bus, its :class:`~agent.body.base.Body`, its configuration,
-  its :class:`~agent.phases.seams.Perception` and :class:`~agent.phases.seams.Formation`,
+  its :class:`~agent.seams.Perception` and :class:`~agent.seams.Formation`,
   and a clock;
 * its :class:`Beliefs`. Heading: the agent's heading in its fixed frame starts at
   :data:`NORTH` (every robot faces north at the start, 4.1.1) and changes only by
@@ -32,11 +32,11 @@ import numpy as np
 import numpy.typing as npt
 
 from agent.body.base import Body
+from agent.config import AgentConfig
 from agent.core.formation.plan import Plan
 from agent.net.bus import Bus
-from agent.phases.config import AgentConfig
 from agent.phases.journal import Journal
-from agent.phases.seams import Formation, Perception
+from agent.seams import Formation, Perception
 from agent.wire import NeighborRecordMsg, StatusMsg, key_status
 
 #: Every robot faces north of its fixed frame at the start (4.1.1).

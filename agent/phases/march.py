@@ -2,7 +2,7 @@
 system should march in a pattern", followers "follow the leaders or other robots in
 front of them by visual servoing"; NAO paper 4.2 for the 20 cm steps).
 
-**Route.** Part of the agreed parameters (:meth:`agent.phases.config.AgentConfig.agreed_params`),
+**Route.** Part of the agreed parameters (:meth:`agent.config.AgentConfig.agreed_params`),
 so every agent derives the same displacement V of the pyramid in the common frame:
 ``--march D``: V = D·(cos β, sin β) along the pyramid's axis β; ``--march-to X,Y``:
 V = (X, Y) − the leader's planned target. The pyramid *translates* by V: its axis keeps
@@ -57,13 +57,13 @@ import numpy as np
 from agent.core.control import PAPER_GAINS, STEP_GAINS, next_leg, wrap_pi
 from agent.core.control.station import StationGains, StationKeeper, safe_walk, unicycle_step
 from agent.core.formation.params import PlanParams
-from agent.core.formation.plan import Plan
+from agent.core.formation.route import route_vector, station_offset
 from agent.core.nao import HEAD_YAW_LIMIT
 from agent.phases.context import Context
 from agent.phases.roles import Fleet, Mover
 
 if TYPE_CHECKING:
-    from agent.phases.config import Route
+    from agent.core.formation.route import Route
 
 log = logging.getLogger("agent.phases.march")
 
@@ -82,22 +82,6 @@ QUIET = 20.0  # s of a still parent that end a follower's march without the radi
 
 class MarchHalt(RuntimeError):
     """The march cannot go on safely; the text is the reason (the runner fails with it)."""
-
-
-def route_vector(plan: Plan, route: Route, axis: float) -> np.ndarray:
-    """V, the pyramid's displacement in the common frame (see the module docstring)."""
-    if route.to is not None:
-        lead = np.asarray(plan.robot(plan.leader).target, dtype=np.float64).reshape(2)
-        return np.asarray(route.to, dtype=np.float64) - lead
-    assert route.distance is not None
-    return route.distance * np.array([math.cos(axis), math.sin(axis)])
-
-
-def station_offset(plan: Plan, me: int) -> np.ndarray:
-    """Where a child keeps its parent: parent target − own target (common frame)."""
-    rp = plan.robot(me)
-    parent = np.asarray(plan.robot(int(rp.parent)).target, dtype=np.float64).reshape(2)
-    return parent - np.asarray(rp.target, dtype=np.float64).reshape(2)
 
 
 class Marcher:

@@ -108,7 +108,7 @@ class Motion:
         """(rotation to believe, suspect): the compass between two head-yaw-0 frames.
 
         ``walking``: the frames are 20 cm apart, so only the central band of the image
-        is matched (see :meth:`agent.phases.adapters.PerceptionAdapter.measure_walk`). When the
+        is matched (see :meth:`agent.adapters.PerceptionAdapter.measure_walk`). When the
         compass fails, the command is believed; when it matches but far from the
         command, the command is believed and the match is returned as ``suspect``
         (a step's real drift may be that large: :meth:`_confirm_drift`)."""

@@ -30,7 +30,7 @@ from agent.core.agreement import Agreement, Decision
 from agent.core.control import PidGains
 from agent.core.formation.plan import Plan
 from agent.phases.membership import Peer
-from agent.phases.seams import Sightings
+from agent.seams import Sightings
 from agent.wire import DigestMsg, NeighborRecordMsg, RecordSetReply
 
 

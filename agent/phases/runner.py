@@ -37,10 +37,10 @@ import traceback
 from collections.abc import Callable
 
 from agent.body.base import Body, BodyError
+from agent.config import AgentConfig
 from agent.core.agreement import Decision
 from agent.net.bus import Bus
 from agent.phases.agreeing import Agreeing
-from agent.phases.config import AgentConfig
 from agent.phases.context import AgentFailure, Context
 from agent.phases.hold import Hold
 from agent.phases.journaling import Journaling
@@ -50,9 +50,9 @@ from agent.phases.motion import Motion
 from agent.phases.research import Research
 from agent.phases.resume import Resumption
 from agent.phases.safe_steps import SafeSteps
-from agent.phases.seams import Formation, Perception
 from agent.phases.search import Search
 from agent.phases.waves import Waves
+from agent.seams import Formation, Perception
 from agent.wire import NeighborRecordMsg, StatusMsg, key_alive, key_status, reason
 
 log = logging.getLogger("agent.phases.runner")
@@ -61,9 +61,9 @@ log = logging.getLogger("agent.phases.runner")
 class Runner:
     """Drives one robot through the phases; :meth:`run` returns the exit code.
 
-    It depends only on the seams of :mod:`agent.phases.seams`: a :class:`~agent.body.base.Body`
-    (zenoh world, NAOqi or in-process world), a :class:`~agent.phases.seams.Perception` and a
-    :class:`~agent.phases.seams.Formation`; the bus carries the exchange between agents.
+    It depends only on the seams of :mod:`agent.seams`: a :class:`~agent.body.base.Body`
+    (zenoh world, NAOqi or in-process world), a :class:`~agent.seams.Perception` and a
+    :class:`~agent.seams.Formation`; the bus carries the exchange between agents.
     """
 
     def __init__(

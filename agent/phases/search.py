@@ -25,7 +25,7 @@ from agent.core.perception.detector import Detection
 from agent.core.perception.obstacles import ObstacleDetection
 from agent.phases.context import NORTH, Context
 from agent.phases.roles import Mover
-from agent.phases.seams import Sightings
+from agent.seams import Sightings
 from agent.wire import NeighborRecordMsg, reason
 
 log = logging.getLogger("agent.phases.search")

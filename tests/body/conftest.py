@@ -1,4 +1,4 @@
-"""The three bodies of :class:`agent.phases.seams.Body` on one simulated world each (issue #11).
+"""The three bodies of :class:`agent.seams.Body` on one simulated world each (issue #11).
 
 - ``world``: :class:`agent.body.in_process.WorldBody`, the world in this process;
 - ``zenoh``: :class:`agent.body.zenoh_world.ZenohBody` over a real zenoh session (loopback) to a
@@ -20,9 +20,9 @@ from typing import Any
 
 import pytest
 
+from agent.adapters import PerceptionAdapter
 from agent.body.base import Body
 from agent.net.bus import Bus, BusConfig
-from agent.phases.adapters import PerceptionAdapter
 from sim import scenarios
 from sim.scenarios import RobotSpec, Scenario
 from sim.world import World

@@ -1,4 +1,4 @@
-"""The Body contract (agent/phases/seams.py): the same tests for the world, zenoh and NAOqi bodies.
+"""The Body contract (agent/seams.py): the same tests for the world, zenoh and NAOqi bodies.
 
 Robot 1 stands at the origin facing north; robot 2 stands 0.9 m ahead, facing it. The
 tests run in file order on one world per body (the motions undo themselves; the contact
@@ -12,9 +12,9 @@ import math
 import numpy as np
 import pytest
 
+from agent.adapters import PerceptionAdapter
 from agent.body.base import BodyError
 from agent.core.nao import CAMERA_HEIGHT, CAMERA_WIDTH, HEAD_YAW_LIMIT, WALK_SPEED
-from agent.phases.adapters import PerceptionAdapter
 from tests.body.conftest import Rig
 
 

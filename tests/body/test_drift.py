@@ -16,12 +16,12 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
+from agent.adapters import FormationAdapter, PerceptionAdapter
 from agent.body.in_process import WorldBody
+from agent.config import AgentConfig
 from agent.core.control import wrap_pi
 from agent.core.perception.compass import CompassResult
 from agent.net.bus import Bus
-from agent.phases.adapters import FormationAdapter, PerceptionAdapter
-from agent.phases.config import AgentConfig
 from agent.phases.context import NORTH
 from agent.phases.motion import _plausible
 from agent.phases.runner import Runner

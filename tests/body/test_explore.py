@@ -12,10 +12,10 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
+from agent.adapters import FormationAdapter, PerceptionAdapter
 from agent.body.in_process import WorldBody
+from agent.config import AgentConfig
 from agent.net.bus import Bus
-from agent.phases.adapters import FormationAdapter, PerceptionAdapter
-from agent.phases.config import AgentConfig
 from agent.phases.runner import Runner
 from sim.scenarios import RobotSpec, Scenario
 from sim.world import World

@@ -14,15 +14,16 @@ import math
 import numpy as np
 import pytest
 
+from agent.adapters import FormationAdapter, PerceptionAdapter
 from agent.body.base import Frame
 from agent.body.in_process import WorldBody
+from agent.config import AgentConfig
 from agent.core.control import wrap_pi
 from agent.core.formation.params import PlanParams
 from agent.core.formation.plan import Plan
+from agent.core.formation.route import Route, route_vector, station_offset
 from agent.net.bus import Bus
-from agent.phases.adapters import FormationAdapter, PerceptionAdapter
-from agent.phases.config import AgentConfig, Route
-from agent.phases.march import LOST, Marcher, MarchHalt, route_vector, station_offset
+from agent.phases.march import LOST, Marcher, MarchHalt
 from agent.phases.membership import Peer
 from agent.phases.runner import Runner
 from agent.wire import NeighborRecordMsg

@@ -15,12 +15,12 @@ import math
 import numpy as np
 import pytest
 
+from agent.adapters import FormationAdapter, PerceptionAdapter
 from agent.body.in_process import WorldBody
+from agent.config import AgentConfig
 from agent.core.control import wrap_pi
 from agent.core.formation.params import PlanParams
 from agent.net.bus import Bus
-from agent.phases.adapters import FormationAdapter, PerceptionAdapter
-from agent.phases.config import AgentConfig
 from agent.phases.context import NORTH
 from agent.phases.membership import Peer
 from agent.phases.runner import Runner

@@ -14,11 +14,11 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
+from agent.adapters import FormationAdapter, PerceptionAdapter
 from agent.body.in_process import WorldBody
+from agent.config import AgentConfig
 from agent.core.control.corridor import CorridorParams
 from agent.net.bus import Bus
-from agent.phases.adapters import FormationAdapter, PerceptionAdapter
-from agent.phases.config import AgentConfig
 from agent.phases.context import AgentFailure
 from agent.phases.runner import Runner
 from sim.nao_model import FOOTPRINT_RADIUS

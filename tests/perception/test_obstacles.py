@@ -162,7 +162,7 @@ def test_bad_radius_raises() -> None:
 
 
 def test_adapter_merges_a_robots_sightings_and_bounds_them() -> None:
-    from agent.phases.adapters import PerceptionAdapter
+    from agent.adapters import PerceptionAdapter
     from agent.wire import MAX_OBSTACLES
 
     a = np.array([[1.0, 0.0], [0.0, 2.0]])

@@ -15,11 +15,11 @@ from typing import Any
 
 import pytest
 
+from agent.adapters import FormationAdapter, PerceptionAdapter
 from agent.body.zenoh_world import ZenohBody
+from agent.config import AgentConfig
 from agent.core.agreement import Decision
 from agent.net.bus import Bus, BusConfig
-from agent.phases.adapters import FormationAdapter, PerceptionAdapter
-from agent.phases.config import AgentConfig
 from agent.phases.runner import Runner
 from agent.wire import Message, NeighborRecordMsg, StatusMsg
 from tools.harness.procs import free_port

@@ -34,8 +34,8 @@ def plan_from_agreed(
 ) -> Any:
     """The plan recomputed by the evaluator from the records the agents exchanged, with
     the fleet's planning parameters."""
+    from agent.adapters import FormationAdapter
     from agent.core.formation.params import PlanParams
-    from agent.phases.adapters import FormationAdapter
 
     fa = FormationAdapter()
     recs = tuple(obs.records[i] for i in sorted(obs.records))
@@ -92,8 +92,7 @@ def judge_march(
     Sets ``march_distance`` (the leader's displacement, m), ``march_route`` (V, m),
     ``march_error`` (|displacement − V| / |V|), ``march_ok`` and the worst |r_d|, |r_φ|
     over every truth sample of the march."""
-    from agent.phases.config import Route
-    from agent.phases.march import route_vector
+    from agent.core.formation.route import Route, route_vector
 
     rt = result["route"]
     route = Route(distance=rt["distance"]) if "distance" in rt else Route(to=tuple(rt["to"]))

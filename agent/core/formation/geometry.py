@@ -23,13 +23,14 @@ def point_seg_dist(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     pos = den > 0
     t = np.where(pos, (apx * abx + apy * aby) / np.where(pos, den, 1.0), 0.0)
     t = np.clip(t, 0.0, 1.0)
-    return np.hypot(p[..., 0] - (ax + t * abx), p[..., 1] - (ay + t * aby))
+    return np.asarray(np.hypot(p[..., 0] - (ax + t * abx), p[..., 1] - (ay + t * aby)))
 
 
 def _cross(o: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return (a[..., 0] - o[..., 0]) * (b[..., 1] - o[..., 1]) - (a[..., 1] - o[..., 1]) * (
+    out = (a[..., 0] - o[..., 0]) * (b[..., 1] - o[..., 1]) - (a[..., 1] - o[..., 1]) * (
         b[..., 0] - o[..., 0]
     )
+    return np.asarray(out)
 
 
 def seg_seg_dist(a0: np.ndarray, a1: np.ndarray, b0: np.ndarray, b1: np.ndarray) -> np.ndarray:
@@ -55,4 +56,4 @@ def paths_cross(a0: np.ndarray, a1: np.ndarray, b0: np.ndarray, b1: np.ndarray) 
     """True where the two segments properly cross (Lemma 1's 'intercrossing')."""
     o1, o2 = _cross(a0, a1, b0), _cross(a0, a1, b1)
     o3, o4 = _cross(b0, b1, a0), _cross(b0, b1, a1)
-    return (o1 * o2 < 0) & (o3 * o4 < 0)
+    return np.asarray((o1 * o2 < 0) & (o3 * o4 < 0))

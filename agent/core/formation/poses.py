@@ -119,7 +119,7 @@ class PoseFrame:
             raise ValueError(f"robot {robot_id} has no pose")
         k = self.ids.index(robot_id)
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-        return self.positions[k] + pts @ _rot(float(self.headings[k])).T
+        return np.asarray(self.positions[k] + pts @ _rot(float(self.headings[k])).T)
 
 
 def _rot(a: float) -> np.ndarray:

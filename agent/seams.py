@@ -6,9 +6,9 @@ collaborators themselves are in :mod:`agent.phases.roles`):
 
 - :class:`Perception`: detector, fixed-frame conversion, merging and the visual compass
   (NAO paper §3), and the same for the static obstacles (§5.1.2;
-  :class:`agent.phases.adapters.PerceptionAdapter`);
+  :class:`agent.adapters.PerceptionAdapter`);
 - :class:`Formation`: agreed records → plan → this robot's goals, or who searches
-  again (§4; :class:`agent.phases.adapters.FormationAdapter`).
+  again (§4; :class:`agent.adapters.FormationAdapter`).
 """
 
 from __future__ import annotations
@@ -56,7 +56,7 @@ class Formation(Protocol):
 
     def plan(self, msgs: tuple[NeighborRecordMsg, ...], params: PlanParams) -> Plan:
         """The plan of the agreed records with the agreed parameters (d_e, φ_e,
-        orientation, strategy: :meth:`agent.phases.config.AgentConfig.plan_params`)."""
+        orientation, strategy: :meth:`agent.config.AgentConfig.plan_params`)."""
         ...
 
     def members(self, plan: Plan) -> list[int]: ...

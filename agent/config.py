@@ -14,6 +14,7 @@ from agent.core.agreed_params import ParamValue
 from agent.core.formation.params import PLAN_STRATEGIES, PlanParams
 from agent.core.formation.pyramid import ORIENTATIONS
 from agent.core.formation.research import DEFAULT_STEP
+from agent.core.formation.route import Route
 from agent.core.nao import HEAD_YAW_LIMIT
 from agent.core.perception.camera import CameraModel
 
@@ -40,38 +41,6 @@ def add_plan_arguments(p: argparse.ArgumentParser) -> None:
         default="default",
         help="slot assignment strategy of the planner (agent/core/formation/plan.py)",
     )
-
-
-MAX_ROUTE = 50.0  # m: the longest march accepted (the longest walk command the world takes)
-
-
-@dataclass(frozen=True)
-class Route:
-    """The march after ``hold`` (issue #13): the leader walks ``distance`` m along the
-    pyramid's axis, or to the point ``to`` (x, y) of the common frame. Exactly one is
-    given. The pyramid translates: its axis keeps its direction (see agent/phases/march.py)."""
-
-    distance: float | None = None
-    to: tuple[float, float] | None = None
-
-    def __post_init__(self) -> None:
-        if (self.distance is None) == (self.to is None):
-            raise ValueError("a route is a distance along the axis or a point, exactly one")
-        if self.distance is not None and not (
-            math.isfinite(self.distance) and 0.0 < self.distance <= MAX_ROUTE
-        ):
-            raise ValueError(f"march distance must be in (0, {MAX_ROUTE:g}] m, got {self.distance}")
-        if self.to is not None and not (
-            len(self.to) == 2 and all(math.isfinite(v) and abs(v) <= 1000.0 for v in self.to)
-        ):
-            raise ValueError(f"march point must be two finite coordinates (m), got {self.to}")
-
-    def key(self) -> tuple[str, float] | tuple[str, float, float]:
-        """What the agreed-parameters digest covers."""
-        if self.to is not None:
-            return ("to", float(self.to[0]), float(self.to[1]))
-        assert self.distance is not None
-        return ("axis", float(self.distance))
 
 
 @dataclass(frozen=True)

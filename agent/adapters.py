@@ -1,9 +1,9 @@
-"""The runner's perception and formation, behind the seams of :mod:`agent.phases.seams`.
+"""The runner's perception and formation, behind the seams of :mod:`agent.seams`.
 
 :class:`PerceptionAdapter` is the NAO paper's perception (§3: detector, eqs. 7–8 into
 the fixed frame, merging, visual compass §3.2.1); :class:`FormationAdapter` is the
 formation core (§4.1.2–4.2, AUV III.B–C) from agreed wire records to this robot's goals.
-Both satisfy the :class:`~agent.phases.seams.Perception` and :class:`~agent.phases.seams.Formation`
+Both satisfy the :class:`~agent.seams.Perception` and :class:`~agent.seams.Formation`
 protocols; tools that need the same plan as the agents (``tools.demo``) use them too.
 """
 
@@ -22,7 +22,7 @@ from agent.core.perception.compass import CompassResult, VisualCompass
 from agent.core.perception.detector import Detection, Detector
 from agent.core.perception.localise import cluster_sightings, merge_sightings, to_fixed_frame
 from agent.core.perception.obstacles import ObstacleDetection, ObstacleDetector
-from agent.phases.seams import Neighbours, Sightings
+from agent.seams import Neighbours, Sightings
 from agent.wire import MAX_OBSTACLES, NeighborRecordMsg
 
 
