@@ -39,6 +39,8 @@ from typing import TYPE_CHECKING
 
 from agent.config import add_plan_arguments
 from agent.core.nao import NAOQI_PORT
+from agent.core.perception.sensor_fault import HELP as SENSOR_FAULT_HELP
+from agent.core.perception.sensor_fault import SensorFault
 from agent.wire import MAX_ROBOT_ID, NetworkSpec, add_network_arguments, network_spec
 
 if TYPE_CHECKING:
@@ -128,6 +130,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         metavar="DIR",
         default=None,
         help="keep a durable journal here and resume from it after a crash (issue #9)",
+    )
+    p.add_argument(
+        "--sensor-fault",
+        type=SensorFault.parse,
+        default=None,
+        metavar="KIND:AMOUNT",
+        help=SENSOR_FAULT_HELP + " (evaluation only: tools.eval_headings)",
     )
     p.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
     args = p.parse_args(argv)
@@ -306,6 +315,7 @@ def main(argv: list[str] | None = None) -> int:
                     member_grace=args.member_grace,
                     correct=not args.no_correct,
                     march=args.route,
+                    sensor_fault=args.sensor_fault,
                     **{
                         k: v
                         for k, v in (

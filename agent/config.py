@@ -17,6 +17,7 @@ from agent.core.formation.research import DEFAULT_STEP
 from agent.core.formation.route import Route
 from agent.core.nao import HEAD_YAW_LIMIT
 from agent.core.perception.camera import CameraModel
+from agent.core.perception.sensor_fault import SensorFault
 
 #: Head yaws of one sweep (paper 5.2.2 iii): the camera model's, 26.6° apart, so that every
 #: NAO at >= 0.5 m is wholly inside some image (7 evenly spaced yaws, 39.8° apart, left
@@ -78,6 +79,8 @@ class AgentConfig:
     research_rounds: int = 2
     explore_step: float = DEFAULT_STEP
     research_timeout: float = 300.0
+    # test tool (agent/core/perception/sensor_fault.py): corrupt this robot's own record
+    sensor_fault: SensorFault | None = None
 
     @property
     def radius(self) -> float:

@@ -34,6 +34,7 @@ import numpy.typing as npt
 from agent.body.base import Body
 from agent.config import AgentConfig
 from agent.core.formation.plan import Plan
+from agent.core.formation.verdict import PairCheck
 from agent.net.bus import Bus
 from agent.phases.journal import Journal
 from agent.seams import Formation, Perception
@@ -88,6 +89,8 @@ class Context:
     planned: Plan | None = None  # the agreed plan, once made (see :attr:`plan`)
     plan_digest: str = ""
     wave: int = -1
+    # the robot's own check of its pair after hold (agent/core/formation/verdict.py)
+    check: PairCheck | None = None
     leg: int = 0  # the move's current leg
     final_heading: float = NORTH  # the pyramid axis, once the goals are known
     timeline: Timeline = field(default_factory=Timeline)
@@ -142,5 +145,8 @@ class Context:
             error=error[:500],
             t_sim=self.body.t_sim,
             bytes_sent=self.bus.stats.total_published,
+            check_parent=-1 if self.check is None else self.check.parent,
+            r_d=0.0 if self.check is None else max(-100.0, min(100.0, self.check.r_d)),
+            r_phi=0.0 if self.check is None else max(-100.0, min(100.0, self.check.r_phi)),
         )
         self.bus.publish(key_status(self.me), msg, "status")

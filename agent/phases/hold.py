@@ -4,7 +4,9 @@ by visual servoing; NAO paper 5.2.2 (iii) step 7 for holding).
 
 HOLD     arrived (status ``hold``); once the whole fleet has arrived and the parent is
          ``done`` (or ``march``), look at the parent and step by the measured offset
-         error (an addition, :meth:`Hold.correct`).
+         error (an addition, :meth:`Hold.correct`); then measure the pair once more and
+         judge it (:meth:`Hold.verify`, DESIGN.md §9): out of tolerance, the robot stops
+         with the figure instead of reporting done.
 MARCH    with a route (issue #13, agent/phases/march.py): ``march`` and wait until every
          member is marching; the leader walks the route, followers keep station on their
          parent by vision.
@@ -22,6 +24,8 @@ import numpy as np
 
 from agent.core.control import PAPER_GAINS, wrap_pi
 from agent.core.control.alignment import look_yaws, match_parent
+from agent.core.formation.route import Route
+from agent.core.formation.verdict import check_pair
 from agent.core.nao import CAMERA_HFOV, HEAD_YAW_LIMIT
 from agent.phases.context import AgentFailure, Context
 from agent.phases.march import Marcher
@@ -48,6 +52,7 @@ class Hold:
         where = ctx.beliefs.position.round(2).tolist()
         ctx.status("hold", 0.5, f"arrived at believed {where}", force=True)
         self.correct()
+        self.verify()
         if ctx.cfg.march is not None:
             ctx.status("march", 0.0, "formation held; waiting for the fleet", force=True)
             self.wait_all(("march", "done", "failed"), "march", "waiting for")
@@ -55,13 +60,20 @@ class Hold:
             if failed:
                 raise AgentFailure(f"not marching: robot(s) {sorted(failed)} failed")
             ctx.status("march", 0.01, "marching", force=True)
-            marcher = Marcher(ctx, self.fleet, self.motion, ctx.cfg.march, ctx.final_heading)
+            route = ctx.cfg.march
+            if route.to is not None:  # a point of the common frame, into this robot's
+                psi = ctx.plan.psi_of(ctx.me) if ctx.planned is not None else 0.0
+                c, s = math.cos(psi), math.sin(psi)
+                x, y = route.to
+                route = Route(to=(c * x + s * y, -s * x + c * y))
+            marcher = Marcher(ctx, self.fleet, self.motion, route, ctx.final_heading)
             marcher.run()
             log.info(
                 "march done at believed %s; worst seen |e_d| %.1f %%, |e_phi| %.1f°",
                 ctx.beliefs.position.round(2).tolist(), 100 * marcher.worst_range,
                 math.degrees(marcher.worst_bearing),
             )  # fmt: skip
+            self.verify()  # the march's end is checked the same way
         self.finish()
 
     def correct(self) -> None:
@@ -83,19 +95,10 @@ class Hold:
         parent = int(rp.parent)
         if parent < 0 or not ctx.cfg.correct:
             return
-        deadline = ctx.clock() + ctx.cfg.wave_timeout
-        while True:
-            self.fleet.pump(0.1)
-            peer = self.fleet.peer(parent)
-            if peer.phase == "failed" or (peer.seen_alive and not peer.alive):
-                log.warning("parent %d is gone: no correction", parent)
-                return
-            if peer.phase in ("done", "march") and self.fleet.all_arrived():
-                break
-            if ctx.clock() > deadline:
-                log.warning("parent %d did not finish in time: no correction", parent)
-                return
-            ctx.status("hold", 0.5, f"arrived; waiting for parent {parent}")
+        why = self._wait_for_parent(parent)
+        if why:
+            log.warning("%s: no correction", why)
+            return
         expected = np.asarray(plan.robot(parent).target, dtype=np.float64) - np.asarray(
             rp.target, dtype=np.float64
         )
@@ -115,6 +118,60 @@ class Hold:
             self.motion.last_frame = None
             self.steps.walk_to(ctx.beliefs.position + err, lambda p: None, backward_within=0.5)
             self.motion.rotate(wrap_pi(ctx.final_heading - ctx.beliefs.heading), PAPER_GAINS)
+
+    def _wait_for_parent(self, parent: int) -> str:
+        """Wait until the whole fleet has arrived and ``parent`` is ``done`` (or
+        ``march``); "" then, else why not (the parent failed, left, or was too slow)."""
+        ctx = self.ctx
+        deadline = ctx.clock() + ctx.cfg.wave_timeout
+        while True:
+            self.fleet.pump(0.1)
+            peer = self.fleet.peer(parent)
+            if peer.phase == "failed":
+                return f"parent {parent} failed"
+            if peer.seen_alive and not peer.alive:
+                return f"parent {parent} is gone"
+            if peer.phase in ("done", "march") and self.fleet.all_arrived():
+                return ""
+            if ctx.clock() > deadline:
+                return f"parent {parent} did not finish in time"
+            ctx.status(ctx.phase, 0.5, f"arrived; waiting for parent {parent}")
+
+    def verify(self) -> None:
+        """ "Done" is a measurement (DESIGN.md §9): look at the parent and judge the pair.
+
+        The child looks where the plan puts its parent (:meth:`_find_parent`) and judges
+        the measured offset with the formula the evaluation uses
+        (:func:`agent.core.formation.verdict.check_pair`: r_d, r_φ against the pyramid
+        axis). The figures travel in every later status. A parent not found within
+        ``max_correction`` of its planned place, or a pair out of tolerance, stops this
+        robot with the figure: the fleet never reports "formation held" on a formation
+        its own camera says is wrong. The leader has no parent to check.
+        """
+        ctx = self.ctx
+        plan = ctx.plan
+        rp = plan.robot(ctx.me)
+        parent = int(rp.parent)
+        if parent < 0:
+            return
+        why = self._wait_for_parent(parent)
+        if why:
+            raise AgentFailure(f"formation unverified: {why}")
+        expected = np.asarray(plan.robot(parent).target, dtype=np.float64) - np.asarray(
+            rp.target, dtype=np.float64
+        )
+        seen = self._find_parent(expected, parent)
+        if seen is None:
+            raise AgentFailure(
+                f"formation off: parent {parent} not within {ctx.cfg.max_correction:.2f} m "
+                "of its planned place"
+            )
+        params = ctx.cfg.plan_params()
+        ctx.check = check_pair(ctx.me, parent, seen, ctx.final_heading, params.d_e, params.phi_e)
+        log.info("own check: %s", ctx.check.text())
+        if not ctx.check.ok:
+            raise AgentFailure(f"formation off: {ctx.check.text()}")
+        ctx.status(ctx.phase, 0.9, f"own check: {ctx.check.text()}", force=True)
 
     def _find_parent(self, expected: np.ndarray, parent: int) -> np.ndarray | None:
         """The parent's measured offset (fixed frame), or None: the head looks at the

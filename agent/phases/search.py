@@ -123,6 +123,10 @@ class Search:
         ctx.status("localise", 0.0)
         pts, ori, conf = ctx.perception.merge(sightings)
         obstacles = ctx.perception.merge_obstacles(self.obstacle_sightings)
+        fault = ctx.cfg.sensor_fault
+        if fault is not None:  # the evaluation's test tool, never on a real fleet
+            log.warning("test tool: this robot's record carries the sensor fault %s", fault)
+            pts, ori = fault.apply(pts, ori)
         rec = NeighborRecordMsg(
             sender=ctx.me,
             round=ctx.record_round,

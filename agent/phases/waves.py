@@ -2,7 +2,9 @@
 5.2.2 (iii) steps 3–7; AUV III.B–C for the pyramid; DESIGN.md §1 steps 5–6).
 
 PLAN  the formation core on the agreed records (identical on every agent): this
-      robot's slot, wave and parent (:meth:`Waves.make_plan`); from then on the agreed
+      robot's slot, wave and parent (:meth:`Waves.make_plan`), turned to its own fixed
+      frame by its estimated start heading (DESIGN.md §9); a robot the fleet's check
+      left out stands still and stops with the reason. From then on the agreed
       record set is served (agent/phases/record_sets.py) and only the agreed sessions
       count (agent/phases/membership.py).
 WAIT  for every robot of this robot's ``after`` list to hold its slot, leader first
@@ -17,6 +19,7 @@ from __future__ import annotations
 
 from agent.core.agreement import Decision
 from agent.core.control import PAPER_GAINS, wrap_pi
+from agent.core.formation.own_frame import in_own_frame
 from agent.core.formation.plan import Plan
 from agent.phases.context import AgentFailure, Context
 from agent.phases.record_sets import record_set
@@ -41,8 +44,14 @@ class Waves:
             plan = ctx.formation.plan(decision.records, ctx.cfg.plan_params())
         except ValueError as exc:
             raise AgentFailure(f"planning failed on the agreed records: {exc}") from None
-        ctx.plan = plan
         ctx.plan_digest = str(plan.digest)
+        if ctx.me in plan.excluded:  # the fleet's check named this robot (DESIGN.md §9)
+            ctx.plan = plan
+            raise AgentFailure(
+                f"left out of the plan, standing still: {plan.verdict or 'sightings do not fit'}"
+            )
+        # the common frame turned to this robot's fixed frame by its start heading ψ
+        ctx.plan = plan = in_own_frame(plan, plan.psi_of(ctx.me))
         self.fleet.served = record_set(ctx.me, decision)
         self.fleet.pin_sessions({int(r) for r in ctx.formation.members(plan)})
         ctx.wave = int(plan.robot(ctx.me).wave)

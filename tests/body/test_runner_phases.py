@@ -123,3 +123,58 @@ def test_correct_steps_towards_the_planned_offset_to_the_parent(
     r.hold.correct()
     assert offset_error() < 0.06
     assert world.locomotion.contacts == 0
+
+
+def _holding(world: World, bus: Bus, perception: PerceptionAdapter):  # type: ignore[no-untyped-def]
+    """Every robot on its slot facing the pyramid axis; the runner of a child."""
+    fa = FormationAdapter()
+    plan = fa.plan(_true_records(world), PlanParams())
+    origin = np.asarray(world.pose(plan.frame_robot)[:2]) - np.asarray(
+        plan.robot(plan.frame_robot).start
+    )
+    axis = fa.axis_angle(plan)
+    for rp in plan.robots:
+        x, y = origin + np.asarray(rp.target)
+        world.set_pose(rp.robot_id, float(x), float(y), axis)
+    child = next(rp for rp in plan.robots if rp.parent >= 0)
+    r = runner_for(child.robot_id, world, bus, perception)
+    r.ctx.plan = plan
+    r.ctx.beliefs.heading = r.ctx.final_heading = wrap_pi(axis)
+    r.membership.peers[int(child.parent)] = Peer(alive=True, phase="done", seen_alive=True)
+    return r, plan, child, axis
+
+
+def test_verify_measures_the_pair_and_says_so_in_the_status(
+    world: World, bus: Bus, perception: PerceptionAdapter
+) -> None:
+    r, _, child, _ = _holding(world, bus, perception)
+    r.hold.verify()
+    check = r.ctx.check
+    assert check is not None and check.parent == child.parent and check.ok
+    assert abs(check.r_d) < 0.06 and abs(check.r_phi) < 0.15
+
+
+def test_verify_stops_a_robot_whose_parent_is_not_where_the_plan_says(
+    world: World, bus: Bus, perception: PerceptionAdapter
+) -> None:
+    from agent.phases.context import AgentFailure
+
+    r, _, child, axis = _holding(world, bus, perception)
+    # the child stands 0.25 m behind its slot: r_d about +30 %, out of tolerance, and
+    # within max_correction (0.3 m), so the parent is still found
+    x, y, h = world.pose(child.robot_id)
+    world.set_pose(child.robot_id, x - 0.25 * math.cos(axis), y - 0.25 * math.sin(axis), h)
+    with pytest.raises(AgentFailure, match="formation off: r_d"):
+        r.hold.verify()
+    assert r.ctx.check is not None and not r.ctx.check.ok
+
+
+def test_verify_of_a_failed_parent_is_no_verdict(
+    world: World, bus: Bus, perception: PerceptionAdapter
+) -> None:
+    from agent.phases.context import AgentFailure
+
+    r, _, child, _ = _holding(world, bus, perception)
+    r.membership.peers[int(child.parent)] = Peer(alive=True, phase="failed", seen_alive=True)
+    with pytest.raises(AgentFailure, match=f"unverified: parent {child.parent} failed"):
+        r.hold.verify()

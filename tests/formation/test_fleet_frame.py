@@ -44,7 +44,7 @@ def test_random_headings_are_recovered_without_noise() -> None:
 
 @pytest.mark.parametrize("kind", ["rotate", "scale", "shift"])
 def test_a_faulty_robot_is_left_out_and_placed_where_the_others_saw_it(kind: str) -> None:
-    pos, h, recs = _fleet(7)
+    pos, h, recs = _fleet(1)
     bad = 3
     recs = [fault(r, kind) if r.robot_id == bad else r for r in recs]
     ff = fleet_frame(recs, DEFAULT_EPSILON)
@@ -76,12 +76,18 @@ def test_heading_of_a_robot_not_planned() -> None:
 def test_a_fleet_that_falls_apart_without_the_named_robot_stops(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
+    import dataclasses
+
     import agent.core.formation.fleet_frame as ff_mod
     from agent.core.formation.pose_check import PoseVerdict
 
     _, _, recs = _fleet(4)
     real = ff_mod.check_poses(recs, DEFAULT_EPSILON)
-    named = PoseVerdict((2,), "robot 2: the others are consistent without it", real.poses)
+    worse = tuple(
+        dataclasses.replace(q, score=5.0) if 2 in (q.i, q.j) else q for q in real.poses.pairs
+    )
+    poses = dataclasses.replace(real.poses, pairs=worse)
+    named = PoseVerdict((2,), "robot 2: the others are consistent without it", poses)
     monkeypatch.setattr(ff_mod, "check_poses", lambda r, e: named)
     monkeypatch.setattr(ff_mod, "leave_out", lambda poses, robot: None)
     with pytest.raises(ValueError, match=r"robot 2's sightings do not fit.*nobody moves"):
@@ -111,3 +117,22 @@ def test_a_fleet_inconsistent_beyond_one_robot_plans_as_the_papers_do(
     monkeypatch.setattr(ff_mod, "check_poses", lambda r, e: PoseVerdict((), "noisy", bad))
     got = fleet_frame(aligned, DEFAULT_EPSILON)
     assert got.aligned and got.reason == "noisy; planned on aligned frames"
+
+
+def test_one_misfit_pair_names_nobody(monkeypatch: pytest.MonkeyPatch) -> None:
+    import dataclasses
+
+    import agent.core.formation.fleet_frame as ff_mod
+    from agent.core.formation.pose_check import PoseVerdict
+
+    _, _, recs = _fleet(4)
+    real = ff_mod.check_poses(recs, DEFAULT_EPSILON)
+    first = real.poses.pairs[0]
+    one_bad = tuple(
+        dataclasses.replace(q, score=3.0) if q is first else q for q in real.poses.pairs
+    )
+    poses = dataclasses.replace(real.poses, pairs=one_bad)
+    named = PoseVerdict((first.i,), f"robot {first.i}: a wrong mask", poses)
+    monkeypatch.setattr(ff_mod, "check_poses", lambda r, e: named)
+    got = fleet_frame(recs, DEFAULT_EPSILON)
+    assert got.excluded == () and got.reason.startswith("not named, one bad pair")

@@ -362,7 +362,7 @@ def summarise(
             turn = float(obs.truth[0][1][int(plan.frame_robot)][2]) - math.pi / 2
             axis = fa.axis_angle(plan) + turn
             result["axis_deg"] = math.degrees(axis)
-            pairs = pyramid_pairs(plan, ids)
+            pairs = pyramid_pairs(plan, [i for i in ids if i in plan.ids])
             final = obs.truth[-1][1]
             result["pairs"] = evaluate(final, pairs, axis, d_e, phi_e)
             if result.get("route"):

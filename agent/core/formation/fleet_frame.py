@@ -8,7 +8,8 @@ aligned), checked by :mod:`pose_check`, which names a robot whose sightings do n
 * Nobody named: every robot is planned from its estimated start position, and walks in
   the common frame by turning its own plan by its estimated start heading ψ
   (:mod:`own_frame`).
-* One robot named, the rest connected without it: the rest are fitted again without its
+* One robot named (at least :data:`MIN_BAD_PAIRS` of its pairs misfit), the rest
+  connected without it: the rest are fitted again without its
   sightings and without the others' sightings of it (:func:`pose_check.leave_out`); the
   named robot is placed where the *others* saw it (the mean of their sightings of it, in
   the rest's frame), stands still, and is planned around like an obstacle.
@@ -88,6 +89,15 @@ def _map_point(src: PoseFrame, dst: PoseFrame, point: np.ndarray) -> np.ndarray:
     return np.asarray(cb + r @ (np.asarray(point, dtype=np.float64) - ca))
 
 
+#: A robot is left out only when at least this many of its pairs misfit: a single misfit
+#: pair (a wrongly matched mask, a neighbour half hidden) could be either end's fault.
+MIN_BAD_PAIRS = 2
+
+
+def _bad_pairs(poses: PoseFrame, robot: int) -> int:
+    return sum(1 for q in poses.pairs if robot in (q.i, q.j) and q.score > 1.0)
+
+
 def _papers_model(records: Sequence[NeighborRecord], epsilon: float) -> FleetFrame | None:
     """Today's common frame (eq. 9 pairs, least squares, ψ ≡ 0), or None if not connected."""
     try:
@@ -106,6 +116,9 @@ def fleet_frame(records: Sequence[NeighborRecord], epsilon: float) -> FleetFrame
     """
     verdict = check_poses(records, epsilon)
     poses = verdict.poses
+    if verdict.named and _bad_pairs(poses, verdict.named[0]) < MIN_BAD_PAIRS:
+        # one misfit pair (a wrong mask, a robot half hidden) blames neither end alone
+        verdict = replace(verdict, named=(), reason=f"not named, one bad pair: {verdict.reason}")
     if not verdict.named:
         if not poses.consistent:
             # noisy sightings no single robot explains: plan as the papers do (aligned
