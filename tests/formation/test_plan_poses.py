@@ -1,0 +1,100 @@
+"""Plans from records of robots set down facing any direction (DESIGN.md §9, issue 19).
+
+Records are in each robot's own fixed frame, so turning a robot's start heading changes
+its record; the plan, mapped back to the world through the frame robot's start pose,
+must not change. Shuffled records give a bit-identical plan.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from agent.core.formation.own_frame import in_own_frame
+from agent.core.formation.params import PlanParams
+from agent.core.formation.plan import Plan, plan_from_records
+from tests.formation.pose_fleets import sim_layout, unaligned_records
+
+IDS = [1, 2, 3, 4, 5]
+PARAMS = PlanParams(d_e=0.8, phi_e=math.radians(30))
+
+
+def _to_world(plan: Plan, pos: np.ndarray, headings: np.ndarray) -> np.ndarray:
+    """The plan's targets in the world: the common frame is the frame robot's fixed frame
+    (its start, its body facing +y)."""
+    k = IDS.index(plan.frame_robot)
+    psi = headings[k] - math.pi / 2
+    c, s = math.cos(psi), math.sin(psi)
+    return np.asarray(pos[k] + plan.targets() @ np.array([[c, s], [-s, c]]))
+
+
+@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(0, 10_000), st.floats(-math.pi, math.pi))
+def test_start_headings_leave_the_pyramid_in_the_world_unchanged(seed: int, turn: float) -> None:
+    rng = np.random.default_rng(seed)
+    pos = sim_layout(rng, len(IDS))
+    aligned = np.full(len(IDS), math.pi / 2)
+    facing = rng.uniform(-math.pi, math.pi, len(IDS))
+    a = plan_from_records(unaligned_records(IDS, pos, aligned), PARAMS)
+    b = plan_from_records(unaligned_records(IDS, pos, facing), PARAMS)
+    assert a.excluded == b.excluded == ()
+    assert [r.parent for r in a.robots] == [r.parent for r in b.robots]
+    np.testing.assert_allclose(_to_world(a, pos, aligned), _to_world(b, pos, facing), atol=1e-6)
+    # a rigid motion of the whole fleet changes the records only by rounding: the same
+    # plan in the common frame
+    c, s = math.cos(turn), math.sin(turn)
+    moved = pos @ np.array([[c, s], [-s, c]]) + np.array([3.0, -1.0])
+    again = plan_from_records(unaligned_records(IDS, moved, facing + turn), PARAMS)
+    assert [r.parent for r in again.robots] == [r.parent for r in b.robots]
+    np.testing.assert_allclose(again.targets(), b.targets(), atol=1e-6)
+
+
+@settings(max_examples=10, deadline=None)
+@given(st.integers(0, 10_000), st.randoms(use_true_random=False))
+def test_shuffled_records_give_a_bit_identical_plan(seed: int, rnd) -> None:  # type: ignore[no-untyped-def]
+    rng = np.random.default_rng(seed)
+    pos = sim_layout(rng, len(IDS))
+    recs = unaligned_records(
+        IDS, pos, rng.uniform(-math.pi, math.pi, len(IDS)), rng, 0.05, math.radians(3)
+    )
+    shuffled = list(recs)
+    rnd.shuffle(shuffled)
+    try:
+        a = plan_from_records(recs, PARAMS)
+    except ValueError:
+        with pytest.raises(ValueError):
+            plan_from_records(shuffled, PARAMS)
+        return
+    b = plan_from_records(shuffled, PARAMS)
+    assert a.digest == b.digest and a.psi.tobytes() == b.psi.tobytes()
+
+
+def test_a_known_answer_two_robots_facing_each_other() -> None:
+    # robot 1 at the origin facing north; robot 2 one metre east facing west (ψ = +90°):
+    # 1 sees 2 at (1, 0); 2 sees 1 straight ahead, (0, 1) in its own frame
+    pos = np.array([[0.0, 0.0], [1.0, 0.0]])
+    recs = unaligned_records([1, 2], pos, np.array([math.pi / 2, math.pi]))
+    np.testing.assert_allclose(recs[1].neighbours, [[0.0, 1.0]], atol=1e-12)
+    plan = plan_from_records(recs, PARAMS)
+    assert plan.psi_of(1) == pytest.approx(0.0, abs=1e-9)
+    assert plan.psi_of(2) == pytest.approx(math.pi / 2, abs=1e-9)
+    # robot 2 walks its plan in its own frame: its goal turned by −90°
+    r2 = plan.robot(2)
+    mine = in_own_frame(plan, plan.psi_of(2)).robot(2)
+    d = np.asarray(r2.target) - np.asarray(r2.start)
+    np.testing.assert_allclose(np.asarray(mine.target) - np.asarray(mine.start), [d[1], -d[0]])
+
+
+def test_aligned_starts_plan_exactly_as_the_papers() -> None:
+    rng = np.random.default_rng(5)
+    pos = sim_layout(rng, len(IDS))
+    recs = unaligned_records(IDS, pos, np.full(len(IDS), math.pi / 2), rng, 0.05, 0.05)
+    ours = plan_from_records(recs, PARAMS)
+    papers = plan_from_records(
+        recs, PlanParams(d_e=0.8, phi_e=math.radians(30), frame_method="lsq")
+    )
+    assert ours.digest == papers.digest and len(ours.psi) == 0
