@@ -8,7 +8,7 @@ aligned), checked by :mod:`pose_check`, which names a robot whose sightings do n
 * Nobody named: every robot is planned from its estimated start position, and walks in
   the common frame by turning its own plan by its estimated start heading ψ
   (:mod:`own_frame`).
-* One robot named (at least :data:`MIN_BAD_PAIRS` of its pairs misfit), the rest
+* One robot named (at least :data:`MIN_BAD_PAIRS` of its pairs misfit in position), the rest
   connected without it: the rest are fitted again without its
   sightings and without the others' sightings of it (:func:`pose_check.leave_out`); the
   named robot is placed where the *others* saw it (the mean of their sightings of it, in
@@ -35,7 +35,7 @@ import numpy as np
 from agent.core.formation.common_frame import build_common_frame
 from agent.core.formation.neighbour_check import identify_neighbours
 from agent.core.formation.pose_check import check_poses, leave_out
-from agent.core.formation.poses import PoseFrame
+from agent.core.formation.poses import POS_TOL, POS_TOL_REL, PoseFrame
 from agent.core.formation.records import NeighborRecord
 
 
@@ -89,13 +89,21 @@ def _map_point(src: PoseFrame, dst: PoseFrame, point: np.ndarray) -> np.ndarray:
     return np.asarray(cb + r @ (np.asarray(point, dtype=np.float64) - ca))
 
 
-#: A robot is left out only when at least this many of its pairs misfit: a single misfit
-#: pair (a wrongly matched mask, a neighbour half hidden) could be either end's fault.
+#: A robot is left out only when at least this many of its pairs misfit *in position*: a
+#: single misfit pair (a neighbour half hidden) could be either end's fault, and a mask
+#: misfit alone (a wrongly matched mask; or a compass off by a constant, which the pose
+#: fit absorbs as a start heading) does not move a robot to a wrong place: the robots'
+#: own check after hold judges what a wrong heading would bend.
 MIN_BAD_PAIRS = 2
 
 
 def _bad_pairs(poses: PoseFrame, robot: int) -> int:
-    return sum(1 for q in poses.pairs if robot in (q.i, q.j) and q.score > 1.0)
+    """Pairs of ``robot`` whose sightings misfit in position beyond the tolerance."""
+    return sum(
+        1
+        for q in poses.pairs
+        if robot in (q.i, q.j) and q.position > POS_TOL + POS_TOL_REL * q.distance
+    )
 
 
 def _papers_model(records: Sequence[NeighborRecord], epsilon: float) -> FleetFrame | None:
@@ -118,7 +126,11 @@ def fleet_frame(records: Sequence[NeighborRecord], epsilon: float) -> FleetFrame
     poses = verdict.poses
     if verdict.named and _bad_pairs(poses, verdict.named[0]) < MIN_BAD_PAIRS:
         # one misfit pair (a wrong mask, a robot half hidden) blames neither end alone
-        verdict = replace(verdict, named=(), reason=f"not named, one bad pair: {verdict.reason}")
+        verdict = replace(
+            verdict,
+            named=(),
+            reason=f"nobody named, < 2 pairs misfit in position: {verdict.reason}",
+        )
     if not verdict.named:
         if not poses.consistent:
             # noisy sightings no single robot explains: plan as the papers do (aligned
