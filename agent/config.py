@@ -59,7 +59,7 @@ class AgentConfig:
     wave_timeout: float = 600.0  # s to wait for earlier waves, and for the fleet to hold
     settle: float = 3.0  # s of unchanged membership when no fleet size is given
     # s a member whose liveliness token vanished, and who published nothing since, still
-    # counts as a member (agent.core.agreement.Grace): a lossy link's lease expiry and
+    # counts as a member (agent.core.grace.Grace): a lossy link's lease expiry and
     # reconnection is no departure; a crashed agent is noticed this much later.
     member_grace: float = 20.0
     search_yaws: tuple[float, ...] = SEARCH_YAWS

@@ -22,12 +22,14 @@ the same record set, and moves only then:
   (:meth:`Agreement.member_joined`) until ``timeout``, and nobody moves meanwhile,
   since agreement needs every member's matching digest.
 
-Re-publishing (what :meth:`Agreement.due` returns): the record once, again when a member
-joins, and while some member's latest digest does not list this agent; the digest while some member's digest differs from
-ours, after agreement until every member has reported a post-agreement phase, and after
-a failure on parameters (as long as the caller pumps).
-Intervals back off exponentially from ``backoff_min`` to ``backoff_max`` and reset when
-something new arrives. Pure: the caller passes the time and does the I/O.
+Re-publishing (what :meth:`Agreement.due` returns, issue 21): prompt sends answer news
+(the record when it was never sent, a member joined, or a member's new digest lacks it;
+the digest when it changed and the set held is complete, and once more on agreement);
+a backoff timer (``backoff_min`` doubling to ``backoff_max``; after the set is complete
+at most 4·``backoff_min``) repairs losses while some member's digest is missing or
+differs, after agreement until every member has reported a post-agreement phase, and
+after a failure on parameters (as long as the caller pumps). Pure: the caller passes the
+time and does the I/O.
 
 Per-sender state is kept only for fleet members (issue #8): a record, digest or phase
 from a sender that is not a live member is ignored and counted in ``ignored``, so a

@@ -7,7 +7,7 @@ what it knows of each member (:class:`Peer`):
 
 * **Tokens and grace.** A token that appears makes a member; a vanished token is a
   departure only once the member has also been silent for the membership grace
-  (:class:`agent.core.agreement.Grace`): on a lossy link sessions are cut and restored.
+  (:class:`agent.core.grace.Grace`): on a lossy link sessions are cut and restored.
 * **Key ownership and sessions.** A record, digest or status counts only from the robot
   its key names, and only from that robot's current session (:meth:`current_session`):
   after agreement, from the session whose record was agreed, or a new one that shows the

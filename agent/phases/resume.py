@@ -10,7 +10,7 @@ restarted after a crash it resumes where it was (:class:`Resumption`):
   (§3.2.1), instead of assuming it faces north.
 * **Before agreement** (a record, no agreement): it rejoins the exchange with its
   journaled record (no new search); the others keep it as a member through the
-  membership grace period (:class:`agent.core.agreement.Grace`). If the others agreed while it
+  membership grace period (:class:`agent.core.grace.Grace`). If the others agreed while it
   was down (its digest had matched theirs before the crash), it asks for any agreed set
   and adopts it when that set holds its own record exactly as journaled.
 * **After agreement**: it asks the fleet for the agreed record set by its digest (every

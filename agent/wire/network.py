@@ -27,7 +27,7 @@ ZENOH_MODES = ("peer", "client", "router")
 #: containers"): a 30 s lease with a keep-alive every 5 s (lease / 6), 30 s to open or
 #: accept a session, and a client that keeps trying to connect for 60 s (retries from
 #: 0.5 s, backing off to 4 s). A session that still breaks reconnects; the agents'
-#: membership grace (``agent.core.agreement.Grace``) bridges its vanished tokens.
+#: membership grace (``agent.core.grace.Grace``) bridges its vanished tokens.
 LOSSY_LINK_SETTINGS: tuple[tuple[str, str], ...] = (
     ("transport/link/tx/lease", "30000"),
     ("transport/link/tx/keep_alive", "6"),

@@ -3,7 +3,7 @@
 An addition to the papers (NAO paper 5.2.2 walks the plan open loop; AUV paper II has
 each robot follow the robot in front by visual servoing). Once the fleet has arrived,
 a child looks at its parent and steps by the difference between the measured and the
-planned offset (``Runner.correct``). Two things make that fragile:
+planned offset (``agent.phases.hold.Hold.correct``). Two things make that fragile:
 
 - the parent need not be in the one image taken at the expected bearing: the heading
   belief drifts over long walks, a NAO cut by the image border is not detected, and an

@@ -44,7 +44,7 @@ the camera looks ahead. NAOs outside the image (beside the robot) are not seen; 
 of 20 cm only approaches those within ~0.2 m of the clearance, which the plan's slot
 spacing (>= d_e) and the searched starts keep away.
 
-Pure: arrays in, a :class:`Verdict` out; the runner (agent/phases/runner.py) looks and moves.
+Pure: arrays in, a :class:`Verdict` out; the agent's safe steps (agent/phases/safe_steps.py) look and move.
 """
 
 from __future__ import annotations
