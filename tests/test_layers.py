@@ -18,7 +18,7 @@
 from __future__ import annotations
 
 import ast
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -123,37 +123,31 @@ def test_only_the_transport_imports_zenoh_and_only_naoqi_modules_import_qi() -> 
     assert all("naoqi" in m.rpartition(".")[2] for m in qi), qi
 
 
+def _imports_of(layer: str, wrong: Callable[[str], bool]) -> list[str]:
+    """``module imports name`` for every import of ``layer`` that ``wrong`` refuses."""
+    return sorted(f"{m} imports {i}" for m in MODULES if _in(m, layer) for i in RAW[m] if wrong(i))
+
+
 def test_agent_never_imports_sim_or_tools() -> None:
-    bad = sorted(
-        f"{m} imports {i}"
-        for m in MODULES
-        if _in(m, "agent")
-        for i in RAW[m]
-        if i.split(".")[0] in ("sim", "tools")
-    )
-    assert bad == []
+    assert _imports_of("agent", lambda i: i.split(".")[0] in ("sim", "tools")) == []
 
 
 def test_sim_imports_only_the_wire_format() -> None:
-    bad = sorted(
-        f"{m} imports {i}"
-        for m in MODULES
-        if _in(m, "sim")
-        for i in RAW[m]
-        if i.split(".")[0] == "agent" and not _in(i, "agent.wire")
-    )
-    assert bad == []
+    wrong = _imports_of("sim", lambda i: i.split(".")[0] == "agent" and not _in(i, "agent.wire"))
+    assert wrong == []
 
 
 def test_tools_never_import_the_phase_machine() -> None:
-    bad = sorted(
-        f"{m} imports {i}"
-        for m in MODULES
-        if _in(m, "tools")
-        for i in RAW[m]
-        if _in(i, "agent.phases")
-    )
-    assert bad == []
+    assert _imports_of("tools", lambda i: _in(i, "agent.phases")) == []
+
+
+def test_the_rules_catch_what_they_forbid() -> None:
+    """The checks can fail: a forbidden import written into a module is found."""
+    RAW["sim.world"].add("agent.phases.runner")
+    try:
+        assert _imports_of("sim", lambda i: not _in(i, "agent.wire") and i.startswith("agent"))
+    finally:
+        RAW["sim.world"].discard("agent.phases.runner")
 
 
 def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
