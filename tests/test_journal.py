@@ -13,6 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agent.phases.journal import (
+    ARCHIVES_KEPT,
     MAGIC_STATE,
     MAX_STATE_BYTES,
     Journal,
@@ -140,7 +141,7 @@ def _body(**over: object) -> dict[str, object]:
         (MAGIC_STATE + (10).to_bytes(4, "big") + b"\0" * 32 + b"abc", "header says"),
         (MAGIC_STATE + (3).to_bytes(4, "big") + b"\0" * 32 + b"abc", "checksum"),
         (_framed([1, 2]), "not a map"),
-        (_framed({**_body(), "v": 2}), "version"),
+        (_framed({**_body(), "v": 1}), "version"),
         (_framed({**_body(), "v": True}), "version"),
         (_framed({**_body(), "more": 1}), "differ"),
         (_framed({**_body(), "record": "text"}), "record is not bytes"),
@@ -229,3 +230,69 @@ def test_bad_reference_images_are_not_written(img: np.ndarray) -> None:
 def test_bad_robot_id_for_a_journal(tmp_path: Path) -> None:
     with pytest.raises(JournalError, match="robot_id"):
         Journal(tmp_path, -1)
+
+
+# --------------------------------------------------------------------------- issue 20
+
+
+def test_run_identity_request_id_and_final_round_trip(tmp_path: Path) -> None:
+    j = Journal(tmp_path, 2, wall=lambda: 1_700_000_000.25)
+    st = replace(full_state(), request_id=2**53 - 1, run_epoch=1_699_999_000_000, final="")
+    saved = j.save(st)
+    assert saved.written_ms == 1_700_000_000_250  # set by the write, not the caller
+    got = Journal(tmp_path, 2).load()
+    assert got == saved and got.request_id == 2**53 - 1 and not got.is_final
+    for final in ("done", "failed", "stopped"):
+        ended = replace(st, command="", request_id=0, final=final)
+        assert decode_state(encode_state(ended)).is_final
+
+
+@pytest.mark.parametrize(
+    ("phase", "final", "is_final"),
+    [("move", "", False), ("done", "", True), ("failed", "", True), ("hold", "stopped", True)],
+)
+def test_which_journals_are_final(phase: str, final: str, is_final: bool) -> None:
+    assert JournalState(robot_id=1, phase=phase, final=final).is_final is is_final
+
+
+@pytest.mark.parametrize(
+    ("over", "match"),
+    [
+        ({"request_id": -1}, "request_id"),
+        ({"request_id": 2**53}, "request_id"),
+        ({"command": "", "request_id": 5}, "request_id without a command"),
+        ({"run_epoch": -5}, "run_epoch"),
+        ({"written_ms": 1.5}, "written_ms"),
+        ({"final": "crashed"}, "final"),
+        ({"final": [1]}, "unhashable|final"),
+    ],
+)
+def test_issue_20_error_branches(over: dict[str, object], match: str) -> None:
+    with pytest.raises(JournalError, match=match):
+        decode_state(_framed({**_body(), **over}))
+
+
+def test_archive_renames_with_a_timestamp_and_keeps_a_few(tmp_path: Path) -> None:
+    t = [1_700_000_000.0]
+    j = Journal(tmp_path, 4, wall=lambda: t[0])
+    assert j.archive() == []  # nothing to archive
+    names = []
+    for k in range(ARCHIVES_KEPT + 2):
+        j.save(JournalState(robot_id=4, phase="search", run_epoch=k))
+        j.save_reference(np.zeros((2, 3, 3), np.uint8))
+        moved = j.archive()
+        assert [p.name.split(".")[:2] for p in moved] == [
+            ["robot-4", "journal"],
+            ["robot-4", "reference"],
+        ]
+        assert not j.state_path.exists() and not j.reference_path.exists()
+        names.append(moved[0].name)
+        t[0] += 0.5 if k % 2 else 0.0  # the first two in one millisecond
+    assert names[0] == "robot-4.journal.20231114T221320.000Z"
+    assert names[1] == "robot-4.journal.20231114T221320.000Z-1"
+    kept = j.archives()
+    assert [p.name for p in kept] == sorted(names, reverse=True)[:ARCHIVES_KEPT]
+    assert len(j.archives(j.reference_path)) == ARCHIVES_KEPT
+    newest = decode_state(kept[0].read_bytes())
+    assert newest.run_epoch == ARCHIVES_KEPT + 1  # the newest kept, the oldest dropped
+    assert Journal(tmp_path, 4).load() is None  # the next start is a fresh run

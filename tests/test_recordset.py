@@ -20,8 +20,8 @@ import pytest
 from agent.core.agreement import Agreement
 from agent.net.bus import Bus, BusConfig, BusError, Event
 from agent.phases.record_sets import answer, record_set, records_of
-from agent.phases.resume import agreed_by_others
 from agent.phases.runner import Runner
+from agent.phases.runs import agreed_by_others
 from agent.wire import (
     KEY_RECORDS_ALL,
     DigestMsg,

@@ -1,7 +1,10 @@
-"""agent/phases/resume.py and the runner's journal hooks, without the world (issue #9).
+"""agent/phases/resume.py, agent/phases/runs.py and the runner's journal hooks, without
+the world (issue #9, issue 20).
 
 The runner of tests/test_runner.py (robot 3, an unconnected zenoh session): what is
-journaled, what a corrupt journal does, and where each journaled phase resumes.
+journaled, what a corrupt journal does, where each journaled phase resumes, and which
+journals are resumed at all: only those of a run still going, as the bus shows it (the
+fleet's answers are faked on the session: its ``query``, and events put in its queue).
 """
 
 from __future__ import annotations
@@ -14,20 +17,36 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agent.phases import resume
+from agent.body.base import MotionResult
+from agent.net.bus import Event, QueryTimeout
+from agent.phases import resume, runs
 from agent.phases.context import NORTH, AgentFailure
 from agent.phases.journal import Journal, JournalState
 from agent.phases.runner import Runner
-from agent.wire import NeighborRecordMsg
+from agent.wire import (
+    DigestMsg,
+    Message,
+    NeighborRecordMsg,
+    RecordSetReply,
+    RecordSetRequest,
+    StatusMsg,
+    canonical_digest,
+    encode,
+    key_digest,
+    key_record,
+    key_status,
+)
 from tests.test_runner import perception, records, runner  # noqa: F401  (fixtures)
 
 
 def test_the_runner_journals_the_command_before_sending_it(runner: Runner, tmp_path: Path) -> None:  # noqa: F811
     runner.ctx.journal = Journal(tmp_path, 3)
     runner.ctx.beliefs.heading, runner.ctx.beliefs.position = 1.0, np.array([0.5, -0.25])
-    runner.journaling.save("walk", 0.2)
+    runner.ctx.run_epoch = 1_700_000_000_000
+    runner.journaling.save("walk", 0.2, 41)
     st = Journal(tmp_path, 3).load()
-    assert st is not None and (st.command, st.command_value) == ("walk", 0.2)
+    assert st is not None and (st.command, st.command_value, st.request_id) == ("walk", 0.2, 41)
+    assert st.run_epoch == 1_700_000_000_000 and st.written_ms > 0 and st.final == ""
     assert st.heading == 1.0 and st.position == (0.5, -0.25) and st.record is None
     runner.ctx.status("search", 0.1)  # a phase change is journaled, without a command
     st = Journal(tmp_path, 3).load()
@@ -54,10 +73,11 @@ def test_a_corrupt_journal_is_reported_and_ignored(
     with caplog.at_level(logging.ERROR):
         assert resume.load(j) is None
     assert "unusable, starting afresh" in caplog.text
+    assert not j.state_path.exists() and len(j.archives()) == 1  # kept aside, not resumed
     assert resume.load(Journal(tmp_path / "empty", 3)) is None
 
 
-@pytest.mark.parametrize("phase", ["failed", "march", "explore"])
+@pytest.mark.parametrize("phase", ["failed", "done", "march", "explore"])
 def test_a_failed_marching_or_exploring_robot_is_not_resumed(runner: Runner, phase: str) -> None:  # noqa: F811
     with pytest.raises(AgentFailure, match=f"phase {phase} at the crash"):
         runner.resumption.resume(JournalState(robot_id=3, phase=phase))
@@ -105,6 +125,306 @@ def test_after_agreement_without_a_fleet_it_stops_safely(runner: Runner) -> None
         agreed_members=(1, 2, 3),
     )
     with pytest.raises(ValueError, match="nobody served the agreed records"):
-        resume.fetch_records(
+        runs.fetch_records(
             runner.ctx, runner.membership, st.agreed_digest, st.agreed_members, timeout=0.5
         )
+
+
+# --------------------------------------------------------------------------- the command in flight
+
+
+def test_a_command_in_flight_with_a_request_id_is_asked_again_with_it(
+    runner: Runner,  # noqa: F811
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    sent: list[tuple[str, float, int]] = []
+
+    def walk(distance: float, request_id: int = 0) -> MotionResult:
+        sent.append(("walk", distance, request_id))
+        return MotionResult("done", 5.0)
+
+    def turn(angle: float, request_id: int = 0) -> MotionResult:
+        sent.append(("turn", angle, request_id))
+        return MotionResult("done", 6.0)
+
+    monkeypatch.setattr(runner.ctx.body, "walk", walk)
+    monkeypatch.setattr(runner.ctx.body, "turn", turn)
+    rec = records()[2]
+    st = JournalState(
+        robot_id=3, phase="exchange", heading=NORTH, record=rec, command="walk",
+        command_value=0.2, request_id=9001,
+    )  # fmt: skip
+    runner.resumption.resume(st, runs.Verdict(True, "peers exchanging"))
+    assert sent == [("walk", 0.2, 9001)]  # once, with the journaled id
+    assert np.allclose(runner.ctx.beliefs.position, [0.0, 0.2])  # the belief follows once
+    st = JournalState(
+        robot_id=3, phase="exchange", heading=1.0, record=rec, command="turn",
+        command_value=0.25, request_id=9002,
+    )  # fmt: skip
+    runner.resumption.resume(st, runs.Verdict(True, "peers exchanging"))
+    assert sent[-1] == ("turn", 0.25, 9002) and math.isclose(runner.ctx.beliefs.heading, 1.25)
+
+
+def test_a_contact_answered_to_the_walk_in_flight_stops_safely(
+    runner: Runner,  # noqa: F811
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setattr(
+        runner.ctx.body, "walk", lambda d, request_id=0: MotionResult("contact", 5.0, "robot 1")
+    )
+    st = JournalState(
+        robot_id=3, phase="move", heading=NORTH, record=records()[2], command="walk",
+        command_value=0.2, request_id=7,
+    )  # fmt: skip
+    with pytest.raises(AgentFailure, match="contact while walking"):
+        runner.resumption.resume(st, runs.Verdict(True, "served"))
+
+
+def test_each_turn_is_journaled_with_the_request_id_it_is_sent_with(
+    runner: Runner,  # noqa: F811
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    runner.ctx.journal = Journal(tmp_path, 3)
+    sent: list[tuple[float, int]] = []
+
+    def turn(angle: float, request_id: int = 0) -> MotionResult:
+        st = Journal(tmp_path, 3).load()  # written before the body is asked
+        assert st is not None and (st.command, st.request_id) == ("turn", request_id)
+        sent.append((angle, request_id))
+        return MotionResult("done", 1.0)
+
+    monkeypatch.setattr(runner.ctx.body, "new_request_id", lambda: 4242)
+    monkeypatch.setattr(runner.ctx.body, "turn", turn)
+    runner.motion.turn(0.1)
+    assert sent == [(0.1, 4242)]
+
+
+# --------------------------------------------------------------------------- is the run going?
+
+WRITTEN_S = 1_000.0  # the crashed process's last write (wall clock, s)
+RESTART_S = 2_000.0  # the restarted process
+
+
+def crashed(tmp_path: Path, st: JournalState) -> Journal:
+    """``st`` journaled by the crashed process; the restarted process's journal."""
+    Journal(tmp_path, 3, wall=lambda: WRITTEN_S).save(st)
+    return Journal(tmp_path, 3, wall=lambda: RESTART_S)
+
+
+def nobody_answers(
+    key: str, msg: Message, expect: type, timeout: float = 0.0, accept: object = None
+) -> Message:
+    raise QueryTimeout(f"{key}: no reply within {timeout:g} s")
+
+
+def serving(reply: RecordSetReply) -> object:
+    """A fleet where robot ``reply.sender`` serves ``reply`` (record_sets.answer's rule)."""
+
+    def query(
+        key: str, msg: Message, expect: type, timeout: float = 0.0, accept: object = None
+    ) -> Message:
+        assert isinstance(msg, RecordSetRequest)
+        if msg.digest not in ("", reply.digest):
+            raise QueryTimeout("no reply")
+        assert callable(accept) and accept(reply) == ""
+        return reply
+
+    return query
+
+
+def served_set(sender: int = 1) -> RecordSetReply:
+    recs = records()
+    return RecordSetReply(
+        sender=sender, digest=canonical_digest(recs), records=tuple(encode(r) for r in recs)
+    )
+
+
+def agreed(phase: str = "wait") -> JournalState:
+    recs = records()
+    return JournalState(
+        robot_id=3, phase=phase, record=recs[2], agreed_digest=canonical_digest(recs),
+        agreed_members=(1, 2, 3), run_epoch=123_456,
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    "st",
+    [
+        JournalState(robot_id=3, phase="done", run_epoch=5),  # a crash while lingering
+        JournalState(robot_id=3, phase="failed"),
+        JournalState(robot_id=3, phase="hold", final="done"),
+        JournalState(robot_id=3, phase="search", final="stopped"),
+    ],
+)
+def test_a_final_journal_is_archived_and_never_resumed(
+    runner: Runner,  # noqa: F811
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    st: JournalState,
+) -> None:
+    j = crashed(tmp_path, st)
+    Journal(tmp_path, 3).save_reference(np.zeros((4, 5, 3), np.uint8))
+    runner.ctx.journal = j
+    # the fleet still serving that run changes nothing: its state is final
+    monkeypatch.setattr(runner.ctx.bus, "query", serving(served_set()))
+    assert runner.resumption.start() == ("search", None)
+    assert not j.state_path.exists() and not j.reference_path.exists()
+    assert len(j.archives()) == 1 and len(j.archives(j.reference_path)) == 1
+    assert runner.ctx.run_epoch == j.opened_ms == int(RESTART_S * 1000)  # a new run
+
+
+def test_an_agreed_journal_nobody_serves_is_archived_and_the_robot_starts_afresh(
+    runner: Runner,  # noqa: F811
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    j = crashed(tmp_path, agreed("move"))
+    runner.ctx.journal = j
+    runner.resumption.runs.served_wait = 0.3
+    monkeypatch.setattr(runner.ctx.bus, "query", nobody_answers)
+    with caplog.at_level(logging.INFO):
+        assert runner.resumption.start() == ("search", None)
+    assert "nobody served the agreed records" in caplog.text and "archived" in caplog.text
+    assert not j.state_path.exists() and len(j.archives()) == 1
+    assert runner.membership.agreement is None
+
+
+def test_an_agreed_journal_the_fleet_serves_is_resumed(
+    runner: Runner,  # noqa: F811
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    j = crashed(tmp_path, agreed("wait"))
+    runner.ctx.journal = j
+    monkeypatch.setattr(runner.ctx.bus, "query", serving(served_set()))
+    assert runner.resumption.start() == ("wait", records()[2])
+    agr = runner.membership.agreement
+    assert agr is not None and agr.agreed and agr.digest()[1] == canonical_digest(records())
+    assert runner.ctx.run_epoch == 123_456  # the run goes on under its identity
+    assert j.state_path.exists() and j.archives() == []
+
+
+def test_an_agreed_journal_served_with_another_set_is_not_resumed(
+    runner: Runner,  # noqa: F811
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    other = (*records()[:2], NeighborRecordMsg(sender=3, round=0, neighbours=((2.0, 2.0),)))
+    reply = RecordSetReply(
+        sender=1, digest=canonical_digest(other), records=tuple(encode(r) for r in other)
+    )
+    j = crashed(tmp_path, agreed("move"))
+    runner.ctx.journal = j
+    runner.resumption.runs.served_wait = 0.3
+    monkeypatch.setattr(runner.ctx.bus, "query", serving(reply))  # a later run's set
+    assert runner.resumption.start() == ("search", None)
+    assert len(j.archives()) == 1
+
+
+def exchanging_journal() -> JournalState:
+    return JournalState(robot_id=3, phase="exchange", heading=1.4, record=records()[2])
+
+
+OLD = int(WRITTEN_S * 1000) - 60_000  # a session that began before the journal's last write
+NEW = int(WRITTEN_S * 1000) + 60_000  # one that began after it: a later run
+
+
+def put(runner: Runner, key: str, msg: Message, epoch: int) -> None:  # noqa: F811
+    runner.ctx.bus._put(Event("msg", key, msg, epoch=epoch))
+
+
+@pytest.mark.parametrize(
+    ("key", "msg", "epoch"),
+    [
+        (key_record(1), records()[0], OLD),
+        (key_status(2), StatusMsg(sender=2, phase="agree"), OLD),
+        (key_status(1), StatusMsg(sender=1, phase="search"), -1),  # insecure: no epochs
+        (key_digest(2), DigestMsg(sender=2, round=0, digest="ab" * 32, members=(1, 2, 3)), OLD),
+    ],
+)
+def test_a_journal_before_agreement_is_resumed_while_peers_exchange(
+    runner: Runner,  # noqa: F811
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    key: str,
+    msg: Message,
+    epoch: int,
+) -> None:
+    j = crashed(tmp_path, exchanging_journal())
+    runner.ctx.journal = j
+    runner.membership.start()
+    runner.resumption.runs.peers_wait = 5.0
+    monkeypatch.setattr(runner.ctx.bus, "query", nobody_answers)  # nobody agreed yet
+    put(runner, key, msg, epoch)
+    assert runner.resumption.start() == ("agree", records()[2])
+    assert j.state_path.exists() and j.archives() == []
+    assert runner.ctx.beliefs.heading == 1.4
+
+
+@pytest.mark.parametrize(
+    ("key", "msg", "epoch"),
+    [
+        (None, None, 0),  # nobody heard
+        (key_record(1), records()[0], NEW),  # a session of a later run
+        (key_status(2), StatusMsg(sender=2, phase="search"), NEW),
+        (key_status(2), StatusMsg(sender=2, phase="move"), OLD),  # not exchanging
+        (key_record(1), NeighborRecordMsg(sender=1, round=1, neighbours=()), OLD),  # round 1
+        (key_record(3), records()[2], OLD),  # this robot's own earlier session
+    ],
+)
+def test_a_journal_before_agreement_without_peers_exchanging_is_archived(
+    runner: Runner,  # noqa: F811
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    key: str | None,
+    msg: Message | None,
+    epoch: int,
+) -> None:
+    j = crashed(tmp_path, exchanging_journal())
+    runner.ctx.journal = j
+    runner.membership.start()
+    runner.resumption.runs.peers_wait = 0.5
+    monkeypatch.setattr(runner.ctx.bus, "query", nobody_answers)
+    if key is not None and msg is not None:
+        put(runner, key, msg, epoch)
+    assert runner.resumption.start() == ("search", None)
+    assert not j.state_path.exists() and len(j.archives()) == 1
+    assert runner.ctx.beliefs.heading == NORTH and runner.ctx.own_record is None
+
+
+def test_a_journal_before_agreement_whose_record_the_others_agreed_on_is_resumed(
+    runner: Runner,  # noqa: F811
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    j = crashed(tmp_path, exchanging_journal())
+    runner.ctx.journal = j
+    runner.resumption.runs.peers_wait = 0.3
+    monkeypatch.setattr(runner.ctx.bus, "query", serving(served_set(sender=2)))
+    assert runner.resumption.start() == ("wait", records()[2])  # adopted, then planned
+    assert runner.membership.agreement is not None and j.archives() == []
+
+
+def test_a_search_journal_is_resumed_while_peers_search(
+    runner: Runner,  # noqa: F811
+    tmp_path: Path,
+) -> None:
+    j = crashed(tmp_path, JournalState(robot_id=3, phase="search", heading=NORTH))
+    runner.ctx.journal = j
+    runner.membership.start()
+    runner.resumption.runs.peers_wait = 5.0
+    put(runner, key_status(1), StatusMsg(sender=1, phase="search"), OLD)
+    assert runner.resumption.start() == ("search", None)
+    assert j.state_path.exists() and j.archives() == []
+
+
+def test_the_runner_ends_with_a_final_record(runner: Runner, tmp_path: Path) -> None:  # noqa: F811
+    runner.ctx.journal = Journal(tmp_path, 3)
+    assert runner.fail("a test") == 1
+    st = Journal(tmp_path, 3).load()
+    assert st is not None and st.final == "failed" and st.is_final
+    runner.journaling.finish("done")
+    st = Journal(tmp_path, 3).load()
+    assert st is not None and st.final == "done"

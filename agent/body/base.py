@@ -7,6 +7,13 @@ and :class:`agent.body.in_process.WorldBody` (an in-process world, for tests). R
 and errors are dataclasses: a body raises :class:`BodyError` when the robot or its world
 refuses or fails an action, and ``ValueError`` for a request that is wrong before
 anything is sent (a head yaw outside ±119.5°, a non-finite distance).
+
+Motion request ids (issue 20; docs/faults.md): the agent journals each walk or turn with
+its request id *before* sending it (:meth:`Body.new_request_id`), so that after a crash it
+can send the command in flight again with the same id. A body with ids (the zenoh world)
+has each id executed once and answers a repeat with the first result: the robot never
+moves twice. A body without them (NAOqi, the in-process world) hands out 0 and ignores
+the id; a command in flight at a crash then counts as executed.
 """
 
 from __future__ import annotations
@@ -66,12 +73,19 @@ class Body(Protocol):
         """The forehead image with the head turned to ``yaw`` (rad, + left, ±119.5°)."""
         ...
 
-    def walk(self, distance: float) -> MotionResult:
-        """Walk ``distance`` m straight ahead (< 0: backwards)."""
+    def new_request_id(self) -> int:
+        """A fresh id for the next walk or turn (to journal before sending it); 0 when
+        this body cannot tell a repeated motion from a new one."""
         ...
 
-    def turn(self, angle: float) -> MotionResult:
-        """Turn on the spot by ``angle`` rad (+ CCW)."""
+    def walk(self, distance: float, request_id: int = 0) -> MotionResult:
+        """Walk ``distance`` m straight ahead (< 0: backwards). ``request_id``: from
+        :meth:`new_request_id` or journaled before a crash (0: a fresh one); a body with
+        ids answers a repeat of an id with its first result, without moving again."""
+        ...
+
+    def turn(self, angle: float, request_id: int = 0) -> MotionResult:
+        """Turn on the spot by ``angle`` rad (+ CCW); ``request_id`` as for :meth:`walk`."""
         ...
 
     def stop(self) -> None:

@@ -87,12 +87,19 @@ class WorldBody:
         img = self.world.render(self._robot_id, yaw)
         return Frame(img, self.world.head_yaw(self._robot_id), self.world.t_sim)
 
-    def walk(self, distance: float) -> MotionResult:
+    def new_request_id(self) -> int:
+        """0: the in-process world keeps no request ids (a motion always runs to its end
+        within the call)."""
+        return 0
+
+    def walk(self, distance: float, request_id: int = 0) -> MotionResult:
+        """Walk ``distance`` m straight ahead (the request id is ignored)."""
         if not math.isfinite(distance) or abs(distance) > MAX_STEP:
             raise ValueError(f"walk distance {distance} m outside ±{MAX_STEP:g} m")
         return self._motion("walk", distance)
 
-    def turn(self, angle: float) -> MotionResult:
+    def turn(self, angle: float, request_id: int = 0) -> MotionResult:
+        """Turn on the spot by ``angle`` rad (the request id is ignored)."""
         if not math.isfinite(angle):
             raise ValueError(f"turn angle {angle} is not finite")
         return self._motion("turn", angle)

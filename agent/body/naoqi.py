@@ -190,14 +190,19 @@ class NaoqiBody:
 
     # ------------------------------------------------------------------ motion
 
-    def walk(self, distance: float) -> MotionResult:
-        """``ALMotion.moveTo(distance, 0, 0)``: straight ahead (< 0: backwards)."""
+    def new_request_id(self) -> int:
+        """0: NAOqi has no request ids (a motion in flight at a crash counts as executed)."""
+        return 0
+
+    def walk(self, distance: float, request_id: int = 0) -> MotionResult:
+        """``ALMotion.moveTo(distance, 0, 0)``: straight ahead (< 0: backwards); the
+        request id is ignored (NAOqi has none)."""
         if not math.isfinite(distance) or abs(distance) > MAX_STEP:
             raise ValueError(f"walk distance {distance} m outside ±{MAX_STEP:g} m")
         return self._move("walk", distance, 0.0)
 
-    def turn(self, angle: float) -> MotionResult:
-        """``ALMotion.moveTo(0, 0, angle)``: on the spot (+ CCW)."""
+    def turn(self, angle: float, request_id: int = 0) -> MotionResult:
+        """``ALMotion.moveTo(0, 0, angle)``: on the spot (+ CCW); the request id is ignored."""
         if not math.isfinite(angle) or abs(angle) > 4 * math.pi:
             raise ValueError(f"turn angle {angle} rad outside ±4π")
         return self._move("turn", 0.0, angle)

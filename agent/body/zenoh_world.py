@@ -7,7 +7,9 @@ arrive when the motion has finished in sim time.
 Lost replies (issue #9): every walk and turn carries a request id, unique to this body
 (a random 40-bit start, then counting up, so that a restarted agent does not reuse its
 predecessor's ids); a query that times out is asked again with the same id, and the
-world executes each (robot, id) once and answers a repeat with the first result. A
+world executes each (robot, id) once and answers a repeat with the first result. The
+agent takes the id first (:meth:`ZenohBody.new_request_id`) and journals it, so that a
+restarted agent sends the command in flight again with the same id (issue 20). A
 camera query that times out is asked again as it is (a picture moves nothing but the
 head, to the same yaw).
 The body reports no pose: the agent knows only what it commanded and what it sees.
@@ -162,16 +164,24 @@ class ZenohBody:
         self._t_sim = max(self._t_sim, rep.t_sim)
         return Frame(img, rep.yaw, rep.t_sim)
 
-    def walk(self, distance: float) -> MotionResult:
-        """Walk ``distance`` m straight ahead; returns when done (status done|contact)."""
+    def new_request_id(self) -> int:
+        """The next request id of this body (never 0)."""
+        rid = self._next_request
+        self._next_request += 1
+        return rid
+
+    def walk(self, distance: float, request_id: int = 0) -> MotionResult:
+        """Walk ``distance`` m straight ahead; returns when done (status done|contact).
+        A repeated ``request_id`` is answered with its first result (0: a fresh id)."""
         if not math.isfinite(distance) or abs(distance) > MAX_STEP:
             raise ValueError(f"walk distance {distance} m outside ±{MAX_STEP:g} m")
-        req = WalkRequest(distance=distance, request_id=self._request_id())
+        req = WalkRequest(distance=distance, request_id=self._id(request_id))
         return self._motion(key_walk(self.robot_id), req, "walk")
 
-    def turn(self, angle: float) -> MotionResult:
-        """Turn on the spot by ``angle`` rad (+ CCW); returns when done."""
-        req = TurnRequest(angle=angle, request_id=self._request_id())
+    def turn(self, angle: float, request_id: int = 0) -> MotionResult:
+        """Turn on the spot by ``angle`` rad (+ CCW); returns when done. ``request_id``
+        as for :meth:`walk`."""
+        req = TurnRequest(angle=angle, request_id=self._id(request_id))
         return self._motion(key_turn(self.robot_id), req, "turn")
 
     def stop(self) -> None:
@@ -180,10 +190,11 @@ class ZenohBody:
     def close(self) -> None:
         """Nothing to release: the bus is the caller's."""
 
-    def _request_id(self) -> int:
-        rid = self._next_request
-        self._next_request += 1
-        return rid
+    def _id(self, request_id: int) -> int:
+        """``request_id``, or a fresh one for 0 (the wire checks the range)."""
+        if isinstance(request_id, bool) or not isinstance(request_id, int) or request_id < 0:
+            raise ValueError(f"request id {request_id!r} is not an id")
+        return request_id or self.new_request_id()
 
     def _ask(self, key: str, req: Message, expect: type[M], total_s: float, attempt_s: float) -> M:
         """The query, asked again after a timeout (same request, so the same request id)

@@ -68,7 +68,7 @@ class Beliefs:
     compass_gain: float = 1.0  # calibrated over the search's full circle
 
 
-def _no_journal(command: str = "", value: float = 0.0) -> None:
+def _no_journal(command: str = "", value: float = 0.0, request_id: int = 0) -> None:
     """The journal hook of an agent that keeps no journal."""
 
 
@@ -95,9 +95,13 @@ class Context:
     final_heading: float = NORTH  # the pyramid axis, once the goals are known
     timeline: Timeline = field(default_factory=Timeline)
     # issue #9: the durable journal (None: not kept); the hook writes it before each
-    # command and at each phase change (agent/phases/resume.py Journaling)
+    # command (with its motion request id) and at each phase change
+    # (agent/phases/journaling.py)
     journal: Journal | None = None
-    journal_hook: Callable[[str, float], None] = _no_journal
+    journal_hook: Callable[[str, float, int], None] = _no_journal
+    # issue 20: when this robot's first process of the current run started (ms since the
+    # Unix epoch; journaled, kept across resumptions; agent/phases/runs.py)
+    run_epoch: int = 0
     last_status: float = -math.inf  # when the last status was published
 
     @property
@@ -131,7 +135,7 @@ class Context:
             self.timeline.mark(phase, self.body.t_sim)
         self.phase = phase
         if changed:
-            self.journal_hook("", 0.0)
+            self.journal_hook("", 0.0, 0)
         if not (changed or force or now - self.last_status >= STATUS_MIN_INTERVAL):
             return
         self.last_status = now

@@ -8,9 +8,17 @@ restarted after a crash with the same ``--state-dir`` it resumes from it
 * the phase, the heading and position beliefs (fixed frame, eq. 2), the compass gain;
 * its own neighbour record (4.1.2) once localised;
 * the agreed record-set digest and members, and the plan digest, once agreed;
-* the move's leg index, and the command in flight (``turn``/``walk`` and its value:
-  written *before* the body is asked, so after a crash it is known what the robot may
-  have been doing);
+* the move's leg index, and the command in flight (``turn``/``walk``, its value and its
+  motion request id: written *before* the body is asked, so after a crash it is known
+  what the robot may have been doing, and the command can be asked again with the same
+  id, which the world answers with its first result);
+* which fleet run it belongs to (issue 20): ``run_epoch``, when this robot's first
+  process of the run started (ms since the Unix epoch, kept across resumptions), and
+  ``written_ms``, when it was written; with the record's round before agreement, and the
+  agreed digest and members after, they name the run (the rule that decides whether it
+  is still going is in :mod:`agent.phases.runs`);
+* ``final``: ``done``, ``failed`` or ``stopped`` once the run is over for this robot
+  (the last record written); a final journal is never resumed, only archived;
 * separately, once per search, the fixed-frame **reference view**: the head-yaw-0 image
   taken at θ = 0 that defines the fixed frame, against which the visual compass
   (§3.2.1) re-measures the heading after a crash (``DIR/robot-{id}.reference``).
@@ -22,6 +30,11 @@ the body, the body (msgpack). Reading trusts nothing: sizes are bounded
 (:data:`MAX_STATE_BYTES`, :data:`MAX_REFERENCE_BYTES`), the checksum, the version and
 every field are checked, and anything that does not fit raises :class:`JournalError`
 (a ``ValueError``) with the reason; the caller reports it and starts afresh.
+
+A journal that is not resumed (final, of a run that ended, or unusable) is archived
+(:meth:`Journal.archive`): renamed with a timestamp suffix, at most
+:data:`ARCHIVES_KEPT` kept per file, so the next run starts from an empty slot and the
+history stays at hand.
 """
 
 from __future__ import annotations
@@ -31,6 +44,8 @@ import hashlib
 import math
 import os
 import tempfile
+import time
+from collections.abc import Callable
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import Any
@@ -48,7 +63,7 @@ from agent.wire import (
     unpack_bounded,
 )
 
-JOURNAL_VERSION = 1
+JOURNAL_VERSION = 2
 MAGIC_STATE = b"NAOJRNL1"
 MAGIC_REFERENCE = b"NAOREFV1"
 #: The state is a few hundred bytes (a record: at most 64 neighbours).
@@ -58,6 +73,15 @@ MAX_REFERENCE_BYTES = 1280 * 960 * 3 + 1024
 MAX_IMAGE_SIDE = 1280
 #: Commands a journal may hold in flight.
 COMMANDS = ("", "turn", "walk")
+#: How a run ended for this robot ("": not yet).
+FINALS = ("", "done", "failed", "stopped")
+#: Journaled phases that end the run for this robot even without a final record (a
+#: crash while lingering in ``done``, or after publishing ``failed``).
+FINAL_PHASES = ("done", "failed")
+#: Archived journals (and reference views) kept per robot, newest first.
+ARCHIVES_KEPT = 3
+#: Largest motion request id (the wire's bound, 2^53 - 1).
+MAX_REQUEST_ID = 2**53 - 1
 _HEAD = len(MAGIC_STATE) + 4 + 32
 
 
@@ -81,11 +105,25 @@ class JournalState:
     leg: int = 0
     command: str = ""
     command_value: float = 0.0
+    #: The command's motion request id (0: none, or a body without ids).
+    request_id: int = 0
+    #: ms since the Unix epoch when this robot's first process of the run started.
+    run_epoch: int = 0
+    #: ms since the Unix epoch when this state was written (set by :meth:`Journal.save`).
+    written_ms: int = 0
+    #: How the run ended for this robot (:data:`FINALS`; "": it has not).
+    final: str = ""
     #: Writes so far (the newest version wins; for logs and tests).
     seq: int = 0
 
     def __post_init__(self) -> None:
         _check_state(self)
+
+    @property
+    def is_final(self) -> bool:
+        """Whether the run is over for this robot: a final record, or a journaled
+        ``done`` or ``failed`` (never resumed)."""
+        return bool(self.final) or self.phase in FINAL_PHASES
 
 
 def _finite(name: str, v: Any, lo: float = -math.inf, hi: float = math.inf) -> float:
@@ -137,6 +175,13 @@ def _check_state(s: JournalState) -> None:
     if s.command not in COMMANDS:
         raise JournalError(f"command {str(s.command)[:24]!r} is not one of {COMMANDS}")
     _finite("command_value", s.command_value, -100.0, 100.0)
+    _int("request_id", s.request_id, 0, MAX_REQUEST_ID)
+    if s.request_id and not s.command:
+        raise JournalError("request_id without a command in flight")
+    _int("run_epoch", s.run_epoch, 0, 2**62)
+    _int("written_ms", s.written_ms, 0, 2**62)
+    if s.final not in FINALS:
+        raise JournalError(f"final {str(s.final)[:24]!r} is not one of {FINALS}")
     _int("seq", s.seq, 0, 2**62)
 
 
@@ -215,6 +260,10 @@ def encode_state(s: JournalState) -> bytes:
         "leg": s.leg,
         "command": s.command,
         "command_value": s.command_value,
+        "request_id": s.request_id,
+        "run_epoch": s.run_epoch,
+        "written_ms": s.written_ms,
+        "final": s.final,
         "seq": s.seq,
     }
     data = msgpack.packb(body, use_bin_type=True)
@@ -264,9 +313,13 @@ def decode_state(data: bytes) -> JournalState:
             leg=obj["leg"],
             command=obj["command"],
             command_value=obj["command_value"],
+            request_id=obj["request_id"],
+            run_epoch=obj["run_epoch"],
+            written_ms=obj["written_ms"],
+            final=obj["final"],
             seq=obj["seq"],
         )
-    except TypeError as exc:  # an unhashable phase or command
+    except TypeError as exc:  # an unhashable phase, command or final
         raise JournalError(f"journal: {exc}") from None
 
 
@@ -293,21 +346,39 @@ def decode_reference(data: bytes) -> np.ndarray:
 # --------------------------------------------------------------------------- the journal
 
 
-class Journal:
-    """The journal files of robot ``robot_id`` under ``folder`` (created if needed)."""
+def _stamp(t: float) -> str:
+    """A sortable UTC timestamp with milliseconds: ``20250101T120000.123Z``."""
+    ms = int(t * 1000)
+    return time.strftime("%Y%m%dT%H%M%S", time.gmtime(ms // 1000)) + f".{ms % 1000:03d}Z"
 
-    def __init__(self, folder: Path | str, robot_id: int) -> None:
+
+class Journal:
+    """The journal files of robot ``robot_id`` under ``folder`` (created if needed).
+
+    ``wall``: the wall clock (s since the Unix epoch) for ``written_ms``, the process's
+    start (:attr:`opened_ms`) and the archives' timestamps."""
+
+    def __init__(
+        self, folder: Path | str, robot_id: int, wall: Callable[[], float] = time.time
+    ) -> None:
         self.folder = Path(folder)
         self.robot_id = _int("robot_id", robot_id, 0, 65535)
         self.folder.mkdir(parents=True, exist_ok=True)
         self.state_path = self.folder / f"robot-{robot_id}.journal"
         self.reference_path = self.folder / f"robot-{robot_id}.reference"
         self.seq = 0
+        self.wall = wall
+        #: When this process opened the journal (ms): a fresh run's ``run_epoch``.
+        self.opened_ms = self.now_ms()
+
+    def now_ms(self) -> int:
+        return int(self.wall() * 1000)
 
     def save(self, state: JournalState) -> JournalState:
-        """Write ``state`` durably (its ``seq`` set to the next write's); returns it."""
+        """Write ``state`` durably (its ``seq`` set to the next write's, ``written_ms``
+        to now); returns it."""
         self.seq += 1
-        st = replace(state, seq=self.seq)
+        st = replace(state, seq=self.seq, written_ms=self.now_ms())
         write_atomic(self.state_path, encode_state(st))
         return st
 
@@ -334,3 +405,30 @@ class Journal:
         """Forget everything (a run that ended: the next start is a new run)."""
         for p in (self.state_path, self.reference_path):
             p.unlink(missing_ok=True)
+
+    def archive(self) -> list[Path]:
+        """Move the journal and the reference view aside: each renamed with the suffix
+        ``.{UTC timestamp}``, the oldest archives beyond :data:`ARCHIVES_KEPT` per file
+        deleted. Returns the new paths (none when there was nothing to archive)."""
+        stamp = _stamp(self.wall())
+        out = []
+        for p in (self.state_path, self.reference_path):
+            if not p.exists():
+                continue
+            dest = p.with_name(f"{p.name}.{stamp}")
+            k = 1
+            while dest.exists():  # two archives within one millisecond
+                dest = p.with_name(f"{p.name}.{stamp}-{k}")
+                k += 1
+            os.replace(p, dest)
+            out.append(dest)
+            for old in self.archives(p)[ARCHIVES_KEPT:]:
+                with contextlib.suppress(OSError):
+                    old.unlink()
+        self.seq = 0
+        return out
+
+    def archives(self, path: Path | None = None) -> list[Path]:
+        """The archives of ``path`` (default: the journal), newest first."""
+        p = self.state_path if path is None else path
+        return sorted(self.folder.glob(f"{p.name}.*"), reverse=True)

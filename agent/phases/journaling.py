@@ -1,7 +1,9 @@
 """Writing the journal (issue #9; DESIGN.md §8 "Faults"): before every command sent to the
 body and at every phase change, so that a restarted agent knows where it was and what it
 may have been doing (agent/phases/journal.py holds the format, agent/phases/resume.py
-reads it back).
+reads it back). Each command is journaled with its motion request id (issue 20), and
+the run's identity with every write; once the run is over for this robot (``done``,
+``failed``, or stopped by the operator) a final record says so (:meth:`Journaling.finish`).
 
 A failing disk never stops the agent: the error is logged and the journal given up.
 """
@@ -25,8 +27,11 @@ def journal_state(
     agr: Agreement[NeighborRecordMsg] | None,
     command: str = "",
     value: float = 0.0,
+    request_id: int = 0,
+    final: str = "",
 ) -> JournalState:
-    """The agent's state to journal now (with the command about to be sent)."""
+    """The agent's state to journal now (with the command about to be sent and its
+    request id; ``final``: how the run ended, "" while it goes on)."""
     decided = agr.decide(ctx.clock()) if agr is not None and agr.agreed else None
     record = agr.records.get(ctx.me) if agr is not None else ctx.own_record
     b = ctx.beliefs
@@ -43,6 +48,9 @@ def journal_state(
         leg=ctx.leg,
         command=command,
         command_value=float(value),
+        request_id=request_id,
+        run_epoch=ctx.run_epoch,
+        final=final,
     )
 
 
@@ -53,14 +61,23 @@ class Journaling:
         self.ctx = ctx
         self.fleet = fleet
 
-    def save(self, command: str = "", value: float = 0.0) -> None:
-        """Write the journal (issue #9), before ``command`` is sent; a failing disk is
-        logged and the journal given up, never fatal."""
+    def save(self, command: str = "", value: float = 0.0, request_id: int = 0) -> None:
+        """Write the journal (issue #9), before ``command`` is sent with ``request_id``;
+        a failing disk is logged and the journal given up, never fatal."""
+        self._write(command, value, request_id, "")
+
+    def finish(self, end: str) -> None:
+        """The final record (issue 20): the run is over for this robot (``done``,
+        ``failed`` or ``stopped``); the next start archives this journal."""
+        self._write("", 0.0, 0, end)
+
+    def _write(self, command: str, value: float, request_id: int, final: str) -> None:
         journal = self.ctx.journal
         if journal is None:
             return
         try:
-            journal.save(journal_state(self.ctx, self.fleet.agreement, command, value))
+            state = journal_state(self.ctx, self.fleet.agreement, command, value, request_id, final)
+            journal.save(state)
         except (OSError, ValueError) as exc:
             log.error("journal write failed, journal given up: %s", reason(exc))
             self.ctx.journal = None

@@ -19,12 +19,15 @@ what it knows of each member (:class:`Peer`):
   (re-)publish what the agreements say is due (agent/core/agreement.py); agreements of
   earlier re-search rounds are retired but acknowledged until every member moved on.
 
-It also serves the agreed record set (agent/phases/record_sets.py).
+It also serves the agreed record set (agent/phases/record_sets.py), and hands every
+record, digest and status it accepts to its :attr:`Membership.observers` (the check of
+agent/phases/runs.py: is a journal's run still going?).
 """
 
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from typing import TypeVar
 
@@ -89,6 +92,9 @@ class Membership:
         self.agreement: Agreement[NeighborRecordMsg] | None = None
         self.retired: list[Agreement[NeighborRecordMsg]] = []  # agreed earlier rounds
         self.served: RecordSetReply | None = None  # the agreed record set we serve
+        # called with each record, digest or status accepted (its key owned by its
+        # sender, from the sender's current session), before it is handled
+        self.observers: list[Callable[[Event], None]] = []
 
     def start(self) -> None:
         """Subscribe to the fleet, declare our token, serve the agreed record set."""
@@ -154,6 +160,8 @@ class Membership:
             return
         if not self.current_session(ev, msg.sender):
             return
+        for observe in self.observers:
+            observe(ev)
         self.grace.heard(msg.sender, now)  # a member's publication is a heartbeat
         if isinstance(msg, NeighborRecordMsg | DigestMsg):
             for a in self.agreements():

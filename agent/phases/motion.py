@@ -10,8 +10,10 @@ eq. 2; 5.2.2 (1) rotation control; §3.2.1 visual compass).
   large drift is re-measured rather than discarded (an addition, issue #10:
   :meth:`Motion._confirm_drift`).
 
-Every command is journaled before it is sent (issue #9, ``Context.journal_hook``); the
-last head-yaw-0 image is kept as the next compass reference (:attr:`Motion.last_frame`).
+Every command is journaled before it is sent, with the motion request id it is sent with
+(issue #9, issue 20: ``Context.journal_hook``, ``Body.new_request_id``), so a restarted
+agent can ask for it again without the robot moving twice; the last head-yaw-0 image is
+kept as the next compass reference (:attr:`Motion.last_frame`).
 """
 
 from __future__ import annotations
@@ -73,8 +75,7 @@ class Motion:
         before = self.reference()
         while not (rc.done or rc.exhausted):
             u = rc.next_step()
-            self.ctx.journal_hook("turn", u)
-            rep = self.ctx.body.turn(u)
+            rep = self.turn(u)
             self.fleet.pump()
             after = self.look(0.0)
             measured = self._compass(before, after, u)
@@ -93,6 +94,13 @@ class Motion:
                 log.warning("contact while turning")
         self.last_frame = before
         return rc.completed
+
+    def turn(self, angle: float) -> MotionResult:
+        """One turn command, journaled with its request id before it is sent."""
+        body = self.ctx.body
+        rid = body.new_request_id()
+        self.ctx.journal_hook("turn", angle, rid)
+        return body.turn(angle, rid)
 
     def _compass(
         self, before: Frame, after: Frame, commanded: float, walking: bool = False
@@ -149,7 +157,7 @@ class Motion:
         fits neither case, the drift is taken as 0 and the turn as commanded (the
         behaviour without this check)."""
         u = float(np.clip(-suspect, -MAX_TURN_STEP, MAX_TURN_STEP))
-        self.ctx.body.turn(u)
+        self.turn(u)
         self.fleet.pump()
         after = self.look(0.0)
         res = self.ctx.perception.measure_walk(before.image, after.image)
@@ -175,21 +183,26 @@ class Motion:
         drift too large to be plausible is re-measured (:meth:`_confirm_drift`)."""
         b = self.ctx.beliefs
         before = self.reference()
-        h0 = b.heading
-        self.ctx.journal_hook("walk", distance)
-        rep = self.ctx.body.walk(distance)
+        h0, p0 = b.heading, b.position
+        body = self.ctx.body
+        rid = body.new_request_id()
+        self.ctx.journal_hook("walk", distance, rid)
+        rep = body.walk(distance, rid)
         self.steps += 1
         self.fleet.pump()
         after = self.look(0.0)
         drift, suspect = self._read(before, after, 0.0, walking=True)
         turned = 0.0
         if suspect is not None and rep.status != "contact":
+            # the step is over: believed (drift unknown yet) before the re-measuring
+            # turn is journaled, so that a crash during that turn does not undo the step
+            b.position = advance(p0, h0, h0, distance)
             after, net = self._confirm_drift(before, h0, suspect)
             turned = float(np.clip(-suspect, -MAX_TURN_STEP, MAX_TURN_STEP))
             drift = net - turned  # the turn taken as commanded, for dead reckoning
         b.heading = wrap_pi(h0 + drift + turned)
         self.last_frame = after
-        b.position = advance(b.position, h0, wrap_pi(h0 + drift), distance)
+        b.position = advance(p0, h0, wrap_pi(h0 + drift), distance)
         log.debug(
             "walk t_sim %.2f %.3f m drift %+.2f° heading %.2f° position %s",
             rep.t_sim, distance, math.degrees(drift), math.degrees(b.heading),

@@ -1,9 +1,18 @@
-"""Resuming an agent after a crash (issue #9; DESIGN.md §1 phases, NAO paper 4.1–5.2).
+"""Resuming an agent after a crash (issue #9, issue 20; DESIGN.md §1 phases, NAO paper
+4.1–5.2).
 
 The papers assume no robot ever crashes. An agent started with ``--state-dir`` journals
-its state (:mod:`agent.phases.journal`, written by :mod:`agent.phases.journaling`);
-restarted after a crash it resumes where it was (:class:`Resumption`):
+its state (:mod:`agent.phases.journal`, written by :mod:`agent.phases.journaling`).
+Restarted, it first asks the bus whether the journal's run is still going
+(:mod:`agent.phases.runs`): a final journal, or one of a run that ended, is archived and
+the robot starts afresh. A journal of a run still going is resumed (:class:`Resumption`):
 
+* **The command in flight** at the crash is sent again with its journaled request id:
+  the world answers a repeat with its first result (or, had the request not reached it,
+  executes it now), so the robot moves once; the belief update follows the answer, once.
+  A body without request ids (NAOqi) journals none: the command then counts as executed
+  (the robot executes a request it received; the agent spends nearly all of a motion
+  waiting for the reply).
 * **Before the search ended** (no record yet): it searches again. If it crashed during
   a turn it first turns back to θ = 0 and re-measures its heading against the journaled
   reference view (the image that defines the fixed frame) with the visual compass
@@ -11,154 +20,75 @@ restarted after a crash it resumes where it was (:class:`Resumption`):
 * **Before agreement** (a record, no agreement): it rejoins the exchange with its
   journaled record (no new search); the others keep it as a member through the
   membership grace period (:class:`agent.core.grace.Grace`). If the others agreed while it
-  was down (its digest had matched theirs before the crash), it asks for any agreed set
-  and adopts it when that set holds its own record exactly as journaled.
-* **After agreement**: it asks the fleet for the agreed record set by its digest (every
-  agent serves ``nao/{id}/records``: agent/phases/record_sets.py), checks the set against
-  the digest and the members (:func:`~agent.phases.record_sets.records_of`), recomputes
-  the plan (identical: the same bit-identical inputs) and checks it against the journaled
-  plan digest, then goes on: waiting for earlier waves, the move from the journaled leg
-  (after re-measuring its heading: the command in flight is taken as executed, the world
-  having received it), holding, or ``done``. The others accept its new session once it
-  shows the agreed digest (``Membership.current_session``). A crash during the march is
-  not resumed: the agent stops safely (``failed``).
+  was down (its digest had matched theirs before the crash), it adopts the agreed set
+  that holds its own record exactly as journaled.
+* **After agreement**: the agreed record set by its digest (every agent serves
+  ``nao/{id}/records``: agent/phases/record_sets.py; the run check fetched it), checked
+  against the digest and the members (:func:`~agent.phases.record_sets.records_of`); it
+  recomputes the plan (identical: the same bit-identical inputs) and checks it against
+  the journaled plan digest, then goes on: waiting for earlier waves, the move from the
+  journaled leg (after re-measuring its heading), or holding. The others accept its new
+  session once it shows the agreed digest (``Membership.current_session``). A crash
+  during the march is not resumed: the agent stops safely (``failed``).
 
-Tie-breaks: a command in flight at the crash counts as executed (the world executes a
-request it received; the agent spends nearly all of a motion waiting for the reply);
-the compass's re-measurement overrides the estimate when it is within 20° of it.
+Tie-break: the compass's re-measurement overrides the estimate when it is within 20° of it.
 """
 
 from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Sequence
 
 import numpy as np
 
-from agent.body.zenoh_world import retry_no_route
+from agent.body.base import MotionResult
 from agent.core.agreed_params import params_digest
 from agent.core.agreement import Agreement
 from agent.core.control import PAPER_GAINS, advance, wrap_pi
-from agent.net.bus import Bus, BusError
 from agent.phases.context import NORTH, AgentFailure, Context
 from agent.phases.journal import Journal, JournalError, JournalState
-from agent.phases.record_sets import records_of
-from agent.phases.roles import Fleet, Hearing, Mover, Planner
-from agent.wire import (
-    KEY_RECORDS_ALL,
-    NeighborRecordMsg,
-    ProtocolError,
-    RecordSetReply,
-    RecordSetRequest,
-    canonical_digest,
-    decode,
-)
+from agent.phases.roles import Fleet, Mover, Planner
+from agent.phases.runs import RunCheck, Verdict, agreed_by_others, fetch_records
+from agent.wire import NeighborRecordMsg, canonical_digest
 
 log = logging.getLogger("agent.phases.resume")
 
-#: s a restarted agent keeps asking the fleet for its agreed records.
-FETCH_TIMEOUT = 60.0
-#: s one record-set query waits for replies.
-QUERY_TIMEOUT = 3.0
 #: The compass's re-measured heading replaces the estimate only within this of it.
 REMEASURE_LIMIT = math.radians(20.0)
 #: Below this the robot does not turn back to θ = 0 to re-measure (compass overlap).
 REORIENT_MIN = math.radians(5.0)
 #: Where a resumed agent starts, by journaled phase (after agreement).
-AGREED_STAGES = {"plan": "wait", "wait": "wait", "move": "move", "hold": "hold", "done": "done"}
+AGREED_STAGES = {"plan": "wait", "wait": "wait", "move": "move", "hold": "hold"}
 
 
-# --------------------------------------------------------------------------- asking the fleet
-
-
-def agreed_by_others(bus: Bus, own: NeighborRecordMsg) -> tuple[str, tuple[int, ...]] | None:
-    """(digest, members) of a record set the others agreed on while this agent was down
-    (after its digest had matched theirs), holding its record exactly as journaled; None
-    when nobody has agreed. Asks once for any agreed set (``RecordSetRequest("")``)."""
-
-    def check(rep: RecordSetReply) -> tuple[NeighborRecordMsg, ...]:
-        try:
-            senders = tuple(sorted(decode(r, NeighborRecordMsg).sender for r in rep.records))
-        except ProtocolError as exc:
-            raise ValueError(str(exc)) from None
-        recs = records_of(rep, rep.digest, senders)
-        if own not in recs:
-            raise ValueError(f"record set {rep.digest[:12]} lacks this robot's record")
-        return recs
-
-    def accept(rep: RecordSetReply) -> str:
-        try:
-            check(rep)
-        except ValueError as exc:
-            return str(exc)
-        return ""
-
+def archive(journal: Journal, why: str) -> None:
+    """Move the journal (and reference view) aside: the robot starts a new run."""
     try:
-        rep = retry_no_route(
-            lambda: bus.query(
-                KEY_RECORDS_ALL, RecordSetRequest(digest=""), RecordSetReply, QUERY_TIMEOUT, accept
-            ),
-            QUERY_TIMEOUT,
-        )
-    except BusError:
-        return None
-    return rep.digest, tuple(r.sender for r in check(rep))
-
-
-def fetch_records(
-    ctx: Context,
-    fleet: Hearing,
-    digest: str,
-    members: Sequence[int],
-    timeout: float = FETCH_TIMEOUT,
-) -> tuple[NeighborRecordMsg, ...]:
-    """Ask every agent for the record set ``digest`` until one answers with it."""
-
-    def accept(rep: RecordSetReply) -> str:
-        try:
-            records_of(rep, digest, members)
-        except ValueError as exc:
-            return str(exc)
-        return ""
-
-    end = ctx.clock() + timeout
-    last = "no reply"
-    while ctx.clock() < end:
-        try:
-            rep = retry_no_route(
-                lambda: ctx.bus.query(
-                    KEY_RECORDS_ALL,
-                    RecordSetRequest(digest=digest),
-                    RecordSetReply,
-                    QUERY_TIMEOUT,
-                    accept,
-                ),
-                QUERY_TIMEOUT,
-            )
-            log.info("agreed records %s fetched from robot %d", digest[:12], rep.sender)
-            return records_of(rep, digest, members)
-        except BusError as exc:
-            last = str(exc)
-        fleet.pump(0.5)  # keep hearing the fleet while nobody answers
-    raise ValueError(f"nobody served the agreed records {digest[:12]} in {timeout:g} s: {last}")
-
-
-# --------------------------------------------------------------------------- resuming
+        moved = journal.archive()
+    except OSError as exc:
+        log.error("journal %s not archived (%s): %s", journal.state_path, why, exc)
+        return
+    if moved:
+        log.info("journal archived as %s (%s)", ", ".join(p.name for p in moved), why)
 
 
 def load(journal: Journal) -> JournalState | None:
-    """The journaled state; a corrupt or foreign journal is reported and ignored."""
+    """The journaled state; a corrupt or foreign journal is reported, archived and
+    ignored."""
     try:
         st = journal.load()
     except JournalError as exc:
         log.error("journal %s unusable, starting afresh: %s", journal.state_path, exc)
+        archive(journal, "unusable")
         return None
     if st is not None:
         log.info(
-            "journal: phase %s, heading %.1f°, position %s, command in flight %s",
-            st.phase, math.degrees(st.heading), [round(v, 3) for v in st.position],
-            f"{st.command} {st.command_value:+.3f}" if st.command else "none",
+            "journal: run of %d, phase %s, heading %.1f°, position %s, command in flight %s%s",
+            st.run_epoch, st.phase, math.degrees(st.heading),
+            [round(v, 3) for v in st.position],
+            f"{st.command} {st.command_value:+.3f} (request {st.request_id})"
+            if st.command else "none",
+            f", final: {st.final}" if st.final else "",
         )  # fmt: skip
     return st
 
@@ -171,49 +101,62 @@ class Resumption:
         self.fleet = fleet
         self.motion = motion
         self.planner = planner
+        self.runs = RunCheck(ctx, fleet)
 
     def start(self) -> tuple[str, NeighborRecordMsg | None]:
-        """Where to start: ``search`` afresh, or what the journal says."""
-        if self.ctx.journal is None:
+        """Where to start: ``search`` afresh (no journal, or one of a run that is over:
+        archived), or where the journal of a run still going says."""
+        journal = self.ctx.journal
+        if journal is None:
             return "search", None
-        st = load(self.ctx.journal)
+        self.ctx.run_epoch = journal.opened_ms  # a new run, unless resumed below
+        st = load(journal)
         if st is None:
             return "search", None
-        stage, record = self.resume(st)
+        verdict = self.runs.check(st)
+        if not verdict.going:
+            log.info("robot %d starts a new run: %s", self.ctx.me, verdict.why)
+            archive(journal, verdict.why)
+            return "search", None
+        log.info("robot %d: its run is still going: %s", self.ctx.me, verdict.why)
+        self.ctx.run_epoch = st.run_epoch or journal.opened_ms
+        stage, record = self.resume(st, verdict)
         log.info("robot %d resumes at %s (journaled phase %s)", self.ctx.me, stage, st.phase)
         return stage, record
 
-    def resume(self, st: JournalState) -> tuple[str, NeighborRecordMsg | None]:
-        """Restore the agent from ``st``; the stage to go on with (``search``, ``agree``,
-        ``wait``, ``move``, ``hold``, ``done``) and the record to agree on. Raises
-        ``AgentFailure`` (a safe stop) when it cannot resume safely.
+    def resume(
+        self, st: JournalState, verdict: Verdict | None = None
+    ) -> tuple[str, NeighborRecordMsg | None]:
+        """Restore the agent from ``st`` (of a run still going: ``verdict``, with what
+        the run check learnt; None: ask the fleet here); the stage to go on with
+        (``search``, ``agree``, ``wait``, ``move``, ``hold``) and the record to agree
+        on. Raises ``AgentFailure`` (a safe stop) when it cannot resume safely.
 
         The journal is not written while resuming: a crash during the resumption resumes
-        from the same journal again."""
+        from the same journal again (the command in flight is asked again with the
+        same request id)."""
         journal, self.ctx.journal = self.ctx.journal, None
         try:
-            return self._resume(st, journal)
+            return self._resume(st, journal, verdict)
         finally:
             self.ctx.journal = journal
 
     def _resume(
-        self, st: JournalState, journal: Journal | None
+        self, st: JournalState, journal: Journal | None, verdict: Verdict | None
     ) -> tuple[str, NeighborRecordMsg | None]:
         ctx, b = self.ctx, self.ctx.beliefs
-        # not resumed: a failed run; the march (by design); an exploration move of a
-        # re-search round (4.1.3 rule 2), whose record and origin were being replaced
-        if st.phase in ("failed", "march", "explore"):
+        # not resumed: a run over for this robot; the march (by design); an exploration
+        # move of a re-search round (4.1.3 rule 2), whose record and origin were being
+        # replaced
+        if st.phase in ("failed", "done", "march", "explore") or st.final:
             raise AgentFailure(
-                f"journal says phase {st.phase} at the crash: not resumed "
-                "(clear the state folder for a new run)"
+                f"journal says phase {st.phase}{f' ({st.final})' if st.final else ''} "
+                "at the crash: not resumed"
             )
         b.compass_gain = st.compass_gain
         b.heading = st.heading
         b.position = np.array(st.position, dtype=np.float64)
-        if st.command == "turn":
-            b.heading = wrap_pi(st.heading + st.command_value)
-        elif st.command == "walk":
-            b.position = advance(b.position, st.heading, st.heading, st.command_value)
+        self.command_in_flight(st)
         moved = st.command != "" or abs(wrap_pi(b.heading - NORTH)) > REORIENT_MIN
         if st.record is None:
             if moved:
@@ -224,14 +167,17 @@ class Resumption:
         ctx.own_record = st.record
         digest, members, phase = st.agreed_digest, st.agreed_members, st.phase
         if not digest:
-            found = agreed_by_others(ctx.bus, st.record)
+            found = verdict.agreed if verdict is not None else agreed_by_others(ctx.bus, st.record)
             if found is None:
                 return "agree", st.record
             digest, members = found
             phase = "plan"
             log.info("the others agreed on %s with this robot's record: adopted", digest[:12])
         ctx.status("plan", 0.0, "resumed: fetching the agreed records", force=True)
-        records = fetch_records(ctx, self.fleet, digest, members)
+        if verdict is not None and verdict.records and verdict.agreed == (digest, members):
+            records = verdict.records
+        else:
+            records = fetch_records(ctx, self.fleet, digest, members)
         agr = Agreement.restored(
             ctx.me,
             records,
@@ -249,10 +195,43 @@ class Resumption:
                 f"{st.plan_digest[:12]}: not moving"
             )
         stage = AGREED_STAGES.get(phase, "wait")
-        if stage in ("move", "hold") and (moved or st.command):
+        if stage in ("move", "hold") and moved:
             self.remeasure_heading(journal)
         ctx.leg = st.leg
         return stage, st.record
+
+    def command_in_flight(self, st: JournalState) -> MotionResult | None:
+        """Finish the command in flight at the crash, once: sent again with its journaled
+        request id (the world answers a repeat with the first result, the robot does not
+        move twice), or, journaled without one (a body without ids), counted as executed.
+        The beliefs follow the command once (a contact while walking stops safely)."""
+        if not st.command:
+            return None
+        ctx, b, v = self.ctx, self.ctx.beliefs, st.command_value
+        rep = None
+        if st.request_id:
+            log.info(
+                "the %s %+.3f in flight at the crash: asked again with its request id %d",
+                st.command, v, st.request_id,
+            )  # fmt: skip
+            if st.command == "walk":
+                rep = ctx.body.walk(v, st.request_id)
+            else:
+                rep = ctx.body.turn(v, st.request_id)
+            self.fleet.pump()
+            log.info("  answered: %s at t_sim %.2f %s", rep.status, rep.t_sim, rep.detail)
+        if st.command == "turn":
+            b.heading = wrap_pi(st.heading + v)
+        else:
+            b.position = advance(b.position, st.heading, st.heading, v)
+        if rep is not None and rep.status == "contact":
+            if st.command == "walk":
+                raise AgentFailure(
+                    "contact while walking (the step in flight at the crash) at believed "
+                    f"{b.position.round(2).tolist()}"
+                )
+            log.warning("contact while turning (the turn in flight at the crash)")
+        return rep
 
     def remeasure_heading(self, journal: Journal | None) -> None:
         """Turn to θ = 0 (by the estimate) and measure the heading against the reference view."""

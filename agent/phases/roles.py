@@ -9,6 +9,8 @@ own :class:`~agent.phases.march.Marcher`):
   (:class:`~agent.phases.membership.Membership`);
 - :class:`Fleet`: the members, the agreement under way, the early records
   (:class:`~agent.phases.membership.Membership`);
+- :class:`Listening`: hear the fleet and watch what it says
+  (:class:`~agent.phases.membership.Membership`);
 - :class:`Mover`: look, turn and step, measured by the visual compass
   (:class:`~agent.phases.motion.Motion`);
 - :class:`Surveyor`: search where the robot stands and make its record
@@ -29,6 +31,7 @@ from agent.body.base import Frame, MotionResult
 from agent.core.agreement import Agreement, Decision
 from agent.core.control import PidGains
 from agent.core.formation.plan import Plan
+from agent.net.bus import Event
 from agent.phases.membership import Peer
 from agent.seams import Sightings
 from agent.wire import DigestMsg, NeighborRecordMsg, RecordSetReply
@@ -40,7 +43,13 @@ class Hearing(Protocol):
     def pump(self, timeout: float = 0.0) -> None: ...
 
 
-class Fleet(Hearing, Protocol):
+class Listening(Hearing, Protocol):
+    """Hearing, and watching every record, digest and status accepted (issue 20)."""
+
+    observers: list[Callable[[Event], None]]
+
+
+class Fleet(Listening, Protocol):
     """The fleet as one agent knows it (DESIGN.md §8 "Faults")."""
 
     peers: dict[int, Peer]

@@ -5,7 +5,8 @@
     SEARCH ─► LOCALISE ─► EXCHANGE/AGREE ─► PLAN ─► WAIT ─► MOVE ─► HOLD ─► (MARCH) ─► DONE
       ▲ re-search when the agreed set leaves a robot unseen │
       └─────────────────────────────────────────────────────┘
-    RESUME: a restarted agent enters where its journal says; FAIL: any phase stops safely.
+    RESUME: a restarted agent enters where its journal says (its run still going);
+    FAIL: any phase stops safely. The journal's last record says how the run ended.
 
 SEARCH/LOCALISE  head sweeps at θ = 0 and θ = 180°, the compass calibrated over the full
                  circle; detections into the fixed frame, merged into this robot's record
@@ -96,7 +97,11 @@ class Runner:
             self.membership.start()
             stage, record = self.resumption.start()
             self.phases(stage, record)
+            self.journaling.finish("done")
             return 0
+        except KeyboardInterrupt:  # stopped by the operator: the run is over for this robot
+            self.journaling.finish("stopped")
+            raise
         except (AgentFailure, MarchHalt, BodyError, ValueError) as exc:
             return self.fail(reason(exc))
         except Exception as exc:  # a bug or an input nobody foresaw: stop safely, never crash
@@ -117,7 +122,7 @@ class Runner:
 
     def phases(self, stage: str, record: NeighborRecordMsg | None) -> None:
         """The phases in order, entered at ``stage`` (``search`` afresh, or where the
-        journal says: ``agree``, ``wait``, ``move``, ``hold``, ``done``)."""
+        journal says: ``agree``, ``wait``, ``move``, ``hold``)."""
         if stage == "search":
             self.ctx.status("start", 0.0, "joined", force=True)
             record = self.search.localise(self.search.sweep())  # SEARCH, LOCALISE
@@ -128,10 +133,7 @@ class Runner:
             self.waves.wait_for_earlier_waves()  # WAIT
         if stage in ("search", "agree", "wait", "move"):
             self.waves.move()  # MOVE
-        if stage == "done":
-            self.hold.finish()  # DONE
-        else:
-            self.hold.run()  # HOLD, CORRECT, (MARCH), DONE
+        self.hold.run()  # HOLD, CORRECT, (MARCH), DONE
 
     def agree(self, record: NeighborRecordMsg) -> Decision[NeighborRecordMsg]:
         """Agreement rounds, with re-search rounds (4.1.3 rule 2) until the agreed records
@@ -149,6 +151,7 @@ class Runner:
         """Stop safely: publish ``failed`` with ``reason``, let it reach the others; 1."""
         log.error("robot %d failed: %s", self.ctx.me, reason)
         self.ctx.status("failed", 0.0, error=reason, force=True)
+        self.journaling.finish("failed")
         # let the failure status and any pending digest reach the others
         end = self.ctx.clock() + 1.0
         while self.ctx.clock() < end:
