@@ -6,6 +6,9 @@ stderr. Stops cleanly on SIGINT/SIGTERM.
 With ``--naoqi`` every robot is also a virtual NAO (:mod:`sim.naoqi_gateway`): NAOqi
 services over the qi protocol, one service directory per robot on its own port, each
 announced before the ready line as ``sim naoqi robot=ID url=tcp://HOST:PORT``.
+
+With ``--reply-delay MAX_S`` the world is slow: every camera and motion reply is held
+for a seeded random delay up to ``MAX_S`` s (:mod:`sim.delays`), the world serving on.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ from typing import Any
 
 from agent.wire import add_network_arguments, network_spec
 from sim import scenarios
+from sim.delays import check_max_delay
 from sim.server import WorldServer
 from sim.world import World
 
@@ -74,6 +78,14 @@ def build_parser() -> argparse.ArgumentParser:
         default=0,
         help="render camera images in K worker processes (default 0: in the world process)",
     )
+    p.add_argument(
+        "--reply-delay",
+        type=float,
+        default=0.0,
+        metavar="MAX_S",
+        help="a slow world: hold every camera and motion reply for a random delay in "
+        "[0, MAX_S] s, drawn from the scenario's seed (default 0: at once; sim/delays.py)",
+    )
     add_network_arguments(p, ("peer", "client", "router"))
     p.add_argument(
         "--naoqi",
@@ -100,6 +112,7 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError(f"--speed {args.speed}: must be >= 0 (0: as fast as possible)")
         if not (0 < args.truth_rate <= 1000):
             raise ValueError(f"--truth-rate {args.truth_rate}: must be in (0, 1000]")
+        check_max_delay(args.reply_delay)
         if args.scenario:
             sc = scenarios.load(args.scenario)
         else:
@@ -132,6 +145,8 @@ def main(argv: list[str] | None = None) -> int:
                 speed=args.speed,
                 truth_rate=args.truth_rate,
                 render_workers=args.render_workers,
+                reply_delay=args.reply_delay,
+                reply_delay_seed=sc.seed,
             )
         except ValueError as exc:
             print(f"sim: {exc}", file=sys.stderr)

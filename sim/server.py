@@ -37,7 +37,9 @@ PyBullet and the world, and the loop's own state (:class:`sim.bindings.RobotBind
 :class:`sim.motions.Motions`): nothing else calls them. The sim clock advances (in fixed
 steps of 0.02 s) only while at least one walk/turn is active, as fast as possible by
 default or paced at ``speed`` x real time; rendering costs no sim time. Queued requests
-are served between steps. With ``render_workers`` > 0 a camera request's state (poses,
+are served between steps. With ``reply_delay`` > 0 (a slow world, :mod:`sim.delays`)
+camera and motion replies are held for a seeded random delay and sent by the same loop
+when due, so the world keeps serving meanwhile. With ``render_workers`` > 0 a camera request's state (poses,
 head yaws, sim time) is taken at once and the picture drawn by a
 :class:`~sim.render_pool.RenderPool` worker; its result comes back through the same queue.
 """
@@ -84,6 +86,7 @@ from agent.wire import (
 )
 from sim import camera
 from sim.bindings import RobotBindings, Unauthorised
+from sim.delays import DelayedReplies
 from sim.locomotion import Contact, Done
 from sim.motions import Motions
 from sim.render_pool import PNG_PARAMS, Job, RenderPool, Result
@@ -128,6 +131,8 @@ class WorldServer:
         speed: float = 0.0,
         truth_rate: float = 10.0,
         render_workers: int = 0,
+        reply_delay: float = 0.0,
+        reply_delay_seed: int = 0,
         log: Any = None,
     ) -> None:
         if not (math.isfinite(speed) and speed >= 0):
@@ -154,6 +159,10 @@ class WorldServer:
         if isinstance(render_workers, bool) or not 0 <= render_workers <= 16:
             raise ValueError(f"render workers {render_workers!r} must be in [0, 16]")
         self.render_workers = render_workers
+        # a slow world: camera and motion replies held back (sim.delays); None: at once
+        self.delays: DelayedReplies[Request, Message] | None = (
+            DelayedReplies(reply_delay, reply_delay_seed) if reply_delay != 0.0 else None
+        )
         self.pool: RenderPool | None = None
         self._cam_pending: dict[int, tuple[Request, int, float, float]] = {}
         self._next_job = 0
@@ -206,9 +215,10 @@ class WorldServer:
             for k in ("camera", "walk", "turn", "register")
             if self.counts[k]
         ]
+        slow = f" delayed={self.delays.held}" if self.delays is not None else ""
         return (
             f"served {' '.join(parts) or 'nothing'}; errors={self.errors} "
-            f"rejected={self.rejected} dropped={self.dropped} "
+            f"rejected={self.rejected} dropped={self.dropped}{slow} "
             f"contacts={self.world.locomotion.contacts} t_sim={self.world.t_sim:.2f} s"
         )
 
@@ -280,6 +290,9 @@ class WorldServer:
     def close(self) -> None:
         if self.session is not None:
             self._log(self.summary())
+        if self.delays is not None:  # held replies go out now
+            for q, msg in self.delays.take_all():
+                self._reply(q, msg)
         for q in self.motions.abandon():
             self._reply(q, ErrorReply(reason="world shutting down"))
         for q, *_ in list(self._cam_pending.values()):
@@ -310,6 +323,7 @@ class WorldServer:
         pace_sim = self.world.t_sim
         while not self._stop.is_set():
             now = time.monotonic()
+            self._send_due(now)
             if now >= next_truth:
                 self._publish_truth()
                 next_truth = now + self.truth_period
@@ -326,7 +340,11 @@ class WorldServer:
                 if done or contacts:
                     self._finish(done, contacts)
             else:
-                self._drain(block=True, timeout=min(0.05, max(0.0, next_truth - now)))
+                wait = min(0.05, max(0.0, next_truth - now))
+                due = self.delays.next_due() if self.delays is not None else None
+                if due is not None:
+                    wait = min(wait, max(0.0, due - now))
+                self._drain(block=True, timeout=wait)
                 pace_wall = time.monotonic()
                 pace_sim = self.world.t_sim
 
@@ -396,7 +414,7 @@ class WorldServer:
             elif isinstance(msg, CameraRequest):
                 rep = self._camera(q, rid, msg.yaw)
                 if rep is not None:  # else a render worker has it
-                    self._reply(q, rep)
+                    self._answer(q, rep)
             elif isinstance(msg, WalkRequest):
                 d, legs = msg.distance, self.world.locomotion
                 self._motion(q, rid, "walk", msg.request_id, lambda: legs.walk(rid, d))
@@ -406,7 +424,7 @@ class WorldServer:
         except ValueError as exc:  # ProtocolError is a ValueError
             self.errors += 1
             self.guard.reject(f"{req.kind} {q.key}", exc)
-            self._reply(q, ErrorReply(reason=reason(exc, 500)))
+            self._answer(q, ErrorReply(reason=reason(exc, 500)), req.kind != "register")
 
     def _authorise(self, q: Request, rid: int) -> None:
         """Secure: only robot ``rid``'s key, in the session bound to ``rid``, drives it
@@ -466,7 +484,7 @@ class WorldServer:
             if res.error:
                 self.errors += 1
                 self._log(f"camera robot {rid}: render failed: {reason(res.error)}")
-                self._reply(q, ErrorReply(reason=f"render failed: {reason(res.error, 480)}"))
+                self._answer(q, ErrorReply(reason=f"render failed: {reason(res.error, 480)}"))
             else:
                 msg = CameraReply(
                     robot_id=rid,
@@ -477,14 +495,14 @@ class WorldServer:
                     encoding="png",
                     data=res.png,
                 )
-                self._reply(q, msg)
+                self._answer(q, msg)
         if res.dead:
             self._log(f"render worker {res.worker} died; {self.pool.alive} left")
             if self.pool.alive == 0:  # render what is left here, and from now on
                 for job in self.pool.take_backlog():
                     left = self._cam_pending.pop(job.job_id, None)
                     if left is not None:
-                        self._reply(left[0], self._render_here(job.robot_id, job.yaw, left[3]))
+                        self._answer(left[0], self._render_here(job.robot_id, job.yaw, left[3]))
 
     def _motion(
         self, q: Request, rid: int, kind: str, request_id: int, start: Callable[[], None]
@@ -493,7 +511,7 @@ class WorldServer:
         busy = self.world.locomotion.busy(rid)
         rep = self.motions.request(q, rid, kind, request_id, busy, start)
         if rep is not None:
-            self._reply(q, rep)
+            self._answer(q, rep)
 
     def _finish(self, done: list[Done], contacts: list[Contact]) -> None:
         for c in contacts:
@@ -504,10 +522,23 @@ class WorldServer:
             if ended is not None:
                 queries, rep = ended
                 for q in queries:
-                    self._reply(q, rep)
+                    self._answer(q, rep)
         self._publish_truth()
 
     # ------------------------------------------------------------------ output
+
+    def _answer(self, q: Request, msg: Message, slow: bool = True) -> None:
+        """A camera or motion reply: at once, or held for its delay in a slow world."""
+        if slow and self.delays is not None:
+            self.delays.hold(q, msg, time.monotonic())
+        else:
+            self._reply(q, msg)
+
+    def _send_due(self, now: float) -> None:
+        """Send the held replies that are due (a slow world)."""
+        if self.delays is not None:
+            for q, msg in self.delays.due(now):
+                self._reply(q, msg)
 
     def _reply(self, q: Request, msg: Message) -> None:
         try:
