@@ -9,4 +9,6 @@ formation figure.
 the compose observer).
 ``report``: the evaluation tools' shared runs JSON, table and outcome figure.
 ``progress``: the progress line of a long evaluation.
+``hosts``: one run's fleet on test hosts (network namespaces) with the levers of fault
+injection (``tools.eval_chaos``).
 """

@@ -3,7 +3,8 @@ fleet's network (DESIGN.md §8), and stopping them.
 
 Every tool and test that starts ``python -m sim``, ``python -m agent`` or
 ``python -m tools.router`` on this machine does it here (``tools.demo``, ``tools.fuzz``,
-``tools.bench world``, ``tools.eval_loss``, tests/system, tests/sim/test_server.py).
+``tools.bench world``, ``tools.eval_loss``, tests/system, tests/sim/test_server.py);
+:mod:`tools.harness.hosts` runs the same command lines on test hosts (``tools.eval_chaos``).
 """
 
 from __future__ import annotations
@@ -131,6 +132,35 @@ def wait_ready(world: Proc, timeout: float, idle: Callable[[], object] | None = 
     return next(ln for ln in world.lines if "ready" in ln.lower())
 
 
+def agent_command(
+    rid: int,
+    robots: int,
+    endpoint: str,
+    args: argparse.Namespace,
+    net: list[str] | None = None,
+    extra: list[str] | None = None,
+) -> list[str]:
+    """The argv of ``python -m agent`` for robot ``rid`` (see :func:`start_agent`);
+    :func:`start_agent` runs it here, ``tools.eval_chaos`` inside a network namespace."""
+    auto = bool(getattr(args, "auto_ids", False))
+    if net is None:
+        net = ["--connect", endpoint, "--no-multicast-scouting", "--insecure"]
+    return [
+        sys.executable, "-m", "agent", "--id", "auto" if auto else str(rid), "--fleet-size", str(robots),
+        *net,
+        "--d-e", str(args.d_e), "--phi-e-deg", str(args.phi_e_deg), "--timeout", str(args.agree_timeout),
+        "--orientation", getattr(args, "orientation", "pca"), "--strategy", getattr(args, "strategy", "default"),
+        *(["--march", str(args.march)] if getattr(args, "march", None) is not None else []),
+        *([f"--march-to={args.march_to}"] if getattr(args, "march_to", None) is not None else []),
+        "--log-level", args.agent_log_level,
+        *(["--no-correct"] if getattr(args, "no_correct", False) else []),
+        *(["--research-rounds", str(args.research_rounds)] if getattr(args, "research_rounds", None) is not None else []),
+        *(["--body", "naoqi", "--nao", args.nao_urls[rid]] if getattr(args, "body", "") == "naoqi" else []),
+        *(a for i, a in getattr(args, "agent_arg", None) or [] if i == rid),
+        *(extra or []),
+    ]  # fmt: skip
+
+
 def start_agent(
     rid: int,
     robots: int,
@@ -145,22 +175,7 @@ def start_agent(
     ``net``: its join flags (default: connect to ``endpoint``, insecure); ``extra``: more
     agent flags (``--state-dir``); ``append``: add to the agent's log (a restart)."""
     auto = bool(getattr(args, "auto_ids", False))
-    if net is None:
-        net = ["--connect", endpoint, "--no-multicast-scouting", "--insecure"]
-    cmd = [
-        sys.executable, "-m", "agent", "--id", "auto" if auto else str(rid), "--fleet-size", str(robots),
-        *net,
-        "--d-e", str(args.d_e), "--phi-e-deg", str(args.phi_e_deg), "--timeout", str(args.agree_timeout),
-        "--orientation", getattr(args, "orientation", "pca"), "--strategy", getattr(args, "strategy", "default"),
-        *(["--march", str(args.march)] if getattr(args, "march", None) is not None else []),
-        *([f"--march-to={args.march_to}"] if getattr(args, "march_to", None) is not None else []),
-        "--log-level", args.agent_log_level,
-        *(["--no-correct"] if getattr(args, "no_correct", False) else []),
-        *(["--research-rounds", str(args.research_rounds)] if getattr(args, "research_rounds", None) is not None else []),
-        *(["--body", "naoqi", "--nao", args.nao_urls[rid]] if getattr(args, "body", "") == "naoqi" else []),
-        *(a for i, a in getattr(args, "agent_arg", None) or [] if i == rid),
-        *(extra or []),
-    ]  # fmt: skip
+    cmd = agent_command(rid, robots, endpoint, args, net, extra)
     log = (out / (f"agent-slot{rid}.log" if auto else f"agent-{rid}.log")).open(
         "ab" if append else "wb"
     )
