@@ -291,7 +291,7 @@ def plot(runs: list[Run], path: Path) -> None:
                     yy = y + 0.18 - 0.14 * k
                     ax.plot([f.t, f.t + d], [yy] * 2, color=ink, lw=2)
                     ax.plot(f.t, yy, "x", color=ink, ms=7, mew=2)
-                    ax.text(f.t + d + 0.3, yy, f"robot {rob}", va="center", fontsize=6, color=ink)
+                    ax.text(f.t + d + 0.3, yy, str(rob), va="center", fontsize=7, color=ink)
     labels = [f"seed {r.seed}" + (f", slow {r.reply_delay_s:g} s" if r.reply_delay_s else "")
               for r in runs]  # fmt: skip
     ax.set_yticks(range(len(runs)), labels, fontsize=8)
@@ -300,11 +300,13 @@ def plot(runs: list[Run], path: Path) -> None:
         plt.Rectangle((0, 0), 1, 1, color=report.COLOURS[o], alpha=0.45) for o in report.COLOURS
     ]
     handles += [
-        plt.Line2D([], [], color="black", marker="x", lw=2, label="agent killed .. restarted"),
+        plt.Line2D(
+            [], [], color="black", marker="x", lw=2, label="agent killed .. restarted (its id)"
+        ),
         plt.Line2D([], [], color="tab:purple", marker="v", lw=3, label="router restart"),
         plt.Rectangle((0, 0), 1, 1, color="tab:blue", alpha=0.4, label="loss burst"),
     ]
-    names = [*report.COLOURS, "agent killed .. restarted", "router restart", "loss burst"]
+    names = [*report.COLOURS, "agent killed .. restarted (its id)", "router restart", "loss burst"]
     ax.legend(handles, names, loc="upper center", bbox_to_anchor=(0.5, -0.5 / (1 + len(runs) / 3)),
               ncol=3, fontsize=8)  # fmt: skip
     c = Counter(r.outcome for r in runs)
