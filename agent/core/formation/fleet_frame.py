@@ -8,7 +8,7 @@ aligned), checked by :mod:`pose_check`, which names a robot whose sightings do n
 * Nobody named: every robot is planned from its estimated start position, and walks in
   the common frame by turning its own plan by its estimated start heading ψ
   (:mod:`own_frame`).
-* One robot named (at least :data:`MIN_BAD_PAIRS` of its pairs misfit in position), the rest
+* One robot named (at least :data:`MIN_BAD_PAIRS` of its pairs misfit), the rest
   connected without it: the rest are fitted again without its
   sightings and without the others' sightings of it (:func:`pose_check.leave_out`); the
   named robot is placed where the *others* saw it (the mean of their sightings of it, in
@@ -35,7 +35,7 @@ import numpy as np
 from agent.core.formation.common_frame import build_common_frame
 from agent.core.formation.neighbour_check import identify_neighbours
 from agent.core.formation.pose_check import check_poses, leave_out
-from agent.core.formation.poses import POS_TOL, POS_TOL_REL, PoseFrame
+from agent.core.formation.poses import PoseFrame
 from agent.core.formation.records import NeighborRecord
 
 
@@ -89,21 +89,17 @@ def _map_point(src: PoseFrame, dst: PoseFrame, point: np.ndarray) -> np.ndarray:
     return np.asarray(cb + r @ (np.asarray(point, dtype=np.float64) - ca))
 
 
-#: A robot is left out only when at least this many of its pairs misfit *in position*: a
-#: single misfit pair (a neighbour half hidden) could be either end's fault, and a mask
-#: misfit alone (a wrongly matched mask; or a compass off by a constant, which the pose
-#: fit absorbs as a start heading) does not move a robot to a wrong place: the robots'
-#: own check after hold judges what a wrong heading would bend.
+#: A robot is left out only when at least this many of its pairs misfit (in position, or
+#: the others' masks against its heading): a single misfit pair (a neighbour half hidden,
+#: a wrongly matched mask) could be either end's fault. A record turned as a whole must be
+#: named by the masks: the robot's own check after hold cannot see it, since its own
+#: frame is turned the same way (measured: every agent said done on a bent pyramid).
 MIN_BAD_PAIRS = 2
 
 
 def _bad_pairs(poses: PoseFrame, robot: int) -> int:
-    """Pairs of ``robot`` whose sightings misfit in position beyond the tolerance."""
-    return sum(
-        1
-        for q in poses.pairs
-        if robot in (q.i, q.j) and q.position > POS_TOL + POS_TOL_REL * q.distance
-    )
+    """Pairs of ``robot`` whose sightings misfit beyond the tolerances."""
+    return sum(1 for q in poses.pairs if robot in (q.i, q.j) and q.score > 1.0)
 
 
 def _papers_model(records: Sequence[NeighborRecord], epsilon: float) -> FleetFrame | None:
