@@ -422,3 +422,22 @@ def test_the_viewers_accept_every_schema() -> None:
 
     for schema in [*fg.SCHEMAS.values(), STATUS]:
         viewer_accepts(schema)
+
+
+def test_the_layout_shows_the_channels_the_recorder_writes(recording: Any) -> None:
+    chans, _, _ = recording
+    root = Path(__file__).resolve().parents[2]
+    layout = json.loads((root / "docs" / "foxglove-layout.json").read_text())
+    panels = layout["configById"]
+    [three_d] = [v for k, v in panels.items() if k.startswith("3D!")]
+    assert set(three_d["topics"]) == {"/scene", "/scene/obstacles", "/scene/plan"}
+    assert all(t in chans for t in three_d["topics"] if t != "/scene/obstacles")
+    [log_panel] = [v for k, v in panels.items() if k.startswith("RosOut!")]
+    assert chans[log_panel["topicToRender"]][0] == "foxglove.Log"
+    [raw] = [v for k, v in panels.items() if k.startswith("RawMessages!")]
+    assert chans[raw["topicPath"]][2] == "json"
+
+    def leaves(node: Any) -> list[str]:
+        return [node] if isinstance(node, str) else leaves(node["first"]) + leaves(node["second"])
+
+    assert sorted(leaves(layout["layout"])) == sorted(panels)
