@@ -1,10 +1,12 @@
 """``python -m tools.replay FILE.mcap [--out DIR] [--frames K]``: replay a demo recording.
 
-Reads the MCAP written by ``tools.demo`` (msgpack wire messages of agent/wire/,
-one channel per key), validates every message with the protocol codec, prints the
+Reads the MCAP written by ``tools.demo``: its msgpack channels (the wire messages of
+agent/wire/, one channel per key; the JSON channels for Foxglove are skipped), validates
+every message with the protocol codec, prints the
 timeline (phase changes of every agent, records and digests exchanged, contacts) and
 writes ``DIR/replay.png`` (paths walked from the truth stream, final poses) and ``K``
-animation frames ``DIR/frame-XXX.png`` evenly spaced over the run.
+animation frames ``DIR/frame-XXX.png`` evenly spaced over the run. Times are wall
+seconds since the first message (the messages' publish times).
 """
 
 from __future__ import annotations
@@ -43,10 +45,12 @@ def load(path: Path) -> Replay:
     last_phase: dict[int, str] = {}
     with path.open("rb") as f:
         reader = make_reader(f)
-        for _, channel, message in reader.iter_messages(log_time_order=True):
+        for _, channel, message in reader.iter_messages(log_time_order=False):
+            if channel.message_encoding != "msgpack":
+                continue  # Foxglove's view of the run (tools/harness/scene.py)
             if rp.t0_ns == 0:
-                rp.t0_ns = message.log_time
-            t = (message.log_time - rp.t0_ns) / 1e9
+                rp.t0_ns = message.publish_time
+            t = (message.publish_time - rp.t0_ns) / 1e9
             rp.messages += 1
             try:
                 msg: Any = decode(message.data)

@@ -26,7 +26,7 @@ def test_demo_observer_counts_what_it_cannot_take(capsys: pytest.CaptureFixture[
     from tools.harness.observe import Observer
 
     class BrokenRecorder:
-        def write(self, *a: Any) -> None:
+        def record(self, *a: Any) -> None:
             raise OSError("x" * 10_000)
 
     obs = Observer(0.0)

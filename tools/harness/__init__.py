@@ -2,6 +2,8 @@
 
 ``procs``: ports, the world, router, agents and rogues, the fleet's network, stopping.
 ``observe``: the MCAP recorder, the bus observer, the live status lines.
+``scene``: the Foxglove channels of a recording (scene, plan, frames, log, statuses).
+``foxglove``: Foxglove's well-known schemas as JSON Schema, and their message builders.
 ``judge``: a run judged from ground truth, its outcome (one rule), the result table, the
 formation figure.
 ``run``: one demo run (world, agents, observation, judgement), as ``tools.demo`` runs it.

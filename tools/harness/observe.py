@@ -6,14 +6,17 @@ An evaluator's view: it reads ground truth (``world/truth/**``); agents never do
 
 from __future__ import annotations
 
+import json
 import sys
 import threading
 import time
 from collections import defaultdict
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
+from agent.core.formation.params import PlanParams
 from agent.net.bus import Bus
 from agent.wire import (
     KEY_ALIVE_ALL,
@@ -30,43 +33,111 @@ from agent.wire import (
     encode,
     id_from_key,
 )
+from tools.harness.foxglove import JSON
 from tools.harness.procs import FleetNet
+from tools.harness.scene import Scene
 
 # ===================================================================== recording
 
 
 class Recorder:
-    """MCAP file of everything the demo saw: one channel per topic, msgpack wire payloads.
+    """MCAP file of everything the demo saw, and Foxglove's view of it.
+
+    Two kinds of channel (docs/agent.md "Recordings"): one per bus key with the exact
+    msgpack wire payloads (``tools.replay`` reads them), and the JSON channels of
+    Foxglove's well-known schemas that :class:`tools.harness.scene.Scene` derives from the
+    same messages (``/scene``, ``/scene/obstacles``, ``/scene/plan``, ``/tf``, ``/log``,
+    ``/robots/{id}/status``). Every message's log time is the world time (``t_sim``) of
+    the latest ground-truth sample (0 before the first); its publish time is the wall
+    clock (the replay's timeline).
 
     Why MCAP: a single indexed, self-describing file that the ``mcap`` package (already
-    a dependency) reads back without a viewer, and Foxglove opens directly.
+    a dependency) reads back without a viewer, and that Foxglove and Lichtblick open and
+    draw. A failure of the Foxglove view never costs a raw message: it is counted in
+    ``scene_rejected`` and its reason logged (rate limited).
+
+    ``params``: the fleet's planning parameters (default: the demo's), ``obstacles``: the
+    world's (x, y, radius), if known; else the scenario file that the harness writes beside
+    the recording (``scenario.json``) during this run is read.
     """
 
-    def __init__(self, path: Path) -> None:
+    def __init__(
+        self,
+        path: Path,
+        params: PlanParams | None = None,
+        obstacles: Sequence[tuple[float, float, float]] | None = None,
+    ) -> None:
         from mcap.writer import Writer
 
+        started = time.time_ns()
         self._f = path.open("wb")
         self._w = Writer(self._f)
         self._w.start(profile="", library="nao-formation tools.demo")
         self._schema = self._w.register_schema(
             name="agent.wire", encoding="", data=b"msgpack map, see agent/wire/"
         )
+        self._schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}
-        self._lock = threading.Lock()
+        self._lock = threading.RLock()
         self.count = 0
+        #: world time (ns) of the latest truth sample: every message's log time
+        self.world_ns = 0
+        self.scene = Scene(self._emit, params, obstacles, path.parent / "scenario.json", started)
+        self.scene_rejected = 0
+        self.guard = Guard(lambda line: print(f"recorder: {line}", file=sys.stderr))
+
+    def record(self, key: str, msg: Any) -> None:
+        """One observed message: its wire payload on channel ``key``, then the Foxglove view."""
+        with self._lock:
+            if isinstance(msg, TruthPosesMsg):
+                self.world_ns = max(self.world_ns, round(msg.t_sim * 1e9))
+            self.write(key, encode(msg))
+            try:
+                self.scene.take(key, msg, self.world_ns)
+            except Exception as exc:  # the viewer's channels must never cost the recording
+                self.scene_rejected += 1
+                self.guard.reject(f"Foxglove view of {key}", exc)
 
     def write(self, topic: str, data: bytes, t_ns: int | None = None) -> None:
-        t = time.time_ns() if t_ns is None else t_ns
+        """``data`` on the msgpack channel ``topic``; log time ``t_ns`` (default: the world
+        time), publish time the wall clock."""
         with self._lock:
             ch = self._channels.get(topic)
             if ch is None:
                 ch = self._w.register_channel(topic, "msgpack", self._schema)
                 self._channels[topic] = ch
-            self._w.add_message(ch, log_time=t, data=data, publish_time=t, sequence=self.count)
-            self.count += 1
+            self._add(ch, data, self.world_ns if t_ns is None else t_ns)
+
+    def _add(self, channel: int, data: bytes, t_ns: int) -> None:
+        self._w.add_message(
+            channel, log_time=t_ns, data=data, publish_time=time.time_ns(), sequence=self.count
+        )
+        self.count += 1
+
+    def _emit(self, topic: str, schema: JSON, message: JSON, t_ns: int) -> None:
+        """One JSON message of a Foxglove (or ``nao.``) schema on ``topic``."""
+        data = json.dumps(message, separators=(",", ":"), allow_nan=False).encode()
+        with self._lock:
+            ch = self._channels.get(topic)
+            if ch is None:
+                name = str(schema["title"])
+                sid = self._schemas.get(name)
+                if sid is None:
+                    sid = self._w.register_schema(
+                        name=name, encoding="jsonschema", data=json.dumps(schema).encode()
+                    )
+                    self._schemas[name] = sid
+                ch = self._w.register_channel(topic, "json", sid)
+                self._channels[topic] = ch
+            self._add(ch, data, t_ns)
 
     def close(self) -> None:
         with self._lock:
+            try:
+                self.scene.finish()
+            except Exception as exc:  # as in record(): the file is still finished
+                self.scene_rejected += 1
+                self.guard.reject("Foxglove view of the plan", exc)
             self._w.finish()
             self._f.close()
 
@@ -122,7 +193,7 @@ class Observer:
     def take(self, key: str, msg: Any, rec: Recorder | None, size: int = 0) -> None:
         """Record one message; ``size``: its bytes on the wire (0: its encoding's)."""
         if rec is not None:
-            rec.write(key, encode(msg))
+            rec.record(key, msg)
         now = time.monotonic() - self.t0
         if isinstance(msg, TruthPosesMsg):
             self.truth.append((msg.t_sim, {p[0]: (p[1], p[2], p[3]) for p in msg.poses}))
