@@ -19,6 +19,7 @@ import numpy as np
 
 from agent.core.formation.verdict import R_D_MAX, R_PHI_MAX, check_pair
 from agent.wire import PHASES
+from tools.harness.frame_fit import common_frame_pose
 from tools.harness.observe import AgentView, Observer
 from tools.harness.procs import rogue_reports
 
@@ -359,8 +360,9 @@ def summarise(
             result["leader_target"] = [float(v) for v in plan.robot(plan.leader).target]
             # the common frame is the frame robot's fixed frame: the world turned by that
             # robot's start heading off north (0 for the papers' aligned starts)
-            turn = float(obs.truth[0][1][int(plan.frame_robot)][2]) - math.pi / 2
-            axis = fa.axis_angle(plan) + turn
+            starts = {r.robot_id: r.start for r in plan.robots}
+            frame = common_frame_pose(starts, obs.truth[0][1])
+            axis = fa.axis_angle(plan) + frame[2] - math.pi / 2
             result["axis_deg"] = math.degrees(axis)
             pairs = pyramid_pairs(plan, [i for i in ids if i in plan.ids])
             final = obs.truth[-1][1]

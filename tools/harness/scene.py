@@ -55,6 +55,7 @@ from agent.wire import (
 from sim.nao_model import FOOTPRINT_RADIUS, HEIGHT
 from tools.harness import foxglove as fg
 from tools.harness.foxglove import JSON
+from tools.harness.frame_fit import common_frame_pose
 
 #: The colours of matplotlib's ``tab10``, as the formation figure gives them: the k-th
 #: robot in ascending id order of the first truth sample.
@@ -275,13 +276,10 @@ class Scene:
             )
             return
         t_ns = self.claimed[plan.digest]
-        frame = self.starts.get(int(plan.frame_robot))
-        if frame is None:
-            self._note(
-                t_ns,
-                fg.WARNING,
-                f"plan not drawn: no ground truth of frame robot {plan.frame_robot}",
-            )
+        try:
+            frame = common_frame_pose({r.robot_id: r.start for r in plan.robots}, self.starts)
+        except ValueError as exc:
+            self._note(t_ns, fg.WARNING, f"plan not drawn: {reason(exc)}")
             return
         x, y, h = frame
         turn = h - math.pi / 2

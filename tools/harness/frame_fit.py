@@ -1,0 +1,41 @@
+"""Where the fleet's common frame lies in the world, for evaluation (DESIGN.md §9).
+
+The common frame is the frame robot's fixed frame *as it believes it*: its start pose if
+its sensors are right, turned and moved if its record is not (an injected
+``--sensor-fault``, a compass off by a constant). Mapping the plan to the world through
+the frame robot's true start pose would then judge a correct pyramid as bent. The
+evaluator instead fits the rigid motion (2-D least squares, Kabsch/Umeyama without
+scale) that takes the plan's start positions to the planned robots' true starts.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+
+
+def common_frame_pose(
+    plan_starts: Mapping[int, np.ndarray], true_starts: Mapping[int, tuple[float, float, float]]
+) -> tuple[float, float, float]:
+    """(x, y, h) such that a common-frame point p is ``(x, y) + R(h − π/2) p`` in the world.
+
+    ``plan_starts``: robot id -> start in the common frame; ``true_starts``: robot id ->
+    its true start pose (x, y, heading). Uses the robots in both (at least two; with one,
+    its true heading is taken as the frame's). Raises ``ValueError`` with none in common.
+    """
+    ids = sorted(i for i in plan_starts if i in true_starts)
+    if not ids:
+        raise ValueError("no planned robot has a true start")
+    a = np.array([np.asarray(plan_starts[i], dtype=np.float64).reshape(2) for i in ids])
+    b = np.array([true_starts[i][:2] for i in ids], dtype=np.float64)
+    if len(ids) == 1:
+        turn = float(true_starts[ids[0]][2]) - math.pi / 2
+    else:
+        ca, cb = a.mean(axis=0), b.mean(axis=0)
+        h = (a - ca).T @ (b - cb)
+        turn = math.atan2(float(h[0, 1] - h[1, 0]), float(h[0, 0] + h[1, 1]))
+    c, s = math.cos(turn), math.sin(turn)
+    offset = b.mean(axis=0) - a.mean(axis=0) @ np.array([[c, s], [-s, c]])
+    return float(offset[0]), float(offset[1]), turn + math.pi / 2
