@@ -25,7 +25,7 @@ import numpy as np
 from agent.core.control import PAPER_GAINS, wrap_pi
 from agent.core.control.alignment import look_yaws, match_parent
 from agent.core.formation.route import Route
-from agent.core.formation.verdict import check_pair
+from agent.core.formation.verdict import FACING_TOL, check_pair, facing_misfit
 from agent.core.nao import CAMERA_HFOV, HEAD_YAW_LIMIT
 from agent.phases.context import AgentFailure, Context
 from agent.phases.march import Marcher
@@ -40,6 +40,8 @@ class Hold:
     """The arrived robot's phases (module docstring)."""
 
     def __init__(self, ctx: Context, fleet: Fleet, motion: Mover, steps: Stepper) -> None:
+        #: the mask orientation of the parent last found (:meth:`_find_parent`); nan: none
+        self.parent_facing = math.nan
         self.ctx = ctx
         self.fleet = fleet
         self.motion = motion
@@ -144,9 +146,11 @@ class Hold:
         the measured offset with the formula the evaluation uses
         (:func:`agent.core.formation.verdict.check_pair`: r_d, r_φ against the pyramid
         axis). The figures travel in every later status. A parent not found within
-        ``max_correction`` of its planned place, or a pair out of tolerance, stops this
-        robot with the figure: the fleet never reports "formation held" on a formation
-        its own camera says is wrong. The leader has no parent to check.
+        ``max_correction`` of its planned place, a pair out of tolerance, or a parent whose
+        mask says it faces more than ``FACING_TOL`` from the axis this robot believes in
+        (its own start heading misjudged), stops this robot with the figure: the fleet
+        never reports "formation held" on a formation its own camera says is wrong. The
+        leader has no parent to check.
         """
         ctx = self.ctx
         plan = ctx.plan
@@ -171,6 +175,16 @@ class Hold:
         log.info("own check: %s", ctx.check.text())
         if not ctx.check.ok:
             raise AgentFailure(f"formation off: {ctx.check.text()}")
+        if math.isfinite(self.parent_facing):  # the parent's mask, independent of our frame
+            off = facing_misfit(seen, self.parent_facing, ctx.final_heading)
+            log.info(
+                "own check: parent %d faces %.0f° off the axis (mask)", parent, math.degrees(off)
+            )
+            if abs(off) > FACING_TOL:
+                raise AgentFailure(
+                    f"formation off: parent {parent} faces {math.degrees(off):+.0f}° from the "
+                    "pyramid axis this robot believes in (its mask): a start heading misjudged"
+                )
         ctx.status(ctx.phase, 0.9, f"own check: {ctx.check.text()}", force=True)
 
     def _find_parent(self, expected: np.ndarray, parent: int) -> np.ndarray | None:
@@ -184,10 +198,12 @@ class Hold:
         for yaw in look_yaws(bearing, ctx.beliefs.heading, CAMERA_HFOV / 3.0, HEAD_YAW_LIMIT):
             frame = self.motion.look(yaw)
             dets = ctx.perception.detect(frame.image, yaw)
-            pts, _, _ = ctx.perception.to_fixed(dets, ctx.beliefs.heading)
+            pts, _, faces = ctx.perception.to_fixed(dets, ctx.beliefs.heading)
             pts = np.asarray(pts, dtype=np.float64).reshape(-1, 2)
             k = match_parent(pts, expected, ctx.cfg.max_correction)
             if k is not None:
+                faces = np.asarray(faces, dtype=np.float64).reshape(-1)
+                self.parent_facing = float(faces[k]) if len(faces) > k else math.nan
                 return np.asarray(pts[k], dtype=np.float64)
             if len(pts):
                 nearest = min(nearest, float(np.min(np.hypot(*(pts - expected).T))))

@@ -178,3 +178,17 @@ def test_verify_of_a_failed_parent_is_no_verdict(
     r.membership.peers[int(child.parent)] = Peer(alive=True, phase="failed", seen_alive=True)
     with pytest.raises(AgentFailure, match=f"unverified: parent {child.parent} failed"):
         r.hold.verify()
+
+
+def test_verify_sees_a_parent_facing_away_from_the_axis_by_its_mask(
+    world: World, bus: Bus, perception: PerceptionAdapter
+) -> None:
+    from agent.phases.context import AgentFailure
+
+    r, _, child, axis = _holding(world, bus, perception)
+    # the parent stands on its slot but faces 70° off the axis: what a child whose own
+    # start heading was misjudged by 70° would believe it sees, position for position
+    x, y, _ = world.pose(int(child.parent))
+    world.set_pose(int(child.parent), x, y, axis + math.radians(70))
+    with pytest.raises(AgentFailure, match="faces"):
+        r.hold.verify()

@@ -70,3 +70,21 @@ def test_turning_the_whole_picture_changes_nothing(
 def test_errors(offset: list[float], axis: float, d_e: float, phi_e: float, match: str) -> None:
     with pytest.raises(ValueError, match=match):
         check_pair(2, 1, np.array(offset), axis, d_e, phi_e)
+
+
+def test_facing_misfit_worked_by_hand() -> None:
+    from agent.core.formation.verdict import facing_misfit
+
+    # axis north; the parent straight ahead (line of sight north) facing north: its back,
+    # orientation 0; turned 40° to the left: +40°; its front (orientation π): modulo π, 0
+    ahead = np.array([0.0, 0.8])
+    assert facing_misfit(ahead, 0.0, math.pi / 2) == pytest.approx(0.0)
+    assert facing_misfit(ahead, math.radians(40), math.pi / 2) == pytest.approx(math.radians(40))
+    assert facing_misfit(ahead, math.pi, math.pi / 2) == pytest.approx(0.0, abs=1e-12)
+    # the parent 30° to the right of the axis, facing north: orientation = north − LOS = +30°
+    right = 0.8 * np.array([math.sin(PHI_E), math.cos(PHI_E)])
+    assert facing_misfit(right, PHI_E, math.pi / 2) == pytest.approx(0.0, abs=1e-12)
+    with pytest.raises(ValueError, match="offset"):
+        facing_misfit(np.zeros(2), 0.0, 0.0)
+    with pytest.raises(ValueError, match="finite"):
+        facing_misfit(ahead, math.nan, 0.0)

@@ -12,7 +12,11 @@ NAOs of 5.2 hold ±0.1 m at d_e = 0.8 m, i.e. 12.5 %).
 
 "Done" is a measurement, not an assumption (DESIGN.md §9): after hold each child
 measures its parent with the camera and judges the pair with :func:`check_pair`; the
-evaluation tools judge the ground truth with the same function.
+evaluation tools judge the ground truth with the same function. A child whose own start
+heading is misjudged measures in a turned frame and would find a bent pair in tolerance;
+the parent's mask (the M-base orientation of the NAO seen, relative to the line of sight)
+does not depend on that frame: every robot of a held pyramid faces the axis, so
+:func:`facing_misfit` compares the parent's facing with the axis the child believes in.
 """
 
 from __future__ import annotations
@@ -26,6 +30,9 @@ import numpy as np
 R_D_MAX = 0.125
 #: Largest |r_φ| of a pair in tolerance.
 R_PHI_MAX = 0.30
+#: Largest misfit (rad, modulo π) between the parent's facing seen by its mask and the
+#: pyramid axis the child believes in (:func:`facing_misfit`).
+FACING_TOL = math.radians(35.0)
 
 
 @dataclass(frozen=True)
@@ -76,3 +83,19 @@ def check_pair(
     cosang = (float(v[0]) * math.cos(axis) + float(v[1]) * math.sin(axis)) / d
     phi = math.acos(min(1.0, max(-1.0, cosang)))
     return PairCheck(child, parent, d, phi, (d - d_e) / d_e, (phi - phi_e) / phi_e)
+
+
+def facing_misfit(offset: np.ndarray, facing: float, axis: float) -> float:
+    """How far (rad, modulo π, in (−π/2, π/2]) the parent seen at ``offset`` (parent −
+    child) with mask orientation ``facing`` (its heading minus the line of sight) faces
+    from ``axis``, the pyramid axis in the child's frame. Modulo π: a mask may confuse
+    front and back. Raises ``ValueError`` for non-finite input or a zero offset.
+    """
+    v = np.asarray(offset, dtype=np.float64).reshape(-1)
+    if v.shape != (2,) or not np.all(np.isfinite(v)) or not math.hypot(*v) > 0.0:
+        raise ValueError(f"offset must be two finite numbers, not both 0, got {offset!r}")
+    if not (math.isfinite(facing) and math.isfinite(axis)):
+        raise ValueError(f"facing and axis must be finite, got {facing}, {axis}")
+    los = math.atan2(float(v[1]), float(v[0]))
+    d = (facing - (axis - los)) % math.pi
+    return d - math.pi if d > math.pi / 2 else d
