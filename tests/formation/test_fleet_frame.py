@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -116,8 +117,8 @@ def test_a_fleet_inconsistent_beyond_one_robot_plans_as_the_papers_do(
         real.poses, pairs=tuple(dataclasses.replace(p, score=5.0) for p in real.poses.pairs)
     )
     monkeypatch.setattr(ff_mod, "check_poses", lambda r, e: PoseVerdict((), "noisy", bad))
-    got = fleet_frame(aligned, DEFAULT_EPSILON)
-    assert got.aligned and got.reason == "noisy; planned on aligned frames"
+    got = fleet_frame(aligned, DEFAULT_EPSILON)  # the papers' model explains every position
+    assert got.aligned and got.reason == "aligned starts: every sighting fits in position"
 
 
 def test_one_misfit_pair_names_nobody(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -136,4 +137,15 @@ def test_one_misfit_pair_names_nobody(monkeypatch: pytest.MonkeyPatch) -> None:
     named = PoseVerdict((first.i,), f"robot {first.i}: a wrong mask", poses)
     monkeypatch.setattr(ff_mod, "check_poses", lambda r, e: named)
     got = fleet_frame(recs, DEFAULT_EPSILON)
-    assert got.excluded == () and got.reason.startswith("nobody named")
+    assert got.excluded == () and got.reason.startswith(("nobody named", "aligned starts"))
+
+
+def test_aligned_starts_with_wrong_masks_leave_nobody_out() -> None:
+    """Masks alone never overrule the papers' aligned model (a wrong mask match is common)."""
+    _, _, recs = _fleet(3, np.full(len(IDS), math.pi / 2))
+    bent = []
+    for r in recs:
+        ori = None if r.orientations is None else np.mod(r.orientations + 1.2, 2 * math.pi)
+        bent.append(r if r.robot_id != 2 else dataclasses.replace(r, orientations=ori))
+    ff = fleet_frame(bent, DEFAULT_EPSILON)
+    assert ff.aligned and ff.excluded == () and np.all(ff.headings == 0.0)

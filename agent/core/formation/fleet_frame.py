@@ -35,7 +35,7 @@ import numpy as np
 from agent.core.formation.common_frame import build_common_frame
 from agent.core.formation.neighbour_check import identify_neighbours
 from agent.core.formation.pose_check import check_poses, leave_out
-from agent.core.formation.poses import PoseFrame
+from agent.core.formation.poses import PoseFrame, evaluate_poses, pair_measurements
 from agent.core.formation.records import NeighborRecord
 
 
@@ -102,6 +102,21 @@ def _bad_pairs(poses: PoseFrame, robot: int) -> int:
     return sum(1 for q in poses.pairs if robot in (q.i, q.j) and q.score > 1.0)
 
 
+def _aligned_explains(
+    records: Sequence[NeighborRecord], epsilon: float, pairs: int
+) -> PoseFrame | None:
+    """The papers' model (eq. 9 pairs, least squares, ψ ≡ 0) when it pairs at least
+    ``pairs`` robot pairs and every one fits in position; else None."""
+    graph = identify_neighbours(records, epsilon)
+    try:
+        cf = build_common_frame(graph, "lsq")
+    except ValueError:
+        return None
+    meas = pair_measurements(graph)
+    cand = evaluate_poses(cf.ids, meas, cf.positions, np.zeros(len(cf.ids)), cf.frame_robot, True)
+    return cand if cand.positions_consistent and len(cand.pairs) >= pairs else None
+
+
 def _papers_model(records: Sequence[NeighborRecord], epsilon: float) -> FleetFrame | None:
     """Today's common frame (eq. 9 pairs, least squares, ψ ≡ 0), or None if not connected."""
     try:
@@ -120,21 +135,30 @@ def fleet_frame(records: Sequence[NeighborRecord], epsilon: float) -> FleetFrame
     """
     verdict = check_poses(records, epsilon)
     poses = verdict.poses
+    today = _aligned_explains(records, epsilon, len(poses.pairs))
+    if today is not None:
+        # the papers' aligned model pairs as many robots and explains every position:
+        # exactly today's frame, nobody left out on masks alone (a turned record would
+        # misfit in position there)
+        return FleetFrame(
+            today.frame_robot, today.ids, today.positions, today.headings, True,
+            reason="aligned starts: every sighting fits in position",
+        )  # fmt: skip
     if verdict.named and _bad_pairs(poses, verdict.named[0]) < MIN_BAD_PAIRS:
         # one misfit pair (a wrong mask, a robot half hidden) blames neither end alone
         verdict = replace(
             verdict,
             named=(),
-            reason=f"nobody named, < 2 pairs misfit in position: {verdict.reason}",
+            reason=f"nobody named, < 2 pairs misfit: {verdict.reason}",
         )
     if not verdict.named:
         if not poses.consistent:
             # noisy sightings no single robot explains: plan as the papers do (aligned
             # frames, least squares) when that model connects the fleet, else on the fit;
             # the robots' own check after hold says whether the result holds
-            today = _papers_model(records, epsilon)
-            if today is not None:
-                return replace(today, reason=f"{verdict.reason}; planned on aligned frames")
+            papers = _papers_model(records, epsilon)
+            if papers is not None:
+                return replace(papers, reason=f"{verdict.reason}; planned on aligned frames")
         return FleetFrame(
             poses.frame_robot, poses.ids, poses.positions, poses.headings, poses.aligned,
             reason=verdict.reason,

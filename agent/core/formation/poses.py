@@ -115,6 +115,11 @@ class PoseFrame:
         """No pair scores above 1."""
         return all(p.score <= 1.0 for p in self.pairs)
 
+    @property
+    def positions_consistent(self) -> bool:
+        """Every pair's sightings fit in position (masks aside)."""
+        return all(p.position <= POS_TOL + POS_TOL_REL * p.distance for p in self.pairs)
+
     def to_common(self, robot_id: int, points: np.ndarray) -> np.ndarray:
         """Points (k, 2) of ``robot_id``'s fixed frame in the common frame."""
         if robot_id not in self.ids:
