@@ -173,7 +173,7 @@ class Hold:
         params = ctx.cfg.plan_params()
         ctx.check = check_pair(ctx.me, parent, seen, ctx.final_heading, params.d_e, params.phi_e)
         log.info("own check: %s", ctx.check.text())
-        if not ctx.check.ok:
+        if not ctx.check.sure:  # with a margin for the camera's own error
             raise AgentFailure(f"formation off: {ctx.check.text()}")
         if math.isfinite(self.parent_facing):  # the parent's mask, independent of our frame
             off = facing_misfit(seen, self.parent_facing, ctx.final_heading)

@@ -88,3 +88,13 @@ def test_facing_misfit_worked_by_hand() -> None:
         facing_misfit(np.zeros(2), 0.0, 0.0)
     with pytest.raises(ValueError, match="finite"):
         facing_misfit(ahead, math.nan, 0.0)
+
+
+def test_a_robot_is_sure_only_with_a_margin() -> None:
+    from agent.core.formation.verdict import OWN_MARGIN
+
+    phi = PHI_E * (1 + 0.9 * R_PHI_MAX)  # in tolerance, but within the camera's own error
+    c = check_pair(2, 1, 0.8 * np.array([math.sin(phi), math.cos(phi)]), math.pi / 2, D_E, PHI_E)
+    assert c.ok and not c.sure and OWN_MARGIN < 0.9
+    c = check_pair(2, 1, np.array([0.4, 0.8 * math.cos(PHI_E)]), math.pi / 2, D_E, PHI_E)
+    assert c.sure

@@ -33,6 +33,8 @@ R_PHI_MAX = 0.30
 #: Largest misfit (rad, modulo π) between the parent's facing seen by its mask and the
 #: pyramid axis the child believes in (:func:`facing_misfit`).
 FACING_TOL = math.radians(35.0)
+#: The share of the tolerances a robot's own check allows itself (:attr:`PairCheck.sure`).
+OWN_MARGIN = 0.8
 
 
 @dataclass(frozen=True)
@@ -49,6 +51,13 @@ class PairCheck:
     @property
     def ok(self) -> bool:
         return abs(self.r_d) <= R_D_MAX and abs(self.r_phi) <= R_PHI_MAX
+
+    @property
+    def sure(self) -> bool:
+        """In tolerance with :data:`OWN_MARGIN` to spare: what a robot's own camera
+        check demands before it says done (its measurement errs too: ~3 % in distance,
+        a few degrees in angle)."""
+        return abs(self.r_d) <= OWN_MARGIN * R_D_MAX and abs(self.r_phi) <= OWN_MARGIN * R_PHI_MAX
 
     def text(self) -> str:
         """``r_d +3.1 %, r_φ −54.0 % to parent 1`` (for statuses and logs)."""
