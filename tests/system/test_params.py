@@ -82,6 +82,8 @@ def test_demo_on_a_scenario_file_plans_the_cp_pyramid(tmp_path: Path) -> None:
     assert r["exit_codes"] == {"2": 0, "5": 0, "7": 0}, r.get("errors")
     assert r["identical_digests"] is True
     assert r["evaluator_plan_digest"] == r["plan_digests"]["2"]
-    assert r["axis_deg"] == pytest.approx(90.0)  # CP: north of the common frame
+    # CP: north of the common frame; the evaluator places that frame in the world by a
+    # rigid fit of the starts (tools/harness/frame_fit.py), good to a fraction of a degree
+    assert r["axis_deg"] == pytest.approx(90.0, abs=2.0)
     assert len(r["pairs"]) == 2 and r["contacts"] == 0
     assert r["success"] is True and res.returncode == 0
