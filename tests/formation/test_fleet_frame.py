@@ -122,22 +122,30 @@ def test_a_fleet_inconsistent_beyond_one_robot_plans_as_the_papers_do(
 
 
 def test_one_misfit_pair_names_nobody(monkeypatch: pytest.MonkeyPatch) -> None:
-    import dataclasses
-
-    import agent.core.formation.fleet_frame as ff_mod
-    from agent.core.formation.pose_check import PoseVerdict
+    """A single misfit pair blames neither end unless the other end was tested and cleared
+    (agent/core/formation/pose_check.py, check_frame)."""
+    import agent.core.formation.pose_check as pc
 
     _, _, recs = _fleet(4)
-    real = ff_mod.check_poses(recs, DEFAULT_EPSILON)
-    first = real.poses.pairs[0]
+    real = pc.check_poses(recs, DEFAULT_EPSILON).poses
+    first = real.pairs[0]
     one_bad = tuple(
-        dataclasses.replace(q, score=3.0) if q is first else q for q in real.poses.pairs
+        dataclasses.replace(q, position=5.0, score=3.0) if q is first else q for q in real.pairs
     )
-    poses = dataclasses.replace(real.poses, pairs=one_bad)
-    named = PoseVerdict((first.i,), f"robot {first.i}: a wrong mask", poses)
-    monkeypatch.setattr(ff_mod, "check_poses", lambda r, e: named)
-    got = fleet_frame(recs, DEFAULT_EPSILON)
-    assert got.excluded == () and got.reason.startswith(("nobody named", "aligned starts"))
+    poses = dataclasses.replace(real, pairs=one_bad)
+    named = pc.PoseVerdict((first.i,), f"robot {first.i}: one bad pair", poses)
+    monkeypatch.setattr(pc, "_check_frame", lambda p: named)
+    got = pc.check_frame(poses)  # the other end, left out, leaves a consistent rest
+    assert got.named == () and got.reason.startswith("nobody named, < 2 pairs")
+    two_bad = tuple(
+        dataclasses.replace(q, position=5.0, score=3.0) if first.i in (q.i, q.j) else q
+        for q in real.pairs
+    )
+    poses = dataclasses.replace(real, pairs=two_bad)
+    named = pc.PoseVerdict((first.i,), f"robot {first.i}: two bad pairs", poses)
+    monkeypatch.setattr(pc, "_check_frame", lambda p: named)
+    assert len(pc.bad_pairs(poses, first.i)) >= 2
+    assert pc.check_frame(poses).named == (first.i,)
 
 
 def test_aligned_starts_with_wrong_masks_leave_nobody_out() -> None:
@@ -149,3 +157,38 @@ def test_aligned_starts_with_wrong_masks_leave_nobody_out() -> None:
         bent.append(r if r.robot_id != 2 else dataclasses.replace(r, orientations=ori))
     ff = fleet_frame(bent, DEFAULT_EPSILON)
     assert ff.aligned and ff.excluded == () and np.all(ff.headings == 0.0)
+
+
+def test_wrong_masks_never_send_a_turned_fleet_to_aligned_frames() -> None:
+    """Ten robots within ±20° of north, a third of the masks wrong by ±60-90° (as in the
+    simulator's 10-NAO runs): the fit's ψ are used, not the papers' aligned model, whose
+    plans would be turned by every robot's real heading."""
+    rng = np.random.default_rng(20)
+    ids = list(range(1, 11))
+    pos = sim_layout(rng, 10)
+    h = math.pi / 2 + rng.uniform(-math.radians(20), math.radians(20), 10)
+    recs = unaligned_records(ids, pos, h, rng, 0.02, math.radians(1))
+    bent = []
+    for r in recs:
+        assert r.orientations is not None
+        wrong = rng.random(r.count) < 0.33
+        off = rng.choice([-1.0, 1.0], r.count) * rng.uniform(1.05, 1.57, r.count)
+        bent.append(dataclasses.replace(r, orientations=r.orientations + np.where(wrong, off, 0)))
+    ff = fleet_frame(bent, DEFAULT_EPSILON)
+    assert not ff.aligned and ff.excluded == ()
+    k = ids.index(ff.frame_robot)
+    for rid in ids:
+        err = ff.heading_of(rid) - (h[ids.index(rid)] - h[k])
+        assert abs(math.remainder(err, 2 * math.pi)) < math.radians(3)
+
+
+def test_a_turned_robot_is_named_by_the_others_masks() -> None:
+    """A broken compass (record turned 40°) fits in position, ψ absorbs it; the others'
+    masks of it agree on the offset, and the fleet leaves it out."""
+    rng = np.random.default_rng(7)
+    ids = list(range(1, 7))
+    pos = sim_layout(rng, 6)
+    recs = unaligned_records(ids, pos, rng.uniform(-math.pi, math.pi, 6), rng, 0.03, 0.03)
+    recs[3] = fault(recs[3], "rotate")
+    ff = fleet_frame(recs, DEFAULT_EPSILON)
+    assert ff.excluded == (4,) and "masks agree" in ff.reason

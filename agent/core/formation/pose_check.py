@@ -9,9 +9,9 @@ carry orientations.
 
 Rule (deterministic, on the poses of :func:`poses.build_poses`):
 
-1. the fleet is *consistent* when every pair scores ≤ 1 (absolute tolerances
-   :data:`poses.POS_TOL` + :data:`poses.POS_TOL_REL`·d in metres and
-   :data:`poses.HEADING_TOL` in radians): nobody is named;
+1. the fleet is *consistent* when every pair's position misfit is within
+   :data:`poses.POS_TOL` + :data:`poses.POS_TOL_REL`·d and no robot is turned (the others'
+   masks agree that its ψ is off, :func:`poses.turned_robots`): nobody is named;
 2. otherwise each robot r (ascending id), in turn, is left out: its sightings and the
    others' sightings of it are dropped and the rest is fitted again (same pairing); r is
    a *candidate* when the rest is connected (at least two robots) and consistent;
@@ -36,9 +36,19 @@ import numpy as np
 
 from agent.core.formation.neighbour_check import DEFAULT_EPSILON
 from agent.core.formation.pose_pairing import identify_pairs
-from agent.core.formation.poses import PoseFrame, fit_poses, poses_from_graph
+from agent.core.formation.poses import (
+    POS_TOL,
+    POS_TOL_REL,
+    PoseFrame,
+    fit_poses,
+    poses_from_graph,
+)
 from agent.core.formation.records import NeighborRecord
 
+#: A robot is named on positions alone only when at least this many of its pairs misfit:
+#: a single misfit pair (a neighbour half hidden, a wrong pairing) could be either end's
+#: fault, unless the other end was tested and does not explain it.
+MIN_BAD_PAIRS = 2
 Z_MIN = 3.5  #: robust z-score a robot must reach to be named among several candidates
 Z_AGREE = 1.0  #: z-score enough when both tie-breaks among candidates agree (rule 3)
 MAD_FLOOR = 0.1  #: smallest MAD of robot scores (scores are in units of the tolerance)
@@ -90,10 +100,59 @@ def check_poses(records: Sequence[NeighborRecord], epsilon: float = DEFAULT_EPSI
     return check_frame(poses_from_graph(graph, records))
 
 
+def bad_pairs(poses: PoseFrame, robot: int) -> list[tuple[int, int]]:
+    """Pairs of ``robot`` whose sightings misfit in position beyond the tolerance."""
+    return [
+        (q.i, q.j)
+        for q in poses.pairs
+        if robot in (q.i, q.j) and q.position > POS_TOL + POS_TOL_REL * q.distance
+    ]
+
+
 def check_frame(poses: PoseFrame) -> PoseVerdict:
-    """The rule of the module docstring on fitted poses."""
+    """The rule of the module docstring on fitted poses, then corroborated: a robot is
+    named only when it is turned, or at least :data:`MIN_BAD_PAIRS` of its pairs misfit
+    in position, or the other end of its one misfit pair was tested (left out, the rest
+    still connected) and does not explain it."""
+    first = _check_frame(poses)
+    if not first.named:
+        return first
+    (r,) = first.named
+    if len(poses.turned) == 1 and poses.turned[0] != r:
+        return PoseVerdict(
+            (), f"ambiguous: robot {poses.turned[0]} is turned, yet {first.reason}", poses
+        )
+    bad = bad_pairs(poses, r)
+    if r in poses.turned or len(bad) >= MIN_BAD_PAIRS:
+        return first
+    others = [i if j == r else j for i, j in bad]
+    if others and all(_tested_and_cleared(poses, s) for s in others):
+        return first
+    return PoseVerdict(
+        (), f"nobody named, < {MIN_BAD_PAIRS} pairs misfit in position: {first.reason}", poses
+    )
+
+
+def _tested_and_cleared(poses: PoseFrame, robot: int) -> bool:
+    """Left out, ``robot`` leaves a connected rest that is still inconsistent."""
+    rest = leave_out(poses, robot)
+    return rest is not None and not rest.consistent
+
+
+def _check_frame(poses: PoseFrame) -> PoseVerdict:
+    """Steps 1-3 of the module docstring."""
     if poses.consistent:
         return PoseVerdict((), "consistent: every pair within tolerance", poses)
+    if len(poses.turned) == 1:
+        (t,) = poses.turned
+        rest = leave_out(poses, t)
+        if rest is not None and rest.consistent:
+            return PoseVerdict(
+                (t,),
+                f"robot {t}: the others' masks agree its heading is off, and the others are "
+                "consistent without it",
+                poses,
+            )
     worst = max(poses.pairs, key=lambda p: (p.score, -p.i, -p.j))
     bad = f"pair {worst.i}-{worst.j} misfit {worst.position:.2f} m, " + (
         f"{math.degrees(worst.heading):.0f}° (score {worst.score:.1f})"
