@@ -532,3 +532,13 @@ def test_the_layout_shows_each_robots_camera_with_its_annotations() -> None:
     for v in images:
         topic = v["imageMode"]["imageTopic"]
         assert v["imageMode"]["annotations"] == {f"{topic}/annotations": {"visible": True}}
+
+
+def test_scene_alone_emits_camera_frames_to_any_sink() -> None:
+    out: list[tuple[str, str, int]] = []
+    scene = Scene(lambda topic, schema, message, t_ns: out.append((topic, schema["title"], t_ns)))
+    scene.take("nao/3/camera", camera(3, 1.0, n=1), 700)
+    assert out == [
+        ("/nao/3/camera", "foxglove.CompressedImage", 700),
+        ("/nao/3/camera/annotations", "foxglove.ImageAnnotations", 700),
+    ]
