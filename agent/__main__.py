@@ -7,7 +7,7 @@
                     [--timeout S] [--member-grace S] [--join-timeout S]
                     [--research-rounds K] [--explore-step M]
                     [--body zenoh|naoqi]
-                    [--nao tcp://HOST:9559] [--state-dir DIR]
+                    [--nao tcp://HOST:9559] [--state-dir DIR] [--publish-camera]
 
 The body is the simulated world over zenoh (``--body zenoh``, the default) or a NAO
 over its qi protocol (``--body naoqi --nao tcp://nao.local:9559``: a real robot, or a
@@ -21,6 +21,10 @@ their digests and stops the whole fleet, naming the odd robot, when they differ.
 walk, turn) go through a second zenoh session connected to ``EP`` (the router's world
 port, ``agent.wire.WORLD_PORT``); records, digests, statuses and liveliness stay on
 the first. Without it one session carries both.
+
+``--publish-camera`` (issue 22): publish a small JPEG of each analysed camera frame, with
+its detections, on ``nao/{id}/camera`` for viewers (at most 2 frames/s, ~10 kB/s; see
+docs/agent.md). Off by default: opt in on a real fleet.
 
 Exit status: 0 when the robot holds its place in the pyramid, 1 on a safe stop
 (failed agreement, planning or motion; the reason is logged and published), 2 on a
@@ -137,6 +141,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         default=None,
         metavar="KIND:AMOUNT",
         help=SENSOR_FAULT_HELP + " (evaluation only: tools.eval_headings)",
+    )
+    p.add_argument(
+        "--publish-camera",
+        action="store_true",
+        help="publish thumbnails of the analysed camera frames with their detections on "
+        "nao/ID/camera for viewers (at most 2 frames/s; off by default)",
     )
     p.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
     args = p.parse_args(argv)
@@ -316,6 +326,7 @@ def main(argv: list[str] | None = None) -> int:
                     correct=not args.no_correct,
                     march=args.route,
                     sensor_fault=args.sensor_fault,
+                    publish_camera=args.publish_camera,
                     **{
                         k: v
                         for k, v in (

@@ -81,6 +81,9 @@ class AgentConfig:
     research_timeout: float = 300.0
     # test tool (agent/core/perception/sensor_fault.py): corrupt this robot's own record
     sensor_fault: SensorFault | None = None
+    # issue 22: publish thumbnails of the analysed frames for viewers on nao/{id}/camera
+    # (agent/phases/camera_feed.py); off by default, opt-in on real fleets
+    publish_camera: bool = False
 
     @property
     def radius(self) -> float:

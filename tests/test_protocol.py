@@ -49,6 +49,16 @@ SAMPLES: list[p.Message] = [
     p.ContactMsg(t_sim=2.0, a=1, b=-1),
     p.RecordSetRequest(digest="ab" * 32),
     p.RecordSetReply(sender=2, digest="ab" * 32, records=(b"\x80",)),
+    p.CameraMsg(
+        robot=2,
+        seq=7,
+        t_sim=3.5,
+        width=160,
+        height=120,
+        jpeg=b"\xff\xd8\xff\xe0 a thumbnail",
+        yaw=-0.4,
+        detections=(p.CameraDetection(id=0, box=(10, 20, 30, 60), d=1.2, phi=-0.3),),
+    ),
 ]
 
 

@@ -33,6 +33,11 @@ are given to every agent and used by the evaluator's plan. ``--scenario FILE`` s
 world on a scenario file (robot count and ids from the file); ``--isolated`` generates
 the seed's scenario with one robot 2-3 m from every other (``sim.scenarios.generate``).
 
+Camera frames (issue 22): the demo's agents run with ``--publish-camera`` (turn it off
+with ``--no-publish-camera``), so ``run.mcap`` holds each robot's camera thumbnails with
+their detections (``/nao/ID/camera``, ``/nao/ID/camera/annotations``); the table gives
+their kB/s per robot, apart from the fleet's own bytes.
+
 This tool is an evaluator: it reads ground truth (``world/truth/**``); agents never do.
 """
 
@@ -115,6 +120,11 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     march.add_argument(
         "--march-to", default=None, metavar="X,Y",
         help="after hold, the leader marches to (X, Y) m in the common frame",
+    )  # fmt: skip
+    p.add_argument(
+        "--publish-camera", action=argparse.BooleanOptionalAction, default=True,
+        help="agents publish thumbnails of their camera frames with detections for viewers "
+        "(issue 22; run.mcap's /nao/ID/camera channels); on in the demo, off on real fleets",
     )  # fmt: skip
     p.add_argument("--agent-log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING"))
     p.add_argument("--world-timeout", type=float, default=120.0)

@@ -81,7 +81,9 @@ def run_one(args: argparse.Namespace, case: Case, seed: int, out: Path) -> Run:
     from tools.harness.run import run_once
 
     argv = ["--robots", str(case.robots), "--seed", str(seed), "--headings", str(case.headings)]
-    argv += ["--out", str(out), "--timeout", str(args.timeout), *args.demo_arg]
+    # no camera frames for viewers unless asked (--demo-arg=--publish-camera)
+    argv += ["--out", str(out), "--timeout", str(args.timeout), "--no-publish-camera"]
+    argv += args.demo_arg
     victim = case.victim(seed)
     if case.fault:
         argv += ["--agent-arg", f"{victim}:--sensor-fault={case.fault}"]

@@ -33,6 +33,7 @@ def run(scenario: Path, seeds: list[int], rounds: int | None, out: Path) -> list
         sc = scenarios.from_dict({**scenarios.to_dict(base), "seed": seed})
         scenarios.dump(sc, d / "scenario.json")
         argv = ["--robots", str(len(sc.robots)), f"--world-arg=--scenario={d / 'scenario.json'}"]
+        argv += ["--no-publish-camera"]  # evaluation: the fleet's own traffic only
         argv += ["--out", str(d), "--timeout", "600", "--seed", str(seed)]
         if rounds is not None:
             argv += ["--research-rounds", str(rounds)]

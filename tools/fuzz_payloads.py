@@ -106,6 +106,22 @@ def valid_samples() -> dict[str, list[P.Message]]:
                 ),
             )
         ],
+        "thumbnail": [
+            P.CameraMsg(robot=2, seq=0, t_sim=0.0, width=160, height=120, jpeg=b"\xff\xd8\xff\xe0"),
+            P.CameraMsg(
+                robot=P.MAX_ROBOT_ID,
+                seq=41,
+                t_sim=12.5,
+                width=P.MAX_THUMBNAIL_WIDTH,
+                height=P.MAX_THUMBNAIL_HEIGHT,
+                jpeg=b"\xff\xd8\xff" + bytes(range(256)) * 16,
+                yaw=1.2,
+                detections=tuple(
+                    P.CameraDetection(id=i, box=(10 * i, 5, 9, 30), d=0.5 + 0.1 * i, phi=0.05 * i)
+                    for i in range(P.MAX_CAMERA_DETECTIONS)
+                ),
+            ),
+        ],
     }
     assert set(out) == set(P.message_types()), "every message type needs a sample"
     return out

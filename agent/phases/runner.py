@@ -23,6 +23,9 @@ PLAN/WAIT/MOVE   the formation core on the agreed records, identical on every ag
 HOLD/MARCH/DONE  correct against the parent, march the route if there is one, ``done``
                  and stay until all are (agent/phases/hold.py, march.py).
 
+With ``--publish-camera`` (issue 22) the perception is wrapped by
+agent/phases/camera_feed.py, which publishes thumbnails of the analysed frames for viewers.
+
 The :class:`Runner` only composes the collaborators around one shared
 :class:`~agent.phases.context.Context` (the typed roles between them are in
 agent/phases/roles.py) and walks the phases in order; every wait in every phase hears
@@ -42,6 +45,7 @@ from agent.config import AgentConfig
 from agent.core.agreement import Decision
 from agent.net.bus import Bus
 from agent.phases.agreeing import Agreeing
+from agent.phases.camera_feed import CameraFeed
 from agent.phases.context import AgentFailure, Context
 from agent.phases.hold import Hold
 from agent.phases.journaling import Journaling
@@ -78,6 +82,8 @@ class Runner:
     ) -> None:
         if body.robot_id != config.robot_id:
             raise ValueError(f"robot {body.robot_id} driven with config for {config.robot_id}")
+        if config.publish_camera:  # issue 22: every analysed frame offered to viewers
+            perception = CameraFeed(perception, bus, config.robot_id, lambda: body.t_sim, clock)
         self.ctx = ctx = Context(bus, body, config, perception, formation, clock)
         self.membership = fleet = Membership(ctx)
         self.journaling = Journaling(ctx, fleet)

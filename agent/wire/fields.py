@@ -27,6 +27,16 @@ MAX_MESSAGE_BYTES = MAX_IMAGE_BYTES + 4096
 MAX_PUBLICATION_BYTES = 64 * 1024
 #: World requests (register, camera, walk, turn) are a few dozen bytes.
 MAX_REQUEST_BYTES = 1024
+#: Camera frames for viewers (issue 22, ``nao/{id}/camera``): a JPEG thumbnail of at most
+#: this many bytes (160x120 at quality 70 is 3-8 kB), at most this size in pixels, with at
+#: most this many detections.
+MAX_THUMBNAIL_BYTES = 32 * 1024
+MAX_THUMBNAIL_WIDTH = 320
+MAX_THUMBNAIL_HEIGHT = 240
+MAX_CAMERA_DETECTIONS = 16
+#: A camera frame's publication: the thumbnail, its fields and detections (16 x ~45 B) and
+#: the signed envelope (~100 B). Viewers subscribe with this bound, checked before the copy.
+MAX_CAMERA_PUBLICATION_BYTES = MAX_THUMBNAIL_BYTES + 4096
 #: msgpack limits of :func:`unpack_bounded` (see its docstring for why these values).
 MAX_OBJECTS = 8192
 MAX_DEPTH = 8

@@ -15,6 +15,8 @@ KEY_DIGEST_ALL = "nao/*/digest"
 KEY_STATUS_ALL = "nao/*/status"
 #: Every agent's record-set queryable (issue #9): the agreed records by digest.
 KEY_RECORDS_ALL = "nao/*/records"
+#: Every agent's camera frames for viewers (issue 22; ``--publish-camera``).
+KEY_CAMERA_FEED_ALL = "nao/*/camera"
 KEY_WORLD_REGISTER = "world/register"
 KEY_WORLD_CLOCK = "world/clock"
 KEY_WORLD_TRUTH_POSES = "world/truth/poses"
@@ -40,6 +42,12 @@ def key_status(robot_id: int) -> str:
 
 def key_records(robot_id: int) -> str:
     return f"nao/{_check_id(robot_id)}/records"
+
+
+def key_camera_feed(robot_id: int) -> str:
+    """Robot ``robot_id``'s camera frames for viewers (:class:`~agent.wire.CameraMsg`); not
+    to be confused with :func:`key_camera`, the world's camera queryable."""
+    return f"nao/{_check_id(robot_id)}/camera"
 
 
 def key_camera(robot_id: int) -> str:

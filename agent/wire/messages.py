@@ -2,25 +2,31 @@
 
 Every message on the wire is a msgpack map ``{"v": SCHEMA_VERSION, "t": <type tag>,
 ...fields}``; each class declares its fields' validators (:mod:`agent.wire.fields`).
-Images are encoded (PNG) bytes of a BGR uint8 picture, as OpenCV writes them.
+Images are encoded (PNG) bytes of a BGR uint8 picture, as OpenCV writes them; the
+camera frames agents publish for viewers (:class:`CameraMsg`) are JPEG thumbnails.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, is_dataclass
 from typing import Any, ClassVar, TypeVar
 
 from agent.wire.fields import (
     _ID,
     _XY,
     HEAD_YAW_LIMIT,
+    MAX_CAMERA_DETECTIONS,
     MAX_COORD,
     MAX_IMAGE_BYTES,
     MAX_MEMBERS,
     MAX_NEIGHBOURS,
     MAX_OBSTACLES,
     MAX_ROBOT_ID,
+    MAX_THUMBNAIL_BYTES,
+    MAX_THUMBNAIL_HEIGHT,
+    MAX_THUMBNAIL_WIDTH,
     SCHEMA_VERSION,
     ProtocolError,
     _bytes,
@@ -86,6 +92,8 @@ class Message:
 def _plain(v: Any) -> Any:
     if isinstance(v, tuple):
         return [_plain(x) for x in v]
+    if is_dataclass(v) and not isinstance(v, type):  # a record inside a message: a map
+        return {f.name: _plain(getattr(v, f.name)) for f in fields(v)}
     return v
 
 
@@ -374,3 +382,89 @@ class ContactMsg(Message):
         "a": _ID,
         "b": _int("b", -1, MAX_ROBOT_ID),
     }
+
+
+_PIXEL = _int("box", 0, max(MAX_THUMBNAIL_WIDTH, MAX_THUMBNAIL_HEIGHT))
+_BOX_CHECK = _tuple("box", _PIXEL, _PIXEL, _PIXEL, _PIXEL)
+_DETECTION_SCHEMA: Mapping[str, Callable[[Any], Any]] = {
+    "id": _ID,
+    "box": _BOX_CHECK,
+    "d": _float("d", 0.0, 100.0),
+    "phi": _float("phi", -2.0 * math.pi, 2.0 * math.pi),
+}
+
+
+@dataclass(frozen=True)
+class CameraDetection:
+    """One detection drawn on a camera thumbnail: ``id`` its number in the frame (the
+    NAOs look alike: the camera cannot tell whom it sees), ``box`` (x, y, w, h) in
+    thumbnail pixels, ``d`` the distance (m, NAO paper eq. 6) and ``phi`` the bearing
+    (rad, +left, body frame: head yaw + pixel offset, eq. 3). On the wire: a map with
+    exactly these four keys."""
+
+    id: int
+    box: tuple[int, int, int, int]
+    d: float
+    phi: float
+
+    def __post_init__(self) -> None:
+        for name, check in _DETECTION_SCHEMA.items():
+            object.__setattr__(self, name, check(getattr(self, name)))
+
+
+def _detection(v: Any) -> CameraDetection:
+    if isinstance(v, CameraDetection):
+        return v
+    if not isinstance(v, dict):
+        raise ProtocolError(f"detection: expected a map, got {type(v).__name__}")
+    if set(v) != set(_DETECTION_SCHEMA):  # keys of any type: compared, never printed raw
+        want = ", ".join(_DETECTION_SCHEMA)
+        raise ProtocolError(f"detection: expected exactly the keys {want}")
+    return CameraDetection(id=v["id"], box=v["box"], d=v["d"], phi=v["phi"])
+
+
+@dataclass(frozen=True)
+class CameraMsg(Message):
+    """A camera frame robot ``robot`` analysed, for viewers (issue 22; DESIGN.md §10):
+    published on ``nao/{robot}/camera`` only with ``--publish-camera``, at most a few per
+    second (agent/phases/camera_feed.py).
+
+    ``seq`` counts the frames published by this agent process; ``t_sim`` is the robot's
+    time of the frame (s: sim time in the simulation, as :attr:`StatusMsg.t_sim`; the wire
+    map's ``t`` is every message's type tag, so the field cannot be called ``t``); ``jpeg`` a
+    JPEG thumbnail of ``width`` x ``height`` pixels (at most 320 x 240 and 32 KiB), ``yaw``
+    the head yaw it was taken at (rad), ``detections`` what the detector found in it, boxes
+    in thumbnail pixels.
+    """
+
+    TAG: ClassVar[str] = "thumbnail"
+    robot: int
+    seq: int
+    t_sim: float
+    width: int
+    height: int
+    jpeg: bytes = field(repr=False)
+    yaw: float = 0.0
+    detections: tuple[CameraDetection, ...] = ()
+    SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {
+        "robot": _int("robot", 0, MAX_ROBOT_ID),
+        "seq": _int("seq", 0, 2**53),
+        "t_sim": _float("t_sim", 0.0),
+        "width": _int("width", 1, MAX_THUMBNAIL_WIDTH),
+        "height": _int("height", 1, MAX_THUMBNAIL_HEIGHT),
+        "jpeg": _bytes("jpeg", MAX_THUMBNAIL_BYTES),
+        "yaw": _float("yaw", -HEAD_YAW_LIMIT - 1e-9, HEAD_YAW_LIMIT + 1e-9),
+        "detections": _seq("detections", _detection, MAX_CAMERA_DETECTIONS),
+    }
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.jpeg[:3] != b"\xff\xd8\xff":
+            raise ProtocolError("jpeg: not a JPEG image (no start-of-image marker)")
+        for det in self.detections:
+            x, y, w, h = det.box
+            if x + w > self.width or y + h > self.height:
+                raise ProtocolError(
+                    f"detection {det.id}: box {det.box} outside the {self.width}x{self.height} "
+                    "thumbnail"
+                )

@@ -54,6 +54,12 @@ def test_three_robot_demo_builds_the_pyramid(tmp_path: Path) -> None:
     assert "RESULT: SUCCESS" in report
     fig = out / "formation.png"
     assert fig.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # camera frames for viewers (issue 22): on in the demo, bounded, apart from the bytes above
+    for i in ("1", "2", "3"):
+        cam = r["camera"][i]
+        assert cam["frames"] >= 3 and cam["bytes"] < 32_768 * cam["frames"], cam
+        assert cam["frames_per_s"] <= 2.0 + 1e-6, cam
+    check_recording_schemas(out / "run.mcap")
     # the recording replays: timeline with every phase of every agent, and a picture
     rep = run([sys.executable, "-m", "tools.replay", str(out / "run.mcap"), "--frames", "2"], 60)
     assert rep.returncode == 0, rep.stderr[-2000:]
@@ -65,14 +71,50 @@ def test_three_robot_demo_builds_the_pyramid(tmp_path: Path) -> None:
     assert (out / "replay" / "frame-001.png").stat().st_size > 0
 
 
+def check_recording_schemas(path: Path) -> None:
+    """The schema test of issue 22: ``run.mcap`` holds Foxglove's scene, image and log
+    channels, each with messages, and the annotations of every robot's camera."""
+    from collections import Counter
+
+    from mcap.reader import make_reader
+
+    schemas: dict[str, str] = {}
+    counts: Counter[str] = Counter()
+    with path.open("rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        assert summary is not None and summary.statistics is not None
+        for ch_id, channel in summary.channels.items():
+            schema = summary.schemas[channel.schema_id]
+            schemas[channel.topic] = schema.name
+            counts[channel.topic] = summary.statistics.channel_message_counts.get(ch_id, 0)
+            if schema.name.startswith("foxglove."):
+                assert (schema.encoding, channel.message_encoding) == ("jsonschema", "json")
+    by_schema: Counter[str] = Counter()
+    for topic, name in schemas.items():
+        by_schema[name] += counts[topic]
+    for name in ("foxglove.SceneUpdate", "foxglove.CompressedImage", "foxglove.Log"):
+        assert by_schema[name] > 0, (name, dict(by_schema))
+    assert by_schema["foxglove.FrameTransform"] > 0 and by_schema["foxglove.ImageAnnotations"] > 0
+    for rid in (1, 2, 3):
+        assert schemas[f"/nao/{rid}/camera"] == "foxglove.CompressedImage"
+        assert schemas[f"/nao/{rid}/camera/annotations"] == "foxglove.ImageAnnotations"
+        assert counts[f"/nao/{rid}/camera"] == counts[f"/nao/{rid}/camera/annotations"] > 0
+    assert counts["/scene"] > 0 and counts["/log"] > 0
+    # the channels tools.replay reads are still there
+    assert counts["world/truth/poses"] > 0 and all(counts[f"nao/{i}/status"] for i in (1, 2, 3))
+
+
 def test_three_robot_demo_with_body_naoqi(tmp_path: Path) -> None:
     """``tools.demo --body naoqi``: the world serves its robots as virtual NAOs over the qi
     protocol; each agent drives its NAO through ALMotion/ALVideoDevice/ALRobotPosture
-    and talks zenoh to the others only."""
+    and talks zenoh to the others only. With ``--no-publish-camera``, as a real fleet
+    runs by default: no camera frame on the bus (issue 22)."""
     out = tmp_path / "demo"
     res = run(
         [sys.executable, "-m", "tools.demo", "--body", "naoqi", "--robots", "3", "--seed", "1",
-         "--out", str(out), "--json", str(tmp_path / "result.json"), "--timeout", "240"],
+         "--out", str(out), "--json", str(tmp_path / "result.json"), "--timeout", "240",
+         "--no-publish-camera"],
         timeout=290,
     )  # fmt: skip
     assert "identical plan digests" in res.stdout, res.stderr[-2000:]
@@ -95,6 +137,8 @@ def test_three_robot_demo_with_body_naoqi(tmp_path: Path) -> None:
         log = (out / f"agent-{i}.log").read_text()
         assert f"robot {i} exit 0" in log, log[-2000:]
         assert "terminate called" not in log
+        assert "camera" not in log.split(f"robot {i} exit 0")[1].split(", compass")[0]
+    assert r["camera"] == {}
 
 
 def test_demo_rejects_bad_arguments() -> None:

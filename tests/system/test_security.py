@@ -1,7 +1,8 @@
 """Trust on real zenoh sessions (DESIGN.md §8, issue #8): TLS, access control, signatures.
 
 - A TLS router with the fleet's access control: a stranger cannot open a link; an
-  observer's key and robot 1's key cannot publish as robot 2; robot 2 can.
+  observer's key and robot 1's key cannot publish as robot 2 (records, camera frames);
+  robot 2 can.
 - The world with credentials over plain links (only the signatures stand): a robot's
   key drives its own robot and no other, a key claims only its own id, unsigned
   requests get no answer, a second session of a claimed key is refused, and replies
@@ -111,6 +112,21 @@ def test_tls_router_refuses_strangers_and_enforces_roles(fleet: T.Credentials) -
             payloads.append(got2.get())
         assert b"forged" not in payloads
         sub2.undeclare()
+        # camera frames for viewers (issue 22): robot 2's own reach the observer, robot 1's
+        # and the observer's on robot 2's camera key never do
+        got3: queue.Queue[bytes] = queue.Queue()
+        sub3 = obs.declare_subscriber("nao/2/camera", lambda s: got3.put(s.payload.to_bytes()))
+        frames: list[bytes] = []
+        end = time.monotonic() + 20.0
+        while b"genuine" not in frames and time.monotonic() < end:
+            r1.put("nao/2/camera", b"forged")
+            rogue.put("nao/2/camera", b"forged")
+            r2.put("nao/2/camera", b"genuine")
+            time.sleep(0.05)  # pacing the puts while polling for delivery, bounded above
+            while not got3.empty():
+                frames.append(got3.get())
+        assert b"genuine" in frames and b"forged" not in frames
+        sub3.undeclare()
         for s in (obs, rogue, r1, r2):
             s.close()
     finally:

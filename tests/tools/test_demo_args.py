@@ -76,3 +76,21 @@ def test_usage_errors(
     with pytest.raises(SystemExit) as exc:
         parse_args([arg.format(**files) for arg in argv])
     assert exc.value.code == 2 and message in capsys.readouterr().err
+
+
+def test_the_demo_turns_the_camera_feed_on_and_other_tools_leave_it_off() -> None:
+    import argparse
+
+    from tools.harness.procs import agent_command
+
+    def cmd(a: argparse.Namespace) -> list[str]:
+        return agent_command(1, 3, "tcp/127.0.0.1:9", a)
+
+    assert parse_args([]).publish_camera is True
+    assert "--publish-camera" in cmd(parse_args([]))
+    assert "--publish-camera" not in cmd(parse_args(["--no-publish-camera"]))
+    # the eval tools' own namespaces know no such setting: their agents publish none
+    bare = argparse.Namespace(d_e=0.8, phi_e_deg=30.0, agree_timeout=60.0, agent_log_level="INFO")
+    assert "--publish-camera" not in cmd(bare)
+    # tools.eval_headings asks the demo for none unless its --demo-arg asks
+    assert parse_args(["--no-publish-camera", "--publish-camera"]).publish_camera is True

@@ -16,6 +16,8 @@ import pytest
 from agent.adapters import FormationAdapter
 from agent.core.formation.params import PlanParams
 from agent.wire import (
+    CameraDetection,
+    CameraMsg,
     ContactMsg,
     DigestMsg,
     NeighborRecordMsg,
@@ -441,3 +443,102 @@ def test_the_layout_shows_the_channels_the_recorder_writes(recording: Any) -> No
         return [node] if isinstance(node, str) else leaves(node["first"]) + leaves(node["second"])
 
     assert sorted(leaves(layout["layout"])) == sorted(panels)
+
+
+# --------------------------------------------------------------------------- camera frames
+
+
+def camera(rid: int, t: float, n: int = 1) -> CameraMsg:
+    """A camera frame of robot ``rid`` (a real JPEG) with ``n`` detections."""
+    import cv2
+    import numpy as np
+
+    ok, buf = cv2.imencode(".jpg", np.full((120, 160, 3), 90, np.uint8))
+    assert ok
+    dets = tuple(
+        CameraDetection(id=k, box=(10 + 40 * k, 30, 20, 50), d=1.0 + k, phi=0.1 * k)
+        for k in range(n)
+    )
+    return CameraMsg(
+        robot=rid, seq=0, t_sim=t, width=160, height=120, jpeg=buf.tobytes(), yaw=0.5,
+        detections=dets,
+    )  # fmt: skip
+
+
+def test_camera_frames_are_images_with_their_detections(tmp_path: Path) -> None:
+    import base64
+
+    rec = Recorder(tmp_path / "run.mcap")
+    obs = Observer(0.0)
+    obs.take("world/truth/poses", truth(0.5), rec)
+    frame = camera(2, 0.4, n=2)
+    obs.take("nao/2/camera", frame, rec, size=2000)
+    obs.take("nao/1/camera", camera(1, 0.4, n=0), rec)
+    rec.close()
+    assert rec.scene_rejected == 0
+    chans, msgs = read(tmp_path / "run.mcap")
+    assert chans["/nao/2/camera"][:3] == ("foxglove.CompressedImage", "jsonschema", "json")
+    assert chans["/nao/2/camera/annotations"][0] == "foxglove.ImageAnnotations"
+    [(t, image)] = msgs["/nao/2/camera"]
+    conforms(image, fg.COMPRESSED_IMAGE)
+    assert t == 500_000_000 and image["timestamp"] == fg.stamp(t)
+    assert (image["format"], image["frame_id"]) == ("jpeg", "nao2/camera")
+    assert base64.b64decode(image["data"]) == frame.jpeg
+    [(ta, marks)] = msgs["/nao/2/camera/annotations"]
+    conforms(marks, fg.IMAGE_ANNOTATIONS)
+    assert ta == t and all(b["timestamp"] == image["timestamp"] for b in marks["points"])
+    assert [[(p["x"], p["y"]) for p in b["points"]] for b in marks["points"]] == [
+        [(10, 30), (30, 30), (30, 80), (10, 80)],
+        [(50, 30), (70, 30), (70, 80), (50, 80)],
+    ]
+    texts = [x["text"] for x in marks["texts"]]
+    assert texts == ["nao 2 yaw +29°", "#0 1.00 m", "#1 2.00 m"]
+    assert [m[0] for m in msgs["/nao/1/camera/annotations"]] == [t]  # no detections: yaw only
+    assert msgs["nao/2/camera"][0][1] == encode(frame)  # the raw wire channel as ever
+    # the observer counts the frames apart from the fleet's own bytes
+    assert obs.agents[2].camera_frames == 1 and obs.agents[2].camera_bytes == 2000
+    assert "camera" not in obs.agents[2].bytes_by_kind
+
+
+def test_a_camera_frame_on_another_robots_key_is_not_drawn(tmp_path: Path) -> None:
+    rec = Recorder(tmp_path / "run.mcap")
+    rec.record("nao/1/camera", camera(2, 0.1))
+    rec.close()
+    assert rec.scene_rejected == 1
+    chans, _ = read(tmp_path / "run.mcap")
+    assert "nao/1/camera" in chans and "/nao/2/camera" not in chans and "/nao/1/camera" not in chans
+
+
+def test_camera_rate_per_robot() -> None:
+    from tools.harness.judge import camera_rate
+    from tools.harness.observe import AgentView
+
+    v = AgentView(camera_frames=21, camera_bytes=100_000, camera_wall=(5.0, 15.0))
+    c = camera_rate(v, 50.0)
+    assert c == {
+        "frames": 21, "bytes": 100_000, "kB_per_s": 10.0, "kB_per_s_run": 2.0,
+        "frames_per_s": 2.0,
+    }  # fmt: skip
+    assert camera_rate(AgentView(), 0.0)["kB_per_s"] == 0.0
+
+
+def test_the_layout_shows_each_robots_camera_with_its_annotations() -> None:
+    root = Path(__file__).resolve().parents[2]
+    layout = json.loads((root / "docs" / "foxglove-layout.json").read_text())
+    images = [v for k, v in layout["configById"].items() if k.startswith("Image!")]
+    assert sorted(v["imageMode"]["imageTopic"] for v in images) == [
+        f"/nao/{i}/camera" for i in (1, 2, 3)
+    ]
+    for v in images:
+        topic = v["imageMode"]["imageTopic"]
+        assert v["imageMode"]["annotations"] == {f"{topic}/annotations": {"visible": True}}
+
+
+def test_scene_alone_emits_camera_frames_to_any_sink() -> None:
+    out: list[tuple[str, str, int]] = []
+    scene = Scene(lambda topic, schema, message, t_ns: out.append((topic, schema["title"], t_ns)))
+    scene.take("nao/3/camera", camera(3, 1.0, n=1), 700)
+    assert out == [
+        ("/nao/3/camera", "foxglove.CompressedImage", 700),
+        ("/nao/3/camera/annotations", "foxglove.ImageAnnotations", 700),
+    ]

@@ -8,8 +8,8 @@ schemas here follow Foxglove's published definitions field for field (names, nes
 enum values; descriptions left out; checked against ``@foxglove/schemas`` 2.1.0), built
 from small shared parts; every field is required but those Foxglove added later, and the
 builders below fill every field. ``foxglove.CompressedImage``
-and ``foxglove.ImageAnnotations`` are defined for the camera views of issue 22; the
-observer of a run receives no images, so no recording uses them yet.
+and ``foxglove.ImageAnnotations`` carry the camera frames agents publish with
+``--publish-camera`` (issue 22; tools/harness/scene.py).
 
 The builders (:func:`stamp`, :func:`pose`, :func:`colour`, primitives, :func:`log`,
 :func:`frame_transform`) return plain dicts ready for ``json.dumps``.
@@ -17,6 +17,7 @@ The builders (:func:`stamp`, :func:`pose`, :func:`colour`, primitives, :func:`lo
 
 from __future__ import annotations
 
+import base64
 import math
 from collections.abc import Sequence
 from typing import Any
@@ -360,3 +361,47 @@ def frame_transform(t_ns: int, parent: str, child: str, x: float, y: float, h: f
         "translation": vec(x, y),
         "rotation": yaw(h),
     }
+
+
+def compressed_image(t_ns: int, frame_id: str, data: bytes, fmt: str = "jpeg") -> JSON:
+    """A ``foxglove.CompressedImage``: ``data`` encoded as ``fmt`` (jpeg, png, ...)."""
+    return {
+        "timestamp": stamp(t_ns),
+        "frame_id": frame_id,
+        "data": base64.b64encode(data).decode("ascii"),
+        "format": fmt,
+    }
+
+
+def point2(x: float, y: float) -> JSON:
+    return {"x": round(float(x), 2), "y": round(float(y), 2)}
+
+
+def box_annotation(t_ns: int, x: float, y: float, w: float, h: float, c: JSON) -> JSON:
+    """A rectangle of image pixels (x, y from the top left, w x h) as a closed line."""
+    corners = [point2(x, y), point2(x + w, y), point2(x + w, y + h), point2(x, y + h)]
+    return {
+        "timestamp": stamp(t_ns),
+        "type": POINTS_TYPES.index("LINE_LOOP"),
+        "points": corners,
+        "outline_color": c,
+        "outline_colors": [],
+        "fill_color": colour((0.0, 0.0, 0.0), 0.0),
+        "thickness": 1.0,
+    }
+
+
+def text_annotation(t_ns: int, x: float, y: float, words: str, c: JSON, size: float = 8.0) -> JSON:
+    """Text at image pixel (x, y), ``size`` pixels high, on a dark translucent ground."""
+    return {
+        "timestamp": stamp(t_ns),
+        "position": point2(x, y),
+        "text": words,
+        "font_size": float(size),
+        "text_color": c,
+        "background_color": colour((0.0, 0.0, 0.0), 0.5),
+    }
+
+
+def image_annotations(points: list[JSON], texts: list[JSON]) -> JSON:
+    return {"circles": [], "points": points, "texts": texts}

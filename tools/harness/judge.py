@@ -286,6 +286,20 @@ def outcome(result: dict[str, Any]) -> tuple[str, str]:
     return "safe_abort", errors or f"exit codes {codes}, phases {phases}"
 
 
+def camera_rate(v: AgentView, wall: float) -> dict[str, float]:
+    """Frames, bytes and kB/s of one robot's camera frames: over the run's wall time
+    (``kB_per_s_run``) and between its first and last frame (``kB_per_s``)."""
+    first, last = v.camera_wall or (0.0, 0.0)
+    span = last - first
+    return {
+        "frames": v.camera_frames,
+        "bytes": v.camera_bytes,
+        "kB_per_s": v.camera_bytes / 1000.0 / span if span > 0 else 0.0,
+        "kB_per_s_run": v.camera_bytes / 1000.0 / wall if wall > 0 else 0.0,
+        "frames_per_s": (v.camera_frames - 1) / span if span > 0 else 0.0,
+    }
+
+
 def summarise(
     obs: Observer,
     result: dict[str, Any],
@@ -307,6 +321,12 @@ def summarise(
     result["bytes"] = {
         str(i): {**dict(views[i].bytes_by_kind), "total": sum(views[i].bytes_by_kind.values())}
         for i in ids
+    }
+    # issue 22: camera frames for viewers (--publish-camera), apart from the fleet's bytes
+    result["camera"] = {
+        str(i): camera_rate(views[i], result.get("wall_total", 0.0))
+        for i in ids
+        if views[i].camera_frames
     }
     result["exchange_bytes"] = {
         str(i): views[i].bytes_by_kind.get("record", 0) + views[i].bytes_by_kind.get("digest", 0)
@@ -475,6 +495,10 @@ def print_table(r: dict[str, Any]) -> None:
     for i, b in r["bytes"].items():
         p(f"  robot {i}: total {b['total']} B, exchange {r['exchange_bytes'][i]} B, "
           f"status {b.get('status', 0)} B")  # fmt: skip
+    for i, c in r.get("camera", {}).items():
+        p(f"  robot {i}: camera {c['frames']} frames, {c['bytes']} B, "
+          f"{c['kB_per_s']:.1f} kB/s while streaming ({c['frames_per_s']:.2f} frames/s), "
+          f"{c['kB_per_s_run']:.1f} kB/s over the run")  # fmt: skip
     same = "yes" if r["identical_digests"] else "NO"
     p(f"identical plan digests: {same} ({next(iter(r['plan_digests'].values()))[:12]})")
     for i, e in r["errors"].items():

@@ -20,10 +20,13 @@ from agent.core.formation.params import PlanParams
 from agent.net.bus import Bus
 from agent.wire import (
     KEY_ALIVE_ALL,
+    KEY_CAMERA_FEED_ALL,
     KEY_DIGEST_ALL,
     KEY_RECORD_ALL,
     KEY_STATUS_ALL,
     KEY_WORLD_TRUTH_ALL,
+    MAX_CAMERA_PUBLICATION_BYTES,
+    CameraMsg,
     ContactMsg,
     DigestMsg,
     Guard,
@@ -47,7 +50,7 @@ class Recorder:
     msgpack wire payloads (``tools.replay`` reads them), and the JSON channels of
     Foxglove's well-known schemas that :class:`tools.harness.scene.Scene` derives from the
     same messages (``/scene``, ``/scene/obstacles``, ``/scene/plan``, ``/tf``, ``/log``,
-    ``/robots/{id}/status``). Every message's log time is the world time (``t_sim``) of
+    ``/robots/{id}/status``, ``/nao/{id}/camera`` and its ``/annotations``). Every message's log time is the world time (``t_sim``) of
     the latest ground-truth sample (0 before the first); its publish time is the wall
     clock (the replay's timeline).
 
@@ -162,6 +165,12 @@ class AgentView:
     exit_code: int | None = None
     #: the robot's own check of its pair after hold (parent id, r_d, r_φ); None: none
     check: tuple[int, float, float] | None = None
+    #: camera frames for viewers (``--publish-camera``, issue 22): kept apart from the
+    #: bytes above, which are the fleet's own traffic; observer wall times of the first
+    #: and the last frame (s)
+    camera_frames: int = 0
+    camera_bytes: int = 0
+    camera_wall: tuple[float, float] | None = None
 
 
 @dataclass
@@ -207,6 +216,13 @@ class Observer:
         except ValueError:
             return
         view = self.agents.setdefault(sender, AgentView())
+        if isinstance(msg, CameraMsg):
+            view.camera_frames += 1
+            view.camera_bytes += size or len(encode(msg))
+            view.camera_wall = (
+                (now, now) if view.camera_wall is None else (view.camera_wall[0], now)
+            )
+            return
         kind = key.rsplit("/", 1)[-1]
         view.bytes_by_kind[kind] += size or len(encode(msg))
         view.count_by_kind[kind] += 1
@@ -275,17 +291,20 @@ class LiveView:
 
 
 def observer_bus(net: FleetNet) -> Bus:
-    """The observer's bus: statuses, records, digests, ground truth and membership."""
+    """The observer's bus: statuses, records, digests, camera frames, ground truth and
+    membership."""
     bus = Bus(net.observer())
     watch(bus)
     return bus
 
 
 def watch(bus: Bus) -> None:
-    """Subscribe ``bus`` to what an observer sees: statuses, records, digests, ground
-    truth and membership."""
+    """Subscribe ``bus`` to what an observer sees: statuses, records, digests, camera
+    frames (agents with ``--publish-camera``; bounded before the copy), ground truth and
+    membership."""
     for key in (KEY_STATUS_ALL, KEY_RECORD_ALL, KEY_DIGEST_ALL, KEY_WORLD_TRUTH_ALL):
         bus.subscribe(key)
+    bus.subscribe(KEY_CAMERA_FEED_ALL, MAX_CAMERA_PUBLICATION_BYTES)
     bus.watch_alive(KEY_ALIVE_ALL)
 
 

@@ -154,6 +154,7 @@ def agent_command(
         *([f"--march-to={args.march_to}"] if getattr(args, "march_to", None) is not None else []),
         "--log-level", args.agent_log_level,
         *(["--no-correct"] if getattr(args, "no_correct", False) else []),
+        *(["--publish-camera"] if getattr(args, "publish_camera", False) else []),
         *(["--research-rounds", str(args.research_rounds)] if getattr(args, "research_rounds", None) is not None else []),
         *(["--body", "naoqi", "--nao", args.nao_urls[rid]] if getattr(args, "body", "") == "naoqi" else []),
         *(a for i, a in getattr(args, "agent_arg", None) or [] if i == rid),

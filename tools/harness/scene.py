@@ -25,6 +25,11 @@ digests, contacts) and emits JSON messages of Foxglove's well-known schemas
   recorder's own notes (why a plan or the obstacles are not drawn).
 * ``/robots/{id}/status``: each status message as JSON (schema ``nao.Status``), for the
   Raw Messages and Plot panels (Foxglove cannot decode the msgpack channels).
+* ``/nao/{id}/camera`` (``foxglove.CompressedImage``, format ``jpeg``, frame
+  ``nao{id}/camera``): each camera frame robot ``id`` published (``--publish-camera``,
+  ``agent.wire.CameraMsg``), and ``/nao/{id}/camera/annotations``
+  (``foxglove.ImageAnnotations``, the same timestamp): a box per detection in the robot's
+  colour, labelled with its number and distance, and the head yaw.
 
 Time: every message is stamped with the world time (``t_sim``) of the latest truth sample
 the caller has seen (``t_ns``), so the viewer's timeline is the world's clock.
@@ -45,11 +50,13 @@ from agent.core.formation.params import PlanParams
 from agent.core.formation.plan import Plan, RobotPlan
 from agent.core.nao import OBSTACLE_HEIGHT, OBSTACLE_RGBA
 from agent.wire import (
+    CameraMsg,
     ContactMsg,
     DigestMsg,
     NeighborRecordMsg,
     StatusMsg,
     TruthPosesMsg,
+    id_from_key,
     reason,
 )
 from sim.nao_model import FOOTPRINT_RADIUS, HEIGHT
@@ -157,6 +164,8 @@ class Scene:
                 self.digests[msg.sender] = msg.digest
                 text = f"digest {msg.digest[:12]} over {list(msg.members)} (round {msg.round})"
                 self._log(t_ns, fg.DEBUG, msg.sender, text)
+        elif isinstance(msg, CameraMsg):
+            self._camera(key, msg, t_ns)
         elif isinstance(msg, ContactMsg):
             other = f"robot {msg.b}" if msg.b >= 0 else "an obstacle or a wall"
             text = f"CONTACT: robot {msg.a} touched {other} at t_sim {msg.t_sim:.2f} s"
@@ -193,6 +202,25 @@ class Scene:
             )
         failed = msg.phase == "failed" or bool(msg.error)
         self._log(t_ns, fg.ERROR if failed else fg.INFO, msg.sender, text)
+
+    def _camera(self, key: str, msg: CameraMsg, t_ns: int) -> None:
+        """A robot's camera frame as an image and its detections as annotations."""
+        rid = msg.robot
+        if id_from_key(key) != rid:  # signed by the key's owner, but about another robot
+            raise ValueError(f"camera frame of robot {rid} on {key}")
+        image = fg.compressed_image(t_ns, f"nao{rid}/camera", msg.jpeg, "jpeg")
+        self.emit(f"/nao/{rid}/camera", fg.COMPRESSED_IMAGE, image, t_ns)
+        c = fg.colour(self.colour(rid))
+        boxes = [fg.box_annotation(t_ns, *d.box, c) for d in msg.detections]
+        labels = [
+            fg.text_annotation(t_ns, d.box[0], max(0, d.box[1] - 9), f"#{d.id} {d.d:.2f} m", c)
+            for d in msg.detections
+        ]
+        white = fg.colour((1.0, 1.0, 1.0))
+        head = f"nao {rid} yaw {math.degrees(msg.yaw):+.0f}°"
+        labels.insert(0, fg.text_annotation(t_ns, 2, max(0, msg.height - 10), head, white))
+        marks = fg.image_annotations(boxes, labels)
+        self.emit(f"/nao/{rid}/camera/annotations", fg.IMAGE_ANNOTATIONS, marks, t_ns)
 
     def _truth(self, msg: TruthPosesMsg, t_ns: int) -> None:
         poses = {int(p[0]): (float(p[1]), float(p[2]), float(p[3])) for p in msg.poses}
