@@ -95,12 +95,11 @@ def judge_run(run: Path) -> FrameRow:
     truth = {int(k): (float(v[0]), float(v[1]), float(v[2])) for k, v in result["starts"].items()}
     msgs = records_of(run / "run.mcap")
     faulty = faulty_robot(result)
-    base = dict(run=str(run), robots=len(msgs), faulty=faulty)
     try:
         ff = fleet_frame(FormationAdapter.records(msgs), DEFAULT_EPSILON)
     except ValueError as exc:
         nan = math.nan
-        return FrameRow(**base, excluded=(), aligned=False, stopped=str(exc), pos_err=nan,
+        return FrameRow(str(run), len(msgs), faulty, excluded=(), aligned=False, stopped=str(exc), pos_err=nan,
                         psi_err=nan, reason="")  # fmt: skip
     ids = [i for i in ff.ids if i != faulty and i in truth]
     est = {i: ff.positions[ff.ids.index(i)] for i in ids}
@@ -110,7 +109,7 @@ def judge_run(run: Path) -> FrameRow:
     pos_err = max(float(np.hypot(*(world[i] - np.array(truth[i][:2])))) for i in ids)
     # a robot faces +y (π/2) in its own fixed frame: its true heading is h + ψ
     psi_err = max(_wrap_deg(truth[i][2] - (h + ff.heading_of(i))) for i in ids)
-    return FrameRow(**base, excluded=ff.excluded, aligned=ff.aligned, stopped="",
+    return FrameRow(str(run), len(msgs), faulty, excluded=ff.excluded, aligned=ff.aligned, stopped="",
                     pos_err=pos_err, psi_err=psi_err, reason=ff.reason)  # fmt: skip
 
 
