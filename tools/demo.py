@@ -4,6 +4,7 @@
     python -m tools.demo --robots 3 --seed 1 --batch 20 [--out DIR]   (seeds 1..20)
     python -m tools.demo --scenario sim/scenarios/paper3.json    (robots from the file)
     python -m tools.demo --robots 4 --orientation cp [--strategy S] [--isolated]
+    python -m tools.demo --view     (watch it live in a browser: http://127.0.0.1:8080/)
 
 Starts ``python -m sim`` and N ``python -m agent`` processes (peers over loopback
 TCP, no multicast so that concurrent runs never mix), shows one live status line per
@@ -33,12 +34,18 @@ are given to every agent and used by the evaluator's plan. ``--scenario FILE`` s
 world on a scenario file (robot count and ids from the file); ``--isolated`` generates
 the seed's scenario with one robot 2-3 m from every other (``sim.scenarios.generate``).
 
+Watching (issue 22, docs/view.md): ``--live [HOST:PORT]`` serves the run's scene over the
+Foxglove WebSocket protocol (default 127.0.0.1:8765) for Foxglove or Lichtblick;
+``--view [HOST:PORT]`` also serves the page in the browser (default 127.0.0.1:8080) and
+opens it where there is a desktop.
+
 This tool is an evaluator: it reads ground truth (``world/truth/**``); agents never do.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -52,7 +59,9 @@ from agent.config import add_plan_arguments
 from agent.wire import INSECURE_WARNING
 from sim import scenarios
 from sim.locomotion import MAX_NOISE_SCALE
+from tools.harness.live import DEFAULT_LIVE, add_live_arguments, check_live_argument, serve
 from tools.harness.run import run_once
+from tools.harness.webpage import DEFAULT_WEB, serve_page
 
 # ===================================================================== CLI
 
@@ -162,12 +171,27 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         metavar="FILE",
         help="the rogue also replays this capture of an earlier run (rogue-*.capture)",
     )
+    add_live_arguments(p)
+    p.add_argument(
+        "--view",
+        nargs="?",
+        const=DEFAULT_WEB,
+        default=None,
+        metavar="HOST:PORT",
+        help=(
+            f"watch the run in a browser: serves the page on {DEFAULT_WEB} and the live "
+            f"server (--live, default {DEFAULT_LIVE})"
+        ),
+    )
     p.add_argument(
         "--plain-links",
         action="store_true",
         help="tests: signatures over plain TCP links (no TLS/ACL), as behind a bad router",
     )
     a = p.parse_args(argv)
+    if a.view is not None and a.live is None:
+        a.live = DEFAULT_LIVE
+    check_live_argument(p, a.live)
     a.scenario_ids = None
     if a.scenario is not None:
         try:
@@ -210,17 +234,38 @@ def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("PYTHONUNBUFFERED", "1")
     if args.insecure:
         print(INSECURE_WARNING, file=sys.stderr)
-    if args.batch:
-        return batch(args)
+    page = None
+    if args.view is not None:
+        page = serve_page(args.view, serve(args.live).url)
+        open_browser(page.url)
     try:
-        result = run_once(args, args.seed, args.out)
-    except RuntimeError as exc:
-        print(f"demo failed: {exc}", file=sys.stderr)
-        return 1
+        if args.batch:
+            return batch(args)
+        try:
+            result = run_once(args, args.seed, args.out)
+        except RuntimeError as exc:
+            print(f"demo failed: {exc}", file=sys.stderr)
+            return 1
+    finally:
+        if page is not None:
+            page.close()
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(result, indent=2, default=float))
     return 0 if result["success"] else 1
+
+
+def open_browser(url: str) -> None:
+    """Open ``url`` in the desktop's browser, where there is a desktop (never a terminal
+    browser: the status lines are on that terminal)."""
+    desktop = sys.platform in ("darwin", "win32") or any(
+        os.environ.get(v) for v in ("DISPLAY", "WAYLAND_DISPLAY")
+    )
+    if desktop:
+        import webbrowser
+
+        with contextlib.suppress(Exception):  # no browser: the URL is printed anyway
+            webbrowser.open(url, new=2)
 
 
 def batch(args: argparse.Namespace) -> int:
