@@ -60,6 +60,7 @@ from agent.wire import INSECURE_WARNING
 from sim import scenarios
 from sim.locomotion import MAX_NOISE_SCALE
 from tools.harness.live import DEFAULT_LIVE, add_live_arguments, check_live_argument, serve
+from tools.harness.progress import Progress
 from tools.harness.run import run_once
 from tools.harness.webpage import DEFAULT_WEB, serve_page
 
@@ -270,24 +271,21 @@ def open_browser(url: str) -> None:
 
 def batch(args: argparse.Namespace) -> int:
     results = []
+    bar = Progress(args.batch, "batch")
     for k in range(args.batch):
         seed = args.seed + k
-        print(
-            f"[batch] run {k + 1}/{args.batch}: {args.robots} robots, seed {seed}", file=sys.stderr
-        )
         try:
             r = run_once(args, seed, args.out / f"seed-{seed:03d}", quiet=True)
         except RuntimeError as exc:
             r = {"seed": seed, "success": False, "error": str(exc), "contacts": -1,
                  "identical_digests": False, "pairs": []}  # fmt: skip
         results.append(r)
-        print(
-            f"[batch] seed {seed}: {'ok' if r['success'] else 'FAIL'} "
+        bar.step(
+            f"seed {seed} ({args.robots} robots): {'ok' if r['success'] else 'FAIL'} "
             f"max|r_d| {r.get('max_abs_r_d', math.nan):.1%} max|r_phi| {r.get('max_abs_r_phi', math.nan):.1%} "
             f"contacts {r.get('contacts')} digests {'same' if r.get('identical_digests') else 'DIFFER'} "
             f"march {r.get('march_distance', math.nan):.2f} m worst|r_d| {r.get('march_worst_abs_r_d', math.nan):.1%} "
-            f"wall {r.get('wall_total', math.nan):.0f}s",
-            file=sys.stderr,
+            f"wall {r.get('wall_total', math.nan):.0f}s"
         )
     ok = sum(1 for r in results if r["success"])
     collisions = sum(1 for r in results if r.get("contacts", -1) != 0)
