@@ -38,6 +38,7 @@
 
   const channels = new Map(); // channel id -> channel
   const subs = new Map(); // subscription id -> channel
+  const heard = new Set(); // subscription ids that brought a message
   let nextSub = 1;
   let dirty = false;
   let sceneNs = 0; // log time of the latest /scene not yet drawn
@@ -82,6 +83,24 @@
       view.connected = true;
       setStatus("live", "live: " + url);
     };
+    // A subscription the server refused (it can reach the server before the channel it
+    // just advertised) brings nothing: ask again for those still silent. The latched
+    // topics (obstacles, plan) are re-sent every second, so a second try gets them.
+    const retry = setInterval(() => {
+      if (ws.readyState !== WebSocket.OPEN) return clearInterval(retry);
+      const again = [];
+      const drop = [];
+      for (const [id, ch] of subs) {
+        if (heard.has(id) || !channels.has(ch.id) || !ch.topic.startsWith("/scene/")) continue;
+        drop.push(id);
+        subs.delete(id);
+        const fresh = nextSub++;
+        subs.set(fresh, ch);
+        again.push({ id: fresh, channelId: ch.id });
+      }
+      if (drop.length) ws.send(JSON.stringify({ op: "unsubscribe", subscriptionIds: drop }));
+      if (again.length) ws.send(JSON.stringify({ op: "subscribe", subscriptions: again }));
+    }, 3000);
     ws.onclose = () => {
       view.connected = false;
       setStatus("closed", "disconnected (run over?) – retrying");
@@ -134,8 +153,10 @@
 
   function onData(dv) {
     if (dv.byteLength < 13 || dv.getUint8(0) !== 1) return;
-    const ch = subs.get(dv.getUint32(1, true));
+    const sub = dv.getUint32(1, true);
+    const ch = subs.get(sub);
     if (!ch) return;
+    heard.add(sub);
     const tNs = Number(dv.getBigUint64(5, true));
     let msg;
     try {
