@@ -4,6 +4,7 @@
     python -m tools.demo --robots 3 --seed 1 --batch 20 [--out DIR]   (seeds 1..20)
     python -m tools.demo --scenario sim/scenarios/paper3.json    (robots from the file)
     python -m tools.demo --robots 4 --orientation cp [--strategy S] [--isolated]
+    python -m tools.demo --view     (watch it live in a browser: http://127.0.0.1:8080/)
 
 Starts ``python -m sim`` and N ``python -m agent`` processes (peers over loopback
 TCP, no multicast so that concurrent runs never mix), shows one live status line per
@@ -38,12 +39,18 @@ with ``--no-publish-camera``), so ``run.mcap`` holds each robot's camera thumbna
 their detections (``/nao/ID/camera``, ``/nao/ID/camera/annotations``); the table gives
 their kB/s per robot, apart from the fleet's own bytes.
 
+Watching (issue 22, docs/view.md): ``--live [HOST:PORT]`` serves the run's scene over the
+Foxglove WebSocket protocol (default 127.0.0.1:8765) for Foxglove or Lichtblick;
+``--view [HOST:PORT]`` also serves the page in the browser (default 127.0.0.1:8080) and
+opens it where there is a desktop.
+
 This tool is an evaluator: it reads ground truth (``world/truth/**``); agents never do.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -57,7 +64,10 @@ from agent.config import add_plan_arguments
 from agent.wire import INSECURE_WARNING
 from sim import scenarios
 from sim.locomotion import MAX_NOISE_SCALE
+from tools.harness.live import DEFAULT_LIVE, add_live_arguments, check_live_argument, serve
+from tools.harness.progress import Progress
 from tools.harness.run import run_once
+from tools.harness.webpage import DEFAULT_WEB, serve_page
 
 # ===================================================================== CLI
 
@@ -172,12 +182,27 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         metavar="FILE",
         help="the rogue also replays this capture of an earlier run (rogue-*.capture)",
     )
+    add_live_arguments(p)
+    p.add_argument(
+        "--view",
+        nargs="?",
+        const=DEFAULT_WEB,
+        default=None,
+        metavar="HOST:PORT",
+        help=(
+            f"watch the run in a browser: serves the page on {DEFAULT_WEB} and the live "
+            f"server (--live, default {DEFAULT_LIVE})"
+        ),
+    )
     p.add_argument(
         "--plain-links",
         action="store_true",
         help="tests: signatures over plain TCP links (no TLS/ACL), as behind a bad router",
     )
     a = p.parse_args(argv)
+    if a.view is not None and a.live is None:
+        a.live = DEFAULT_LIVE
+    check_live_argument(p, a.live)
     a.scenario_ids = None
     if a.scenario is not None:
         try:
@@ -220,39 +245,57 @@ def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("PYTHONUNBUFFERED", "1")
     if args.insecure:
         print(INSECURE_WARNING, file=sys.stderr)
-    if args.batch:
-        return batch(args)
+    page = None
+    if args.view is not None:
+        page = serve_page(args.view, serve(args.live).url)
+        open_browser(page.url)
     try:
-        result = run_once(args, args.seed, args.out)
-    except RuntimeError as exc:
-        print(f"demo failed: {exc}", file=sys.stderr)
-        return 1
+        if args.batch:
+            return batch(args)
+        try:
+            result = run_once(args, args.seed, args.out)
+        except RuntimeError as exc:
+            print(f"demo failed: {exc}", file=sys.stderr)
+            return 1
+    finally:
+        if page is not None:
+            page.close()
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(result, indent=2, default=float))
     return 0 if result["success"] else 1
 
 
+def open_browser(url: str) -> None:
+    """Open ``url`` in the desktop's browser, where there is a desktop (never a terminal
+    browser: the status lines are on that terminal)."""
+    desktop = sys.platform in ("darwin", "win32") or any(
+        os.environ.get(v) for v in ("DISPLAY", "WAYLAND_DISPLAY")
+    )
+    if desktop:
+        import webbrowser
+
+        with contextlib.suppress(Exception):  # no browser: the URL is printed anyway
+            webbrowser.open(url, new=2)
+
+
 def batch(args: argparse.Namespace) -> int:
     results = []
+    bar = Progress(args.batch, "batch")
     for k in range(args.batch):
         seed = args.seed + k
-        print(
-            f"[batch] run {k + 1}/{args.batch}: {args.robots} robots, seed {seed}", file=sys.stderr
-        )
         try:
             r = run_once(args, seed, args.out / f"seed-{seed:03d}", quiet=True)
         except RuntimeError as exc:
             r = {"seed": seed, "success": False, "error": str(exc), "contacts": -1,
                  "identical_digests": False, "pairs": []}  # fmt: skip
         results.append(r)
-        print(
-            f"[batch] seed {seed}: {'ok' if r['success'] else 'FAIL'} "
+        bar.step(
+            f"seed {seed} ({args.robots} robots): {'ok' if r['success'] else 'FAIL'} "
             f"max|r_d| {r.get('max_abs_r_d', math.nan):.1%} max|r_phi| {r.get('max_abs_r_phi', math.nan):.1%} "
             f"contacts {r.get('contacts')} digests {'same' if r.get('identical_digests') else 'DIFFER'} "
             f"march {r.get('march_distance', math.nan):.2f} m worst|r_d| {r.get('march_worst_abs_r_d', math.nan):.1%} "
-            f"wall {r.get('wall_total', math.nan):.0f}s",
-            file=sys.stderr,
+            f"wall {r.get('wall_total', math.nan):.0f}s"
         )
     ok = sum(1 for r in results if r["success"])
     collisions = sum(1 for r in results if r.get("contacts", -1) != 0)

@@ -40,6 +40,7 @@ from typing import Any
 
 from tools.harness import report
 from tools.harness.judge import outcome, summarise
+from tools.harness.live import add_live_arguments, check_live_argument, live_sinks
 from tools.harness.observe import AgentView, Observer, Recorder, observe_for, observer_bus
 from tools.harness.procs import (
     Proc,
@@ -51,6 +52,7 @@ from tools.harness.procs import (
     stop,
     wait_ready,
 )
+from tools.harness.progress import Progress
 
 FAULTS = (
     "kill-agent@search",
@@ -100,7 +102,7 @@ def run_one(args: argparse.Namespace, fault: str, seed: int, out: Path) -> Run:
     n = args.robots
     net = fleet_network(args, out, n)
     t0 = time.monotonic()
-    rec = Recorder(out / "run.mcap")
+    rec = Recorder(out / "run.mcap", sinks=live_sinks(args.live))
     obs = Observer(t0)
     procs: list[Proc] = []
     agents: dict[int, Proc] = {}
@@ -255,6 +257,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--agent-log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING"))
     p.add_argument("--credentials", type=Path, default=None)
     p.add_argument("--insecure", action="store_true", help="no TLS/router (kill-router needs one)")
+    add_live_arguments(p)  # every run of the matrix on one live server
     p.add_argument(
         "--report",
         type=Path,
@@ -264,6 +267,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="run nothing: the table and figure (under --out) of earlier --json files together",
     )
     a = p.parse_args(argv)
+    check_live_argument(p, a.live)
     a.faults = [f.strip() for v in a.fault for f in v.split(",") if f.strip()] or list(FAULTS)
     bad = [f for f in a.faults if f not in FAULTS]
     if bad:
@@ -285,12 +289,11 @@ def main(argv: list[str] | None = None) -> int:
         write(args, runs)
         print_table(runs)
         return 0
+    bar = Progress(len(args.faults) * args.seeds, "eval_faults")
     for fault in args.faults:
         for seed in range(args.seed_start, args.seed_start + args.seeds):
-            print(f"[eval_faults] {fault} seed {seed}", file=sys.stderr)
             r = run_one(args, fault, seed, args.out / fault.replace("@", "-") / f"seed-{seed:03d}")
-            print(f"[eval_faults] {fault} seed {seed}: {r.outcome} ({r.detail[:100]})",
-                  file=sys.stderr)  # fmt: skip
+            bar.step(f"{fault} seed {seed}: {r.outcome} ({r.detail[:100]})")
             runs.append(r)
             write(args, runs)
     print_table(runs)

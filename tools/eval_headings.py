@@ -38,6 +38,7 @@ from typing import Any
 from sim.scenarios import Headings
 from tools.harness import report
 from tools.harness.judge import outcome
+from tools.harness.live import add_live_arguments, check_live_argument
 from tools.harness.progress import Progress
 
 
@@ -84,6 +85,8 @@ def run_one(args: argparse.Namespace, case: Case, seed: int, out: Path) -> Run:
     # no camera frames for viewers unless asked (--demo-arg=--publish-camera)
     argv += ["--out", str(out), "--timeout", str(args.timeout), "--no-publish-camera"]
     argv += args.demo_arg
+    if args.live is not None:  # every run of the matrix on one live server
+        argv += ["--live", args.live]
     victim = case.victim(seed)
     if case.fault:
         argv += ["--agent-arg", f"{victim}:--sensor-fault={case.fault}"]
@@ -171,9 +174,11 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                    help="one more tools.demo argument for every run (repeat)")  # fmt: skip
     p.add_argument("--json", type=Path, default=None)
     p.add_argument("--out", type=Path, default=Path("out/eval_headings"))
+    add_live_arguments(p)
     p.add_argument("--report", type=Path, nargs="+", default=None, metavar="JSON",
                    help="run nothing: the table and figure of earlier --json files together")  # fmt: skip
     a = p.parse_args(argv)
+    check_live_argument(p, a.live)
     a.headings = a.headings or [Headings("random")]
     a.robots = a.robots or [4]
     if any(not 2 <= n <= 64 for n in a.robots) or a.seeds < 1:

@@ -55,6 +55,7 @@ from tools.harness import report
 from tools.harness.judge import outcome
 from tools.harness.monitor import monitor
 from tools.harness.procs import Lines
+from tools.harness.progress import Progress
 from tools.packet_drop import Dropper
 
 REPO = Path(__file__).resolve().parents[1]
@@ -502,10 +503,9 @@ def _evaluate(args: argparse.Namespace, losses: list[float], out: Path) -> int:
     total = len(losses) * args.seeds
     creds = "" if args.insecure else _fleet(out, args.robots)
     json_path = Path(args.json) if args.json else out / "runs.json"
+    bar = Progress(total, "eval_loss")
     for loss in losses:
         for seed in range(args.seed_start, args.seed_start + args.seeds):
-            n = len(results) + 1
-            print(f"[{n}/{total}] loss {loss:g} seed {seed} ...", file=sys.stderr, flush=True)
             try:
                 r = run_once(
                     loss, seed, args.robots, args.timeout,
@@ -520,12 +520,10 @@ def _evaluate(args: argparse.Namespace, losses: list[float], out: Path) -> int:
             res = json.loads(res_path.read_text()) if res_path.exists() else {}
             rows.append(run_row(r, res))
             report.write_runs(rows, json_path)
-            print(
-                f"[{n}/{total}] {'OK  ' if r.success else 'FAIL'} {r.reason}; agree "
+            bar.step(
+                f"loss {loss:g} seed {seed}: {'OK  ' if r.success else 'FAIL'} {r.reason}; agree "
                 f"{_fmt(r.agree_s, '.2f')} s, bytes/agent {r.bytes_per_agent}, "
-                f"dropped {r.dropped_packets} pkts, wall {r.wall_s:.0f} s",
-                file=sys.stderr,
-                flush=True,
+                f"dropped {r.dropped_packets} pkts, wall {r.wall_s:.0f} s"
             )
     summary = summarise(results)
     doc = {

@@ -21,10 +21,13 @@ from typing import Any
 
 from sim import scenarios
 from tools.demo import parse_args
+from tools.harness.live import add_live_arguments, check_live_argument
 from tools.harness.run import run_once
 
 
-def run(scenario: Path, seeds: list[int], rounds: int | None, out: Path) -> list[dict[str, Any]]:
+def run(
+    scenario: Path, seeds: list[int], rounds: int | None, out: Path, live: str | None = None
+) -> list[dict[str, Any]]:
     base = scenarios.load(scenario)
     rows = []
     for seed in seeds:
@@ -37,6 +40,8 @@ def run(scenario: Path, seeds: list[int], rounds: int | None, out: Path) -> list
         argv += ["--out", str(d), "--timeout", "600", "--seed", str(seed)]
         if rounds is not None:
             argv += ["--research-rounds", str(rounds)]
+        if live is not None:  # every run on one live server
+            argv += ["--live", live]
         try:
             r = run_once(parse_args(argv), seed, d, quiet=True)
         except RuntimeError as exc:
@@ -92,14 +97,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seeds", default="1,2,3", help="comma-separated world seeds")
     p.add_argument("--research-rounds", type=int, default=None)
     p.add_argument("--out", type=Path, default=Path("out/research"))
+    add_live_arguments(p)
     a = p.parse_args(argv)
+    check_live_argument(p, a.live)
     try:
         seeds = [int(s) for s in a.seeds.split(",") if s.strip()]
     except ValueError:
         p.error(f"--seeds wants integers, got {a.seeds!r}")
     if not seeds:
         p.error("--seeds is empty")
-    rows = run(a.scenario, seeds, a.research_rounds, a.out)
+    rows = run(a.scenario, seeds, a.research_rounds, a.out, a.live)
     ok = sum(r["success"] for r in rows)
     walls = sorted(r["wall_total"] for r in rows)
     print(

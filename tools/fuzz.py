@@ -254,7 +254,10 @@ def main(argv: list[str] | None = None) -> int:
     report: dict[str, Any] = {"seed": args.seed}
     if args.n:
         t0 = time.perf_counter()
-        res = fuzz(args.n, args.seed, progress=lambda s: print(s, file=sys.stderr, flush=True))
+        from tools.harness.progress import Progress
+
+        bar = Progress(len(TAGS), "fuzz")
+        res = fuzz(args.n, args.seed, progress=bar.step)
         total = time.perf_counter() - t0
         print(f"{'type':10s} {'accepted':>9s} {'rejected':>9s} {'crashed':>8s} {'time':>8s}")
         for tag, c in res.items():

@@ -268,8 +268,9 @@ def run_all(
     runs: int, n: int, levels: list[str], strategies: list[str], frames: list[str]
 ) -> dict[str, Any]:
     out: dict[str, Any] = {}
-    total = len(levels) * len(strategies) * len(frames)
-    done = 0
+    from tools.harness.progress import Progress
+
+    bar = Progress(len(levels) * len(strategies) * len(frames), "montecarlo")
     for level in levels:
         for strategy in strategies:
             for frame in frames:
@@ -291,8 +292,7 @@ def run_all(
                     acc.makespan.append(st["makespan"])
                     acc.wave_makespan.append(st["wave_makespan"])
                 out[f"{level}/{strategy}/{frame}"] = _summary(acc)
-                done += 1
-                print(f"[montecarlo] {done}/{total} {level}/{strategy}/{frame}", file=sys.stderr)
+                bar.step(f"{level}/{strategy}/{frame}")
     return out
 
 

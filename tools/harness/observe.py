@@ -37,6 +37,7 @@ from agent.wire import (
     id_from_key,
 )
 from tools.harness.foxglove import JSON
+from tools.harness.live import Fanout, Sink
 from tools.harness.procs import FleetNet
 from tools.harness.scene import Scene
 
@@ -61,7 +62,9 @@ class Recorder:
 
     ``params``: the fleet's planning parameters (default: the demo's), ``obstacles``: the
     world's (x, y, radius), if known; else the scenario file that the harness writes beside
-    the recording (``scenario.json``) during this run is read.
+    the recording (``scenario.json``) during this run is read. ``sinks``: where the
+    Foxglove channels go besides the file (``--live``: :class:`tools.harness.live.LiveServer`);
+    one scene builder for all (:class:`tools.harness.live.Fanout`).
     """
 
     def __init__(
@@ -69,6 +72,7 @@ class Recorder:
         path: Path,
         params: PlanParams | None = None,
         obstacles: Sequence[tuple[float, float, float]] | None = None,
+        sinks: Sequence[Sink] = (),
     ) -> None:
         from mcap.writer import Writer
 
@@ -85,7 +89,9 @@ class Recorder:
         self.count = 0
         #: world time (ns) of the latest truth sample: every message's log time
         self.world_ns = 0
-        self.scene = Scene(self._emit, params, obstacles, path.parent / "scenario.json", started)
+        #: the scene's channels go to this file first, then to ``sinks`` (the live view)
+        self.fanout = Fanout(self._emit, sinks)
+        self.scene = Scene(self.fanout, params, obstacles, path.parent / "scenario.json", started)
         self.scene_rejected = 0
         self.guard = Guard(lambda line: print(f"recorder: {line}", file=sys.stderr))
 

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from tools.harness.judge import summarise
+from tools.harness.live import live_sinks
 from tools.harness.observe import AgentView, LiveView, Observer, Recorder, observe_for, observer_bus
 from tools.harness.procs import (
     Proc,
@@ -79,7 +80,7 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
     net = fleet_network(args, out, n, getattr(args, "scenario_ids", None))
     endpoint = net.endpoint
     t0 = time.monotonic()
-    rec = Recorder(out / "run.mcap")
+    rec = Recorder(out / "run.mcap", sinks=live_sinks(getattr(args, "live", None)))
     obs = Observer(t0)
     procs: list[Proc] = []
     agents: dict[int, Proc] = {}

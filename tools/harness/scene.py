@@ -16,8 +16,9 @@ digests, contacts) and emits JSON messages of Foxglove's well-known schemas
   :func:`tools.harness.judge.plan_from_agreed`): recomputed from the records the robots
   signed, drawn only when its digest is one an agent reported; its common frame is placed
   in the world by the frame robot's first ground-truth pose (``judge.summarise``'s
-  ``turn``). It is computed when the recording closes, once per run, and stamped with the
-  world time of the first status that reported that digest.
+  ``turn``). It is computed when an agent first reports a plan digest (so that the live
+  view shows it while the fleet walks) and again when the recording closes, drawn once
+  per plan, stamped with the world time of the first status that reported that digest.
 * ``/tf`` (``foxglove.FrameTransform``): world → ``robot/{id}`` per truth sample, and
   world → ``common`` with the plan.
 * ``/log`` (``foxglove.Log``): every change of a robot's phase, wave or error (the
@@ -186,6 +187,7 @@ class Scene:
         self.phase[msg.sender] = msg
         if msg.plan_digest and msg.plan_digest not in self.claimed:
             self.claimed[msg.plan_digest] = t_ns
+            self._plan(quiet=True)  # drawn as soon as it is known, for the live view
         change = (msg.phase, msg.wave, msg.error)
         if self.changes.get(msg.sender) == change:
             return
@@ -280,10 +282,17 @@ class Scene:
     # ----------------------------------------------------------------- the plan
 
     def finish(self) -> None:
-        """Draw the plan (module docstring), or say in ``/log`` why it is not drawn."""
+        """Draw the plan (module docstring), or say in ``/log`` why it is not drawn; a plan
+        already drawn while the run went on (:meth:`_status`) is not drawn again."""
         if not self.claimed:
             self._note(self.now_ns, fg.INFO, "no agent reported a plan: no plan drawn")
             return
+        self._plan(quiet=False)
+
+    def _plan(self, quiet: bool) -> None:
+        """Draw the plan of the signed records when its digest is one an agent reported;
+        ``quiet``: while the run goes on (the live view), a plan not (yet) drawable is
+        not said in ``/log`` (the records of a re-search round may still come)."""
         t_ns = min(self.claimed.values())
         from agent.adapters import FormationAdapter
 
@@ -292,9 +301,14 @@ class Scene:
         try:
             plan = fa.plan(records, self.params)
         except (ValueError, KeyError, IndexError, ArithmeticError) as exc:
-            self._note(t_ns, fg.WARNING, f"plan not drawn: {reason(exc)}")
+            if not quiet:
+                self._note(t_ns, fg.WARNING, f"plan not drawn: {reason(exc)}")
+            return
+        if plan.digest == self.plan_drawn:
             return
         if plan.digest not in self.claimed:
+            if quiet:
+                return
             reported = ", ".join(sorted(d[:12] for d in self.claimed))
             self._note(
                 t_ns,
@@ -307,7 +321,8 @@ class Scene:
         try:
             frame = common_frame_pose({r.robot_id: r.start for r in plan.robots}, self.starts)
         except ValueError as exc:
-            self._note(t_ns, fg.WARNING, f"plan not drawn: {reason(exc)}")
+            if not quiet:
+                self._note(t_ns, fg.WARNING, f"plan not drawn: {reason(exc)}")
             return
         x, y, h = frame
         turn = h - math.pi / 2
