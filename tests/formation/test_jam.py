@@ -122,8 +122,12 @@ def test_the_fleet_stops_naming_the_root_failure() -> None:
     root = "robot 4 cannot reach its slot: robot 2 (hold) in its way for 60 polls"
     want = f"{FLEET_STOP}robot 4 failed: {root}"
     assert stop_reason({4: root}) == want
-    # a fleet stop heard before the root is copied verbatim: the same text
+    # a fleet stop heard before the root is copied from the marker on: the same text
     assert stop_reason({1: want}) == want
+    assert stop_reason({1: f"AgentFailure: {want}"}) == want
+    assert stop_reason({1: f"AgentFailure: {want}", 4: f"AgentFailure: {root}"}) == (
+        f"{FLEET_STOP}robot 4 failed: AgentFailure: {root}"
+    )
     assert stop_reason({1: want, 4: root}) == want
     # several roots: the lowest id, whatever the order heard
     other = "contact while walking at believed [0.1, 0.2]"

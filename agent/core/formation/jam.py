@@ -28,7 +28,8 @@ from what every agent knows alike, the agreed plan and the statuses each robot p
 4. **The fleet stops with one reason** (:func:`stop_reason`): once a member of the plan
    has failed, every agent stops, naming the failure that started it, so that no agent
    reports a finished formation around a hole. A failure that is itself such a stop
-   names its root in its text and is copied verbatim; among several roots the lowest id
+   names its root in its text and is copied from :data:`FLEET_STOP` on (what the agent
+   put before it, the exception's name, is dropped); among several roots the lowest id
    is named (the same on every agent that heard them all).
 
 Pure: ids, phases (the wire's phase names, as strings) and positions in, decisions out.
@@ -169,12 +170,14 @@ def jam_verdict(
 def stop_reason(failures: Mapping[int, str]) -> str:
     """Rule 4: the reason every agent stops with, once the members ``failures`` (id →
     published error) have failed; "" for none. A root failure (one that is not itself a
-    fleet stop) is named as ``formation incomplete: robot I failed: ERROR`` (the lowest
-    id among the roots); with only fleet stops heard, the lowest id's text is copied."""
+    fleet stop: no :data:`FLEET_STOP` in it) is named as ``formation incomplete: robot I
+    failed: ERROR`` (the lowest id among the roots); with only fleet stops heard, the
+    lowest id's text is copied from :data:`FLEET_STOP` on."""
     if not failures:
         return ""
-    roots = sorted(i for i, e in failures.items() if not e.startswith(FLEET_STOP))
+    roots = sorted(i for i, e in failures.items() if FLEET_STOP not in e)
     if roots:
         i = roots[0]
         return f"{FLEET_STOP}robot {i} failed: {failures[i] or 'no reason given'}"
-    return failures[min(failures)]
+    text = failures[min(failures)]
+    return text[text.index(FLEET_STOP) :]
