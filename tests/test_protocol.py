@@ -481,6 +481,14 @@ def test_status_carries_the_robot_s_own_check() -> None:
     assert p.decode(p.encode(p.StatusMsg(sender=2, phase="hold"))).check_parent == -1
 
 
+def test_status_names_the_blocker_of_a_jammed_robot() -> None:
+    msg = p.StatusMsg(sender=4, phase="move", blocked_by=2)
+    assert p.decode(p.encode(msg)).blocked_by == 2
+    assert p.decode(p.encode(p.StatusMsg(sender=4, phase="move"))).blocked_by == -1
+    with pytest.raises(p.ProtocolError, match="blocked_by"):
+        p.StatusMsg(sender=4, phase="move", blocked_by=-2)
+
+
 @pytest.mark.parametrize(
     ("field", "value"), [("check_parent", -2), ("r_d", 1e9), ("r_phi", float("nan"))]
 )

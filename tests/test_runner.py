@@ -243,8 +243,41 @@ def test_failed_member_of_an_earlier_wave_stops_us(runner: Runner) -> None:
     after(runner, (1, 2))
     runner.membership.peers[1] = Peer(alive=True, phase="hold", seen_alive=True)
     runner.membership.peers[2] = Peer(alive=True, phase="failed", seen_alive=True)
-    with pytest.raises(AgentFailure, match=r"robot 2 of wave .* failed"):
+    with pytest.raises(AgentFailure, match=r"formation incomplete: robot 2 failed"):
         runner.waves.wait_for_earlier_waves()
+
+
+def test_a_robot_blocked_by_us_makes_us_yield(runner: Runner) -> None:
+    """Issue 21 (agent/core/formation/jam.py rule 2): robot 1 cannot reach its slot
+    because robot 3 (us, not moved yet) stands too near it, and we wait for robot 1."""
+    after(runner, (1, 2))
+    runner.membership.peers[1] = Peer(alive=True, phase="move", seen_alive=True, blocked_by=3)
+    runner.membership.peers[2] = Peer(alive=True, phase="hold", seen_alive=True)
+    runner.waves.wait_for_earlier_waves()  # returns at once: no timeout
+    # the claim of robot 1 on somebody else: we wait our turn
+    runner.membership.peers[1] = Peer(alive=True, phase="move", seen_alive=True, blocked_by=2)
+    with pytest.raises(AgentFailure, match=r"robots \[1\] of earlier waves did not hold"):
+        runner.waves.wait_for_earlier_waves()
+
+
+def test_no_yield_while_an_independent_robot_is_pending(runner: Runner) -> None:
+    after(runner, (1, 2))
+    runner.membership.peers[1] = Peer(alive=True, phase="move", seen_alive=True, blocked_by=3)
+    runner.membership.peers[2] = Peer(alive=True, phase="move", seen_alive=True)
+    with pytest.raises(AgentFailure, match=r"robots \[1, 2\] of earlier waves did not hold"):
+        runner.waves.wait_for_earlier_waves()
+
+
+def test_a_failed_member_stops_a_robot_that_was_done(runner: Runner) -> None:
+    """No 'formation held' around a hole: the fleet's one reason (jam.py rule 4)."""
+    runner.membership.peers[1] = Peer(alive=True, phase="done", seen_alive=True)
+    runner.membership.peers[2] = Peer(
+        alive=True, phase="failed", seen_alive=True, error="robot 2 cannot reach its slot"
+    )
+    with pytest.raises(
+        AgentFailure, match="formation incomplete: robot 2 failed: robot 2 cannot reach its slot"
+    ):
+        runner.hold.finish()
 
 
 def test_earlier_wave_that_never_holds_times_out(runner: Runner) -> None:

@@ -103,6 +103,9 @@ class Context:
     # Unix epoch; journaled, kept across resumptions; agent/phases/runs.py)
     run_epoch: int = 0
     last_status: float = -math.inf  # when the last status was published
+    # issue 21: the member this robot's way is blocked by, beyond its patience (-1: none;
+    # agent/core/formation/jam.py), published in every status
+    blocked_by: int = -1
 
     @property
     def me(self) -> int:
@@ -152,5 +155,6 @@ class Context:
             check_parent=-1 if self.check is None else self.check.parent,
             r_d=0.0 if self.check is None else max(-100.0, min(100.0, self.check.r_d)),
             r_phi=0.0 if self.check is None else max(-100.0, min(100.0, self.check.r_phi)),
+            blocked_by=self.blocked_by,
         )
         self.bus.publish(key_status(self.me), msg, "status")

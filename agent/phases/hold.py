@@ -12,7 +12,10 @@ MARCH    with a route (issue #13, agent/phases/march.py): ``march`` and wait unt
          parent by vision.
 DONE     ``done``, and stay until every member is, repeating the status as heartbeats
          (:meth:`Hold.wait_all`; a final status published once into a cut session
-         reaches nobody, issue #9).
+         reaches nobody, issue #9). A member of the plan that failed leaves a hole: every
+         waiting robot, and every robot that was done, then stops with the fleet's one
+         reason (issue 21, agent/core/formation/jam.py rule 4) instead of reporting a
+         formation held.
 """
 
 from __future__ import annotations
@@ -128,6 +131,9 @@ class Hold:
         deadline = ctx.clock() + ctx.cfg.wave_timeout
         while True:
             self.fleet.pump(0.1)
+            stop = self.fleet.fleet_stop()
+            if stop:
+                raise AgentFailure(stop)
             peer = self.fleet.peer(parent)
             if peer.phase == "failed":
                 return f"parent {parent} failed"
@@ -217,11 +223,15 @@ class Hold:
         return None
 
     def finish(self) -> None:
-        """``done``, and stay until every member is."""
+        """``done``, and stay until every member is; a member that failed meanwhile
+        leaves a hole: stop with the fleet's reason (module docstring)."""
         self.ctx.status("done", 1.0, "formation held", force=True)
         self.wait_all(
             ("done", "failed"), "done", "formation held; waiting for", self.ctx.cfg.member_grace
         )
+        stop = self.fleet.fleet_stop()
+        if stop:
+            raise AgentFailure(stop)
 
     def wait_all(self, phases: tuple[str, ...], mine: str, text: str, linger: float = 0.0) -> None:
         """Stay (heartbeats) until every live member is in ``phases`` (bounded).

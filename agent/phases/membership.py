@@ -32,6 +32,7 @@ from dataclasses import asdict, dataclass
 from typing import TypeVar
 
 from agent.core.agreement import Agreement
+from agent.core.formation.jam import stop_reason
 from agent.core.grace import Grace
 from agent.net.bus import Event
 from agent.phases.context import Context
@@ -76,6 +77,8 @@ class Peer:
     wave: int = -1
     plan_digest: str = ""
     seen_alive: bool = False
+    error: str = ""  # the reason of a ``failed`` status
+    blocked_by: int = -1  # the member it is blocked by (issue 21); -1: none
 
 
 class Membership:
@@ -182,6 +185,7 @@ class Membership:
                 return  # per-sender state only for members (their token came first)
             member.phase, member.wave, member.plan_digest = msg.phase, msg.wave, msg.plan_digest
             member.detail = msg.detail
+            member.error, member.blocked_by = msg.error, msg.blocked_by
             for a in self.agreements():
                 a.on_peer_phase(msg.sender, msg.phase)
 
@@ -269,6 +273,23 @@ class Membership:
     def pin_sessions(self, members: set[int]) -> None:
         """From the plan on, only the sessions the agreement was made with count."""
         self.agreed_epochs = {r: e for r, e in self.epochs.items() if r in members}
+
+    def fleet_stop(self) -> str:
+        """Why this robot must stop because a member of the plan failed ("" if none): the
+        one reason of agent/core/formation/jam.py rule 4, so that no agent reports a
+        formation with a hole as held. Robots the plan left out (they stop by design)
+        and members that only left do not count."""
+        plan = self.ctx.planned
+        if plan is None:
+            return ""
+        counted = set(self.ctx.formation.members(plan)) - set(plan.excluded) - {self.ctx.me}
+        return stop_reason(
+            {
+                i: p.error
+                for i, p in sorted(self.peers.items())
+                if i in counted and p.phase == "failed"
+            }
+        )
 
     def all_arrived(self) -> bool:
         """Whether every live member of the agreement has arrived (:data:`ARRIVED`)."""

@@ -68,6 +68,8 @@ class Fleet(Listening, Protocol):
 
     def all_arrived(self) -> bool: ...
 
+    def fleet_stop(self) -> str: ...
+
 
 class Mover(Protocol):
     """Turns and steps measured by the visual compass (NAO paper 4.2, 5.2.2)."""

@@ -13,6 +13,12 @@ out of the image but still there):
   if beside); bounded by ``max_polls``;
 * **VIA**: once this robot's patience (its rank in the plan, (wave, id) order) is
   spent, a tangent step round the blocker, until the way to the goal is clear again.
+* **jam** (issue 21, agent/core/formation/jam.py): still blocked once the patience is
+  spent, the robot names the member it takes for the blocker (status ``blocked_by``,
+  :meth:`SafeSteps._claim`): a robot that has not moved yet and waits for this one
+  yields (agent/phases/waves.py). It waits longer for a blocker that has not moved yet
+  (up to the wave timeout) than for any other (``max_polls``), then stops naming it;
+  and it stops at once with the fleet's reason when a member of the plan has failed.
 
 :meth:`SafeSteps.walk_to` is the distance control to a goal with these checks.
 """
@@ -38,17 +44,22 @@ from agent.core.control.corridor import (
     patience,
     plan_rank,
 )
+from agent.core.formation.jam import STOP, blocker_of, expected_places, jam_verdict
 from agent.core.nao import CAMERA_HFOV, HEAD_YAW_LIMIT
 from agent.phases.context import AgentFailure, Context
-from agent.phases.roles import Hearing, Mover
+from agent.phases.roles import Fleet, Mover
 
 log = logging.getLogger("agent.phases.safe_steps")
+
+#: m: a NAO seen this near a member's expected place is taken for that member (rule 1 of
+#: agent/core/formation/jam.py): the detector's range error at 1 m and a step's drift
+BLOCKER_MATCH = 0.3
 
 
 class SafeSteps:
     """The distance control whose every step is checked first (module docstring)."""
 
-    def __init__(self, ctx: Context, fleet: Hearing, motion: Mover) -> None:
+    def __init__(self, ctx: Context, fleet: Fleet, motion: Mover) -> None:
         self.ctx = ctx
         self.fleet = fleet
         self.motion = motion
@@ -84,6 +95,9 @@ class SafeSteps:
                     self._via_step(v)
                     continue
                 side = 0
+            why = self.fleet.fleet_stop()
+            if why:
+                raise AgentFailure(why)
             if abs(leg.turn) > self.ctx.cfg.rotation_tolerance:
                 self.motion.rotate(
                     leg.turn, STEP_GAINS if abs(leg.turn) < math.radians(15) else PAPER_GAINS
@@ -121,11 +135,16 @@ class SafeSteps:
         the yaw-0 image the compass takes anyway and those seen lately: returns GO, or
         (``via``) VIA once this robot's patience (its plan rank) is spent; waits
         meanwhile, looking again every poll (status detail ``waiting: NAO ahead at
-        [x, y]``, fixed frame). Bounded: AgentFailure after ``max_polls`` polls."""
+        [x, y]``, fixed frame). Past its patience it names its blocker (:meth:`_claim`).
+        Bounded (agent/core/formation/jam.py rule 3): AgentFailure after ``max_polls``
+        polls, or the wave timeout's worth for a blocker that has not moved yet; at once
+        when a member of the plan has failed (rule 4)."""
         b = self.ctx.beliefs
         cp = self.corridor
         rank = self._rank()
-        for waited in range(cp.max_polls + 1):
+        long_polls = max(cp.max_polls, int(self.ctx.cfg.wave_timeout / max(cp.poll, 0.1)))
+        waited = 0
+        while True:
             frame = self.motion.reference()
             self.motion.last_frame = frame
             seen, _, _ = self.ctx.perception.to_fixed(
@@ -140,12 +159,34 @@ class SafeSteps:
             if v.action == GO or (v.action == VIA and via):
                 if waited:
                     log.info("corridor: %s after %d poll(s)", v.action, waited)
+                self._claim(-1)
                 return v
             where = (b.position + v.blockers[0]).round(2).tolist()
+            why = self.fleet.fleet_stop()
+            if why:
+                raise AgentFailure(why)
+            by = ""
+            if via and waited >= patience(rank, cp):  # patience spent: name the blocker
+                blocker = self._blocker(v.blockers[0])
+                phase = self.fleet.peer(blocker).phase if blocker >= 0 else ""
+                jv = jam_verdict(self.ctx.me, blocker, phase, waited, cp.max_polls, long_polls)
+                if jv.action == STOP:
+                    self._claim(-1)
+                    raise AgentFailure(
+                        f"{jv.reason} (way blocked at believed {b.position.round(2).tolist()})"
+                    )
+                self._claim(blocker)
+                by = f" (robot {blocker})" if blocker >= 0 else ""
+            elif not via and waited >= cp.max_polls:
+                raise AgentFailure(
+                    f"way blocked for {cp.max_polls} polls at believed "
+                    f"{b.position.round(2).tolist()}"
+                )
             self.ctx.status(
-                self.ctx.phase, detail=f"waiting: NAO ahead at {where}", force=waited == 0
+                self.ctx.phase, detail=f"waiting: NAO ahead at {where}{by}", force=waited == 0
             )
             self.waits += 1
+            waited += 1
             self.fleet.pump(cp.poll)
             if waited and not confirmed(v.blockers[0], seen, cp):
                 self._recheck(v.blockers[0], seen, where)
@@ -155,9 +196,37 @@ class SafeSteps:
                 rel = np.array([p for p, _ in self.seen]) - b.position
                 shown = in_view(rel, b.heading, CAMERA_HFOV)
                 self.seen = [e for e, gone in zip(self.seen, shown, strict=True) if not gone]
-        raise AgentFailure(
-            f"way blocked for {cp.max_polls} polls at believed {b.position.round(2).tolist()}"
+
+    def _blocker(self, rel: np.ndarray) -> int:
+        """The member taken for the NAO at ``rel`` (relative, fixed frame): the one whose
+        expected place, by the plan and the phases heard, is nearest (jam.py rule 1);
+        -1 without a plan or a match. A robot the plan left out stands at its start."""
+        plan = self.ctx.planned
+        if plan is None:
+            return -1
+        me = self.ctx.me
+        seen = np.asarray(plan.robot(me).start, dtype=np.float64) + self.ctx.beliefs.position
+        others = [int(i) for i in self.ctx.formation.members(plan) if int(i) != me]
+        left_out = set(plan.excluded)
+        places = expected_places(
+            {i: plan.robot(i).start for i in others},
+            {i: plan.robot(i).target for i in others},
+            {i: "start" if i in left_out else self.fleet.peer(i).phase for i in others},
         )
+        return blocker_of(seen + rel, places, BLOCKER_MATCH)
+
+    def _claim(self, blocker: int) -> None:
+        """Publish that this robot's way is blocked by ``blocker`` (-1: no longer)."""
+        if blocker == self.ctx.blocked_by:
+            return
+        if blocker >= 0:
+            log.info("corridor: blocked by robot %d beyond patience: claimed", blocker)
+        self.ctx.blocked_by = blocker
+        self.ctx.status(self.ctx.phase, detail=self._claim_text(blocker), force=True)
+
+    @staticmethod
+    def _claim_text(blocker: int) -> str:
+        return f"blocked by robot {blocker}" if blocker >= 0 else "way clear"
 
     def _recheck(self, blocker: np.ndarray, seen: np.ndarray, where: list[float]) -> None:
         """A blocker only remembered, not in the yaw-0 image: find out whether it is still

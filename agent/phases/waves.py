@@ -8,7 +8,10 @@ PLAN  the formation core on the agreed records (identical on every agent): this
       record set is served (agent/phases/record_sets.py) and only the agreed sessions
       count (agent/phases/membership.py).
 WAIT  for every robot of this robot's ``after`` list to hold its slot, leader first
-      (agent/core/formation/execution.py).
+      (agent/core/formation/execution.py); but yield (start now) when the robots it
+      still waits for are blocked by it, or wait for one that is (issue 21,
+      agent/core/formation/jam.py rule 2); stop with the fleet's reason once a member of
+      the plan has failed (rule 4).
 MOVE  rotation control to face each leg's goal, distance control in 20 cm steps with
       the heading corrected after each (4.2, 5.2.2), every step checked first
       (agent/phases/safe_steps.py), then the turn to the pyramid axis. A robot restarted
@@ -17,14 +20,19 @@ MOVE  rotation control to face each leg's goal, distance control in 20 cm steps 
 
 from __future__ import annotations
 
+import logging
+
 from agent.core.agreement import Decision
 from agent.core.control import PAPER_GAINS, wrap_pi
+from agent.core.formation.jam import yields
 from agent.core.formation.own_frame import in_own_frame
 from agent.core.formation.plan import Plan
 from agent.phases.context import AgentFailure, Context
 from agent.phases.record_sets import record_set
 from agent.phases.roles import Fleet, Mover, Stepper
 from agent.wire import NeighborRecordMsg
+
+log = logging.getLogger("agent.phases.waves")
 
 
 class Waves:
@@ -60,16 +68,21 @@ class Waves:
 
     def wait_for_earlier_waves(self) -> None:
         """Start once every robot of this robot's ``after`` list holds its slot (the plan's
-        execution rule, ``agent/core/formation/execution.py``; the leader's list is empty)."""
+        execution rule, ``agent/core/formation/execution.py``; the leader's list is empty),
+        or once the robots still pending are jammed on this one (module docstring)."""
         ctx = self.ctx
         plan = ctx.plan
         members = set(ctx.formation.members(plan))
         earlier = sorted(
             int(i) for i in plan.robot(ctx.me).after if int(i) in members and int(i) != ctx.me
         )
+        after = {int(r.robot_id): tuple(int(j) for j in r.after) for r in plan.robots}
         deadline = ctx.clock() + ctx.cfg.wave_timeout
         while True:
             self.fleet.pump(0.1)
+            why = self.fleet.fleet_stop()
+            if why:
+                raise AgentFailure(why)
             pending = []
             for i in earlier:
                 peer = self.fleet.peer(i)
@@ -83,6 +96,12 @@ class Waves:
                     raise AgentFailure(f"robot {i} of wave {plan.robot(i).wave} failed")
                 pending.append(i)
             if not pending:
+                return
+            claims = {i: self.fleet.peer(i).blocked_by for i in sorted(members - {ctx.me})}
+            to = yields(after, ctx.me, pending, claims)
+            if to:
+                log.info("yielding to robot(s) %s, blocked by this robot: starting now", to)
+                ctx.status("wait", 1.0, f"yielding to robot(s) {to}", force=True)
                 return
             if ctx.clock() > deadline:
                 raise AgentFailure(f"robots {pending} of earlier waves did not hold in time")

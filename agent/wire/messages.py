@@ -163,6 +163,9 @@ class StatusMsg(Message):
     ``check_parent`` >= 0: the robot measured that parent with its camera after hold and
     judged the pair (``r_d``, ``r_phi``: NAO paper 5.1.1, ``agent.core.formation.verdict``);
     -1: no such measurement (yet, or the leader).
+
+    ``blocked_by`` >= 0: the robot's way to its slot has stayed blocked by that member
+    beyond its patience (issue 21, ``agent.core.formation.jam``); -1: not blocked.
     """
 
     TAG: ClassVar[str] = "status"
@@ -178,6 +181,7 @@ class StatusMsg(Message):
     check_parent: int = -1
     r_d: float = 0.0
     r_phi: float = 0.0
+    blocked_by: int = -1
     SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {
         "sender": _ID,
         "phase": _str("phase", 16, PHASES),
@@ -191,6 +195,7 @@ class StatusMsg(Message):
         "check_parent": _int("check_parent", -1, MAX_ROBOT_ID),
         "r_d": _float("r_d", -100.0, 100.0),
         "r_phi": _float("r_phi", -100.0, 100.0),
+        "blocked_by": _int("blocked_by", -1, MAX_ROBOT_ID),
     }
 
 

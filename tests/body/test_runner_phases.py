@@ -176,7 +176,8 @@ def test_verify_of_a_failed_parent_is_no_verdict(
 
     r, _, child, _ = _holding(world, bus, perception)
     r.membership.peers[int(child.parent)] = Peer(alive=True, phase="failed", seen_alive=True)
-    with pytest.raises(AgentFailure, match=f"unverified: parent {child.parent} failed"):
+    # the fleet's one reason (agent/core/formation/jam.py rule 4), naming the failed parent
+    with pytest.raises(AgentFailure, match=f"formation incomplete: robot {child.parent} failed"):
         r.hold.verify()
 
 

@@ -18,8 +18,10 @@ from agent.adapters import FormationAdapter, PerceptionAdapter
 from agent.body.in_process import WorldBody
 from agent.config import AgentConfig
 from agent.core.control.corridor import CorridorParams
+from agent.core.formation.plan import Plan, RobotPlan
 from agent.net.bus import Bus
 from agent.phases.context import AgentFailure
+from agent.phases.membership import Peer
 from agent.phases.runner import Runner
 from sim.nao_model import FOOTPRINT_RADIUS
 from sim.scenarios import RobotSpec, Scenario
@@ -95,3 +97,77 @@ def test_a_nao_standing_on_the_goal_stops_the_robot_with_a_reason(
         r.safe_steps.walk_to(np.array([0.0, 0.75]), lambda p: None)
     assert blocked.locomotion.contacts == 0
     assert _separation(blocked) > 2 * FOOTPRINT_RADIUS
+
+
+def _plan_with_robot_2_on_the_goal() -> Plan:
+    """Robot 1 (world (0, -0.8)) planned to (0, -0.05), robot 2 standing at its start
+    (0, 0), planned to (1.5, 0) after robot 1: the jam of issue 21 (world = fixed frame
+    shifted, both facing north at the start of robot 1's frame)."""
+
+    def rp(i: int, start: tuple[float, float], target: tuple[float, float], wave: int) -> RobotPlan:
+        s, t = np.array(start), np.array(target)
+        d = t - s
+        return RobotPlan(
+            robot_id=i, start=s, target=t, order=i - 1, parent=-1 if i == 1 else 1,
+            heading=math.atan2(d[1], d[0]), distance=float(np.hypot(*d)), wave=wave,
+            after=() if i == 1 else (1,),
+        )  # fmt: skip
+
+    robots = (rp(1, (0.0, -0.8), (0.0, -0.05), 0), rp(2, (0.0, 0.0), (1.5, 0.0), 1))
+    return Plan(
+        frame_robot=1, leader=1, axis=math.pi / 2, origin=np.zeros(2), robots=robots,
+        waves=((1,), (2,)), digest="00",
+    )  # fmt: skip
+
+
+def _jammed(world: World, bus: Bus, perception: PerceptionAdapter, phase: str) -> Runner:
+    cfg = AgentConfig(robot_id=1, wave_timeout=1.0)  # 10 polls for a robot not moved yet
+    r = Runner(bus, WorldBody(world, 1), cfg, perception, FormationAdapter())
+    r.safe_steps.corridor = CorridorParams(poll=0.01, max_polls=3)
+    r.ctx.plan = _plan_with_robot_2_on_the_goal()
+    r.membership.peers[2] = Peer(alive=True, phase=phase, seen_alive=True)
+    return r
+
+
+def test_a_jammed_robot_names_its_blocker_and_goes_on_once_it_yields(
+    blocked: World, bus: Bus, perception: PerceptionAdapter
+) -> None:
+    """Issue 21: robot 2 has not moved (``wait``) and stands on robot 1's goal: robot 1
+    names it (``blocked_by`` 2) and waits; robot 2 yields (here: the world moves it, as
+    its own agent would walk away), and robot 1 reaches its goal."""
+    r = _jammed(blocked, bus, perception, "wait")
+    claims: list[int] = []
+    status = r.ctx.status
+
+    def record(phase: str, progress: float = 0.0, detail: str = "", **kw: object) -> None:
+        claims.append(r.ctx.blocked_by)
+        if r.ctx.blocked_by == 2 and blocked.pose(2)[:2] == (0.0, 0.0):
+            blocked.set_pose(2, 1.5, 0.0, -math.pi / 2)  # robot 2 yields
+        status(phase, progress, detail, **kw)  # type: ignore[arg-type]
+
+    r.ctx.status = record  # type: ignore[method-assign]
+    r.safe_steps.walk_to(np.array([0.0, 0.75]), lambda p: None)
+    assert 2 in claims and r.ctx.blocked_by == -1  # claimed, then cleared
+    x, y, _ = blocked.pose(1)
+    assert math.hypot(x, y + 0.05) < 0.15
+    assert blocked.locomotion.contacts == 0
+
+
+@pytest.mark.parametrize(
+    ("phase", "who"),
+    [
+        ("wait", "robot 2 \\(wait\\) in its way for 10 polls"),
+        # a robot that holds is expected on its slot, (1.5, 0): the NAO on the goal is
+        # none of the plan's, and no yield will come
+        ("hold", "a NAO not in the plan \\(or one walking\\) in its way for 3 polls"),
+    ],
+)
+def test_a_jammed_robot_stops_naming_its_blocker(
+    blocked: World, bus: Bus, perception: PerceptionAdapter, phase: str, who: str
+) -> None:
+    """It waits the wave timeout's worth of polls for a robot that has not moved, the
+    corridor's ``max_polls`` for any other NAO, then stops with a reason naming it."""
+    r = _jammed(blocked, bus, perception, phase)
+    with pytest.raises(AgentFailure, match=f"robot 1 cannot reach its slot: {who}"):
+        r.safe_steps.walk_to(np.array([0.0, 0.75]), lambda p: None)
+    assert blocked.locomotion.contacts == 0 and blocked.pose(2)[:2] == (0.0, 0.0)
