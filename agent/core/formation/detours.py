@@ -21,6 +21,18 @@ other, so that both may walk together. Local search, deterministic:
    precedence cycle) is discarded. Repeat until no link improves, ``rounds`` is met or
    MAX_EVALS plans were packed.
 
+The search runs twice (:mod:`scheduled`): the *narrow* neighbourhood above, then, from
+its result, the *wide* one (issue 21, "Planner worst case"), which adds what a chain of
+long parallel walks needs (a robot passing the start of the one ahead of it, both long:
+the worst cases of the line and two-blob fleets): sidesteps at a fixed distance from
+either end (``SIDESTEP_ALONG`` × ``SIDESTEP_OFFSETS`` clearances, a lane taken early
+whatever the path's length), both robots of a link bent at once (a lane each, the pairs
+of candidates >= the pair's clearance apart, shortest first), and slot swaps of each
+chain robot with the ``SWAPS`` robots whose slots are nearest its own. The wide search
+starts from the narrow one's plan and only accepts improvements, so no plan gets a
+longer makespan than the narrow search alone gives. Ties: every list above is in a
+fixed order (rows, candidate order), so identical inputs give identical plans.
+
 Safety is never traded: every accepted plan is packed from exact pair flags, so it
 keeps the same guarantees as the plan it started from.
 """
@@ -45,6 +57,16 @@ TRIES = 6
 #: packing): bounds the time on long chains (a line of 200 robots: ~6 000 without it).
 MAX_EVALS = 2000
 
+#: Slot swaps tried per robot of the critical chain: with the robots whose slots are the
+#: nearest to its own (then by row).
+SWAPS = 8
+
+#: The wide neighbourhood's sidesteps: via points ``along`` clearances from either end
+#: of the path and ``off`` clearances beside it (a lane taken at a fixed distance, not a
+#: fraction of a long path: 7-56 degrees off the straight line).
+SIDESTEP_ALONG = (2.0, 4.0, 8.0)
+SIDESTEP_OFFSETS = (1.0, 2.0, 3.0)
+
 
 #: Extra via points near the ends of the path (fractions of the path, offsets in
 #: clearances): a step aside first, or an approach from the side, clears a robot standing
@@ -53,7 +75,7 @@ END_FRACTIONS = (0.0, 0.1, 0.9, 1.0)
 END_OFFSETS = (1.0, 1.5, 2.0, 3.0)
 
 
-def _candidates(p: np.ndarray, q: np.ndarray, c: float) -> list[np.ndarray]:
+def _candidates(p: np.ndarray, q: np.ndarray, c: float, wide: bool = False) -> list[np.ndarray]:
     """:func:`via_points.detour_candidates`, then the end candidates (left before right)."""
     out = detour_candidates(p, q, c)
     if not out:
@@ -65,7 +87,66 @@ def _candidates(p: np.ndarray, q: np.ndarray, c: float) -> list[np.ndarray]:
         for off in END_OFFSETS:
             for sign in (1.0, -1.0):
                 out.append(p + frac * d + sign * off * c * nrm)
+    if not wide:
+        return out
+    length = float(np.hypot(*d))
+    for along in SIDESTEP_ALONG:
+        if along * c >= 0.5 * length:
+            break
+        for off in SIDESTEP_OFFSETS:
+            for sign in (1.0, -1.0):
+                out.append(p + along * c * u + sign * off * c * nrm)
+                out.append(q - along * c * u + sign * off * c * nrm)
     return out
+
+
+def _stack(p: np.ndarray, q: np.ndarray, current: np.ndarray, c: float) -> np.ndarray:
+    """(K, 3, 2): the current path (as 3 points) and one-via candidates p -> w -> q."""
+    cur = current if current.shape[0] == 3 else np.array([current[0], current[0], current[-1]])
+    cands = _candidates(p, q, c, wide=True)
+    out = np.empty((len(cands) + 1, 3, 2))
+    out[0] = cur
+    if cands:
+        out[1:, 0], out[1:, 1], out[1:, 2] = p, np.array(cands), q
+    return out
+
+
+def _pair_detours(
+    starts: np.ndarray,
+    targets: np.ndarray,
+    paths: Sequence[np.ndarray],
+    u: int,
+    v: int,
+    c: float,
+    req: float,
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Both robots of a link bent at once (a lane each): the combinations of their current
+    path and one-via candidates that keep the two paths >= ``req`` apart, shortest
+    summed length first (then listed order), at most ``TRIES``; both paths change (one
+    alone is tried by the single detours)."""
+    su = _stack(starts[u], targets[u], paths[u], c)
+    sv = _stack(starts[v], targets[v], paths[v], c)
+    ku, kv = su.shape[0], sv.shape[0]
+    d = (
+        seg_seg_dist(
+            su[:, None, :-1, None, :],
+            su[:, None, 1:, None, :],
+            sv[None, :, None, :-1, :],
+            sv[None, :, None, 1:, :],
+        )
+        .reshape(ku, kv, -1)
+        .min(axis=2)
+    )
+    lu = np.sum(np.hypot(*np.diff(su, axis=1).transpose(2, 0, 1)), axis=1)
+    lv = np.sum(np.hypot(*np.diff(sv, axis=1).transpose(2, 0, 1)), axis=1)
+    tot = lu[:, None] + lv[None, :]
+    ok = d >= req
+    ok[0, :] = False
+    ok[:, 0] = False
+    iu, iv = np.nonzero(ok)
+    flat = iu * kv + iv
+    pick = flat[np.lexsort((flat, tot[iu, iv]))][:TRIES]
+    return [(su[f // kv], sv[f % kv]) for f in pick.tolist()]
 
 
 def _path(start: np.ndarray, via: Sequence[np.ndarray], target: np.ndarray) -> np.ndarray:
@@ -98,6 +179,7 @@ def shorten(
     radius: float,
     bound: float,
     rounds: int = 20,
+    wide: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, tuple[tuple[np.ndarray, ...], ...], PairFlags]:
     """Local search of the module doc. ``order``: the slot order of every robot (the
     leader holds 0; also the packing priority). Returns (targets, order, vias, flags) of
@@ -155,8 +237,13 @@ def shorten(
                 trial = (*key, rows, new_paths, new_t, new_o, f2, new_len)
             tried += 1
 
-        seen: set[tuple[int, int]] = set()
-        for u, v in itertools.pairwise(chain):
+        def swap(
+            u: int,
+            v: int,
+            targets: np.ndarray = targets,
+            order: np.ndarray = order,
+            paths: list[np.ndarray] = paths,
+        ) -> None:
             # 2-opt: the two robots swap slots (straight paths)
             new_t = targets.copy()
             new_t[[u, v]] = new_t[[v, u]]
@@ -166,12 +253,30 @@ def shorten(
             swapped[u] = _path(starts[u], (), new_t[u])
             swapped[v] = _path(starts[v], (), new_t[v])
             consider([u, v], swapped, new_t, new_o)
+
+        swapped_pairs: set[tuple[int, int]] = set()
+        for r in chain if wide else []:
+            dist = np.hypot(*(targets - targets[r]).T)
+            near = np.lexsort((np.arange(n), dist))[1 : SWAPS + 1]
+            for o in near.tolist():
+                if o == r:
+                    continue
+                key2 = (min(r, o), max(r, o))
+                if key2 not in swapped_pairs:
+                    swapped_pairs.add(key2)
+                    swap(r, o)
+        seen: set[tuple[int, int]] = set()
+        for u, v in itertools.pairwise(chain):
+            key2 = (min(u, v), max(u, v))
+            if key2 not in swapped_pairs:
+                swapped_pairs.add(key2)
+                swap(u, v)
             req = pair_req.get((min(u, v), max(u, v)), c)
             for r, other in ((v, u), (u, v)):
                 if (r, other) in seen:
                     continue
                 seen.add((r, other))
-                cands = _candidates(starts[r], targets[r], c)
+                cands = _candidates(starts[r], targets[r], c, wide)
                 if not cands:
                     continue
                 k_c = len(cands)
@@ -191,6 +296,10 @@ def shorten(
                     new_paths = list(paths)
                     new_paths[r] = stack[j]
                     consider([r], new_paths, targets, order)
+            for pu, pv in _pair_detours(starts, targets, paths, u, v, c, req) if wide else []:
+                new_paths = list(paths)
+                new_paths[u], new_paths[v] = pu, pv
+                consider([u, v], new_paths, targets, order)
         if trial is None:
             break
         best = trial[0]

@@ -123,9 +123,10 @@ def scheduled_plan(
         flags = pair_flags(paths, 2.0 * params.radius)
     leader_row = int(np.flatnonzero(order == 0)[0])
     if bound is not None and not obs.shape[0]:
-        targets, order, vias_rows, flags = shorten(
-            pos, targets, vias_rows, flags, order, params.radius, bound
-        )
+        for wide in (False, True):  # the narrow search, then the wide one from its result
+            targets, order, vias_rows, flags = shorten(
+                pos, targets, vias_rows, flags, order, params.radius, bound, wide=wide
+            )
         leader_row = int(np.flatnonzero(order == 0)[0])
     lengths = np.array(
         [path_length(pos[k], vias_rows[k], targets[k]) for k in range(n)], dtype=np.float64
