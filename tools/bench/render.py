@@ -138,6 +138,7 @@ def measure(
             world_cam = int(part.split("=")[1])
     return {
         "workers": workers,
+        "load_average_1min": os.getloadavg()[0],
         "frames": len(lat),
         "wall_s": t_wall,
         "frames_per_s": len(lat) / t_wall,
@@ -158,16 +159,31 @@ def plot(rows: list[dict[str, Any]], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    labels = ["in the world" if r["workers"] == 0 else f"{r['workers']} worker(s)" for r in rows]
-    fig, ax = plt.subplots(1, 2, figsize=(9, 3.4))
-    ax[0].bar(labels, [r["frames_per_cpu_s"] for r in rows], color="#4a7")
+    modes = sorted({r["workers"] for r in rows})
+    labels = ["in the world" if k == 0 else f"{k} worker{'s' * (k > 1)}" for k in modes]
+    fig, ax = plt.subplots(1, 2, figsize=(9.5, 3.6))
+    for x, k in enumerate(modes):  # every run a dot (repeats), the bar their mean
+        mine = [r for r in rows if r["workers"] == k]
+        per_cpu = [r["frames_per_cpu_s"] for r in mine]
+        per_s = [r["frames_per_s"] for r in mine]
+        ax[0].bar(x, sum(per_cpu) / len(per_cpu), color="#4a7", alpha=0.7)
+        ax[0].plot([x] * len(mine), per_cpu, "ko", ms=4)
+        ax[1].bar(x, sum(per_s) / len(per_s), color="#47a", alpha=0.7)
+        ax[1].plot([x] * len(mine), per_s, "ko", ms=4)
+        for r in mine:
+            ax[1].annotate(
+                f"load {r['load_average_1min']:.0f}",
+                (x, r["frames_per_s"]),
+                xytext=(6, -3),
+                textcoords="offset points",
+                fontsize=7,
+            )
     ax[0].set_ylabel("frames per CPU-second")
-    ax[0].set_title("throughput per CPU (world + workers + router)")
-    ax[1].bar(labels, [r["frames_per_s"] for r in rows], color="#47a")
+    ax[0].set_title("per CPU-second (world + workers + router)", fontsize=10)
     ax[1].set_ylabel("frames per wall second")
-    ax[1].set_title(f"wall throughput on {os.cpu_count()} shared cores")
+    ax[1].set_title(f"per wall second, {os.cpu_count()} cores shared (1-min load)", fontsize=10)
     for a in ax:
-        a.tick_params(axis="x", labelsize=8)
+        a.set_xticks(range(len(modes)), labels, fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
