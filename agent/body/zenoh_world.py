@@ -225,7 +225,14 @@ class ZenohBody:
         """Nothing to stop: the world ends each motion itself (it has no cancel)."""
 
     def close(self) -> None:
-        """Nothing to release: the bus is the caller's."""
+        """Nothing to release (the bus is the caller's); says how many frames the
+        pose-time rule refused, if any."""
+        if self.stale_frames:
+            log.info(
+                "camera: %d frame(s) drawn before the last motion ended were asked again",
+                self.stale_frames,
+            )
+            self.stale_frames = 0
 
     def _id(self, request_id: int) -> int:
         """``request_id``, or a fresh one for 0 (the wire checks the range)."""
