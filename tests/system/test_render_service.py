@@ -49,3 +49,28 @@ def test_agents_served_by_a_render_worker_build_the_pyramid(tmp_path: Path) -> N
         assert abs(p["r_d"]) <= 0.125 and abs(p["r_phi"]) <= 0.30, p
     assert r["contacts"] == 0
     assert r["success"] is True and res.returncode == 0 and "RESULT: SUCCESS" in res.stdout
+
+
+@pytest.mark.netns
+def test_world_and_two_workers_on_test_hosts(tmp_path: Path) -> None:
+    """``tools.eval_render``: router, world, monitor, 3 agents and 2 render workers each on
+    a network-namespace host of its own; the workers draw every picture."""
+    import os
+    import shutil
+
+    from tools import netns
+
+    if shutil.which("iptables") is None or netns.unavailable_reason() is not None:
+        pytest.skip(f"needs iptables and network namespaces: {netns.unavailable_reason()}")
+    out = tmp_path / "hosts"
+    res = subprocess.run(
+        [sys.executable, "-m", "tools.eval_render", "--robots", "3", "--seed", "1",
+         "--workers", "2", "--out", str(out), "--prefix", f"rt{os.getpid() % 100000}",
+         "--timeout", "300"],
+        cwd=ROOT, capture_output=True, text=True, timeout=480,
+    )  # fmt: skip
+    assert res.returncode == 0 and "SUCCESS" in res.stdout, (res.stdout + res.stderr)[-3000:]
+    doc = json.loads((out / "render_hosts.json").read_text())
+    served = doc["render_served"]
+    assert served["render-1"] and served["render-2"], served  # both drew their robots
+    assert doc["world_served_camera"] <= 3 and doc["contacts"] == 0
