@@ -25,6 +25,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import cv2
+import numpy as np
 
 from sim.scenarios import Scenario, from_dict, to_dict
 
@@ -34,6 +35,14 @@ PNG_PARAMS = [
     cv2.IMWRITE_PNG_STRATEGY,
     cv2.IMWRITE_PNG_STRATEGY_RLE,
 ]
+
+
+def png_bytes(img: np.ndarray) -> bytes:
+    """A rendered BGR picture as the PNG bytes a ``CameraReply`` carries."""
+    ok, png = cv2.imencode(".png", img, PNG_PARAMS)
+    if not ok:
+        raise ValueError("PNG encoding failed")
+    return bytes(png.tobytes())
 
 
 @dataclass(frozen=True)
@@ -80,10 +89,7 @@ def _worker(index: int, scenario: dict[str, Any], jobs: Any, results: Any) -> No
                     if rid != job.robot_id:
                         world.set_head_yaw(rid, h)
                 img = world.render(job.robot_id, job.yaw)
-                ok, png = cv2.imencode(".png", img, PNG_PARAMS)
-                if not ok:
-                    raise ValueError("PNG encoding failed")
-                results.send(Result(job.job_id, index, png=png.tobytes()))
+                results.send(Result(job.job_id, index, png=png_bytes(img)))
             except Exception as exc:
                 results.send(Result(job.job_id, index, error=f"{type(exc).__name__}: {exc}"))
 

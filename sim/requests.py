@@ -14,6 +14,7 @@ ones and answers the others with their reason.
 - ``world/robot/{id}/camera``: ``CameraRequest(yaw)``; without a payload the selector
   parameter ``yaw`` (radians, at most ``MAX_PARAM_CHARS`` characters) is read instead.
 - ``world/robot/{id}/walk`` / ``turn``: ``WalkRequest`` / ``TurnRequest``.
+- ``world/scenario``: ``ScenarioRequest`` (or no payload), asked by render workers.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from agent.wire import (
     Message,
     ProtocolError,
     RegisterRequest,
+    ScenarioRequest,
     TurnRequest,
     WalkRequest,
     decode,
@@ -126,7 +128,7 @@ class CheckedRequest:
 
     kind: str
     query: Request
-    robot_id: int  # -1 for register
+    robot_id: int  # -1 for register and scenario
     msg: Message
 
 
@@ -146,6 +148,10 @@ def check(kind: str, q: Request, robot_ids: frozenset[int]) -> CheckedRequest:
         if payload is None:
             return CheckedRequest(kind, q, -1, RegisterRequest())
         return CheckedRequest(kind, q, -1, decode_as(payload, RegisterRequest))
+    if kind == "scenario":
+        if payload is None:
+            return CheckedRequest(kind, q, -1, ScenarioRequest())
+        return CheckedRequest(kind, q, -1, decode_as(payload, ScenarioRequest))
     rid = id_from_key(q.key)
     if rid not in robot_ids:
         raise ValueError(f"unknown robot {rid}; robots are {sorted(robot_ids)}")

@@ -6,7 +6,12 @@ is authenticated and checked: :mod:`sim.requests`):
 - ``world/register``: ``RegisterRequest(want)`` -> ``RegisterReply(robot_id)``: the lowest
   free robot id of the scenario (or ``want`` if it is free); who may claim or drive which
   robot, and how long: :mod:`sim.bindings`.
-- ``world/robot/{id}/camera``: ``CameraRequest(yaw)`` -> ``CameraReply`` (PNG).
+- ``world/robot/{id}/camera``: ``CameraRequest(yaw)`` -> ``CameraReply`` (PNG). Declared
+  not complete: where render workers serve a robot's camera (:mod:`sim.render_worker`,
+  complete queryables), a best-matching query goes to one of them, and to the world
+  only when none is left.
+- ``world/scenario``: ``ScenarioRequest`` -> ``ScenarioReply`` (the scenario as JSON, for
+  render workers building their copy of the room; secure: to the ``render`` key only).
 - ``world/robot/{id}/walk`` / ``turn``: ``WalkRequest`` / ``TurnRequest`` -> a
   ``CommandReply(done|contact)`` sent when the motion has finished in sim time. A
   request with a ``request_id`` (> 0) is executed once per (robot, id), so a client may
@@ -47,6 +52,7 @@ head yaws, sim time) is taken at once and the picture drawn by a
 from __future__ import annotations
 
 import contextlib
+import json
 import math
 import queue
 import sys
@@ -56,13 +62,13 @@ from collections import Counter, defaultdict
 from collections.abc import Callable
 from typing import Any
 
-import cv2
 import zenoh
 
 from agent.wire import (
     KEY_ALIVE_ALL,
     KEY_WORLD_CLOCK,
     KEY_WORLD_REGISTER,
+    KEY_WORLD_SCENARIO,
     KEY_WORLD_TRUTH_CONTACTS,
     KEY_WORLD_TRUTH_POSES,
     CameraReply,
@@ -76,6 +82,8 @@ from agent.wire import (
     NetworkSpec,
     RegisterReply,
     RegisterRequest,
+    ScenarioReply,
+    ScenarioRequest,
     TruthPosesMsg,
     TurnRequest,
     WalkRequest,
@@ -84,12 +92,12 @@ from agent.wire import (
     reason,
     trust,
 )
-from sim import camera
+from sim import camera, scenarios
 from sim.bindings import RobotBindings, Unauthorised
 from sim.delays import DelayedReplies
 from sim.locomotion import Contact, Done
 from sim.motions import Motions
-from sim.render_pool import PNG_PARAMS, Job, RenderPool, Result
+from sim.render_pool import Job, RenderPool, Result, png_bytes
 from sim.requests import CheckedRequest, Query, Request, check, payload_size
 from sim.world import World
 
@@ -196,8 +204,11 @@ class WorldServer:
             return on_query
 
         self._keep.append(s.declare_queryable(KEY_WORLD_REGISTER, handler("register")))
+        self._keep.append(s.declare_queryable(KEY_WORLD_SCENARIO, handler("scenario")))
         for kind in ("camera", "walk", "turn"):
-            self._keep.append(s.declare_queryable(f"world/robot/*/{kind}", handler(kind)))
+            # not complete: a render worker's complete camera queryable is preferred
+            q = s.declare_queryable(f"world/robot/*/{kind}", handler(kind), complete=False)
+            self._keep.append(q)
 
         def on_alive(sample: Any) -> None:
             self.admit_alive(sample)
@@ -407,10 +418,12 @@ class WorldServer:
         req: CheckedRequest = item
         q, rid, msg = req.query, req.robot_id, req.msg
         try:
-            if req.kind != "register" and q.who is not None:
+            if req.kind not in ("register", "scenario") and q.who is not None:
                 self._authorise(q, rid)
             if isinstance(msg, RegisterRequest):
                 self._reply(q, self._register(q, msg))
+            elif isinstance(msg, ScenarioRequest):
+                self._reply(q, self._scenario(q))
             elif isinstance(msg, CameraRequest):
                 rep = self._camera(q, rid, msg.yaw)
                 if rep is not None:  # else a render worker has it
@@ -440,6 +453,14 @@ class WorldServer:
         self._log(f"robot {rid} claimed")
         return RegisterReply(robot_id=rid)
 
+    def _scenario(self, q: Request) -> Message:
+        """The scenario, for a render worker (secure: the ``render`` key only)."""
+        if q.who is not None and q.who != trust.Identity("render"):
+            self.untrusted += 1
+            raise ValueError(f"{q.who.cn} may not ask for the scenario")
+        text = json.dumps(scenarios.to_dict(self.world.scenario), sort_keys=True)
+        return ScenarioReply(scenario=text.encode())
+
     def _camera(self, q: Request, rid: int, yaw: float) -> Message | None:
         if self.pool is not None and self.pool.alive > 0:
             if len(self._cam_pending) >= MAX_RENDER_PENDING:
@@ -461,9 +482,6 @@ class WorldServer:
 
     def _render_here(self, rid: int, yaw: float, t_sim: float) -> Message:
         img = self.world.render(rid, yaw)
-        ok, png = cv2.imencode(".png", img, PNG_PARAMS)
-        if not ok:
-            raise ValueError("PNG encoding failed")
         return CameraReply(
             robot_id=rid,
             yaw=self.world.head_yaw(rid),
@@ -471,7 +489,7 @@ class WorldServer:
             width=img.shape[1],
             height=img.shape[0],
             encoding="png",
-            data=png.tobytes(),
+            data=png_bytes(img),
         )
 
     def _rendered(self, res: Result) -> None:
@@ -517,13 +535,14 @@ class WorldServer:
         for c in contacts:
             self._put(KEY_WORLD_TRUTH_CONTACTS, ContactMsg(t_sim=c.t_sim, a=c.a, b=c.b))
             self._log(f"contact t={c.t_sim:.2f} between {c.a} and {c.b}")
+        # The poses first: a render worker has them before the robot asks for a picture.
+        self._publish_truth()
         for d in done:
             ended = self.motions.finish(d)
             if ended is not None:
                 queries, rep = ended
                 for q in queries:
                     self._answer(q, rep)
-        self._publish_truth()
 
     # ------------------------------------------------------------------ output
 

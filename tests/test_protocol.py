@@ -36,6 +36,8 @@ SAMPLES: list[p.Message] = [
     ),
     p.RegisterRequest(),
     p.RegisterReply(robot_id=4),
+    p.ScenarioRequest(),
+    p.ScenarioReply(scenario=b'{"seed": 7}'),
     p.CameraRequest(yaw=0.3),
     p.CameraReply(
         robot_id=1, yaw=-1.0, t_sim=3.0, width=640, height=480, encoding="png", data=b"\x89PNG..."

@@ -106,3 +106,90 @@ def test_retry_timeout_counts_attempts_and_raises_past_the_total() -> None:
 
     with pytest.raises(QueryTimeout):
         retry_timeout(never, total_s=0.05, attempt_s=2.0, what="x")
+
+
+# --------------------------------------------------------------------------- pose time
+# issue 21: a render worker follows the world's poses a little behind; a frame drawn
+# from poses older than the end of the robot's last motion is never used.
+
+
+def _png() -> bytes:
+    import cv2
+    import numpy as np
+
+    ok, data = cv2.imencode(".png", np.zeros((4, 6, 3), np.uint8))
+    assert ok
+    return bytes(data.tobytes())
+
+
+class RenderedBus:
+    """Motions end at ``motion_t``; camera replies carry the pose times of ``frames``
+    in turn (the last one repeated); every camera query must ask for the best match."""
+
+    def __init__(self, frames: list[float], motion_t: float = 5.0) -> None:
+        self.frames = frames
+        self.motion_t = motion_t
+        self.status = "done"
+        self.camera_asks = 0
+
+    def query(
+        self, key: str, msg: object, expect: type, timeout: float, best: bool = False
+    ) -> object:
+        from agent.wire import CameraReply
+
+        if key.endswith("/camera"):
+            assert best, "a camera query goes to one complete queryable"
+            self.camera_asks += 1
+            t = self.frames.pop(0) if len(self.frames) > 1 else self.frames[0]
+            return CameraReply(
+                robot_id=3, yaw=0.0, t_sim=t, width=6, height=4, encoding="png", data=_png()
+            )
+        return CommandReply(robot_id=3, status=self.status, t_sim=self.motion_t)
+
+
+def test_a_frame_older_than_the_last_motion_is_asked_for_again() -> None:
+    bus = RenderedBus([4.9, 4.95, 5.0])
+    body = ZenohBody(bus, 3)  # type: ignore[arg-type]
+    assert body.camera(0.0).t_sim == 4.9  # no motion yet: any frame will do
+    bus.frames = [4.9, 4.95, 5.0]
+    body.walk(0.2)
+    assert body.motion_end == 5.0
+    frame = body.camera(0.3)
+    assert frame.t_sim == 5.0 and bus.camera_asks == 4 and body.stale_frames == 2
+
+
+def test_a_contact_ends_a_motion_too() -> None:
+    bus = RenderedBus([7.0])
+    bus.motion_t, bus.status = 7.5, "contact"
+    body = ZenohBody(bus, 3, camera_timeout=0.3)  # type: ignore[arg-type]
+    assert body.turn(0.1).status == "contact"
+    assert body.motion_end == 7.5
+    with pytest.raises(BodyError, match=r"predates the last motion.*t=7\.00.*t=7\.50"):
+        body.camera(0.0)
+    assert body.stale_frames >= 1
+
+
+def test_a_renderer_that_never_catches_up_fails_within_the_camera_timeout() -> None:
+    import time
+
+    bus = RenderedBus([1.0], motion_t=2.0)
+    body = ZenohBody(bus, 3, camera_timeout=0.5)  # type: ignore[arg-type]
+    body.walk(0.1)
+    t0 = time.monotonic()
+    with pytest.raises(BodyError, match="predates the last motion"):
+        body.camera(0.0)
+    assert time.monotonic() - t0 < 1.5
+    assert 1 < bus.camera_asks < 20  # asked again with a growing pause, not in a hot loop
+
+
+def test_an_error_reply_to_a_camera_query_is_not_retried() -> None:
+    bus = LossyBus(lost=0, error=BusError("render failed: boom"))
+
+    def query(key: str, msg: object, expect: type, timeout: float, best: bool = False) -> object:
+        return LossyBus.query(bus, key, msg, expect, timeout)
+
+    bus.query = query  # type: ignore[method-assign]
+    body = ZenohBody(bus, 3)  # type: ignore[arg-type]
+    with pytest.raises(BodyError, match="render failed"):
+        body.camera(0.0)
+    assert len(bus.asked) == 1

@@ -152,6 +152,11 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--world-arg", action="append", default=[], help="extra argument for python -m sim"
     )
     p.add_argument(
+        "--render-service", type=int, default=0, metavar="K",
+        help="K render workers (python -m sim.render_worker --shard i/K) draw the cameras "
+        "instead of the world (issue 21; default 0: the world draws them)",
+    )  # fmt: skip
+    p.add_argument(
         "--agent-arg",
         action="append",
         default=[],
@@ -219,6 +224,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         p.error("--isolated needs at least 2 robots")
     if a.batch < 0:
         p.error("--batch must be >= 0")
+    if not 0 <= a.render_service <= 8 or (a.render_service and a.body == "naoqi"):
+        p.error("--render-service must be in [0, 8], and needs --body zenoh")
     if not (math.isfinite(a.noise_scale) and 0.0 <= a.noise_scale <= MAX_NOISE_SCALE):
         p.error(f"--noise-scale must be in [0, {MAX_NOISE_SCALE:g}]")
     if a.body == "naoqi" and a.auto_ids:

@@ -73,6 +73,8 @@ def valid_samples() -> dict[str, list[P.Message]]:
         ],
         "register": [P.RegisterRequest(), P.RegisterRequest(want=3)],
         "registered": [P.RegisterReply(robot_id=4)],
+        "scenario?": [P.ScenarioRequest()],
+        "scenario": [P.ScenarioReply(scenario=b'{"seed": 7}')],
         "camera": [P.CameraRequest(yaw=0.3), P.CameraRequest()],
         "image": [
             P.CameraReply(

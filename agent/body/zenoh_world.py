@@ -13,6 +13,16 @@ restarted agent sends the command in flight again with the same id (issue 20). A
 camera query that times out is asked again as it is (a picture moves nothing but the
 head, to the same yaw).
 The body reports no pose: the agent knows only what it commanded and what it sees.
+
+Render workers (issue 21; docs/world.md "Render workers"): a camera query goes to one
+complete queryable (``best``: zenoh's best-matching target), a render worker when one
+serves the robot, else the world. Each reply carries the world time of the poses it was
+drawn from (``CameraReply.t_sim``); a worker follows the world's poses a little behind.
+The pose-time rule: a frame whose poses precede the end of this robot's last motion
+(the ``t_sim`` of its last walk or turn reply) shows the robot where it was, and is never
+used: the body asks again, after a short pause, until a fresh frame comes or the camera
+timeout is spent (then a :class:`BodyError`). Frames refused so are counted in
+``stale_frames``.
 """
 
 from __future__ import annotations
@@ -59,6 +69,10 @@ log = logging.getLogger("agent.body.zenoh_world")
 MOTION_ATTEMPT_S = 60.0
 #: ... and of a camera query.
 CAMERA_ATTEMPT_S = 15.0
+#: Pause before asking again for a frame older than the last motion, doubled up to
+#: STALE_WAIT_MAX_S (a render worker's poses lag the world's by a publication or two).
+STALE_WAIT_S = 0.02
+STALE_WAIT_MAX_S = 0.5
 
 
 def retry_no_route(call: Callable[[], T], deadline_s: float, first_wait: float = 0.05) -> T:
@@ -134,6 +148,9 @@ class ZenohBody:
         self.camera_timeout = camera_timeout
         self.motion_timeout = motion_timeout
         self._t_sim = 0.0
+        #: World time at which this robot's last motion ended (the pose-time rule).
+        self.motion_end = 0.0
+        self.stale_frames = 0  # frames refused: drawn from poses older than motion_end
         self.contacts = 0
         self._next_request = secrets.randbits(40) + 1
         self.retries = 0  # queries asked again after a timeout
@@ -150,19 +167,39 @@ class ZenohBody:
         """The forehead image with the head at ``yaw`` (rad, + left, |yaw| <= 119.5°)."""
         if not math.isfinite(yaw) or abs(yaw) > HEAD_YAW_LIMIT + 1e-9:
             raise ValueError(f"head yaw {yaw} rad outside ±{math.degrees(HEAD_YAW_LIMIT):.1f}°")
-        req = CameraRequest(yaw=yaw)
-        try:
-            rep = self._ask(
-                key_camera(self.robot_id), req, CameraReply, self.camera_timeout, CAMERA_ATTEMPT_S
-            )
-        except BusError as exc:
-            raise BodyError(f"camera at yaw {math.degrees(yaw):.1f}°", str(exc)) from None
+        what = f"camera at yaw {math.degrees(yaw):.1f}°"
+        rep = self._fresh_frame(CameraRequest(yaw=yaw), what)
         buf = np.frombuffer(rep.data, dtype=np.uint8)
         img = cv2.imdecode(buf, cv2.IMREAD_COLOR)
         if img is None or img.shape != (rep.height, rep.width, 3):
-            raise BodyError(f"camera at yaw {math.degrees(yaw):.1f}°", "undecodable image")
+            raise BodyError(what, "undecodable image")
         self._t_sim = max(self._t_sim, rep.t_sim)
         return Frame(img, rep.yaw, rep.t_sim)
+
+    def _fresh_frame(self, req: CameraRequest, what: str) -> CameraReply:
+        """A camera reply drawn from poses no older than the end of the last motion,
+        asked again (after a pause) while it is older, within the camera timeout."""
+        end = time.monotonic() + self.camera_timeout
+        wait = STALE_WAIT_S
+        key = key_camera(self.robot_id)
+        while True:
+            left = max(0.1, end - time.monotonic())
+            try:
+                rep = self._ask(key, req, CameraReply, left, CAMERA_ATTEMPT_S, best=True)
+            except BusError as exc:
+                raise BodyError(what, str(exc)) from None
+            if rep.t_sim >= self.motion_end:
+                return rep
+            self.stale_frames += 1
+            if time.monotonic() + wait > end:
+                raise BodyError(
+                    what,
+                    f"every frame predates the last motion: poses of t={rep.t_sim:.2f} s, "
+                    f"the motion ended at t={self.motion_end:.2f} s",
+                )
+            log.debug("%s: poses of t=%.2f s < motion end %.2f s", what, rep.t_sim, self.motion_end)
+            time.sleep(wait)  # the renderer's poses catch up with the world's
+            wait = min(2.0 * wait, STALE_WAIT_MAX_S)
 
     def new_request_id(self) -> int:
         """The next request id of this body (never 0)."""
@@ -188,7 +225,14 @@ class ZenohBody:
         """Nothing to stop: the world ends each motion itself (it has no cancel)."""
 
     def close(self) -> None:
-        """Nothing to release: the bus is the caller's."""
+        """Nothing to release (the bus is the caller's); says how many frames the
+        pose-time rule refused, if any."""
+        if self.stale_frames:
+            log.info(
+                "camera: %d frame(s) drawn before the last motion ended were asked again",
+                self.stale_frames,
+            )
+            self.stale_frames = 0
 
     def _id(self, request_id: int) -> int:
         """``request_id``, or a fresh one for 0 (the wire checks the range)."""
@@ -196,11 +240,24 @@ class ZenohBody:
             raise ValueError(f"request id {request_id!r} is not an id")
         return request_id or self.new_request_id()
 
-    def _ask(self, key: str, req: Message, expect: type[M], total_s: float, attempt_s: float) -> M:
+    def _ask(
+        self,
+        key: str,
+        req: Message,
+        expect: type[M],
+        total_s: float,
+        attempt_s: float,
+        best: bool = False,
+    ) -> M:
         """The query, asked again after a timeout (same request, so the same request id)
-        and while it meets no queryable (NoRoute: nothing was executed)."""
+        and while it meets no queryable (NoRoute: nothing was executed); ``best``: to one
+        complete queryable (a camera: one render worker), see :meth:`Bus.query`."""
 
         def once(timeout: float) -> M:
+            if best:
+                return retry_no_route(
+                    lambda: self.bus.query(key, req, expect, timeout, best=True), 30.0
+                )
             return retry_no_route(lambda: self.bus.query(key, req, expect, timeout), 30.0)
 
         rep, attempts = retry_timeout(once, total_s, attempt_s, key)
@@ -213,6 +270,7 @@ class ZenohBody:
         except BusError as exc:
             raise BodyError(what, str(exc)) from None
         self._t_sim = max(self._t_sim, rep.t_sim)
+        self.motion_end = max(self.motion_end, rep.t_sim)
         if rep.status == "contact":
             self.contacts += 1
             return MotionResult("contact", rep.t_sim, rep.detail)

@@ -156,6 +156,15 @@ def key_owner(key: str) -> Identity:
     return Identity("world") if key.startswith("world/") else Identity.robot(id_from_key(key))
 
 
+def reply_signers(key: str) -> tuple[Identity, ...]:
+    """Who may sign a reply on ``key``: its owner, and on a camera key
+    (``world/robot/{i}/camera``) also the render workers (issue 21)."""
+    owner = key_owner(key)
+    if owner == Identity("world") and key.startswith("world/robot/") and key.endswith("/camera"):
+        return owner, Identity("render")
+    return (owner,)
+
+
 @dataclass(frozen=True)
 class Event:
     """One thing that arrived: a decoded message on ``key``, or a liveliness change."""
@@ -407,14 +416,20 @@ class Bus:
         expect: type[M],
         timeout: float = 10.0,
         accept: Callable[[M], str] | None = None,
+        best: bool = False,
     ) -> M:
         """Send ``msg`` to the queryable on ``key`` and return its reply of type ``expect``.
 
         Raises :class:`BusError` with the reason on timeout, an ``ErrorReply`` or a reply
         that does not decode. ``accept(reply)``: a reason to skip the reply ("" takes
         it), for queries several peers answer (the first acceptable reply wins).
-        Replies on ``world/...`` must be sealed by the world, on ``nao/{i}/...`` by
-        robot i, on the key the reply names.
+        Replies on ``world/...`` must be sealed by the world (a camera's also by a render
+        worker), on ``nao/{i}/...`` by robot i, on the key the reply names.
+
+        ``best``: zenoh sends the query to one complete queryable, the nearest, if there
+        is one, else to every matching one (``QueryTarget.BEST_MATCHING``): a camera
+        query goes to one render worker, not to all (issue 21). Default: to every
+        matching queryable.
         """
         data = encode(msg)
         nonce = b""
@@ -426,11 +441,14 @@ class Bus:
         try:
             # Every queryable that matches gets the query and every reply is kept (no
             # consolidation): a stranger's queryable answering first cannot hide the world's.
+            # With ``best``, one complete queryable (in a routed fleet the router's access
+            # control lets only the world and the render workers declare them on world/**).
+            target = zenoh.QueryTarget.BEST_MATCHING if best else zenoh.QueryTarget.ALL
             replies = self.session.get(
                 key,
                 payload=data,
                 timeout=timeout,
-                target=zenoh.QueryTarget.ALL,
+                target=target,
                 consolidation=zenoh.ConsolidationMode.NONE,
             )
         except Exception as exc:  # zenoh refused the query (bad key, closed session)
@@ -507,10 +525,11 @@ class Bus:
         raw = take_payload(ok.payload, MAX_SEALED_BYTES if self.verifier else MAX_MESSAGE_BYTES)
         if self.verifier is not None:
             rkey = key if key.startswith("world/") else str(ok.key_expr)
-            owner = key_owner(rkey)
+            signers = reply_signers(rkey)
             opened = self.verifier.open(rkey, raw, bind=nonce, replay=False)
-            if opened.who != owner:
-                raise TrustError(f"reply signed by {opened.who.cn}, not {owner.cn}")
+            if opened.who not in signers:
+                names = " or ".join(s.cn for s in signers)
+                raise TrustError(f"reply signed by {opened.who.cn}, not {names}")
             raw = opened.payload
         try:
             return decode(raw)

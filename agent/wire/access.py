@@ -9,7 +9,12 @@ from typing import Any
 
 from agent.wire.credentials import Credentials
 from agent.wire.identity import Identity
-from agent.wire.keys import KEY_RECORDS_ALL
+from agent.wire.keys import (
+    KEY_CAMERA_ALL,
+    KEY_RECORDS_ALL,
+    KEY_WORLD_SCENARIO,
+    KEY_WORLD_TRUTH_POSES,
+)
 
 # --------------------------------------------------------------------------- zenoh settings
 
@@ -90,17 +95,36 @@ def acl_settings(roster: Iterable[Identity]) -> dict[str, Any]:
         # the world: serves and publishes world/**, hears membership
         _rule("world-serve", ["declare_queryable", "reply", "put"], ["ingress"], ["world/**"]),
         _rule("world-take", ["query", "declare_subscriber"], ["egress"], ["world/**"]),
+        # render workers (issue 21): follow the world's poses, ask its scenario, serve
+        # the cameras; nothing else (no walking, no registering, no fleet traffic)
+        _rule(
+            "render-serve",
+            ["declare_queryable", "reply", "query", "declare_subscriber"],
+            ["ingress"],
+            [KEY_CAMERA_ALL, KEY_WORLD_SCENARIO, KEY_WORLD_TRUTH_POSES],
+        ),
+        _rule(
+            "render-take",
+            ["query", "reply", "declare_queryable", "put", "declare_subscriber"],
+            ["egress"],
+            [KEY_CAMERA_ALL, KEY_WORLD_SCENARIO, KEY_WORLD_TRUTH_POSES],
+        ),
         # observers: evaluation reads ground truth too
         _rule("observe", ["declare_subscriber"], ["ingress"], ["world/**"]),
         _rule("observe-deliver", ["put"], ["egress"], ["world/**"]),
     ]
-    members = sorted(i.cn for i in roster if i.role != "router")
+    members = sorted(i.cn for i in roster if i.role not in ("router", "render"))
     subjects: list[dict[str, Any]] = []
     policies: list[dict[str, Any]] = []
     member_rules = ["hear-fleet", "watch-alive", "deliver-fleet", "ask-records", "deliver-records"]
     roles = [
         ("members", members, member_rules),
         ("world", ["world"] if Identity("world") in roster else [], ["world-serve", "world-take"]),
+        (
+            "render",
+            ["render"] if Identity("render") in roster else [],
+            ["render-serve", "render-take"],
+        ),
         (
             "observer",
             ["observer"] if Identity("observer") in roster else [],

@@ -19,7 +19,7 @@ from cryptography.hazmat.primitives.asymmetric import ed25519
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
 from agent.wire.envelope import MAX_AGE_S, Signer, Verifier
-from agent.wire.identity import Identity, TrustError
+from agent.wire.identity import ROLES, Identity, TrustError
 from agent.wire.revocation import (
     REASONS,
     Revocation,
@@ -99,8 +99,8 @@ def create_fleet(
 ) -> FleetPaths:
     """Create a fleet CA and a key and certificate for every identity under ``out``.
 
-    ``robot_ids`` get ``robot-{id}``; ``world``, ``observer`` and ``router`` are always
-    made. ``hosts`` are extra DNS names or IP addresses the router is reached at
+    ``robot_ids`` get ``robot-{id}``; ``world``, ``observer``, ``router`` and ``render``
+    are always made. ``hosts`` are extra DNS names or IP addresses the router is reached at
     (``localhost``, ``127.0.0.1`` and ``router`` are always included: zenoh checks the
     router's name on connect). Refuses a folder that already holds a fleet.
     """
@@ -147,7 +147,7 @@ def create_fleet(
             names.append(x509.IPAddress(ipaddress.ip_address(h)))
         except ValueError:
             names.append(x509.DNSName(h))
-    who = [Identity.robot(r) for r in ids] + [Identity(r) for r in ("world", "observer", "router")]
+    who = [Identity.robot(r) for r in ids] + [Identity(r) for r in ROLES[1:]]
     for ident in who:
         key = ed25519.Ed25519PrivateKey.generate()
         builder = (

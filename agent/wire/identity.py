@@ -1,6 +1,7 @@
 """Fleet identities (DESIGN.md §8 "Trust"): who a certificate's common name says it is.
 
-``robot-{id}``, ``world``, ``observer`` and ``router``; the common name *is* the identity.
+``robot-{id}``, ``world``, ``observer``, ``router`` and ``render`` (the render workers of
+issue 21, one key for all of them); the common name *is* the identity.
 """
 
 from __future__ import annotations
@@ -10,7 +11,7 @@ from dataclasses import dataclass
 
 from agent.wire.fields import MAX_ROBOT_ID, ProtocolError
 
-ROLES = ("robot", "world", "observer", "router")
+ROLES = ("robot", "world", "observer", "router", "render")
 _ROBOT_CN = re.compile(r"robot-(0|[1-9][0-9]{0,4})")
 
 
@@ -39,7 +40,8 @@ class Identity:
 
     @property
     def cn(self) -> str:
-        """The certificate common name: ``robot-2``, ``world``, ``observer``, ``router``."""
+        """The certificate common name: ``robot-2``, ``world``, ``observer``, ``router``,
+        ``render``."""
         return f"robot-{self.robot_id}" if self.role == "robot" else self.role
 
     @classmethod
@@ -49,7 +51,7 @@ class Identity:
     @property
     def code(self) -> int:
         """The compact wire code of the identity: the robot id, or -1 world, -2 observer,
-        -3 router (one msgpack byte for the roles and robots up to 127)."""
+        -3 router, -4 render (one msgpack byte for the roles and robots up to 127)."""
         return self.robot_id if self.role == "robot" else -ROLES.index(self.role)
 
     @classmethod
@@ -69,6 +71,6 @@ class Identity:
             if rid > MAX_ROBOT_ID:
                 raise TrustError(f"common name {cn!r}: robot id outside [0, {MAX_ROBOT_ID}]")
             return cls.robot(rid)
-        if cn in ("world", "observer", "router"):
+        if cn in ROLES[1:]:
             return cls(cn)
         raise TrustError(f"common name {cn!r} names no fleet identity")

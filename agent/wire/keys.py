@@ -18,6 +18,10 @@ KEY_RECORDS_ALL = "nao/*/records"
 #: Every agent's camera frames for viewers (issue 22; ``--publish-camera``).
 KEY_CAMERA_FEED_ALL = "nao/*/camera"
 KEY_WORLD_REGISTER = "world/register"
+#: The world's scenario (render workers build their copy of the room from it).
+KEY_WORLD_SCENARIO = "world/scenario"
+#: Every robot's forehead camera: served by the world, or by render workers (issue 21).
+KEY_CAMERA_ALL = "world/robot/*/camera"
 KEY_WORLD_CLOCK = "world/clock"
 KEY_WORLD_TRUTH_POSES = "world/truth/poses"
 KEY_WORLD_TRUTH_CONTACTS = "world/truth/contacts"

@@ -250,6 +250,30 @@ class RegisterReply(Message):
     SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {"robot_id": _ID}
 
 
+#: Largest scenario a world hands out (JSON text of ``sim.scenarios.to_dict``).
+MAX_SCENARIO_BYTES = 1 << 20
+
+
+@dataclass(frozen=True)
+class ScenarioRequest(Message):
+    """Ask the world for its scenario (a render worker building its copy of the room)."""
+
+    TAG: ClassVar[str] = "scenario?"
+    SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {}
+
+
+@dataclass(frozen=True)
+class ScenarioReply(Message):
+    """The world's scenario as JSON text (``sim.scenarios.to_dict``): same scenario and
+    seed, same room and textures."""
+
+    TAG: ClassVar[str] = "scenario"
+    scenario: bytes = field(repr=False)
+    SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {
+        "scenario": _bytes("scenario", MAX_SCENARIO_BYTES)
+    }
+
+
 @dataclass(frozen=True)
 class CameraRequest(Message):
     """Render the forehead camera with the head at ``yaw`` (rad, +left, |yaw| <= 119.5°)."""

@@ -3,7 +3,7 @@
 Three layers, each useful without the others:
 
 1. **Fleet credentials.** One Ed25519 fleet CA signs one certificate per identity:
-   ``robot-{id}``, ``world``, ``observer``, ``router``. The certificate's common name *is*
+   ``robot-{id}``, ``world``, ``observer``, ``router``, ``render``. The certificate's common name *is*
    the identity; the same Ed25519 key serves the TLS link and the end-to-end signatures.
    Layout of a credentials folder (``python -m tools.fleet init``)::
 
@@ -23,7 +23,8 @@ Three layers, each useful without the others:
    each common name its role: robot i publishes ``nao/i/**``, declares ``nao/alive/i``,
    serves ``nao/i/records`` (the agreed record sets, any member may ask) and
    queries ``world/robot/i/**`` and ``world/register``; the world serves ``world/**``;
-   observers only subscribe.
+   render workers (issue 21) serve ``world/robot/*/camera``, ask ``world/scenario`` and
+   follow ``world/truth/poses``; observers only subscribe.
 
 3. **End to end.** Every payload travels in a sealed envelope (:meth:`Signer.seal`), a
    msgpack array ``[1, signer, epoch, seq, dt, payload, signature]``: the signer's

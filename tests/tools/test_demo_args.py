@@ -94,3 +94,22 @@ def test_the_demo_turns_the_camera_feed_on_and_other_tools_leave_it_off() -> Non
     assert "--publish-camera" not in cmd(bare)
     # tools.eval_headings asks the demo for none unless its --demo-arg asks
     assert parse_args(["--no-publish-camera", "--publish-camera"]).publish_camera is True
+
+
+def test_render_service_workers_and_what_they_served(tmp_path: Path) -> None:
+    from tools.harness.render import render_command, served, served_by
+
+    assert parse_args([]).render_service == 0
+    assert parse_args(["--render-service", "2"]).render_service == 2
+    for bad in (["--render-service", "9"], ["--render-service", "1", "--body", "naoqi"]):
+        with pytest.raises(SystemExit):
+            parse_args(bad)
+    cmd = render_command(["--connect", "tls/h:1"], (2, 3))
+    assert cmd[1:] == ["-m", "sim.render_worker", "--connect", "tls/h:1", "--shard", "2/3"]
+    (tmp_path / "render-1.log").write_text(
+        "render ready robots=1,3 shard=1/2 seed=1\n"
+        "[render t=   65.00] served camera=207 (260 ms); errors=0 rejected=0\n"
+    )
+    (tmp_path / "render-2.log").write_text("render ready robots=2 shard=2/2 seed=1\n")
+    assert served(tmp_path / "render-1.log") == 207
+    assert served_by(tmp_path, 3) == {"render-1": 207, "render-2": None, "render-3": None}

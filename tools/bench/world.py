@@ -181,8 +181,8 @@ def sim_speed_bus(n: int, seed: int, sim_seconds: float) -> float:
 
 
 def render_breakdown(n: int, seed: int) -> tuple[float, float, float]:
+    from sim.render_pool import PNG_PARAMS
     from sim.scenarios import generate
-    from sim.server import PNG_PARAMS
     from sim.world import World
 
     with World(generate(3, seed)) as w:

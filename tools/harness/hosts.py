@@ -11,6 +11,9 @@ host 2     the world (``python -m sim``)
 host 3     the monitor (:mod:`tools.harness.monitor`), which records and judges the run
 host 4..   one agent each (``python -m agent --id I --state-dir``, ids from the world's
            ready line)
+then       one render worker each when ``render_workers`` K > 0 (issue 21:
+           ``python -m sim.render_worker --shard i/K`` on the world's port), started
+           after the world; they draw every camera picture
 =========  ====================================================================
 
 The levers: :meth:`HostFleet.kill_agent` (SIGKILL, no goodbye) and
@@ -45,6 +48,7 @@ from tools.harness.procs import (
     router_command,
     world_command,
 )
+from tools.harness.render import render_command, served_by
 from tools.packet_drop import Dropper
 
 ROUTER, WORLD, MONITOR, FIRST_AGENT = 1, 2, 3, 4
@@ -80,9 +84,12 @@ class HostFleet:
         prefix: str,
         credentials: str = "",
         world_extra: list[str] | None = None,
+        render_workers: int = 0,
     ) -> None:
         self.args, self.robots, self.seed, self.workdir = args, robots, seed, workdir
-        self.fab = netns.Fabric(robots + FIRST_AGENT - 1, prefix=prefix)
+        self.render_workers = render_workers
+        self.fab = netns.Fabric(robots + FIRST_AGENT - 1 + render_workers, prefix=prefix)
+        self.renderers: list[subprocess.Popen[str]] = []
         self.world_extra = world_extra or []
         proto = "tls" if credentials else "tcp"
         self.router_ep = f"{proto}/{netns.address(ROUTER)}:{P.BUS_PORT}"
@@ -150,10 +157,34 @@ class HostFleet:
         if not lines.wait_for("ready", 180.0):
             raise RuntimeError(f"world not ready; see {self.workdir / 'world.log'}")
         self.ids = robot_ids(lines.lines, self.robots)
+        self._start_renderers()
         self._droppers = [Dropper(self.fab.name(FIRST_AGENT + k)) for k in range(self.robots)]
+
+    def _start_renderers(self) -> None:
+        """K render workers, one per host after the agents' (shards 1/K..K/K)."""
+        k = self.render_workers
+        net = ["--connect", self.world_ep, "--no-multicast-scouting", *self.sec, "--mode", "client"]
+        for i in range(1, k + 1):
+            host = FIRST_AGENT + self.robots + i - 1
+            p = self.fab.popen(
+                host,
+                render_command(net, (i, k)),
+                stderr=self._log(f"render-{i}"),
+                env=self.env,
+                cwd=str(ROOT),
+            )
+            self.renderers.append(p)
+            if not Lines(p).wait_for("render ready", 180.0):
+                raise RuntimeError(f"render worker {i} not ready; see render-{i}.log")
+
+    def render_served(self) -> dict[str, int | None]:
+        """Camera queries each render worker answered (after :meth:`close`)."""
+        return served_by(self.workdir, self.render_workers)
 
     def close(self) -> None:
         """Clear the loss, stop the monitor and every process, remove the test hosts."""
+        for p in self.renderers:  # SIGTERM first: each logs what it served
+            netns.stop(p, timeout=10.0)
         with contextlib.suppress(Exception):
             self.clear_loss()
         if self.monitor is not None:

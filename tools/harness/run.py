@@ -1,5 +1,5 @@
-"""One run of the demo: the world, a router for secure TLS fleets, one agent process per
-robot and optional rogues, observed on the bus until the agents have finished, then
+"""One run of the demo: the world, a router for secure TLS fleets, optional render workers
+(issue 21), one agent process per robot and optional rogues, observed on the bus until the agents have finished, then
 judged (``tools.harness.judge``). ``args`` is ``tools.demo``'s argument namespace.
 """
 
@@ -29,6 +29,7 @@ from tools.harness.procs import (
     stop,
     wait_ready,
 )
+from tools.harness.render import served_by, start_render_workers
 
 
 def route_length(args: argparse.Namespace) -> float:
@@ -125,6 +126,11 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
 
         wait_ready(world, args.world_timeout, take)
         result["wall_world_ready"] = time.monotonic() - t0
+        workers = int(getattr(args, "render_service", 0) or 0)
+        if workers > 0:  # issue 21: cameras drawn by render workers, not the world
+            procs.extend(start_render_workers(workers, ["--connect", endpoint, *net.flags], out))
+            result["render_workers"] = workers
+            result["wall_render_ready"] = time.monotonic() - t0
         ids = robot_ids(world.lines, n)
         result["ids"] = ids
         # with --body naoqi: each robot's virtual NAO, "sim naoqi robot=ID url=URL"
@@ -170,6 +176,8 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
             stop(p)
         bus.close()
         rec.close()
+    if result.get("render_workers"):
+        result["render_served"] = served_by(out, result["render_workers"])
     if getattr(args, "auto_ids", False):
         agents = claimed_ids(agents, out)
         result["claimed_ids"] = sorted(agents)
