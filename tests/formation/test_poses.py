@@ -415,3 +415,36 @@ def test_turned_robots_needs_three_agreeing_owners() -> None:
     assert turned_robots(ids, [seen(1, -20), seen(2, -22), seen(3, -18)], psi) == ()
     no_mask = [PoseMeasurement(o, 4, v) for o in (1, 2, 3)]
     assert turned_robots(ids, no_mask, psi) == ()
+
+
+def test_an_isolated_misfit_pair_is_dropped_as_a_wrong_pairing() -> None:
+    """Two robots' sightings of *other* NAOs matched to each other (equal distances): the
+    pair misfits by metres while both robots' other pairs fit; the check drops it, refits,
+    names nobody. A second misfit pair on the same robot is no wrong pairing."""
+    from agent.core.formation.pose_check import check_frame, drop_wrong_pairings
+    from agent.core.formation.poses import PoseMeasurement
+
+    rng = np.random.default_rng(5)
+    pos = sim_layout(rng, 6)
+    good = build_poses(unaligned_records(list(range(6)), pos, rng.uniform(0, 6, 6)))
+    assert good.consistent
+    i, j = 1, 4  # a wrong pair of sightings added to theirs: the pair misfits as a whole
+    wrong = [
+        PoseMeasurement(i, j, np.array([2.0, 0.5])),
+        PoseMeasurement(j, i, np.array([0.5, 2.0])),
+    ]
+    bent = fit_poses(good.ids, [*good.measurements, *wrong])
+    assert not bent.positions_consistent
+    v = check_frame(bent)
+    assert v.named == () and f"{i}-{j} (wrong pairings)" in v.reason and v.poses.consistent
+    rel = np.remainder(
+        v.poses.headings - v.poses.headings[0] - good.headings + good.headings[0], 2 * math.pi
+    )
+    assert np.all(np.minimum(rel, 2 * math.pi - rel) < 1e-6)  # the same turns, any frame robot
+    k = next(c for c in range(6) if c not in (i, j))  # a wrong sighting on a second pair
+    more = [
+        PoseMeasurement(i, k, np.array([-2.0, 0.3])),
+        PoseMeasurement(k, i, np.array([0.3, -2.0])),
+    ]
+    worse = fit_poses(good.ids, [*good.measurements, *wrong, *more])
+    assert drop_wrong_pairings(worse) is None  # robot i misfits twice: not a wrong pairing

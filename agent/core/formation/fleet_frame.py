@@ -17,14 +17,15 @@ aligned), checked by :mod:`pose_check`, which names a robot whose sightings do n
 * One robot named and the rest not connected, or not consistent, without it: nobody can
   be trusted to move, and :func:`fleet_frame` raises ``ValueError`` with the same reason
   on every agent (they hold the same records).
-* Sightings inconsistent in position with nobody to blame, every estimated |ψ| within
-  :data:`ALIGNED_FALLBACK_HEADING` (noise beyond the check's tolerances on parallel
-  frames, as in the papers' own Monte Carlo): planned as the papers do, on aligned frames,
-  when that model connects the fleet; otherwise on the fit. A mask misfit alone never
-  sends the fleet to the aligned model (in 10-NAO runs set down within ±20° of north the
-  fit's ψ were right to 2° while single masks misfit by up to 90°; planning those runs on
-  aligned frames bent every pyramid). The robots' own check after hold tells whether the
-  pyramid holds.
+* Sightings inconsistent with nobody to blame: planned on the fit (the robots' own check
+  after hold tells whether the pyramid holds). A mask misfit alone never sends the fleet
+  to the aligned model (in 10-NAO runs set down within ±20° of north the fit's ψ were
+  right to 2° while single masks misfit by up to 90°; planning those runs on aligned
+  frames bent every pyramid), nor does a misfit that noise on nearly parallel frames
+  explains: the first rule below covers the papers' own Monte Carlo.
+* The fit finds every |ψ| within :data:`poses.ALIGNED_MAX_HEADING` and nobody turned, or
+  the papers' aligned model explains every position with as many pairs as the fit: planned
+  exactly as the papers do, on aligned frames (checked first).
 
 Deterministic: the same records in any order give bit-identical output (the pose fit's
 own guarantee; the named robot's place is a mean over sightings sorted by owner id).
@@ -32,7 +33,6 @@ own guarantee; the named robot's place is a mean over sightings sorted by owner 
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
@@ -100,13 +100,6 @@ def _map_point(src: PoseFrame, dst: PoseFrame, point: np.ndarray) -> np.ndarray:
     return np.asarray(cb + r @ (np.asarray(point, dtype=np.float64) - ca))
 
 
-#: When nobody is named and the fit misfits in position, the papers' aligned model is
-#: planned on only if every estimated |ψ| is within this (noise on parallel frames); a
-#: fleet the fit finds turned further is planned on the fit: aligned frames would turn
-#: every robot's plan by its real heading.
-ALIGNED_FALLBACK_HEADING = math.radians(25.0)
-
-
 def _max_turn(poses: PoseFrame) -> float:
     """The largest estimated |ψ| (rad)."""
     return float(np.max(np.abs(poses.headings), initial=0.0))
@@ -171,14 +164,6 @@ def fleet_frame(records: Sequence[NeighborRecord], epsilon: float) -> FleetFrame
             reason="aligned starts: every sighting fits in position",
         )  # fmt: skip
     if not verdict.named:
-        if not poses.positions_consistent and _max_turn(poses) <= ALIGNED_FALLBACK_HEADING:
-            # noisy sightings no single robot explains, on nearly parallel frames (the
-            # papers' own Monte Carlo): plan as the papers do (aligned frames, least
-            # squares) when that model connects the fleet; the robots' own check after
-            # hold says whether the result holds
-            papers = _papers_model(records, epsilon)
-            if papers is not None:
-                return replace(papers, reason=f"{verdict.reason}; planned on aligned frames")
         return FleetFrame(
             poses.frame_robot, poses.ids, poses.positions, poses.headings, poses.aligned,
             reason=verdict.reason,

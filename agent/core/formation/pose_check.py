@@ -29,6 +29,7 @@ The reason text says which of these happened, with the figures.
 from __future__ import annotations
 
 import math
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -139,6 +140,35 @@ def _tested_and_cleared(poses: PoseFrame, robot: int) -> bool:
     return rest is not None and not rest.consistent
 
 
+def drop_wrong_pairings(poses: PoseFrame) -> PoseVerdict | None:
+    """The fit again without the misfit pairs, when each is *isolated* (neither of its
+    robots has another misfit pair) and the rest is then connected and consistent; else
+    None.
+
+    An isolated misfit pair between robots whose other pairs all fit is a wrong pairing
+    (two robots' sightings of different NAOs matched on distance: 10 NAOs within ±20° of
+    north, a pair misfit by 3.06 m while every ψ was right to 1.3°), not a faulty robot:
+    a robot with a wrong record misfits with most of its pairs. Nobody is named."""
+    bad = [p for p in poses.pairs if p.score > 1.0]
+    ends = Counter(r for p in bad for r in (p.i, p.j))
+    if not bad or any(ends[p.i] > 1 or ends[p.j] > 1 for p in bad):
+        return None
+    drop = {(p.i, p.j) for p in bad}
+    meas = [
+        m
+        for m in poses.measurements
+        if (min(m.owner, m.target), max(m.owner, m.target)) not in drop
+    ]
+    try:
+        refit = fit_poses(poses.ids, meas, poses.frame_robot)
+    except ValueError:
+        return None
+    if not refit.consistent:
+        return None
+    names = ", ".join(f"{i}-{j}" for i, j in sorted(drop))
+    return PoseVerdict((), f"consistent without the misfit pair(s) {names} (wrong pairings)", refit)
+
+
 def _check_frame(poses: PoseFrame) -> PoseVerdict:
     """Steps 1-3 of the module docstring."""
     if poses.consistent:
@@ -153,6 +183,10 @@ def _check_frame(poses: PoseFrame) -> PoseVerdict:
                 "consistent without it",
                 poses,
             )
+    if not poses.turned:
+        cleaned = drop_wrong_pairings(poses)
+        if cleaned is not None:
+            return cleaned
     worst = max(poses.pairs, key=lambda p: (p.score, -p.i, -p.j))
     bad = f"pair {worst.i}-{worst.j} misfit {worst.position:.2f} m, " + (
         f"{math.degrees(worst.heading):.0f}° (score {worst.score:.1f})"
