@@ -235,7 +235,9 @@ def screenshot(url: str, path: Path, stop: Stop, after: float = 1.0) -> int:
         print("view: --screenshot needs chromium (apt-get install chromium)", file=sys.stderr)
         return 2
     with sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path=exe, args=["--no-sandbox"])
+        browser = pw.chromium.launch(
+            executable_path=exe, args=["--no-sandbox", "--disable-dev-shm-usage"]
+        )
         try:
             page = browser.new_page(viewport={"width": 1400, "height": 900})
             page.goto(url)

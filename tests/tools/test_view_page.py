@@ -61,7 +61,9 @@ def page() -> Iterator[Any]:
             pytest.fail("chromium is missing (.ci/run installs it)")
         pytest.skip("no chromium")
     with sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path=exe, args=["--no-sandbox"])
+        browser = pw.chromium.launch(
+            executable_path=exe, args=["--no-sandbox", "--disable-dev-shm-usage"]
+        )
         try:
             yield browser.new_page(viewport={"width": 1400, "height": 900})
         finally:
