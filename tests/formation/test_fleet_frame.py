@@ -91,7 +91,7 @@ def test_a_fleet_that_falls_apart_without_the_named_robot_stops(
     poses = dataclasses.replace(real.poses, pairs=worse)
     named = PoseVerdict((2,), "robot 2: the others are consistent without it", poses)
     monkeypatch.setattr(ff_mod, "check_poses", lambda r, e: named)
-    monkeypatch.setattr(ff_mod, "leave_out", lambda poses, robot: None)
+    monkeypatch.setattr(ff_mod, "consistent_rest", lambda poses, robot: None)
     with pytest.raises(ValueError, match=r"robot 2's sightings do not fit.*nobody moves"):
         fleet_frame(recs, DEFAULT_EPSILON)
 

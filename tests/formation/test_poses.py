@@ -448,3 +448,27 @@ def test_an_isolated_misfit_pair_is_dropped_as_a_wrong_pairing() -> None:
     ]
     worse = fit_poses(good.ids, [*good.measurements, *wrong, *more])
     assert drop_wrong_pairings(worse) is None  # robot i misfits twice: not a wrong pairing
+
+
+def test_a_faulty_robot_is_named_beside_a_wrong_pairing() -> None:
+    """A shifted record and, elsewhere, a wrong pairing: no robot's leaving makes the rest
+    consistent as it is; with the rest's isolated misfit pair dropped, only the faulty
+    robot's does (pose_check.consistent_rest)."""
+    from agent.core.formation.pose_check import check_frame, consistent_rest
+    from agent.core.formation.poses import PoseMeasurement
+
+    rng = np.random.default_rng(1)
+    pos = sim_layout(rng, 6)
+    recs = unaligned_records(list(range(6)), pos, rng.uniform(0, 2 * math.pi, 6))
+    recs[2] = fault(recs[2], "shift")
+    base = build_poses(recs)
+    named = check_frame(base).named
+    assert named == (2,)
+    wrong = [
+        PoseMeasurement(0, 4, np.array([2.0, 0.5])),
+        PoseMeasurement(4, 0, np.array([0.5, 2.0])),
+    ]
+    both = fit_poses(base.ids, [*base.measurements, *wrong])
+    assert consistent_rest(both, 2, cleaning=False) is None
+    assert consistent_rest(both, 2) is not None
+    assert check_frame(both).named == (2,)

@@ -11,8 +11,8 @@ aligned), checked by :mod:`pose_check`, which names a robot whose sightings do n
 * One robot named (:func:`pose_check.check_frame`: at least two of its pairs misfit in
   position, or the others' masks agree that its ψ is off), the rest
   connected without it: the rest are fitted again without its
-  sightings and without the others' sightings of it (:func:`pose_check.leave_out`); the
-  named robot is placed where the *others* saw it (the mean of their sightings of it, in
+  sightings and without the others' sightings of it, isolated misfit pairs dropped as
+  wrong pairings (:func:`pose_check.consistent_rest`); the named robot is placed where the *others* saw it (the mean of their sightings of it, in
   the rest's frame), stands still, and is planned around like an obstacle.
 * One robot named and the rest not connected, or not consistent, without it: nobody can
   be trusted to move, and :func:`fleet_frame` raises ``ValueError`` with the same reason
@@ -40,7 +40,7 @@ import numpy as np
 
 from agent.core.formation.common_frame import build_common_frame
 from agent.core.formation.neighbour_check import identify_neighbours
-from agent.core.formation.pose_check import check_poses, leave_out
+from agent.core.formation.pose_check import check_poses, consistent_rest
 from agent.core.formation.poses import (
     ALIGNED_MAX_HEADING,
     PoseFrame,
@@ -169,8 +169,8 @@ def fleet_frame(records: Sequence[NeighborRecord], epsilon: float) -> FleetFrame
             reason=verdict.reason,
         )  # fmt: skip
     (robot,) = verdict.named[:1]
-    rest = leave_out(poses, robot)
-    if rest is None or not rest.consistent:
+    rest = consistent_rest(poses, robot)
+    if rest is None:
         raise ValueError(
             f"robot {robot}'s sightings do not fit ({verdict.reason}) and the rest is not a "
             "connected, consistent fleet without it; nobody moves"
