@@ -236,7 +236,7 @@ def screenshot(url: str, path: Path, stop: Stop, after: float = 1.0) -> int:
         return 2
     with sync_playwright() as pw:
         browser = pw.chromium.launch(
-            executable_path=exe, args=["--no-sandbox", "--disable-dev-shm-usage"]
+            executable_path=exe, args=["--no-sandbox", "--disable-dev-shm-usage", "--disable-gpu"]
         )
         try:
             page = browser.new_page(viewport={"width": 1400, "height": 900})

@@ -62,7 +62,7 @@ def page() -> Iterator[Any]:
         pytest.skip("no chromium")
     with sync_playwright() as pw:
         browser = pw.chromium.launch(
-            executable_path=exe, args=["--no-sandbox", "--disable-dev-shm-usage"]
+            executable_path=exe, args=["--no-sandbox", "--disable-dev-shm-usage", "--disable-gpu"]
         )
         try:
             yield browser.new_page(viewport={"width": 1400, "height": 900})
@@ -127,12 +127,8 @@ class Stamps:
             self.wall.setdefault(t_ns, time.time())  # the first of a repeated world time
 
 
-def test_a_robots_moves_reach_the_page(page: Any) -> None:
-    """The truth samples of a real run fed at twice their pace: the page draws the scenes
-    in which a robot moved (the world publishes a step of motion when it is done: 14 in
-    that run), up to the last. How fast is a figure, printed (``-s``), not asserted: the
-    page draws the newest scene it has, so under load it skips some and a time bound
-    would test the machine (docs/view.md has the measured latency)."""
+def _feed_the_page(page: Any) -> tuple[set[int], Stamps, list[list[int]]]:
+    """Feed the run to a live server and its page; the moves, stamps and the page's draws."""
     live = LiveServer("127.0.0.1", 0)
     web = PageServer("127.0.0.1:0", live.url)
     stamps = Stamps()
@@ -141,7 +137,7 @@ def test_a_robots_moves_reach_the_page(page: Any) -> None:
     moved: set[int] = set()
 
     def feed() -> None:
-        world_ns, last = 0, {}
+        world_ns, last = 0, dict[int, tuple[float, float]]()
         t0_rec, t0 = msgs[0][0], time.monotonic()
         for t_pub, key, data in msgs:
             while (wait := t0 + (t_pub - t0_rec) / 2e9 - time.monotonic()) > 0:
@@ -166,6 +162,28 @@ def test_a_robots_moves_reach_the_page(page: Any) -> None:
     finally:
         web.close()
         live.close()
+    return moved, stamps, draws
+
+
+def test_a_robots_moves_reach_the_page(page: Any) -> None:
+    """The truth samples of a real run fed at twice their pace: the page draws the scenes
+    in which a robot moved (the world publishes a step of motion when it is done: 14 in
+    that run), up to the last. How fast is a figure, printed (``-s``), not asserted: the
+    page draws the newest scene it has, so under load it skips some and a time bound
+    would test the machine (docs/view.md has the measured latency).
+
+    Headless chromium's renderer crashed ("Target crashed") in 2 of ~10 runs with the
+    machine at load 74 on 2 cores, never unloaded: a crashed tab is the browser's, so the
+    whole feed is run once more in a fresh tab; a second crash fails."""
+    try:
+        moved, stamps, draws = _feed_the_page(page)
+    except Exception as exc:  # playwright's Error: only a crashed tab is retried
+        if "Target crashed" not in str(exc):
+            raise
+        browser = page.context.browser
+        moved, stamps, draws = _feed_the_page(
+            browser.new_page(viewport={"width": 1400, "height": 900})
+        )
     drawn = {t_ns for t_ns, _ in draws}
     assert moved and max(moved) in drawn, (len(draws), len(moved))  # the last move is shown
     assert len(drawn & moved) >= 3, (len(draws), len(moved))  # and moves along the way
