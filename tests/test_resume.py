@@ -9,6 +9,7 @@ fleet's answers are faked on the session: its ``query``, and events put in its q
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import shutil
@@ -18,6 +19,7 @@ import numpy as np
 import pytest
 
 from agent.body.base import MotionResult
+from agent.core.control import wrap_pi
 from agent.net.bus import Event, QueryTimeout
 from agent.phases import resume, runs
 from agent.phases.context import NORTH, AgentFailure
@@ -428,3 +430,34 @@ def test_the_runner_ends_with_a_final_record(runner: Runner, tmp_path: Path) -> 
     runner.journaling.finish("done")
     st = Journal(tmp_path, 3).load()
     assert st is not None and st.final == "done"
+
+
+def test_resumed_at_hold_it_faces_the_pyramid_axis_and_checks_against_it(
+    runner: Runner,  # noqa: F811
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A robot resumed at hold skips the move, which set the pyramid axis; the hold's own
+    check judged the pair against north instead (eval_faults kill-agent@hold: "formation
+    off: r_φ +285 %" on pairs within tolerance), facing north after the re-measurement."""
+    goals, axis = runner.ctx.formation.goals(runner.ctx.plan, 3)
+    final = wrap_pi(axis + 1.2)  # a robot of a fleet turned away from north
+    monkeypatch.setattr(runner.ctx.formation, "goals", lambda plan, me: (goals, final))
+    turned: list[float] = []
+
+    def rotate(angle: float, gains: object = None, detail: str = "") -> None:
+        turned.append(angle)
+        runner.ctx.beliefs.heading = wrap_pi(runner.ctx.beliefs.heading + angle)
+
+    def remeasure(journal: object) -> None:  # turned to θ = 0, the view did not match
+        rotate(wrap_pi(NORTH - runner.ctx.beliefs.heading))
+
+    monkeypatch.setattr(runner.motion, "rotate", rotate)
+    monkeypatch.setattr(runner.resumption, "remeasure_heading", remeasure)
+    monkeypatch.setattr(runner.ctx.bus, "query", serving(served_set()))
+    st = dataclasses.replace(agreed("hold"), heading=final, position=(0.1, 0.3))
+    assert runner.ctx.final_heading == NORTH  # as a fresh process starts
+    stage, _ = runner.resumption.resume(st, runs.Verdict(True, "served"))
+    assert stage == "hold"
+    assert runner.ctx.final_heading == pytest.approx(final)
+    assert turned == [pytest.approx(wrap_pi(NORTH - final)), pytest.approx(wrap_pi(final - NORTH))]
+    assert runner.ctx.beliefs.heading == pytest.approx(final)  # facing the axis again

@@ -195,8 +195,15 @@ class Resumption:
                 f"{st.plan_digest[:12]}: not moving"
             )
         stage = AGREED_STAGES.get(phase, "wait")
+        if stage in ("move", "hold"):
+            # the pyramid axis (set by the move, which a robot resumed at hold skips): the
+            # hold's own check judges the pair against it
+            _, ctx.final_heading = ctx.formation.goals(ctx.plan, ctx.me)
         if stage in ("move", "hold") and moved:
             self.remeasure_heading(journal)
+            turn = wrap_pi(ctx.final_heading - b.heading)
+            if stage == "hold" and abs(turn) > REORIENT_MIN:  # face the axis again, as arrived
+                self.motion.rotate(turn, PAPER_GAINS, "resumed: turn back to the pyramid axis")
         ctx.leg = st.leg
         return stage, st.record
 
