@@ -208,7 +208,8 @@ def open_bus(args: argparse.Namespace, log: logging.Logger) -> tuple[Bus, Bus, i
     body). Secure, ``--id N``: the sessions open with robot N's key. Secure, ``--id
     auto``: for each robot key in the credentials folder (sorted), open a world session
     with it and ask the world for that id; the world grants an id only to the key that
-    owns it, so the first free one wins. Insecure: ``--id auto`` takes the lowest free id.
+    owns it, so the first free one wins; revoked keys are skipped, and a folder holding
+    only revoked ones is refused saying so. Insecure: ``--id auto`` takes the lowest free id.
     """
     from agent.body.zenoh_world import register
     from agent.net.bus import Bus, BusConfig, open_retrying
@@ -218,7 +219,7 @@ def open_bus(args: argparse.Namespace, log: logging.Logger) -> tuple[Bus, Bus, i
         return open_retrying(lambda: Bus(spec), args.join_timeout)
 
     from agent.body.base import BodyError
-    from agent.wire.trust import Credentials
+    from agent.wire.trust import Credentials, Identity
 
     def opened(spec: NetworkSpec, world: Bus | None, rid: int) -> tuple[Bus, Bus, int]:
         if world is None:  # one session for both
@@ -240,7 +241,18 @@ def open_bus(args: argparse.Namespace, log: logging.Logger) -> tuple[Bus, Bus, i
         spec = network_spec(args, f"robot-{rid}")
         return opened(spec, world_bus(spec), rid)
     spec = network_spec(args, "robot-0")
-    candidates = [-1] if not spec.secure else Credentials(spec.credentials).own_robot_keys()
+    creds = Credentials(spec.credentials) if spec.secure else None
+    candidates = [-1] if creds is None else creds.own_robot_keys()
+    revoked = [] if creds is None else creds.revoked_robot_keys()
+    if creds is not None and revoked:
+        gone = [f"robot-{r} ({creds.revoked[Identity.robot(r)].describe()})" for r in revoked]
+        if not candidates:
+            raise ValueError(
+                f"{spec.credentials} holds only revoked robot keys: the fleet CA revoked "
+                f"{', '.join(gone)} in {creds.paths.crl}; this key may no longer join the "
+                "fleet (docs/security.md, 'Revoking a key')"
+            )
+        log.warning("not claiming with revoked keys: %s", ", ".join(gone))
     if not candidates:
         raise ValueError(f"{spec.credentials} holds no robot key to claim a robot with")
     reasons = []

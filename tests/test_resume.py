@@ -9,6 +9,7 @@ fleet's answers are faked on the session: its ``query``, and events put in its q
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import shutil
@@ -18,6 +19,7 @@ import numpy as np
 import pytest
 
 from agent.body.base import MotionResult
+from agent.core.control import wrap_pi
 from agent.net.bus import Event, QueryTimeout
 from agent.phases import resume, runs
 from agent.phases.context import NORTH, AgentFailure
@@ -428,3 +430,83 @@ def test_the_runner_ends_with_a_final_record(runner: Runner, tmp_path: Path) -> 
     runner.journaling.finish("done")
     st = Journal(tmp_path, 3).load()
     assert st is not None and st.final == "done"
+
+
+def test_resumed_at_hold_it_faces_the_pyramid_axis_and_checks_against_it(
+    runner: Runner,  # noqa: F811
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A robot resumed at hold skips the move, which set the pyramid axis; the hold's own
+    check judged the pair against north instead (eval_faults kill-agent@hold: "formation
+    off: r_φ +285 %" on pairs within tolerance), facing north after the re-measurement."""
+    goals, axis = runner.ctx.formation.goals(runner.ctx.plan, 3)
+    final = wrap_pi(axis + 1.2)  # a robot of a fleet turned away from north
+    monkeypatch.setattr(runner.ctx.formation, "goals", lambda plan, me: (goals, final))
+    turned: list[float] = []
+
+    def rotate(angle: float, gains: object = None, detail: str = "") -> None:
+        turned.append(angle)
+        runner.ctx.beliefs.heading = wrap_pi(runner.ctx.beliefs.heading + angle)
+
+    def remeasure(journal: object) -> None:  # turned to θ = 0, the view did not match
+        rotate(wrap_pi(NORTH - runner.ctx.beliefs.heading))
+
+    monkeypatch.setattr(runner.motion, "rotate", rotate)
+    monkeypatch.setattr(runner.resumption, "remeasure_heading", remeasure)
+    monkeypatch.setattr(runner.ctx.bus, "query", serving(served_set()))
+    st = dataclasses.replace(agreed("hold"), heading=final, position=(0.1, 0.3))
+    assert runner.ctx.final_heading == NORTH  # as a fresh process starts
+    stage, _ = runner.resumption.resume(st, runs.Verdict(True, "served"))
+    assert stage == "hold"
+    assert runner.ctx.final_heading == pytest.approx(final)
+    assert turned == [pytest.approx(wrap_pi(NORTH - final)), pytest.approx(wrap_pi(final - NORTH))]
+    assert runner.ctx.beliefs.heading == pytest.approx(final)  # facing the axis again
+
+
+class Crash(Exception):
+    """The agent killed (SIGKILL) while its command is on its way."""
+
+
+def test_a_second_crash_during_the_resumption_forgets_no_turn(
+    runner: Runner,  # noqa: F811
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """eval_chaos seed 22: an agent killed four times in its search. The third process
+    answered the turn in flight and turned back towards θ = 0 to re-measure its heading;
+    killed during that turn, the fourth resumed from the journal of the first crash and
+    believed itself 88° from where it faced (the compass then disagreed by 30°: kept the
+    estimate, and the robot missed its parent at the end). The resumption's own turns are
+    journaled now, with their request ids; the journaled phase and record stand."""
+    from agent.body.base import Frame
+
+    heading, v = math.radians(163.2), 0.262
+    first = JournalState(
+        robot_id=3, phase="search", heading=heading, command="turn", command_value=v,
+        request_id=900, run_epoch=77,
+    )  # fmt: skip
+    Journal(tmp_path, 3).save(first)
+    Journal(tmp_path, 3).save_reference(np.zeros((4, 5, 3), np.uint8))
+    runner.ctx.journal = Journal(tmp_path, 3)
+    frame = Frame(np.zeros((4, 5, 3), np.uint8), 0.0, 0.0)
+    monkeypatch.setattr(runner.motion, "look", lambda yaw=0.0: frame)
+    sent: list[tuple[float, int]] = []
+
+    def turn(angle: float, request_id: int = 0) -> MotionResult:
+        sent.append((angle, request_id))
+        if request_id == 900:
+            return MotionResult("done", 6.3)  # the world's first answer, from its cache
+        raise Crash  # the re-measurement's first turn: the agent dies with it on its way
+
+    monkeypatch.setattr(runner.ctx.body, "turn", turn)
+    monkeypatch.setattr(runner.ctx.body, "new_request_id", lambda: 901)
+    with pytest.raises(Crash):
+        runner.resumption.resume(first, runs.Verdict(True, "peers search"))
+    assert sent[0] == (v, 900) and sent[1][1] == 901
+    st = Journal(tmp_path, 3).load()
+    assert st is not None
+    assert (st.command, st.request_id) == ("turn", 901)  # the turn on its way, with its id
+    assert st.command_value == pytest.approx(sent[1][0])
+    assert st.heading == pytest.approx(wrap_pi(heading + v))  # the turn in flight done once
+    assert (st.phase, st.record, st.run_epoch) == ("search", None, 77)  # as journaled
+    assert runner.ctx.journal is not None and runner.ctx.journal_hook == runner.journaling.save

@@ -243,6 +243,40 @@ def test_a_revoked_router_refuses_to_start(root: Path, capsys: pytest.CaptureFix
     assert "router's certificate is revoked" in capsys.readouterr().err
 
 
+def _host(root: Path, tmp_path: Path, rid: int) -> Path:
+    """One robot host's folder (its own key only), exported before any revocation."""
+    host = tmp_path / f"robot-{rid}"
+    fleet.export(root, T.Identity.robot(rid), host)
+    return host
+
+
+def test_id_auto_with_only_a_revoked_key_says_it_is_revoked(
+    root: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from agent.__main__ import main as agent_main
+
+    host = _host(root, tmp_path, 3)
+    T.revoke(root, [R3], reason="key-compromise")
+    shutil.copy(root / "crl.pem", host / "crl.pem")  # the list handed out
+    argv = ["--id", "auto", "--credentials", str(host), "--connect", "tls/127.0.0.1:1",
+            "--no-multicast-scouting"]  # fmt: skip
+    assert agent_main(argv) == 2  # refused before any session opens
+    err = capsys.readouterr().err
+    assert "holds only revoked robot keys" in err and "robot-3 (key-compromise" in err, err
+    assert "no robot key to claim" not in err
+    # a folder with no robot key at all: the message as before
+    assert T.Credentials(host).revoked_robot_keys() == [3]
+    (host / "keys" / "robot-3.key").unlink()
+    assert agent_main(argv) == 2
+    assert "holds no robot key to claim a robot with" in capsys.readouterr().err
+
+
+def test_id_auto_skips_a_revoked_key_among_others(root: Path) -> None:
+    T.revoke(root, [R3])
+    creds = T.Credentials(root)
+    assert creds.own_robot_keys() == [1, 2] and creds.revoked_robot_keys() == [3]
+
+
 # --------------------------------------------------------------------------- a real router
 
 

@@ -31,6 +31,11 @@ the robot starts afresh. A journal of a run still going is resumed (:class:`Resu
   session once it shows the agreed digest (``Membership.current_session``). A crash
   during the march is not resumed: the agent stops safely (``failed``).
 
+While resuming, the journal keeps the journaled phase, record and agreement, and follows
+the body: the beliefs once the command in flight is answered, and each turn of the
+resumption (re-measuring the heading, turning back to the axis at hold) with its request
+id (:class:`MotionJournal`): a second crash during the resumption resumes from there.
+
 Tie-break: the compass's re-measurement overrides the estimate when it is within 20° of it.
 """
 
@@ -38,6 +43,7 @@ from __future__ import annotations
 
 import logging
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -93,6 +99,39 @@ def load(journal: Journal) -> JournalState | None:
     return st
 
 
+class MotionJournal:
+    """The journal hook while resuming: the journaled state ``st`` with the beliefs as
+    they are and the command about to be sent (statuses write nothing: the journaled
+    phase stands until the resumption is over). A failing disk gives it up (logged)."""
+
+    def __init__(self, ctx: Context, journal: Journal | None, st: JournalState) -> None:
+        self.ctx, self.journal, self.st = ctx, journal, st
+
+    def hook(self, command: str = "", value: float = 0.0, request_id: int = 0) -> None:
+        """``Context.journal_hook``: a command about to be sent is journaled."""
+        if command:
+            self.save(command, value, request_id)
+
+    def save(self, command: str = "", value: float = 0.0, request_id: int = 0) -> None:
+        """Journal ``st`` with the beliefs now and ``command`` (none: nothing in flight)."""
+        if self.journal is None:
+            return
+        b = self.ctx.beliefs
+        state = replace(
+            self.st,
+            heading=float(wrap_pi(b.heading)),
+            position=(float(b.position[0]), float(b.position[1])),
+            command=command,
+            command_value=float(value),
+            request_id=request_id,
+        )
+        try:
+            self.journal.save(state)
+        except (OSError, ValueError) as exc:
+            log.error("journal write failed while resuming, given up: %s", exc)
+            self.journal = None
+
+
 class Resumption:
     """Where a (restarted) agent starts, and its state restored from the journal."""
 
@@ -132,17 +171,28 @@ class Resumption:
         (``search``, ``agree``, ``wait``, ``move``, ``hold``) and the record to agree
         on. Raises ``AgentFailure`` (a safe stop) when it cannot resume safely.
 
-        The journal is not written while resuming: a crash during the resumption resumes
-        from the same journal again (the command in flight is asked again with the
-        same request id)."""
+        While resuming, the journal keeps ``st`` (its phase, record, agreement, leg):
+        a crash during the resumption resumes from it again. Only the body's motion is
+        journaled meanwhile (:class:`MotionJournal`): the heading and position once the
+        command in flight is answered, and each turn of the resumption (the heading
+        re-measurement, the turn back to the axis) with its request id, so that a second
+        crash neither replays a command nor forgets a turn."""
         journal, self.ctx.journal = self.ctx.journal, None
+        hook = self.ctx.journal_hook
+        motions = MotionJournal(self.ctx, journal, st)
+        self.ctx.journal_hook = motions.hook
         try:
-            return self._resume(st, journal, verdict)
+            return self._resume(st, journal, verdict, motions)
         finally:
             self.ctx.journal = journal
+            self.ctx.journal_hook = hook
 
     def _resume(
-        self, st: JournalState, journal: Journal | None, verdict: Verdict | None
+        self,
+        st: JournalState,
+        journal: Journal | None,
+        verdict: Verdict | None,
+        motions: MotionJournal,
     ) -> tuple[str, NeighborRecordMsg | None]:
         ctx, b = self.ctx, self.ctx.beliefs
         # not resumed: a run over for this robot; the march (by design); an exploration
@@ -157,6 +207,8 @@ class Resumption:
         b.heading = st.heading
         b.position = np.array(st.position, dtype=np.float64)
         self.command_in_flight(st)
+        if st.command:
+            motions.save()  # answered: the beliefs as they are now, nothing in flight
         moved = st.command != "" or abs(wrap_pi(b.heading - NORTH)) > REORIENT_MIN
         if st.record is None:
             if moved:
@@ -195,8 +247,15 @@ class Resumption:
                 f"{st.plan_digest[:12]}: not moving"
             )
         stage = AGREED_STAGES.get(phase, "wait")
+        if stage in ("move", "hold"):
+            # the pyramid axis (set by the move, which a robot resumed at hold skips): the
+            # hold's own check judges the pair against it
+            _, ctx.final_heading = ctx.formation.goals(ctx.plan, ctx.me)
         if stage in ("move", "hold") and moved:
             self.remeasure_heading(journal)
+            turn = wrap_pi(ctx.final_heading - b.heading)
+            if stage == "hold" and abs(turn) > REORIENT_MIN:  # face the axis again, as arrived
+                self.motion.rotate(turn, PAPER_GAINS, "resumed: turn back to the pyramid axis")
         ctx.leg = st.leg
         return stage, st.record
 

@@ -336,6 +336,12 @@ class Credentials:
         """Robot ids whose private key this folder holds, sorted (for ``--id auto``)."""
         return [r for r in self.robots() if self.paths.key(Identity.robot(r)).is_file()]
 
+    def revoked_robot_keys(self) -> list[int]:
+        """Robot ids whose private key this folder holds but whose certificate is revoked,
+        sorted (``--id auto`` says so when these are all it has)."""
+        ids = (i.robot_id for i in self.revoked if i.role == "robot")
+        return sorted(r for r in ids if self.paths.key(Identity.robot(r)).is_file())
+
     def signer(self, who: Identity, epoch_ms: int | None = None) -> Signer:
         """The :class:`Signer` of ``who``: its private key, checked against its certificate."""
         self.check_active(who)
