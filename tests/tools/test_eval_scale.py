@@ -152,3 +152,13 @@ def test_arguments_and_the_agreement_timeout() -> None:
 def test_bad_arguments(argv: list[str]) -> None:
     with pytest.raises(SystemExit):
         parse_args(argv)
+
+
+def test_bench_scale_is_the_same_tool(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from tools.bench.__main__ import main as bench
+
+    src = tmp_path / "in.json"
+    src.write_text(json.dumps({"runs": [asdict(r) for r in runs()]}))
+    assert bench(["scale", "--report", str(src), "--out", str(tmp_path / "out")]) == 0
+    assert "world start" in capsys.readouterr().out
+    assert (tmp_path / "out" / "scale_phases.png").is_file()
