@@ -106,3 +106,25 @@ def test_retry_timeout_counts_attempts_and_raises_past_the_total() -> None:
 
     with pytest.raises(QueryTimeout):
         retry_timeout(never, total_s=0.05, attempt_s=2.0, what="x")
+
+
+def test_camera_waits_grow_with_the_fleet_behind_the_worlds_queue() -> None:
+    from agent.body.zenoh_world import CAMERA_ATTEMPT_S, CAMERA_TIMEOUT_S, camera_waits
+
+    assert camera_waits(None) == camera_waits(3) == (CAMERA_ATTEMPT_S, CAMERA_TIMEOUT_S)
+    assert camera_waits(15) == (15.0, 30.0)  # unchanged up to 15 robots
+    assert camera_waits(30) == (30.0, 60.0)
+    assert camera_waits(100) == (100.0, 200.0)
+
+
+def test_a_camera_attempt_waits_as_long_as_the_body_is_told() -> None:
+    from agent.wire import CameraRequest
+
+    bus = LossyBus(lost=10**6)
+    body = ZenohBody(bus, 3, camera_timeout=0.3, camera_attempt=0.2)  # type: ignore[arg-type]
+    with pytest.raises(BodyError, match="camera"):
+        body.camera(0.0)
+    assert bus.asked and all(isinstance(m, CameraRequest) for _, m, _ in bus.asked)
+    assert max(t for _, _, t in bus.asked) <= 0.2
+    long = ZenohBody(LossyBus(lost=0), 3, camera_attempt=100.0)  # type: ignore[arg-type]
+    assert (long.camera_attempt, long.camera_timeout) == (100.0, 30.0)
