@@ -67,8 +67,9 @@ class Run:
     max_abs_r_d: float | None = None
     max_abs_r_phi: float | None = None
     min_separation: float | None = None
-    #: the agents' agreement timeout of the run (s)
+    #: the agents' agreement timeout and wait limit for earlier waves of the run (s)
     agree_timeout_s: float = 120.0
+    wave_timeout_s: float = 600.0
     #: the 1-minute load average at the run's start, its mean over the run, at its end
     load_start: float = 0.0
     load_mean: float = 0.0
@@ -84,7 +85,12 @@ def _finite(v: Any) -> float | None:
 
 
 def row_of(
-    r: dict[str, Any], robots: int, seed: int, load: Sequence[float], agree_timeout_s: float
+    r: dict[str, Any],
+    robots: int,
+    seed: int,
+    load: Sequence[float],
+    agree_timeout_s: float = 120.0,
+    wave_timeout_s: float = 600.0,
 ) -> Run:
     """A judged ``result.json`` (``tools.harness.judge.summarise``) as one row."""
     got, detail = outcome(r)
@@ -110,6 +116,7 @@ def row_of(
         load_mean=statistics.fmean(load) if load else 0.0,
         load_end=load[-1] if load else 0.0,
         agree_timeout_s=agree_timeout_s,
+        wave_timeout_s=wave_timeout_s,
     )
 
 
@@ -146,6 +153,15 @@ def agree_timeout(args: argparse.Namespace, robots: int) -> float:
     return given if given is not None else max(120.0, 3.0 * robots)
 
 
+def wave_timeout(args: argparse.Namespace) -> float:
+    """The agents' wait limit for earlier waves and for the fleet to hold (``python -m
+    agent --wave-timeout``, wall s): ``--wave-timeout``, or by default the run's
+    ``--timeout``. The agents' default (600 s) is shorter than the waves of 100 NAOs on
+    a loaded 2-core machine take; the run's own limit still bounds every run."""
+    given: float | None = args.wave_timeout
+    return given if given is not None else float(args.timeout)
+
+
 def run_one(args: argparse.Namespace, robots: int, seed: int, out: Path) -> Run:
     """One run of ``robots`` NAOs at ``seed`` (module docstring)."""
     from tools.demo import parse_args
@@ -155,13 +171,15 @@ def run_one(args: argparse.Namespace, robots: int, seed: int, out: Path) -> Run:
     argv += ["--timeout", str(args.timeout), "--world-timeout", str(args.world_timeout)]
     agree_s = agree_timeout(args, robots)
     argv += ["--agree-timeout", f"{agree_s:g}"]
+    wave_s = wave_timeout(args)
+    argv += [f"--agent-arg={i}:--wave-timeout={wave_s:g}" for i in range(1, robots + 1)]
     argv += ["--no-publish-camera", *args.demo_arg]
     with load_samples() as load:
         try:
             r = run_once(parse_args(argv), seed, out, quiet=True)
         except RuntimeError as exc:
             r = {"errors": {"demo": str(exc)}, "contacts": 0}
-    return row_of(r, robots, seed, load, agree_s)
+    return row_of(r, robots, seed, load, agree_s, wave_s)
 
 
 # ===================================================================== table
@@ -322,6 +340,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                    help="wall limit of the world's start-up (s)")  # fmt: skip
     p.add_argument("--agree-timeout", type=float, default=None, metavar="S",
                    help="the agents' agreement timeout (default max(120, 3 N) s)")  # fmt: skip
+    p.add_argument("--wave-timeout", type=float, default=None, metavar="S",
+                   help="the agents' wait for earlier waves (default: --timeout)")  # fmt: skip
     p.add_argument("--demo-arg", action="append", default=[], metavar="ARG",
                    help="one more tools.demo argument for every run (repeat)")  # fmt: skip
     p.add_argument("--json", type=Path, default=None)
@@ -334,9 +354,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     a.robots = a.robots or [10, 30, 50]
     if any(not 2 <= n <= MAX_ROBOTS for n in a.robots) or a.seeds < 1:
         p.error(f"--robots in [2, {MAX_ROBOTS}], --seeds >= 1")
-    agree_ok = a.agree_timeout is None or a.agree_timeout > 0
-    if not (a.timeout > 0 and a.world_timeout > 0 and agree_ok):
-        p.error("--timeout, --world-timeout and --agree-timeout must be > 0")
+    given = [t for t in (a.agree_timeout, a.wave_timeout) if t is not None]
+    if not (a.timeout > 0 and a.world_timeout > 0 and all(t > 0 for t in given)):
+        p.error("--timeout, --world-timeout, --agree-timeout and --wave-timeout must be > 0")
     return a
 
 

@@ -22,6 +22,8 @@ from tools.eval_scale import (
     parse_args,
     plot_phases,
     row_of,
+    run_one,
+    wave_timeout,
 )
 
 PHASE_WALLS = {"start": 4.0, "search": 238.0, "localise": 2.0, "exchange": 46.0, "agree": 1.5,
@@ -56,6 +58,7 @@ def test_a_judged_result_becomes_a_row() -> None:
     assert (r.robots, r.seed, r.outcome, r.contacts, r.wall_s) == (3, 11, "complete", 0, 454.0)
     assert r.exchange_bytes_max == 3000 and r.exchange_bytes_median == 2000.0
     assert r.agreement_s == 4.25 and r.world_ready_s == 21.0 and r.agree_timeout_s == 150.0
+    assert r.wave_timeout_s == 600.0
     assert r.phases == PHASE_WALLS
     assert r.max_abs_r_phi is None  # NaN is no number
     assert (r.load_start, r.load_mean, r.load_end) == (20.0, 30.0, 40.0)
@@ -133,8 +136,9 @@ def test_arguments_and_the_agreement_timeout() -> None:
     assert a.robots == [10, 100] and a.seed_start == 11 and a.seeds == 1
     assert parse_args([]).robots == [10, 30, 50]
     assert [agree_timeout(a, n) for n in (10, 40, 50, 100)] == [120.0, 120.0, 150.0, 300.0]
-    fixed = parse_args(["--agree-timeout", "90"])
-    assert agree_timeout(fixed, 100) == 90.0
+    fixed = parse_args(["--agree-timeout", "90", "--wave-timeout", "700"])
+    assert agree_timeout(fixed, 100) == 90.0 and wave_timeout(fixed) == 700.0
+    assert wave_timeout(parse_args(["--timeout", "3000"])) == 3000.0
     assert parse_args(["--robots", str(MAX_ROBOTS)]).robots == [MAX_ROBOTS]
 
 
@@ -147,6 +151,7 @@ def test_arguments_and_the_agreement_timeout() -> None:
         ["--timeout", "0"],
         ["--agree-timeout", "-1"],
         ["--agree-timeout", "0"],
+        ["--wave-timeout", "0"],
     ],
 )
 def test_bad_arguments(argv: list[str]) -> None:
@@ -162,3 +167,22 @@ def test_bench_scale_is_the_same_tool(tmp_path: Path, capsys: pytest.CaptureFixt
     assert bench(["scale", "--report", str(src), "--out", str(tmp_path / "out")]) == 0
     assert "world start" in capsys.readouterr().out
     assert (tmp_path / "out" / "scale_phases.png").is_file()
+
+
+def test_a_run_gives_every_agent_the_timeouts(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    import tools.harness.run as harness
+
+    seen: dict[str, Any] = {}
+
+    def fake_run_once(args: Any, seed: int, out: Path, quiet: bool = False) -> dict[str, Any]:
+        seen.update(robots=args.robots, seed=seed, agent_arg=args.agent_arg,
+                    agree=args.agree_timeout, camera=args.publish_camera)  # fmt: skip
+        return result()
+
+    monkeypatch.setattr(harness, "run_once", fake_run_once)
+    r = run_one(parse_args(["--timeout", "2000"]), 4, 7, tmp_path)
+    assert (seen["robots"], seen["seed"], seen["agree"], seen["camera"]) == (4, 7, 120.0, False)
+    assert seen["agent_arg"] == [(i, "--wave-timeout=2000") for i in range(1, 5)]
+    assert (r.outcome, r.agree_timeout_s, r.wave_timeout_s) == ("complete", 120.0, 2000.0)
