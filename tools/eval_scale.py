@@ -67,6 +67,9 @@ class Run:
     max_abs_r_d: float | None = None
     max_abs_r_phi: float | None = None
     min_separation: float | None = None
+    #: bus events the observer dropped unread (its queue full: it lagged; phase times are
+    #: when the observer read the statuses, and dropped records are missing from the bytes)
+    dropped: int = 0
     #: the agents' agreement timeout and wait limit for earlier waves of the run (s)
     agree_timeout_s: float = 120.0
     wave_timeout_s: float = 600.0
@@ -112,6 +115,7 @@ def row_of(
         max_abs_r_d=_finite(r.get("max_abs_r_d")),
         max_abs_r_phi=_finite(r.get("max_abs_r_phi")),
         min_separation=_finite(r.get("min_separation")),
+        dropped=int(r.get("dropped", 0)),
         load_start=load[0] if load else 0.0,
         load_mean=statistics.fmean(load) if load else 0.0,
         load_end=load[-1] if load else 0.0,
@@ -202,6 +206,7 @@ def table_rows(runs: Sequence[Run]) -> list[list[str]]:
             f"{r.exchange_bytes_max / 1000:.1f} / {r.exchange_bytes_median / 1000:.1f}",
             "yes" if r.silent_wrong else "no",
             f"{r.load_start:.0f} / {r.load_mean:.0f} / {r.load_end:.0f}",
+            str(r.dropped),
             r.detail,
         ]
         for r in runs
@@ -218,6 +223,7 @@ HEADER = [
     "exchange kB/agent (max / median)",
     "silent wrong",
     "load (start / mean / end)",
+    "observer dropped",
     "detail",
 ]
 

@@ -48,6 +48,7 @@ def result(**over: Any) -> dict[str, Any]:
         "max_abs_r_phi": float("nan"),
         "min_separation": 0.52,
         "silent_wrong": False,
+        "dropped": 7,
     }
     r.update(over)
     return r
@@ -58,7 +59,7 @@ def test_a_judged_result_becomes_a_row() -> None:
     assert (r.robots, r.seed, r.outcome, r.contacts, r.wall_s) == (3, 11, "complete", 0, 454.0)
     assert r.exchange_bytes_max == 3000 and r.exchange_bytes_median == 2000.0
     assert r.agreement_s == 4.25 and r.world_ready_s == 21.0 and r.agree_timeout_s == 150.0
-    assert r.wave_timeout_s == 600.0
+    assert r.wave_timeout_s == 600.0 and r.dropped == 7
     assert r.phases == PHASE_WALLS
     assert r.max_abs_r_phi is None  # NaN is no number
     assert (r.load_start, r.load_mean, r.load_end) == (20.0, 30.0, 40.0)
@@ -80,7 +81,7 @@ def runs() -> list[Run]:
 
 def test_markdown_tables_hold_every_run_and_phase() -> None:
     text = markdown(runs())
-    assert "| 50 | 11 | complete | 0 | 454 | 4.2 | 3.0 / 2.0 | no | 25 / 30 / 35 |" in text
+    assert "| 50 | 11 | complete | 0 | 454 | 4.2 | 3.0 / 2.0 | no | 25 / 30 / 35 | 7 |" in text
     assert "| 100 | 1 | unsafe | 1 |" in text and "| yes |" in text
     head = next(ln for ln in text.splitlines() if ln.startswith("| N | seed | world start"))
     assert head.split(" | ")[3:-1] == [p for p in PHASES if p in PHASE_WALLS]
