@@ -279,7 +279,7 @@ def plot_phases(runs: Sequence[Run], path: Path) -> None:
     shown = [s for s in segments if any(_duration(r, s) > 0 for r in runs)]
     cmap = plt.get_cmap("tab20")
     colour = {s: cmap(k % 20) for k, s in enumerate(segments)}
-    fig, ax = plt.subplots(figsize=(10, 1.8 + 0.55 * len(runs)))
+    fig, ax = plt.subplots(figsize=(10, 2.6 + 0.55 * len(runs)))
     right = max([r.wall_s for r in runs] + [sum(_duration(r, s) for s in shown) for r in runs])
     for y, r in enumerate(runs):
         left = 0.0
@@ -304,7 +304,7 @@ def plot_phases(runs: Sequence[Run], path: Path) -> None:
     handles.append(plt.Line2D([], [], marker="D", color="black", linestyle=""))
     ax.legend(
         handles, [*shown, "run's wall time"], fontsize=7, ncol=6, loc="upper center",
-        bbox_to_anchor=(0.5, -0.18 if len(runs) > 2 else -0.35),
+        bbox_to_anchor=(0.5, -0.25 if len(runs) > 2 else -0.45),
     )  # fmt: skip
     ax.set_yticks(range(len(runs)), [r.name for r in runs])
     ax.invert_yaxis()
