@@ -287,7 +287,7 @@ def main(argv: list[str] | None = None) -> int:
     log = logging.getLogger("agent")
     # Imported here so that `--help` and usage errors need no zenoh session.
     from agent.body.base import Body, BodyError
-    from agent.body.zenoh_world import ZenohBody
+    from agent.body.zenoh_world import ZenohBody, camera_waits
     from agent.config import AgentConfig
     from agent.net.bus import BusError
     from agent.phases.runner import Runner, report_unavailable
@@ -320,7 +320,8 @@ def main(argv: list[str] | None = None) -> int:
             except BodyError as exc:
                 return report_unavailable(bus, rid, str(exc))
         else:
-            body = ZenohBody(world_bus, rid)
+            attempt, total = camera_waits(args.fleet_size)  # the world's queue (issue 21)
+            body = ZenohBody(world_bus, rid, camera_timeout=total, camera_attempt=attempt)
         try:
             runner = Runner(
                 bus,

@@ -93,7 +93,7 @@ def _raw(**obj: object) -> bytes:
         (_raw(v=1, t="registered", robot_id=-1), "outside"),
         (_raw(v=1, t="registered", robot_id=True), "expected int"),
         (_raw(v=1, t="record", sender=1, round=0, neighbours=[[0.0]]), "list of 2"),
-        (_raw(v=1, t="record", sender=1, round=0, neighbours=[[0.0, 1.0]] * 65), "at most"),
+        (_raw(v=1, t="record", sender=1, round=0, neighbours=[[0.0, 1.0]] * 129), "at most"),
         (
             _raw(
                 v=1, t="record", sender=1, round=0, neighbours=[[0.0, 1.0]], confidences=[0.5, 0.5]

@@ -50,7 +50,9 @@ class LossyBus:
         self.error = error
         self.asked: list[tuple[str, object, float]] = []
 
-    def query(self, key: str, msg: object, expect: type, timeout: float) -> object:
+    def query(
+        self, key: str, msg: object, expect: type, timeout: float, best: bool = False
+    ) -> object:
         self.asked.append((key, msg, timeout))
         if self.error is not None:
             raise self.error
@@ -193,3 +195,25 @@ def test_an_error_reply_to_a_camera_query_is_not_retried() -> None:
     with pytest.raises(BodyError, match="render failed"):
         body.camera(0.0)
     assert len(bus.asked) == 1
+
+
+def test_camera_waits_grow_with_the_fleet_behind_the_worlds_queue() -> None:
+    from agent.body.zenoh_world import CAMERA_ATTEMPT_S, CAMERA_TIMEOUT_S, camera_waits
+
+    assert camera_waits(None) == camera_waits(3) == (CAMERA_ATTEMPT_S, CAMERA_TIMEOUT_S)
+    assert camera_waits(15) == (15.0, 30.0)  # unchanged up to 15 robots
+    assert camera_waits(30) == (30.0, 60.0)
+    assert camera_waits(100) == (100.0, 200.0)
+
+
+def test_a_camera_attempt_waits_as_long_as_the_body_is_told() -> None:
+    from agent.wire import CameraRequest
+
+    bus = LossyBus(lost=10**6)
+    body = ZenohBody(bus, 3, camera_timeout=0.3, camera_attempt=0.2)  # type: ignore[arg-type]
+    with pytest.raises(BodyError, match="camera"):
+        body.camera(0.0)
+    assert bus.asked and all(isinstance(m, CameraRequest) for _, m, _ in bus.asked)
+    assert max(t for _, _, t in bus.asked) <= 0.2
+    long = ZenohBody(LossyBus(lost=0), 3, camera_attempt=100.0)  # type: ignore[arg-type]
+    assert (long.camera_attempt, long.camera_timeout) == (100.0, 30.0)

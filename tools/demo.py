@@ -69,6 +69,12 @@ from tools.harness.progress import Progress
 from tools.harness.run import run_once
 from tools.harness.webpage import DEFAULT_WEB, serve_page
 
+#: The most robots a demo runs. Each robot is an agent process (~100 MB of its own memory
+#: and a TLS session at the router): 128 robots need ~13 GB. The wire's records carry at
+#: most ``agent.wire.MAX_NEIGHBOURS`` (128) neighbours, so even a robot that sees every
+#: other one of 128 fits; the scenario generator places up to 200.
+MAX_ROBOTS = 128
+
 # ===================================================================== CLI
 
 
@@ -218,8 +224,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
             p.error("--scenario fixes the robots and the seed: no --batch")
         a.scenario_ids = sorted(r.id for r in sc.robots)
         a.robots, a.seed = len(a.scenario_ids), sc.seed
-    if not 1 <= a.robots <= 64:
-        p.error("--robots must be in [1, 64]")
+    if not 1 <= a.robots <= MAX_ROBOTS:
+        p.error(f"--robots must be in [1, {MAX_ROBOTS}]")
     if a.isolated and a.robots < 2:
         p.error("--isolated needs at least 2 robots")
     if a.batch < 0:

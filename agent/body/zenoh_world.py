@@ -67,12 +67,28 @@ log = logging.getLogger("agent.body.zenoh_world")
 #: Seconds one attempt of a motion query waits for its reply before asking again with
 #: the same request id (a repeat of a running motion waits for that motion in the world).
 MOTION_ATTEMPT_S = 60.0
-#: ... and of a camera query.
+#: ... and of a camera query, and all attempts of one camera query together.
 CAMERA_ATTEMPT_S = 15.0
 #: Pause before asking again for a frame older than the last motion, doubled up to
 #: STALE_WAIT_MAX_S (a render worker's poses lag the world's by a publication or two).
 STALE_WAIT_S = 0.02
 STALE_WAIT_MAX_S = 0.5
+CAMERA_TIMEOUT_S = 30.0
+#: Seconds of a camera query's attempt per robot of the fleet (issue 21). The world draws
+#: one picture at a time, so in a fleet that searches at once a query waits behind one
+#: query of nearly every other robot: 10 NAOs on the 2-core machine at load 34 took
+#: ~0.75 s a picture (261 s of search, ~35 pictures each). An attempt shorter than that
+#: queue asks again while the first query still waits: the world then draws pictures
+#: nobody waits for, and the queue grows (at 100 NAOs every query would time out).
+CAMERA_WAIT_PER_ROBOT_S = 1.0
+
+
+def camera_waits(fleet_size: int | None) -> tuple[float, float]:
+    """(one attempt, all attempts) in seconds of a camera query in a fleet of
+    ``fleet_size`` robots: (max(15, 1·N), twice that); (15, 30) up to 15 robots and when
+    the size is not known."""
+    attempt = max(CAMERA_ATTEMPT_S, CAMERA_WAIT_PER_ROBOT_S * (fleet_size or 0))
+    return attempt, attempt * CAMERA_TIMEOUT_S / CAMERA_ATTEMPT_S
 
 
 def retry_no_route(call: Callable[[], T], deadline_s: float, first_wait: float = 0.05) -> T:
@@ -140,12 +156,14 @@ class ZenohBody:
         self,
         bus: Bus,
         robot_id: int,
-        camera_timeout: float = 30.0,
+        camera_timeout: float = CAMERA_TIMEOUT_S,
         motion_timeout: float = 300.0,
+        camera_attempt: float = CAMERA_ATTEMPT_S,
     ) -> None:
         self.bus = bus
         self._robot_id = robot_id
         self.camera_timeout = camera_timeout
+        self.camera_attempt = camera_attempt
         self.motion_timeout = motion_timeout
         self._t_sim = 0.0
         #: World time at which this robot's last motion ended (the pose-time rule).
@@ -185,7 +203,7 @@ class ZenohBody:
         while True:
             left = max(0.1, end - time.monotonic())
             try:
-                rep = self._ask(key, req, CameraReply, left, CAMERA_ATTEMPT_S, best=True)
+                rep = self._ask(key, req, CameraReply, left, self.camera_attempt, best=True)
             except BusError as exc:
                 raise BodyError(what, str(exc)) from None
             if rep.t_sim >= self.motion_end:

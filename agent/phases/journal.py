@@ -66,7 +66,8 @@ from agent.wire import (
 JOURNAL_VERSION = 2
 MAGIC_STATE = b"NAOJRNL1"
 MAGIC_REFERENCE = b"NAOREFV1"
-#: The state is a few hundred bytes (a record: at most 64 neighbours).
+#: The state is a few hundred bytes (a record: at most MAX_NEIGHBOURS (128) neighbours,
+#: under 8 KB; the agreed members: at most MAX_MEMBERS ids).
 MAX_STATE_BYTES = 64 * 1024
 #: A reference view: a BGR uint8 image, at most 1280 x 960.
 MAX_REFERENCE_BYTES = 1280 * 960 * 3 + 1024

@@ -16,7 +16,10 @@ from agent.core import nao
 
 SCHEMA_VERSION = 1
 MAX_ROBOT_ID = 65535
-MAX_NEIGHBOURS = 64
+#: Neighbours one record may carry (issue 21: 100 NAOs). A robot sees at most the others
+#: within sight (``nao.SIGHT_MAX`` = 3 m); generated fleets of 100-200 put <= 50 there,
+#: and a fleet of up to 128 robots (``tools.demo``'s limit) fits even if one saw them all.
+MAX_NEIGHBOURS = 128
 MAX_OBSTACLES = 32  # obstacles one robot may report in its record
 MAX_MEMBERS = 1024
 MAX_TEXT = 512

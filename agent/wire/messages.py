@@ -199,8 +199,9 @@ class StatusMsg(Message):
     }
 
 
-#: A neighbour record's wire form in a :class:`RecordSetReply` (64 neighbours: ~2.5 KB).
-MAX_RECORD_BYTES = 4096
+#: A neighbour record's wire form in a :class:`RecordSetReply`: MAX_NEIGHBOURS (128)
+#: neighbours and MAX_OBSTACLES obstacles take ~5.4 KB (64 and 32: 3.1 KB).
+MAX_RECORD_BYTES = 8192
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,4 @@
-"""``python -m tools.bench {plan,world,perception,agent,render}``: benchmarks that print numbers.
+"""``python -m tools.bench {plan,world,perception,agent,render,scale}``: benchmarks that print numbers.
 
 Each sub-benchmark lives in its own module ``tools/bench/<name>.py`` with a
 ``main(argv) -> int``.
@@ -9,7 +9,7 @@ from __future__ import annotations
 import importlib
 import sys
 
-TARGETS = ("plan", "world", "perception", "agent", "render")
+TARGETS = ("plan", "world", "perception", "agent", "render", "scale")
 
 
 def main(argv: list[str] | None = None) -> int:
