@@ -3,14 +3,12 @@
 from __future__ import annotations
 
 import itertools
-import math
 from collections.abc import Callable
 
 import pytest
 
 from agent.core.agreed_params import odd_params, params_digest
 from agent.core.agreement import Agreement
-from agent.core.grace import Grace
 from agent.wire import DigestMsg, NeighborRecordMsg, canonical_digest
 
 Drop = Callable[[str, int, int, float], bool]
@@ -443,38 +441,6 @@ def test_params_mismatch_names_what_is_known_at_the_timeout() -> None:
     assert a.decide(1.0).kind == "wait"  # robot 2 has not even joined
     d = a.decide(6.0)
     assert d.kind == "failed" and "robot(s) [1] plan with different parameters" in d.reason
-
-
-def test_grace_a_vanished_token_is_gone_only_after_the_grace_period() -> None:
-    g = Grace(5.0)
-    g.token(1, False, 10.0)
-    assert g.pending() == (1,)
-    assert g.expired(14.9) == []
-    assert g.expired(15.0) == [1]
-    assert g.pending() == () and g.expired(100.0) == []  # reported once
-
-
-def test_grace_heartbeats_and_a_returning_token_end_the_count() -> None:
-    g = Grace(5.0)
-    g.token(1, False, 0.0)
-    g.token(2, False, 0.0)
-    g.heard(1, 4.0)  # a record or status of robot 1: still there
-    g.heard(3, 4.0)  # no token lost: nothing to reset
-    g.token(2, True, 3.0)  # robot 2 reconnected
-    assert g.expired(8.0) == []
-    assert g.expired(9.0) == [1]
-    g.token(4, False, 0.0)
-    g.token(4, False, 7.0)  # a repeated vanish does not restart the count
-    assert g.expired(5.0) == [4]
-
-
-def test_grace_zero_expires_at_once_and_bad_grace_is_refused() -> None:
-    g = Grace(0.0)
-    g.token(1, False, 2.0)
-    assert g.expired(2.0) == [1]
-    for bad in (-1.0, math.inf, math.nan):
-        with pytest.raises(ValueError, match="grace"):
-            Grace(bad)
 
 
 def test_a_member_out_of_reach_after_its_record_is_waited_for_until_it_returns() -> None:
