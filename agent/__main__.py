@@ -33,6 +33,16 @@ usage error.
 
 from __future__ import annotations
 
+import os
+
+# One BLAS thread per agent, set before numpy is imported (issue 21). An agent's linear
+# algebra is small (a least squares over its fleet's sightings), and with many agents on
+# one host (the simulation, ``docker compose --scale agent=50``) OpenBLAS's thread pools
+# spun against each other: at 50 agents planning at once the machine spent its time in
+# the kernel and a 2-second plan took minutes. An explicit setting still wins.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
 import argparse
 import contextlib
 import dataclasses

@@ -20,7 +20,8 @@ not depend on it:
 * **loop consistency** (the *support*, as :mod:`neighbour_check`'s but rotated): if the
   candidate is right, every other sighting ``v_ic`` of i, moved into j's frame as
   ``R(−Δ)(v_ic − v_ij)``, is one of j's sightings (within ε/2 + 0.08·|v_ic − v_ij|)
-  when j sees c too: each such triangle i–j–c that closes counts one, from both sides.
+  when j sees c too: each such triangle i–j–c that closes counts one, from both sides
+  (:mod:`pair_support`, for every candidate at once).
 
 Candidates are taken globally greedy (as :func:`neighbour_check.identify_neighbours`) in
 two passes. The first takes the supported candidates (support ≥ 1); the second the
@@ -42,9 +43,9 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from agent.core.formation.neighbour_check import DEFAULT_EPSILON, NeighbourGraph, NeighbourPair
+from agent.core.formation.pair_support import support_one_side
 from agent.core.formation.records import NeighborRecord, canonical_records
 
 #: ρ: distance disagreement allowed per metre of distance (on top of ε). Two sightings
@@ -161,38 +162,6 @@ def _flatten(
     )
 
 
-def _support_one_side(
-    src: np.ndarray,
-    dst: np.ndarray,
-    turn: np.ndarray,
-    owner: np.ndarray,
-    vecs: np.ndarray,
-    epsilon: float,
-) -> np.ndarray:
-    """Triangles closed from ``src``'s side: src's other sightings found among dst's owner's."""
-    out = np.zeros(src.shape[0], dtype=np.int64)
-    by_owner = {int(o): np.flatnonzero(owner == o) for o in np.unique(owner)}
-    trees: dict[int, cKDTree] = {}
-    for t in range(src.shape[0]):
-        oi, oj = int(owner[src[t]]), int(owner[dst[t]])
-        others = by_owner[oi][by_owner[oi] != src[t]]
-        if others.size == 0:
-            continue
-        theirs = by_owner[oj][by_owner[oj] != dst[t]]
-        if theirs.size == 0:
-            continue
-        if oj not in trees:
-            trees[oj] = cKDTree(vecs[by_owner[oj]])
-        rel = vecs[others] - vecs[src[t]]
-        c, s = math.cos(-turn[t]), math.sin(-turn[t])
-        moved = rel @ np.array([[c, s], [-s, c]])
-        dist, k = trees[oj].query(moved)
-        hit = by_owner[oj][np.minimum(k, by_owner[oj].size - 1)]
-        tol = 0.5 * epsilon + SUPPORT_REL_TOL * np.hypot(rel[:, 0], rel[:, 1])
-        out[t] = int(np.sum((dist <= tol) & (hit != dst[t])))
-    return out
-
-
 def identify_pairs(
     records: Sequence[NeighborRecord],
     epsilon: float = DEFAULT_EPSILON,
@@ -237,9 +206,9 @@ def identify_pairs(
         turn = wrap_angle(bearing[ra] - bearing[rb] + np.pi)  # ψ_j − ψ_i of each candidate
         # rounded so that float noise does not decide between exact ties (|Δ| does)
         cost = np.round(derr / tol + _mask_cost(turn, bearing, ori, ra, rb) / MASK_SCALE, 9)
-        support = _support_one_side(ra, rb, turn, owner, vecs, epsilon) + _support_one_side(
-            rb, ra, -turn, owner, vecs, epsilon
-        )
+        support = support_one_side(
+            ra, rb, turn, owner, vecs, epsilon, SUPPORT_REL_TOL
+        ) + support_one_side(rb, ra, -turn, owner, vecs, epsilon, SUPPORT_REL_TOL)
         order = np.lexsort((rb, ra, np.abs(turn), cost, -support))
         used: set[int] = set()
         linked: set[tuple[int, int]] = set()
