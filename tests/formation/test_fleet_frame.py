@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Any
 
 import numpy as np
 import pytest
 
 from agent.core.formation.fleet_frame import fleet_frame
 from agent.core.formation.neighbour_check import DEFAULT_EPSILON
+from agent.core.formation.pose_check import check_poses
 from tests.formation.pose_fleets import fault, sim_layout, unaligned_records
 
 IDS = [1, 2, 3, 4, 5, 6]
@@ -74,6 +76,13 @@ def test_heading_of_a_robot_not_planned() -> None:
         fleet_frame(recs, DEFAULT_EPSILON).heading_of(99)
 
 
+def _inject(monkeypatch: pytest.MonkeyPatch, ff_mod: Any, verdict: Any) -> None:
+    """fleet_frame fits ``verdict.poses`` and its check says ``verdict``."""
+    monkeypatch.setattr(ff_mod, "build_poses", lambda r, e: verdict.poses)
+    monkeypatch.setattr(ff_mod, "quick_check", lambda poses: None)
+    monkeypatch.setattr(ff_mod, "check_frame", lambda poses: verdict)
+
+
 def test_a_fleet_that_falls_apart_without_the_named_robot_stops(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
@@ -83,14 +92,14 @@ def test_a_fleet_that_falls_apart_without_the_named_robot_stops(
     from agent.core.formation.pose_check import PoseVerdict
 
     _, _, recs = _fleet(4)
-    real = ff_mod.check_poses(recs, DEFAULT_EPSILON)
+    real = check_poses(recs, DEFAULT_EPSILON)
     worse = tuple(
         dataclasses.replace(q, score=5.0, position=1.0) if 2 in (q.i, q.j) else q
         for q in real.poses.pairs
     )
     poses = dataclasses.replace(real.poses, pairs=worse)
     named = PoseVerdict((2,), "robot 2: the others are consistent without it", poses)
-    monkeypatch.setattr(ff_mod, "check_poses", lambda r, e: named)
+    _inject(monkeypatch, ff_mod, named)
     monkeypatch.setattr(ff_mod, "consistent_rest", lambda poses, robot: None)
     with pytest.raises(ValueError, match=r"robot 2's sightings do not fit.*nobody moves"):
         fleet_frame(recs, DEFAULT_EPSILON)
@@ -105,18 +114,18 @@ def test_a_fleet_inconsistent_beyond_one_robot_plans_as_the_papers_do(
     from agent.core.formation.pose_check import PoseVerdict
 
     _, _, recs = _fleet(4)
-    real = ff_mod.check_poses(recs, DEFAULT_EPSILON)
+    real = check_poses(recs, DEFAULT_EPSILON)
     worse = [dataclasses.replace(p, score=5.0) for p in real.poses.pairs]
     poses = dataclasses.replace(real.poses, pairs=tuple(worse))
-    monkeypatch.setattr(ff_mod, "check_poses", lambda r, e: PoseVerdict((), "ambiguous", poses))
+    _inject(monkeypatch, ff_mod, PoseVerdict((), "ambiguous", poses))
     got = fleet_frame(recs, DEFAULT_EPSILON)  # random headings: eq. 9 pairs nobody
     assert got.reason == "ambiguous" and not got.aligned
     _, _, aligned = _fleet(3, np.full(len(IDS), math.pi / 2))
-    real = ff_mod.check_poses(aligned, DEFAULT_EPSILON)
+    real = check_poses(aligned, DEFAULT_EPSILON)
     bad = dataclasses.replace(
         real.poses, pairs=tuple(dataclasses.replace(p, score=5.0) for p in real.poses.pairs)
     )
-    monkeypatch.setattr(ff_mod, "check_poses", lambda r, e: PoseVerdict((), "noisy", bad))
+    _inject(monkeypatch, ff_mod, PoseVerdict((), "noisy", bad))
     got = fleet_frame(aligned, DEFAULT_EPSILON)  # the papers' model explains every position
     assert got.aligned and got.reason == "aligned starts: every sighting fits in position"
 

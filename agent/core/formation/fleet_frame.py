@@ -25,7 +25,10 @@ aligned), checked by :mod:`pose_check`, which names a robot whose sightings do n
   explains: the first rule below covers the papers' own Monte Carlo.
 * The fit finds every |ψ| within :data:`poses.ALIGNED_MAX_HEADING` and nobody turned, or
   the papers' aligned model explains every position with as many pairs as the fit: planned
-  exactly as the papers do, on aligned frames (checked first).
+  exactly as the papers do, on aligned frames (checked first, on the fit as the check's
+  steps that leave nobody out leave it, :func:`pose_check.quick_check`; the check's search
+  for a robot to blame, one fit per robot, runs only when it can change the frame:
+  issue 21, 50 aligned NAOs plan in ~9 CPU s instead of ~110 s).
 
 Deterministic: the same records in any order give bit-identical output (the pose fit's
 own guarantee; the named robot's place is a mean over sightings sorted by owner id).
@@ -40,10 +43,11 @@ import numpy as np
 
 from agent.core.formation.common_frame import build_common_frame
 from agent.core.formation.neighbour_check import identify_neighbours
-from agent.core.formation.pose_check import check_poses, consistent_rest
+from agent.core.formation.pose_check import check_frame, consistent_rest, quick_check
 from agent.core.formation.poses import (
     ALIGNED_MAX_HEADING,
     PoseFrame,
+    build_poses,
     evaluate_poses,
     pair_measurements,
 )
@@ -145,16 +149,19 @@ def fleet_frame(records: Sequence[NeighborRecord], epsilon: float) -> FleetFrame
     named robot without which the rest is not connected, or a fleet whose sightings are
     inconsistent beyond one robot.
     """
-    verdict = check_poses(records, epsilon)
-    poses = verdict.poses
+    first = build_poses(records, epsilon)
+    quick = quick_check(first)  # check_frame's verdict when it needs no search
+    poses = first if quick is None else quick.poses
     today = _aligned_explains(records, epsilon, poses)
     if today is None and _max_turn(poses) <= ALIGNED_MAX_HEADING and not poses.turned:
         # the fit finds the starts aligned: plan exactly as the papers do (a distance-only
         # pose pairing of a dense fleet can pair a long one-way sighting wrongly and blame
-        # a sound robot for it; 15 NAOs, seed 1, robot 5)
+        # a sound robot for it; 15 NAOs, seed 1, robot 5). Nobody is left out here, so the
+        # check's search for a robot to blame is not run (issue 21: ~100 fits at 50 NAOs)
         papers = _papers_model(records, epsilon)
         if papers is not None:
-            return replace(papers, reason=f"aligned starts (every |ψ| ≤ 10°): {verdict.reason}")
+            why = quick.reason if quick is not None else "pairs misfit, nobody sought to blame"
+            return replace(papers, reason=f"aligned starts (every |ψ| ≤ 10°): {why}")
     if today is not None:
         # the papers' aligned model pairs as many robots and explains every position:
         # exactly today's frame, nobody left out on masks alone (a turned record would
@@ -163,6 +170,7 @@ def fleet_frame(records: Sequence[NeighborRecord], epsilon: float) -> FleetFrame
             today.frame_robot, today.ids, today.positions, today.headings, True,
             reason="aligned starts: every sighting fits in position",
         )  # fmt: skip
+    verdict = quick if quick is not None else check_frame(first)
     if not verdict.named:
         return FleetFrame(
             poses.frame_robot, poses.ids, poses.positions, poses.headings, poses.aligned,

@@ -191,10 +191,26 @@ def consistent_rest(poses: PoseFrame, robot: int, cleaning: bool = True) -> Pose
     return None if cleaned is None else cleaned.poses
 
 
-def _check_frame(poses: PoseFrame) -> PoseVerdict:
-    """Steps 1-3 of the module docstring."""
+def quick_check(poses: PoseFrame) -> PoseVerdict | None:
+    """:func:`check_frame`'s verdict where it needs no robot left out: the fit consistent,
+    or (nobody turned) consistent once its isolated misfit pairs are dropped as wrong
+    pairings; else None (then only :func:`check_frame`'s search over the robots tells).
+
+    The search fits the fleet again once per robot (twice with the wrong pairings
+    dropped): ~100 fits of ~1 s at 50 NAOs. :func:`fleet_frame.fleet_frame` asks this
+    first, and searches only when the frame is not the papers' aligned one anyway."""
     if poses.consistent:
         return PoseVerdict((), "consistent: every pair within tolerance", poses)
+    if not poses.turned:
+        return drop_wrong_pairings(poses)
+    return None
+
+
+def _check_frame(poses: PoseFrame) -> PoseVerdict:
+    """Steps 1-3 of the module docstring."""
+    quick = quick_check(poses)
+    if quick is not None:
+        return quick
     if len(poses.turned) == 1:
         (t,) = poses.turned
         rest = leave_out(poses, t)
@@ -205,10 +221,6 @@ def _check_frame(poses: PoseFrame) -> PoseVerdict:
                 "consistent without it",
                 poses,
             )
-    if not poses.turned:
-        cleaned = drop_wrong_pairings(poses)
-        if cleaned is not None:
-            return cleaned
     worst = max(poses.pairs, key=lambda p: (p.score, -p.i, -p.j))
     bad = f"pair {worst.i}-{worst.j} misfit {worst.position:.2f} m, " + (
         f"{math.degrees(worst.heading):.0f}° (score {worst.score:.1f})"
