@@ -201,3 +201,51 @@ def test_a_turned_robot_is_named_by_the_others_masks() -> None:
     recs[3] = fault(recs[3], "rotate")
     ff = fleet_frame(recs, DEFAULT_EPSILON)
     assert ff.excluded == (4,) and "masks agree" in ff.reason
+
+
+def test_an_aligned_fleet_with_misfit_pairs_plans_without_the_search(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Issue 21: the search for a robot to blame (one fit per robot) is not run when the
+    frame is the papers' aligned one anyway; the same frame as with the search."""
+    import dataclasses
+
+    import agent.core.formation.fleet_frame as ff_mod
+
+    _, _, aligned = _fleet(3, np.full(len(IDS), math.pi / 2))
+    real = check_poses(aligned, DEFAULT_EPSILON).poses
+    # two misfit pairs sharing robot 2: no isolated wrong pairing, nobody turned
+    worse = tuple(
+        dataclasses.replace(p, score=5.0, position=1.0) if 2 in (p.i, p.j) else p
+        for p in real.pairs
+    )
+    misfit = dataclasses.replace(real, pairs=worse)
+    assert not misfit.consistent and not misfit.turned
+    monkeypatch.setattr(ff_mod, "build_poses", lambda r, e: misfit)
+    monkeypatch.setattr(ff_mod, "_aligned_explains", lambda r, e, p: None)
+    with_search = fleet_frame(aligned, DEFAULT_EPSILON)
+
+    def no_search(poses: Any) -> Any:
+        raise AssertionError("the search ran")
+
+    monkeypatch.setattr(ff_mod, "check_frame", no_search)
+    got = fleet_frame(aligned, DEFAULT_EPSILON)
+    assert got.aligned and got.excluded == ()
+    assert got.reason == "aligned starts (every |ψ| ≤ 10°): pairs misfit, nobody sought to blame"
+    assert got.positions.tobytes() == with_search.positions.tobytes()
+
+
+def test_quick_check_answers_only_without_the_search() -> None:
+    import dataclasses
+
+    from agent.core.formation.pose_check import check_frame, quick_check
+
+    _, _, recs = _fleet(4)
+    poses = check_poses(recs, DEFAULT_EPSILON).poses
+    ok = quick_check(poses)
+    assert ok is not None and ok.named == () and ok.reason.startswith("consistent")
+    assert ok == check_frame(poses)
+    turned = dataclasses.replace(
+        poses, pairs=tuple(dataclasses.replace(p, score=5.0) for p in poses.pairs), turned=(2,)
+    )
+    assert quick_check(turned) is None  # a turned robot: only the search can tell
