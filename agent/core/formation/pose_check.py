@@ -15,11 +15,13 @@ Rule (deterministic, on the poses of :func:`poses.build_poses`):
 2. otherwise: misfit pairs that are *isolated* (neither robot has another) are wrong
    pairings (:func:`drop_wrong_pairings`): dropped, and if the refit is consistent nobody
    is named. Otherwise exactly one turned robot whose leaving makes the rest consistent
-   is named. Otherwise each robot r (ascending id), in turn, is left out: its sightings
-   and the others' sightings of it are dropped and the rest is fitted again (same
-   pairing); r is a *candidate* when the rest is connected (at least two robots) and
-   consistent; only when no robot is, when the rest is consistent once its own isolated
-   misfit pairs are dropped (:func:`consistent_rest`);
+   is named. Otherwise each robot r (ascending id) that may explain the misfit
+   (:func:`may_explain`: turned or an end of a misfit pair, and every misfit pair it is
+   not part of isolated) is left out in turn: its sightings and the others' sightings of
+   it are dropped and the rest is fitted again (same pairing); r is a *candidate* when
+   the rest is connected (at least two robots) and consistent; only when no robot is,
+   when the rest is consistent once its own isolated misfit pairs are dropped
+   (:func:`consistent_rest`);
 3. exactly one candidate: it is named. Several (typically the faulty robot and the
    partner of its worst pair): with the robust z-score ``(s_r − median(s)) /
    (1.4826·MAD(s))`` of the robot scores s (MAD floored at :data:`MAD_FLOOR`), the
@@ -206,6 +208,29 @@ def quick_check(poses: PoseFrame) -> PoseVerdict | None:
     return None
 
 
+def may_explain(poses: PoseFrame, cleaning: bool) -> list[int]:
+    """The robots (ascending) whose leaving out :func:`consistent_rest` is asked about: a
+    turned robot or an end of a misfit pair, and only if the misfit pairs it is not part
+    of are none (``cleaning`` False) or isolated (True: the wrong pairings that
+    :func:`drop_wrong_pairings` may drop).
+
+    Leaving a robot out drops its own pairs and nobody else's; the robust (soft-L1) fit
+    bounds what its sightings did to the others' poses, so a misfit pair between two other
+    robots stays misfit in the rest. Without this rule the search fitted the fleet once
+    per robot, twice over: ~100 fits, ~100 CPU s at 50 NAOs whose misfit pairs spread
+    over the whole fleet (issue 21), to find what this rule says at once: nobody."""
+    bad = [p for p in poses.pairs if p.score > 1.0]
+    ends = {r for p in bad for r in (p.i, p.j)} | set(poses.turned)
+    out = []
+    for r in poses.ids:
+        if r not in ends:
+            continue
+        others = Counter(x for p in bad if r not in (p.i, p.j) for x in (p.i, p.j))
+        if not others or (cleaning and max(others.values()) == 1):
+            out.append(r)
+    return out
+
+
 def _check_frame(poses: PoseFrame) -> PoseVerdict:
     """Steps 1-3 of the module docstring."""
     quick = quick_check(poses)
@@ -228,7 +253,7 @@ def _check_frame(poses: PoseFrame) -> PoseVerdict:
     candidates: list[int] = []
     rest_max: dict[int, float] = {}
     for cleaning in (False, True):  # as they are first; only if none, with wrong pairings dropped
-        for r in poses.ids:
+        for r in may_explain(poses, cleaning):
             rest = consistent_rest(poses, r, cleaning)
             if rest is not None:
                 candidates.append(r)
