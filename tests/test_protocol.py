@@ -491,6 +491,16 @@ def test_status_names_the_blocker_of_a_jammed_robot() -> None:
         p.StatusMsg(sender=4, phase="move", blocked_by=-2)
 
 
+def test_status_carries_the_way_walked_along_the_path() -> None:
+    """Issue 21 (finer waits): metres along the planned path, bounded and finite."""
+    msg = p.StatusMsg(sender=4, phase="move", walked=12.5)
+    assert p.decode(p.encode(msg)).walked == 12.5
+    assert p.decode(p.encode(p.StatusMsg(sender=4, phase="move"))).walked == 0.0
+    for bad in (-0.1, p.MAX_WALKED * 2, float("nan"), float("inf"), True, "1"):
+        with pytest.raises(p.ProtocolError, match="walked"):
+            p.StatusMsg(sender=4, phase="move", walked=bad)  # type: ignore[arg-type]
+
+
 @pytest.mark.parametrize(
     ("field", "value"), [("check_parent", -2), ("r_d", 1e9), ("r_phi", float("nan"))]
 )

@@ -280,6 +280,58 @@ def test_a_failed_member_stops_a_robot_that_was_done(runner: Runner) -> None:
         runner.hold.finish()
 
 
+def at(r: Runner, ids: tuple[int, ...], arcs: tuple[float, ...]) -> None:
+    """Make robot 3 wait for ``ids`` until each has walked ``arcs`` of its path."""
+    robots = tuple(
+        dataclasses.replace(rp, after=ids, after_at=arcs) if rp.robot_id == 3 else rp
+        for rp in r.ctx.plan.robots
+    )
+    r.ctx.plan = dataclasses.replace(r.ctx.plan, robots=robots)
+    r.ctx.plan_digest = "ab" * 32
+
+
+def test_a_robot_past_its_release_point_lets_us_start(runner: Runner) -> None:
+    """Issue 21 (finer waits): robot 1 walks on the same plan and is 1.5 m along its
+    path, past the 1.2 m we wait for; robot 2 holds."""
+    at(runner, (1, 2), (1.2, 0.7))
+    digest = runner.ctx.plan_digest
+    runner.membership.peers[1] = Peer(
+        alive=True, phase="move", seen_alive=True, plan_digest=digest, walked=1.5
+    )
+    runner.membership.peers[2] = Peer(alive=True, phase="hold", seen_alive=True)
+    runner.waves.wait_for_earlier_waves()  # returns at once
+
+
+@pytest.mark.parametrize(
+    ("walked", "digest", "phase"),
+    [(1.1, "ab" * 32, "move"), (1.5, "cd" * 32, "move"), (1.5, "ab" * 32, "wait")],
+)
+def test_a_robot_short_of_its_release_point_is_waited_for(
+    runner: Runner, walked: float, digest: str, phase: str
+) -> None:
+    """Short of 1.2 m, or progress along another plan's path, or not walking: wait."""
+    at(runner, (1,), (1.2,))
+    runner.membership.peers[1] = Peer(
+        alive=True, phase=phase, seen_alive=True, plan_digest=digest, walked=walked
+    )
+    with pytest.raises(AgentFailure, match=r"robots \[1\] of earlier waves did not hold"):
+        runner.waves.wait_for_earlier_waves()
+
+
+def test_progress_heard_only_grows_for_one_plan(runner: Runner) -> None:
+    from agent.net.bus import Event
+
+    runner.membership.handle(Event("alive", "nao/alive/2", robot_id=2))
+    d1, d2 = "ab" * 32, "cd" * 32
+    for walked, digest in ((2.0, d1), (1.0, d1)):  # a late, older status changes nothing
+        msg = StatusMsg(sender=2, phase="move", plan_digest=digest, walked=walked)
+        runner.membership.handle(Event("msg", "nao/2/status", msg))
+    assert runner.membership.peers[2].walked == 2.0
+    msg = StatusMsg(sender=2, phase="move", plan_digest=d2, walked=0.5)  # a new plan
+    runner.membership.handle(Event("msg", "nao/2/status", msg))
+    assert runner.membership.peers[2].walked == 0.5
+
+
 def test_earlier_wave_that_never_holds_times_out(runner: Runner) -> None:
     after(runner, (1, 2))
     runner.membership.peers[1] = Peer(alive=True, phase="move", seen_alive=True)

@@ -13,12 +13,13 @@ Output (everything in the input's frame)::
 
     {"leader": 7, "axis_rad": a, "targets": [{"id", "x", "y", "order", "parent"}],
      "trajectories": [{"id", "heading_rad", "distance", "via": [[x, y], ...],
-                       "wave": k, "after": [ids]}],
+                       "wave": k, "after": [ids], "after_at": [m]}],
      "waves": [[7, 3], [9], ...], "digest": "hex", "strategy": "optimal"}
 
-A robot may start once every robot of its ``after`` list holds its slot (the dependency
-rule of ``agent.core.formation.execution``); waiting for every robot of the earlier waves is
-safe too.
+A robot may start once every robot of its ``after`` list has walked past the arc length
+of its path given at the same place in ``after_at`` (its release point; empty: once it
+holds its slot), the dependency rule of ``agent.core.formation.execution``; waiting for
+every robot of the earlier waves to hold is safe too.
 
 ``--png FILE`` also draws the plan (starts, paths coloured by wave, slots, leader, axis).
 """
@@ -133,6 +134,7 @@ def plan_to_json(plan: Plan) -> dict[str, Any]:
                 "via": [v.tolist() for v in r.via],
                 "wave": r.wave,
                 "after": list(r.after),
+                "after_at": list(r.after_at),
             }
             for r in plan.robots
         ],

@@ -38,7 +38,7 @@ from agent.core.formation.verdict import PairCheck
 from agent.net.bus import Bus
 from agent.phases.journal import Journal
 from agent.seams import Formation, Perception
-from agent.wire import NeighborRecordMsg, StatusMsg, key_status
+from agent.wire import MAX_WALKED, NeighborRecordMsg, StatusMsg, key_status
 
 #: Every robot faces north of its fixed frame at the start (4.1.1).
 NORTH = math.pi / 2
@@ -106,6 +106,10 @@ class Context:
     # issue 21: the member this robot's way is blocked by, beyond its patience (-1: none;
     # agent/core/formation/jam.py), published in every status
     blocked_by: int = -1
+    # issue 21 (finer waits): how far this robot has walked along its planned path (m,
+    # plan arc length, never decreasing during a move; agent/phases/waves.py), published
+    # in every status: a robot waiting for it starts once it is past its release point
+    walked: float = 0.0
 
     @property
     def me(self) -> int:
@@ -156,5 +160,6 @@ class Context:
             r_d=0.0 if self.check is None else max(-100.0, min(100.0, self.check.r_d)),
             r_phi=0.0 if self.check is None else max(-100.0, min(100.0, self.check.r_phi)),
             blocked_by=self.blocked_by,
+            walked=min(MAX_WALKED, max(0.0, self.walked)),
         )
         self.bus.publish(key_status(self.me), msg, "status")

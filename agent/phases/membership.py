@@ -79,6 +79,9 @@ class Peer:
     seen_alive: bool = False
     error: str = ""  # the reason of a ``failed`` status
     blocked_by: int = -1  # the member it is blocked by (issue 21); -1: none
+    # how far it has walked along its path of plan ``plan_digest`` (issue 21, finer
+    # waits): the largest value heard for that plan (the robot only walks on)
+    walked: float = 0.0
 
 
 class Membership:
@@ -183,6 +186,8 @@ class Membership:
             member = self.peers.get(msg.sender)
             if msg.sender == me or member is None or not member.seen_alive:
                 return  # per-sender state only for members (their token came first)
+            same_plan = msg.plan_digest == member.plan_digest
+            member.walked = max(member.walked, msg.walked) if same_plan else msg.walked
             member.phase, member.wave, member.plan_digest = msg.phase, msg.wave, msg.plan_digest
             member.detail = msg.detail
             member.error, member.blocked_by = msg.error, msg.blocked_by

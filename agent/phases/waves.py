@@ -7,20 +7,28 @@ PLAN  the formation core on the agreed records (identical on every agent): this
       left out stands still and stops with the reason. From then on the agreed
       record set is served (agent/phases/record_sets.py) and only the agreed sessions
       count (agent/phases/membership.py).
-WAIT  for every robot of this robot's ``after`` list to hold its slot, leader first
-      (agent/core/formation/execution.py); but yield (start now) when the robots it
+WAIT  for every robot of this robot's ``after`` list to walk past its release point
+      (the plan's ``after_at``: that robot's published ``walked`` along its path, or it
+      holds its slot; issue 21, agent/core/formation/release.py), leader first
+      (agent/core/formation/execution.py): an event, never a time; but yield (start now) when the robots it
       still waits for are blocked by it, or wait for one that is (issue 21,
       agent/core/formation/jam.py rule 2); stop with the fleet's reason once a member of
       the plan has failed (rule 4).
 MOVE  rotation control to face each leg's goal, distance control in 20 cm steps with
       the heading corrected after each (4.2, 5.2.2), every step checked first
       (agent/phases/safe_steps.py), then the turn to the pyramid axis. A robot restarted
-      mid-move (issue #9) goes on from its journaled leg.
+      mid-move (issue #9) goes on from its journaled leg. While it walks it publishes
+      how far along its planned path it is (``walked``, :func:`walked_along`), at once
+      when it passes a release point that a robot waits for.
 """
 
 from __future__ import annotations
 
 import logging
+import math
+from collections.abc import Sequence
+
+import numpy as np
 
 from agent.core.agreement import Decision
 from agent.core.control import PAPER_GAINS, wrap_pi
@@ -33,6 +41,29 @@ from agent.phases.roles import Fleet, Mover, Stepper
 from agent.wire import NeighborRecordMsg
 
 log = logging.getLogger("agent.phases.waves")
+
+
+def walked_along(goals: Sequence[np.ndarray], leg: int, position: np.ndarray) -> float:
+    """How far along the path start (0, 0) -> ``goals`` (this robot's fixed frame, from
+    its start) a robot walking leg ``leg`` at ``position`` is, at least: the legs
+    before, plus the leg's length less the distance still to its goal (a robot off the
+    leg is counted as less far along). Never above the path's length."""
+    prev = np.zeros(2)
+    done = 0.0
+    for k, g in enumerate(goals):
+        g = np.asarray(g, dtype=np.float64)
+        seg = float(np.hypot(*(g - prev)))
+        if k == leg:
+            left = float(np.hypot(*(g - np.asarray(position, dtype=np.float64))))
+            return done + max(0.0, seg - left)
+        done += seg
+        prev = g
+    return done
+
+
+def _released(peer_walked: float, at: float, same_plan: bool) -> bool:
+    """A robot walking the same plan is past the release point ``at`` of its path."""
+    return same_plan and math.isfinite(peer_walked) and peer_walked >= at
 
 
 class Waves:
@@ -73,8 +104,13 @@ class Waves:
         ctx = self.ctx
         plan = ctx.plan
         members = set(ctx.formation.members(plan))
-        earlier = sorted(
-            int(i) for i in plan.robot(ctx.me).after if int(i) in members and int(i) != ctx.me
+        mine = plan.robot(ctx.me)
+        earlier = sorted(int(i) for i in mine.after if int(i) in members and int(i) != ctx.me)
+        # release points (plan arc lengths); none given: each must hold its slot
+        at = (
+            {int(i): float(x) for i, x in zip(mine.after, mine.after_at, strict=True)}
+            if len(mine.after_at) == len(mine.after)
+            else {}
         )
         after = {int(r.robot_id): tuple(int(j) for j in r.after) for r in plan.robots}
         deadline = ctx.clock() + ctx.cfg.wave_timeout
@@ -87,6 +123,9 @@ class Waves:
             for i in earlier:
                 peer = self.fleet.peer(i)
                 if peer.phase in ("hold", "march", "done"):
+                    continue
+                same_plan = peer.plan_digest == ctx.plan_digest
+                if peer.phase == "move" and i in at and _released(peer.walked, at[i], same_plan):
                     continue
                 if peer.seen_alive and not peer.alive:
                     raise AgentFailure(
@@ -115,6 +154,15 @@ class Waves:
         self.steps.forget()  # and the NAOs seen before are elsewhere now
         goals, final_heading = ctx.formation.goals(plan, ctx.me)
         ctx.final_heading = final_heading
+        # the release points others wait for on this robot's path: passing one is news
+        releases = sorted(
+            x
+            for r in plan.robots
+            if len(r.after_at) == len(r.after)
+            for i, x in zip(r.after, r.after_at, strict=True)
+            if int(i) == ctx.me
+        )
+        ctx.walked = walked_along(goals, ctx.leg, ctx.beliefs.position)
         ctx.status("move", 0.0, f"{len(goals)} leg(s)")
         n = len(goals)
         for k, goal in enumerate(goals):
@@ -123,7 +171,10 @@ class Waves:
             ctx.leg = k
 
             def progress(p: float, k: int = k) -> None:
-                ctx.status("move", (k + p) / n, f"leg {k + 1}/{n}")
+                before = ctx.walked
+                ctx.walked = max(before, walked_along(goals, k, ctx.beliefs.position))
+                news = any(before < x <= ctx.walked for x in releases)
+                ctx.status("move", (k + p) / n, f"leg {k + 1}/{n}", force=news)
 
             self.steps.walk_to(goal, progress)
         turn = wrap_pi(final_heading - ctx.beliefs.heading)

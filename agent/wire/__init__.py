@@ -51,6 +51,7 @@ from agent.wire.fields import (
     MAX_THUMBNAIL_BYTES,
     MAX_THUMBNAIL_HEIGHT,
     MAX_THUMBNAIL_WIDTH,
+    MAX_WALKED,
     SCHEMA_VERSION,
     ProtocolError,
 )
@@ -164,6 +165,7 @@ __all__ = [
     "MAX_THUMBNAIL_BYTES",
     "MAX_THUMBNAIL_HEIGHT",
     "MAX_THUMBNAIL_WIDTH",
+    "MAX_WALKED",
     "PHASES",
     "SCHEMA_VERSION",
     "WORLD_PORT",

@@ -48,6 +48,9 @@ MAX_ARRAY_LEN = MAX_MEMBERS
 MAX_STR_BYTES = 4 * MAX_TEXT  # MAX_TEXT characters of UTF-8
 MAX_COORD = 1000.0  # metres: no NAO fleet spans a kilometre
 MAX_STEP = 50.0  # metres: the longest single walk command accepted
+#: metres: the longest planned path a status reports walking along (issue 21, finer
+#: waits): a path with two via points across a fleet of MAX_COORD spans < 9 km
+MAX_WALKED = 10.0 * MAX_COORD
 HEAD_YAW_LIMIT = nao.HEAD_YAW_LIMIT
 DIGEST_HEX_LEN = 64
 

@@ -27,6 +27,7 @@ from agent.wire.fields import (
     MAX_THUMBNAIL_BYTES,
     MAX_THUMBNAIL_HEIGHT,
     MAX_THUMBNAIL_WIDTH,
+    MAX_WALKED,
     SCHEMA_VERSION,
     ProtocolError,
     _bytes,
@@ -166,6 +167,11 @@ class StatusMsg(Message):
 
     ``blocked_by`` >= 0: the robot's way to its slot has stayed blocked by that member
     beyond its patience (issue 21, ``agent.core.formation.jam``); -1: not blocked.
+
+    ``walked``: how far the robot has walked along its planned path (m, arc length of the
+    plan ``plan_digest``, never decreasing during its ``move``; 0 before it): a robot
+    that waits for it starts once it is past the release point in the plan's
+    ``after_at`` (issue 21, ``agent.core.formation.release``).
     """
 
     TAG: ClassVar[str] = "status"
@@ -182,6 +188,7 @@ class StatusMsg(Message):
     r_d: float = 0.0
     r_phi: float = 0.0
     blocked_by: int = -1
+    walked: float = 0.0
     SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {
         "sender": _ID,
         "phase": _str("phase", 16, PHASES),
@@ -196,6 +203,7 @@ class StatusMsg(Message):
         "r_d": _float("r_d", -100.0, 100.0),
         "r_phi": _float("r_phi", -100.0, 100.0),
         "blocked_by": _int("blocked_by", -1, MAX_ROBOT_ID),
+        "walked": _float("walked", 0.0, MAX_WALKED),
     }
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import math
 
 import numpy as np
 import pytest
@@ -31,38 +32,55 @@ def _pack(paths: list[np.ndarray], leader: int = 0):  # type: ignore[no-untyped-
     return f, lens, pack(f, lens, leader, np.arange(len(paths)))
 
 
-def test_either_order_pair_waits_and_far_robots_start_at_once() -> None:
-    # 0 and 1 cross (either order is fine: the ends are far from the other path); 2 is far
+def _deps_ok(paths, after, at, waves) -> bool:  # type: ignore[no-untyped-def]
+    rows = [list(a) for a in after]
+    rel = [list(x) for x in at]
+    return check_dependencies(paths, rows, waves, R, after_at=rel) == []
+
+
+def test_either_order_pair_waits_for_the_release_point_and_far_robots_start_at_once() -> None:
+    # 0 and 1 cross at (2, 2) (either order is fine: the ends are far from the other
+    # path); 2 is far. Robot 0's point at arc s is s/sqrt(2) (1, 1), |s - 2 sqrt(2)| from
+    # robot 1's line x + y = 4: 1 may start once 0 is past 2 sqrt(2) + 2r
     paths = [P((0, 0), (4, 4)), P((0, 4), (4, 0)), P((50, 0), (51, 0))]
-    _, lens, (start, after, waves) = _pack(paths)
+    _, _, (start, after, waves, at) = _pack(paths)
+    release = 2 * math.sqrt(2) + 2 * R
     assert start[0] == 0.0 and start[2] == 0.0  # the leader first, the far robot at once
-    assert start[1] == pytest.approx(lens[0])
+    assert start[1] == pytest.approx(release)
     assert after == ((), (0,), ()) and waves.tolist() == [0, 1, 0]
+    assert at[1] == (pytest.approx(release),) and at[0] == () and at[2] == ()
     assert check_safety(paths, waves, R) == []
-    assert check_dependencies(paths, [list(a) for a in after], waves, R) == []
+    assert _deps_ok(paths, after, at, waves)
+    # one metre less and the rest of 0's path still comes within 2r of 1's
+    early = [[], [release - 1.0], []]
+    bad = check_dependencies(paths, [list(a) for a in after], waves, R, after_at=early)
+    assert [v.kind for v in bad] == ["released-early"]
 
 
 def test_precedence_pair_keeps_its_order_and_longest_goes_first() -> None:
-    # robot 1 stands 0.1 m beside robot 0's path: it must leave first
+    # robot 1 stands 0.1 m beside robot 0's path: it must leave first; 0 starts once 1
+    # is 0.3 m up its path (0.1 + 0.3 = 2r from 0's path)
     paths = [P((0, 0), (4, 0)), P((2, 0.1), (2, 3)), P((20, 0), (30, 0)), P((20, 1), (21, 1))]
-    _, lens, (start, after, waves) = _pack(paths, leader=2)
-    assert after[0] == (1,) and start[0] == pytest.approx(lens[1])
+    _, _, (start, after, waves, at) = _pack(paths, leader=2)
+    assert after[0] == (1,) and start[0] == pytest.approx(0.3) and at[0] == (pytest.approx(0.3),)
     # 2 and 3 run side by side 1 m apart: both may walk at once
     assert start[2] == 0.0 and start[3] == 0.0
+    assert _deps_ok(paths, after, at, waves)
+    # the rule before release points (wait until 1 holds) is safe too
     assert check_dependencies(paths, [list(a) for a in after], waves, R) == []
 
 
 def test_a_short_walk_slips_into_a_gap() -> None:
-    # 1 crosses 0 and 2 (either order); 0 (the leader) goes first, 1 after it; 2, placed
-    # last, walks in the gap before 1: intervals of conflicting robots never overlap
+    # 1 crosses 0 and 2 (either order); 0 (the leader) goes first, 1 once 0 is 5.4 m
+    # along (0.4 past x = 5); 2, placed last, goes before 1: 1 waits until 2 is 1.4 m
+    # along (0.4 past x = 5), which 2 is at 1.4 < 5.4. Worked by hand: makespan 5.4 + 6
     paths = [P((0, 0), (10, 0)), P((5, -3), (5, 3)), P((4, 2), (6, 2))]
-    f, lens, (start, after, waves) = _pack(paths)
-    fin = start + lens
-    assert start.tolist() == [0.0, 10.0, 0.0] and after == ((), (0, 2), ())
-    for a, b, same in zip(f.a, f.b, f.same_ok, strict=True):
-        if not same:
-            assert fin[a] <= start[b] + 1e-12 or fin[b] <= start[a] + 1e-12
-    assert dependency_makespan(lens, after, waves) == pytest.approx(float(fin.max()))
+    _, lens, (start, after, waves, at) = _pack(paths)
+    assert start.tolist() == pytest.approx([0.0, 5.4, 0.0])
+    assert after == ((), (0, 2), ()) and at[1] == pytest.approx((5.4, 1.4))
+    assert dependency_makespan(lens, after, waves, at) == pytest.approx(11.4)
+    assert dependency_makespan(lens, after, waves) == pytest.approx(16.0)  # hold rule
+    assert _deps_ok(paths, after, at, waves)
 
 
 def test_pack_rejects_bad_input() -> None:
@@ -74,7 +92,7 @@ def test_pack_rejects_bad_input() -> None:
     with pytest.raises(ValueError, match="leader"):
         pack(f, lens, 5, np.arange(2))
     neither = PairFlags(
-        f.a, f.b, np.zeros(1, bool), np.zeros(1, bool), np.zeros(1, bool), *(f.d_path,) * 4
+        f.a, f.b, np.zeros(1, bool), np.zeros(1, bool), np.zeros(1, bool), *(f.d_path,) * 6
     )
     with pytest.raises(ValueError, match="no order"):
         pack(neither, lens, 0, np.arange(2))
@@ -82,28 +100,30 @@ def test_pack_rejects_bad_input() -> None:
     a, b = np.array([0, 0, 1]), np.array([1, 2, 2])
     no = np.zeros(3, bool)
     cyc = PairFlags(
-        a, b, no, np.array([True, False, True]), np.array([False, True, False]), *(np.ones(3),) * 4
+        a, b, no, np.array([True, False, True]), np.array([False, True, False]), *(np.ones(3),) * 6
     )
     with pytest.raises(ValueError, match="cycle"):
         pack(cyc, np.ones(3), 0, np.arange(3))
 
 
 def test_detour_cuts_the_critical_chain() -> None:
-    # robot 1 stands 0.3 m beside the middle of robot 0's long path: 0 waits for 1 to
-    # leave (makespan 4.7 + 20); a via point beside the path lets both walk at once
-    paths = [P((0, 0), (20, 0)), P((10, 0.3), (10, 5)), P((40, 0), (41, 0))]
+    # robot 1 walks along robot 0's path, passing 0.325 m from 0's slot (20, 0): 1 goes
+    # first and 0 starts once 1's path is 2r from that slot again (x = 20.26, arc 10.26;
+    # makespan 10.26 + 20); a via point keeps 1 clear of 0's path: both start at once
+    paths = [P((0, 0), (20, 0)), P((10, 0.45), (30, 0.2)), P((40, 0), (41, 0))]
     starts = np.array([p[0] for p in paths])
     targets = np.array([p[-1] for p in paths])
-    f, lens, (start, _, _) = _pack(paths)
+    f, lens, (start, _, _, _) = _pack(paths)
     before = float(np.max(start + lens))
+    assert 30.0 < before < 30.5
     t2, o2, vias, f2 = shorten(starts, targets, [(), (), ()], f, np.arange(3), R, bound=1e9)
     new_paths = [np.vstack([starts[k], *vias[k], t2[k]]) for k in range(3)]
     lens2 = path_lengths(new_paths)
-    s2, after2, waves2 = pack(f2, lens2, int(np.flatnonzero(o2 == 0)[0]), o2)
+    s2, after2, waves2, at2 = pack(f2, lens2, int(np.flatnonzero(o2 == 0)[0]), o2)
     assert float(np.max(s2 + lens2)) < before - 1.0
     assert sorted(o2.tolist()) == [0, 1, 2]
     assert check_safety(new_paths, waves2, R) == []
-    assert check_dependencies(new_paths, [list(a) for a in after2], waves2, R) == []
+    assert _deps_ok(new_paths, after2, at2, waves2)
     # the path budget holds (here: no longer than the straight paths)
     t3, _, vias3, _ = shorten(starts, targets, [(), (), ()], f, np.arange(3), R, bound=lens.sum())
     paths3 = [np.vstack([starts[k], *vias3[k], t3[k]]) for k in range(3)]

@@ -46,6 +46,7 @@ from agent.core.formation.execution import (
     capt_makespan,
     check_dependencies,
     dependency_makespan,
+    dependency_starts,
     optimal_total,
     path_lengths,
     wave_makespan,
@@ -158,6 +159,13 @@ def _rows_after(plan: Plan) -> list[list[int]]:
     return [[row[j] for j in r.after] for r in plan.robots]
 
 
+def _rows_at(plan: Plan) -> list[list[float]] | None:
+    """The plan's release points (what the agents wait for); None: hold (old plans)."""
+    if any(len(r.after_at) != len(r.after) for r in plan.robots):
+        return None
+    return [list(r.after_at) for r in plan.robots]
+
+
 def _bounds(starts: np.ndarray, slots: np.ndarray, k: int = 64) -> tuple[float, float]:
     """Lower bounds of the longest path of any assignment (so of CAPT's makespan) and of
     the min-sum total: projected on a direction, any assignment costs at least the sorted
@@ -182,12 +190,13 @@ def measures(
     lengths = path_lengths(plan.paths())
     waves = plan.wave_of()
     after = _rows_after(plan)
+    at = _rows_at(plan)
     if n <= exact_max:
         capt, opt, exact = capt_makespan(starts, slots), optimal_total(starts, slots), True
     else:
         capt, opt = _bounds(starts, slots)
         exact = False
-    dep = dependency_makespan(lengths, after, waves)
+    dep = dependency_makespan(lengths, after, waves, at)
     out: dict[str, Any] = {
         "waves": len(plan.waves),
         "strategy": plan.strategy,
@@ -200,7 +209,7 @@ def measures(
     if n <= check_max:
         paths = plan.paths()
         out["safe"] = not check_safety(paths, waves, radius) and not check_dependencies(
-            paths, after, waves, radius
+            paths, after, waves, radius, after_at=at
         )
     return out
 
@@ -294,12 +303,7 @@ def demo_wait(n: int = 15, seed: int = 1) -> dict[str, float]:
     top = np.zeros(int(waves.max()) + 1)
     np.maximum.at(top, waves, lengths)
     wave_start = np.r_[0.0, np.cumsum(top)][waves]
-    after = _rows_after(plan)
-    finish = np.zeros(n)
-    dep_start = np.zeros(n)
-    for i in np.argsort(waves, kind="stable").tolist():
-        dep_start[i] = max((finish[j] for j in after[i]), default=0.0)
-        finish[i] = dep_start[i] + lengths[i]
+    dep_start = dependency_starts(lengths, _rows_after(plan), waves, _rows_at(plan))
     walk = float(lengths.sum())
     return {
         "walk": walk,

@@ -1,12 +1,13 @@
 """Via points instead of waiting: shorten the critical chain of a packed plan (issue 12).
 
 After :mod:`packing`, the makespan is the end of a chain of robots each waiting for the
-one before it (a close pair that may not walk together, see :mod:`safety`). A cheap
+one before it to pass its release point (a close pair that may not walk together, see
+:mod:`safety` and :mod:`release`). A cheap
 detour can cut such a link: one via point that keeps one robot of the pair clear of the
 other, so that both may walk together. Local search, deterministic:
 
 1. pack; take the critical chain (the robot that ends last, then the robot it waits for
-   that ends last, ... ties by row);
+   that passed its release point last, ... ties by row);
 2. for each link (v waits for u) and each of the two robots, the detour candidates of
    :func:`via_points.detour_candidates` (one via point beside the straight path) and the
    end candidates below (a step aside at the start, or an approach from the side) that
@@ -157,13 +158,20 @@ def _length(p: np.ndarray) -> float:
     return float(np.sum(np.hypot(*np.diff(p, axis=0).T)))
 
 
-def _chain(start: np.ndarray, finish: np.ndarray, after: Sequence[Sequence[int]]) -> list[int]:
+def _chain(
+    start: np.ndarray,
+    finish: np.ndarray,
+    after: Sequence[Sequence[int]],
+    release: Sequence[Sequence[float]],
+) -> list[int]:
     i = int(np.argmax(finish))  # first row among equal ends
     chain = [i]
     while after[i]:
         deps = list(after[i])
-        j = deps[int(np.argmax(finish[deps]))]
-        if finish[j] < start[i] - 1e-9:  # i did not wait for anyone: chain starts here
+        free = start[deps] + np.asarray(release[i])  # when each let i go
+        k = int(np.argmax(free))
+        j = deps[k]
+        if free[k] < start[i] - 1e-9:  # i did not wait for anyone: chain starts here
             break
         chain.append(j)
         i = j
@@ -195,7 +203,7 @@ def shorten(
     def leader_of(o: np.ndarray) -> int:
         return int(np.flatnonzero(o == 0)[0])
 
-    st, after, _ = pack(flags, lengths, leader_of(order), order)
+    st, after, _, rel = pack(flags, lengths, leader_of(order), order)
     best = float(np.max(st + lengths))
     evals = 0
     for _ in range(rounds):
@@ -203,7 +211,7 @@ def shorten(
             (int(a), int(b)): float(q)
             for a, b, q in zip(flags.a, flags.b, flags.required, strict=True)
         }
-        chain = _chain(st, st + lengths, after)
+        chain = _chain(st, st + lengths, after, rel)
         # (makespan, total, tried, changed rows, paths, targets, order, flags, lengths)
         trial: tuple[Any, ...] | None = None
         tried = 0
@@ -228,7 +236,7 @@ def shorten(
                 return
             f2 = update_flags(flags, new_paths, rows, c, (starts, new_t))
             try:
-                s2, _, _ = pack(f2, new_len, leader_of(new_o), new_o, times_only=True)
+                s2, _, _, _ = pack(f2, new_len, leader_of(new_o), new_o, times_only=True)
             except ValueError:
                 return
             ms = float(np.max(s2 + new_len))
@@ -306,5 +314,5 @@ def shorten(
         rows, paths, targets, order, flags, lengths = trial[3:]
         for r in rows:
             vias_l[r] = tuple(p.copy() for p in paths[r][1:-1])
-        st, after, _ = pack(flags, lengths, leader_of(order), order)
+        st, after, _, rel = pack(flags, lengths, leader_of(order), order)
     return targets, order, tuple(vias_l), flags

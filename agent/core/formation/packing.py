@@ -1,25 +1,31 @@
 """Wave packing: start every robot as soon as its own conflicts are clear (issue 12; the
-execution rules are those of :mod:`execution`).
+execution rules are those of :mod:`execution`, the release points those of
+:mod:`release`, issue 21).
 
 Input: the pair flags of :mod:`safety` for paths that can be scheduled (no pair that can
 go in no order, no precedence cycle). Robots walk at unit speed in this model, so a
-robot's walk is an interval ``[start, start + length]``. Pairs that may not walk
+robot that starts at t is at arc length s of its path at t + s. Pairs that may not walk
 together become:
 
-* *precedence* pairs (only one order allowed): the later one starts after the earlier
-  one's interval ends;
-* *either-order* pairs: their intervals may not overlap, in any order.
+* *precedence* pairs (only u before v allowed): v starts once u is past the pair's
+  release point r(u, v), i.e. at or after start_u + r(u, v);
+* *either-order* pairs: u before v (start_v >= start_u + r(u, v)) or v before u
+  (start_u >= start_v + r(v, u)), whichever fits.
 
 List scheduling: robots are taken in a topological order of the precedence pairs, ready
 robots by priority - the leader first, then the longest path first (a long walk started
-late ends late), then pyramid order, then row. Each robot gets the earliest start
->= the end of its precedence predecessors at which its interval overlaps no interval
-of an either-order neighbour already placed; it may slip *before* such a neighbour when
-the gap is long enough. Then every close pair is ordered by its intervals: the one that
-ends first is the one the other waits for (its ``after`` list). Intervals of a pair
-never overlap, so every ``after`` edge goes from an earlier end to a later start and the
-graph is acyclic; waves are its levels (wave = 1 + the largest wave it waits for), so
-the wave rule stays safe as well. The dependency makespan is at most the largest end.
+late ends late), then pyramid order, then row. Each robot gets the earliest start t >=
+the release times of its precedence predecessors at which every either-order
+neighbour already placed is on one side of it: t + r(i, j) <= start_j (it slips in
+before j) or t >= start_j + r(j, i) (after j); the forbidden windows are visited by
+their lower end (ties by row) and t only moves forward, so the result does not depend
+on the order of the input. Then every close pair is ordered by its starts: v waits for
+u (its ``after`` list, with the release point r(u, v)) when start_v >= start_u +
+r(u, v), else u waits for v. Release points of close pairs are > 0, so every ``after``
+edge goes from an earlier start to a later one and the graph is acyclic; waves are its
+levels (wave = 1 + the largest wave it waits for), so the wave rule (every robot of an
+earlier wave holds) stays safe as well. The dependency makespan is the largest
+start + length.
 """
 
 from __future__ import annotations
@@ -38,10 +44,11 @@ def pack(
     leader: int,
     priority: np.ndarray,
     times_only: bool = False,
-) -> tuple[np.ndarray, tuple[tuple[int, ...], ...], np.ndarray]:
-    """(start time, after lists, waves) per robot row; rows >= len(lengths) in ``flags``
-    (static obstacles) are ignored (the scheduler already kept paths clear of them).
-    ``times_only``: the start times alone (empty after lists and waves)."""
+) -> tuple[np.ndarray, tuple[tuple[int, ...], ...], np.ndarray, tuple[tuple[float, ...], ...]]:
+    """(start time, after lists, waves, release points) per robot row: robot i starts
+    once every robot ``after[i][k]`` has walked ``release[i][k]`` of its path. Rows >=
+    len(lengths) in ``flags`` (static obstacles) are ignored (the scheduler already kept
+    paths clear of them). ``times_only``: the start times alone (the rest empty)."""
     lens = np.asarray(lengths, dtype=np.float64)
     n = lens.size
     if np.asarray(priority).shape != (n,):
@@ -51,9 +58,15 @@ def pack(
     sel = ~flags.same_ok & (flags.b < n)
     a, b = flags.a[sel], flags.b[sel]
     ab, ba = flags.ab_ok[sel], flags.ba_ok[sel]
+    r_ab, r_ba = flags.rel_ab[sel].tolist(), flags.rel_ba[sel].tolist()
     if np.any(~ab & ~ba):
         raise ValueError("a pair can go in no order: schedule the paths first (safety)")
     either = ab & ba
+    # rel[(u, v)]: u before v, v may start once u has walked this far (release)
+    rel: dict[tuple[int, int], float] = {}
+    for u, v, x, y in zip(a.tolist(), b.tolist(), r_ab, r_ba, strict=True):
+        rel[(u, v)] = x
+        rel[(v, u)] = y
     src = np.concatenate([a[ab & ~ba], b[ba & ~ab]]).tolist()
     dst = np.concatenate([b[ab & ~ba], a[ba & ~ab]]).tolist()
     succ: list[list[int]] = [[] for _ in range(n)]
@@ -75,21 +88,24 @@ def pack(
     heap = [key(i) for i in range(n) if indeg[i] == 0]
     heapq.heapify(heap)
     start = [-1.0] * n
-    finish = [-1.0] * n
-    rank = [0] * n  # placement index: breaks ties of zero-length walks at one instant
     placed = 0
     while heap:
         i = heapq.heappop(heap)[3]
-        t = max((finish[j] for j in pred[i]), default=0.0)
-        busy = sorted((start[j], finish[j]) for j in nbr[i] if start[j] >= 0)
-        li = lens_l[i]
-        for s, f in busy:
-            if t + li <= s:
-                break  # fits in the gap before this interval
-            if f > t:
-                t = f
-        start[i], finish[i] = t, t + li
-        rank[i] = placed
+        t = max((start[j] + rel[(j, i)] for j in pred[i]), default=0.0)
+        # either-order neighbours placed: i goes before j (t + rel(i, j) <= start j) or
+        # after it (t >= start j + rel(j, i)); earliest such t, intervals by lower end
+        busy = sorted(
+            (start[j] - rel[(i, j)], j, rel[(i, j)], rel[(j, i)]) for j in nbr[i] if start[j] >= 0
+        )
+        moved = True
+        while moved:  # one pass, plus one more only if rounding moved t past a gap
+            moved = False
+            for _, j, r_ij, r_ji in busy:
+                if t + r_ij <= start[j] or t >= start[j] + r_ji:
+                    continue
+                t = start[j] + r_ji
+                moved = True
+        start[i] = t
         placed += 1
         for j in succ[i]:
             indeg[j] -= 1
@@ -98,16 +114,19 @@ def pack(
     if placed < n:
         raise ValueError("precedence cycle: schedule the paths first (safety)")
     if times_only:
-        return np.array(start), (), np.zeros(0, dtype=np.int64)
-    # order every close pair by its intervals: the one ending first is waited for
-    after: list[set[int]] = [set() for _ in range(n)]
+        return np.array(start), (), np.zeros(0, dtype=np.int64), ()
+    # order every close pair by its starts: v waits for u when it starts once u is past
+    # the pair's release point
+    after: list[dict[int, float]] = [{} for _ in range(n)]
     for u, v in zip(src, dst, strict=True):
-        after[v].add(u)
+        after[v][u] = rel[(u, v)]
     for u, v in zip(a[either].tolist(), b[either].tolist(), strict=True):
-        if finish[u] <= start[v] and (finish[v] > start[u] or rank[u] < rank[v]):
-            after[v].add(u)
-        else:
-            after[u].add(v)
+        if start[u] + rel[(u, v)] <= start[v]:
+            after[v][u] = rel[(u, v)]
+        elif start[v] + rel[(v, u)] <= start[u]:
+            after[u][v] = rel[(v, u)]
+        else:  # pragma: no cover - the placement above keeps one of the two
+            raise ValueError("internal error: a close pair walks together")
     # levels of the after graph (Kahn), ties by row
     waiting = [len(x) for x in after]
     users: list[list[int]] = [[] for _ in range(n)]
@@ -131,6 +150,7 @@ def pack(
         np.array(start),
         tuple(tuple(sorted(x)) for x in after),
         waves,
+        tuple(tuple(x[j] for j in sorted(x)) for x in after),
     )
 
 

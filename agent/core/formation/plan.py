@@ -16,7 +16,8 @@ is tried first, the paper's 5.1.2 procedure (:func:`obstacles.plan_around_obstac
 after it (``PlanParams.obstacle_method``).
 
 Execution (:mod:`execution`): a robot may start once every robot of its ``after`` list
-holds its slot; waiting for every robot of every earlier ``wave`` is safe too (``after``
+has walked past the arc length of its path given in ``after_at`` (its release point,
+:mod:`release`; its whole length: it holds its slot); waiting for every robot of every earlier ``wave`` is safe too (``after``
 always points to earlier waves). The leader is in wave 0 (it starts at once), but not
 necessarily alone.
 
@@ -65,9 +66,13 @@ class RobotPlan:
     distance: float  # d_i of the first leg
     via: tuple[np.ndarray, ...] = ()
     wave: int = 0
-    # robot ids (ascending) that must hold their slots before this robot starts: the
-    # dependency rule of :mod:`execution` (always in earlier waves)
+    # robot ids (ascending) this robot waits for before it starts: the dependency rule of
+    # :mod:`execution` (always in earlier waves)
     after: tuple[int, ...] = ()
+    # per ``after`` entry, the arc length of that robot's path it must have walked past
+    # (its release point, :mod:`release`); its whole length: it must hold its slot.
+    # Empty: every entry must hold its slot (the rule before release points)
+    after_at: tuple[float, ...] = ()
 
     def waypoints(self) -> list[np.ndarray]:
         return [*self.via, self.target]
@@ -171,8 +176,10 @@ def plan_digest(plan_fields: dict[str, object], robots: Sequence[RobotPlan]) -> 
     """sha256 over a canonical encoding: the plan fields by name, then (robots in the
     given order, ascending id in a Plan) one little-endian record per robot (id, order,
     parent, wave, via count, after count as int64; start, target, heading, distance as
-    float64), then every via point (float64 x, y), then every after id (int64)."""
-    h = hashlib.sha256(b"nao-formation/plan/v2")
+    float64), then every via point (float64 x, y), then every after id (int64), then
+    every ``after_at`` arc length (float64; an empty ``after_at`` counts as zeros: no
+    plan makes a zero release point)."""
+    h = hashlib.sha256(b"nao-formation/plan/v3")
     for key in sorted(plan_fields):
         h.update(key.encode())
         v = plan_fields[key]
@@ -198,6 +205,8 @@ def plan_digest(plan_fields: dict[str, object], robots: Sequence[RobotPlan]) -> 
     vias = [v for r in robots for v in r.via]
     h.update(np.array(vias, dtype="<f8").reshape(-1, 2).tobytes())
     h.update(np.array([j for r in robots for j in r.after], dtype="<i8").tobytes())
+    at = [x for r in robots for x in (r.after_at or (0.0,) * len(r.after))]
+    h.update(np.array(at, dtype="<f8").tobytes())
     return h.hexdigest()
 
 
@@ -251,6 +260,8 @@ def plan_from_positions(
     strategy = best.strategy
     order, targets, vias_rows = best.order, best.targets, best.vias
     waves_rows, after_rows = best.waves, best.after
+    # none (the banded plan): every robot waited for must hold its slot
+    at_rows = best.after_at or tuple(() for _ in range(n))
     leader_row = int(np.flatnonzero(order == 0)[0])
     dense = np.unique(waves_rows, return_inverse=True)[1].reshape(-1)
     # first legs, vectorised: heading/distance of (first via or target) - start
@@ -282,6 +293,7 @@ def plan_from_positions(
             via=tuple(np.asarray(v, dtype=np.float64) for v in vias_rows[k]),
             wave=wave_l[k],
             after=tuple(id_l[j] for j in after_rows[k]),
+            after_at=tuple(float(x) for x in at_rows[k]),
         )
         for k in range(n)
     ]

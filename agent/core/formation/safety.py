@@ -16,7 +16,9 @@ Pairs whose estimated starts (or targets) are already closer than c - estimates 
 be - are held to that smaller distance instead (they may not come closer than that).
 
 The pair test reduces to three flags per pair (i, k): *same* (may walk together),
-*i-before-k*, *k-before-i* (:class:`PairFlags`). Only pairs whose paths come within c
+*i-before-k*, *k-before-i* (:class:`PairFlags`), with the pair's two release points
+(:mod:`release`: how far the first must have walked before the second may start, for
+the dependency rule of :mod:`execution`; the wave rule waits until it holds). Only pairs whose paths come within c
 matter; they are found exactly by the spatial hashing of :mod:`close_pairs`. Between
 detour rounds only the pairs of the robots whose path changed are redone
 (:func:`update_flags`). The wave scheduler that builds safe plans from these flags is
@@ -37,6 +39,7 @@ import numpy as np
 
 from agent.core.formation.close_pairs import path_segments, segment_pairs
 from agent.core.formation.geometry import point_seg_dist, seg_seg_dist
+from agent.core.formation.release import arc_offsets, segment_releases
 
 #: Absolute rounding slack of a required distance, in clearances.
 ABS_SLACK = 1e-12
@@ -67,6 +70,10 @@ class PairFlags:
     d_ab: np.ndarray  # min(d(path_a, start_b), d(path_b, target_a))
     d_ba: np.ndarray
     required: np.ndarray
+    #: release points (:mod:`release`): a before b, b may start once a has walked past
+    #: arc length ``rel_ab`` of its path (``rel_ba``: b before a, on b's path)
+    rel_ab: np.ndarray
+    rel_ba: np.ndarray
 
 
 def _flags_from_pairs(
@@ -85,7 +92,7 @@ def _flags_from_pairs(
         z = np.zeros(0, dtype=np.int64)
         zf = np.zeros(0)
         zb = np.zeros(0, dtype=bool)
-        return PairFlags(z, z, zb, zb, zb, zf, zf, zf, zf)
+        return PairFlags(z, z, zb, zb, zb, zf, zf, zf, zf, zf, zf)
     i, k = owner[s], owner[t]
     d_ss = seg_seg_dist(seg_a[s], seg_b[s], seg_a[t], seg_b[t])
     d_i_sk = point_seg_dist(starts[k], seg_a[s], seg_b[s])
@@ -107,6 +114,19 @@ def _flags_from_pairs(
     )
     d_start = np.hypot(*(starts[a] - starts[b]).T)
     d_target = np.hypot(*(targets[a] - targets[b]).T)
+    # release points against the clearance without the rounding slack (see release)
+    room = np.minimum(clearance, np.minimum(d_start, d_target))
+    pair_of = np.repeat(np.arange(first.size), np.diff(np.r_[first, pk.size]))
+    arc0 = arc_offsets(owner, seg_a, seg_b)
+    arc_i, arc_k = segment_releases(seg_a, seg_b, arc0, s[order], t[order], room[pair_of])
+    total = np.zeros(n)
+    np.maximum.at(total, owner, arc0 + np.hypot(*(seg_b - seg_a).T))
+    # a release point is > 0 for every close pair (release); rounding aside: if not,
+    # the old rule (wait until the robot holds its slot: its whole length)
+    rel_ab = np.maximum.reduceat(arc_i, first)
+    rel_ba = np.maximum.reduceat(arc_k, first)
+    rel_ab = np.where(rel_ab > 0, np.minimum(rel_ab, total[a]), total[a])
+    rel_ba = np.where(rel_ba > 0, np.minimum(rel_ba, total[b]), total[b])
     # rounding slack: relative 1e-9, and 1e-12·c absolute (starts 1e-300 m apart are one)
     req = (
         np.minimum(clearance, np.minimum(d_start, d_target)) * (1.0 - 1e-9) - ABS_SLACK * clearance
@@ -121,6 +141,8 @@ def _flags_from_pairs(
         d_ab=d_ab,
         d_ba=d_ba,
         required=req,
+        rel_ab=rel_ab,
+        rel_ba=rel_ba,
     )
 
 

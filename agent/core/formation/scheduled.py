@@ -96,6 +96,8 @@ class Scheduled:
     waves: np.ndarray
     after: tuple[tuple[int, ...], ...]
     strategy: str
+    #: per robot, per ``after`` entry: how far that robot must have walked (release)
+    after_at: tuple[tuple[float, ...], ...] = ()
     makespan: float = 0.0  # dependency makespan (path-length units)
     total: float = 0.0  # total path length
 
@@ -131,7 +133,7 @@ def scheduled_plan(
     lengths = np.array(
         [path_length(pos[k], vias_rows[k], targets[k]) for k in range(n)], dtype=np.float64
     )
-    start, after, waves = pack(flags, lengths, leader_row, order)
+    start, after, waves, release = pack(flags, lengths, leader_row, order)
     waves = regroup_waves(lengths, after, waves, leader_row)
     return Scheduled(
         order,
@@ -140,6 +142,7 @@ def scheduled_plan(
         waves,
         after,
         strategy,
+        after_at=release,
         makespan=float(np.max(start + lengths)),
         total=float(lengths.sum()),
     )
