@@ -249,3 +249,31 @@ def test_quick_check_answers_only_without_the_search() -> None:
         poses, pairs=tuple(dataclasses.replace(p, score=5.0) for p in poses.pairs), turned=(2,)
     )
     assert quick_check(turned) is None  # a turned robot: only the search can tell
+
+
+def _with_pairs(scores: dict[tuple[int, int], float], turned: tuple[int, ...] = ()) -> Any:
+    import dataclasses
+
+    from agent.core.formation.poses import PairResidual
+
+    _, _, recs = _fleet(4)
+    poses = check_poses(recs, DEFAULT_EPSILON).poses
+    pairs = tuple(PairResidual(i, j, s, 0.0, 1.0, s) for (i, j), s in sorted(scores.items()))
+    return dataclasses.replace(poses, pairs=pairs, turned=turned)
+
+
+def test_may_explain_known_answers() -> None:
+    from agent.core.formation.pose_check import may_explain
+
+    # robot 2 is an end of every misfit pair: the only one whose leaving can clear them
+    one = _with_pairs({(1, 2): 3.0, (2, 3): 2.0, (2, 4): 4.0, (3, 4): 0.5})
+    # cleaning: left out, 3 leaves 1-2 and 2-4, which share robot 2: not isolated
+    assert may_explain(one, False) == [2] and may_explain(one, True) == [2]
+    two = _with_pairs({(1, 2): 3.0, (3, 4): 2.0, (4, 5): 0.2})
+    assert may_explain(two, False) == []  # two disjoint misfit pairs: nobody alone
+    assert may_explain(two, True) == [1, 2, 3, 4]  # the other one is isolated
+    spread = _with_pairs({(1, 2): 3.0, (2, 3): 2.0, (4, 5): 2.0, (5, 6): 9.0})
+    assert may_explain(spread, True) == []  # the misfit spreads: the search is not run
+    turned = _with_pairs({(1, 2): 0.5}, turned=(5,))
+    assert may_explain(turned, False) == [5]  # no misfit pair, a turned robot
+    assert may_explain(_with_pairs({(1, 2): 0.5}), False) == []
