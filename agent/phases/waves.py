@@ -18,7 +18,7 @@ MOVE  rotation control to face each leg's goal, distance control in 20 cm steps 
       the heading corrected after each (4.2, 5.2.2), every step checked first
       (agent/phases/safe_steps.py), then the turn to the pyramid axis. A robot restarted
       mid-move (issue #9) goes on from its journaled leg. While it walks it publishes
-      how far along its planned path it is (``walked``, :func:`walked_along`), at once
+      how far along its planned path it is (``walked``, :func:`~agent.core.formation.release.walked_along`), at once
       when it passes a release point that a robot waits for.
 """
 
@@ -26,39 +26,19 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Sequence
-
-import numpy as np
 
 from agent.core.agreement import Decision
 from agent.core.control import PAPER_GAINS, wrap_pi
 from agent.core.formation.jam import yields
 from agent.core.formation.own_frame import in_own_frame
 from agent.core.formation.plan import Plan
+from agent.core.formation.release import walked_along
 from agent.phases.context import AgentFailure, Context
 from agent.phases.record_sets import record_set
 from agent.phases.roles import Fleet, Mover, Stepper
 from agent.wire import NeighborRecordMsg
 
 log = logging.getLogger("agent.phases.waves")
-
-
-def walked_along(goals: Sequence[np.ndarray], leg: int, position: np.ndarray) -> float:
-    """How far along the path start (0, 0) -> ``goals`` (this robot's fixed frame, from
-    its start) a robot walking leg ``leg`` at ``position`` is, at least: the legs
-    before, plus the leg's length less the distance still to its goal (a robot off the
-    leg is counted as less far along). Never above the path's length."""
-    prev = np.zeros(2)
-    done = 0.0
-    for k, g in enumerate(goals):
-        g = np.asarray(g, dtype=np.float64)
-        seg = float(np.hypot(*(g - prev)))
-        if k == leg:
-            left = float(np.hypot(*(g - np.asarray(position, dtype=np.float64))))
-            return done + max(0.0, seg - left)
-        done += seg
-        prev = g
-    return done
 
 
 def _released(peer_walked: float, at: float, same_plan: bool) -> bool:

@@ -21,9 +21,14 @@ with a capsule (two discs and a band), an interval; its upper end, as an arc len
 i's path, is a candidate release point of i for k, and the largest candidate over the
 pair's segment pairs is the release point. ``radius`` is the pair's clearance *without*
 the rounding slack of :mod:`safety`, so (R1) holds with that slack to spare.
+
+The event's other side, :func:`walked_along`: how far along its path a walking robot is,
+at least (a robot off its leg counts as less far along), which the agent publishes.
 """
 
 from __future__ import annotations
+
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -131,3 +136,21 @@ def tail(path: np.ndarray, s: float) -> np.ndarray:
     k = int(np.searchsorted(cum, s, side="right")) - 1
     f = (s - cum[k]) / seg[k] if seg[k] > 0 else 0.0
     return np.vstack([p[k] + f * (p[k + 1] - p[k]), p[k + 1 :]])
+
+
+def walked_along(goals: Sequence[np.ndarray], leg: int, position: np.ndarray) -> float:
+    """How far along the path start (0, 0) -> ``goals`` (this robot's fixed frame, from
+    its start) a robot walking leg ``leg`` at ``position`` is, at least: the legs
+    before, plus the leg's length less the distance still to its goal (a robot off the
+    leg is counted as less far along). Never above the path's length."""
+    prev = np.zeros(2)
+    done = 0.0
+    for k, g in enumerate(goals):
+        g = np.asarray(g, dtype=np.float64)
+        seg = float(np.hypot(*(g - prev)))
+        if k == leg:
+            left = float(np.hypot(*(g - np.asarray(position, dtype=np.float64))))
+            return done + max(0.0, seg - left)
+        done += seg
+        prev = g
+    return done

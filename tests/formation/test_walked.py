@@ -1,12 +1,12 @@
 """How far along its planned path a walking robot says it is (issue 21, finer waits:
-``agent.phases.waves.walked_along``, published as ``StatusMsg.walked``)."""
+``agent.core.formation.release.walked_along``, published as ``StatusMsg.walked``)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from agent.phases.waves import walked_along
+from agent.core.formation.release import walked_along
 
 
 def test_walked_along_counts_the_legs_and_the_way_left() -> None:
