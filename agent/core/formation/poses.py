@@ -17,9 +17,9 @@ placed from their owner's pose, fall within ε of exactly one robot. Each gives
   ``δ = ψ_j − ψ_i − (β_ij + θ_ij − π/2)``: the mask's estimate modulo π
   (:func:`pose_pairing.mask_relative_heading`), weak (:data:`SIGMA_MASK`).
 
-Robust least squares: ``scipy.optimize.least_squares(method="trf", loss="soft_l1",
-f_scale=1)`` with an analytic Jacobian, fixed tolerances (1e-12) and a fixed budget
-(:data:`MAX_NFEV`), started from the spanning tree: breadth-first from the frame robot
+Robust least squares (soft-L1 loss, :func:`robust_lm.minimise`: Levenberg–Marquardt on
+the sparse normal equations, with the analytic sparse Jacobian, fixed tolerances and a
+fixed budget), started from the spanning tree: breadth-first from the frame robot
 over mutual pairs, neighbours in ascending id, ``ψ_v = ψ_u + (β_uv − β_vu + π)``,
 ``p_v = p_u + R(ψ_u) v_uv``. No randomness: every agent gets bit-identical poses from the
 same records (canonical order, :mod:`records`). One-way sightings are attached after a
@@ -52,9 +52,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares
+from scipy.sparse import coo_matrix, csr_matrix
 from scipy.spatial import cKDTree
 
+from agent.core.formation import robust_lm
 from agent.core.formation.common_frame import build_common_frame
 from agent.core.formation.neighbour_check import (
     DEFAULT_EPSILON,
@@ -80,7 +81,6 @@ TURN_MIN = math.radians(33.0)
 TURN_MAX = math.radians(65.0)
 TURN_WINDOW = math.radians(30.0)  #: masks within this of the offset agree with it
 TURN_SIGHTINGS = 3  #: agreeing sightings (distinct owners) needed to call a robot turned
-MAX_NFEV = 200  #: least-squares budget (function evaluations), fixed for determinism
 _TOL = 1e-12
 
 
@@ -264,9 +264,9 @@ class _Problem:
         rm = self.sm * np.sin(2.0 * delta) / 2.0
         return np.concatenate([(e * self.sp[:, None]).reshape(-1), rm])
 
-    def jac(self, x: np.ndarray) -> np.ndarray:
+    def jac(self, x: np.ndarray) -> csr_matrix:
+        """The Jacobian, sparse: each sighting touches its two robots' columns only."""
         _, psi = self.unpack(x)
-        jm = np.zeros((3 * self.m, self.nvar))
         rows = np.arange(self.m)
         co, ct = self.col[self.o], self.col[self.t]
         c, s = np.cos(psi[self.o]), np.sin(psi[self.o])
@@ -275,17 +275,25 @@ class _Problem:
         dpy = -(c * self.v[:, 0] - s * self.v[:, 1]) * self.sp
         delta = psi[self.t] - psi[self.o] - self.mask_ref
         dm = self.sm * np.cos(2.0 * delta)
+        r_list: list[np.ndarray] = []
+        c_list: list[np.ndarray] = []
+        v_list: list[np.ndarray] = []
         for cols, sign in ((ct, 1.0), (co, -1.0)):
             ok = cols >= 0
             r, k = rows[ok], cols[ok]
-            jm[2 * r, k] += sign * self.sp[ok]
-            jm[2 * r + 1, k + 1] += sign * self.sp[ok]
-            jm[2 * self.m + r, k + 2] += sign * dm[ok]
+            r_list += [2 * r, 2 * r + 1, 2 * self.m + r]
+            c_list += [k, k + 1, k + 2]
+            v_list += [sign * self.sp[ok], sign * self.sp[ok], sign * dm[ok]]
         ok = co >= 0
         r, k = rows[ok], co[ok]
-        jm[2 * r, k + 2] += dpx[ok]
-        jm[2 * r + 1, k + 2] += dpy[ok]
-        return jm
+        r_list += [2 * r, 2 * r + 1]
+        c_list += [k + 2, k + 2]
+        v_list += [dpx[ok], dpy[ok]]
+        shape = (3 * self.m, self.nvar)
+        coo = coo_matrix(
+            (np.concatenate(v_list), (np.concatenate(r_list), np.concatenate(c_list))), shape
+        )
+        return coo.tocsr()
 
 
 def _residuals(
@@ -381,7 +389,10 @@ def evaluate_poses(
 
 
 def fit_poses(
-    ids: Sequence[int], measurements: Sequence[PoseMeasurement], frame_robot: int | None = None
+    ids: Sequence[int],
+    measurements: Sequence[PoseMeasurement],
+    frame_robot: int | None = None,
+    start: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> PoseFrame:
     """Robust SE(2) least squares over ``measurements`` (see the module docstring).
 
@@ -393,6 +404,9 @@ def fit_poses(
         Sightings; the mutual ones must connect every robot to the frame robot.
     frame_robot : int, optional
         Defaults to :func:`choose_pose_frame_robot`.
+    start : (positions (N, 2), headings (N,)), optional
+        Initial poses in ascending id order, in the frame robot's frame (default: the
+        spanning tree over mutual pairs, which must then connect every robot).
 
     Raises
     ------
@@ -416,23 +430,16 @@ def fit_poses(
     frame = choose_pose_frame_robot(rid, measurements) if frame_robot is None else frame_robot
     if frame not in known:
         raise ValueError(f"frame robot {frame} is not among {list(rid)}")
-    pos0, psi0 = _spanning_tree(rid, measurements, frame)
+    if start is None:
+        pos0, psi0 = _spanning_tree(rid, measurements, frame)
+    else:
+        pos0 = np.array(start[0], dtype=np.float64).reshape(len(rid), 2)
+        psi0 = np.array(start[1], dtype=np.float64).reshape(len(rid))
     anchor = rid.index(frame)
     prob = _Problem(rid, measurements, anchor)
     if prob.nvar and prob.m:
-        sol = least_squares(
-            prob.fun,
-            prob.pack(pos0, psi0),
-            jac=prob.jac,
-            method="trf",
-            loss="soft_l1",
-            f_scale=1.0,
-            xtol=_TOL,
-            ftol=_TOL,
-            gtol=_TOL,
-            max_nfev=MAX_NFEV,
-        )
-        pos, psi = prob.unpack(sol.x)
+        x, _ = robust_lm.minimise(prob.fun, prob.jac, prob.pack(pos0, psi0))
+        pos, psi = prob.unpack(x)
     else:
         pos, psi = pos0, psi0
     return evaluate_poses(rid, measurements, pos, wrap_angle(psi), frame)
