@@ -1,0 +1,230 @@
+"""Sightings identified again against the fitted poses (DESIGN.md §9; refines NAO paper
+4.1.2, Algorithm 2, for dense fleets).
+
+The pairing of :mod:`pose_pairing` (and eq. 9 before it) decides which robot a sighting
+is from two sightings alone. In a dense fleet that is not enough: at 50 NAOs, 0.6 m
+apart, about one sighting in ten was paired with the wrong robot (a one-way sighting
+whose partner was occluded matches a neighbour's sighting of someone else within ε).
+The robust fit absorbs most of them, but a robot whose spanning-tree start came through
+a wrong pair can be fitted turned by ~180° (50 NAOs, seed 11: robot 45, 177°, 1.5 m
+off), and the leftover misfits make the whole fleet look inconsistent.
+
+Once the fit has placed the fleet, every sighting can be identified the way a person
+would: where does it land? This module does that, in rounds (at most
+:data:`ROUNDS`), each on the poses of the previous fit:
+
+1. **Headings re-seated** (:func:`reseat_headings`). A robot whose own sightings mostly
+   land on nobody (fewer than half, with at least :data:`MIN_SIGHTINGS`) gets a vote:
+   every heading that puts one of its sightings on a robot at the measured distance is a
+   candidate, and the candidate that lands most of its sightings wins if it lands at
+   least :data:`RESEAT_SHARE` of them and :data:`RESEAT_GAIN` more than the fitted
+   heading (ties: the candidate closest to the fitted heading, then the lower index).
+   A robot whose distances are wrong (a sensor fault) lands few sightings under any
+   heading and keeps its fitted one, and its misfit keeps it named by :mod:`pose_check`.
+2. **Sightings identified** (:func:`identify_sightings`): a sighting placed from its
+   owner's pose that lands within the gate ``GATE + GATE_REL·d`` of one robot, and that
+   robot alone (the second nearest at least :data:`AMBIGUITY` times farther), is a
+   sighting of that robot; two sightings of one owner on one robot: the nearer. A
+   sighting that lands on nobody is a wrong pairing or an outlier and is dropped, except
+   for a *suspect* owner (fewer than :data:`MIN_SIGHTINGS` sightings, or fewer than half
+   of them land): its sightings keep the identity the pairing gave them, unless another
+   of its sightings landed there, because their misfit is the consistency check's
+   evidence that its sensors are wrong.
+3. The fit is run again from the current poses (:func:`poses.fit_poses` with ``start``).
+
+The rounds stop when the measurements stop changing. Everything is sorted by id and
+detection index, with no randomness: every agent gets the same poses (bit-identical) from
+the same records.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from agent.core.formation.pose_pairing import wrap_angle
+from agent.core.formation.poses import PoseFrame, PoseMeasurement, fit_poses
+from agent.core.formation.records import NeighborRecord
+
+#: Gate (m) within which a placed sighting lands on a robot, at distance 0 ...
+GATE = 0.12
+#: ... plus this per metre of distance (measured at 50 NAOs: median placement error
+#: 0.025 m, 90th percentile 0.12 m, neighbours 0.6 m apart or more).
+GATE_REL = 0.06
+#: The second-nearest robot must be at least this many times farther than the nearest.
+AMBIGUITY = 1.5
+#: Rounds of re-seat, identify, fit.
+ROUNDS = 3
+#: A robot's own sightings needed before its heading is put to the vote.
+MIN_SIGHTINGS = 3
+#: Share of its sightings the winning heading must land.
+RESEAT_SHARE = 0.6
+#: Sightings the winning heading must land beyond the fitted heading.
+RESEAT_GAIN = 2
+
+
+def gate(distance: np.ndarray | float) -> np.ndarray:
+    """The landing gate (m) of sightings at ``distance`` (m)."""
+    return GATE + GATE_REL * np.asarray(distance, dtype=np.float64)
+
+
+def _place(position: np.ndarray, heading: float, vectors: np.ndarray) -> np.ndarray:
+    c, s = math.cos(heading), math.sin(heading)
+    return np.asarray(position + vectors @ np.array([[c, s], [-s, c]]))
+
+
+def landing(
+    positions: np.ndarray, owner: int, points: np.ndarray, distances: np.ndarray
+) -> np.ndarray:
+    """Index of the robot each placed point lands on (−1: nobody, or ambiguous).
+
+    ``positions`` (N, 2) of every robot, ``owner`` the index of the sightings' owner (never
+    landed on), ``points`` (k, 2) the placed sightings, ``distances`` (k,) their measured
+    distances (for the gate).
+    """
+    n = positions.shape[0]
+    if n < 2 or points.shape[0] == 0:
+        return np.full(points.shape[0], -1, dtype=np.int64)
+    d = np.hypot(
+        points[:, None, 0] - positions[None, :, 0], points[:, None, 1] - positions[None, :, 1]
+    )
+    d[:, owner] = np.inf
+    order = np.argsort(d, axis=1, kind="stable")
+    rows = np.arange(points.shape[0])
+    near, second = d[rows, order[:, 0]], d[rows, order[:, 1]] if n > 2 else np.inf
+    ok = (near <= gate(distances)) & (second >= AMBIGUITY * near)
+    return np.where(ok, order[:, 0], -1).astype(np.int64)
+
+
+def reseat_headings(
+    positions: np.ndarray, headings: np.ndarray, sightings: Sequence[np.ndarray]
+) -> np.ndarray:
+    """Headings after the vote of step 1 (module docstring); the input is not changed.
+
+    ``sightings[k]`` (m_k, 2): robot k's own sightings in its fixed frame.
+    """
+    out = np.array(headings, dtype=np.float64)
+    for k, vecs in enumerate(sightings):
+        m = vecs.shape[0]
+        if m < MIN_SIGHTINGS:
+            continue
+        dist = np.hypot(vecs[:, 0], vecs[:, 1])
+        now = int(np.sum(landing(positions, k, _place(positions[k], out[k], vecs), dist) >= 0))
+        if 2 * now >= m:
+            continue
+        rel = positions - positions[k]
+        rng = np.hypot(rel[:, 0], rel[:, 1])
+        close = np.abs(rng[None, :] - dist[:, None]) <= gate(dist)[:, None]
+        close[:, k] = False
+        a_idx, t_idx = np.nonzero(close)
+        if a_idx.size == 0:
+            continue
+        cand = wrap_angle(
+            np.arctan2(rel[t_idx, 1], rel[t_idx, 0]) - np.arctan2(vecs[a_idx, 1], vecs[a_idx, 0])
+        )
+        counts = np.array(
+            [
+                np.sum(landing(positions, k, _place(positions[k], float(h), vecs), dist) >= 0)
+                for h in cand
+            ]
+        )
+        turn = np.abs(wrap_angle(cand - out[k]))
+        best = int(np.lexsort((np.arange(cand.size), turn, -counts))[0])
+        if counts[best] >= max(RESEAT_SHARE * m, now + RESEAT_GAIN):
+            out[k] = float(cand[best])
+    return out
+
+
+def identify_sightings(
+    ids: tuple[int, ...],
+    positions: np.ndarray,
+    headings: np.ndarray,
+    records: Sequence[NeighborRecord],
+    paired: dict[tuple[int, int], int],
+) -> list[tuple[int, int, int]]:
+    """(owner id, detection index, target id) of every identified sighting (step 2).
+
+    ``paired`` maps (owner id, detection index) to the target the pairing gave it. Sorted
+    by owner id, then detection index.
+    """
+    index = {rid: k for k, rid in enumerate(ids)}
+    out: list[tuple[int, int, int]] = []
+    for rec in sorted(records, key=lambda r: r.robot_id):
+        if rec.robot_id not in index or rec.count == 0:
+            continue
+        k = index[rec.robot_id]
+        vecs = np.asarray(rec.neighbours, dtype=np.float64)
+        dist = np.hypot(vecs[:, 0], vecs[:, 1])
+        pts = _place(positions[k], float(headings[k]), vecs)
+        hit = landing(positions, k, pts, dist)
+        miss = np.hypot(*(pts - positions[np.maximum(hit, 0)]).T)
+        chosen: dict[int, int] = {}  # target index -> detection index (the nearer)
+        for a in np.argsort(np.where(hit >= 0, miss, np.inf), kind="stable"):
+            t = int(hit[a])
+            if t >= 0 and t not in chosen:
+                chosen[t] = int(a)
+        landed = {a: ids[t] for t, a in chosen.items()}
+        taken = set(landed.values())
+        suspect = rec.count < MIN_SIGHTINGS or 2 * int(np.sum(hit >= 0)) < rec.count
+        for a in range(rec.count):
+            if a in landed:
+                out.append((rec.robot_id, a, landed[a]))
+            elif suspect and int(hit[a]) < 0:
+                target = paired.get((rec.robot_id, a))
+                if target is not None and target in index and target not in taken:
+                    out.append((rec.robot_id, a, target))
+                    taken.add(target)
+    return out
+
+
+def refine_poses(frame: PoseFrame, records: Sequence[NeighborRecord]) -> PoseFrame:
+    """Rounds of :mod:`reidentify` (re-seat headings, identify sightings where they land,
+    fit again from the current poses) until the measurements stop changing."""
+    recs = sorted((r for r in records if r.robot_id in frame.ids), key=lambda r: r.robot_id)
+    by_ids = {r.robot_id: r for r in recs}
+    for _ in range(ROUNDS):
+        paired = _detection_targets(frame.measurements, by_ids)
+        sightings = [np.asarray(by_ids[i].neighbours, dtype=np.float64).reshape(-1, 2)
+                     if i in by_ids else np.zeros((0, 2)) for i in frame.ids]  # fmt: skip
+        psi = reseat_headings(frame.positions, frame.headings, sightings)
+        found = identify_sightings(frame.ids, frame.positions, psi, recs, paired)
+        if not np.array_equal(psi, frame.headings) or set(found) != {
+            (o, a, t) for (o, a), t in paired.items()
+        }:
+            meas = _measurements(found, by_ids)
+            frame = fit_poses(frame.ids, meas, frame.frame_robot, (frame.positions, psi))
+        else:
+            break
+    return frame
+
+
+def _detection_targets(
+    measurements: Sequence[PoseMeasurement], records: dict[int, NeighborRecord]
+) -> dict[tuple[int, int], int]:
+    """(owner, detection index) -> target of each measurement (its vector found in the
+    owner's record)."""
+    out: dict[tuple[int, int], int] = {}
+    for m in measurements:
+        rec = records.get(m.owner)
+        if rec is None:
+            continue
+        hit = np.flatnonzero(np.all(rec.neighbours == m.vector, axis=1))
+        if hit.size:
+            out[(m.owner, int(hit[0]))] = m.target
+    return out
+
+
+def _measurements(
+    found: Sequence[tuple[int, int, int]], records: dict[int, NeighborRecord]
+) -> list[PoseMeasurement]:
+    """Measurements of identified sightings; mutual when the target saw the owner too."""
+    links = {(o, t) for o, _, t in found}
+    out = []
+    for o, a, t in found:
+        rec = records[o]
+        w = 1.0 if rec.confidences is None else float(rec.confidences[a])
+        theta = math.nan if rec.orientations is None else float(rec.orientations[a])
+        out.append(PoseMeasurement(o, t, rec.neighbours[a].copy(), w, theta, (t, o) in links))
+    return out

@@ -1,0 +1,180 @@
+"""Sightings identified where they land (agent/core/formation/reidentify.py): known
+answers for the gate, the vote and the identification, a dense fleet with a robot fitted
+turned round, junk detections between robots, and determinism under shuffled records."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from agent.core.formation.fleet_frame import fleet_frame
+from agent.core.formation.poses import build_poses, evaluate_poses
+from agent.core.formation.records import NeighborRecord
+from agent.core.formation.reidentify import (
+    GATE,
+    GATE_REL,
+    gate,
+    identify_sightings,
+    landing,
+    refine_poses,
+    reseat_headings,
+)
+from tests.formation.pose_fleets import rot, sim_layout, unaligned_records
+
+GRID = np.array([[x, y] for y in (0.0, 1.0, 2.0) for x in (0.0, 1.0, 2.0)])  # 3 × 3, 1 m
+
+
+def _sightings(pos: np.ndarray, k: int, psi: float, scale: float = 1.0) -> np.ndarray:
+    """Robot k's sightings of every other robot, in a fixed frame turned by ψ."""
+    w = np.delete(pos, k, axis=0) - pos[k]
+    return np.asarray(scale * w @ rot(psi))  # R(−ψ) w, row-wise
+
+
+def test_gate_by_hand() -> None:
+    assert (GATE, GATE_REL) == (0.12, 0.06)
+    assert float(gate(2.0)) == pytest.approx(0.24)
+
+
+def test_landing_known_answers() -> None:
+    pos = np.array([[0.0, 0.0], [1.0, 0.0], [3.0, 0.0], [1.0, 2.0], [1.0, 2.3]])
+    pts = np.array([[1.05, 0.0], [2.0, 0.0], [0.02, 0.0], [1.0, 2.14]])
+    dist = np.array([1.0, 2.0, 0.02, 2.4])
+    # on robot 1; between 1 and 2 (1 m from both): nobody; on the owner itself: never;
+    # 0.14 m from robot 3 but 0.16 m from robot 4: ambiguous
+    assert landing(pos, 0, pts, dist).tolist() == [1, -1, -1, -1]
+
+
+def test_landing_with_too_few_robots_or_points() -> None:
+    assert landing(np.zeros((1, 2)), 0, np.ones((2, 2)), np.ones(2)).tolist() == [-1, -1]
+    assert landing(GRID, 0, np.zeros((0, 2)), np.zeros(0)).shape == (0,)
+
+
+def test_a_robot_fitted_turned_round_is_reseated() -> None:
+    sightings = [_sightings(GRID, k, 0.0) for k in range(9)]
+    psi = np.zeros(9)
+    psi[0] = math.pi  # the corner robot, fitted facing backwards: all 8 land on nobody
+    out = reseat_headings(GRID, psi, sightings)
+    assert abs(out[0]) < 1e-9
+    assert np.array_equal(out[1:], np.zeros(8))  # the others are not voted on
+    # (the centre robot could not be told: the grid looks the same turned round)
+    psi[0], psi[4] = 0.0, math.pi
+    assert reseat_headings(GRID, psi, sightings)[4] == math.pi
+
+
+def test_a_robot_with_wrong_distances_keeps_its_heading() -> None:
+    sightings = [_sightings(GRID, k, 0.0) for k in range(9)]
+    sightings[4] = _sightings(GRID, 4, 0.0, scale=1.4)  # a D-base off by 40 %
+    psi = np.zeros(9)
+    psi[4] = 0.3
+    assert reseat_headings(GRID, psi, sightings)[4] == 0.3
+
+
+def test_too_few_sightings_are_not_voted_on() -> None:
+    sightings = [_sightings(GRID, k, 0.0)[:2] for k in range(9)]
+    psi = np.full(9, math.pi)
+    assert np.array_equal(reseat_headings(GRID, psi, sightings), psi)
+
+
+def _record(rid: int, vecs: np.ndarray) -> NeighborRecord:
+    return NeighborRecord(rid, np.asarray(vecs, dtype=np.float64).reshape(-1, 2))
+
+
+def test_junk_between_robots_is_dropped_for_a_sound_owner() -> None:
+    ids = tuple(range(9))
+    vecs = _sightings(GRID, 0, 0.0)  # robot 0 at (0, 0) sees the 8 others
+    junk = np.array([[0.5, 1.0]])  # two NAOs seen as one, half-way between 3 and 4
+    rec = _record(0, np.vstack([vecs, junk]))
+    found = identify_sightings(ids, GRID, np.zeros(9), [rec], {(0, 8): 4})
+    assert [(a, t) for _, a, t in found] == [(a, a + 1) for a in range(8)]
+
+
+def test_a_suspect_owner_keeps_its_pairing() -> None:
+    ids = tuple(range(9))
+    vecs = _sightings(GRID, 0, 0.0, scale=1.4)  # most land on nobody
+    rec = _record(0, vecs)
+    paired = {(0, a): a + 1 for a in range(8)}
+    found = identify_sightings(ids, GRID, np.zeros(9), [rec], paired)
+    assert {(a, t) for _, a, t in found} == {(a, a + 1) for a in range(8)}
+
+
+def test_two_sightings_of_one_robot_keep_the_nearer() -> None:
+    ids = tuple(range(9))
+    rec = _record(0, np.array([[1.1, 0.0], [1.02, 0.0], [0.0, 1.0]]))
+    found = identify_sightings(ids, GRID, np.zeros(9), [rec], {(0, 0): 1})
+    assert found == [(0, 1, 1), (0, 2, 3)]
+
+
+def _dense_fleet(seed: int, n: int = 30) -> tuple[np.ndarray, list[NeighborRecord]]:
+    rng = np.random.default_rng(seed)
+    pos = sim_layout(rng, n)
+    recs = unaligned_records(
+        list(range(1, n + 1)), pos, np.full(n, math.pi / 2), rng, 0.03, math.radians(2)
+    )
+    return pos, recs
+
+
+def test_refine_turns_a_robot_fitted_backwards_round() -> None:
+    _, recs = _dense_fleet(5)
+    pf = build_poses(recs)
+    assert pf.consistent and float(np.max(np.abs(pf.headings))) < math.radians(3)
+    k = int(np.argmax([r.count for r in recs]))  # a well-seen robot, fitted backwards
+    psi = pf.headings.copy()
+    psi[k] = math.pi
+    wrong = evaluate_poses(pf.ids, pf.measurements, pf.positions, psi, pf.frame_robot)
+    assert not wrong.consistent
+    fixed = refine_poses(wrong, recs)
+    assert fixed.consistent
+    assert float(np.max(np.abs(fixed.headings))) < math.radians(3)
+    assert np.allclose(fixed.positions, pf.positions, atol=0.05)
+
+
+def test_merged_detections_in_a_dense_fleet_still_give_the_true_frame() -> None:
+    """A robot that sees two close NAOs as one (between them) and misses both: its junk
+    sighting can pair with a neighbour's sighting of someone else. The frame is still the
+    truth (0.1 m, 3°), with nobody left out."""
+    pos, recs = _dense_fleet(8, 40)
+    out = []
+    for rec in recs:
+        own = pos[rec.robot_id - 1]
+        d = np.hypot(*(pos - own).T)
+        nb = rec.neighbours.copy()
+        # merge the robot's two nearest seen neighbours that are < 1 m apart into one
+        seen = [j for j in np.argsort(d) if 0.5 <= d[j] <= 3.0]
+        pairs = [
+            (a, b)
+            for a in seen[:4]
+            for b in seen[:4]
+            if a < b and np.hypot(*(pos[a] - pos[b])) < 1.0
+        ]
+        if pairs and rec.robot_id % 2 == 0:
+            a, b = pairs[0]
+            ia = int(np.argmin(np.hypot(*(nb - (pos[a] - own)).T)))
+            ib = int(np.argmin(np.hypot(*(nb - (pos[b] - own)).T)))
+            nb[ia] = (nb[ia] + nb[ib]) / 2
+            nb = np.delete(nb, ib, axis=0)
+        out.append(NeighborRecord(rec.robot_id, nb))
+    ff = fleet_frame(out, 0.35)
+    assert "identified where it lands" in ff.reason
+    assert ff.excluded == ()
+    truth = pos - pos[ff.frame_robot - 1]
+    assert np.allclose(ff.positions, truth[[i - 1 for i in ff.ids]], atol=0.1)
+    assert float(np.max(np.abs(ff.headings))) < math.radians(3)
+
+
+@settings(max_examples=5, deadline=None)
+@given(st.randoms(use_true_random=False))
+def test_shuffled_records_refine_bit_identically(rnd) -> None:  # type: ignore[no-untyped-def]
+    _, recs = _dense_fleet(5, 20)
+    pf = build_poses(recs)
+    psi = pf.headings.copy()
+    psi[3] += math.pi
+    wrong = evaluate_poses(pf.ids, pf.measurements, pf.positions, psi, pf.frame_robot)
+    a = refine_poses(wrong, recs)
+    shuffled = list(recs)
+    rnd.shuffle(shuffled)
+    b = refine_poses(wrong, shuffled)
+    assert np.array_equal(a.positions, b.positions) and np.array_equal(a.headings, b.headings)
