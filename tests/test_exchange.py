@@ -539,8 +539,26 @@ def test_a_digest_that_lacks_our_record_is_answered_once() -> None:
     a.sent(["record", "digest"], 1.2)  # digest timer next at 3.2
     assert a.due(1.3) == []  # once: the next answer waits for news or the timer
     a.on_digest(_peer_digest(1, (1,), "cd" * 32), 1.4)  # its next digest still lacks us
-    assert a.due(1.4) == []  # news, but answers are at least backoff_min apart
-    assert a.due(2.2) == ["record"]
+    assert a.due(1.4) == []  # news, but answers are at least backoff_min apart ...
+    assert a.due(2.2) == []  # ... and each answer doubles that (crossed in flight)
+    assert "record" in a.due(3.2)
+
+
+def test_hint_answers_back_off_until_a_member_joins() -> None:
+    a = _lone(4)
+    times = []
+    for k in range(40):  # a new digest lacking us every 0.1 s
+        t = 0.1 * (k + 1)
+        a.on_digest(_peer_digest(1, (1,), f"{k:064x}"), t)
+        if "record" in a.due(t):
+            a.sent(["record"], t)
+            times.append(round(t, 1))
+    assert times == [1.0, 3.0]  # 1 s after the first send, then 2 s (the timer agrees)
+    a.member_joined(9, 4.0)  # a newcomer: prompt again, and answers 1 s apart again
+    assert "record" in a.due(4.0)
+    a.sent(["record"], 4.0)
+    a.on_digest(_peer_digest(1, (1,), "ef" * 32), 5.0)
+    assert "record" in a.due(5.0)
 
 
 def test_a_complete_set_is_announced_then_repeated_quickly() -> None:

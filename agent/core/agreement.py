@@ -207,6 +207,10 @@ class Agreement(Generic[R]):
         self._record_tx = _Backoff(backoff_min, backoff_max)
         self._record_pending = True  # publish at least once (again after a newcomer)
         self._record_hint = False  # a member's new digest lacks our record: send once
+        #: answers to such hints are at least this far apart, doubling with each answer
+        #: (digests sent before our record reached their senders keep arriving after it)
+        self._hint_gap = backoff_min
+        self._digest_at: dict[int, float] = {}  # member -> when its latest digest arrived
         self._digest_tx = _Backoff(backoff_min, backoff_max)
         self._digest_dirty = True  # our digest changed since we last published it
         self._min_gap = backoff_min  # prompt sends are at least this far apart
@@ -259,6 +263,7 @@ class Agreement(Generic[R]):
         # A newcomer has seen none of our earlier publications (no history).
         self._record_pending = True
         self._digest_dirty = True
+        self._hint_gap = self._min_gap
         self._record_tx.reset(now)
         self._digest_tx.reset(now)
 
@@ -299,6 +304,7 @@ class Agreement(Generic[R]):
             return
         old = self.digests.get(msg.sender)
         self.digests[msg.sender] = msg
+        self._digest_at[msg.sender] = now
         self.params_of[msg.sender] = msg.params
         news = old is None or (old.digest, old.members) != (msg.digest, msg.members)
         if news and self.self_id not in msg.members:
@@ -482,7 +488,10 @@ class Agreement(Generic[R]):
         """What to (re-)publish now: a subset of ``["record", "digest"]`` in that order.
 
         Prompt sends answer news, at most one per ``backoff_min``: the record when it was
-        never sent, a member joined, or a member's new digest lacks it; the digest when it
+        never sent, a member joined, or a member's new digest lacks it (those answers
+        ``backoff_min`` apart, then twice that after each one, up to ``backoff_max``,
+        until a member joins: at 50 NAOs on 2 cores digests that crossed our record in
+        flight had each agent send it 5–6 times); the digest when it
         changed and we hold a record of every live member (a digest of an incomplete set
         cannot be agreed on; others learn what we lack from the slow re-sends), and once
         more when we agree. A backoff timer (``backoff_min`` doubling to ``backoff_max``,
@@ -508,11 +517,20 @@ class Agreement(Generic[R]):
             return out
         # Re-send the record only to answer a digest that lacks it: a peer still
         # searching publishes its digest when it starts exchanging, which re-arms us.
+        # ... and only a digest that arrived after our last send: an older one is no news
+        # (a member whose set is incomplete publishes its digest only on its slow timer)
         unacked = [
-            i for i in others if i in self.digests and self.self_id not in self._members_of(i)
+            i
+            for i in others
+            if i in self.digests
+            and self.self_id not in self._members_of(i)
+            and self._digest_at.get(i, -math.inf) > self._last_sent["record"]
         ]
-        if ((self._record_pending or self._record_hint) and self._spaced("record", now)) or (
-            (unacked or not others) and self._record_tx.due(now)
+        hinted = self._record_hint and now - self._last_sent["record"] >= self._hint_gap
+        if (
+            (self._record_pending and self._spaced("record", now))
+            or hinted
+            or ((unacked or not others) and self._record_tx.due(now))
         ):
             out.append("record")
         complete = not self.missing_records()
@@ -536,6 +554,8 @@ class Agreement(Generic[R]):
     def sent(self, what: Iterable[str], now: float) -> None:
         for w in what:
             if w == "record":
+                if self._record_hint and not self._record_pending:
+                    self._hint_gap = min(self._backoff_max, 2.0 * self._hint_gap)
                 self._record_pending = False
                 self._record_hint = False
                 self._record_tx.fired(now)

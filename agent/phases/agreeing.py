@@ -7,7 +7,8 @@ AGREE    move on only once every live member published the same record-set diges
 
 Agreement is asymmetric on a lossy link (issue #9): a member that already acts on the
 plan of exactly the records held here has agreed on them, and this robot adopts that
-agreement (:meth:`Agreeing.adopt_plan`).
+agreement (:meth:`Agreeing.adopt_plan`), once it has held every record for
+:data:`ADOPT_AFTER` seconds without agreeing.
 """
 
 from __future__ import annotations
@@ -21,6 +22,11 @@ from agent.phases.roles import Fleet
 from agent.wire import NeighborRecordMsg, canonical_digest
 
 log = logging.getLogger("agent.phases.agreeing")
+
+#: Seconds of holding every member's record before a member's plan is checked for
+#: adoption (it costs a whole plan, ~7 CPU s at 50 NAOs, during which nothing is pumped;
+#: on a sound link the digests agree well before, issue 21).
+ADOPT_AFTER = 2.0
 
 
 class Agreeing:
@@ -48,10 +54,14 @@ class Agreeing:
         )
         self.fleet.open_round(agr)
         ctx.status("exchange", 0.0, "publishing record")
+        complete_at: float | None = None  # when a record from every member was first held
         while True:
             self.fleet.pump(0.05)
-            d = agr.decide(ctx.clock())
-            if d.kind == "wait":
+            now = ctx.clock()
+            d = agr.decide(now)
+            if complete_at is None and not agr.missing_records():
+                complete_at = now
+            if d.kind == "wait" and complete_at is not None and now - complete_at >= ADOPT_AFTER:
                 d = self.adopt_plan(agr) or d
             if d.kind != "wait":
                 return d

@@ -27,16 +27,24 @@ def record(i: int, n: int) -> NeighborRecordMsg:
 
 
 def simulate(
-    n: int, loss: float, rng: np.random.Generator, limit: float = 120.0, stagger: float = 0.0
+    n: int,
+    loss: float,
+    rng: np.random.Generator,
+    limit: float = 120.0,
+    stagger: float = 0.0,
+    latency: float = 0.0,
 ) -> dict[str, float]:
     """One fleet: agent i starts exchanging at ``U(0, stagger)`` s (its search ends then);
     before that it only collects what it hears, as the runner's early records and digests.
-    Every agent is a live member from the start (liveliness tokens outlive the search)."""
+    Every agent is a live member from the start (liveliness tokens outlive the search).
+    A publication reaches the others ``latency`` s after it is sent (a loaded host: at
+    50 NAOs on 2 cores, digests sent before a record arrived keep arriving after it)."""
     starts = {i: float(rng.uniform(0.0, stagger)) if stagger > 0 else 0.0 for i in range(n)}
     agents: dict[int, Agreement[NeighborRecordMsg]] = {}
     early: dict[int, dict[int, NeighborRecordMsg | DigestNote]] = {i: {} for i in range(n)}
     sent = dict.fromkeys(range(n), 0)
     t, dt, agreed_at = 0.0, 0.05, dict.fromkeys(range(n), -1.0)
+    flight: list[tuple[float, int, int, NeighborRecordMsg | DigestNote]] = []
     while t < limit:
         t += dt
         for i in range(n):
@@ -53,22 +61,25 @@ def simulate(
                     if isinstance(m, DigestNote):
                         a.on_digest(m, t)
                 agents[i] = a
+        arrived = [f for f in flight if f[0] <= t + 1e-9]
+        flight = [f for f in flight if f[0] > t + 1e-9]
+        for _, j, i, note in arrived:
+            b = agents.get(j)
+            if b is None:  # still searching: kept for later, newest wins
+                early[j][i + (0 if isinstance(note, NeighborRecordMsg) else n)] = note
+            elif isinstance(note, NeighborRecordMsg):
+                b.on_record(note, t)
+            else:
+                b.on_digest(note, t)
         for i, a in list(agents.items()):
             due = a.due(t)
             for what in due:
                 msg = a.records[i] if what == "record" else DigestMsg(**asdict(a.digest_note()))
                 sent[i] += len(encode(msg))
+                note = a.records[i] if what == "record" else a.digest_note()
                 for j in range(n):
-                    if j == i or rng.random() < loss:
-                        continue
-                    b = agents.get(j)
-                    if b is None:  # still searching: kept for later, newest wins
-                        key = j, i + (0 if what == "record" else n)
-                        early[j][key[1]] = a.records[i] if what == "record" else a.digest_note()
-                    elif what == "record":
-                        b.on_record(a.records[i], t)
-                    else:
-                        b.on_digest(a.digest_note(), t)
+                    if j != i and rng.random() >= loss:
+                        flight.append((t + latency, j, i, note))
             a.sent(due, t)
             if a.decide(t).kind == "agreed" and agreed_at[i] < 0:
                 agreed_at[i] = t
@@ -76,6 +87,7 @@ def simulate(
                     b.on_peer_phase(i, "plan")  # its next status acknowledges
         if (
             len(agents) == n
+            and not flight
             and all(v >= 0 for v in agreed_at.values())
             and not any(a.due(t + 100.0) for a in agents.values())
         ):
