@@ -24,6 +24,34 @@ def _fleet(seed: int, headings: np.ndarray | None = None):  # type: ignore[no-un
     return pos, h, unaligned_records(IDS, pos, h)
 
 
+def test_aligned_starts_are_planned_without_the_pose_pairing(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Issue 21: aligned starts the papers' model explains (or explains once its sightings
+    are identified where they land) never run the pose pairing; a turned robot does."""
+    import agent.core.formation.fleet_frame as ff_mod
+
+    calls: list[int] = []
+    real = ff_mod.build_poses
+
+    def counted(*args: Any) -> Any:
+        calls.append(1)
+        return real(*args)
+
+    monkeypatch.setattr(ff_mod, "build_poses", counted)
+    rng = np.random.default_rng(4)
+    pos = sim_layout(rng, 12)
+    heads = np.full(12, math.pi / 2)
+    recs = unaligned_records(list(range(1, 13)), pos, heads, rng, 0.03, math.radians(2))
+    ff = fleet_frame(recs, DEFAULT_EPSILON)
+    assert ff.aligned and calls == []
+    heads[5] += math.radians(70)  # robot 6 set down turned
+    recs = unaligned_records(list(range(1, 13)), pos, heads, rng, 0.03, math.radians(2))
+    ff = fleet_frame(recs, DEFAULT_EPSILON)
+    assert calls == [1]
+    assert abs(ff.heading_of(6) - math.radians(70)) < math.radians(5)
+
+
 def test_aligned_starts_keep_the_papers_model() -> None:
     _, _, recs = _fleet(3, np.full(len(IDS), math.pi / 2))
     ff = fleet_frame(recs, DEFAULT_EPSILON)
@@ -223,6 +251,7 @@ def test_an_aligned_fleet_with_misfit_pairs_plans_without_the_search(
     assert not misfit.consistent and not misfit.turned
     monkeypatch.setattr(ff_mod, "build_poses", lambda r, e: misfit)
     monkeypatch.setattr(ff_mod, "_aligned_explains", lambda r, e, p: None)
+    monkeypatch.setattr(ff_mod, "_aligned_at_once", lambda r, e: None)  # the slow path
     with_search = fleet_frame(aligned, DEFAULT_EPSILON)
 
     def no_search(poses: Any) -> Any:

@@ -228,3 +228,20 @@ def _measurements(
         theta = math.nan if rec.orientations is None else float(rec.orientations[a])
         out.append(PoseMeasurement(o, t, rec.neighbours[a].copy(), w, theta, (t, o) in links))
     return out
+
+
+def mostly_land(frame: PoseFrame, records: Sequence[NeighborRecord]) -> bool:
+    """Every robot with at least :data:`MIN_SIGHTINGS` sightings lands at least half of
+    them on a robot from its pose in ``frame`` (a robot turned from its fitted heading, or
+    with wrong distances, lands few)."""
+    index = {rid: k for k, rid in enumerate(frame.ids)}
+    for rec in records:
+        k = index.get(rec.robot_id)
+        if k is None or rec.count < MIN_SIGHTINGS:
+            continue
+        vecs = np.asarray(rec.neighbours, dtype=np.float64)
+        dist = np.hypot(vecs[:, 0], vecs[:, 1])
+        pts = _place(frame.positions[k], float(frame.headings[k]), vecs)
+        if 2 * int(np.sum(landing(frame.positions, k, pts, dist) >= 0)) < rec.count:
+            return False
+    return True
