@@ -16,7 +16,13 @@ import numpy as np
 import pytest
 
 from agent.core import nao
-from agent.core.perception.obstacles import ObstacleDetection, ObstacleDetector, obstacle_mask
+from agent.core.perception.obstacles import (
+    UPRIGHT_TOL_PX,
+    ObstacleDetection,
+    ObstacleDetector,
+    horizon_row,
+    obstacle_mask,
+)
 from sim.scenarios import ClutterSpec, ObstacleSpec, RobotSpec, Scenario
 from sim.world import World, make_texture
 
@@ -127,6 +133,36 @@ def test_no_obstacle_among_naos_and_orange_clutter(det: ObstacleDetector) -> Non
     with World(sc, noise=False) as w:
         for yaw in (-1.0, -0.4, 0.0, 0.4, 1.0):
             assert det.detect(w.render(1, yaw), yaw) == []
+
+
+def test_horizon_row_by_hand() -> None:
+    cam = ObstacleDetector().camera
+    # rays at the camera's height: tan(pitch down) · fy above the optical centre
+    assert horizon_row(cam) == pytest.approx(cam.cy - cam.fy * math.tan(-cam.pitch))
+    assert horizon_row(cam) < cam.cy  # the camera looks down
+
+
+def test_a_flat_rose_patch_on_the_floor_is_no_obstacle(det: ObstacleDetector) -> None:
+    """50 NAOs, seed 12: dark floor letters lit into the obstacle rose (HSV 159, 152, 52)
+    were reported as cylinders. A cylinder is taller than the camera: its silhouette
+    reaches the horizon; a patch below it is flat."""
+    import cv2
+
+    import agent.core.perception.obstacles as obstacles
+
+    cam = det.camera
+    img = np.full((cam.height, cam.width, 3), 120, np.uint8)
+    # a blob at the left border whose bottom rises at its right edge, as a base does;
+    # BGR of the rendered letters
+    cv2.ellipse(img, (0, 445), (60, 12), 0, 0, 360, (43, 21, 52), -1)
+    assert det.detect(img, 0.0) == []
+    with pytest.MonkeyPatch.context() as mp:  # without the horizon rule: a cylinder 1.6 m off
+        mp.setattr(obstacles, "UPRIGHT_TOL_PX", 1e9)
+        (ghost,) = det.detect(img, 0.0)
+    assert ghost.distance == pytest.approx(1.6, abs=0.1)
+    top = int(horizon_row(cam) + UPRIGHT_TOL_PX) + 1
+    img[top:440, 0:40] = (43, 21, 52)  # reaching to just below the horizon: still flat
+    assert det.detect(img, 0.0) == []
 
 
 def test_room_textures_hold_no_obstacle_colour() -> None:

@@ -17,6 +17,8 @@ cylinders of one distinctive colour and a known radius (:mod:`agent.core.nao`:
    axis is ``g + r`` away (accurate to ~1 % at 3 m). When the bottom is below the image
    (a near cylinder), the angular width ``w`` between two true edges gives it:
    ``r / sin(w / 2)``.
+   A run whose top stays below the horizon is flat and not reported
+   (:data:`UPRIGHT_TOL_PX`): cylinders are taller than the camera.
 4. **Bearing.** The middle of two true edges; with one true edge, that edge moved by the
    half-width ``asin(r / D)`` inwards. With the bottom in view, an edge is true only
    where the base ellipse's bottom has risen as it does at a silhouette's side (a NAO
@@ -61,6 +63,11 @@ RISE_FRACTION = 0.35
 MIN_RISE_PX = 3.0
 BLUR = 3
 MORPH = 5
+#: A cylinder is taller than the camera (``nao.OBSTACLE_HEIGHT`` > camera height), so its
+#: silhouette reaches the horizon at any distance; a run whose top stays more than this
+#: many pixels below the horizon is flat (50 NAOs, seed 12: rose-ish floor letters, lit
+#: into the obstacle range, gave 14 robots phantom obstacles and a plan out of the room).
+UPRIGHT_TOL_PX = 3.0
 
 
 @dataclass(frozen=True)
@@ -146,6 +153,11 @@ def _ground_distance(cam: CameraModel, u: float, v: float) -> float | None:
     return t * math.hypot(cp - yc * sp, xc)
 
 
+def horizon_row(cam: CameraModel) -> float:
+    """Image row (px, down) of the horizon: rays at the camera's height."""
+    return float(cam.cy - cam.fy * math.tan(-cam.pitch))
+
+
 class ObstacleDetector:
     """Finds the obstacle cylinders in forehead images (no state per call)."""
 
@@ -184,6 +196,8 @@ class ObstacleDetector:
         cam = self.camera
         if run.c1 - run.c0 + 1 < MIN_WIDTH_PX or not (left or right):
             return None
+        if run.top > horizon_row(cam) + UPRIGHT_TOL_PX:
+            return None  # flat: a rose patch on the floor, not a cylinder taller than the camera
         # angles (+left) of the run's outer pixel edges
         b_left = cam.pixel_bearing(float(run.c0))
         b_right = cam.pixel_bearing(float(run.c1 + 1))
