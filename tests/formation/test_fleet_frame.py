@@ -133,6 +133,34 @@ def test_a_fleet_that_falls_apart_without_the_named_robot_stops(
         fleet_frame(recs, DEFAULT_EPSILON)
 
 
+def test_a_large_fleet_inconsistent_beyond_one_robot_stops(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Beyond UNEXPLAINED_MAX_N robots an unexplained misfit stops the fleet: its own
+    check after hold cannot tell a wrong dense pyramid (50 NAOs, seed 13)."""
+    import dataclasses
+
+    import agent.core.formation.fleet_frame as ff_mod
+    from agent.core.formation.pose_check import PoseVerdict
+
+    for n, stops in ((ff_mod.UNEXPLAINED_MAX_N, False), (ff_mod.UNEXPLAINED_MAX_N + 1, True)):
+        rng = np.random.default_rng(n)
+        ids = list(range(1, n + 1))
+        recs = unaligned_records(ids, sim_layout(rng, n), rng.uniform(-math.pi, math.pi, n))
+        real = check_poses(recs, DEFAULT_EPSILON)
+        worse = tuple(dataclasses.replace(p, score=5.0) for p in real.poses.pairs)
+        _inject(
+            monkeypatch,
+            ff_mod,
+            PoseVerdict((), "ambiguous", dataclasses.replace(real.poses, pairs=worse)),
+        )
+        if stops:
+            with pytest.raises(ValueError, match=rf"ambiguous.*a fleet of {n} .*nobody moves"):
+                fleet_frame(recs, DEFAULT_EPSILON)
+        else:
+            assert fleet_frame(recs, DEFAULT_EPSILON).reason == "ambiguous"
+
+
 def test_a_fleet_inconsistent_beyond_one_robot_plans_as_the_papers_do(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
