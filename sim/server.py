@@ -65,6 +65,7 @@ from typing import Any
 import zenoh
 
 from agent.wire import (
+    BUSY,
     KEY_ALIVE_ALL,
     KEY_WORLD_CLOCK,
     KEY_WORLD_REGISTER,
@@ -464,7 +465,7 @@ class WorldServer:
     def _camera(self, q: Request, rid: int, yaw: float) -> Message | None:
         if self.pool is not None and self.pool.alive > 0:
             if len(self._cam_pending) >= MAX_RENDER_PENDING:
-                raise ValueError(f"world busy: {len(self._cam_pending)} pictures being drawn")
+                raise ValueError(f"{BUSY}: {len(self._cam_pending)} pictures being drawn")
             # The state the picture depends on is taken now; a worker draws it.
             self.world.set_head_yaw(rid, yaw)
             job = Job(

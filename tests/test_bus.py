@@ -20,12 +20,14 @@ from agent.net.bus import (
     Bus,
     BusConfig,
     BusError,
+    Busy,
     Event,
     NoRoute,
     SessionUnavailable,
     open_retrying,
 )
 from agent.wire import (
+    BUSY,
     MAX_MESSAGE_BYTES,
     MAX_PUBLICATION_BYTES,
     ClockMsg,
@@ -168,7 +170,20 @@ def test_query_error_reply_raises_with_reason(pair: tuple[Bus, Bus, str]) -> Non
     w = world_session(ep)
     q = serve(w, key_walk(3), encode(ErrorReply(reason="robot 3 is busy")))
     try:
-        with pytest.raises(BusError, match="robot 3 is busy"):
+        with pytest.raises(BusError, match="robot 3 is busy") as info:
+            query_eventually(b, key_walk(3), CommandReply)
+        assert not isinstance(info.value, Busy)  # a refusal, not an overload
+    finally:
+        q.undeclare()
+        w.close()
+
+
+def test_query_busy_reply_raises_busy(pair: tuple[Bus, Bus, str]) -> None:
+    _, b, ep = pair
+    w = world_session(ep)
+    q = serve(w, key_walk(3), encode(ErrorReply(reason=f"{BUSY}: 64 pictures being drawn")))
+    try:
+        with pytest.raises(Busy, match="world busy: 64 pictures"):
             query_eventually(b, key_walk(3), CommandReply)
     finally:
         q.undeclare()

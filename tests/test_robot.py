@@ -197,6 +197,37 @@ def test_an_error_reply_to_a_camera_query_is_not_retried() -> None:
     assert len(bus.asked) == 1
 
 
+def test_a_busy_world_is_asked_again_after_a_pause() -> None:
+    from agent.net.bus import Busy
+
+    bus = RenderedBus([1.0])
+    real = bus.query
+    busy = [2]
+
+    def query(key: str, msg: object, expect: type, timeout: float, best: bool = False) -> object:
+        if busy[0] > 0:
+            busy[0] -= 1
+            raise Busy(f"{key}: world busy: 64 pictures being drawn")
+        return real(key, msg, expect, timeout, best)
+
+    bus.query = query  # type: ignore[method-assign]
+    body = ZenohBody(bus, 3)  # type: ignore[arg-type]
+    frame = body.camera(0.0)  # two refusals, 0.5 s then 1 s apart
+    assert frame.t_sim == 1.0 and body.busy_replies == 2
+    body.close()
+    assert body.busy_replies == 0
+
+
+def test_a_world_busy_until_the_camera_timeout_fails() -> None:
+    from agent.net.bus import Busy
+
+    bus = LossyBus(lost=0, error=Busy("world/robot/3/camera: world busy: 64 pictures"))
+    body = ZenohBody(bus, 3, camera_timeout=1.0)  # type: ignore[arg-type]
+    with pytest.raises(BodyError, match=r"world busy.*until the camera timeout"):
+        body.camera(0.0)
+    assert len(bus.asked) == 2  # at 0 and after 0.5 s; the next pause (1 s) is past the end
+
+
 def test_camera_waits_grow_with_the_fleet_behind_the_worlds_queue() -> None:
     from agent.body.zenoh_world import CAMERA_ATTEMPT_S, CAMERA_TIMEOUT_S, camera_waits
 

@@ -37,6 +37,7 @@ from typing import Any, TypeVar
 import zenoh
 
 from agent.wire import (
+    BUSY,
     MAX_MESSAGE_BYTES,
     MAX_PUBLICATION_BYTES,
     MAX_REQUEST_BYTES,
@@ -90,6 +91,11 @@ class NoRoute(BusError):
     fresh peer session that has not learnt the world's routes, or a route being rebuilt
     after a lossy link dropped. Nothing was executed, so the caller may retry.
     """
+
+
+class Busy(BusError):
+    """The queryable answered that it is overloaded (an ``ErrorReply`` whose reason starts
+    with :data:`agent.wire.BUSY`) and executed nothing: the caller may ask again later."""
 
 
 class QueryTimeout(BusError):
@@ -491,7 +497,8 @@ class Bus:
                     self._reject(f"reply on {key}", exc)
                     continue
                 if isinstance(out, ErrorReply):
-                    raise BusError(f"{key}: {out.reason}")
+                    kind = Busy if out.reason.startswith(BUSY) else BusError
+                    raise kind(f"{key}: {out.reason}")
                 if not isinstance(out, expect):
                     why = f"unexpected reply {type(out).__name__}, expected {expect.__name__}"
                     errors.append(why)

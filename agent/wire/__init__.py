@@ -82,6 +82,7 @@ from agent.wire.keys import (
     key_walk,
 )
 from agent.wire.messages import (
+    BUSY,
     MAX_RECORD_BYTES,
     MAX_REQUEST_ID,
     PHASES,
@@ -121,6 +122,7 @@ from agent.wire.network import (
 from agent.wire.receive import MAX_REASON, Guard, Inbox, reason
 
 __all__ = [
+    "BUSY",
     "BUS_PORT",
     "CREDENTIALS_ENV",
     "DIGEST_HEX_LEN",

@@ -366,9 +366,16 @@ class CommandReply(Message):
     }
 
 
+#: How the reason of an :class:`ErrorReply` begins when the server is overloaded and
+#: executed nothing: the caller may ask again later (issue 21: at 100 NAOs the world's
+#: bounded render queue refused pictures, and agents stopped on it).
+BUSY = "world busy"
+
+
 @dataclass(frozen=True)
 class ErrorReply(Message):
-    """The reply to a request the world cannot serve; ``reason`` says why."""
+    """The reply to a request the world cannot serve; ``reason`` says why (starting
+    with :data:`BUSY` when it may be asked again later)."""
 
     TAG: ClassVar[str] = "error"
     reason: str
