@@ -465,7 +465,9 @@ class WorldServer:
     def _camera(self, q: Request, rid: int, yaw: float) -> Message | None:
         if self.pool is not None and self.pool.alive > 0:
             if len(self._cam_pending) >= MAX_RENDER_PENDING:
-                raise ValueError(f"{BUSY}: {len(self._cam_pending)} pictures being drawn")
+                # drawn nothing: the robot may ask again later (agent.net.bus.Busy)
+                self.errors += 1
+                return ErrorReply(reason=f"{BUSY}: {len(self._cam_pending)} pictures being drawn")
             # The state the picture depends on is taken now; a worker draws it.
             self.world.set_head_yaw(rid, yaw)
             job = Job(

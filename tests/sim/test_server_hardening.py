@@ -242,3 +242,22 @@ def test_the_motion_cache_is_bounded_per_robot(server: Any, legs: FakeLegs) -> N
     assert len(server.motions.results[3]) == MOTION_CACHE
     _ask(server, "turn", TurnRequest(angle=0.1, request_id=1))  # forgotten: executed again
     assert len(legs.started) == MOTION_CACHE + 2
+
+
+def test_a_full_render_queue_answers_busy(server: Any) -> None:
+    """Issue 21: with every render slot taken the world draws nothing and says so with
+    agent.wire.BUSY first, so that the robot asks again later (agent.net.bus.Busy)."""
+    from types import SimpleNamespace
+
+    from agent.wire import BUSY
+    from sim.server import MAX_RENDER_PENDING
+
+    server.pool = SimpleNamespace(alive=1)
+    server._cam_pending = dict.fromkeys(range(MAX_RENDER_PENDING))
+    q = FakeQuery(key_camera(3), encode(CameraRequest(yaw=0.0)))
+    server.admit("camera", q)
+    server._drain(block=False)
+    (rep,) = q.replies
+    assert isinstance(rep, ErrorReply)
+    assert rep.reason == f"{BUSY}: {MAX_RENDER_PENDING} pictures being drawn"
+    assert server.errors == 1
