@@ -57,29 +57,6 @@ def test_formation_adapter_goals_are_plan_targets_in_own_fixed_frame() -> None:
         )
 
 
-def test_formation_adapter_keeps_its_last_plan(monkeypatch: pytest.MonkeyPatch) -> None:
-    import agent.adapters as adapters
-
-    calls: list[int] = []
-    real = adapters.plan_from_records
-
-    def counted(*args, **kwargs):  # type: ignore[no-untyped-def]
-        calls.append(1)
-        return real(*args, **kwargs)
-
-    monkeypatch.setattr(adapters, "plan_from_records", counted)
-    fa = FormationAdapter()
-    first = fa.plan(records(), PlanParams())
-    assert fa.plan(records(), PlanParams()) is first and len(calls) == 1  # equal inputs
-    assert fa.plan(records(), PlanParams(d_e=0.9)) is not first and len(calls) == 2
-    # two robots that saw nobody: not connected, and the same error again, unplanned
-    lone = tuple(NeighborRecordMsg(sender=i, round=0, neighbours=()) for i in (1, 2))
-    for _ in range(2):
-        with pytest.raises(ValueError):
-            fa.plan(lone, PlanParams())
-    assert len(calls) == 3
-
-
 def test_formation_adapter_is_order_independent() -> None:
     fa = FormationAdapter()
     a = fa.plan(records(), PlanParams())

@@ -189,6 +189,8 @@ def refine_poses(frame: PoseFrame, records: Sequence[NeighborRecord]) -> PoseFra
         sightings = [np.asarray(by_ids[i].neighbours, dtype=np.float64).reshape(-1, 2)
                      if i in by_ids else np.zeros((0, 2)) for i in frame.ids]  # fmt: skip
         psi = reseat_headings(frame.positions, frame.headings, sightings)
+        anchor = frame.ids.index(frame.frame_robot)
+        psi[anchor] = frame.headings[anchor]  # the frame robot's heading is the frame's
         found = identify_sightings(frame.ids, frame.positions, psi, recs, paired)
         if not np.array_equal(psi, frame.headings) or set(found) != {
             (o, a, t) for (o, a), t in paired.items()
