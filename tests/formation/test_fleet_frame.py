@@ -278,8 +278,8 @@ def test_an_aligned_fleet_with_misfit_pairs_plans_without_the_search(
     misfit = dataclasses.replace(real, pairs=worse)
     assert not misfit.consistent and not misfit.turned
     monkeypatch.setattr(ff_mod, "build_poses", lambda r, e: misfit)
-    monkeypatch.setattr(ff_mod, "_aligned_explains", lambda r, e, p: None)
-    monkeypatch.setattr(ff_mod, "_aligned_at_once", lambda r, e: None)  # the slow path
+    monkeypatch.setattr(ff_mod, "_aligned_explains", lambda a, p: None)
+    monkeypatch.setattr(ff_mod, "_aligned_at_once", lambda a, r: None)  # the slow path
     with_search = fleet_frame(aligned, DEFAULT_EPSILON)
 
     def no_search(poses: Any) -> Any:

@@ -128,37 +128,40 @@ def _max_turn(poses: PoseFrame) -> float:
     return float(np.max(np.abs(poses.headings), initial=0.0))
 
 
-def _aligned_explains(
-    records: Sequence[NeighborRecord], epsilon: float, poses: PoseFrame
-) -> PoseFrame | None:
-    """The papers' model (eq. 9 pairs, least squares, ψ ≡ 0) when every one of its pairs
-    fits in position and it pairs at least as many robot pairs as the pose fit, or the
-    pose fit itself finds every |ψ| within :data:`poses.ALIGNED_MAX_HEADING`; else None.
-
-    The second case keeps aligned dense fleets exactly as the papers plan them: there the
-    distance-only pose pairing can pair a long one-way sighting with a neighbour's
-    sighting of someone else (15 NAOs, seed 1: three such pairs of robot 5 at 2.7-3.4 m,
-    which would have left a sound robot out)."""
+def _papers_poses(records: Sequence[NeighborRecord], epsilon: float) -> PoseFrame | None:
+    """The papers' model (eq. 9 pairs, least squares, ψ ≡ 0) as poses with the residuals
+    of its pairs' sightings, or None if it does not connect; computed once per frame."""
     graph = identify_neighbours(records, epsilon)
     try:
         cf = build_common_frame(graph, "lsq")
     except ValueError:
         return None
-    meas = pair_measurements(graph)
-    cand = evaluate_poses(cf.ids, meas, cf.positions, np.zeros(len(cf.ids)), cf.frame_robot, True)
-    if not cand.positions_consistent or set(cand.ids) != set(poses.ids):
+    zero = np.zeros(len(cf.ids))
+    return evaluate_poses(
+        cf.ids, pair_measurements(graph), cf.positions, zero, cf.frame_robot, True
+    )
+
+
+def _aligned_explains(papers: PoseFrame | None, poses: PoseFrame) -> PoseFrame | None:
+    """The papers' model (:func:`_papers_poses`) when every one of its pairs fits in
+    position and it pairs at least as many robot pairs as the pose fit, or the pose fit
+    itself finds every |ψ| within :data:`poses.ALIGNED_MAX_HEADING`; else None.
+
+    The second case keeps aligned dense fleets exactly as the papers plan them: there the
+    distance-only pose pairing can pair a long one-way sighting with a neighbour's
+    sighting of someone else (15 NAOs, seed 1: three such pairs of robot 5 at 2.7-3.4 m,
+    which would have left a sound robot out)."""
+    if papers is None or not papers.positions_consistent or set(papers.ids) != set(poses.ids):
         return None
     small = _max_turn(poses) <= ALIGNED_MAX_HEADING
-    return cand if small or len(cand.pairs) >= len(poses.pairs) else None
+    return papers if small or len(papers.pairs) >= len(poses.pairs) else None
 
 
-def _papers_model(records: Sequence[NeighborRecord], epsilon: float) -> FleetFrame | None:
-    """Today's common frame (eq. 9 pairs, least squares, ψ ≡ 0), or None if not connected."""
-    try:
-        cf = build_common_frame(identify_neighbours(records, epsilon), "lsq")
-    except ValueError:
+def _papers_model(papers: PoseFrame | None) -> FleetFrame | None:
+    """Today's common frame (:func:`_papers_poses`), or None if not connected."""
+    if papers is None:
         return None
-    return FleetFrame(cf.frame_robot, cf.ids, cf.positions, np.zeros(len(cf.ids)), True)
+    return FleetFrame(papers.frame_robot, papers.ids, papers.positions, papers.headings, True)
 
 
 _AGAIN = "consistent once every sighting is identified where it lands"
@@ -183,31 +186,21 @@ def _planned_on(poses: PoseFrame, reason: str) -> FleetFrame:
     )
 
 
-def _aligned_at_once(records: Sequence[NeighborRecord], epsilon: float) -> FleetFrame | None:
-    """The papers' model (eq. 9 pairs, least squares, ψ ≡ 0), or that model with its
-    sightings identified again where they land (:func:`reidentify.refine_poses`, every
-    |ψ| within :data:`poses.ALIGNED_MAX_HEADING`), when it is consistent, connects every
-    robot and every robot's own sightings mostly land on the others (:func:`mostly_land`:
-    a turned robot's do not); else None. Aligned starts need no pose pairing then (issue
-    21: the pairing's support was ~5 of the ~7 CPU s an agent planned at 50 NAOs)."""
-    graph = identify_neighbours(records, epsilon)
-    try:
-        cf = build_common_frame(graph, "lsq")
-    except ValueError:
+def _aligned_at_once(
+    papers: PoseFrame | None, records: Sequence[NeighborRecord]
+) -> FleetFrame | None:
+    """The papers' model (:func:`_papers_poses`), or that model with its sightings
+    identified again where they land (:func:`reidentify.refine_poses`, every |ψ| within
+    :data:`poses.ALIGNED_MAX_HEADING`), when it is consistent, connects every robot and
+    every robot's own sightings mostly land on the others (:func:`mostly_land`: a turned
+    robot's do not); else None. Aligned starts need no pose pairing then (issue 21: the
+    pairing's support was ~5 of the ~7 CPU s an agent planned at 50 NAOs)."""
+    if papers is None or set(papers.ids) != {r.robot_id for r in records}:
         return None
-    if set(cf.ids) != {r.robot_id for r in records}:
-        return None
-    zero = np.zeros(len(cf.ids))
-    papers = evaluate_poses(
-        cf.ids, pair_measurements(graph), cf.positions, zero, cf.frame_robot, True
-    )
     if papers.positions_consistent and not papers.turned:
         if not mostly_land(papers, records):
             return None
-        return FleetFrame(
-            cf.frame_robot, cf.ids, cf.positions, zero, True,
-            reason="aligned starts: every sighting fits in position",
-        )  # fmt: skip
+        return _planned_on(papers, "aligned starts: every sighting fits in position")
     clean = refine_poses(papers, records)
     why = _AGAIN
     if not clean.consistent and not clean.turned:
@@ -228,13 +221,14 @@ def fleet_frame(records: Sequence[NeighborRecord], epsilon: float) -> FleetFrame
     named robot without which the rest is not connected, or a fleet whose sightings are
     inconsistent beyond one robot.
     """
-    fast = _aligned_at_once(records, epsilon)
+    papers = _papers_poses(records, epsilon)
+    fast = _aligned_at_once(papers, records)
     if fast is not None:
         return fast
     first = build_poses(records, epsilon)
     quick = quick_check(first)  # check_frame's verdict when it needs no search
     poses = first if quick is None else quick.poses
-    today = _aligned_explains(records, epsilon, poses)
+    today = _aligned_explains(papers, poses)
     if today is None and _max_turn(poses) <= ALIGNED_MAX_HEADING and not poses.turned:
         clean = _identified_again(poses, records)
         if clean is not None and _max_turn(clean) <= ALIGNED_MAX_HEADING:
@@ -243,10 +237,10 @@ def fleet_frame(records: Sequence[NeighborRecord], epsilon: float) -> FleetFrame
         # pose pairing of a dense fleet can pair a long one-way sighting wrongly and blame
         # a sound robot for it; 15 NAOs, seed 1, robot 5). Nobody is left out here, so the
         # check's search for a robot to blame is not run (issue 21: ~100 fits at 50 NAOs)
-        papers = _papers_model(records, epsilon)
-        if papers is not None:
+        model = _papers_model(papers)
+        if model is not None:
             why = quick.reason if quick is not None else "pairs misfit, nobody sought to blame"
-            return replace(papers, reason=f"aligned starts (every |ψ| ≤ 10°): {why}")
+            return replace(model, reason=f"aligned starts (every |ψ| ≤ 10°): {why}")
     if today is not None:
         # the papers' aligned model pairs as many robots and explains every position:
         # exactly today's frame, nobody left out on masks alone (a turned record would
