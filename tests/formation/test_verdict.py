@@ -53,7 +53,9 @@ def test_turning_the_whole_picture_changes_nothing(
     b = check_pair(2, 1, np.array([[c, -s], [s, c]]) @ off, axis + rot, D_E, PHI_E)
     assert a.r_d == pytest.approx(b.r_d, abs=1e-9)
     assert a.r_phi == pytest.approx(b.r_phi, abs=1e-6)
-    assert a.ok == b.ok or abs(abs(a.r_phi) - R_PHI_MAX) < 1e-6
+    # a ratio on its bound may fall either side of it once turned (rounding)
+    on_bound = abs(abs(a.r_phi) - R_PHI_MAX) < 1e-6 or abs(abs(a.r_d) - R_D_MAX) < 1e-9
+    assert a.ok == b.ok or on_bound
 
 
 @pytest.mark.parametrize(
