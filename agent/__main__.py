@@ -79,7 +79,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     )
     add_plan_arguments(p)
     p.add_argument(
-        "--timeout", type=float, default=120.0, help="agreement timeout after the search (s)"
+        "--timeout",
+        type=float,
+        default=120.0,
+        help="agreement timeout: seconds without news from the fleet (s)",
     )
     p.add_argument(
         "--member-grace",

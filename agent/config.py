@@ -55,7 +55,7 @@ class AgentConfig:
     phi_e: float = math.radians(30.0)
     orientation: str = "pca"  # pyramid orientation: "pca" (NAO eq. 12) | "cp" (AUV III.B)
     strategy: str = "default"  # assignment strategy, one of formation.params.PLAN_STRATEGIES
-    timeout: float = 120.0  # s from the end of the search to agreement
+    timeout: float = 120.0  # s without news (a new record or digest) before agreement fails
     wave_timeout: float = 600.0  # s to wait for earlier waves, and for the fleet to hold
     settle: float = 3.0  # s of unchanged membership when no fleet size is given
     # s a member whose liveliness token vanished, and who published nothing since, still

@@ -139,22 +139,6 @@ def test_member_that_dies_before_agreement_fails_everyone_safely() -> None:
         assert a.due(net.t + 100) == []
 
 
-def test_timeout_names_who_is_missing() -> None:
-    net = Net([0, 1], timeout=5.0)
-    net.run(6.0)
-    d = net.agents[0].decide(net.t)
-    assert d.kind == "failed"
-    assert "no agreement after 5 s" in d.reason and "2 of 3" in d.reason
-
-
-def test_timeout_names_missing_record_and_digest() -> None:
-    net = Net([0, 1], fleet_size=2, timeout=2.0, drop=lambda kind, s, d, t: s == 1)
-    net.run(3.0)
-    d = net.agents[0].decide(net.t)
-    assert d.kind == "failed"
-    assert "no record from [1]" in d.reason and "from [1]" in d.reason
-
-
 def test_more_members_than_fleet_size_fails() -> None:
     net = Net([0, 1, 2], fleet_size=2)
     net.step()

@@ -149,10 +149,10 @@ def load_samples(
 
 def agree_timeout(args: argparse.Namespace, robots: int) -> float:
     """The agents' agreement timeout (``python -m agent --timeout``): ``--agree-timeout``,
-    or by default max(120, 3·N) s. An agent's agreement times out that long after its
-    own search ended, and the world renders every robot's search on its own cores, so
-    the spread of the searches' ends grows with N (120 s is the agents' and the demo's
-    default, enough for 30 NAOs)."""
+    or by default max(120, 3·N) s. An agent's agreement times out that long after the
+    fleet's last news (a new record or digest), and the world renders every robot's
+    search on its own cores, so the gaps between the last searches' ends grow with N
+    (120 s is the agents' and the demo's default, enough for 30 NAOs)."""
     given: float | None = args.agree_timeout
     return given if given is not None else max(120.0, 3.0 * robots)
 

@@ -16,11 +16,20 @@ the same record set, and moves only then:
 * **Failed** (a safe stop, never a move on an unshared plan) when a member whose
   record we do not hold (or that reported ``failed``) leaves before agreement, the live
   set exceeds ``fleet_size``,
-  or ``timeout`` expires; the reason names who is missing. A member that leaves after
+  or ``timeout`` seconds pass without news; the reason names who is missing. A member that leaves after
   its record arrived is out of reach, not gone (issue #9: at 50 % loss a session stays
   cut for longer than any sensible grace): the agreement waits for it to come back
   (:meth:`Agreement.member_joined`) until ``timeout``, and nobody moves meanwhile,
   since agreement needs every member's matching digest.
+
+**The timeout counts from the fleet's last news** (issue 21), not from this agent's
+start: news is a record that changes the set held or a member's digest that changes.
+In a fleet of 100 the searches end over ~15 minutes; an agent that searched early
+would otherwise give up while the fleet is still converging (and, having stopped, end
+everyone's agreement: "member left before agreement"). Each member's record and
+digest can change only finitely often in a round (its held set only grows), so the
+agreement still ends: agreed, or failed after ``timeout`` seconds in which nothing
+moved.
 
 Re-publishing (what :meth:`Agreement.due` returns, issue 21): prompt sends answer news
 (the record when it was never sent, a member joined, or a member's new digest lacks it;
@@ -190,6 +199,7 @@ class Agreement(Generic[R]):
         self.timeout = timeout
         self.settle = settle
         self.started = now
+        self.last_news = now  # the timeout counts from here (module doc)
         self.digest_fn = digest_fn
         self.params = params  # our agreed-parameters digest (params_digest)
         self.params_of: dict[int, str] = {}  # member (live or left) -> its params digest
@@ -287,6 +297,7 @@ class Agreement(Generic[R]):
         if old is not None and (old.round > msg.round or old == msg):
             return False
         self.records[msg.sender] = msg
+        self.last_news = now
         self._digest_cache = None
         self._digest_dirty = True
         return True
@@ -307,6 +318,8 @@ class Agreement(Generic[R]):
         self._digest_at[msg.sender] = now
         self.params_of[msg.sender] = msg.params
         news = old is None or (old.digest, old.members) != (msg.digest, msg.members)
+        if news:
+            self.last_news = now
         if news and self.self_id not in msg.members:
             self._record_hint = True  # it lacks our record: answer once
         # A digest that differs from ours needs records, not our digest: no re-send.
@@ -394,8 +407,11 @@ class Agreement(Generic[R]):
             self._final = self._agreed()
             self._digest_dirty = True  # tell the others once more, promptly
             return self._final
-        if now - self.started > self.timeout:
-            parts = [f"no agreement after {self.timeout:g} s"]
+        if self.timed_out(now):
+            parts = [
+                f"no agreement: no news for {self.timeout:g} s "
+                f"({now - self.started:.0f} s after the exchange began)"
+            ]
             if self.fleet_size is not None and n != self.fleet_size:
                 parts.append(f"{n} of {self.fleet_size} members alive {sorted(self.live)}")
             if missing:
@@ -434,7 +450,7 @@ class Agreement(Generic[R]):
         known[self.self_id] = self.params
         unknown = sorted(i for i in self.live if i not in known)
         complete = self.fleet_size is None or len(self.live | self.left) >= self.fleet_size
-        timed_out = now - self.started > self.timeout
+        timed_out = self.timed_out(now)
         odd, ref = odd_params(known)
         if (unknown or not complete) and not timed_out:
             return Decision(
@@ -451,6 +467,10 @@ class Agreement(Generic[R]):
             + (f"; parameters unknown for {unknown}" if unknown else "")
             + "; nobody plans or marches"
         )
+
+    def timed_out(self, now: float) -> bool:
+        """Whether ``timeout`` seconds passed since the fleet's last news (module doc)."""
+        return now - self.last_news > self.timeout
 
     def _wait_reason(self, missing: list[int], disagree: list[int]) -> str:
         if self.left:
