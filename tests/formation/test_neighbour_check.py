@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from agent.core.formation.common_frame import build_common_frame, choose_frame_robot
-from agent.core.formation.neighbour_check import identify_neighbours, meets_eq9
+from agent.core.formation.neighbour_check import _support, identify_neighbours, meets_eq9
 from agent.core.formation.records import NeighborRecord
 from tests.formation.conftest import random_fleet, records_from_positions
 
@@ -111,3 +113,52 @@ def test_robot_half_way_does_not_fool_the_check() -> None:
     )
     for p in g.pairs:
         assert np.allclose(p.v_ij, pos[p.j] - pos[p.i])
+
+
+def _support_one_by_one(
+    r2: np.ndarray, c2: np.ndarray, owner: np.ndarray, vecs: np.ndarray, eps: float
+) -> np.ndarray:
+    """The support worked candidate by candidate (the definition in _support's doc)."""
+    out = np.zeros(r2.shape[0], dtype=np.int64)
+    for t in range(r2.shape[0]):
+        mine = np.flatnonzero(owner == owner[r2[t]])
+        theirs = vecs[owner == owner[c2[t]]]
+        for d in mine[mine != r2[t]]:
+            q = vecs[d] - vecs[r2[t]]
+            out[t] += int(np.min(np.hypot(*(theirs - q).T)) < eps)
+    return out
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.integers(2, 6),
+    st.integers(0, 2**31 - 1),
+    st.integers(0, 4),
+    st.booleans(),
+)
+def test_support_counts_equal_the_one_by_one_definition(
+    owners: int, seed: int, tenths: int, shuffled: bool
+) -> None:
+    # sightings on a 0.1 m grid (ties on purpose) and ε half-way between grid distances:
+    # no distance lies within rounding of ε, so the two counts cannot differ by it
+    eps = (tenths + 0.5) / 10.0
+    rng = np.random.default_rng(seed)
+    owner = rng.integers(0, owners, size=int(rng.integers(2, 30)))
+    if not shuffled:
+        owner = np.sort(owner)
+    vecs = np.round(rng.uniform(-1.5, 1.5, size=(owner.size, 2)), 1)
+    pairs = [(a, b) for a in range(owner.size) for b in range(owner.size)
+             if owner[a] != owner[b]]  # fmt: skip
+    if not pairs:
+        return
+    r2 = np.array([a for a, _ in pairs])
+    c2 = np.array([b for _, b in pairs])
+    got = _support(r2, c2, owner, vecs, eps)
+    assert got.dtype == np.int64
+    assert np.array_equal(got, _support_one_by_one(r2, c2, owner, vecs, eps))
+
+
+def test_support_of_no_candidates_is_empty() -> None:
+    out = _support(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(3, np.int64),
+                   np.zeros((3, 2)), 0.3)  # fmt: skip
+    assert out.shape == (0,)

@@ -106,23 +106,36 @@ def _support(
     If the candidate is right, k sits at ``p_i + v_ia``, so every other detection of i,
     shifted by ``-v_ia``, should appear among k's detections when k sees it too. The
     support is the number of i's other detections that do (within ε).
+
+    Vectorised per k (issue 21: ~5 000 candidates at 50 NAOs took 0.14 CPU s one query at
+    a time, twice per agent, 50 agents at once): every candidate's shifted detections
+    are queried against k's KD-tree in one call; the counts are the same integers.
     """
     out = np.zeros(r2.shape[0], dtype=np.int64)
-    by_owner: dict[int, np.ndarray] = {}
-    for o in np.unique(owner):
-        by_owner[int(o)] = np.flatnonzero(owner == o)
-    trees: dict[int, cKDTree] = {}
-    for t in range(r2.shape[0]):
-        oi, ok = int(owner[r2[t]]), int(owner[c2[t]])
-        mine = by_owner[oi]
-        others = mine[mine != r2[t]]
-        if others.size == 0:
+    if r2.size == 0:
+        return out
+    order = np.argsort(owner, kind="stable")  # detections grouped by owner
+    owners, start, count = np.unique(owner[order], return_index=True, return_counts=True)
+    first = dict(zip(owners.tolist(), start.tolist(), strict=True))
+    size = dict(zip(owners.tolist(), count.tolist(), strict=True))
+    oi = owner[r2]
+    ok_all = owner[c2]
+    m = np.array([size[int(o)] for o in oi], dtype=np.int64)  # i's detections per candidate
+    base = np.array([first[int(o)] for o in oi], dtype=np.int64)
+    for ok in np.unique(ok_all):
+        ts = np.flatnonzero(ok_all == ok)
+        seg = np.repeat(ts, m[ts])  # candidate of each query
+        ends = np.cumsum(m[ts])
+        offs = np.arange(int(ends[-1])) - np.repeat(ends - m[ts], m[ts])
+        det = order[base[seg] + offs]  # i's detections, in i's order
+        keep = det != r2[seg]
+        seg, det = seg[keep], det[keep]
+        if seg.size == 0:
             continue
-        if ok not in trees:
-            trees[ok] = cKDTree(vecs[by_owner[ok]])
-        shifted = vecs[others] - vecs[r2[t]]
-        dist, _ = trees[ok].query(shifted, distance_upper_bound=epsilon)
-        out[t] = int(np.sum(np.isfinite(dist)))
+        lo, n = first[int(ok)], size[int(ok)]
+        tree = cKDTree(vecs[order[lo : lo + n]])
+        dist, _ = tree.query(vecs[det] - vecs[r2[seg]], distance_upper_bound=epsilon)
+        out += np.bincount(seg[np.isfinite(dist)], minlength=out.size)
     return out
 
 
