@@ -17,11 +17,13 @@ from agent.core.formation.records import NeighborRecord
 from agent.core.formation.reidentify import (
     GATE,
     GATE_REL,
+    MIN_APART,
     gate,
     identify_sightings,
     landing,
     refine_poses,
     reseat_headings,
+    reseat_positions,
 )
 from tests.formation.pose_fleets import rot, sim_layout, unaligned_records
 
@@ -77,6 +79,58 @@ def test_too_few_sightings_are_not_voted_on() -> None:
     sightings = [_sightings(GRID, k, 0.0)[:2] for k in range(9)]
     psi = np.full(9, math.pi)
     assert np.array_equal(reseat_headings(GRID, psi, sightings), psi)
+
+
+def test_a_robot_fitted_out_of_place_is_reseated_where_its_sightings_land() -> None:
+    sightings = [_sightings(GRID, k, 0.0) for k in range(9)]
+    pos = GRID.copy()
+    pos[0] = [-0.9, 0.5]  # 1 m off: none of its 8 sightings lands
+    out = reseat_positions(pos, np.zeros(9), sightings)
+    assert np.array_equal(out[0], GRID[0])  # exactly: the candidate is a robot minus a sighting
+    assert np.array_equal(out[1:], GRID[1:])
+    assert np.array_equal(pos[0], [-0.9, 0.5])  # the input is not changed
+
+
+def test_a_robot_with_wrong_distances_keeps_its_position() -> None:
+    sightings = [_sightings(GRID, k, 0.0) for k in range(9)]
+    sightings[4] = _sightings(GRID, 4, 0.0, scale=1.4)  # lands on nobody, where it stands
+    out = reseat_positions(GRID, np.zeros(9), sightings)
+    assert np.array_equal(out, GRID)
+
+
+def test_the_others_sightings_keep_a_robot_where_they_see_it() -> None:
+    # robot 8's own sightings are those of a robot at (2.5, 2.5): all 8 would land there,
+    # but the other 8 robots see it at (2, 2), and nobody sees it at (2.5, 2.5)
+    sightings = [_sightings(GRID, k, 0.0) for k in range(9)]
+    sightings[8] = np.delete(GRID, 8, axis=0) - np.array([2.5, 2.5])
+    assert np.array_equal(reseat_positions(GRID, np.zeros(9), sightings), GRID)
+    # without the others' sightings of it the vote moves it: the guard is what holds it
+    alone = [np.zeros((0, 2))] * 8 + [sightings[8]]
+    assert np.allclose(reseat_positions(GRID, np.zeros(9), alone)[8], [2.5, 2.5])
+
+
+def test_no_position_is_voted_next_to_another_robot() -> None:
+    # robot 1's sightings would all land from 0.2 m beside robot 0: refused (MIN_APART)
+    pos = np.array([[0.0, 0.0], [5.0, 5.0], [2.0, 0.0], [0.0, 2.0], [2.0, 2.0]])
+    true_1 = np.array([0.2, 0.0])
+    sightings = [np.zeros((0, 2)), pos[[0, 2, 3, 4]] - true_1] + [np.zeros((0, 2))] * 3
+    assert MIN_APART == 0.3
+    assert np.array_equal(reseat_positions(pos, np.zeros(5), sightings), pos)
+
+
+def test_refine_puts_a_robot_fitted_out_of_place_back() -> None:
+    _, recs = _dense_fleet(5)
+    pf = build_poses(recs)
+    k = int(np.argmax([r.count for r in recs]))
+    if pf.ids[k] == pf.frame_robot:
+        k = (k + 1) % len(pf.ids)
+    pos = pf.positions.copy()
+    pos[k] += [0.7, -0.7]  # ~1 m off, as a wrong pairing placed robot 36 (50 NAOs, seed 12)
+    wrong = evaluate_poses(pf.ids, pf.measurements, pos, pf.headings, pf.frame_robot)
+    assert not wrong.consistent
+    fixed = refine_poses(wrong, recs)
+    assert fixed.consistent
+    assert np.allclose(fixed.positions, pf.positions, atol=0.05)
 
 
 def _record(rid: int, vecs: np.ndarray) -> NeighborRecord:
