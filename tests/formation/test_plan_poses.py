@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from agent.core.formation.own_frame import in_own_frame
@@ -34,6 +34,10 @@ def _to_world(plan: Plan, pos: np.ndarray, headings: np.ndarray) -> np.ndarray:
 
 @settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.integers(0, 10_000), st.floats(-math.pi, math.pi))
+# hypothesis found it: two groups of near-equal headings (145° and -95° ± 10°) whose
+# papers' model landed exactly half of every robot's sightings, a wrong frame planned at
+# once (reidentify.LAND_SHARE)
+@example(seed=391, turn=0.0)
 def test_start_headings_leave_the_pyramid_in_the_world_unchanged(seed: int, turn: float) -> None:
     rng = np.random.default_rng(seed)
     pos = sim_layout(rng, len(IDS))

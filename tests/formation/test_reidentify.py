@@ -21,9 +21,11 @@ from agent.core.formation.reidentify import (
     gate,
     identify_sightings,
     landing,
+    mostly_land,
     refine_poses,
     reseat_headings,
     reseat_positions,
+    seen_counts,
 )
 from tests.formation.pose_fleets import rot, sim_layout, unaligned_records
 
@@ -131,6 +133,42 @@ def test_refine_puts_a_robot_fitted_out_of_place_back() -> None:
     fixed = refine_poses(wrong, recs)
     assert fixed.consistent
     assert np.allclose(fixed.positions, pf.positions, atol=0.05)
+
+
+#: 4 × 4 lattice, 1 m, with a vacancy at (2, 2); every robot sees those within 1.5 m
+LATTICE = np.array([[x, y] for y in range(4) for x in range(4) if (x, y) != (2, 2)], float)
+
+
+def _near_sightings(pos: np.ndarray) -> list[np.ndarray]:
+    out = []
+    for k in range(pos.shape[0]):
+        w = np.delete(pos, k, axis=0) - pos[k]
+        out.append(w[np.hypot(*w.T) <= 1.5])
+    return out
+
+
+def test_seen_counts_by_hand() -> None:
+    sightings = _near_sightings(LATTICE)
+    seen = seen_counts(LATTICE, np.zeros(len(LATTICE)), sightings)
+    assert seen[0] == 3  # the corner (0, 0) is seen by (1, 0), (0, 1), (1, 1)
+    assert seen.tolist() == [len(v) for v in sightings]  # seeing is mutual here
+
+
+def test_a_robot_on_the_wrong_lattice_spot_is_unseen_and_moved_back() -> None:
+    # robot 0 (the corner) fitted on the vacancy: its 3 sightings land there too (on
+    # (3, 2), (2, 3), (3, 3)), but nobody's sighting lands on it
+    sightings = _near_sightings(LATTICE)
+    pos = LATTICE.copy()
+    pos[0] = [2.0, 2.0]
+    psi = np.zeros(len(pos))
+    assert seen_counts(pos, psi, sightings)[0] == 0
+    out = reseat_positions(pos, psi, sightings)
+    assert np.array_equal(out, LATTICE)
+    records = [NeighborRecord(k + 1, v) for k, v in enumerate(sightings)]
+    ids = tuple(range(1, len(pos) + 1))
+    wrong = evaluate_poses(ids, [], pos, psi, 1)
+    right = evaluate_poses(ids, [], LATTICE, psi, 1)
+    assert not mostly_land(wrong, records) and mostly_land(right, records)
 
 
 def _record(rid: int, vecs: np.ndarray) -> NeighborRecord:
