@@ -18,6 +18,8 @@ from agent.core.formation.reidentify import (
     GATE,
     GATE_REL,
     MIN_APART,
+    _landings,
+    _seen_on,
     gate,
     identify_sightings,
     landing,
@@ -270,3 +272,29 @@ def test_shuffled_records_refine_bit_identically(rnd) -> None:  # type: ignore[n
     rnd.shuffle(shuffled)
     b = refine_poses(wrong, shuffled)
     assert np.array_equal(a.positions, b.positions) and np.array_equal(a.headings, b.headings)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(2, 12), st.integers(1, 6))
+def test_the_votes_counts_equal_landing_one_candidate_at_a_time(seed: int, n: int, m: int) -> None:
+    """_landings and _seen_on (k-d trees, every candidate at once) against the plain
+    :func:`landing`, one candidate and one point at a time (continuous coordinates: no
+    distance sits on a gate or an ambiguity ratio, where rounding could decide)."""
+    rng = np.random.default_rng(seed)
+    pos = rng.uniform(-2.0, 2.0, size=(n, 2))
+    k = int(rng.integers(0, n))
+    vecs = rng.uniform(-1.5, 1.5, size=(m, 2))
+    dist = np.hypot(*vecs.T)
+    cands = rng.uniform(-2.0, 2.0, size=(5, 2))
+    got = _landings(pos, k, cands[:, None, :] + vecs[None, :, :], dist)
+    want = [int(np.sum(landing(pos, k, c + vecs, dist) >= 0)) for c in cands]
+    assert got.tolist() == want
+    pts = rng.uniform(-2.0, 2.0, size=(8, 2))
+    pd = rng.uniform(0.3, 2.0, size=8)
+    seen = _seen_on(pos, k, cands, pts, pd)
+    for c, count in zip(cands, seen.tolist(), strict=True):
+        # k standing at c, and the points' owner far away (landing never lands on it)
+        moved = np.vstack([pos, [[1e6, 1e6]]])
+        moved[k] = c
+        hits = landing(moved, n, pts, pd)
+        assert count == int(np.sum(hits == k))

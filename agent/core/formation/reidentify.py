@@ -57,6 +57,7 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from agent.core.formation.pose_pairing import wrap_angle
 from agent.core.formation.poses import PoseFrame, PoseMeasurement, fit_poses
@@ -161,18 +162,21 @@ def _landings(positions: np.ndarray, k: int, points: np.ndarray, dist: np.ndarra
     """Per candidate, how many of robot k's placed sightings land on a robot.
 
     ``points`` (C, m, 2): robot k's sightings placed from each of C candidate positions;
-    ``dist`` (m,). :func:`landing` for every candidate at once (k's own entry never lands).
+    ``dist`` (m,). :func:`landing` for every candidate at once (k's own entry never lands),
+    the two nearest robots from a k-d tree (100 NAOs: ~2 500 candidates × 25 sightings).
     """
     others = np.delete(positions, k, axis=0)
-    if others.shape[0] < 1 or points.shape[1] == 0:
-        return np.zeros(points.shape[0], dtype=np.int64)
-    d = np.hypot(
-        points[:, :, None, 0] - others[None, None, :, 0],
-        points[:, :, None, 1] - others[None, None, :, 1],
-    )  # (C, m, N-1)
-    part = np.sort(d, axis=2)
-    near = part[:, :, 0]
-    second = part[:, :, 1] if others.shape[0] > 1 else np.full_like(near, np.inf)
+    c, m = points.shape[0], points.shape[1]
+    if others.shape[0] < 1 or m == 0 or c == 0:
+        return np.zeros(c, dtype=np.int64)
+    flat = points.reshape(-1, 2)
+    if others.shape[0] == 1:
+        near = np.hypot(flat[:, 0] - others[0, 0], flat[:, 1] - others[0, 1])
+        second = np.full_like(near, np.inf)
+    else:
+        both, _ = cKDTree(others).query(flat, k=2)
+        near, second = both[:, 0], both[:, 1]
+    near, second = near.reshape(c, m), second.reshape(c, m)
     ok = (near <= gate(dist)[None, :]) & (second >= AMBIGUITY * near)
     return np.asarray(ok.sum(axis=1), dtype=np.int64)
 
@@ -181,19 +185,21 @@ def _seen_on(
     positions: np.ndarray, k: int, candidates: np.ndarray, points: np.ndarray, dist: np.ndarray
 ) -> np.ndarray:
     """Per candidate position of robot k, how many of the others' placed sightings
-    (``points`` (S, 2), measured at ``dist`` (S,)) land on k standing there."""
+    (``points`` (S, 2), measured at ``dist`` (S,)) land on k standing there (only the
+    pairs within the largest gate are looked at: a k-d tree)."""
+    c = candidates.shape[0]
+    if points.shape[0] == 0 or c == 0:
+        return np.zeros(c, dtype=np.int64)
     others = np.delete(positions, k, axis=0)
-    if points.shape[0] == 0:
-        return np.zeros(candidates.shape[0], dtype=np.int64)
-    d_other = np.hypot(
-        points[:, None, 0] - others[None, :, 0], points[:, None, 1] - others[None, :, 1]
-    )
-    nearest_other = np.min(d_other, axis=1) if others.shape[0] else np.full(points.shape[0], np.inf)
-    d_k = np.hypot(
-        points[None, :, 0] - candidates[:, None, 0], points[None, :, 1] - candidates[:, None, 1]
-    )  # (C, S)
-    ok = (d_k <= gate(dist)[None, :]) & (nearest_other[None, :] >= AMBIGUITY * d_k)
-    return np.asarray(ok.sum(axis=1), dtype=np.int64)
+    if others.shape[0]:
+        nearest_other, _ = cKDTree(others).query(points, k=1)
+    else:
+        nearest_other = np.full(points.shape[0], np.inf)
+    reach = float(gate(float(np.max(dist))))
+    near = cKDTree(candidates).sparse_distance_matrix(cKDTree(points), reach, output_type="ndarray")
+    ci, si, d_k = near["i"].astype(np.int64), near["j"].astype(np.int64), near["v"]
+    ok = (d_k <= gate(dist[si])) & (nearest_other[si] >= AMBIGUITY * d_k)
+    return np.bincount(ci[ok], minlength=c).astype(np.int64)
 
 
 def seen_counts(
