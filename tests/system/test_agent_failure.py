@@ -56,7 +56,7 @@ def test_member_killed_during_search_stops_the_others_unmoved(tmp_path: Path) ->
             # when the victim was gone before this survivor's exchange began (it never
             # counted it as a member), no agreement within the timeout without it.
             m = re.search(r"member\(s\) \[([\d, ]+)\] left before agreement", st.error)
-            t = re.search(r"no agreement after [\d.]+ s; (\d) of 3 members alive", st.error)
+            t = re.search(r"no news for [\d.]+ s \([^)]*\); (\d) of 3 members alive", st.error)
             assert m is not None or (t is not None and t.group(1) == "2"), st.error
             if m is not None:
                 left = {int(x) for x in m.group(1).split(",")}

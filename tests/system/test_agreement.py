@@ -191,7 +191,7 @@ def test_timeout_gives_a_reason(endpoint: str) -> None:
     finally:
         close_all(peers)
     for d in ds:
-        assert d.kind == "failed" and "no agreement after 2 s" in d.reason and "2 of 3" in d.reason
+        assert d.kind == "failed" and "no news for 2 s" in d.reason and "2 of 3" in d.reason
 
 
 def test_bad_messages_on_the_bus_do_not_disturb_agreement(endpoint: str) -> None:
