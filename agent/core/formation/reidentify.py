@@ -21,20 +21,22 @@ would: where does it land? This module does that, in rounds (at most
    heading (ties: the candidate closest to the fitted heading, then the lower index).
    A robot whose distances are wrong (a sensor fault) lands few sightings under any
    heading and keeps its fitted one, and its misfit keeps it named by :mod:`pose_check`.
-   **Positions re-seated** (:func:`reseat_positions`), on the re-seated headings: a robot
-   whose own sightings still mostly land on nobody gets a second vote, on where it
-   stands, and so does a robot no other robot's sighting lands on. Every position that
-   puts one of its sightings on a robot is a candidate (none within :data:`MIN_APART`
-   of a firm robot, one whose own sightings land and that someone sees, or of one
-   re-seated before it; ascending index); the candidate landing the most of its
-   sightings plus the others' sightings of it wins if it lands :data:`RESEAT_SHARE` of
-   its own, the two counts together gain :data:`RESEAT_GAIN` over the fitted position,
-   and the others' sightings landing on it are no fewer than there (ties: the
-   candidate nearest the fitted position, then the lower index). Issue 21, 50 NAOs, seed 12: robot 36, seen only one way, was placed ~1 m off
-   by a wrong pairing; without this the fleet fell back to the pose pairing (4.8 CPU s
-   an agent instead of ~0.5, ×50 agents on 2 cores: a 194 s plan phase). Counting the
-   others' sightings keeps a robot from being moved off the place they see it at, where
-   its own sightings may happen to land in a dense lattice.
+   **Positions re-seated first** (:func:`reseat_positions`, before the heading vote, on
+   the fitted headings: on 50 NAOs seed 12's records the heading vote, run first on a
+   distorted neighbourhood, turned robot 49 by 23°). A robot whose own sightings mostly
+   land on nobody, or that no other robot's sighting lands on, gets a vote on where it
+   stands. Every position that puts one of its sightings on a robot is a candidate
+   (none within :data:`MIN_APART` of a firm robot, one whose own sightings land and
+   that someone sees, or of one re-seated before it; ascending index). The candidate
+   landing the most of its sightings plus the others' sightings of it wins if it lands
+   :data:`RESEAT_SHARE` of its own, the two counts together gain :data:`RESEAT_GAIN`
+   over the fitted position, and the others' sightings landing on it are no fewer than
+   there (ties: the candidate nearest the fitted position, then the lower index).
+   Issue 21, 50 NAOs, seed 12: robot 36, seen only one way, was placed ~1 m off by a
+   wrong pairing, and the fleet fell back to the pose pairing (4.8 CPU s an agent
+   instead of ~0.5, ×50 agents on 2 cores: a 194 s plan phase). Counting the others'
+   sightings keeps a robot from being moved off the place they see it at, where its
+   own sightings may happen to land in a dense lattice.
 2. **Sightings identified** (:func:`identify_sightings`): a sighting placed from its
    owner's pose that lands within the gate ``GATE + GATE_REL·d`` of one robot, and that
    robot alone (the second nearest at least :data:`AMBIGUITY` times farther), is a
@@ -319,8 +321,9 @@ def identify_sightings(
 
 
 def refine_poses(frame: PoseFrame, records: Sequence[NeighborRecord]) -> PoseFrame:
-    """Rounds of :mod:`reidentify` (re-seat headings, identify sightings where they land,
-    fit again from the current poses) until the measurements stop changing."""
+    """Rounds of :mod:`reidentify` (re-seat positions, then headings; identify sightings
+    where they land; fit again from the current poses) until the measurements stop
+    changing."""
     recs = sorted((r for r in records if r.robot_id in frame.ids), key=lambda r: r.robot_id)
     by_ids = {r.robot_id: r for r in recs}
     for _ in range(ROUNDS):
