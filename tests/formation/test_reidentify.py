@@ -15,6 +15,7 @@ from agent.core.formation.fleet_frame import fleet_frame
 from agent.core.formation.poses import build_poses, evaluate_poses
 from agent.core.formation.records import NeighborRecord
 from agent.core.formation.reidentify import (
+    AMBIGUITY,
     GATE,
     GATE_REL,
     MIN_APART,
@@ -274,27 +275,45 @@ def test_shuffled_records_refine_bit_identically(rnd) -> None:  # type: ignore[n
     assert np.array_equal(a.positions, b.positions) and np.array_equal(a.headings, b.headings)
 
 
+def _landing_by_definition(
+    pos: np.ndarray, owner: int, points: np.ndarray, dist: np.ndarray
+) -> list[int]:
+    """landing's rule worked point by point: the nearest robot other than the owner, within
+    the gate, with the next one at least AMBIGUITY times farther."""
+    out = []
+    for p, d in zip(points, dist, strict=True):
+        r = [(float(np.hypot(*(p - q))), j) for j, q in enumerate(pos) if j != owner]
+        r.sort()
+        near, j = r[0] if r else (math.inf, -1)
+        second = r[1][0] if len(r) > 1 else math.inf
+        out.append(j if near <= float(gate(d)) and second >= AMBIGUITY * near else -1)
+    return out
+
+
 @settings(max_examples=40, deadline=None)
 @given(st.integers(0, 2**31 - 1), st.integers(2, 12), st.integers(1, 6))
-def test_the_votes_counts_equal_landing_one_candidate_at_a_time(seed: int, n: int, m: int) -> None:
-    """_landings and _seen_on (k-d trees, every candidate at once) against the plain
-    :func:`landing`, one candidate and one point at a time (continuous coordinates: no
-    distance sits on a gate or an ambiguity ratio, where rounding could decide)."""
+def test_landing_and_the_votes_counts_follow_the_definition(seed: int, n: int, m: int) -> None:
+    """landing (a k-d tree), and _landings and _seen_on (every candidate at once), against
+    the rule worked one point at a time (continuous coordinates: no distance sits on a
+    gate or an ambiguity ratio, where rounding could decide)."""
     rng = np.random.default_rng(seed)
     pos = rng.uniform(-2.0, 2.0, size=(n, 2))
     k = int(rng.integers(0, n))
     vecs = rng.uniform(-1.5, 1.5, size=(m, 2))
     dist = np.hypot(*vecs.T)
     cands = rng.uniform(-2.0, 2.0, size=(5, 2))
+    for c in cands:
+        assert landing(pos, k, c + vecs, dist).tolist() == _landing_by_definition(
+            pos, k, c + vecs, dist
+        )
     got = _landings(pos, k, cands[:, None, :] + vecs[None, :, :], dist)
-    want = [int(np.sum(landing(pos, k, c + vecs, dist) >= 0)) for c in cands]
+    want = [sum(h >= 0 for h in _landing_by_definition(pos, k, c + vecs, dist)) for c in cands]
     assert got.tolist() == want
     pts = rng.uniform(-2.0, 2.0, size=(8, 2))
     pd = rng.uniform(0.3, 2.0, size=8)
     seen = _seen_on(pos, k, cands, pts, pd)
     for c, count in zip(cands, seen.tolist(), strict=True):
-        # k standing at c, and the points' owner far away (landing never lands on it)
-        moved = np.vstack([pos, [[1e6, 1e6]]])
-        moved[k] = c
-        hits = landing(moved, n, pts, pd)
-        assert count == int(np.sum(hits == k))
+        moved = pos.copy()
+        moved[k] = c  # k standing at c; the points' owner is none of the robots
+        hits = _landing_by_definition(moved, -1, pts, pd)
+        assert count == sum(h == k for h in hits)

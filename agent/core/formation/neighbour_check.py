@@ -116,14 +116,11 @@ def _support(
         return out
     order = np.argsort(owner, kind="stable")  # detections grouped by owner
     owners, start, count = np.unique(owner[order], return_index=True, return_counts=True)
-    first = dict(zip(owners.tolist(), start.tolist(), strict=True))
-    size = dict(zip(owners.tolist(), count.tolist(), strict=True))
-    oi = owner[r2]
-    ok_all = owner[c2]
-    m = np.array([size[int(o)] for o in oi], dtype=np.int64)  # i's detections per candidate
-    base = np.array([first[int(o)] for o in oi], dtype=np.int64)
-    for ok in np.unique(ok_all):
-        ts = np.flatnonzero(ok_all == ok)
+    gi = np.searchsorted(owners, owner[r2])  # i's group, per candidate
+    gk = np.searchsorted(owners, owner[c2])  # k's group
+    m, base = count[gi], start[gi]  # i's detections per candidate, and where they begin
+    for g in np.unique(gk):
+        ts = np.flatnonzero(gk == g)
         seg = np.repeat(ts, m[ts])  # candidate of each query
         ends = np.cumsum(m[ts])
         offs = np.arange(int(ends[-1])) - np.repeat(ends - m[ts], m[ts])
@@ -132,8 +129,7 @@ def _support(
         seg, det = seg[keep], det[keep]
         if seg.size == 0:
             continue
-        lo, n = first[int(ok)], size[int(ok)]
-        tree = cKDTree(vecs[order[lo : lo + n]])
+        tree = cKDTree(vecs[order[start[g] : start[g] + count[g]]])
         dist, _ = tree.query(vecs[det] - vecs[r2[seg]], distance_upper_bound=epsilon)
         out += np.bincount(seg[np.isfinite(dist)], minlength=out.size)
     return out

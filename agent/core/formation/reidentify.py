@@ -105,20 +105,24 @@ def landing(
 
     ``positions`` (N, 2) of every robot, ``owner`` the index of the sightings' owner (never
     landed on), ``points`` (k, 2) the placed sightings, ``distances`` (k,) their measured
-    distances (for the gate).
+    distances (for the gate). The two nearest robots come from a k-d tree, so the votes
+    can ask for thousands of candidate placements at once (100 NAOs: ~2 500 candidates ×
+    25 sightings; a dense (points × robots) matrix took ~300 MB an agent).
     """
     n = positions.shape[0]
     if n < 2 or points.shape[0] == 0:
         return np.full(points.shape[0], -1, dtype=np.int64)
-    d = np.hypot(
-        points[:, None, 0] - positions[None, :, 0], points[:, None, 1] - positions[None, :, 1]
-    )
-    d[:, owner] = np.inf
-    order = np.argsort(d, axis=1, kind="stable")
-    rows = np.arange(points.shape[0])
-    near, second = d[rows, order[:, 0]], d[rows, order[:, 1]] if n > 2 else np.inf
+    rest = np.delete(positions, owner, axis=0)
+    if rest.shape[0] == 1:
+        near = np.hypot(points[:, 0] - rest[0, 0], points[:, 1] - rest[0, 1])
+        second = np.full_like(near, np.inf)
+        nearest = np.zeros(points.shape[0], dtype=np.int64)
+    else:
+        both, idx = cKDTree(rest).query(points, k=2)
+        near, second, nearest = both[:, 0], both[:, 1], idx[:, 0].astype(np.int64)
+    nearest += nearest >= owner % n  # back to indices of ``positions`` (np.delete reads -1 too)
     ok = (near <= gate(distances)) & (second >= AMBIGUITY * near)
-    return np.where(ok, order[:, 0], -1).astype(np.int64)
+    return np.where(ok, nearest, -1).astype(np.int64)
 
 
 def reseat_headings(
@@ -161,26 +165,12 @@ def reseat_headings(
 
 
 def _landings(positions: np.ndarray, k: int, points: np.ndarray, dist: np.ndarray) -> np.ndarray:
-    """Per candidate, how many of robot k's placed sightings land on a robot.
-
-    ``points`` (C, m, 2): robot k's sightings placed from each of C candidate positions;
-    ``dist`` (m,). :func:`landing` for every candidate at once (k's own entry never lands),
-    the two nearest robots from a k-d tree (100 NAOs: ~2 500 candidates × 25 sightings).
-    """
-    others = np.delete(positions, k, axis=0)
+    """Per candidate, how many of robot k's placed sightings land on a robot
+    (:func:`landing`). ``points`` (C, m, 2): robot k's sightings placed from each of C
+    candidate positions; ``dist`` (m,)."""
     c, m = points.shape[0], points.shape[1]
-    if others.shape[0] < 1 or m == 0 or c == 0:
-        return np.zeros(c, dtype=np.int64)
-    flat = points.reshape(-1, 2)
-    if others.shape[0] == 1:
-        near = np.hypot(flat[:, 0] - others[0, 0], flat[:, 1] - others[0, 1])
-        second = np.full_like(near, np.inf)
-    else:
-        both, _ = cKDTree(others).query(flat, k=2)
-        near, second = both[:, 0], both[:, 1]
-    near, second = near.reshape(c, m), second.reshape(c, m)
-    ok = (near <= gate(dist)[None, :]) & (second >= AMBIGUITY * near)
-    return np.asarray(ok.sum(axis=1), dtype=np.int64)
+    hit = landing(positions, k, points.reshape(-1, 2), np.tile(dist, c))
+    return np.asarray((hit >= 0).reshape(c, m).sum(axis=1), dtype=np.int64)
 
 
 def _seen_on(
@@ -377,10 +367,10 @@ def _measurements(
 
 def mostly_land(frame: PoseFrame, records: Sequence[NeighborRecord]) -> bool:
     """Every robot with at least :data:`MIN_SIGHTINGS` sightings lands at least
-    :data:`LAND_SHARE` of them on a robot from its pose in ``frame`` (a robot turned from its fitted heading, or
-    with wrong distances, lands few), and some other robot's sighting lands on it (a robot
-    fitted on the wrong spot of a dense lattice can land its own there, but nobody sees
-    it there: 50 NAOs, seed 13, robot 45, 1.2 m off)."""
+    :data:`LAND_SHARE` of them on a robot from its pose in ``frame`` (a robot turned from
+    its fitted heading, or with wrong distances, lands few), and some other robot's
+    sighting lands on it (a robot fitted on the wrong spot of a dense lattice can land
+    its own there, but nobody sees it there: 50 NAOs, seed 13, robot 45, 1.2 m off)."""
     index = {rid: k for k, rid in enumerate(frame.ids)}
     sightings = [np.zeros((0, 2))] * len(frame.ids)
     for rec in records:
