@@ -72,6 +72,9 @@ from agent.core.formation.poses import (
 from agent.core.formation.records import NeighborRecord
 from agent.core.formation.reidentify import mostly_land, refine_poses
 
+#: rounds of isolated misfit pairs the fast aligned path drops (pose_check.drop_wrong_pairings)
+FAST_DROP_ROUNDS = 3
+
 
 @dataclass(frozen=True)
 class FleetFrame:
@@ -205,8 +208,9 @@ def _aligned_at_once(
     why = _AGAIN
     if not clean.consistent and not clean.turned:
         # one borderline pair in ~500 (50 NAOs, seed 12: pair 8-26 at 1.05): an isolated
-        # misfit pair is a wrong pairing (pose_check.drop_wrong_pairings)
-        dropped = drop_wrong_pairings(clean)
+        # misfit pair is a wrong pairing (pose_check.drop_wrong_pairings); the refit may
+        # move the noise tail onto another pair, so a few rounds (mostly_land guards)
+        dropped = drop_wrong_pairings(clean, rounds=FAST_DROP_ROUNDS)
         if dropped is not None:
             clean, why = dropped.poses, f"{_AGAIN}, {dropped.reason}"
     if clean.consistent and _max_turn(clean) <= ALIGNED_MAX_HEADING and mostly_land(clean, records):
