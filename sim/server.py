@@ -30,8 +30,10 @@ the malformed lane also holds at most ``MALFORMED_MAX_BYTES`` of payloads),
 so a flood of garbage can neither grow memory nor delay a valid request by more than
 one queue's worth. Every callback survives every exception; rejected input is counted
 in ``rejected`` and logged with a reason cut to 200 characters, rate limited. At most
-``MAX_RENDER_PENDING`` camera requests wait for render workers; liveliness tokens of
-ids that are not robots of this world are ignored.
+one camera request per robot waits for render workers (:mod:`sim.pending_pictures`:
+a repeat at the same yaw is answered by the picture in the works, and no robot of the
+world is refused for want of room); liveliness tokens of ids that are not robots of this
+world are ignored.
 
 Publications: ``world/clock`` (``ClockMsg``) and ``world/truth/poses`` (``TruthPosesMsg``)
 at ``truth_rate`` Hz of wall time and after every finished command; ``world/truth/contacts``
@@ -98,6 +100,7 @@ from sim.bindings import RobotBindings, Unauthorised
 from sim.delays import DelayedReplies
 from sim.locomotion import Contact, Done
 from sim.motions import Motions
+from sim.pending_pictures import Admission, PendingPictures
 from sim.render_pool import Job, RenderPool, Result, png_bytes
 from sim.requests import CheckedRequest, Query, Request, check, payload_size
 from sim.world import World
@@ -115,16 +118,15 @@ def zenoh_config(spec: NetworkSpec) -> zenoh.Config:
 
 
 #: Lanes of the world's inbox, in the order they are served, and their capacities.
-#: ``rendered``: results of render workers (at most MAX_RENDER_PENDING are ever
-#: outstanding, so this lane never overflows); ``alive``: liveliness changes;
+#: ``rendered``: results of render workers (at most the pending pictures' capacity are
+#: ever outstanding, and the lane holds at least that many, so it never overflows);
+#: ``alive``: liveliness changes;
 #: ``valid``: requests that passed the callback's checks; ``malformed``: requests
 #: waiting only for an ErrorReply.
 INBOX_CAPS = {"rendered": 256, "alive": 1024, "valid": 256, "malformed": 1024}
 #: A malformed query keeps its payload (in zenoh's memory) until it is answered: the
 #: lane holds at most this many payload bytes; a bigger request is dropped unanswered.
 MALFORMED_MAX_BYTES = 16 * 1024 * 1024
-#: Camera requests handed to render workers and not yet answered.
-MAX_RENDER_PENDING = 64
 #: Results of motions with a request id kept per robot, for repeats (oldest dropped).
 MOTION_CACHE = 32
 
@@ -154,8 +156,10 @@ class WorldServer:
         self.truth_period = 1.0 / truth_rate
         self.log = log if log is not None else sys.stderr
         self.robot_ids = frozenset(world.robot_ids)  # read by the zenoh callbacks
+        self._cam_pending: PendingPictures[Request] = PendingPictures(len(self.robot_ids))
+        caps = {**INBOX_CAPS, "rendered": max(INBOX_CAPS["rendered"], self._cam_pending.capacity)}
         self.inbox: Inbox[Any] = Inbox(
-            INBOX_CAPS, priority=True, max_weight={"malformed": MALFORMED_MAX_BYTES}
+            caps, priority=True, max_weight={"malformed": MALFORMED_MAX_BYTES}
         )
         self.guard = Guard(self._log)
         self._drop_log = Guard(self._log, burst=3, per_second=0.2)  # its count: dropped
@@ -173,7 +177,6 @@ class WorldServer:
             DelayedReplies(reply_delay, reply_delay_seed) if reply_delay != 0.0 else None
         )
         self.pool: RenderPool | None = None
-        self._cam_pending: dict[int, tuple[Request, int, float, float]] = {}
         self._next_job = 0
         self._stop = threading.Event()
         self._keep: list[Any] = []
@@ -307,9 +310,8 @@ class WorldServer:
                 self._reply(q, msg)
         for q in self.motions.abandon():
             self._reply(q, ErrorReply(reason="world shutting down"))
-        for q, *_ in list(self._cam_pending.values()):
-            self._reply(q, ErrorReply(reason="world shutting down"))
-        self._cam_pending.clear()
+        for pending in self._cam_pending.drain():
+            self._reply(pending.query, ErrorReply(reason="world shutting down"))
         if self.pool is not None:
             self.pool.close()
             self.pool = None
@@ -464,10 +466,15 @@ class WorldServer:
 
     def _camera(self, q: Request, rid: int, yaw: float) -> Message | None:
         if self.pool is not None and self.pool.alive > 0:
-            if len(self._cam_pending) >= MAX_RENDER_PENDING:
+            admission, superseded = self._cam_pending.request(q, rid, yaw)
+            if admission is Admission.BUSY:
                 # drawn nothing: the robot may ask again later (agent.net.bus.Busy)
                 self.errors += 1
                 return ErrorReply(reason=f"{BUSY}: {len(self._cam_pending)} pictures being drawn")
+            if admission is Admission.REBOUND:  # its picture in the works answers this
+                if superseded is not None:
+                    self._reply(superseded, ErrorReply(reason="superseded by a repeat"))
+                return None
             # The state the picture depends on is taken now; a worker draws it.
             self.world.set_head_yaw(rid, yaw)
             job = Job(
@@ -478,7 +485,7 @@ class WorldServer:
                 {r: self.world.head_yaw(r) for r in self.world.robot_ids},
             )
             self._next_job += 1
-            self._cam_pending[job.job_id] = (q, rid, yaw, self.world.t_sim)
+            self._cam_pending.add(job.job_id, q, rid, yaw, self.world.t_sim)
             self.pool.submit(job)
             return None
         return self._render_here(rid, yaw, self.world.t_sim)
@@ -499,9 +506,9 @@ class WorldServer:
         """A worker's picture (or failure) for a pending camera request."""
         assert self.pool is not None
         self.pool.worker_done(res)
-        pending = self._cam_pending.pop(res.job_id, None)
+        pending = self._cam_pending.done(res.job_id)
         if pending is not None:
-            q, rid, yaw, t_sim = pending
+            q, rid, yaw, t_sim = pending.query, pending.robot_id, pending.yaw, pending.t_sim
             if res.error:
                 self.errors += 1
                 self._log(f"camera robot {rid}: render failed: {reason(res.error)}")
@@ -521,9 +528,11 @@ class WorldServer:
             self._log(f"render worker {res.worker} died; {self.pool.alive} left")
             if self.pool.alive == 0:  # render what is left here, and from now on
                 for job in self.pool.take_backlog():
-                    left = self._cam_pending.pop(job.job_id, None)
+                    left = self._cam_pending.done(job.job_id)
                     if left is not None:
-                        self._answer(left[0], self._render_here(job.robot_id, job.yaw, left[3]))
+                        self._answer(
+                            left.query, self._render_here(job.robot_id, job.yaw, left.t_sim)
+                        )
 
     def _motion(
         self, q: Request, rid: int, kind: str, request_id: int, start: Callable[[], None]

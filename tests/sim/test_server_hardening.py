@@ -250,14 +250,45 @@ def test_a_full_render_queue_answers_busy(server: Any) -> None:
     from types import SimpleNamespace
 
     from agent.wire import BUSY
-    from sim.server import MAX_RENDER_PENDING
 
     server.pool = SimpleNamespace(alive=1)
-    server._cam_pending = dict.fromkeys(range(MAX_RENDER_PENDING))
+    cap = server._cam_pending.capacity
+    for job in range(cap):  # every slot taken (by ids outside the world: a flood)
+        server._cam_pending.add(job, None, 100 + job, 0.0, 0.0)
     q = FakeQuery(key_camera(3), encode(CameraRequest(yaw=0.0)))
     server.admit("camera", q)
     server._drain(block=False)
     (rep,) = q.replies
     assert isinstance(rep, ErrorReply)
-    assert rep.reason == f"{BUSY}: {MAX_RENDER_PENDING} pictures being drawn"
+    assert rep.reason == f"{BUSY}: {cap} pictures being drawn"
     assert server.errors == 1
+
+
+def test_a_repeated_camera_query_is_answered_by_the_picture_in_the_works(server: Any) -> None:
+    """Issue 21 (100 NAOs): a robot that asks again while its picture is drawn gets that
+    picture, once; no second job is queued; at another yaw it is told the world is busy."""
+    from types import SimpleNamespace
+
+    from agent.wire import BUSY, CameraReply
+    from sim.render_pool import Result
+
+    jobs: list[Any] = []
+    server.pool = SimpleNamespace(alive=1, submit=jobs.append, worker_done=lambda r: None)
+    server.world.set_head_yaw = lambda rid, yaw: None
+    server.world.poses = dict
+    server.world.head_yaw = lambda rid: 0.0
+    first, again, other = (
+        FakeQuery(key_camera(3), encode(CameraRequest(yaw=y))) for y in (0.5, 0.5, -0.5)
+    )
+    for q in (first, again, other):
+        server.admit("camera", q)
+        server._drain(block=False)
+    assert len(jobs) == 1 and len(server._cam_pending) == 1
+    (gone,) = first.replies
+    assert isinstance(gone, ErrorReply) and "superseded" in gone.reason
+    (busy,) = other.replies
+    assert isinstance(busy, ErrorReply) and busy.reason.startswith(BUSY)
+    server._rendered(Result(jobs[0].job_id, 0, png=b"png"))
+    (pic,) = again.replies
+    assert isinstance(pic, CameraReply) and pic.robot_id == 3 and pic.yaw == 0.5
+    assert len(server._cam_pending) == 0 and len(first.replies) == 1
