@@ -477,13 +477,8 @@ class WorldServer:
                 return None
             # The state the picture depends on is taken now; a worker draws it.
             self.world.set_head_yaw(rid, yaw)
-            job = Job(
-                self._next_job,
-                rid,
-                yaw,
-                self.world.poses(),
-                {r: self.world.head_yaw(r) for r in self.world.robot_ids},
-            )
+            heads = {r: self.world.head_yaw(r) for r in self.world.robot_ids}
+            job = Job(self._next_job, rid, yaw, self.world.poses(), heads)
             self._next_job += 1
             self._cam_pending.add(job.job_id, q, rid, yaw, self.world.t_sim)
             self.pool.submit(job)
@@ -515,14 +510,9 @@ class WorldServer:
                 self._answer(q, ErrorReply(reason=f"render failed: {reason(res.error, 480)}"))
             else:
                 msg = CameraReply(
-                    robot_id=rid,
-                    yaw=yaw,
-                    t_sim=t_sim,
-                    width=camera.WIDTH,
-                    height=camera.HEIGHT,
-                    encoding="png",
-                    data=res.png,
-                )
+                    robot_id=rid, yaw=yaw, t_sim=t_sim, width=camera.WIDTH,
+                    height=camera.HEIGHT, encoding="png", data=res.png,
+                )  # fmt: skip
                 self._answer(q, msg)
         if res.dead:
             self._log(f"render worker {res.worker} died; {self.pool.alive} left")
