@@ -80,6 +80,10 @@ EVENT_MAX_BYTES = {"msg": 4 * 1024 * 1024}
 MAX_REPLY_ERRORS = 4
 
 
+#: What :meth:`Bus.query` records of zenoh's own error reply when a get's timeout runs out.
+ZENOH_TIMEOUT = "error reply: b'Timeout' (zenoh: the query's timeout ran out)"
+
+
 class BusError(RuntimeError):
     """A query that got no usable reply (timeout, error reply, undecodable reply)."""
 
@@ -463,6 +467,11 @@ class Bus:
         out = self._first_reply(key, replies, expect, errors, nonce, accept)
         if out is not None:
             return out
+        if errors and all(e == ZENOH_TIMEOUT for e in errors):
+            # the get's own timeout ran out: zenoh ends it with an error reply "Timeout"
+            # (issue 21: at 100 NAOs a camera query that waited past its attempt was
+            # taken for a world's error, and the robot stopped instead of asking again)
+            raise QueryTimeout(f"{key}: no reply within {timeout:g} s")
         if errors:
             shown = errors[:MAX_REPLY_ERRORS]
             if len(errors) > MAX_REPLY_ERRORS:
@@ -528,6 +537,8 @@ class Bus:
             if err is None:
                 raise BusError("empty reply")
             text = take_payload(err.payload, 4096)[:200]
+            if text == b"Timeout":
+                raise BusError(ZENOH_TIMEOUT)
             raise BusError(f"error reply: {text!r}")
         raw = take_payload(ok.payload, MAX_SEALED_BYTES if self.verifier else MAX_MESSAGE_BYTES)
         if self.verifier is not None:
