@@ -151,12 +151,10 @@ def reseat_headings(
         cand = wrap_angle(
             np.arctan2(rel[t_idx, 1], rel[t_idx, 0]) - np.arctan2(vecs[a_idx, 1], vecs[a_idx, 0])
         )
-        counts = np.array(
-            [
-                np.sum(landing(positions, k, _place(positions[k], float(h), vecs), dist) >= 0)
-                for h in cand
-            ]
-        )
+        # every candidate's placement at once: one k-d tree, not one per candidate (100
+        # NAOs: ~55 000 trees, ~5 of ~10 CPU s of a plan); the same counts
+        placed = np.stack([_place(positions[k], float(h), vecs) for h in cand])
+        counts = _landings(positions, k, placed, dist)
         turn = np.abs(wrap_angle(cand - out[k]))
         best = int(np.lexsort((np.arange(cand.size), turn, -counts))[0])
         if counts[best] >= max(RESEAT_SHARE * m, now + RESEAT_GAIN):
