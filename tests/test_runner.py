@@ -594,3 +594,30 @@ def test_a_member_on_another_plan_or_with_other_params_is_not_adopted(
         assert agr.decide(0.0).kind != "agreed"
     finally:
         bus.close()
+
+
+def test_no_adoption_when_the_records_change_while_we_plan(
+    perception: PerceptionAdapter,
+) -> None:
+    """The candidate plan is computed while the bus is pumped (agent/phases/pumping.py):
+    a record that changes meanwhile makes the candidate stale, and nothing is adopted."""
+    from dataclasses import replace
+
+    r, bus = _waiting(perception)
+    try:
+        agr = r.membership.agreement
+        assert agr is not None
+        ours = str(r.ctx.formation.plan(records(), r.ctx.cfg.plan_params()).digest)
+        _claim(r, 2, ours, agr.params)
+        plan = r.ctx.formation.plan
+
+        def plan_then_change(*args: object) -> object:
+            out = plan(*args)  # type: ignore[arg-type]
+            agr.records[1] = replace(agr.records[1], neighbours=((1.0, 0.25),))
+            return out
+
+        r.ctx.formation.plan = plan_then_change  # type: ignore[method-assign]
+        assert r.agreeing.adopt_plan(agr) is None
+        assert agr.decide(0.0).kind != "agreed"
+    finally:
+        bus.close()
