@@ -18,7 +18,7 @@ import logging
 from agent.core.agreed_params import params_digest
 from agent.core.agreement import Agreement, Decision
 from agent.phases.context import Context
-from agent.phases.pumping import PLAN_PUMP_S, while_pumping
+from agent.phases.pumping import plan_pumping
 from agent.phases.roles import Fleet
 from agent.wire import NeighborRecordMsg, canonical_digest
 
@@ -99,13 +99,7 @@ class Agreeing:
         recs = tuple(agr.records[i] for i in sorted(agr.records))
         if self.candidate is None or self.candidate[0] != recs:
             try:
-                params = ctx.cfg.plan_params()
-                plan = while_pumping(
-                    lambda: ctx.formation.plan(recs, params),
-                    lambda: self.fleet.pump(0.0),
-                    PLAN_PUMP_S,
-                )
-                digest = str(plan.digest)
+                digest = str(plan_pumping(ctx, self.fleet, recs).digest)
             except ValueError:
                 digest = ""
             self.candidate = (recs, digest)

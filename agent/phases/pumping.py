@@ -15,6 +15,11 @@ from concurrent.futures import ThreadPoolExecutor
 from concurrent.futures import TimeoutError as Pending
 from typing import TypeVar
 
+from agent.core.formation.plan import Plan
+from agent.phases.context import Context
+from agent.phases.roles import Fleet
+from agent.wire import NeighborRecordMsg
+
 #: Seconds between two pumps of the bus while the plan is computed.
 PLAN_PUMP_S = 0.1
 
@@ -36,3 +41,12 @@ def while_pumping(compute: Callable[[], T], pump: Callable[[], None], every: flo
                 if job.done():  # compute itself raised a TimeoutError
                     raise
                 pump()
+
+
+def plan_pumping(ctx: Context, fleet: Fleet, records: tuple[NeighborRecordMsg, ...]) -> Plan:
+    """The formation core's plan of ``records`` with this agent's parameters, computed
+    while ``fleet`` is pumped (:func:`while_pumping`); ``ValueError`` if it refuses."""
+    params = ctx.cfg.plan_params()
+    return while_pumping(
+        lambda: ctx.formation.plan(records, params), lambda: fleet.pump(0.0), PLAN_PUMP_S
+    )

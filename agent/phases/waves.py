@@ -3,7 +3,8 @@
 
 PLAN  the formation core on the agreed records (identical on every agent): this
       robot's slot, wave and parent (:meth:`Waves.make_plan`; computed in a worker
-      thread while this one keeps pumping the bus, :func:`while_pumping`), turned to its own fixed
+      thread while this one keeps pumping the bus,
+      agent/phases/pumping.py), turned to its own fixed
       frame by its estimated start heading (DESIGN.md §9); a robot the fleet's check
       left out stands still and stops with the reason. From then on the agreed
       record set is served (agent/phases/record_sets.py) and only the agreed sessions
@@ -35,7 +36,7 @@ from agent.core.formation.own_frame import in_own_frame
 from agent.core.formation.plan import Plan
 from agent.core.formation.release import walked_along
 from agent.phases.context import AgentFailure, Context
-from agent.phases.pumping import PLAN_PUMP_S, while_pumping
+from agent.phases.pumping import plan_pumping
 from agent.phases.record_sets import record_set
 from agent.phases.roles import Fleet, Mover, Stepper
 from agent.wire import NeighborRecordMsg
@@ -62,12 +63,7 @@ class Waves:
         ctx = self.ctx
         ctx.status("plan", 0.0, decision.reason)
         try:
-            params = ctx.cfg.plan_params()
-            plan = while_pumping(
-                lambda: ctx.formation.plan(decision.records, params),
-                lambda: self.fleet.pump(0.0),
-                PLAN_PUMP_S,
-            )
+            plan = plan_pumping(ctx, self.fleet, decision.records)
         except ValueError as exc:
             raise AgentFailure(f"planning failed on the agreed records: {exc}") from None
         ctx.plan_digest = str(plan.digest)
