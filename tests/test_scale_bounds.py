@@ -4,7 +4,8 @@
 - a record carries at most ``MAX_NEIGHBOURS`` = 128 neighbours; the largest record fits
   ``MAX_RECORD_BYTES`` (a record set's item), a signed publication and a journal state;
 - the scenario generator places 100 robots in a room of the world's bounds, and nobody
-  there has more robots within sight than a record may carry.
+  there has more robots within sight than a record may carry;
+- what a member hears of the fleet's progress statuses stays bounded.
 """
 
 from __future__ import annotations
@@ -77,3 +78,13 @@ def test_a_generated_fleet_of_100_fits_the_room_and_the_records() -> None:
     assert in_sight < w.MAX_NEIGHBOURS
     with pytest.raises(ValueError, match="200"):
         scenarios.generate(201, 1)
+
+
+def test_status_cadence_is_bounded_by_what_a_member_hears() -> None:
+    """Known answers: 3 s up to 30 NAOs, then fleet / 10 statuses a second (issue 21)."""
+    from agent.phases.context import STATUS_MIN_INTERVAL, status_interval
+
+    assert status_interval(None) == STATUS_MIN_INTERVAL == 3.0
+    assert status_interval(3) == status_interval(30) == 3.0
+    assert status_interval(50) == pytest.approx(5.0)
+    assert status_interval(100) == pytest.approx(10.0)

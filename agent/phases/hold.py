@@ -260,7 +260,7 @@ class Hold:
             agr = fleet.agreement
             if not waiting and (agr is None or not agr.due(ctx.clock())):
                 return
-            if ctx.clock() - ctx.last_status >= HEARTBEAT:
+            if ctx.clock() - ctx.last_status >= max(HEARTBEAT, ctx.status_interval):
                 progress = 1.0 if mine == "done" else 0.0
                 ctx.status(mine, progress, f"{text} {waiting}", force=True)
         if mine == "march":
