@@ -21,13 +21,14 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
 
 from agent.wire import TruthPosesMsg, decode
+from tools.harness import foxglove as fg
 from tools.harness.live import Fanout, LiveServer
 from tools.harness.procs import free_port
 from tools.harness.scene import Scene
@@ -48,7 +49,11 @@ def chromium() -> str:
 
 
 @pytest.fixture(scope="module")
-def page() -> Iterator[Any]:
+def new_page() -> Iterator[Callable[[], Any]]:
+    """Opens a page in a freshly launched headless chromium (each test its own browser: a
+    crashed renderer leaves nothing behind for the next). ``DEBUG=pw:browser`` makes
+    Playwright's driver copy chromium's own output to stderr, which a failure shows: that
+    is how a "Target crashed" turned out to be the page's own endless loop (below)."""
     try:
         from playwright.sync_api import sync_playwright
     except ImportError:
@@ -60,17 +65,37 @@ def page() -> Iterator[Any]:
         if os.environ.get("CI"):
             pytest.fail("chromium is missing (.ci/run installs it)")
         pytest.skip("no chromium")
-    with sync_playwright() as pw:
-        browser = pw.chromium.launch(
-            executable_path=exe, args=["--no-sandbox", "--disable-dev-shm-usage", "--disable-gpu"]
-        )
-        try:
-            yield browser.new_page(viewport={"width": 1400, "height": 900})
-        finally:
-            browser.close()
+    old_debug = os.environ.get("DEBUG")
+    os.environ["DEBUG"] = "pw:browser"  # read when the driver starts, just below
+    try:
+        with sync_playwright() as pw:
+            launched: list[Any] = []
+
+            def open_page() -> Any:
+                args = ["--no-sandbox", "--disable-dev-shm-usage", "--disable-gpu"]
+                browser = pw.chromium.launch(executable_path=exe, args=args)
+                launched.append(browser)
+                return browser.new_page(viewport={"width": 1400, "height": 900})
+
+            try:
+                yield open_page
+            finally:
+                for browser in launched:
+                    browser.close()
+    finally:
+        if old_debug is None:
+            os.environ.pop("DEBUG", None)
+        else:
+            os.environ["DEBUG"] = old_debug
 
 
-def test_the_page_shows_the_three_robots_of_a_real_run(page: Any, tmp_path: Path) -> None:
+def test_the_page_shows_the_three_robots_of_a_real_run(
+    new_page: Callable[[], Any], tmp_path: Path
+) -> None:
+    _three_robots(new_page(), tmp_path)
+
+
+def _three_robots(page: Any, tmp_path: Path) -> None:
     live, web = free_port(), free_port()
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     cmd = [sys.executable, "-m", "tools.view", "--replay", str(RUN), "--speed", "3", "--loop"]
@@ -114,6 +139,39 @@ def test_the_page_shows_the_three_robots_of_a_real_run(page: Any, tmp_path: Path
     finally:
         proc.terminate()
         proc.wait(30)
+
+
+def test_a_silent_plan_channel_is_asked_again_and_the_page_lives_on(
+    new_page: Callable[[], Any],
+) -> None:
+    """The plan is sent once, before the page subscribes, and not again (no later message
+    triggers the re-send of latched topics): the page's subscription stays silent, and 3 s
+    on the page unsubscribes and subscribes again, and goes on drawing. Before the fix
+    the retry iterated the Map it was adding to and never ended: no re-subscription ever
+    reached the server, and the tab died of a 3 GB heap (in 2 of 10 runs of the test above,
+    and in CI: "V8 javascript OOM" in chromium's output, then "Target crashed")."""
+    events: list[tuple[str, int]] = []
+
+    class Counting(LiveServer):
+        def count(self, topic: str, change: int) -> None:
+            events.append((topic, change))
+            super().count(topic, change)
+
+    live = Counting("127.0.0.1", 0)
+    web = PageServer("127.0.0.1:0", live.url)
+    try:
+        live.emit("/scene/plan", fg.SCENE_UPDATE, {"deletions": [], "entities": []}, 1)
+        page = new_page()
+        page.goto(web.url)
+        deadline = time.monotonic() + 20.0
+        while ("/scene/plan", -1) not in events or events[-1][1] != 1:
+            assert time.monotonic() < deadline, events  # asked again within 3 s (+ slack)
+            time.sleep(0.1)
+        live.emit("/scene", fg.SCENE_UPDATE, {"deletions": [], "entities": []}, 2)
+        page.wait_for_function("() => window.naoView.received >= 1", timeout=10_000)  # lives on
+    finally:
+        web.close()
+        live.close()
 
 
 class Stamps:
@@ -165,25 +223,13 @@ def _feed_the_page(page: Any) -> tuple[set[int], Stamps, list[list[int]]]:
     return moved, stamps, draws
 
 
-def test_a_robots_moves_reach_the_page(page: Any) -> None:
+def test_a_robots_moves_reach_the_page(new_page: Callable[[], Any]) -> None:
     """The truth samples of a real run fed at twice their pace: the page draws the scenes
     in which a robot moved (the world publishes a step of motion when it is done: 14 in
     that run), up to the last. How fast is a figure, printed (``-s``), not asserted: the
     page draws the newest scene it has, so under load it skips some and a time bound
-    would test the machine (docs/view.md has the measured latency).
-
-    Headless chromium's renderer crashed ("Target crashed") in 2 of ~10 runs with the
-    machine at load 74 on 2 cores, never unloaded: a crashed tab is the browser's, so the
-    whole feed is run once more in a fresh tab; a second crash fails."""
-    try:
-        moved, stamps, draws = _feed_the_page(page)
-    except Exception as exc:  # playwright's Error: only a crashed tab is retried
-        if "Target crashed" not in str(exc):
-            raise
-        browser = page.context.browser
-        moved, stamps, draws = _feed_the_page(
-            browser.new_page(viewport={"width": 1400, "height": 900})
-        )
+    would test the machine (docs/view.md has the measured latency)."""
+    moved, stamps, draws = _feed_the_page(new_page())
     drawn = {t_ns for t_ns, _ in draws}
     assert moved and max(moved) in drawn, (len(draws), len(moved))  # the last move is shown
     assert len(drawn & moved) >= 3, (len(draws), len(moved))  # and moves along the way

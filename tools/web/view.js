@@ -86,11 +86,14 @@
     // A subscription the server refused (it can reach the server before the channel it
     // just advertised) brings nothing: ask again for those still silent. The latched
     // topics (obstacles, plan) are re-sent every second, so a second try gets them.
+    // The loop runs over a copy: a Map's iterator also visits the entries added while it
+    // runs, and each fresh subscription is silent too, so iterating `subs` itself never
+    // ended (the tab's heap reached 3 GB in 40 s: chromium's "V8 javascript OOM").
     const retry = setInterval(() => {
       if (ws.readyState !== WebSocket.OPEN) return clearInterval(retry);
       const again = [];
       const drop = [];
-      for (const [id, ch] of subs) {
+      for (const [id, ch] of [...subs]) {
         if (heard.has(id) || !channels.has(ch.id) || !ch.topic.startsWith("/scene/")) continue;
         drop.push(id);
         subs.delete(id);
