@@ -45,6 +45,8 @@ class Hold:
     def __init__(self, ctx: Context, fleet: Fleet, motion: Mover, steps: Stepper) -> None:
         #: the mask orientation of the parent last found (:meth:`_find_parent`); nan: none
         self.parent_facing = math.nan
+        #: why :meth:`_wait_for_parent` gave up, once it has
+        self._parent_wait: str | None = None
         self.ctx = ctx
         self.fleet = fleet
         self.motion = motion
@@ -126,9 +128,21 @@ class Hold:
 
     def _wait_for_parent(self, parent: int) -> str:
         """Wait until the whole fleet has arrived and ``parent`` is ``done`` (or
-        ``march``); "" then, else why not (the parent failed, left, or was too slow)."""
+        ``march``); "" then, else why not (the parent failed, or did not finish within
+        ``wave_timeout``; that answer is kept, so the check after the correction does not
+        wait a second time).
+
+        A parent out of reach (its token gone and silent for the membership grace) is
+        waited for, as the agreement waits for a member out of reach (issue #9): on a
+        lossy link it is usually this robot's own session that was cut, and the parent
+        it cannot hear stands in the formation all the same. Before, a parent out of
+        reach stopped this robot at once ("formation unverified").
+        """
         ctx = self.ctx
+        if self._parent_wait is not None:
+            return self._parent_wait
         deadline = ctx.clock() + ctx.cfg.wave_timeout
+        why = ""
         while True:
             self.fleet.pump(0.1)
             stop = self.fleet.fleet_stop()
@@ -136,14 +150,19 @@ class Hold:
                 raise AgentFailure(stop)
             peer = self.fleet.peer(parent)
             if peer.phase == "failed":
-                return f"parent {parent} failed"
-            if peer.seen_alive and not peer.alive:
-                return f"parent {parent} is gone"
+                why = f"parent {parent} failed"
+                break
             if peer.phase in ("done", "march") and self.fleet.all_arrived():
-                return ""
+                break
             if ctx.clock() > deadline:
-                return f"parent {parent} did not finish in time"
-            ctx.status(ctx.phase, 0.5, f"arrived; waiting for parent {parent}")
+                gone = peer.seen_alive and not peer.alive
+                why = f"parent {parent} {'out of reach' if gone else 'did not finish'} in time"
+                break
+            waiting = "out of reach" if peer.seen_alive and not peer.alive else "not done"
+            ctx.status(ctx.phase, 0.5, f"arrived; waiting for parent {parent} ({waiting})")
+        if why:
+            self._parent_wait = why
+        return why
 
     def verify(self) -> None:
         """ "Done" is a measurement (DESIGN.md §9): look at the parent and judge the pair.

@@ -193,3 +193,36 @@ def test_verify_sees_a_parent_facing_away_from_the_axis_by_its_mask(
     world.set_pose(int(child.parent), x, y, axis + math.radians(70))
     with pytest.raises(AgentFailure, match="faces"):
         r.hold.verify()
+
+
+def test_verify_waits_for_a_parent_out_of_reach_and_then_says_so(
+    world: World, bus: Bus, perception: PerceptionAdapter
+) -> None:
+    """A parent out of reach (token gone, silent for the grace) that had not reported
+    ``done`` is waited for until ``wave_timeout`` (5 s here), not taken for gone at once;
+    the answer is kept, so a second look does not wait again."""
+    import time
+
+    from agent.phases.context import AgentFailure
+
+    r, _, child, _ = _holding(world, bus, perception)
+    r.membership.peers[int(child.parent)] = Peer(alive=False, phase="hold", seen_alive=True)
+    t0 = time.monotonic()
+    with pytest.raises(AgentFailure, match=f"parent {child.parent} out of reach in time"):
+        r.hold.verify()
+    assert time.monotonic() - t0 >= 5.0
+    t1 = time.monotonic()
+    with pytest.raises(AgentFailure, match="out of reach in time"):
+        r.hold.verify()
+    assert time.monotonic() - t1 < 1.0
+
+
+def test_verify_measures_a_parent_out_of_reach_that_reported_done(
+    world: World, bus: Bus, perception: PerceptionAdapter
+) -> None:
+    """Its last status was ``done``: it stands where it finished, and the camera, not the
+    network, judges the pair (before: "formation unverified: parent is gone")."""
+    r, _, child, _ = _holding(world, bus, perception)
+    r.membership.peers[int(child.parent)] = Peer(alive=False, phase="done", seen_alive=True)
+    r.hold.verify()
+    assert r.ctx.check is not None and r.ctx.check.ok
