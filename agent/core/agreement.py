@@ -36,10 +36,10 @@ Re-publishing (what :meth:`Agreement.due` returns, issue 21): prompt sends answe
 the digest when it changed and the set held is complete, and once more on agreement);
 a backoff timer (``backoff_min`` doubling to ``backoff_max``; after the set is complete
 at most 4·``backoff_min``, or one repair per ``live / REPAIRS_HEARD_PER_S`` seconds in a
-large fleet, so that what every member hears stays bounded) repairs losses while some member's digest is missing or
-differs, after agreement until every member has reported a post-agreement phase, and
-after a failure on parameters (as long as the caller pumps). Pure: the caller passes the
-time and does the I/O.
+larger fleet, so that what every member hears stays bounded) repairs losses while some
+member's digest is missing or differs, after agreement until every member has reported
+a post-agreement phase, and after a failure on parameters (as long as the caller
+pumps). Pure: the caller passes the time and does the I/O.
 
 Per-sender state is kept only for fleet members (issue #8): a record, digest or phase
 from a sender that is not a live member is ignored and counted in ``ignored``, so a
