@@ -134,11 +134,8 @@ R = TypeVar("R", bound=RecordLike)
 #: (``agent.wire.canonical_digest``), so that equal digests mean bit-identical inputs.
 DigestFn = Callable[[Sequence[R]], str]
 
-#: Digest repairs a member hears per second from the whole fleet, at most, once the sets
-#: are complete (issue 21): each agent repairs at most every ``live / this`` seconds. At
-#: 100 NAOs on 2 cores the 1 s repairs of try 6 (every agent's complete set re-sent each
-#: second for the 300 s a member was silent: ~480 digests an agent) were ~10 000
-#: signature checks a second, and the fleet's messages arrived up to 130 s late.
+#: Repairs of complete sets a member hears per second, at most (issue 21, docs/agent.md:
+#: 1 s repairs flooded 100 NAOs with ~10 000 signature checks a second).
 REPAIRS_HEARD_PER_S = 10.0
 
 #: Phases an agent reports only after it has agreed (acknowledges our digest).
@@ -562,8 +559,7 @@ class Agreement(Generic[R]):
         ):
             out.append("record")
         complete = not self.missing_records()
-        # a complete set is what the others wait for: re-sent at most 4·backoff_min apart,
-        # or further apart in a fleet whose repairs would flood every member (module doc)
+        # a complete set is what the others wait for: repaired at most complete_cap() apart
         self._digest_tx.hi = self.complete_cap() if complete else self._backoff_max
         if complete and self._prompt("digest", now):
             self._digest_tx.reset(now)
@@ -573,10 +569,8 @@ class Agreement(Generic[R]):
         return out
 
     def complete_cap(self) -> float:
-        """Longest gap (s) between repairs of our digest once our set is complete:
-        4·``backoff_min``, or ``live / REPAIRS_HEARD_PER_S`` in a large fleet (each member
-        hears every member's repairs: at most that many a second), never more than
-        ``backoff_max``."""
+        """Longest gap (s) between repairs of our complete set: 4·``backoff_min``, or
+        ``live / REPAIRS_HEARD_PER_S`` in a larger fleet, at most ``backoff_max``."""
         spread = len(self.live) / REPAIRS_HEARD_PER_S
         return min(self._backoff_max, max(4.0 * self._min_gap, spread))
 
