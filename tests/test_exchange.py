@@ -8,7 +8,7 @@ from collections.abc import Callable
 import pytest
 
 from agent.core.agreed_params import odd_params, params_digest
-from agent.core.agreement import REPAIRS_HEARD_PER_S, Agreement
+from agent.core.agreement import HEARD_PER_S, Agreement
 from agent.wire import DigestMsg, NeighborRecordMsg, canonical_digest
 
 Drop = Callable[[str, int, int, float], bool]
@@ -562,14 +562,14 @@ def test_a_complete_set_is_announced_then_repeated_quickly() -> None:
 
 def test_a_large_fleets_complete_set_is_repaired_at_a_bounded_rate() -> None:
     """100 members (backoff 0.25 to 16 s, the agent's settings), every record held, nobody's
-    digest heard: our repairs double from 0.25 s up to 100 / REPAIRS_HEARD_PER_S = 10 s,
+    digest heard: our repairs double from 0.25 s up to 100 / HEARD_PER_S = 10 s,
     not 4·0.25 s (try 6 of issue 21)."""
     n = 100
     a = Agreement(0, rec(0), 0.0, fleet_size=n, backoff_max=16.0, digest_fn=canonical_digest)
     for j in range(1, n):
         a.member_joined(j, 0.0)
         a.on_record(rec(j), 0.0)
-    assert a.complete_cap() == pytest.approx(n / REPAIRS_HEARD_PER_S)
+    assert a.complete_cap() == pytest.approx(n / HEARD_PER_S)
     sends = []
     for k in range(1200):  # 120 s in 0.1 s steps
         t = 0.1 * k

@@ -35,7 +35,7 @@ Re-publishing (what :meth:`Agreement.due` returns, issue 21): prompt sends answe
 (the record when it was never sent, a member joined, or a member's new digest lacks it;
 the digest when it changed and the set held is complete, and once more on agreement);
 a backoff timer (``backoff_min`` doubling to ``backoff_max``; after the set is complete
-at most 4·``backoff_min``, or one repair per ``live / REPAIRS_HEARD_PER_S`` seconds in a
+at most 4·``backoff_min``, or one repair per ``live / HEARD_PER_S`` seconds in a
 larger fleet, so that what every member hears stays bounded) repairs losses while some
 member's digest is missing or differs, after agreement until every member has reported
 a post-agreement phase, and after a failure on parameters (as long as the caller
@@ -134,9 +134,9 @@ R = TypeVar("R", bound=RecordLike)
 #: (``agent.wire.canonical_digest``), so that equal digests mean bit-identical inputs.
 DigestFn = Callable[[Sequence[R]], str]
 
-#: Repairs of complete sets a member hears per second, at most (issue 21, docs/agent.md:
-#: 1 s repairs flooded 100 NAOs with ~10 000 signature checks a second).
-REPAIRS_HEARD_PER_S = 10.0
+#: Publications of one kind (repairs of complete sets; progress statuses) a member hears
+#: per second from the fleet, at most (issue 21, docs/agent.md: 1 s repairs flooded 100).
+HEARD_PER_S = 10.0
 
 #: Phases an agent reports only after it has agreed (acknowledges our digest).
 POST_AGREE_PHASES = frozenset({"plan", "wait", "move", "hold", "march", "done"})
@@ -570,8 +570,8 @@ class Agreement(Generic[R]):
 
     def complete_cap(self) -> float:
         """Longest gap (s) between repairs of our complete set: 4·``backoff_min``, or
-        ``live / REPAIRS_HEARD_PER_S`` in a larger fleet, at most ``backoff_max``."""
-        spread = len(self.live) / REPAIRS_HEARD_PER_S
+        ``live / HEARD_PER_S`` in a larger fleet, at most ``backoff_max``."""
+        spread = len(self.live) / HEARD_PER_S
         return min(self._backoff_max, max(4.0 * self._min_gap, spread))
 
     def _spaced(self, what: str, now: float) -> bool:

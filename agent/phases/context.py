@@ -33,6 +33,7 @@ import numpy.typing as npt
 
 from agent.body.base import Body
 from agent.config import AgentConfig
+from agent.core.agreement import HEARD_PER_S
 from agent.core.formation.plan import Plan
 from agent.core.formation.verdict import PairCheck
 from agent.net.bus import Bus
@@ -43,18 +44,16 @@ from agent.wire import MAX_WALKED, NeighborRecordMsg, StatusMsg, key_status
 #: Every robot faces north of its fixed frame at the start (4.1.1).
 NORTH = math.pi / 2
 STATUS_MIN_INTERVAL = 3.0  # s between progress statuses of the same phase
-#: Progress statuses a member hears per second from the whole fleet, at most (issue 21:
-#: every member verifies every status; at 100 NAOs a 3 s cadence was ~33 a second).
-STATUSES_HEARD_PER_S = 10.0
 
 
 def status_interval(fleet_size: int | None) -> float:
     """Seconds between progress statuses (and waiting heartbeats) of one robot:
-    :data:`STATUS_MIN_INTERVAL`, or ``fleet_size / STATUSES_HEARD_PER_S`` in a larger
-    fleet (10 s at 100 NAOs, well inside the membership grace of 20 s)."""
+    :data:`STATUS_MIN_INTERVAL`, or ``fleet_size / HEARD_PER_S`` in a larger fleet, the
+    agreement's budget (every member verifies every status; at 100 NAOs a 3 s cadence
+    was ~33 a second): 10 s at 100 NAOs, well inside the membership grace of 20 s."""
     if fleet_size is None:
         return STATUS_MIN_INTERVAL
-    return max(STATUS_MIN_INTERVAL, fleet_size / STATUSES_HEARD_PER_S)
+    return max(STATUS_MIN_INTERVAL, fleet_size / HEARD_PER_S)
 
 
 class AgentFailure(RuntimeError):

@@ -36,8 +36,6 @@ from agent.phases.roles import Fleet, Mover, Stepper
 
 log = logging.getLogger("agent.phases.hold")
 
-HEARTBEAT = 3.0  # s between statuses while waiting
-
 
 class Hold:
     """The arrived robot's phases (module docstring)."""
@@ -154,12 +152,12 @@ class Hold:
                 break
             if peer.phase in ("done", "march") and self.fleet.all_arrived():
                 break
+            gone = peer.seen_alive and not peer.alive
             if ctx.clock() > deadline:
-                gone = peer.seen_alive and not peer.alive
                 why = f"parent {parent} {'out of reach' if gone else 'did not finish'} in time"
                 break
-            waiting = "out of reach" if peer.seen_alive and not peer.alive else "not done"
-            ctx.status(ctx.phase, 0.5, f"arrived; waiting for parent {parent} ({waiting})")
+            state = "out of reach" if gone else "not done"
+            ctx.status(ctx.phase, 0.5, f"arrived; waiting for parent {parent} ({state})")
         if why:
             self._parent_wait = why
         return why
@@ -279,7 +277,7 @@ class Hold:
             agr = fleet.agreement
             if not waiting and (agr is None or not agr.due(ctx.clock())):
                 return
-            if ctx.clock() - ctx.last_status >= max(HEARTBEAT, ctx.status_interval):
+            if ctx.clock() - ctx.last_status >= ctx.status_interval:
                 progress = 1.0 if mine == "done" else 0.0
                 ctx.status(mine, progress, f"{text} {waiting}", force=True)
         if mine == "march":

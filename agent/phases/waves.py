@@ -3,10 +3,9 @@
 
 PLAN  the formation core on the agreed records (identical on every agent): this
       robot's slot, wave and parent (:meth:`Waves.make_plan`; computed in a worker
-      thread while this one keeps pumping the bus,
-      agent/phases/pumping.py), turned to its own fixed
-      frame by its estimated start heading (DESIGN.md §9); a robot the fleet's check
-      left out stands still and stops with the reason. From then on the agreed
+      thread while this one keeps pumping the bus, agent/phases/pumping.py), turned to
+      its own fixed frame by its estimated start heading (DESIGN.md §9); a robot the
+      fleet's check left out stands still and stops with the reason. From then on the agreed
       record set is served (agent/phases/record_sets.py) and only the agreed sessions
       count (agent/phases/membership.py).
 WAIT  for every robot of this robot's ``after`` list to walk past its release point
