@@ -279,7 +279,7 @@ def test_an_aligned_fleet_with_misfit_pairs_plans_without_the_search(
     assert not misfit.consistent and not misfit.turned
     monkeypatch.setattr(ff_mod, "build_poses", lambda r, e: misfit)
     monkeypatch.setattr(ff_mod, "_aligned_explains", lambda a, p: None)
-    monkeypatch.setattr(ff_mod, "_aligned_at_once", lambda a, r: None)  # the slow path
+    monkeypatch.setattr(ff_mod, "_aligned_at_once", lambda a, g, r: None)  # the slow path
     with_search = fleet_frame(aligned, DEFAULT_EPSILON)
 
     def no_search(poses: Any) -> Any:

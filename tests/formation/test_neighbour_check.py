@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agent.core.formation.common_frame import build_common_frame, choose_frame_robot
-from agent.core.formation.neighbour_check import _support, identify_neighbours, meets_eq9
+from agent.core.formation.neighbour_check import identify_neighbours, meets_eq9, mutual_support
 from agent.core.formation.records import NeighborRecord
 from tests.formation.conftest import random_fleet, records_from_positions
 
@@ -118,7 +118,7 @@ def test_robot_half_way_does_not_fool_the_check() -> None:
 def _support_one_by_one(
     r2: np.ndarray, c2: np.ndarray, owner: np.ndarray, vecs: np.ndarray, eps: float
 ) -> np.ndarray:
-    """The support worked candidate by candidate (the definition in _support's doc)."""
+    """The support worked candidate by candidate (the definition in mutual_support's doc)."""
     out = np.zeros(r2.shape[0], dtype=np.int64)
     for t in range(r2.shape[0]):
         mine = np.flatnonzero(owner == owner[r2[t]])
@@ -153,12 +153,12 @@ def test_support_counts_equal_the_one_by_one_definition(
         return
     r2 = np.array([a for a, _ in pairs])
     c2 = np.array([b for _, b in pairs])
-    got = _support(r2, c2, owner, vecs, eps)
+    got = mutual_support(r2, c2, owner, vecs, eps)
     assert got.dtype == np.int64
     assert np.array_equal(got, _support_one_by_one(r2, c2, owner, vecs, eps))
 
 
 def test_support_of_no_candidates_is_empty() -> None:
-    out = _support(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(3, np.int64),
+    out = mutual_support(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(3, np.int64),
                    np.zeros((3, 2)), 0.3)  # fmt: skip
     assert out.shape == (0,)

@@ -7,10 +7,11 @@ aligned), checked by :mod:`pose_check`, which names a robot whose sightings do n
 
 * First, without the pose pairing (issue 21: its support is the costly part at 50 NAOs):
   the papers' model (eq. 9 pairs, least squares, ψ ≡ 0), or that model with its
-  sightings identified again where they land (:mod:`reidentify`), is planned on when it
-  is consistent, connects every robot, finds every |ψ| within 10° and every robot's own
-  sightings mostly land on the others (a turned robot's do not, and then everything
-  below runs).
+  sightings identified again where they land (:mod:`reidentify`), or the same started
+  from the firm eq. 9 pairs alone (:mod:`firm_pairs`: a dense fleet's chance pairs left
+  out), is planned on when it is consistent, connects every robot, finds every |ψ|
+  within 10° and every robot's own sightings mostly land on the others (a turned
+  robot's do not, and then everything below runs).
 * Nobody named: every robot is planned from its estimated start position, and walks in
   the common frame by turning its own plan by its estimated start heading ψ
   (:mod:`own_frame`).
@@ -55,7 +56,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from agent.core.formation.common_frame import build_common_frame
-from agent.core.formation.neighbour_check import identify_neighbours
+from agent.core.formation.firm_pairs import firm_start
+from agent.core.formation.neighbour_check import NeighbourGraph, identify_neighbours
 from agent.core.formation.pose_check import (
     check_frame,
     consistent_rest,
@@ -131,10 +133,9 @@ def _max_turn(poses: PoseFrame) -> float:
     return float(np.max(np.abs(poses.headings), initial=0.0))
 
 
-def _papers_poses(records: Sequence[NeighborRecord], epsilon: float) -> PoseFrame | None:
-    """The papers' model (eq. 9 pairs, least squares, ψ ≡ 0) as poses with the residuals
-    of its pairs' sightings, or None if it does not connect; computed once per frame."""
-    graph = identify_neighbours(records, epsilon)
+def _papers_poses(graph: NeighbourGraph) -> PoseFrame | None:
+    """The papers' model on ``graph`` (eq. 9 pairs, least squares, ψ ≡ 0) as poses with the
+    residuals of its pairs' sightings, or None if it does not connect."""
     try:
         cf = build_common_frame(graph, "lsq")
     except ValueError:
@@ -178,9 +179,10 @@ UNEXPLAINED_MAX_N = 15
 
 
 def _identified_again(poses: PoseFrame, records: Sequence[NeighborRecord]) -> PoseFrame | None:
-    """:func:`poses.refine_poses` of an inconsistent fit, if that makes it consistent."""
+    """:func:`poses.refine_poses` of an inconsistent fit, if that makes it consistent and
+    every robot's own sightings mostly land (:func:`mostly_land`)."""
     clean = refine_poses(poses, records)
-    return clean if clean.consistent else None
+    return clean if clean.consistent and mostly_land(clean, records) else None
 
 
 def _planned_on(poses: PoseFrame, reason: str) -> FleetFrame:
@@ -190,29 +192,43 @@ def _planned_on(poses: PoseFrame, reason: str) -> FleetFrame:
 
 
 def _aligned_at_once(
-    papers: PoseFrame | None, records: Sequence[NeighborRecord]
+    papers: PoseFrame | None, graph: NeighbourGraph, records: Sequence[NeighborRecord]
 ) -> FleetFrame | None:
     """The papers' model (:func:`_papers_poses`), or that model with its sightings
     identified again where they land (:func:`reidentify.refine_poses`, every |ψ| within
-    :data:`poses.ALIGNED_MAX_HEADING`), when it is consistent, connects every robot and
-    every robot's own sightings mostly land on the others (:func:`mostly_land`: a turned
-    robot's do not); else None. Aligned starts need no pose pairing then (issue 21: the
-    pairing's support was ~5 of the ~7 CPU s an agent planned at 50 NAOs)."""
+    :data:`poses.ALIGNED_MAX_HEADING`), or the same started from the firm pairs alone
+    (:func:`firm_pairs.firm_graph`: a dense fleet's chance eq. 9 pairs left out), when it
+    is consistent, connects every robot and every robot's own sightings mostly land on
+    the others (:func:`mostly_land`: a turned robot's do not); else None. Aligned starts
+    need no pose pairing then (issue 21: the pairing's support was ~5 of the ~7 CPU s an
+    agent planned at 50 NAOs, and 31 CPU s and ~470 MB at 100)."""
     if papers is None or set(papers.ids) != {r.robot_id for r in records}:
         return None
     if papers.positions_consistent and not papers.turned:
         if not mostly_land(papers, records):
             return None
         return _planned_on(papers, "aligned starts: every sighting fits in position")
-    clean = refine_poses(papers, records)
-    why = _AGAIN
+    start = firm_start(graph)
+    firm = None if start is None else _papers_poses(start)
+    found = None
+    if firm is not None and set(firm.ids) == set(papers.ids):
+        found = _aligned_again(firm, records, f"firm pairs first, {_AGAIN}")
+    return found if found is not None else _aligned_again(papers, records, _AGAIN)
+
+
+def _aligned_again(
+    start: PoseFrame, records: Sequence[NeighborRecord], why: str
+) -> FleetFrame | None:
+    """``start`` with its sightings identified again where they land, planned on when
+    consistent, every |ψ| ≤ 10° and every robot's sightings mostly land; else None."""
+    clean = refine_poses(start, records)
     if not clean.consistent and not clean.turned:
         # one borderline pair in ~500 (50 NAOs, seed 12: pair 8-26 at 1.05): an isolated
         # misfit pair is a wrong pairing (pose_check.drop_wrong_pairings); the refit may
         # move the noise tail onto another pair, so a few rounds (mostly_land guards)
         dropped = drop_wrong_pairings(clean, rounds=FAST_DROP_ROUNDS)
         if dropped is not None:
-            clean, why = dropped.poses, f"{_AGAIN}, {dropped.reason}"
+            clean, why = dropped.poses, f"{why}, {dropped.reason}"
     if clean.consistent and _max_turn(clean) <= ALIGNED_MAX_HEADING and mostly_land(clean, records):
         return _planned_on(clean, "aligned starts (every |ψ| ≤ 10°), " + why)
     return None
@@ -225,8 +241,9 @@ def fleet_frame(records: Sequence[NeighborRecord], epsilon: float) -> FleetFrame
     named robot without which the rest is not connected, or a fleet whose sightings are
     inconsistent beyond one robot.
     """
-    papers = _papers_poses(records, epsilon)
-    fast = _aligned_at_once(papers, records)
+    graph = identify_neighbours(records, epsilon)
+    papers = _papers_poses(graph)
+    fast = _aligned_at_once(papers, graph, records)
     if fast is not None:
         return fast
     first = build_poses(records, epsilon)

@@ -14,7 +14,7 @@ the canonical record order of :mod:`records`), after one addition of ours: a can
 with more *mutual support* goes first. The paper's test alone is fooled when a third
 robot stands half-way between i and j (i sees it at v, j sees it at -v: ε ≈ 0 for the
 wrong pair); the support counts the other detections of i that j also reports at the
-place the candidate implies (see :func:`_support`), which the right pair wins; a candidate is accepted when neither of
+place the candidate implies (see :func:`mutual_support`), which the right pair wins; a candidate is accepted when neither of
 its two detections is already used and the two robots are not already a neighbour pair.
 The second pass of the paper ("re-going through all the neighbours with their IDs and
 delete those neighbour pairs whose errors do not meet (9)") is then applied to the
@@ -98,7 +98,7 @@ def meets_eq9(v_ij: np.ndarray, v_ji: np.ndarray, epsilon: float) -> tuple[bool,
     return (abs(ex) < epsilon and abs(ey) < epsilon and ed < epsilon), ed
 
 
-def _support(
+def mutual_support(
     r2: np.ndarray, c2: np.ndarray, owner: np.ndarray, vecs: np.ndarray, epsilon: float
 ) -> np.ndarray:
     """Mutual support of each candidate pair (detection r2 of i <-> detection c2 of k).
@@ -176,7 +176,7 @@ def identify_neighbours(
         swap = owner[rows] > owner[cols]
         r2 = np.where(swap, cols, rows)
         c2 = np.where(swap, rows, cols)
-        support = _support(r2, c2, owner, vecs, epsilon)
+        support = mutual_support(r2, c2, owner, vecs, epsilon)
         order = np.lexsort((c2, r2, ed, -support))
         used: set[int] = set()
         linked: set[tuple[int, int]] = set()
