@@ -472,3 +472,24 @@ def test_a_faulty_robot_is_named_beside_a_wrong_pairing() -> None:
     assert consistent_rest(both, 2, cleaning=False) is None
     assert consistent_rest(both, 2) is not None
     assert check_frame(both).named == (2,)
+
+
+def test_candidates_built_in_blocks_give_the_same_pairs(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 21: the pairing's candidates are built in blocks (memory); every key is
+    elementwise, so blocks of a few sighting pairs give exactly the pairs of one block."""
+    import agent.core.formation.pose_pairing as pose_pairing
+
+    rng = np.random.default_rng(11)
+    pos = random_fleet(rng, 12, spacing=0.6)
+    heads = rng.uniform(-math.pi, math.pi, 12)
+    recs = [
+        NeighborRecord(r.robot_id, r.neighbours @ rot(-heads[r.robot_id]).T)
+        for r in records_from_positions(list(range(12)), pos, 2.5, 0.03, rng)
+    ]
+    whole = identify_pairs(recs, 0.35).pairs
+    monkeypatch.setattr(pose_pairing, "BLOCK_ELEMENTS", 7)
+    blocks = identify_pairs(recs, 0.35).pairs
+    assert len(whole) >= 20
+    assert [(p.i, p.j, p.a, p.b, p.eps_d) for p in blocks] == [
+        (p.i, p.j, p.a, p.b, p.eps_d) for p in whole
+    ]
