@@ -230,7 +230,7 @@ class SafeSteps:
 
     def _recheck(self, blocker: np.ndarray, seen: np.ndarray, where: list[float]) -> None:
         """A blocker only remembered, not in the yaw-0 image: find out whether it is still
-        there. Too near ahead to be seen (< VIEW_NEAR): step back (``back_off``); out of
+        there. Too near ahead to be seen surely (< FORGET_NEAR): step back (``back_off``); out of
         the yaw-0 image (beside the robot): look at it with the head, forget what that
         image should show and does not, remember what it shows. Otherwise the memory
         would keep a NAO that walked away until this robot's patience ran out."""

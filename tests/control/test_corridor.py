@@ -11,12 +11,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agent.core.control.corridor import (
+    FORGET_NEAR,
     GO,
     LEFT,
     MAX_VIA_TURN,
     RIGHT,
     VIA,
-    VIEW_NEAR,
     WAIT,
     CorridorParams,
     back_off,
@@ -24,6 +24,7 @@ from agent.core.control.corridor import (
     check_step,
     closest_approach,
     confirmed,
+    in_view,
     patience,
     plan_rank,
 )
@@ -202,21 +203,41 @@ HFOV = CAMERA_HFOV
 
 
 def test_back_off_known_answers() -> None:
-    ahead = np.array([[0.0, 0.52]])  # remembered 0.52 m straight ahead, facing north
-    # not in the image: step back to VIEW_NEAR + margin = 0.65 m, i.e. 0.13 m
+    ahead = np.array([[0.0, 0.62]])  # remembered 0.62 m straight ahead, facing north
+    # not in the image: step back to FORGET_NEAR + margin = 0.75 m, i.e. 0.13 m
     assert back_off(ahead, np.zeros((0, 2)), NORTH, HFOV, CP) == pytest.approx(0.13)
     # much nearer: at most back_max
-    assert back_off(np.array([[0.0, 0.35]]), np.zeros((0, 2)), NORTH, HFOV, CP) == 0.15
+    assert back_off(np.array([[0.0, 0.45]]), np.zeros((0, 2)), NORTH, HFOV, CP) == 0.15
     # the image shows it (within 2·margin): it is there, no need to look again
-    assert back_off(ahead, np.array([[0.05, 0.55]]), NORTH, HFOV, CP) == 0.0
+    assert back_off(ahead, np.array([[0.05, 0.65]]), NORTH, HFOV, CP) == 0.0
     # far enough to be seen, or behind the robot (stepping back comes nearer): 0
-    assert back_off(np.array([[0.0, VIEW_NEAR + 0.1]]), np.zeros((0, 2)), NORTH, HFOV, CP) == 0
+    assert back_off(np.array([[0.0, FORGET_NEAR + 0.01]]), np.zeros((0, 2)), NORTH, HFOV, CP) == 0
     assert back_off(np.array([[0.3, -0.1]]), np.zeros((0, 2)), NORTH, HFOV, CP) == 0.0
-    # beside and a little ahead, 0.57 m at 36° off the heading: back until 0.65 m away
-    b = 0.57 * np.array([[math.cos(NORTH - math.radians(36)), math.sin(NORTH - math.radians(36))]])
+    # beside and a little ahead, 0.67 m at 36° off the heading: back until 0.75 m away
+    b = 0.67 * np.array([[math.cos(NORTH - math.radians(36)), math.sin(NORTH - math.radians(36))]])
     d = back_off(b, np.zeros((0, 2)), NORTH, HFOV, CP)
-    assert math.hypot(b[0, 0], b[0, 1] + d) == pytest.approx(VIEW_NEAR + CP.margin)
+    assert math.hypot(b[0, 0], b[0, 1] + d) == pytest.approx(FORGET_NEAR + CP.margin)
     assert 0.09 < d < 0.1
+
+
+def test_a_nao_believed_near_the_edge_or_just_past_view_near_is_not_forgotten() -> None:
+    """Issue 21, 100 NAOs: robot 91 stepped back from robot 99 to a believed ~0.6 m,
+    forgot it when the image did not show it (truly 0.58 m, 35° off the heading), walked
+    on and touched it. An image forgets only what it surely shows: believed at least
+    FORGET_NEAR away and FORGET_EDGE inside the field of view (30.45° - 10° = 20.45°)."""
+
+    def at(r: float, deg: float) -> np.ndarray:
+        a = NORTH + math.radians(deg)
+        return np.array([[r * math.cos(a), r * math.sin(a)]])
+
+    assert not in_view(at(0.62, -22.0), NORTH, HFOV)[0]  # the incident: too near
+    assert not in_view(at(0.8, -22.0), NORTH, HFOV)[0]  # near the edge
+    assert in_view(at(0.8, -20.0), NORTH, HFOV)[0]
+    assert in_view(at(FORGET_NEAR + 1e-9, 0.0), NORTH, HFOV)[0]
+    assert not in_view(at(FORGET_NEAR - 0.01, 0.0), NORTH, HFOV)[0]
+    assert in_view(at(0.62, -22.0), NORTH, HFOV, near=0.6, edge=math.radians(5))[0]  # before
+    with pytest.raises(ValueError, match="edge"):
+        in_view(at(1.0, 0.0), NORTH, HFOV, edge=math.nan)
 
 
 def test_confirmed_known_answers() -> None:
@@ -245,7 +266,7 @@ def test_back_off_never_exceeds_back_max_and_ends_at_the_view_range(
     b = back_off(np.array([[x, y]]), np.zeros((0, 2)), h, HFOV, CP)
     assert 0.0 <= b <= CP.back_max + 1e-12
     if b > 0.0:
-        assert math.hypot(x, y) < VIEW_NEAR
+        assert math.hypot(x, y) < FORGET_NEAR
         assert x * math.cos(h) + y * math.sin(h) >= 0.0  # never backs towards it
         after = math.hypot(x + b * math.cos(h), y + b * math.sin(h))
-        assert b == CP.back_max or after == pytest.approx(VIEW_NEAR + CP.margin)
+        assert b == CP.back_max or after == pytest.approx(FORGET_NEAR + CP.margin)
