@@ -196,12 +196,12 @@ def _aligned_at_once(
 ) -> FleetFrame | None:
     """The papers' model (:func:`_papers_poses`), or that model with its sightings
     identified again where they land (:func:`reidentify.refine_poses`, every |ψ| within
-    :data:`poses.ALIGNED_MAX_HEADING`), or the same started from the firm pairs alone
-    (:func:`firm_pairs.firm_graph`: a dense fleet's chance eq. 9 pairs left out), when it
-    is consistent, connects every robot and every robot's own sightings mostly land on
-    the others (:func:`mostly_land`: a turned robot's do not); else None. Aligned starts
-    need no pose pairing then (issue 21: the pairing's support was ~5 of the ~7 CPU s an
-    agent planned at 50 NAOs, and 31 CPU s and ~470 MB at 100)."""
+    :data:`poses.ALIGNED_MAX_HEADING`; started first from the firm pairs of a dense
+    fleet, :func:`firm_pairs.firm_start`, its chance eq. 9 pairs left out, then from all
+    pairs), when it is consistent, connects every robot and every robot's own sightings
+    mostly land on the others (:func:`mostly_land`: a turned robot's do not); else None.
+    Aligned starts need no pose pairing then (issue 21: the pairing's support was ~5 of
+    the ~7 CPU s an agent planned at 50 NAOs, and 31 CPU s and ~470 MB at 100)."""
     if papers is None or set(papers.ids) != {r.robot_id for r in records}:
         return None
     if papers.positions_consistent and not papers.turned:
