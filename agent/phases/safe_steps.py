@@ -43,7 +43,6 @@ from agent.core.control.corridor import (
     in_view,
     patience,
     plan_rank,
-    remembered,
 )
 from agent.core.formation.jam import STOP, blocker_of, expected_places, jam_verdict
 from agent.core.nao import CAMERA_HFOV, HEAD_YAW_LIMIT
@@ -122,16 +121,14 @@ class SafeSteps:
         self.motion.walk_step(v.walk)
 
     def _remembered(self) -> np.ndarray:
-        """The NAOs remembered (``corridor.remembered``: seen in the last ``memory_steps``
-        steps, or near), relative to here (fixed frame): a NAO closer than the detector's
-        range, or beside the robot, is not in the image but is still there."""
-        if not self.seen:
+        """The NAOs seen in the last ``memory_steps`` steps, relative to here (fixed frame):
+        a NAO closer than the detector's range, or beside the robot, is not in the image
+        but is still there."""
+        keep = [(p, k) for p, k in self.seen if self.motion.steps - k <= self.corridor.memory_steps]
+        self.seen = keep
+        if not keep:
             return np.zeros((0, 2))
-        rel = np.array([p for p, _ in self.seen]) - self.ctx.beliefs.position
-        ages = np.array([self.motion.steps - k for _, k in self.seen])
-        keep = remembered(rel, ages, self.corridor)
-        self.seen = [e for e, k in zip(self.seen, keep, strict=True) if k]
-        return np.asarray(rel[keep], dtype=np.float64).reshape(-1, 2)
+        return np.array([p for p, _ in keep]) - self.ctx.beliefs.position
 
     def clear_way(self, walk: float, via: bool = True, goal: np.ndarray | None = None) -> Verdict:
         """Check the next step's corridor (agent/core/control/corridor.py) against the NAOs in

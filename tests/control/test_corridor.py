@@ -27,7 +27,6 @@ from agent.core.control.corridor import (
     in_view,
     patience,
     plan_rank,
-    remembered,
 )
 from agent.core.formation.params import PlanParams
 from agent.core.nao import CAMERA_HFOV
@@ -271,17 +270,3 @@ def test_back_off_never_exceeds_back_max_and_ends_at_the_view_range(
         assert x * math.cos(h) + y * math.sin(h) >= 0.0  # never backs towards it
         after = math.hypot(x + b * math.cos(h), y + b * math.sin(h))
         assert b == CP.back_max or after == pytest.approx(FORGET_NEAR + CP.margin)
-
-
-def test_remembered_known_answers() -> None:
-    """Issue 21, 100 NAOs: a NAO standing 0.31 m beside the robot (believed), seen 6
-    steps before (two back, four on), was forgotten by age and walked into. Kept now:
-    anything within memory_near (0.8 m) whatever its age; farther, the last 6 steps."""
-    rel = np.array([[0.31, 0.0], [0.0, 0.79], [0.0, 0.81], [1.5, 0.0]])
-    assert remembered(rel, np.array([7, 40, 7, 6]), CP).tolist() == [True, True, False, True]
-    assert remembered(rel, np.array([0, 0, 0, 7]), CP).tolist() == [True, True, True, False]
-    assert remembered(np.zeros((0, 2)), np.zeros(0), CP).shape == (0,)
-    with pytest.raises(ValueError, match="ages"):
-        remembered(rel, np.array([1, 2]), CP)
-    with pytest.raises(ValueError, match="memory_near"):
-        CorridorParams(memory_near=-1.0)

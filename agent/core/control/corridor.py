@@ -34,9 +34,8 @@ steps diverge.
 
 **Memory** (the runner's): a NAO closer than about 0.5 m is cut by the image border and
 not detected, and one beside the robot is outside the image; so the runner checks
-against every NAO seen in the last ``memory_steps`` steps too, and any seen nearer than
-``memory_near`` however long ago (:func:`remembered`; dead-reckoned, relative to its
-believed position), and against those alone to decide whether a detour is over.
+against every NAO seen in the last ``memory_steps`` steps too (dead-reckoned, relative to
+its believed position), and against those alone to decide whether a detour is over.
 While it waits, a sighting that the next image would surely show again (:func:`in_view`:
 believed at least :data:`FORGET_NEAR` away and :data:`FORGET_EDGE` inside the image) is
 forgotten before that image is taken, so a NAO that walked on no longer blocks.
@@ -83,7 +82,6 @@ class CorridorParams:
     max_polls: int = 60  # polls of one blocking episode before the robot gives up
     tie: float = 0.05  # m: a blocker this close to the line is passed on the right
     memory_steps: int = 6  # steps a sighting is remembered (the runner's, see below)
-    memory_near: float = 0.8  # m: a sighting this near is remembered whatever its age
     back_max: float = 0.15  # m: the longest step back to see a remembered NAO again
 
     def __post_init__(self) -> None:
@@ -93,7 +91,6 @@ class CorridorParams:
         _finite("poll", self.poll, 0.0, 60.0)
         _finite("tie", self.tie, 0.0, 1.0)
         _finite("back_max", self.back_max, 0.0, 0.5)
-        _finite("memory_near", self.memory_near, 0.0, 5.0)
         if not 0 <= self.memory_steps <= 100:
             raise ValueError(f"memory_steps must be in [0, 100], got {self.memory_steps}")
         if not 0 <= self.base_polls <= self.max_polls:
@@ -202,22 +199,6 @@ def in_view(
     rng = np.hypot(pts[:, 0], pts[:, 1])
     off = np.abs(np.angle(np.exp(1j * (np.arctan2(pts[:, 1], pts[:, 0]) - heading))))
     return np.asarray((off <= hfov / 2 - edge) & (rng >= near) & (rng <= far))
-
-
-def remembered(rel: np.ndarray, ages: np.ndarray, params: CorridorParams) -> np.ndarray:
-    """Mask of the sightings (``rel``, (k, 2), relative to here; ``ages`` in steps walked
-    since) the runner keeps: those of the last ``memory_steps`` steps, and any nearer
-    than ``memory_near`` however old. Issue 21, 100 NAOs (twice, robots 91 and 99): a
-    NAO standing beside the robot, out of the image, was forgotten six steps (two back,
-    four on) after it was seen, while the robot believed it 0.31 m away, and the robot
-    walked into it. A NAO that walked away from there is forgotten when an image that
-    surely shows its place does not show it (:func:`in_view`)."""
-    pts = _points(rel)
-    age = np.asarray(ages, dtype=np.int64).reshape(-1)
-    if age.shape[0] != pts.shape[0]:
-        raise ValueError(f"{pts.shape[0]} sightings but {age.shape[0]} ages")
-    near = np.hypot(pts[:, 0], pts[:, 1]) <= params.memory_near
-    return np.asarray((age <= params.memory_steps) | near, dtype=bool)
 
 
 def confirmed(blocker: np.ndarray, seen: np.ndarray, params: CorridorParams) -> bool:
