@@ -173,7 +173,7 @@ VIEW_NEAR = 0.6
 #: 21, 100 NAOs: robot 91 stepped back from robot 99 to a believed ~0.6 m, forgot it
 #: when the next image did not show it (truly 0.58 m, 35° off its heading: outside the
 #: image), walked on and touched it.
-FORGET_NEAR = 0.7
+FORGET_NEAR = VIEW_NEAR + 0.1
 #: rad: how far inside the field of view a remembered NAO must be believed for an image
 #: that does not show it to forget it (a NAO's half width at 0.6 m is ~14°; the compass
 #: drifts a few degrees over the remembered steps); beyond, the head looks at it.
