@@ -14,6 +14,7 @@ import math
 import numpy as np
 
 from agent.core.formation.records import NeighborRecord
+from tests.formation.conftest import random_fleet
 
 MASK_STEP = math.radians(5.0)
 
@@ -96,16 +97,10 @@ def fault(rec: NeighborRecord, kind: str) -> NeighborRecord:
     return NeighborRecord(rec.robot_id, nb, rec.orientations, rec.confidences)
 
 
-def dense_layout(rng: np.random.Generator, n: int, spacing: float = 0.6) -> np.ndarray:
-    """Positions (n, 2) of a dense room: uniform in a square of side 0.8·√n m, at least
-    ``spacing`` apart (median nearest neighbour ~0.7 m, as the 50- and 100-NAO runs)."""
-    side = 0.8 * math.sqrt(n)
-    pts: list[np.ndarray] = []
-    while len(pts) < n:
-        p = rng.uniform(0.0, side, 2)
-        if all(np.hypot(*(p - q)) >= spacing for q in pts):
-            pts.append(p)
-    return np.array(pts)
+#: A dense room's spread (tests.formation.conftest.random_fleet): a square of side
+#: 0.8·√n m, robots ≥ 0.6 m apart (median nearest neighbour ~0.7 m, as the 50- and
+#: 100-NAO runs).
+DENSE_SPREAD = 0.8 / 0.6
 
 
 def dense_records(
@@ -114,7 +109,7 @@ def dense_records(
     """A dense room's records: every robot within 3.5 m seen with 4 % distance and 2°
     bearing noise, each sighting then kept with probability ``keep`` on each side (the
     occluded ones missed: many sightings one-way). Returns (positions, headings, records)."""
-    pos = dense_layout(rng, n)
+    pos = random_fleet(rng, n, spacing=0.6, spread=DENSE_SPREAD)
     h = np.full(n, math.pi / 2) if headings is None else headings
     ids = list(range(1, n + 1))
     recs = unaligned_records(ids, pos, h, rng, 0.04, math.radians(2.0), True, (0.5, 3.5))

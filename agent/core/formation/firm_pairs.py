@@ -35,6 +35,7 @@ record order gives the same firm graph.
 from __future__ import annotations
 
 import numpy as np
+from scipy.cluster.hierarchy import DisjointSet
 
 from agent.core.formation.neighbour_check import NeighbourGraph, mutual_support
 
@@ -118,21 +119,12 @@ def _forest(graph: NeighbourGraph, support: np.ndarray, min_support: int) -> Nei
     order = sorted(
         range(len(pairs)), key=lambda k: (-int(support[k]), pairs[k].eps_d, pairs[k].i, pairs[k].j)
     )
-    parent = {i: i for i in graph.ids}
-
-    def root(x: int) -> int:
-        while parent[x] != x:
-            parent[x] = parent[parent[x]]
-            x = parent[x]
-        return x
-
+    joined = DisjointSet(graph.ids)
     keep = []
     for k in order:
-        ri, rj = root(pairs[k].i), root(pairs[k].j)
-        if support[k] >= min_support or ri != rj:
+        # merge() is True when the pair joins two parts of the forest (Kruskal)
+        if joined.merge(pairs[k].i, pairs[k].j) or support[k] >= min_support:
             keep.append(pairs[k])
-        if ri != rj:
-            parent[ri] = rj
     keep.sort(key=lambda p: (p.i, p.j))
     return NeighbourGraph(
         ids=graph.ids, pairs=tuple(keep), records=graph.records, epsilon=graph.epsilon

@@ -50,6 +50,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.cluster.hierarchy import DisjointSet
 
 from agent.core.formation.neighbour_check import (
     DEFAULT_EPSILON,
@@ -96,22 +97,10 @@ class Research:
 def components(graph: NeighbourGraph) -> tuple[tuple[int, ...], ...]:
     """Connected components of the identified-neighbour graph, each ascending, ordered
     by size (largest first), ties by lowest id."""
-    parent = {i: i for i in graph.ids}
-
-    def find(i: int) -> int:
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
+    joined = DisjointSet(graph.ids)
     for p in graph.pairs:
-        a, b = find(p.i), find(p.j)
-        if a != b:
-            parent[max(a, b)] = min(a, b)
-    groups: dict[int, list[int]] = {}
-    for i in graph.ids:
-        groups.setdefault(find(i), []).append(i)
-    comps = [tuple(sorted(g)) for g in groups.values()]
+        joined.merge(p.i, p.j)
+    comps = [tuple(sorted(g)) for g in joined.subsets()]
     comps.sort(key=lambda c: (-len(c), c[0]))
     return tuple(comps)
 
