@@ -17,6 +17,7 @@ import math
 import numpy as np
 
 from agent.core.formation.assignment import assign, bounded_assignment, min_bottleneck
+from agent.core.formation.kinks import start_kinks
 from agent.core.formation.params import CANDIDATES_MAX_N, PlanParams
 from agent.core.formation.pyramid import PyramidFrame, placed_slots
 from agent.core.formation.scheduled import Scheduled, scheduled_plan
@@ -89,11 +90,26 @@ def choose(
             if sc.total <= bound:
                 good.append((sc.makespan, sc.total, k, sc))
         good.sort(key=lambda g: g[:3])
+        axis = np.array([math.cos(frame.beta), math.sin(frame.beta)])
+        kinked: list[tuple[float, float, int, Scheduled]] = []
         for j, (_, _, k, sc) in enumerate(good[:SHORTENED]):  # detours for the best
             better = scheduled_plan(
                 pos, sc.targets, sc.order, empty, _NO_OBS, params, sc.strategy, bound=bound
             )
             good[j] = (better.makespan, better.total, k, better)
+            # the same with start sidesteps (kinks), ranked after every plan without
+            vias = start_kinks(pos, sc.targets, axis, 2.0 * params.radius)
+            if not any(vias):
+                continue
+            try:
+                alt = scheduled_plan(
+                    pos, sc.targets, sc.order, vias, _NO_OBS, params, sc.strategy, bound=bound
+                )
+            except ValueError:
+                continue
+            if alt.total <= bound:
+                kinked.append((alt.makespan, alt.total, len(BOUND_STEPS) + 2 + k, alt))
+        good += kinked
         if good:
             return min(good, key=lambda g: g[:3])[3]
     for strat, placement in params.attempts(n):
