@@ -86,11 +86,14 @@ class SafeSteps:
             leg = next_leg(b.position, b.heading, goal, backward_within=backward_within)
             if leg is None:
                 return
+            ahead = min(cp.lookahead, max(0.0, leg.remaining - abs(leg.walk)))
             if side:  # detouring: do the NAOs seen lately still block the way to the goal?
                 to_goal = wrap_pi(b.heading + leg.turn)
                 wait = patience(self._rank(), cp)
                 rel = self._remembered()
-                v = check_step(leg.walk, to_goal, rel, cp, wait, side=side, goal=goal - b.position)
+                v = check_step(
+                    leg.walk, to_goal, rel, cp, wait, side=side, goal=goal - b.position, ahead=ahead
+                )
                 if v.action == VIA:
                     self._via_step(v)
                     continue
@@ -102,7 +105,7 @@ class SafeSteps:
                 self.motion.rotate(
                     leg.turn, STEP_GAINS if abs(leg.turn) < math.radians(15) else PAPER_GAINS
                 )
-            v = self.clear_way(leg.walk, goal=goal)
+            v = self.clear_way(leg.walk, goal=goal, ahead=ahead)
             if v.action == VIA:
                 side = v.side
                 self._via_step(v)
@@ -130,8 +133,11 @@ class SafeSteps:
             return np.zeros((0, 2))
         return np.array([p for p, _ in keep]) - self.ctx.beliefs.position
 
-    def clear_way(self, walk: float, via: bool = True, goal: np.ndarray | None = None) -> Verdict:
-        """Check the next step's corridor (agent/core/control/corridor.py) against the NAOs in
+    def clear_way(
+        self, walk: float, via: bool = True, goal: np.ndarray | None = None, ahead: float = 0.0
+    ) -> Verdict:
+        """Check the next step's corridor and ``ahead`` m of the way beyond it
+        (agent/core/control/corridor.py) against the NAOs in
         the yaw-0 image the compass takes anyway and those seen lately: returns GO, or
         (``via``) VIA once this robot's patience (its plan rank) is spent; waits
         meanwhile, looking again every poll (status detail ``waiting: NAO ahead at
@@ -154,7 +160,7 @@ class SafeSteps:
                 self.seen.append((b.position + p, self.motion.steps))
             v = check_step(
                 walk, b.heading, self._remembered(), cp, waited if via else 0, rank,
-                goal=None if goal is None else goal - b.position,
+                goal=None if goal is None else goal - b.position, ahead=ahead,
             )  # fmt: skip
             if v.action == GO or (v.action == VIA and via):
                 if waited:

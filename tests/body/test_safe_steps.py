@@ -171,3 +171,37 @@ def test_a_jammed_robot_stops_naming_its_blocker(
     with pytest.raises(AgentFailure, match=f"robot 1 cannot reach its slot: {who}"):
         r.safe_steps.walk_to(np.array([0.0, 0.75]), lambda p: None)
     assert blocked.locomotion.contacts == 0 and blocked.pose(2)[:2] == (0.0, 0.0)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_nao_standing_beside_the_way_is_walked_round_not_crept_past(
+    bus: Bus, perception: PerceptionAdapter, seed: int
+) -> None:
+    """Issue 21, 100 NAOs: a NAO holding 0.25 m beside a robot's straight way. Checked one
+    step ahead only, it blocked the step once it was 0.6 m ahead, too near to be seen
+    surely: the robot stepped back, saw the step clear, stepped on, and crept past it until
+    the sighting was lost beside it, then touched it (both seeds, before the lookahead).
+    With the way ``lookahead`` m beyond the step checked too, it is seen blocking while in
+    the image, and walked round."""
+    beside = Scenario(
+        robots=(RobotSpec(1, 0.0, -1.2, math.pi / 2), RobotSpec(2, 0.25, 0.0, math.pi)),
+        seed=seed,
+        room=4.0,
+    )
+    with World(beside, noise=True) as world:
+        r = _runner(world, bus, perception)
+        seps: list[float] = []
+        walk_step = r.motion.walk_step
+
+        def step(distance: float) -> object:
+            rep = walk_step(distance)
+            seps.append(_separation(world))
+            return rep
+
+        r.motion.walk_step = step  # type: ignore[method-assign,assignment]
+        r.safe_steps.walk_to(np.array([0.0, 2.4]), lambda p: None)  # 1.2 m past the NAO
+        x, y, _ = world.pose(1)
+        assert math.hypot(x, y - 1.2) < 0.15
+        assert world.locomotion.contacts == 0
+        assert r.safe_steps.vias >= 1
+        assert min(seps) > 2 * FOOTPRINT_RADIUS + 0.05, seps

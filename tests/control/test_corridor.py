@@ -138,6 +138,25 @@ def test_bad_params(kwargs: dict[str, float], match: str) -> None:
         CorridorParams(**kwargs)  # type: ignore[arg-type]
 
 
+def test_the_lookahead_sees_a_nao_beside_the_way_while_it_is_still_in_the_image() -> None:
+    # a NAO 0.25 m right of the way, 0.7 m ahead (in the image: 20° off the heading):
+    # a 20 cm step ends hypot(0.25, 0.5) = 0.56 m from it (> 0.45: go) ...
+    beside = np.array([[0.25, 0.7]])
+    assert check_step(0.2, NORTH, beside, CP).action == GO
+    # ... the way 0.5 m beyond passes it at 0.25 m: wait, then round it on the left
+    w = check_step(0.2, NORTH, beside, CP, ahead=CP.lookahead)
+    assert w.action == WAIT and w.blockers == pytest.approx(beside)
+    v = check_step(0.2, NORTH, beside, CP, waited=1, ahead=CP.lookahead)
+    assert v.action == VIA and v.side == LEFT
+    # the tangent to the 0.55 m circle round it, on its left: asin(0.55 / 0.744) off its bearing
+    rho = math.hypot(0.25, 0.7)
+    assert v.heading == pytest.approx(math.atan2(0.7, 0.25) + math.asin(0.55 / rho))
+    # a NAO beyond the lookahead's reach does not block yet
+    far = np.array([[0.25, 1.3]])
+    assert check_step(0.2, NORTH, far, CP, ahead=CP.lookahead).action == GO
+    assert CP.lookahead == 0.5
+
+
 def test_bad_inputs() -> None:
     with pytest.raises(ValueError, match="rank"):
         patience(-1, CP)
@@ -153,6 +172,10 @@ def test_bad_inputs() -> None:
         check_step(0.2, NORTH, np.zeros((0, 2)), CP, waited=-1)
     with pytest.raises(ValueError, match="side"):
         check_step(0.2, NORTH, np.zeros((0, 2)), CP, side=2)
+    with pytest.raises(ValueError, match="ahead"):
+        check_step(0.2, NORTH, np.zeros((0, 2)), CP, ahead=-0.1)
+    with pytest.raises(ValueError, match="lookahead"):
+        CorridorParams(lookahead=math.nan)
     with pytest.raises(ValueError, match="clearance"):
         blocking(0.2, NORTH, np.zeros((0, 2)), -1.0)
 

@@ -119,3 +119,21 @@ def dense_records(
         ori = None if r.orientations is None else r.orientations[m]
         out.append(NeighborRecord(r.robot_id, r.neighbours[m], ori))
     return pos, h, out
+
+
+def masks_turned(
+    recs: list[NeighborRecord], pos: np.ndarray, headings: np.ndarray, robot: int, deg: float
+) -> list[NeighborRecord]:
+    """``recs`` with every mask of ``robot`` (id; ids 1..n at ``pos``) turned by ``deg``:
+    the others saw its body turned while it turned through its own search; its start pose
+    and its own sightings are unchanged."""
+    out = []
+    for rec in recs:
+        ori = rec.orientations
+        if ori is not None and rec.robot_id != robot:
+            own = pos[rec.robot_id - 1]
+            world = rec.neighbours @ rot(headings[rec.robot_id - 1] - math.pi / 2).T + own
+            on = np.hypot(*(world - pos[robot - 1]).T) < 0.25
+            ori = np.where(on, (ori + math.radians(deg)) % (2 * math.pi), ori)
+        out.append(NeighborRecord(rec.robot_id, rec.neighbours, ori, rec.confidences))
+    return out

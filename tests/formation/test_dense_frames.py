@@ -17,8 +17,10 @@ import pytest
 
 from agent.core.formation.fleet_frame import FleetFrame, fleet_frame
 from agent.core.formation.neighbour_check import DEFAULT_EPSILON
+from agent.core.formation.poses import PoseMeasurement, evaluate_poses
 from agent.core.formation.records import NeighborRecord
-from tests.formation.pose_fleets import dense_records
+from agent.core.formation.reidentify import masks_outvoted
+from tests.formation.pose_fleets import dense_records, masks_turned
 
 RECORDED = Path(__file__).resolve().parents[1] / "data" / "records-100-seed11.npz"
 
@@ -106,3 +108,60 @@ def test_a_dense_room_set_down_askew_is_never_planned_wrong(seed: int) -> None:
     psi = heads[[i - 1 for i in frame.ids]] - math.pi / 2
     off = np.angle(np.exp(1j * (psi - psi[0] - (frame.headings - frame.headings[0]))))
     assert err_m < 0.15 and np.degrees(np.abs(off).max()) < 10.0
+
+
+@pytest.mark.parametrize(("n", "seed"), [(20, 1), (20, 2), (30, 0), (30, 2)])
+def test_masks_of_a_robot_seen_turning_do_not_stop_an_aligned_room(n: int, seed: int) -> None:
+    """Issue 21, 30 NAOs, seed 7: 12 of robot 25's 13 masks agreed on -34° (the others
+    looked while it turned through its own search), its start was north and its 12
+    sightings all landed at ψ = 0. The masks' "turned" kept the fleet from the aligned
+    frame: every agent stopped. Here the same on synthetic aligned rooms: planned right
+    (before: these four stopped, or were planned 0.52-0.55 m off)."""
+    rng = np.random.default_rng(seed)
+    robot = 1 + seed % n
+    heads = np.full(n, math.pi / 2)
+    pos, heads, recs = dense_records(rng, n, heads)
+    frame = fleet_frame(masks_turned(recs, pos, heads, robot, 34.0), DEFAULT_EPSILON)
+    err_m, psi = _error(frame, pos)
+    assert frame.excluded == () and err_m < 0.15 and psi < 10.0
+
+
+def _identified(
+    recs: list[NeighborRecord], pos: np.ndarray, heads: np.ndarray
+) -> list[PoseMeasurement]:
+    """Every sighting with its true target (the robot nearest where it lands in truth)."""
+    out = []
+    for rec in recs:
+        k = rec.robot_id - 1
+        c, s = math.cos(heads[k] - math.pi / 2), math.sin(heads[k] - math.pi / 2)
+        world = rec.neighbours @ np.array([[c, s], [-s, c]]) + pos[k]
+        ori = rec.orientations
+        for m, (v, w) in enumerate(zip(rec.neighbours, world, strict=True)):
+            d = np.hypot(*(pos - w).T)
+            d[k] = np.inf
+            o = math.nan if ori is None else float(ori[m])
+            out.append(PoseMeasurement(rec.robot_id, int(np.argmin(d)) + 1, v, orientation=o))
+    return out
+
+
+@pytest.mark.parametrize("turn", [35.0, 60.0])
+def test_a_truly_turned_robot_keeps_its_masks_verdict(turn: float) -> None:
+    """The positions outvote the masks only where the robot's own sightings land from its
+    fitted pose, and better than from that pose turned by the masks' offset: robot 4 truly
+    set down turned, fitted unturned (every ψ = 0 on the true positions), is still called
+    turned (its sightings land turned); unturned with its masks turned, it is not."""
+    ids = tuple(range(1, 21))
+    heads = np.full(20, math.pi / 2)
+    heads[3] += math.radians(turn)
+    pos, heads, recs = dense_records(np.random.default_rng(3), 20, heads)
+    fitted = evaluate_poses(ids, _identified(recs, pos, heads), pos, np.zeros(20), 1)
+    assert 4 in fitted.turned and not masks_outvoted(fitted, recs)
+    heads[3] = math.pi / 2
+    pos, heads, recs = dense_records(np.random.default_rng(3), 20, heads)
+    recs = masks_turned(recs, pos, heads, 4, turn)
+    fitted = evaluate_poses(ids, _identified(recs, pos, heads), pos, np.zeros(20), 1)
+    assert 4 in fitted.turned and masks_outvoted(fitted, recs)
+    # nobody turned by the masks: nothing to outvote
+    pos, heads, recs = dense_records(np.random.default_rng(3), 20, np.full(20, math.pi / 2))
+    fitted = evaluate_poses(ids, _identified(recs, pos, heads), pos, np.zeros(20), 1)
+    assert fitted.turned == () and masks_outvoted(fitted, recs)

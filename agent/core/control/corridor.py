@@ -8,7 +8,12 @@ step the robot looks at the NAOs in the image it already takes for the compass (
 yaw 0, straight ahead) and decides:
 
 - **go** when no NAO stands within the clearance ``c = 2·radius + margin`` of the
-  step's sweep (the segment from the robot's believed position to the end of the step).
+  step's sweep: the segment from the robot's believed position to the end of the step
+  and ``lookahead`` beyond it (at most to the goal). The lookahead flags a NAO standing
+  beside the way while the image still shows it: checked one step ahead only, a NAO
+  0.25 m beside the way blocks the step only once it is 0.6 m ahead, too near to be seen
+  surely, and the robot crept past it (step back to see it, step on, the sighting lost
+  beside the robot; issue 21, 100 NAOs and ``tests/body/test_safe_steps.py``).
   A NAO the step does not approach (the closest point of the segment is its start:
   stepping away from a robot already close) does not block, as in
   :func:`agent.core.control.station.safe_walk`.
@@ -83,6 +88,9 @@ class CorridorParams:
     tie: float = 0.05  # m: a blocker this close to the line is passed on the right
     memory_steps: int = 6  # steps a sighting is remembered (the runner's, see below)
     back_max: float = 0.15  # m: the longest step back to see a remembered NAO again
+    #: m of the way beyond the step checked too (module docstring): a NAO at the
+    #: sweep's end + lookahead >= VIEW_NEAR + 0.1 ahead is still surely in the image
+    lookahead: float = 0.5
 
     def __post_init__(self) -> None:
         _finite("radius", self.radius, 1e-3, 5.0)
@@ -91,6 +99,7 @@ class CorridorParams:
         _finite("poll", self.poll, 0.0, 60.0)
         _finite("tie", self.tie, 0.0, 1.0)
         _finite("back_max", self.back_max, 0.0, 0.5)
+        _finite("lookahead", self.lookahead, 0.0, 2.0)
         if not 0 <= self.memory_steps <= 100:
             raise ValueError(f"memory_steps must be in [0, 100], got {self.memory_steps}")
         if not 0 <= self.base_polls <= self.max_polls:
@@ -156,7 +165,7 @@ def blocking(walk: float, heading: float, others: np.ndarray, clearance: float) 
     """Mask of the NAOs at ``others`` (relative, fixed frame) that block a straight step of
     ``walk`` m along ``heading``: the sweep comes within ``clearance`` of them and closer
     than they are now."""
-    _finite("walk", walk, -1.0, 1.0)
+    _finite("walk", walk, -3.0, 3.0)
     _finite("heading", heading)
     _finite("clearance", clearance, 0.0)
     pts = _points(others)
@@ -266,15 +275,18 @@ def check_step(
     rank: int = 0,
     side: int = 0,
     goal: np.ndarray | None = None,
+    ahead: float = 0.0,
 ) -> Verdict:
     """Go, wait or via for a step of ``walk`` m along ``heading`` (believed, fixed frame)
     with NAOs at ``others`` (k, 2; relative to the robot, fixed-frame axes), after
     ``waited`` polls blocked, for the robot of plan rank ``rank``. ``side`` (RIGHT/LEFT)
     keeps a detour on the side it started; 0 chooses (see the module docstring).
     ``goal`` (relative): a blocker within the clearance of it cannot be walked round:
-    wait."""
+    wait. ``ahead`` (m, >= 0): the way beyond the step checked as well (the caller's
+    ``lookahead``, cut at the goal); a via step itself is checked over its own length."""
     _finite("walk", walk, -1.0, 1.0)
     _finite("heading", heading)
+    _finite("ahead", ahead, 0.0, 2.0)
     if waited < 0:
         raise ValueError(f"waited must be >= 0, got {waited}")
     if side not in (0, RIGHT, LEFT):
@@ -283,7 +295,7 @@ def check_step(
     if walk <= 0.0:  # backwards: the camera does not see that way
         return Verdict(GO, np.zeros((0, 2)))
     c = params.clearance
-    mask = blocking(walk, heading, pts, c)
+    mask = blocking(walk + ahead, heading, pts, c)
     if not mask.any():
         return Verdict(GO, np.zeros((0, 2)))
     blockers = pts[mask]

@@ -72,7 +72,7 @@ from agent.core.formation.poses import (
     pair_measurements,
 )
 from agent.core.formation.records import NeighborRecord
-from agent.core.formation.reidentify import mostly_land, refine_poses
+from agent.core.formation.reidentify import masks_outvoted, mostly_land, refine_poses
 
 #: rounds of isolated misfit pairs the fast aligned path drops (pose_check.drop_wrong_pairings)
 FAST_DROP_ROUNDS = 3
@@ -204,7 +204,7 @@ def _aligned_at_once(
     the ~7 CPU s an agent planned at 50 NAOs, and 31 CPU s and ~470 MB at 100)."""
     if papers is None or set(papers.ids) != {r.robot_id for r in records}:
         return None
-    if papers.positions_consistent and not papers.turned:
+    if papers.positions_consistent and _unturned(papers, records):
         if not mostly_land(papers, records):
             return None
         return _planned_on(papers, "aligned starts: every sighting fits in position")
@@ -222,16 +222,28 @@ def _aligned_again(
     """``start`` with its sightings identified again where they land, planned on when
     consistent, every |ψ| ≤ 10° and every robot's sightings mostly land; else None."""
     clean = refine_poses(start, records)
-    if not clean.consistent and not clean.turned:
+    if not clean.positions_consistent and _unturned(clean, records):
         # one borderline pair in ~500 (50 NAOs, seed 12: pair 8-26 at 1.05): an isolated
         # misfit pair is a wrong pairing (pose_check.drop_wrong_pairings); the refit may
         # move the noise tail onto another pair, so a few rounds (mostly_land guards)
         dropped = drop_wrong_pairings(clean, rounds=FAST_DROP_ROUNDS)
         if dropped is not None:
             clean, why = dropped.poses, f"{why}, {dropped.reason}"
-    if clean.consistent and _max_turn(clean) <= ALIGNED_MAX_HEADING and mostly_land(clean, records):
+    if (
+        clean.positions_consistent
+        and _unturned(clean, records)
+        and _max_turn(clean) <= ALIGNED_MAX_HEADING
+        and mostly_land(clean, records)
+    ):
         return _planned_on(clean, "aligned starts (every |ψ| ≤ 10°), " + why)
     return None
+
+
+def _unturned(frame: PoseFrame, records: Sequence[NeighborRecord]) -> bool:
+    """No robot turned: the masks call nobody turned, or the positions outvote them
+    (:func:`reidentify.masks_outvoted`: a mask is the body's orientation while it turned
+    through its own search)."""
+    return not frame.turned or masks_outvoted(frame, records)
 
 
 def fleet_frame(records: Sequence[NeighborRecord], epsilon: float) -> FleetFrame:

@@ -350,10 +350,11 @@ def mask_offset(deltas: Sequence[float]) -> tuple[float, int]:
     return float(wrap_half(mean)), int(count[best])
 
 
-def turned_robots(
+def turn_offsets(
     ids: tuple[int, ...], measurements: Sequence[PoseMeasurement], psi: np.ndarray
-) -> tuple[int, ...]:
-    """Robots whose ψ the others' masks agree is off by :data:`TURN_MIN` to :data:`TURN_MAX`."""
+) -> dict[int, float]:
+    """Robots whose ψ the others' masks agree is off by :data:`TURN_MIN` to :data:`TURN_MAX`,
+    with that offset (rad, modulo π: :func:`mask_offset`), by ascending id."""
     index = {rid: k for k, rid in enumerate(ids)}
     seen: dict[int, list[float]] = {}
     for m in sorted(measurements, key=lambda m: (m.target, m.owner)):
@@ -362,13 +363,20 @@ def turned_robots(
         ref = math.atan2(float(m.vector[1]), float(m.vector[0])) + m.orientation - math.pi / 2
         delta = float(wrap_half(psi[index[m.target]] - psi[index[m.owner]] - ref))
         seen.setdefault(m.target, []).append(delta)
-    out = []
+    out = {}
     for rid, deltas in sorted(seen.items()):
         offset, count = mask_offset(deltas)
         agreed = count >= TURN_SIGHTINGS and 2 * count > len(deltas)
         if agreed and TURN_MIN <= abs(offset) <= TURN_MAX:
-            out.append(rid)
-    return tuple(out)
+            out[rid] = offset
+    return out
+
+
+def turned_robots(
+    ids: tuple[int, ...], measurements: Sequence[PoseMeasurement], psi: np.ndarray
+) -> tuple[int, ...]:
+    """Robots whose ψ the others' masks agree is off by :data:`TURN_MIN` to :data:`TURN_MAX`."""
+    return tuple(turn_offsets(ids, measurements, psi))
 
 
 def evaluate_poses(
