@@ -7,6 +7,7 @@ import logging
 import math
 import time
 from collections.abc import Iterator
+from dataclasses import replace
 from types import SimpleNamespace
 from typing import Any
 
@@ -33,6 +34,7 @@ from agent.wire import (
     MAX_PUBLICATION_BYTES,
     ClockMsg,
     CommandReply,
+    DigestMsg,
     ErrorReply,
     NeighborRecordMsg,
     StatusMsg,
@@ -322,6 +324,25 @@ def test_event_queue_is_bounded_oldest_dropped_and_counted(pair: tuple[Bus, Bus,
     assert len(b.drain()) == EVENT_CAPS["alive"]
 
 
+def test_a_status_flood_cannot_push_records_out(pair: tuple[Bus, Bus, str]) -> None:
+    """Issue 21, 100 NAOs (try 11): the run's observer lost 23 of the 100 records to a
+    flood of statuses. Records have a lane of their own: a flood of statuses drops the
+    oldest statuses, never a record."""
+    _, b, _ = pair
+    rec = NeighborRecordMsg(sender=7, round=0, neighbours=((1.0, 0.5),), orientations=(0.0,))
+    b._enqueue_sample("nao/7/record", encode(rec))
+    for i in range(EVENT_CAPS["msg"] + 10):
+        b._enqueue_sample("nao/1/status", encode(StatusMsg(sender=1, phase="hold", wave=i)))
+    assert b.stats.dropped == 10
+    got = b.drain()
+    assert got[0].key == "nao/7/record" and got[0].msg == rec
+    assert [e.msg.wave for e in got[1:]] == list(range(10, EVENT_CAPS["msg"] + 10))
+    # and the record lane is bounded too: the oldest record goes first
+    for i in range(EVENT_CAPS["record"] + 1):
+        b._enqueue_sample("nao/7/record", encode(replace(rec, round=i % 100)))
+    assert b.stats.dropped == 11 and len(b.drain()) == EVENT_CAPS["record"]
+
+
 def serve_raw(session: zenoh.Session, key: str, replies: list[bytes]) -> zenoh.Queryable:
     def on_query(q: zenoh.Query) -> None:
         for r in replies:
@@ -403,19 +424,28 @@ def test_query_on_a_bad_key_is_a_bus_error(pair: tuple[Bus, Bus, str]) -> None:
         b.query("world/robot/**/#bad?", WalkRequest(distance=0.1), CommandReply, timeout=1.0)
 
 
-def test_event_queue_is_bounded_in_payload_bytes_too(pair: tuple[Bus, Bus, str]) -> None:
+@pytest.mark.parametrize("lane", ["msg", "record"])
+def test_event_queue_is_bounded_in_payload_bytes_too(pair: tuple[Bus, Bus, str], lane: str) -> None:
     _, b, _ = pair
-    big = encode(
-        NeighborRecordMsg(
-            sender=1, round=0, neighbours=tuple((0.1 * i, 1.0 / (i + 1)) for i in range(64))
+    if lane == "record":
+        key, big = "nao/1/record", encode(
+            NeighborRecordMsg(
+                sender=1, round=0, neighbours=tuple((0.1 * i, 1.0 / (i + 1)) for i in range(128)),
+                orientations=tuple(0.01 * i for i in range(128)),
+            )
+        )  # fmt: skip
+    else:
+        members = tuple(range(60_000, 61_024))
+        key, big = (
+            "nao/1/digest",
+            encode(DigestMsg(sender=1, round=0, digest="ab" * 32, members=members)),
         )
-    )
-    n = EVENT_CAPS["msg"]
-    assert n * len(big) > EVENT_MAX_BYTES["msg"]  # the byte cap binds before the count
+    n = EVENT_CAPS[lane]
+    assert n * len(big) > EVENT_MAX_BYTES[lane]  # the byte cap binds before the count
     for _ in range(n):
-        b._enqueue_sample("nao/1/record", big)
-    kept = EVENT_MAX_BYTES["msg"] // len(big)
-    assert b.events.weights()["msg"] <= EVENT_MAX_BYTES["msg"]
+        b._enqueue_sample(key, big)
+    kept = EVENT_MAX_BYTES[lane] // len(big)
+    assert b.events.weights()[lane] <= EVENT_MAX_BYTES[lane]
     assert b.stats.dropped == n - kept and len(b.drain()) == kept
 
 

@@ -158,6 +158,8 @@ def test_fleet_verdict_names_a_silent_wrong_formation() -> None:
     honest = fleet_verdict(views, [1, 2], all_done=False, truth_ok=False)
     assert not honest["silent_wrong"] and honest["verdicts_agree"]
     assert fleet_verdict(views, [1, 2], all_done=True, truth_ok=True)["verdicts_agree"]
+    # no plan to judge against (the evaluator lacked records): not called silent wrong
+    assert not fleet_verdict(views, [1, 2], True, False, judged=False)["silent_wrong"]
 
 
 def _judged(**kw: object) -> dict[str, object]:
@@ -172,6 +174,7 @@ def _judged(**kw: object) -> dict[str, object]:
         "max_abs_r_d": 0.02,
         "max_abs_r_phi": 0.54,
         "errors": {},
+        "evaluator_plan_digest": "aa",
     }
     return {**base, **kw}
 
@@ -183,6 +186,9 @@ def _judged(**kw: object) -> dict[str, object]:
         ({"contacts": 2}, "unsafe", "contact"),
         ({"plan_digests": {"1": "aa", "2": "bb"}, "identical_digests": False}, "unsafe", "differ"),
         ({"within_tolerance": False}, "unsafe", "wrong formation"),
+        # the evaluator lacks records (100 NAOs: its observer's queue): nothing to judge
+        ({"within_tolerance": False, "evaluator_plan_digest": None, "records_observed": 1},
+         "unjudged", "holds 1 of 2 records"),
         ({"final_phase": {"1": "done", "2": "failed"}, "exit_codes": {"1": 0, "2": 1},
           "errors": {"2": "formation off: r_phi -54 % to parent 1"}}, "safe_abort", "formation off"),
         ({"timeout": "agents still running"}, "complete", "within"),

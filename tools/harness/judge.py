@@ -227,13 +227,14 @@ def plot(obs: Observer, result: dict[str, Any], path: Path) -> None:
 
 
 def fleet_verdict(
-    views: dict[int, AgentView], ids: list[int], all_done: bool, truth_ok: bool
+    views: dict[int, AgentView], ids: list[int], all_done: bool, truth_ok: bool, judged: bool = True
 ) -> dict[str, Any]:
     """The fleet's own verdict beside the ground truth's (DESIGN.md §9 "Honest results").
 
     The fleet says "formation held" when every agent reports ``done``; each child's own
     check of its pair (``StatusMsg.r_d``/``r_phi``) is reported too. ``silent_wrong``: every
-    agent reported done while the ground truth fails - as bad as a contact.
+    agent reported done while the ground truth fails - as bad as a contact (only when the
+    ground truth could be ``judged``: the evaluator recomputed the plan).
     """
     checks = {str(i): list(c) for i in ids if (c := views[i].check) is not None}
     out_of_tol = sorted(
@@ -244,11 +245,11 @@ def fleet_verdict(
         "own_checks": checks,
         "own_checks_out_of_tolerance": out_of_tol,
         "verdicts_agree": all_done == truth_ok,
-        "silent_wrong": all_done and not truth_ok,
+        "silent_wrong": all_done and not truth_ok and judged,
     }
 
 
-OUTCOMES = ("complete", "safe_abort", "unsafe")
+OUTCOMES = ("complete", "safe_abort", "unsafe", "unjudged")
 
 
 def outcome(result: dict[str, Any]) -> tuple[str, str]:
@@ -258,7 +259,11 @@ def outcome(result: dict[str, Any]) -> tuple[str, str]:
     share; or every agent reported done while the ground truth fails (a silent wrong
     formation is as bad as a contact). ``complete``: every agent done on identical plans,
     the ground truth within tolerance; robots the fleet left out (``excluded``, named by
-    its consistency check) only stand still. Everything else is a ``safe_abort``.
+    its consistency check) only stand still. ``unjudged``: every agent done on identical
+    plans, but the evaluator could not recompute the plan (its observer lacks records: at
+    100 NAOs a status flood pushed 23 records out of its queue), so the ground truth has
+    nothing to be held against; never counted as a success nor as a silent wrong "done".
+    Everything else is a ``safe_abort``.
     """
     contacts = int(result.get("contacts", 0))
     if contacts:
@@ -276,6 +281,12 @@ def outcome(result: dict[str, Any]) -> tuple[str, str]:
         if result.get("within_tolerance"):
             rest = f" (robots {sorted(int(i) for i in out)} left out)" if out else ""
             return "complete", f"done, pairs within tolerance{rest}"
+        if not result.get("evaluator_plan_digest"):
+            held = result.get("records_observed", "?")
+            return "unjudged", (
+                f"every agent done, but the evaluator holds {held} of {len(codes)} records: "
+                "no plan to judge the ground truth against"
+            )
         worst = f"max |r_d| {result.get('max_abs_r_d', math.nan):.1%}, |r_phi| " + (
             f"{result.get('max_abs_r_phi', math.nan):.1%}"
         )
@@ -363,6 +374,7 @@ def summarise(
     if obs.truth:
         result["starts"] = {str(i): list(obs.truth[0][1][i]) for i in ids if i in obs.truth[0][1]}
         result["finals"] = {str(i): list(obs.truth[-1][1][i]) for i in ids if i in obs.truth[-1][1]}
+    result["records_observed"] = len(obs.records)
     if obs.truth and len(obs.records) == n:
         try:
             fa, plan = plan_from_agreed(
@@ -406,7 +418,8 @@ def summarise(
     ok_agents = all(
         views[i].exit_code == 0 and views[i].phase == "done" for i in ids if i not in left_out
     )
-    result.update(fleet_verdict(views, ids, ok_agents, within))
+    judged = bool(result.get("evaluator_plan_digest"))
+    result.update(fleet_verdict(views, ids, ok_agents, within, judged))
     # The agents planned from exactly the records the robots signed: the evaluator, which
     # accepts only verified envelopes, recomputes the same plan digest from them.
     result["plan_matches_records"] = bool(digests) and digests == {

@@ -22,7 +22,12 @@ from tools.harness.judge import OUTCOMES
 
 Row = Mapping[str, Any]
 
-COLOURS = {"complete": "tab:green", "safe_abort": "tab:orange", "unsafe": "tab:red"}
+COLOURS = {
+    "complete": "tab:green",
+    "safe_abort": "tab:orange",
+    "unsafe": "tab:red",
+    "unjudged": "tab:grey",
+}
 
 
 def write_runs(rows: Sequence[Row], *paths: Path | None) -> None:
