@@ -54,6 +54,20 @@ def _separation(world: World) -> float:
     return float(np.hypot(*np.subtract(world.pose(1)[:2], world.pose(2)[:2])))
 
 
+def _separations(r: Runner, world: World) -> list[float]:
+    """Robot 1's separation from robot 2 after each of its steps (filled as it walks)."""
+    seps: list[float] = []
+    walk_step = r.motion.walk_step
+
+    def step(distance: float) -> object:
+        rep = walk_step(distance)
+        seps.append(_separation(world))
+        return rep
+
+    r.motion.walk_step = step  # type: ignore[method-assign,assignment]
+    return seps
+
+
 def test_a_nao_in_the_corridor_is_waited_for_then_walked_round(
     blocked: World, bus: Bus, perception: PerceptionAdapter
 ) -> None:
@@ -66,15 +80,7 @@ def test_a_nao_in_the_corridor_is_waited_for_then_walked_round(
         status(phase, progress, detail, **kw)  # type: ignore[arg-type]
 
     r.ctx.status = record  # type: ignore[method-assign]
-    seps: list[float] = []
-    walk_step = r.motion.walk_step
-
-    def step(distance: float) -> object:
-        rep = walk_step(distance)
-        seps.append(_separation(blocked))
-        return rep
-
-    r.motion.walk_step = step  # type: ignore[method-assign,assignment]
+    seps = _separations(r, blocked)
     goal = np.array([0.0, 1.6])  # 0.8 m beyond the NAO, straight through it
     r.safe_steps.walk_to(goal, lambda p: None)
     x, y, _ = blocked.pose(1)
@@ -190,15 +196,7 @@ def test_a_nao_standing_beside_the_way_is_walked_round_not_crept_past(
     )
     with World(beside, noise=True) as world:
         r = _runner(world, bus, perception)
-        seps: list[float] = []
-        walk_step = r.motion.walk_step
-
-        def step(distance: float) -> object:
-            rep = walk_step(distance)
-            seps.append(_separation(world))
-            return rep
-
-        r.motion.walk_step = step  # type: ignore[method-assign,assignment]
+        seps = _separations(r, world)
         r.safe_steps.walk_to(np.array([0.0, 2.4]), lambda p: None)  # 1.2 m past the NAO
         x, y, _ = world.pose(1)
         assert math.hypot(x, y - 1.2) < 0.15
