@@ -76,7 +76,7 @@ class Beliefs:
 
     heading: float = NORTH
     position: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(2))
-    compass_gain: float = 1.0  # calibrated over the search's full circle
+    compass_gain: float = 1.0  # calibrated by the search's half turn (search.py)
 
 
 def _no_journal(command: str = "", value: float = 0.0, request_id: int = 0) -> None:

@@ -8,9 +8,9 @@
     RESUME: a restarted agent enters where its journal says (its run still going);
     FAIL: any phase stops safely. The journal's last record says how the run ended.
 
-SEARCH/LOCALISE  head sweeps at θ = 0 and θ = 180°, the compass calibrated over the full
-                 circle; detections into the fixed frame, merged into this robot's record
-                 (agent/phases/search.py).
+SEARCH/LOCALISE  head sweeps at θ = 0 and θ = 180°, the compass calibrated by the sweeps'
+                 overlapping views (the full circle as a fallback); detections into the
+                 fixed frame, merged into this robot's record (agent/phases/search.py).
 EXCHANGE/AGREE   publish the record, collect every member's, go on only once every live
                  member published the same digest (agent/phases/agreeing.py over
                  agent/core/agreement.py).

@@ -2,8 +2,10 @@
 step 2; 3.1–3.2 localisation; eqs. 7–8 into the fixed frame; 5.1.2 obstacles).
 
 SEARCH   sweep the head over the configured yaws (within ±119.5°) at θ = 0, turn to
-         θ = 180° with the rotation control, sweep again; then complete the circle to
-         calibrate the compass against the first image (an addition, :meth:`Search.sweep`).
+         θ = 180° with the rotation control, sweep again; the half turn is measured
+         where the two sweeps' views overlap, which calibrates the compass (an
+         addition; the circle is completed only when those views do not agree,
+         :meth:`Search.sweep`).
 LOCALISE the detections into the fixed frame (eqs. 7–8) with the compass-estimated
          heading, merged across images into this robot's neighbour record (4.1.2),
          with the static obstacles seen (:meth:`Search.localise`).
@@ -22,6 +24,7 @@ import numpy as np
 from agent.body.base import Frame
 from agent.core.control import PAPER_GAINS, wrap_pi
 from agent.core.perception.detector import Detection
+from agent.core.perception.half_turn import half_turn, overlap_pairs
 from agent.core.perception.obstacles import ObstacleDetection
 from agent.phases.context import NORTH, Context
 from agent.phases.roles import Mover
@@ -42,17 +45,25 @@ class Search:
     def sweep(self) -> list[Sightings]:
         """Sweeps at θ = 0 and θ = 180° (5.2.2 (iii)); returns fixed-frame sightings.
 
-        Addition to the paper: after the second sweep the robot completes the circle
-        back to θ = 0. The yaw-0 image taken at the start *defines* the fixed frame, so
-        the compass between it and the image after the full circle gives the absolute
-        residual r; the compass gain is then (2π + r) / (sum of compass steps), which
-        removes the compass's scale error (parallax of the off-axis camera) from the
-        θ = 180° sweep and from every later turn, and the heading is known absolutely.
+        Addition to the paper: the half turn between the sweeps is measured absolutely
+        where the two sweeps' views overlap (the head at ±119.5° after it looks where the
+        head at ∓60.5° looked before: :mod:`agent.core.perception.half_turn`). The compass
+        gain is then (that turn) / (sum of compass steps), which removes the compass's
+        scale error (parallax of the off-axis camera) from the θ = 180° sweep and from
+        every later turn, and the heading is known absolutely. When the overlapping views
+        do not agree (too few features, say), the robot completes the circle to θ = 0
+        instead and the compass between the yaw-0 image that *defines* the fixed frame
+        and the last one gives the residual r over 2π (:meth:`_calibrate`).
         """
         ctx, b, motion = self.ctx, self.ctx.beliefs, self.motion
         ctx.status("search", 0.0, "sweep at θ = 0°")
         h0 = b.heading  # north at the start; kept from the compass in re-search rounds
-        n = 2 * len(ctx.cfg.search_yaws)
+        yaws = ctx.cfg.search_yaws
+        n = 2 * len(yaws)
+        pairs = overlap_pairs(yaws)
+        kept = {i for i, _ in pairs}  # θ = 0 views an after-view will be matched to
+        before_views: dict[int, Frame] = {}
+        overlaps: list[tuple[float, float, float]] = []
         raw: list[tuple[int, list[Detection]]] = []
         obst: list[tuple[int, list[ObstacleDetection]]] = []  # 5.1.2: obstacles seen
         done = 0
@@ -61,12 +72,16 @@ class Search:
         for sweep in range(2):
             if sweep == 1:
                 turned[0] = motion.rotate(math.pi, PAPER_GAINS, "turn to θ = 180°")
-            for yaw in ctx.cfg.search_yaws:
+            for k, yaw in enumerate(yaws):
                 frame = motion.look(yaw)
                 if abs(yaw) < 1e-9:
                     motion.last_frame = frame
                     if sweep == 0:
                         origin = frame
+                if sweep == 0 and k in kept:
+                    before_views[k] = frame
+                elif sweep == 1:
+                    overlaps.extend(self._overlap(before_views, pairs, k, frame))
                 raw.append((sweep, ctx.perception.detect(frame.image, yaw)))
                 obst.append((sweep, ctx.perception.detect_obstacles(frame.image, yaw)))
                 done += 1
@@ -82,12 +97,20 @@ class Search:
                     ctx.journal.save_reference(origin.image)
                 except (OSError, ValueError) as exc:
                     log.error("reference view not journaled: %s", reason(exc))
+        before_views.clear()
         heading_180 = b.heading
-        turned[1] = motion.rotate(math.pi, PAPER_GAINS, "complete the circle to θ = 0°")
-        assert origin is not None and motion.last_frame is not None
-        self._calibrate(origin, motion.last_frame, turned, h0)
-        if b.compass_gain != 1.0:
-            heading_180 = wrap_pi(h0 + b.compass_gain * turned[0])
+        turn = half_turn(overlaps, turned[0])
+        if turn is not None and self._set_gain(turn / turned[0], f"{len(overlaps)} views"):
+            b.heading = wrap_pi(h0 + turn)
+            heading_180 = b.heading
+        else:
+            log.info("half turn not measured by the views (%d matched)", len(overlaps))
+            turned[1] = motion.rotate(math.pi, PAPER_GAINS, "complete the circle to θ = 0°")
+            assert origin is not None and motion.last_frame is not None
+            gain0 = b.compass_gain
+            self._calibrate(origin, motion.last_frame, turned, h0)
+            if b.compass_gain != gain0:
+                heading_180 = wrap_pi(h0 + turned[0] * b.compass_gain / gain0)
         self.obstacle_sightings = [
             ctx.perception.obstacles_fixed(o, h0 if sweep == 0 else heading_180)
             for sweep, o in obst
@@ -95,6 +118,32 @@ class Search:
         return [
             ctx.perception.to_fixed(dets, h0 if sweep == 0 else heading_180) for sweep, dets in raw
         ]
+
+    def _overlap(
+        self, before: dict[int, Frame], pairs: tuple[tuple[int, int], ...], k: int, after: Frame
+    ) -> list[tuple[float, float, float]]:
+        """The compass between after-view ``k`` and the θ = 0 view it overlaps, if any:
+        ``[(yaw before, yaw after, rotation)]`` (empty when the compass fails)."""
+        out: list[tuple[float, float, float]] = []
+        for i, j in pairs:
+            if j == k and i in before:
+                res = self.ctx.perception.measure_turn(before[i].image, after.image)
+                if res.ok:
+                    out.append((before[i].yaw, after.yaw, float(res.dtheta)))
+                else:
+                    log.debug("overlapping views %d/%d: %s", i, j, res.reason)
+        return out
+
+    def _set_gain(self, ratio: float, over: str) -> bool:
+        """Scale the compass gain by ``ratio`` (true turn / believed turn) if plausible."""
+        b = self.ctx.beliefs
+        gain = b.compass_gain * ratio
+        if not (math.isfinite(gain) and 0.9 <= gain <= 1.1):
+            log.warning("compass gain %.4f implausible: kept %.4f", gain, b.compass_gain)
+            return False
+        b.compass_gain = gain
+        log.info("compass calibrated over %s: gain %.4f", over, gain)
+        return True
 
     def _calibrate(
         self, origin: Frame, final: Frame, turned: list[float], h0: float = NORTH
@@ -106,15 +155,10 @@ class Search:
             log.warning("compass calibration skipped: %s", res.reason if not res.ok else "no turn")
             return
         r = float(res.dtheta)
-        gain = (2.0 * math.pi + r) / total
-        if not 0.9 <= gain <= 1.1:
-            log.warning("compass gain %.4f implausible: kept 1.0", gain)
-            return
-        self.ctx.beliefs.compass_gain = gain
-        self.ctx.beliefs.heading = wrap_pi(h0 + r)
-        log.info(
-            "compass calibrated over the circle: gain %.4f, residual %+.2f°", gain, math.degrees(r)
-        )
+        if self._set_gain(
+            (2.0 * math.pi + r) / total, f"the circle (residual {math.degrees(r):+.2f}°)"
+        ):
+            self.ctx.beliefs.heading = wrap_pi(h0 + r)
 
     def localise(self, sightings: list[Sightings]) -> NeighborRecordMsg:
         """This robot's record of the current round: the merged neighbours (4.1.2) and

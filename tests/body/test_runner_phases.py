@@ -44,10 +44,28 @@ def test_search_sees_every_neighbour_where_it_stands(
     for j, p in truth.items():
         d = min(float(np.hypot(*(np.asarray(n) - p))) for n in rec.neighbours)
         assert d < 0.05 + 0.12 * float(np.hypot(*p)), (j, p, rec.neighbours)
-    # the full circle brought the robot back near θ = 0, and it knows its heading
+    # the half turn was measured by the overlapping views: the robot stays at θ = 180°
+    # (no circle completed), and it knows its heading
     h = world.pose(1)[2]
-    assert abs(wrap_pi(r.ctx.beliefs.heading - (NORTH + wrap_pi(h - h0)))) < math.radians(3)
+    assert abs(wrap_pi(h - h0 - math.pi)) < math.radians(10)
+    assert abs(wrap_pi(r.ctx.beliefs.heading - (NORTH + wrap_pi(h - h0)))) < math.radians(1)
     assert r.ctx.beliefs.compass_gain != 1.0 and 0.9 <= r.ctx.beliefs.compass_gain <= 1.1
+
+
+def test_without_overlapping_views_the_search_completes_the_circle(
+    world: World, bus: Bus, perception: PerceptionAdapter
+) -> None:
+    # head yaws within ±40°: the sweeps at θ = 0 and 180° never look the same way
+    cfg = AgentConfig(
+        robot_id=2, fleet_size=3, wave_timeout=5.0, search_yaws=tuple(np.radians([-40, 0, 40]))
+    )
+    r = Runner(bus, WorldBody(world, 2), cfg, perception, FormationAdapter())
+    h0 = world.pose(2)[2]
+    r.search.sweep()
+    h = world.pose(2)[2]
+    assert abs(wrap_pi(h - h0)) < math.radians(10)  # back near θ = 0
+    assert abs(wrap_pi(r.ctx.beliefs.heading - (NORTH + wrap_pi(h - h0)))) < math.radians(1)
+    assert 0.9 <= r.ctx.beliefs.compass_gain <= 1.1 and r.ctx.beliefs.compass_gain != 1.0
 
 
 def test_rotate_turns_by_the_compass(world: World, bus: Bus, perception: PerceptionAdapter) -> None:
