@@ -44,7 +44,7 @@ from agent.wire import (
     key_status,
     key_walk,
 )
-from tests.fakes import FakeZBytes
+from tests.fakes import FakeZBytes, zb
 from tools.harness.procs import free_port
 
 pytestmark = pytest.mark.system
@@ -500,3 +500,14 @@ def test_open_retrying_rejects_bad_bounds(
 ) -> None:
     with pytest.raises(ValueError, match=match):
         open_retrying(lambda: "x", give_up, wait=wait)
+
+
+def test_a_sample_carries_the_time_it_arrived(pair: tuple[Bus, Bus, str]) -> None:
+    """Issue 21: a loaded reader's queue must not delay when a message is said to have
+    arrived (the harness's phase times): the callback stamps it before any check."""
+    _, b, _ = pair
+    before = time.monotonic()
+    b._on_sample(sample("nao/1/status", zb(encode(StatusMsg(sender=1, phase="hold")))))
+    after = time.monotonic()
+    (ev,) = b.drain()
+    assert before <= ev.t_rx <= after

@@ -194,6 +194,9 @@ class Event:
     epoch: int = -1
     #: Bytes of the sample on the wire (the envelope included).
     size: int = 0
+    #: ``time.monotonic()`` when the sample reached this process (0.0: not a sample),
+    #: before its checks and before it waited in the queue (a loaded reader's own lag).
+    t_rx: float = 0.0
 
 
 @dataclass
@@ -303,23 +306,25 @@ class Bus:
     def _on_sample(self, sample: Any, max_bytes: int = MAX_PUBLICATION_BYTES) -> None:
         """The subscriber callback: never raises; what does not decode is counted."""
         key = "?"
+        t_rx = time.monotonic()
         try:
             key = str(sample.key_expr)
-            self._accept(key, take_payload(sample.payload, max_bytes), max_bytes)
+            self._accept(key, take_payload(sample.payload, max_bytes), max_bytes, t_rx)
         except Exception as exc:  # ProtocolError, and anything unforeseen: count, go on
             self._reject(f"message on {key}", exc)
 
     def _enqueue_sample(self, key: str, data: bytes) -> None:
         """Open and decode ``data`` as if it had arrived on ``key`` (tests, tools)."""
         try:
-            self._accept(key, data, MAX_PUBLICATION_BYTES)
+            self._accept(key, data, MAX_PUBLICATION_BYTES, time.monotonic())
         except Exception as exc:
             self._reject(f"message on {key}", exc)
 
-    def _accept(self, key: str, data: bytes, max_bytes: int) -> None:
+    def _accept(self, key: str, data: bytes, max_bytes: int, t_rx: float = 0.0) -> None:
         signer, epoch, payload = self._open(key, data)
         msg = decode(payload, max_bytes=max_bytes)
-        self._put(Event("msg", key, msg, signer=signer, epoch=epoch, size=len(data)), len(data))
+        ev = Event("msg", key, msg, signer=signer, epoch=epoch, size=len(data), t_rx=t_rx)
+        self._put(ev, len(data))
 
     def _reject(self, what: str, exc: BaseException) -> None:
         """Count (``rejected``; ``untrusted`` for authentication failures) and log."""

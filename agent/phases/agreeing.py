@@ -55,6 +55,9 @@ class Agreeing:
         )
         self.fleet.open_round(agr)
         ctx.status("exchange", 0.0, "publishing record")
+        log.info(
+            "exchange: record of round %d, %d neighbour(s)", record.round, len(record.neighbours)
+        )
         complete_at: float | None = None  # when a record from every member was first held
         while True:
             self.fleet.pump(0.05)
@@ -65,6 +68,11 @@ class Agreeing:
             if d.kind == "wait" and complete_at is not None and now - complete_at >= ADOPT_AFTER:
                 d = self.adopt_plan(agr) or d
             if d.kind != "wait":
+                since = "" if complete_at is None else f" {now - complete_at:.1f} s after"
+                log.info(
+                    "%s: %d member(s),%s every record held; %s",
+                    d.kind, len(agr.live), since or " not", d.reason,
+                )  # fmt: skip
                 return d
             n = max(1, len(agr.live))
             held = len(agr.held_members())

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
@@ -106,3 +107,18 @@ def test_sim_client_ask_skips_bad_replies() -> None:
     link = client.Link(FakeSession(replies), NetworkSpec())
     got = client.ask(link, key_camera(3), CameraRequest(yaw=0.0), 1.0)
     assert got == rep and client.GUARD.rejected - before == 2
+
+
+def test_the_observer_dates_a_phase_by_its_arrival_not_its_turn_in_the_queue() -> None:
+    """Issue 21: the observer's phase times are arrival times; a status that waited in
+    its queue (behind the recording of others) keeps the time it arrived."""
+    from tools.harness.observe import Observer
+
+    obs = Observer(100.0)
+    ev = Event("msg", "nao/1/status", StatusMsg(sender=1, phase="plan"), t_rx=105.5)
+    obs.take_event(ev, None)
+    assert obs.agents[1].phase_wall["plan"] == 5.5
+    late = Event("msg", "nao/2/status", StatusMsg(sender=2, phase="plan"))  # no stamp: now
+    before = time.monotonic()
+    obs.take_event(late, None)
+    assert before - 100.0 <= obs.agents[2].phase_wall["plan"] <= time.monotonic() - 100.0

@@ -200,16 +200,20 @@ class Observer:
         if ev.kind != "msg":
             return
         try:
-            self.take(ev.key, ev.msg, rec, ev.size)
+            self.take(ev.key, ev.msg, rec, ev.size, ev.t_rx)
         except Exception as exc:
             self.rejected += 1
             self.guard.reject(f"message on {ev.key}", exc)
 
-    def take(self, key: str, msg: Any, rec: Recorder | None, size: int = 0) -> None:
-        """Record one message; ``size``: its bytes on the wire (0: its encoding's)."""
+    def take(
+        self, key: str, msg: Any, rec: Recorder | None, size: int = 0, t_rx: float = 0.0
+    ) -> None:
+        """Record one message; ``size``: its bytes on the wire (0: its encoding's);
+        ``t_rx``: ``time.monotonic()`` when it reached this process (0.0: now). Phase times
+        are arrival times: a loaded observer's queue and recording do not delay them."""
+        now = (t_rx if t_rx > 0.0 else time.monotonic()) - self.t0
         if rec is not None:
             rec.record(key, msg)
-        now = time.monotonic() - self.t0
         if isinstance(msg, TruthPosesMsg):
             self.truth.append((msg.t_sim, {p[0]: (p[1], p[2], p[3]) for p in msg.poses}))
             self.truth_contacts = max(self.truth_contacts, msg.contacts)
