@@ -2,8 +2,8 @@
 HOLD, §8 MARCH; the correction follows AUV paper §II, robots follow the robot in front
 by visual servoing; NAO paper 5.2.2 (iii) step 7 for holding).
 
-HOLD     arrived (status ``hold``); once the whole fleet has arrived and the parent is
-         ``done`` (or ``march``), look at the parent and step by the measured offset
+HOLD     arrived (status ``hold``); once the parent is ``done`` (or ``march``) and no
+         robot may still walk near the sight line to it, look at the parent and step by the measured offset
          error (an addition, :meth:`Hold.correct`); then measure the pair once more and
          judge it (:meth:`Hold.verify`, DESIGN.md §9): out of tolerance, the robot stops
          with the figure instead of reporting done.
@@ -27,6 +27,7 @@ import numpy as np
 
 from agent.core.control import PAPER_GAINS, wrap_pi
 from agent.core.control.alignment import look_yaws, match_parent
+from agent.core.formation.passers_by import passers_by
 from agent.core.formation.route import Route
 from agent.core.formation.verdict import FACING_TOL, check_pair, facing_misfit
 from agent.core.nao import CAMERA_HFOV, HEAD_YAW_LIMIT
@@ -45,6 +46,9 @@ class Hold:
         self.parent_facing = math.nan
         #: why :meth:`_wait_for_parent` gave up, once it has
         self._parent_wait: str | None = None
+        #: the parent's offset from the correction's last look, when the robot did not
+        #: move after it (:meth:`verify` judges that measurement instead of looking again)
+        self._still_seen: np.ndarray | None = None
         self.ctx = ctx
         self.fleet = fleet
         self.motion = motion
@@ -87,8 +91,8 @@ class Hold:
         The papers walk the plan open-loop; the residual error is dominated by the
         distance estimates of the search (~10 % at 1.2 m, better at d_e). The pyramid
         is defined by parent–child offsets (AUV II: robots follow the robot in front
-        by visual servoing), so once the whole fleet has arrived and the parent has
-        finished its own correction (``done``), the child looks at where the plan puts
+        by visual servoing), so once the parent has finished its own correction
+        (``done``) and nobody may still walk near the sight line (:meth:`_wait_for_parent`), the child looks at where the plan puts
         its parent, measures it and steps by the difference (twice at most). The head
         fans out around the expected bearing until it finds a NAO within
         ``max_correction`` of the planned offset (:meth:`_find_parent`); a NAO farther
@@ -117,7 +121,8 @@ class Hold:
                 "correction %d: parent %d seen at %s, planned %s, step %.3f m",
                 attempt + 1, parent, seen.round(3).tolist(), expected.round(3).tolist(), size,
             )  # fmt: skip
-            if size < 0.03:
+            if size < 0.03:  # not walked: this look is already the final state's
+                self._still_seen = seen
                 break
             ctx.status("hold", 0.75, f"correcting {size:.2f} m towards parent {parent}")
             self.motion.last_frame = None
@@ -125,8 +130,11 @@ class Hold:
             self.motion.rotate(wrap_pi(ctx.final_heading - ctx.beliefs.heading), PAPER_GAINS)
 
     def _wait_for_parent(self, parent: int) -> str:
-        """Wait until the whole fleet has arrived and ``parent`` is ``done`` (or
-        ``march``); "" then, else why not (the parent failed, or did not finish within
+        """Wait until ``parent`` is ``done`` (or ``march``) and every robot that may still
+        pass near this robot's sight line to it has arrived
+        (:func:`~agent.core.formation.passers_by.passers_by`: within twice the robot
+        radius plus ``max_correction``; until issue 21, the whole fleet); "" then, else
+        why not (the parent failed, or did not finish within
         ``wave_timeout``; that answer is kept, so the check after the correction does not
         wait a second time).
 
@@ -140,6 +148,10 @@ class Hold:
         if self._parent_wait is not None:
             return self._parent_wait
         deadline = ctx.clock() + ctx.cfg.wave_timeout
+        # who may still walk near this robot's sight line to its parent (every agent
+        # computes the same from the same plan)
+        margin = 2.0 * ctx.cfg.plan_params().radius + ctx.cfg.max_correction
+        passing = passers_by(ctx.plan, ctx.me, margin)
         why = ""
         while True:
             self.fleet.pump(0.1)
@@ -150,11 +162,14 @@ class Hold:
             if peer.phase == "failed":
                 why = f"parent {parent} failed"
                 break
-            if peer.phase in ("done", "march") and self.fleet.all_arrived():
+            if peer.phase in ("done", "march") and self.fleet.arrived(passing):
                 break
             gone = peer.seen_alive and not peer.alive
             if ctx.clock() > deadline:
-                why = f"parent {parent} {'out of reach' if gone else 'did not finish'} in time"
+                if peer.phase in ("done", "march"):
+                    why = f"robot(s) passing near did not arrive in time ({list(passing)})"
+                else:
+                    why = f"parent {parent} {'out of reach' if gone else 'did not finish'} in time"
                 break
             state = "out of reach" if gone else "not done"
             ctx.status(ctx.phase, 0.5, f"arrived; waiting for parent {parent} ({state})")
@@ -165,7 +180,8 @@ class Hold:
     def verify(self) -> None:
         """ "Done" is a measurement (DESIGN.md §9): look at the parent and judge the pair.
 
-        The child looks where the plan puts its parent (:meth:`_find_parent`) and judges
+        The child looks where the plan puts its parent (:meth:`_find_parent`; or takes
+        the correction's last look, when it did not move after it) and judges
         the measured offset with the formula the evaluation uses
         (:func:`agent.core.formation.verdict.check_pair`: r_d, r_φ against the pyramid
         axis). The figures travel in every later status. A parent not found within
@@ -187,7 +203,10 @@ class Hold:
         expected = np.asarray(plan.robot(parent).target, dtype=np.float64) - np.asarray(
             rp.target, dtype=np.float64
         )
-        seen = self._find_parent(expected, parent)
+        # the correction's last look, when nothing moved after it; else a look now
+        seen, self._still_seen = self._still_seen, None
+        if seen is None:
+            seen = self._find_parent(expected, parent)
         if seen is None:
             raise AgentFailure(
                 f"formation off: parent {parent} not within {ctx.cfg.max_correction:.2f} m "

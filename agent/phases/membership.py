@@ -27,7 +27,7 @@ agent/phases/runs.py: is a journal's run still going?).
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from dataclasses import asdict, dataclass
 from typing import TypeVar
 
@@ -296,10 +296,12 @@ class Membership:
             }
         )
 
-    def all_arrived(self) -> bool:
-        """Whether every live member of the agreement has arrived (:data:`ARRIVED`)."""
-        members = self.agreement.held_members() if self.agreement else ()
-        for i in members:
+    def arrived(self, among: Collection[int] | None = None) -> bool:
+        """Whether every live member of the agreement (or of ``among``) has arrived
+        (:data:`ARRIVED`)."""
+        if among is None:
+            among = self.agreement.held_members() if self.agreement else ()
+        for i in among:
             peer = self.peer(i)
             if i != self.ctx.me and peer.alive and peer.phase not in ARRIVED:
                 return False

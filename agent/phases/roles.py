@@ -22,7 +22,7 @@ own :class:`~agent.phases.march.Marcher`):
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from typing import Protocol
 
 import numpy as np
@@ -66,7 +66,7 @@ class Fleet(Listening, Protocol):
 
     def pin_sessions(self, members: set[int]) -> None: ...
 
-    def all_arrived(self) -> bool: ...
+    def arrived(self, among: Collection[int] | None = None) -> bool: ...
 
     def fleet_stop(self) -> str: ...
 

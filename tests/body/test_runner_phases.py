@@ -244,3 +244,54 @@ def test_verify_measures_a_parent_out_of_reach_that_reported_done(
     r.membership.peers[int(child.parent)] = Peer(alive=False, phase="done", seen_alive=True)
     r.hold.verify()
     assert r.ctx.check is not None and r.ctx.check.ok
+
+
+def test_a_child_waits_for_the_robots_passing_its_sight_line_only(
+    world: World, bus: Bus, perception: PerceptionAdapter
+) -> None:
+    """Issue 21: the alignment waits for the parent and for the robots that may still
+    walk near the sight line to it, not for the whole fleet."""
+    from tests.formation.test_passers_by import plan_of, robot
+
+    plan = plan_of(
+        robot(1, (0.0, 3.0), (0.0, 0.0), -1),
+        robot(2, (-3.0, -0.4), (-0.7, -0.4), 1),
+        robot(3, (-2.0, -1.0), (2.0, -1.0), 1),  # passes 0.6 m below 2's slot
+        robot(4, (5.0, 5.0), (6.0, 5.0), 1),  # far away
+    )
+    cfg = AgentConfig(robot_id=2, fleet_size=4, wave_timeout=0.5)
+    r = Runner(bus, WorldBody(world, 2), cfg, perception, FormationAdapter())
+    r.ctx.plan = plan
+    peers = r.membership.peers
+    peers[1] = Peer(alive=True, phase="done", seen_alive=True)
+    peers[3] = Peer(alive=True, phase="move", seen_alive=True)
+    peers[4] = Peer(alive=True, phase="move", seen_alive=True)
+    assert r.hold._wait_for_parent(1).startswith("robot(s) passing near did not arrive")
+    r.hold._parent_wait = None
+    peers[3] = Peer(alive=True, phase="hold", seen_alive=True)
+    assert r.hold._wait_for_parent(1) == ""  # 4 still walks, far from the sight line
+
+
+def test_verify_judges_the_last_look_of_a_correction_that_did_not_walk(
+    world: World, bus: Bus, perception: PerceptionAdapter
+) -> None:
+    """Issue 21: a robot on its slot finds nothing to correct; that look is the final
+    state's, and verify judges it instead of asking the world for the same picture."""
+    r, _, child, _ = _holding(world, bus, perception)
+    pictures: list[float] = []
+    camera = r.ctx.body.camera
+
+    def counted(yaw: float):  # type: ignore[no-untyped-def]
+        pictures.append(yaw)
+        return camera(yaw)
+
+    r.ctx.body.camera = counted  # type: ignore[method-assign]
+    r.hold.correct()
+    looked = len(pictures)
+    assert looked >= 1 and world.locomotion.contacts == 0
+    r.hold.verify()
+    assert len(pictures) == looked  # no new picture
+    check = r.ctx.check
+    assert check is not None and check.parent == child.parent and check.ok
+    r.hold.verify()  # a second verify (after a march) looks again
+    assert len(pictures) > looked
