@@ -392,6 +392,7 @@ def main(argv: list[str] | None = None) -> int:
             st.untrusted,
             st.dropped,
         )
+        log.info("robot %d phases (wall/CPU s): %s", rid, runner.ctx.timeline.costs())
         return code
 
 

@@ -531,3 +531,16 @@ def test_without_linger_members_out_of_reach_are_not_waited_for(
         assert r.ctx.clock() < 3.0
     finally:
         bus.close()
+
+
+def test_the_timeline_reports_wall_and_cpu_seconds_per_phase() -> None:
+    from agent.phases.context import Timeline
+
+    tl = Timeline()
+    assert tl.costs() == ""
+    tl.mark("search", 0.0)
+    tl.mark("wait", 1.0)
+    parts = tl.costs().split(", ")
+    assert [p.split(" ")[0] for p in parts] == ["search", "wait"]
+    wall, cpu = (float(v) for v in parts[0].split(" ")[1].split("/"))
+    assert wall >= 0.0 and cpu >= 0.0
