@@ -541,6 +541,7 @@ def test_the_timeline_reports_wall_and_cpu_seconds_per_phase() -> None:
     tl.mark("search", 0.0)
     tl.mark("wait", 1.0)
     parts = tl.costs().split(", ")
-    assert [p.split(" ")[0] for p in parts] == ["search", "wait"]
-    wall, cpu = (float(v) for v in parts[0].split(" ")[1].split("/"))
+    assert [p.split(" ")[0] for p in parts] == ["set-up", "search", "wait"]
+    assert parts[0].startswith("set-up -/")
+    wall, cpu = (float(v) for v in parts[1].split(" ")[1].split("/"))
     assert wall >= 0.0 and cpu >= 0.0

@@ -73,10 +73,11 @@ class Timeline:
         self.cpu.append(time.process_time())
 
     def costs(self) -> str:
-        """``phase wall/CPU`` seconds of each phase entered, up to now; e.g. ``search
+        """``phase wall/CPU`` seconds of each phase entered, up to now, after the CPU
+        seconds of the set-up (imports, session, perception); e.g. ``set-up -/1.2, search
         190/4.1, wait 88/1.9``: what a robot costs its host while it searches, waits..."""
         now = (time.monotonic(), time.process_time())
-        parts = []
+        parts = [f"set-up -/{self.cpu[0]:.1f}"] if self.cpu else []
         for k, (phase, wall, _) in enumerate(self.marks):
             end_wall = self.marks[k + 1][1] if k + 1 < len(self.marks) else now[0]
             end_cpu = self.cpu[k + 1] if k + 1 < len(self.cpu) else now[1]
