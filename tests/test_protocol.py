@@ -507,3 +507,15 @@ def test_status_carries_the_way_walked_along_the_path() -> None:
 def test_status_check_fields_are_bounded(field: str, value: float) -> None:
     with pytest.raises(p.ProtocolError, match=field):
         p.StatusMsg(sender=2, phase="done", **{field: value})
+
+
+def test_status_carries_the_steps_taken_since_arrival() -> None:
+    """Issue 21: a child follows its parent's steps (agent/phases/hold.py)."""
+    msg = p.StatusMsg(sender=4, phase="hold", shift_x=-0.15, shift_y=0.05)
+    got = p.decode(p.encode(msg))
+    assert (got.shift_x, got.shift_y) == (-0.15, 0.05)
+    assert p.decode(p.encode(p.StatusMsg(sender=4, phase="hold"))).shift_x == 0.0
+    for name in ("shift_x", "shift_y"):
+        for bad in (p.MAX_SHIFT + 1.0, -p.MAX_SHIFT - 1.0, math.nan, "0.1"):
+            with pytest.raises(p.ProtocolError, match=name):
+                p.StatusMsg(sender=4, phase="hold", **{name: bad})  # type: ignore[arg-type]

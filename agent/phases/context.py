@@ -39,7 +39,7 @@ from agent.core.formation.verdict import PairCheck
 from agent.net.bus import Bus
 from agent.phases.journal import Journal
 from agent.seams import Formation, Perception
-from agent.wire import MAX_WALKED, NeighborRecordMsg, StatusMsg, key_status
+from agent.wire import MAX_SHIFT, MAX_WALKED, NeighborRecordMsg, StatusMsg, key_status
 
 #: Every robot faces north of its fixed frame at the start (4.1.1).
 NORTH = math.pi / 2
@@ -136,6 +136,9 @@ class Context:
     # plan arc length, never decreasing during a move; agent/phases/waves.py), published
     # in every status: a robot waiting for it starts once it is past its release point
     walked: float = 0.0
+    # issue 21: how far this robot has stepped since it arrived (m, common frame of the
+    # plan; agent/phases/hold.py), published in every status: its children follow it
+    shift: tuple[float, float] = (0.0, 0.0)
 
     @property
     def me(self) -> int:
@@ -192,5 +195,7 @@ class Context:
             r_phi=0.0 if self.check is None else max(-100.0, min(100.0, self.check.r_phi)),
             blocked_by=self.blocked_by,
             walked=min(MAX_WALKED, max(0.0, self.walked)),
+            shift_x=min(MAX_SHIFT, max(-MAX_SHIFT, self.shift[0])),
+            shift_y=min(MAX_SHIFT, max(-MAX_SHIFT, self.shift[1])),
         )
         self.bus.publish(key_status(self.me), msg, "status")

@@ -82,6 +82,8 @@ class Peer:
     # how far it has walked along its path of plan ``plan_digest`` (issue 21, finer
     # waits): the largest value heard for that plan (the robot only walks on)
     walked: float = 0.0
+    # how far it has stepped since it arrived (m, common frame of ``plan_digest``)
+    shift: tuple[float, float] = (0.0, 0.0)
 
 
 class Membership:
@@ -191,6 +193,7 @@ class Membership:
             member.phase, member.wave, member.plan_digest = msg.phase, msg.wave, msg.plan_digest
             member.detail = msg.detail
             member.error, member.blocked_by = msg.error, msg.blocked_by
+            member.shift = (msg.shift_x, msg.shift_y)
             for a in self.agreements():
                 a.on_peer_phase(msg.sender, msg.phase)
 

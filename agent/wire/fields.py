@@ -47,6 +47,8 @@ MAX_MAP_LEN = 32
 MAX_ARRAY_LEN = MAX_MEMBERS
 MAX_STR_BYTES = 4 * MAX_TEXT  # MAX_TEXT characters of UTF-8
 MAX_COORD = 1000.0  # metres: no NAO fleet spans a kilometre
+#: metres: a robot's steps after it arrived (its alignment; far more than it walks)
+MAX_SHIFT = 10.0
 MAX_STEP = 50.0  # metres: the longest single walk command accepted
 #: metres: the longest planned path a status reports walking along (issue 21, finer
 #: waits): a path with two via points across a fleet of MAX_COORD spans < 9 km

@@ -24,6 +24,7 @@ from agent.wire.fields import (
     MAX_NEIGHBOURS,
     MAX_OBSTACLES,
     MAX_ROBOT_ID,
+    MAX_SHIFT,
     MAX_THUMBNAIL_BYTES,
     MAX_THUMBNAIL_HEIGHT,
     MAX_THUMBNAIL_WIDTH,
@@ -172,6 +173,10 @@ class StatusMsg(Message):
     plan ``plan_digest``, never decreasing during its ``move``; 0 before it): a robot
     that waits for it starts once it is past the release point in the plan's
     ``after_at`` (issue 21, ``agent.core.formation.release``).
+
+    ``shift_x``, ``shift_y``: how far the robot has stepped since it arrived (m, the
+    common frame of ``plan_digest``): its alignment to its own parent, which its children
+    follow at once instead of one level after another (issue 21, ``agent.phases.hold``).
     """
 
     TAG: ClassVar[str] = "status"
@@ -189,6 +194,8 @@ class StatusMsg(Message):
     r_phi: float = 0.0
     blocked_by: int = -1
     walked: float = 0.0
+    shift_x: float = 0.0
+    shift_y: float = 0.0
     SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {
         "sender": _ID,
         "phase": _str("phase", 16, PHASES),
@@ -204,6 +211,8 @@ class StatusMsg(Message):
         "r_phi": _float("r_phi", -100.0, 100.0),
         "blocked_by": _int("blocked_by", -1, MAX_ROBOT_ID),
         "walked": _float("walked", 0.0, MAX_WALKED),
+        "shift_x": _float("shift_x", -MAX_SHIFT, MAX_SHIFT),
+        "shift_y": _float("shift_y", -MAX_SHIFT, MAX_SHIFT),
     }
 
 

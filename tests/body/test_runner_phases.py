@@ -295,3 +295,34 @@ def test_verify_judges_the_last_look_of_a_correction_that_did_not_walk(
     assert check is not None and check.parent == child.parent and check.ok
     r.hold.verify()  # a second verify (after a march) looks again
     assert len(pictures) > looked
+
+
+def test_a_child_follows_the_steps_its_parent_announces(
+    world: World, bus: Bus, perception: PerceptionAdapter
+) -> None:
+    """Issue 21: while the parent aligns to its own parent, the child steps with it (the
+    parent's ``shift``), so a correction near the top of the pyramid does not pass down
+    it one level at a time; the child then announces its own shift for its children."""
+    r, _, child, axis = _holding(world, bus, perception)
+    r.ctx.plan_digest = "ab" * 32
+    parent = int(child.parent)
+    # the parent has stepped 0.15 m back along the axis (common frame = world here)
+    back = -0.15 * np.array([math.cos(axis), math.sin(axis)])
+    r.membership.peers[parent] = Peer(
+        alive=True, phase="hold", seen_alive=True, plan_digest="ab" * 32, shift=tuple(back)
+    )
+    start = np.asarray(world.pose(child.robot_id)[:2])
+    r.hold._arrived_at = r.ctx.beliefs.position.copy()
+    r.hold._follow(parent)
+    moved = np.asarray(world.pose(child.robot_id)[:2]) - start
+    assert float(np.hypot(*(moved - back))) < 0.06  # it stepped with its parent
+    assert float(np.hypot(*(np.asarray(r.ctx.shift) - back))) < 0.06  # and says so
+    assert world.locomotion.contacts == 0
+    r.hold._follow(parent)  # nothing more to follow: no step
+    assert float(np.hypot(*(np.asarray(world.pose(child.robot_id)[:2]) - start - moved))) < 1e-9
+    # a parent of another plan, or one done, is not followed
+    r.membership.peers[parent] = Peer(
+        alive=True, phase="hold", seen_alive=True, plan_digest="cd" * 32, shift=(0.0, 0.25)
+    )
+    r.hold._follow(parent)
+    assert float(np.hypot(*(np.asarray(world.pose(child.robot_id)[:2]) - start - moved))) < 1e-9
