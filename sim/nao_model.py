@@ -210,3 +210,13 @@ class NaoBodyFactory:
 
 
 HEAD_JOINT = 0
+#: Each link's colour, in link order (:meth:`NaoBodyFactory.create`): a hidden NAO
+#: (:meth:`sim.world.World.render` culls those out of view) gets them back.
+LINK_COLOURS: tuple[tuple[float, float, float, float], ...] = tuple(
+    p.rgba for p in (*HEAD_PARTS, *BODY_PARTS)
+)
+#: Radius (m) of a vertical cylinder about the body's axis that holds every part, whatever
+#: the head's yaw: a NAO farther than that outside the camera's view draws no pixel.
+BOUNDING_RADIUS = max(
+    math.hypot(p.pos[0], p.pos[1]) + max(p.size) for p in (*HEAD_PARTS, *BODY_PARTS)
+)

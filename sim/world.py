@@ -30,7 +30,7 @@ import pybullet as pb
 from agent.wire import nao
 from sim import camera
 from sim.locomotion import Locomotion, NoiseModel, Obstacle
-from sim.nao_model import HEAD_JOINT, NaoBodyFactory
+from sim.nao_model import BOUNDING_RADIUS, HEAD_JOINT, LINK_COLOURS, NaoBodyFactory
 from sim.scenarios import Scenario
 
 TEXELS_PER_M = 256
@@ -40,6 +40,9 @@ GUARD_LO = (0, 110, 40)
 GUARD_HI = (16, 255, 255)
 OBSTACLE_HEIGHT = nao.OBSTACLE_HEIGHT
 TILE = 1.0  # metres: edge of the triangles the floor and walls are cut into
+#: Angle (rad) added to the camera's half field of view before a NAO counts as out of
+#: view (the camera's 1.2° pitch tilts the image's side planes by less than this).
+CULL_MARGIN = math.radians(5.0)
 
 
 def _safe_colour(rng: np.random.Generator) -> tuple[int, int, int]:
@@ -145,6 +148,7 @@ class World:
         self._poses: dict[int, tuple[float, float, float]] = {}
         self._head: dict[int, float] = {}
         self._dirty: set[int] = set()
+        self._hidden: set[int] = set()  # robots made transparent: out of the last view
         for r in sorted(sc.robots, key=lambda r: r.id):
             self._bodies[r.id] = factory.create(r.x, r.y, r.heading)
             self._poses[r.id] = (float(r.x), float(r.y), _wrap(float(r.heading)))
@@ -322,6 +326,7 @@ class World:
         x, y, th = self._poses[robot_id]
         body = self._bodies[robot_id]
         cid = self._client
+        self._cull(robot_id)
         # Hide the observer's own body (under the floor) while its camera renders.
         pb.resetBasePositionAndOrientation(body, (x, y, -5.0), (0, 0, 0, 1), physicsClientId=cid)
         try:
@@ -338,6 +343,32 @@ class World:
             pb.resetBasePositionAndOrientation(
                 body, (x, y, 0.0), pb.getQuaternionFromEuler((0.0, 0.0, th)), physicsClientId=cid
             )
+
+    def _cull(self, robot_id: int) -> None:
+        """Make the NAOs out of ``robot_id``'s view transparent, and those in view opaque
+        again. TinyRenderer skips a transparent shape but draws every other triangle,
+        seen or not (a third of a picture's cost at 50 NAOs); a NAO whose bounding
+        cylinder lies wholly outside the horizontal field of view (plus
+        :data:`CULL_MARGIN`) draws no pixel, so the picture is the same
+        (``tests/sim/test_world.py`` compares them)."""
+        x, y, th = self._poses[robot_id]
+        eye, _, _ = camera.camera_pose(x, y, th, self._head[robot_id])
+        look = th + self._head[robot_id]
+        half = camera.HFOV / 2.0 + CULL_MARGIN
+        cid = self._client
+        for rid, (rx, ry, _) in self._poses.items():
+            if rid == robot_id:
+                continue
+            dx, dy = rx - float(eye[0]), ry - float(eye[1])
+            d = math.hypot(dx, dy)
+            off = abs(_wrap(math.atan2(dy, dx) - look))
+            seen = d <= 2.0 * BOUNDING_RADIUS or off <= half + math.asin(BOUNDING_RADIUS / d)
+            if seen == (rid in self._hidden):
+                body = self._bodies[rid]
+                for link, rgba in enumerate(LINK_COLOURS):
+                    colour = rgba if seen else (rgba[0], rgba[1], rgba[2], 0.0)
+                    pb.changeVisualShape(body, link, rgbaColor=colour, physicsClientId=cid)
+                (self._hidden.discard if seen else self._hidden.add)(rid)
 
     # ------------------------------------------------------------------ lifetime
 

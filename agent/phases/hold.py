@@ -37,6 +37,11 @@ from agent.phases.roles import Fleet, Mover, Stepper
 
 log = logging.getLogger("agent.phases.hold")
 
+#: Smallest step of its parent a child follows (m): a follow costs a turn, a step and a
+#: turn back; smaller ones are left to the child's own alignment (measured at 50 NAOs:
+#: following every 3 cm made each level of the pyramid slower, not faster).
+FOLLOW_MIN = 0.08
+
 
 class Hold:
     """The arrived robot's phases (module docstring)."""
@@ -152,8 +157,9 @@ class Hold:
         ``shift``, common frame): while the parent aligns to its own parent, its children
         move with it, so that a correction near the top of the pyramid does not pass down
         it one level after another (issue 21: at 50 NAOs one robot's 0.15 m made every
-        robot below it walk the same 0.15 m in turn, ~8 s a level). Only within twice
-        ``max_correction``; the child's own alignment measures the parent afterwards."""
+        robot below it walk the same 0.15 m in turn, ~8 s a level). Only steps of at least
+        :data:`FOLLOW_MIN` and within twice ``max_correction``; the child's own alignment
+        measures the parent afterwards."""
         ctx = self.ctx
         peer = self.fleet.peer(parent)
         if peer.phase != "hold" or peer.plan_digest != ctx.plan_digest:
@@ -163,7 +169,10 @@ class Hold:
         sx, sy = peer.shift
         want = np.array([c * sx + s * sy, -s * sx + c * sy])
         todo = want - self._followed
-        if float(np.hypot(*want)) > 2.0 * ctx.cfg.max_correction or float(np.hypot(*todo)) < 0.03:
+        if (
+            float(np.hypot(*want)) > 2.0 * ctx.cfg.max_correction
+            or float(np.hypot(*todo)) < FOLLOW_MIN
+        ):
             return
         log.info("following parent %d: %s m", parent, todo.round(3).tolist())
         self._step(todo)
