@@ -3,8 +3,9 @@ HOLD, §8 MARCH; the correction follows AUV paper §II, robots follow the robot 
 by visual servoing; NAO paper 5.2.2 (iii) step 7 for holding).
 
 HOLD     arrived (status ``hold``); once the parent is ``done`` (or ``march``) and no
-         robot may still walk near the sight line to it, look at the parent and step by the measured offset
-         error (an addition, :meth:`Hold.correct`); then measure the pair once more and
+         robot may still walk near the sight line to it, look at the parent and step by
+         the measured offset error (an addition, :meth:`Hold.correct`; meanwhile step
+         with the parent, :meth:`Hold._follow`); then measure the pair once more and
          judge it (:meth:`Hold.verify`, DESIGN.md §9): out of tolerance, the robot stops
          with the figure instead of reporting done.
 MARCH    with a route (issue #13, agent/phases/march.py): ``march`` and wait until every
@@ -96,14 +97,15 @@ class Hold:
         self.finish()
 
     def correct(self) -> None:
-        """Visual alignment to the parent, once everyone has arrived (an addition).
+        """Visual alignment to the parent, once nobody may pass near (an addition).
 
         The papers walk the plan open-loop; the residual error is dominated by the
         distance estimates of the search (~10 % at 1.2 m, better at d_e). The pyramid
         is defined by parent–child offsets (AUV II: robots follow the robot in front
         by visual servoing), so once the parent has finished its own correction
-        (``done``) and nobody may still walk near the sight line (:meth:`_wait_for_parent`), the child looks at where the plan puts
-        its parent, measures it and steps by the difference (twice at most). The head
+        (``done``) and nobody may still walk near the sight line
+        (:meth:`_wait_for_parent`), the child looks at where the plan puts its parent,
+        measures it and steps by the difference (twice at most). The head
         fans out around the expected bearing until it finds a NAO within
         ``max_correction`` of the planned offset (:meth:`_find_parent`); a NAO farther
         off is another robot or a wrong match, and corrections below 3 cm are not walked.

@@ -100,7 +100,11 @@ class Search:
         before_views.clear()
         heading_180 = b.heading
         turn = half_turn(overlaps, turned[0])
-        if turn is not None and self._set_gain(turn / turned[0], f"{len(overlaps)} views"):
+        if (
+            turn is not None
+            and abs(turned[0]) > 1e-3  # a rotation that turned nothing measures no gain
+            and self._set_gain(turn / turned[0], f"{len(overlaps)} views")
+        ):
             b.heading = wrap_pi(h0 + turn)
             heading_180 = b.heading
         else:
