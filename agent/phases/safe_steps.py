@@ -13,10 +13,11 @@ out of the image but still there):
   if beside); bounded by ``max_polls``;
 * **VIA**: once this robot's patience (its rank in the plan, (wave, id) order) is
   spent, a tangent step round the blocker, until the way to the goal is clear again.
-  A blocker taken for a member that holds its slot (or that the plan left out) will
-  not walk on: the patience is then the first rank's (one poll), whatever this
-  robot's rank (issue 21: at 50 NAOs a robot of rank ~30 waited 33 polls, 80 s of the
-  critical chain, for a NAO that stood on its slot).
+  A blocker taken for a member that holds its slot, that the plan left out, or that
+  has not moved and waits (through the plan) for this robot will not walk on before
+  this one passes: the patience is then the first rank's (one poll), whatever this
+  robot's rank (issue 21: at 50 NAOs robot 37, rank ~30, waited 32-33 polls, 80 s of
+  the critical chain, for robot 6 standing at its start, whose ``after`` list names 37).
 * **jam** (issue 21, agent/core/formation/jam.py): still blocked once the patience is
   spent, the robot names the member it takes for the blocker (status ``blocked_by``,
   :meth:`SafeSteps._claim`): a robot that has not moved yet and waits for this one
@@ -48,7 +49,15 @@ from agent.core.control.corridor import (
     patience,
     plan_rank,
 )
-from agent.core.formation.jam import HOLDING, STOP, blocker_of, expected_places, jam_verdict
+from agent.core.formation.jam import (
+    HOLDING,
+    STOP,
+    UNMOVED,
+    blocker_of,
+    expected_places,
+    jam_verdict,
+    waits_for,
+)
 from agent.core.nao import CAMERA_HFOV, HEAD_YAW_LIMIT
 from agent.phases.context import AgentFailure, Context
 from agent.phases.roles import Fleet, Mover
@@ -176,7 +185,7 @@ class SafeSteps:
             if why:
                 raise AgentFailure(why)
             by = ""
-            if via and waited >= patience(rank, cp):  # patience spent: name the blocker
+            if via and waited >= patience(now_rank, cp):  # patience spent: name the blocker
                 blocker = self._blocker(v.blockers[0])
                 phase = self.fleet.peer(blocker).phase if blocker >= 0 else ""
                 jv = jam_verdict(self.ctx.me, blocker, phase, waited, cp.max_polls, long_polls)
@@ -229,12 +238,19 @@ class SafeSteps:
         return blocker_of(seen + rel, places, BLOCKER_MATCH)
 
     def _stands(self, blocker: int) -> bool:
-        """Whether member ``blocker`` stands for good: it holds its slot, or the plan
-        left it out (it stands at its start); False for -1 (no member named)."""
+        """Whether waiting for member ``blocker`` to walk on is no use: it holds its slot,
+        the plan left it out (it stands at its start), or it has not moved and waits,
+        through the plan's ``after`` lists, for this robot (it moves only once this robot
+        is past it, or yields once claimed: jam.py rule 2); False for -1 (no member
+        named)."""
         plan = self.ctx.planned
         if blocker < 0 or plan is None:
             return False
-        return blocker in plan.excluded or self.fleet.peer(blocker).phase in HOLDING
+        phase = self.fleet.peer(blocker).phase
+        if blocker in plan.excluded or phase in HOLDING:
+            return True
+        after = {int(r.robot_id): tuple(int(j) for j in r.after) for r in plan.robots}
+        return phase in UNMOVED and waits_for(after, blocker, self.ctx.me)
 
     def _claim(self, blocker: int) -> None:
         """Publish that this robot's way is blocked by ``blocker`` (-1: no longer)."""
