@@ -5,8 +5,11 @@ Candidates (n <= ``CANDIDATES_MAX_N``): the min-sum assignment (``optimal``), mi
 under bounds on the longest path between B* and min-sum's own (the CAT-ORA idea), and
 CAPT, all on the centred pyramid (AUV eqs. 5-7). Each is made safe and packed
 (:mod:`scheduled`); of those whose total path stays within ``PATH_SLACK`` of the
-optimum, the best by dependency makespan get detours on their critical chain, and the
-smallest makespan wins. Otherwise the paper's matching (NAO paper 4.2, Lemma 1) or the
+optimum, the best by dependency makespan get detours on their critical chain, a copy
+with start sidesteps (:mod:`kinks`) and two copies with bundle lanes (:mod:`lanes`: the
+slots of each bundle re-paired per side and jointly, from the detoured plan's
+assignment), and the smallest makespan wins; a lane plan only when its makespan is
+strictly smaller than every other. Otherwise the paper's matching (NAO paper 4.2, Lemma 1) or the
 explicit strategy is tried per placement until one schedules safely.
 """
 
@@ -18,6 +21,7 @@ import numpy as np
 
 from agent.core.formation.assignment import assign, bounded_assignment, min_bottleneck
 from agent.core.formation.kinks import start_kinks
+from agent.core.formation.lanes import bundle_lanes
 from agent.core.formation.params import CANDIDATES_MAX_N, PlanParams
 from agent.core.formation.pyramid import PyramidFrame, placed_slots
 from agent.core.formation.scheduled import Scheduled, scheduled_plan
@@ -33,6 +37,10 @@ BOUND_STEPS = (0.0, 0.25, 0.5, 0.75)
 
 #: How many of the best candidates (by makespan before detours) get detours.
 SHORTENED = 3
+
+#: A bundle-lane plan (:mod:`lanes`) replaces the best plan only when its makespan is
+#: smaller by more than this (path-length units: rounding).
+LANES_MARGIN = 1e-9
 
 _NO_OBS = np.zeros((0, 2))
 
@@ -92,26 +100,56 @@ def choose(
         good.sort(key=lambda g: g[:3])
         axis = np.array([math.cos(frame.beta), math.sin(frame.beta)])
         kinked: list[tuple[float, float, int, Scheduled]] = []
+        laned: list[tuple[float, float, int, Scheduled]] = []
+        clear = 2.0 * params.radius
         for j, (_, _, k, sc) in enumerate(good[:SHORTENED]):  # detours for the best
             better = scheduled_plan(
                 pos, sc.targets, sc.order, empty, _NO_OBS, params, sc.strategy, bound=bound
             )
             good[j] = (better.makespan, better.total, k, better)
             # the same with start sidesteps (kinks), ranked after every plan without
-            vias = start_kinks(pos, sc.targets, axis, 2.0 * params.radius)
-            if not any(vias):
-                continue
-            try:
-                alt = scheduled_plan(
-                    pos, sc.targets, sc.order, vias, _NO_OBS, params, sc.strategy, bound=bound
-                )
-            except ValueError:
-                continue
-            if alt.total <= bound:
+            vias = start_kinks(pos, sc.targets, axis, clear)
+            alt = None
+            if any(vias):
+                try:
+                    alt = scheduled_plan(
+                        pos, sc.targets, sc.order, vias, _NO_OBS, params, sc.strategy, bound=bound
+                    )
+                except ValueError:
+                    alt = None
+            if alt is not None and alt.total <= bound:
                 kinked.append((alt.makespan, alt.total, len(BOUND_STEPS) + 2 + k, alt))
+            # the same with bundle lanes (a lane each, slots re-paired in the bundle)
+            for m, joint in enumerate((False, True)):
+                ln = bundle_lanes(
+                    starts_p, slots_p, better.order, params.d_e, params.phi_e, clear, joint
+                )
+                if ln is None:
+                    continue
+                lanes_order, lanes_vias = ln
+                try:
+                    alt = scheduled_plan(
+                        pos,
+                        frame.to_common(slots_p[lanes_order]),
+                        lanes_order,
+                        [tuple(frame.to_common(v) for v in vs) for vs in lanes_vias],
+                        _NO_OBS,
+                        params,
+                        sc.strategy,
+                        bound=bound,
+                    )
+                except ValueError:
+                    continue
+                if alt.total <= bound:
+                    laned.append((alt.makespan, alt.total, 2 * k + m, alt))
         good += kinked
         if good:
-            return min(good, key=lambda g: g[:3])[3]
+            win = min(good, key=lambda g: g[:3])
+            if laned:  # kept only when its makespan is strictly smaller
+                lane_win = min(laned, key=lambda g: g[:3])
+                if lane_win[0] < win[0] - LANES_MARGIN:
+                    win = lane_win
+            return win[3]
     for strat, placement in params.attempts(n):
         slots_p = placed_slots(n, params.d_e, params.phi_e, starts_p, placement)
         perm = assign(starts_p, slots_p, strat, params.d_e, params.phi_e)
