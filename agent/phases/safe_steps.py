@@ -12,7 +12,9 @@ out of the image but still there):
   (:meth:`SafeSteps._recheck`: step back if too near to see, look at it with the head
   if beside); bounded by ``max_polls``;
 * **VIA**: once this robot's patience (its rank in the plan, (wave, id) order) is
-  spent, a tangent step round the blocker, until the way to the goal is clear again.
+  spent, a tangent step round the blocker, until the way to the goal is clear again;
+  a tangent step whose own corridor the image after the turn shows blocked is planned
+  again from that image once the patience is spent (:meth:`SafeSteps._via_step`).
   A blocker taken for a member that holds its slot, that the plan left out, or that
   has not moved and waits (through the plan) for this robot will not walk on before
   this one passes: the patience is then the first rank's (one poll), whatever this
@@ -79,6 +81,8 @@ class SafeSteps:
         self.corridor = CorridorParams()  # the safe-step check before each step
         self.waits = 0  # polls spent waiting for a clear corridor
         self.vias = 0  # via (tangent) steps taken round a blocking NAO
+        #: polls spent on via steps found blocked after the turn (not walked), this goal
+        self.refused = 0
         self.seen: list[tuple[np.ndarray, int]] = []  # (NAO seen, fixed frame; at step)
 
     def forget(self) -> None:
@@ -94,6 +98,7 @@ class SafeSteps:
         b = self.ctx.beliefs
         total = float(np.hypot(*(goal - b.position))) or 1.0
         cp = self.corridor
+        self.refused = 0
         side = 0  # the side of the detour under way (0: none)
         for _ in range(200):
             leg = next_leg(b.position, b.heading, goal, backward_within=backward_within)
@@ -107,8 +112,7 @@ class SafeSteps:
                 v = check_step(
                     leg.walk, to_goal, rel, cp, wait, side=side, goal=goal - b.position, ahead=ahead
                 )
-                if v.action == VIA:
-                    self._via_step(v)
+                if v.action == VIA and self._via_step(v):
                     continue
                 side = 0
             why = self.fleet.fleet_stop()
@@ -120,21 +124,27 @@ class SafeSteps:
                 )
             v = self.clear_way(leg.walk, goal=goal, ahead=ahead)
             if v.action == VIA:
-                side = v.side
-                self._via_step(v)
+                side = v.side if self._via_step(v) else 0
                 continue
             self.motion.walk_step(leg.walk)
             progress(1.0 - max(0.0, leg.remaining - abs(leg.walk)) / total)
         raise AgentFailure("distance control did not converge in 200 steps")
 
-    def _via_step(self, v: Verdict) -> None:
-        """Turn to the via step's heading, check its corridor again (no further via), walk."""
+    def _via_step(self, v: Verdict) -> bool:
+        """Turn to the via step's heading, check its corridor again (no further via), walk;
+        False, not walked, when that corridor stays blocked past this robot's patience:
+        the image after the turn shows what the via was planned without (a NAO out of
+        the earlier view, one seen afresh nearer). The caller then plans the detour again
+        from what it has seen since (issue 21: at 50 NAOs robot 37 waited 60 polls, then
+        stopped the fleet, facing a NAO that held its slot 0.6 m ahead)."""
         turn = wrap_pi(v.heading - self.ctx.beliefs.heading)
         if abs(turn) > self.ctx.cfg.rotation_tolerance:
             self.motion.rotate(turn, STEP_GAINS if abs(turn) < math.radians(15) else PAPER_GAINS)
+        if self.clear_way(v.walk, via=False).action != GO:
+            return False
         self.vias += 1
-        self.clear_way(v.walk, via=False)
         self.motion.walk_step(v.walk)
+        return True
 
     def _remembered(self) -> np.ndarray:
         """The NAOs seen in the last ``memory_steps`` steps, relative to here (fixed frame):
@@ -157,7 +167,10 @@ class SafeSteps:
         [x, y]``, fixed frame). Past its patience it names its blocker (:meth:`_claim`).
         Bounded (agent/core/formation/jam.py rule 3): AgentFailure after ``max_polls``
         polls, or the wave timeout's worth for a blocker that has not moved yet; at once
-        when a member of the plan has failed (rule 4)."""
+        when a member of the plan has failed (rule 4). A via step's own check (``via``
+        False) returns its blocked verdict once the patience is spent, for the caller to
+        plan the detour again (:meth:`_via_step`); ``max_polls`` such polls for one goal
+        end in AgentFailure."""
         b = self.ctx.beliefs
         cp = self.corridor
         rank = now_rank = self._rank()
@@ -196,11 +209,17 @@ class SafeSteps:
                     )
                 self._claim(blocker)
                 by = f" (robot {blocker})" if blocker >= 0 else ""
-            elif not via and waited >= cp.max_polls:
-                raise AgentFailure(
-                    f"way blocked for {cp.max_polls} polls at believed "
-                    f"{b.position.round(2).tolist()}"
+            elif not via and waited >= patience(now_rank, cp):  # a via step: re-plan it
+                self.refused += waited
+                if self.refused >= cp.max_polls:
+                    raise AgentFailure(
+                        f"way blocked for {cp.max_polls} polls at believed "
+                        f"{b.position.round(2).tolist()}"
+                    )
+                log.info(
+                    "corridor: via step blocked after %d poll(s): detour planned again", waited
                 )
+                return v
             self.ctx.status(
                 self.ctx.phase, detail=f"waiting: NAO ahead at {where}{by}", force=waited == 0
             )

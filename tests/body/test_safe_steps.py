@@ -259,3 +259,31 @@ def test_a_nao_that_holds_its_slot_is_walked_round_without_waiting_out_the_rank(
     assert math.hypot(x, y - 1.6) < 0.15
     assert polls[0] <= r.safe_steps.waits <= polls[1] and r.safe_steps.vias >= 1
     assert blocked.locomotion.contacts == 0
+
+
+def test_a_via_step_blocked_after_the_turn_is_planned_again(
+    bus: Bus, perception: PerceptionAdapter
+) -> None:
+    """Issue 21, 50 NAOs: robot 37 turned for a via step, saw a NAO that held its slot
+    0.6 m ahead in the turned image, waited 60 polls for it and stopped the fleet. Here
+    robot 3 stands on the right tangent round robot 2, outside the first image (44° off
+    the heading): the via step planned without it is found blocked after the turn, not
+    walked, and the detour is planned again (round the left) from what the robot has seen
+    (before: ``max_polls`` polls, then AgentFailure)."""
+    hidden = Scenario(
+        robots=(
+            RobotSpec(1, 0.0, -0.8, math.pi / 2),
+            RobotSpec(2, 0.0, 0.0, -math.pi / 2),
+            RobotSpec(3, 0.62 * math.cos(0.81), -0.8 + 0.62 * math.sin(0.81), math.pi),
+        ),
+        seed=5,
+        room=4.0,
+    )
+    with World(hidden) as world:
+        r = _runner(world, bus, perception)
+        r.safe_steps.corridor = CorridorParams(poll=0.01, max_polls=8)
+        r.safe_steps.walk_to(np.array([0.0, 2.4]), lambda p: None)  # 0.8 m past robot 2
+        x, y, _ = world.pose(1)
+        assert math.hypot(x, y - 1.6) < 0.15
+        assert r.safe_steps.refused >= 1 and r.safe_steps.vias >= 1
+        assert world.locomotion.contacts == 0
