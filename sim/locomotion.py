@@ -7,7 +7,9 @@ visual compass after each step.
 
 **Motion.** ``walk(d)`` moves a robot straight ahead (``d`` < 0: backwards) at
 :data:`WALK_SPEED` = 0.095 m/s (backwards :data:`BACK_SPEED`); ``turn(a)`` turns it on the
-spot at :data:`TURN_RATE`. All active commands advance together in fixed steps of
+spot at :data:`TURN_RATE`; ``side(d)`` steps it sideways (``d`` > 0: to its left, NAOqi's
+``moveTo(0, y, 0)``) at :data:`SIDE_SPEED`, at most :data:`~agent.wire.MAX_SIDE_STEP` at
+once. All active commands advance together in fixed steps of
 ``dt`` = 0.02 s of sim time (:meth:`Locomotion.step`); a robot runs one command at a time.
 
 **Noise model** (:class:`NoiseModel`, seeded per robot from the scenario seed and the
@@ -20,6 +22,8 @@ robot id, so results do not depend on what other robots do):
   and κ_c ~ N(0, 0.20 rad/m) is drawn per command. Over robots, after a segment of length
   s the heading error has σ = sqrt(0.13 s² + 0.01 s): 0.09 rad at 0.2 m, 0.37 rad at
   1.0 m (Table 2, one NAO: |e| 0.02-0.10 rad at 0.2 m, 0.33-0.45 rad at 0.8-1.0 m);
+- sidestep: the walk's distance error and heading random walk (no curvature: the
+  veer of a NAO is a property of its forward gait);
 - turn: actual = commanded × (1 + N(0, 0.05)) + N(0, 0.02 rad).
 
 :meth:`NoiseModel.scaled` multiplies every σ by K (``python -m sim --noise-scale K``,
@@ -41,11 +45,13 @@ from typing import Protocol
 
 import numpy as np
 
+from agent.wire import MAX_SIDE_STEP
 from sim.nao_model import FOOTPRINT_RADIUS
 
 WALK_SPEED = 0.095  # m/s forwards (NAO default)
 BACK_SPEED = 0.06  # m/s backwards
 TURN_RATE = 0.6  # rad/s on the spot
+SIDE_SPEED = 0.05  # m/s sideways
 DT = 0.02  # s of sim time per step
 MAX_DISTANCE = 50.0  # m, longest accepted walk command
 MAX_ANGLE = 4 * math.pi  # rad, largest accepted turn command
@@ -112,7 +118,7 @@ class Poses(Protocol):
 
 @dataclass
 class _Motion:
-    kind: str  # "walk" or "turn"
+    kind: str  # "walk", "side" or "turn"
     remaining: float  # metres of path or radians of turn still to go (>= 0)
     sign: float  # direction of travel / turn
     speed: float  # m/s or rad/s
@@ -184,6 +190,17 @@ class Locomotion:
             "walk", actual, 1.0 if d >= 0 else -1.0, WALK_SPEED if d >= 0 else BACK_SPEED, kappa
         )
 
+    def side(self, robot_id: int, distance: float) -> None:
+        """Start stepping ``distance`` metres sideways (positive: to the left)."""
+        d = float(distance)
+        if not math.isfinite(d):
+            raise ValueError(f"sidestep {distance!r} is not finite")
+        if abs(d) > MAX_SIDE_STEP:
+            raise ValueError(f"sidestep {d} m exceeds ±{MAX_SIDE_STEP} m")
+        rng = self._check_free(robot_id)
+        actual = abs(d) * max(0.0, 1.0 + self.noise.distance_scale * float(rng.standard_normal()))
+        self._active[robot_id] = _Motion("side", actual, 1.0 if d >= 0 else -1.0, SIDE_SPEED, 0.0)
+
     def turn(self, robot_id: int, angle: float) -> None:
         """Start turning on the spot by ``angle`` radians (positive: counter-clockwise)."""
         a = float(angle)
@@ -229,7 +246,7 @@ class Locomotion:
                 dth = m.curvature * ds
                 if self.noise.heading_walk > 0 and ds > 0:
                     dth += self.noise.heading_walk * math.sqrt(ds) * float(rng.standard_normal())
-                mid = th + dth / 2
+                mid = th + dth / 2 + (math.pi / 2 if m.kind == "side" else 0.0)
                 proposal[rid] = (
                     x + m.sign * ds * math.cos(mid),
                     y + m.sign * ds * math.sin(mid),

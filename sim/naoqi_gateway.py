@@ -6,9 +6,9 @@ its own port, with the services and methods an agent's NAOqi body uses, under th
 NAOqi names and signatures:
 
 - ``ALMotion``: ``wakeUp``, ``rest``, ``robotIsWakeUp``, ``moveInit``,
-  ``moveTo(x, y, theta)`` (blocking; a forward/backward walk when ``theta`` = 0, a turn
-  on the spot when ``x`` = ``y`` = 0; returns ``False`` when a contact stopped it, as
-  NAOqi ≥ 2.5's ``moveTo`` reports an interrupted move), ``stopMove``,
+  ``moveTo(x, y, theta)`` (blocking; a forward/backward walk when ``y`` = ``theta`` = 0,
+  a sidestep when ``x`` = ``theta`` = 0, a turn on the spot when ``x`` = ``y`` = 0;
+  returns ``False`` when a contact stopped it, as NAOqi ≥ 2.5's ``moveTo`` reports an interrupted move), ``stopMove``,
   ``setAngles(names, angles, fractionMaxSpeed)`` and ``getAngles(names, useSensors)``
   for ``HeadYaw`` (clamped to ±119.5° like the real joint), ``getTime``.
 - ``ALVideoDevice``: ``subscribeCamera(name, cameraIndex, resolution, colorSpace, fps)``
@@ -151,10 +151,10 @@ class ALMotion:
         for v in (x, y, theta):
             if not math.isfinite(v):
                 raise RuntimeError(f"ALMotion.moveTo: {v} is not finite")
-        if abs(y) > 1e-9 or (abs(theta) > 1e-9 and abs(x) > 1e-9):
+        if sum(abs(v) > 1e-9 for v in (x, y, theta)) > 1:
             raise RuntimeError(
-                "ALMotion.moveTo: the virtual NAO walks straight (y = 0, theta = 0) "
-                "or turns on the spot (x = y = 0)"
+                "ALMotion.moveTo: the virtual NAO walks straight (y = 0, theta = 0), "
+                "steps sideways (x = 0, theta = 0) or turns on the spot (x = y = 0)"
             )
 
         def ended(rep: Message) -> bool:
@@ -164,6 +164,9 @@ class ALMotion:
         rid = n.robot_id
         if abs(theta) > 1e-9:
             return n.ask("turn", key_turn(rid), TurnRequest(angle=float(theta)), ended)
+        if abs(y) > 1e-9:
+            step = WalkRequest(distance=0.0, lateral=float(y))
+            return n.ask("walk", key_walk(rid), step, ended)
         return n.ask("walk", key_walk(rid), WalkRequest(distance=float(x)), ended)
 
     def stopMove(self) -> None:

@@ -12,8 +12,8 @@ is authenticated and checked: :mod:`sim.requests`):
   only when none is left.
 - ``world/scenario``: ``ScenarioRequest`` -> ``ScenarioReply`` (the scenario as JSON, for
   render workers building their copy of the room; secure: to the ``render`` key only).
-- ``world/robot/{id}/walk`` / ``turn``: ``WalkRequest`` / ``TurnRequest`` -> a
-  ``CommandReply(done|contact)`` sent when the motion has finished in sim time. A
+- ``world/robot/{id}/walk`` / ``turn``: ``WalkRequest`` (a walk, or a sidestep with
+  ``lateral``) / ``TurnRequest`` -> a ``CommandReply(done|contact)`` sent when the motion has finished in sim time. A
   request with a ``request_id`` (> 0) is executed once per (robot, id), so a client may
   retry a motion whose reply it lost (:mod:`sim.motions`; the last ``MOTION_CACHE``
   results per robot are kept).
@@ -432,8 +432,9 @@ class WorldServer:
                 if rep is not None:  # else a render worker has it
                     self._answer(q, rep)
             elif isinstance(msg, WalkRequest):
-                d, legs = msg.distance, self.world.locomotion
-                self._motion(q, rid, "walk", msg.request_id, lambda: legs.walk(rid, d))
+                d, side, legs = msg.distance, msg.lateral, self.world.locomotion
+                go = (lambda: legs.side(rid, side)) if side else (lambda: legs.walk(rid, d))
+                self._motion(q, rid, "walk", msg.request_id, go)
             elif isinstance(msg, TurnRequest):
                 a, legs = msg.angle, self.world.locomotion
                 self._motion(q, rid, "turn", msg.request_id, lambda: legs.turn(rid, a))

@@ -43,6 +43,7 @@ SAMPLES: list[p.Message] = [
         robot_id=1, yaw=-1.0, t_sim=3.0, width=640, height=480, encoding="png", data=b"\x89PNG..."
     ),
     p.WalkRequest(distance=0.2, request_id=12),
+    p.WalkRequest(distance=0.0, request_id=13, lateral=-0.05),
     p.TurnRequest(angle=-0.26, request_id=p.MAX_REQUEST_ID),
     p.CommandReply(robot_id=1, status="done", t_sim=4.0),
     p.ErrorReply(reason="unknown robot 9"),
@@ -154,6 +155,18 @@ def test_expect_restricts_type() -> None:
 def test_construction_validates() -> None:
     with pytest.raises(p.ProtocolError):
         p.WalkRequest(distance=math.inf)
+
+
+@pytest.mark.parametrize(
+    ("distance", "lateral", "reason"),
+    [(0.1, 0.05, "not both"), (0.0, p.MAX_SIDE_STEP + 0.01, "lateral: .*outside")],
+)
+def test_a_sidestep_is_bounded_and_never_mixed_with_a_walk(
+    distance: float, lateral: float, reason: str
+) -> None:
+    wire = {"v": p.SCHEMA_VERSION, "t": "walk", "distance": distance, "lateral": lateral}
+    with pytest.raises(p.ProtocolError, match=reason):
+        p.decode(msgpack.packb(wire))
 
 
 @pytest.mark.parametrize(

@@ -84,6 +84,11 @@ class Body(Protocol):
         ids answers a repeat of an id with its first result, without moving again."""
         ...
 
+    def side(self, distance: float, request_id: int = 0) -> MotionResult:
+        """Step ``distance`` m sideways (+ to the left, at most ``MAX_SIDE_STEP``; NAOqi's
+        ``moveTo(0, y, 0)``); ``request_id`` as for :meth:`walk`."""
+        ...
+
     def turn(self, angle: float, request_id: int = 0) -> MotionResult:
         """Turn on the spot by ``angle`` rad (+ CCW); ``request_id`` as for :meth:`walk`."""
         ...

@@ -20,7 +20,7 @@ import numpy as np
 
 from agent.body.base import BodyError, Frame, MotionResult
 from agent.core.nao import HEAD_YAW_LIMIT
-from agent.wire import MAX_STEP
+from agent.wire import MAX_SIDE_STEP, MAX_STEP
 
 
 class Finished(Protocol):
@@ -40,6 +40,7 @@ class Legs(Protocol):
     """The world's locomotion: commands and one step of the clock."""
 
     def walk(self, robot_id: int, distance: float) -> object: ...
+    def side(self, robot_id: int, distance: float) -> object: ...
     def turn(self, robot_id: int, angle: float) -> object: ...
     def step(self) -> tuple[Sequence[Finished], Sequence[object]]: ...
 
@@ -98,6 +99,12 @@ class WorldBody:
             raise ValueError(f"walk distance {distance} m outside ±{MAX_STEP:g} m")
         return self._motion("walk", distance)
 
+    def side(self, distance: float, request_id: int = 0) -> MotionResult:
+        """Step ``distance`` m sideways (+ left; the request id is ignored)."""
+        if not math.isfinite(distance) or abs(distance) > MAX_SIDE_STEP:
+            raise ValueError(f"sidestep {distance} m outside ±{MAX_SIDE_STEP:g} m")
+        return self._motion("side", distance)
+
     def turn(self, angle: float, request_id: int = 0) -> MotionResult:
         """Turn on the spot by ``angle`` rad (the request id is ignored)."""
         if not math.isfinite(angle):
@@ -116,6 +123,8 @@ class WorldBody:
         try:
             if what == "walk":
                 loco.walk(self._robot_id, amount)
+            elif what == "side":
+                loco.side(self._robot_id, amount)
             else:
                 loco.turn(self._robot_id, amount)
         except ValueError as exc:  # the world refuses (busy, too far)

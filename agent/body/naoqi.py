@@ -37,7 +37,7 @@ import qi
 
 from agent.body.base import BodyError, Frame, MotionResult
 from agent.core import nao
-from agent.wire import MAX_STEP
+from agent.wire import MAX_SIDE_STEP, MAX_STEP
 
 T = TypeVar("T")
 
@@ -201,15 +201,22 @@ class NaoqiBody:
             raise ValueError(f"walk distance {distance} m outside ±{MAX_STEP:g} m")
         return self._move("walk", distance, 0.0)
 
+    def side(self, distance: float, request_id: int = 0) -> MotionResult:
+        """``ALMotion.moveTo(0, distance, 0)``: sideways (+ left); the request id is
+        ignored."""
+        if not math.isfinite(distance) or abs(distance) > MAX_SIDE_STEP:
+            raise ValueError(f"sidestep {distance} m outside ±{MAX_SIDE_STEP:g} m")
+        return self._move("side", 0.0, 0.0, distance)
+
     def turn(self, angle: float, request_id: int = 0) -> MotionResult:
         """``ALMotion.moveTo(0, 0, angle)``: on the spot (+ CCW); the request id is ignored."""
         if not math.isfinite(angle) or abs(angle) > 4 * math.pi:
             raise ValueError(f"turn angle {angle} rad outside ±4π")
         return self._move("turn", 0.0, angle)
 
-    def _move(self, what: str, x: float, theta: float) -> MotionResult:
+    def _move(self, what: str, x: float, theta: float, y: float = 0.0) -> MotionResult:
         self._open(what)
-        ok = _call(f"{what} (ALMotion.moveTo)", lambda: self.motion.moveTo(x, 0.0, theta))
+        ok = _call(f"{what} (ALMotion.moveTo)", lambda: self.motion.moveTo(x, y, theta))
         t = self._robot_time()
         self._t_sim = max(self._t_sim, t)
         if ok is False:

@@ -43,6 +43,7 @@ from agent.core.nao import HEAD_YAW_LIMIT
 from agent.net.bus import Bus, BusError, Busy, NoRoute, QueryTimeout
 from agent.wire import (
     KEY_WORLD_REGISTER,
+    MAX_SIDE_STEP,
     MAX_STEP,
     CameraReply,
     CameraRequest,
@@ -245,6 +246,14 @@ class ZenohBody:
         if not math.isfinite(distance) or abs(distance) > MAX_STEP:
             raise ValueError(f"walk distance {distance} m outside ±{MAX_STEP:g} m")
         req = WalkRequest(distance=distance, request_id=self._id(request_id))
+        return self._motion(key_walk(self.robot_id), req, "walk")
+
+    def side(self, distance: float, request_id: int = 0) -> MotionResult:
+        """Step ``distance`` m sideways (+ left): a ``WalkRequest`` with ``lateral``;
+        returns when done. ``request_id`` as for :meth:`walk`."""
+        if not math.isfinite(distance) or abs(distance) > MAX_SIDE_STEP:
+            raise ValueError(f"sidestep {distance} m outside ±{MAX_SIDE_STEP:g} m")
+        req = WalkRequest(distance=0.0, lateral=distance, request_id=self._id(request_id))
         return self._motion(key_walk(self.robot_id), req, "walk")
 
     def turn(self, angle: float, request_id: int = 0) -> MotionResult:

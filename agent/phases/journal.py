@@ -73,7 +73,7 @@ MAX_STATE_BYTES = 64 * 1024
 MAX_REFERENCE_BYTES = 1280 * 960 * 3 + 1024
 MAX_IMAGE_SIDE = 1280
 #: Commands a journal may hold in flight.
-COMMANDS = ("", "turn", "walk")
+COMMANDS = ("", "turn", "walk", "side")
 #: How a run ended for this robot ("": not yet).
 FINALS = ("", "done", "failed", "stopped")
 #: Journaled phases that end the run for this robot even without a final record (a

@@ -211,3 +211,34 @@ class Motion:
         if rep.status == "contact":
             raise AgentFailure(f"contact while walking at believed {b.position.round(2).tolist()}")
         return rep
+
+    def side_step(self, distance: float) -> MotionResult:
+        """One sidestep (+ to the left; NAOqi's ``moveTo(0, y, 0)``) and dead reckoning:
+        the position moves ``distance`` across the believed heading, the heading by the
+        compass's reading between the images before and after (the walk's central band;
+        an implausible reading is taken as no drift). An addition to the papers, which
+        only walk straight and turn: a NAO steps sideways by itself, and the final
+        alignment's few centimetres across the axis (:mod:`agent.phases.hold`) otherwise
+        cost a turn there and back (issue 21)."""
+        b = self.ctx.beliefs
+        before = self.reference()
+        h0, p0 = b.heading, b.position
+        body = self.ctx.body
+        rid = body.new_request_id()
+        self.ctx.journal_hook("side", distance, rid)
+        rep = body.side(distance, rid)
+        self.steps += 1
+        self.fleet.pump()
+        after = self.look(0.0)
+        drift, suspect = self._read(before, after, 0.0, walking=True)
+        if suspect is not None:
+            drift = 0.0
+        b.heading = wrap_pi(h0 + drift)
+        self.last_frame = after
+        across = math.pi / 2
+        b.position = advance(p0, h0 + across, wrap_pi(h0 + drift) + across, distance)
+        if rep.status == "contact":
+            raise AgentFailure(
+                f"contact while stepping sideways at believed {b.position.round(2).tolist()}"
+            )
+        return rep

@@ -275,6 +275,8 @@ class Resumption:
             )  # fmt: skip
             if st.command == "walk":
                 rep = ctx.body.walk(v, st.request_id)
+            elif st.command == "side":
+                rep = ctx.body.side(v, st.request_id)
             else:
                 rep = ctx.body.turn(v, st.request_id)
             self.fleet.pump()
@@ -282,9 +284,10 @@ class Resumption:
         if st.command == "turn":
             b.heading = wrap_pi(st.heading + v)
         else:
-            b.position = advance(b.position, st.heading, st.heading, v)
+            way = st.heading + (math.pi / 2 if st.command == "side" else 0.0)
+            b.position = advance(b.position, way, way, v)
         if rep is not None and rep.status == "contact":
-            if st.command == "walk":
+            if st.command != "turn":
                 raise AgentFailure(
                     "contact while walking (the step in flight at the crash) at believed "
                     f"{b.position.round(2).tolist()}"

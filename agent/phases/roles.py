@@ -85,6 +85,8 @@ class Mover(Protocol):
 
     def walk_step(self, distance: float) -> MotionResult: ...
 
+    def side_step(self, distance: float) -> MotionResult: ...
+
 
 class Surveyor(Protocol):
     """Search and localise (NAO paper 5.2.2 (iii), 3.1–3.2, 4.1.2)."""

@@ -50,6 +50,7 @@ MAX_COORD = 1000.0  # metres: no NAO fleet spans a kilometre
 #: metres: a robot's steps after it arrived (its alignment; far more than it walks)
 MAX_SHIFT = 10.0
 MAX_STEP = 50.0  # metres: the longest single walk command accepted
+MAX_SIDE_STEP = 0.3  # metres: the longest single sidestep accepted (NAOqi moveTo(0, y, 0))
 #: metres: the longest planned path a status reports walking along (issue 21, finer
 #: waits): a path with two via points across a fleet of MAX_COORD spans < 9 km
 MAX_WALKED = 10.0 * MAX_COORD

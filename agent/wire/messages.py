@@ -25,6 +25,7 @@ from agent.wire.fields import (
     MAX_OBSTACLES,
     MAX_ROBOT_ID,
     MAX_SHIFT,
+    MAX_SIDE_STEP,
     MAX_THUMBNAIL_BYTES,
     MAX_THUMBNAIL_HEIGHT,
     MAX_THUMBNAIL_WIDTH,
@@ -331,16 +332,25 @@ _REQUEST_ID = _int("request_id", 0, MAX_REQUEST_ID)
 
 @dataclass(frozen=True)
 class WalkRequest(Message):
-    """Walk straight ahead ``distance`` metres (negative: backwards); ``request_id``:
-    see :data:`MAX_REQUEST_ID`."""
+    """Walk straight ahead ``distance`` metres (negative: backwards), or, with
+    ``distance`` 0, step ``lateral`` metres sideways (positive: to the left; NAOqi's
+    ``moveTo(0, y, 0)``, at most :data:`MAX_SIDE_STEP`); ``request_id``: see
+    :data:`MAX_REQUEST_ID`."""
 
     TAG: ClassVar[str] = "walk"
     distance: float
     request_id: int = 0
+    lateral: float = 0.0
     SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {
         "distance": _float("distance"),
         "request_id": _REQUEST_ID,
+        "lateral": _float("lateral", -MAX_SIDE_STEP, MAX_SIDE_STEP),
     }
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.lateral and self.distance:
+            raise ProtocolError("walk: a step is straight ahead or sideways, not both")
 
 
 @dataclass(frozen=True)

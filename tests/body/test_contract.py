@@ -88,6 +88,25 @@ def test_walk_and_back(facing: Rig) -> None:
     assert facing.world.pose(1) == pytest.approx((x0, y0, h0), abs=1e-6)
 
 
+def test_sidestep_and_back(facing: Rig) -> None:
+    body = facing.make(1)
+    x0, y0, h0 = facing.world.pose(1)
+    r = body.side(0.1)  # facing north: to the left is west
+    assert r.status == "done"
+    assert facing.world.pose(1)[:2] == pytest.approx((x0 - 0.1, y0), abs=1e-6)
+    assert body.side(-0.1).status == "done"
+    assert facing.world.pose(1) == pytest.approx((x0, y0, h0), abs=1e-6)
+
+
+@pytest.mark.parametrize("distance", [math.nan, 0.5])
+def test_impossible_sidestep_is_refused_before_moving(facing: Rig, distance: float) -> None:
+    body = facing.make(1)
+    before = facing.world.pose(1)
+    with pytest.raises(ValueError, match="sidestep"):
+        body.side(distance)
+    assert facing.world.pose(1) == before
+
+
 @pytest.mark.parametrize("distance", [math.nan, 60.0])
 def test_impossible_walk_is_refused_before_moving(facing: Rig, distance: float) -> None:
     body = facing.make(1)

@@ -143,6 +143,33 @@ def test_correct_steps_towards_the_planned_offset_to_the_parent(
     assert world.locomotion.contacts == 0
 
 
+def test_a_small_correction_is_a_sidestep_without_turning(
+    world: World, bus: Bus, perception: PerceptionAdapter
+) -> None:
+    """Issue 21: a correction across the axis stepped sideways (NAOqi moveTo(0, y, 0))
+    instead of turning to it, walking and turning back (~12 compass turn steps, ~20 s a
+    level of the pyramid at 50 NAOs)."""
+    r, plan, child, axis = _holding(world, bus, perception)
+    parent = plan.robot(child.parent)
+    want = np.asarray(parent.target) - np.asarray(child.target)
+    x, y, h = world.pose(child.robot_id)
+    off = 0.10 * np.array([math.sin(axis), -math.cos(axis)])  # 10 cm to its right
+    world.set_pose(child.robot_id, x + off[0], y + off[1], h)
+    turns: list[float] = []
+    turn = r.motion.turn
+
+    def counted(angle: float) -> object:
+        turns.append(angle)
+        return turn(angle)
+
+    r.motion.turn = counted  # type: ignore[method-assign,assignment]
+    r.hold.correct()
+    d = np.subtract(world.pose(parent.robot_id)[:2], world.pose(child.robot_id)[:2])
+    assert float(np.hypot(*(d - want))) < 0.05
+    assert len(turns) <= 2, turns  # at most a drift's turn back to the axis
+    assert world.locomotion.contacts == 0
+
+
 def _holding(world: World, bus: Bus, perception: PerceptionAdapter):  # type: ignore[no-untyped-def]
     """Every robot on its slot facing the pyramid axis; the runner of a child."""
     fa = FormationAdapter()

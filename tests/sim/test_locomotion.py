@@ -7,8 +7,10 @@ import math
 import numpy as np
 import pytest
 
+from agent.wire import MAX_SIDE_STEP
 from sim.locomotion import (
     DT,
+    SIDE_SPEED,
     WALK_SPEED,
     Locomotion,
     NoiseModel,
@@ -60,6 +62,31 @@ def test_noiseless_turn_and_backwards_walk() -> None:
     loco.walk(1, -0.3)
     loco.run_until_idle()
     assert st.pose(1)[0] == pytest.approx(-0.3, abs=1e-12)
+
+
+def test_noiseless_sidesteps_are_exact_and_take_distance_over_their_speed() -> None:
+    st = Store({1: (0.0, 0.0, NORTH)})
+    loco = Locomotion(st, seed=0, noise=NoiseModel.none())
+    loco.side(1, 0.1)  # facing north: to the left is west
+    done, _ = loco.run_until_idle()
+    assert [(d.kind, d.status) for d in done] == [("side", "done")]
+    assert st.pose(1) == pytest.approx((-0.1, 0.0, NORTH), abs=1e-12)
+    assert loco.t_sim == pytest.approx(math.ceil(0.1 / (SIDE_SPEED * DT) - 1e-9) * DT)
+    loco.side(1, -0.25)
+    loco.run_until_idle()
+    assert st.pose(1) == pytest.approx((0.15, 0.0, NORTH), abs=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("distance", "reason"), [(math.nan, "not finite"), (MAX_SIDE_STEP + 0.01, "exceeds")]
+)
+def test_impossible_sidesteps_are_refused(distance: float, reason: str) -> None:
+    loco = Locomotion(Store({1: (0.0, 0.0, NORTH)}), seed=0)
+    with pytest.raises(ValueError, match=reason):
+        loco.side(1, distance)
+    loco.walk(1, 0.1)
+    with pytest.raises(ValueError, match="busy"):
+        loco.side(1, 0.05)
 
 
 def _walk_errors(distance: float, runs: int) -> tuple[np.ndarray, np.ndarray]:
