@@ -83,3 +83,28 @@ def test_a_resumed_agent_sends_the_walk_in_flight_again_and_moves_once(
     assert math.isclose(runner.ctx.beliefs.position[1], 0.1, abs_tol=1e-9)
     assert np.isclose(runner.ctx.beliefs.position[0], 0.0)
     assert body.walk(-0.1).status == "done"
+
+
+def test_a_resumed_agent_sends_the_sidestep_in_flight_again_and_moves_once(
+    zenoh: Rig, perception: PerceptionAdapter
+) -> None:
+    """Issue 21's sidesteps are journaled as ``side`` and resumed like a walk: asked
+    again with their id, believed once, across the heading."""
+    x0, y0, h0 = zenoh.world.pose(1)
+    crashed = restarted(zenoh)
+    rid = crashed.new_request_id()
+    st = JournalState(
+        robot_id=1, phase="search", heading=NORTH, command="side", command_value=0.1,
+        request_id=rid,
+    )  # fmt: skip
+    assert crashed.side(0.1, rid).status == "done"
+    body = restarted(zenoh)
+    runner = Runner(
+        body.bus, body, AgentConfig(robot_id=1, fleet_size=2), perception, FormationAdapter()
+    )
+    repeats = zenoh.server.motions.repeats
+    assert runner.resumption.resume(st, Verdict(True, "peers searching")) == ("search", None)
+    assert zenoh.server.motions.repeats == repeats + 1
+    assert zenoh.world.pose(1) == pytest.approx((x0 - 0.1, y0, h0), abs=1e-6)  # once, west
+    assert runner.ctx.beliefs.position == pytest.approx((-0.1, 0.0), abs=1e-9)
+    assert body.side(-0.1).status == "done"
