@@ -38,9 +38,10 @@ from agent.phases.roles import Fleet, Mover, Stepper
 
 log = logging.getLogger("agent.phases.hold")
 
-#: Smallest step of its parent a child follows (m): a follow costs a turn, a step and a
-#: turn back; smaller ones are left to the child's own alignment (measured at 50 NAOs:
-#: following every 3 cm made each level of the pyramid slower, not faster).
+#: Smallest step of its parent a child follows (m); smaller ones are left to the child's
+#: own alignment (measured at 50 NAOs when a follow cost a turn, a step and a turn back:
+#: following every 3 cm made each level of the pyramid slower, not faster; since the
+#: sidesteps a follow of up to SIDE_MAX turns no more, and the threshold is not re-tuned).
 FOLLOW_MIN = 0.08
 #: Largest part of a step, across and along the robot's heading, taken as a sidestep and
 #: a straight step without turning (m; :meth:`Hold._step`); below SIDE_MIN nothing is
