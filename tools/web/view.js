@@ -39,6 +39,7 @@
   const channels = new Map(); // channel id -> channel
   const subs = new Map(); // subscription id -> channel
   const heard = new Set(); // subscription ids that brought a message
+  const asked = new Map(); // subscription id -> [Date.now() when asked, how many times before]
   let nextSub = 1;
   let dirty = false;
   let sceneNs = 0; // log time of the latest /scene not yet drawn
@@ -84,21 +85,30 @@
       setStatus("live", "live: " + url);
     };
     // A subscription the server refused (it can reach the server before the channel it
-    // just advertised) brings nothing: ask again for those still silent. The latched
-    // topics (obstacles, plan) are re-sent every second, so a second try gets them.
+    // just advertised: foxglove-sdk logs "attempted to subscribe to unknown channel")
+    // brings nothing: ask again for every one still silent, 3 s after it was asked, then
+    // 6, 12, 24, 48 s (a topic may also be silent because nothing is sent on it). The
+    // latched topics (obstacles, plan) are re-sent every second, so a second try gets
+    // them; `/scene` streams, so a silent one was refused (a browser test saw a page
+    // draw nothing for a whole run when only `/scene/...` topics were asked again).
     // The loop runs over a copy: a Map's iterator also visits the entries added while it
     // runs, and each fresh subscription is silent too, so iterating `subs` itself never
     // ended (the tab's heap reached 3 GB in 40 s: chromium's "V8 javascript OOM").
     const retry = setInterval(() => {
       if (ws.readyState !== WebSocket.OPEN) return clearInterval(retry);
+      const now = Date.now();
       const again = [];
       const drop = [];
       for (const [id, ch] of [...subs]) {
-        if (heard.has(id) || !channels.has(ch.id) || !ch.topic.startsWith("/scene/")) continue;
+        if (heard.has(id) || !channels.has(ch.id)) continue;
+        const [when, tries] = asked.get(id) || [now, 0];
+        if (now - when < 3000 * 2 ** Math.min(tries, 4) - 500) continue;
         drop.push(id);
         subs.delete(id);
+        asked.delete(id);
         const fresh = nextSub++;
         subs.set(fresh, ch);
+        asked.set(fresh, [now, tries + 1]);
         again.push({ id: fresh, channelId: ch.id });
       }
       if (drop.length) ws.send(JSON.stringify({ op: "unsubscribe", subscriptionIds: drop }));
@@ -109,6 +119,7 @@
       setStatus("closed", "disconnected (run over?) – retrying");
       channels.clear();
       subs.clear();
+      asked.clear();
       setTimeout(() => connect(url), 2000);
     };
     ws.onerror = () => {
@@ -142,6 +153,7 @@
         if (wanted(ch)) {
           const id = nextSub++;
           subs.set(id, ch);
+          asked.set(id, [Date.now(), 0]);
           add.push({ id: id, channelId: ch.id });
         }
       }
@@ -160,6 +172,7 @@
     const ch = subs.get(sub);
     if (!ch) return;
     heard.add(sub);
+    asked.delete(sub);
     const tNs = Number(dv.getBigUint64(5, true));
     let msg;
     try {
