@@ -15,7 +15,12 @@ solver (LSMR) stopped at its budget short of the exact solver's minimum (robot 4
 a fit of 50 NAOs takes tens of milliseconds.
 
 Deterministic: no randomness, a fixed iteration budget and fixed tolerances; the same
-inputs give bit-identical outputs on one platform.
+inputs give bit-identical outputs on one platform, whatever its BLAS threads: each step
+is solved by SuperLU (``scipy.sparse.linalg.splu`` on the sparse damped system), which
+calls no threaded BLAS. A dense LAPACK solve (``numpy.linalg.solve``) gave other last
+bits with one OpenBLAS thread than with two, and at 50 NAOs the agents (one thread each)
+and the harness's evaluator (two) planned different digests from the same records
+(tenth session); agents on hosts with other thread settings would have too.
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ from collections.abc import Callable
 
 import numpy as np
 from scipy.sparse import csr_matrix, diags
+from scipy.sparse.linalg import splu
 
 #: Iteration budget (accepted or refused steps).
 MAX_ITER = 200
@@ -62,16 +68,16 @@ def minimise(
         j = jac(x)
         w = 1.0 / np.sqrt(1.0 + f * f)
         jw = diags(w) @ j
-        h = np.asarray((j.T @ jw).toarray())
-        g = np.asarray(jw.T @ f)
-        d = np.maximum(np.diag(h), 1e-12)
+        h = (j.T @ jw).tocsc()
+        g = np.asarray(jw.T @ f, dtype=np.float64).reshape(-1)
+        d = np.maximum(h.diagonal(), 1e-12)
         improved = False
         while it < MAX_ITER:
             it += 1
-            a = h + lam * np.diag(d)
+            a = (h + diags(lam * d)).tocsc()
             try:
-                step = -np.linalg.solve(a, g)
-            except np.linalg.LinAlgError:
+                step = -splu(a).solve(g)
+            except RuntimeError:  # SuperLU: "Factor is exactly singular"
                 lam *= 4.0
                 if lam > LAMBDA_MAX:
                     return x, it
