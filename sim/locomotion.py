@@ -175,31 +175,31 @@ class Locomotion:
             raise ValueError(f"robot {robot_id} is busy with a {self._active[robot_id].kind}")
         return rng
 
-    def walk(self, robot_id: int, distance: float) -> None:
-        """Start walking ``distance`` metres straight ahead (negative: backwards)."""
+    def _stride(
+        self, robot_id: int, distance: float, bound: float, what: str
+    ) -> tuple[np.random.Generator, float, float]:
+        """(the robot's rng, the distance it will really cover, the direction ±1) of a
+        walk or sidestep of ``distance`` m (at most ``bound``): the distance noise drawn."""
         d = float(distance)
         if not math.isfinite(d):
-            raise ValueError(f"walk distance {distance!r} is not finite")
-        if abs(d) > MAX_DISTANCE:
-            raise ValueError(f"walk distance {d} m exceeds ±{MAX_DISTANCE} m")
+            raise ValueError(f"{what} {distance!r} is not finite")
+        if abs(d) > bound:
+            raise ValueError(f"{what} {d} m exceeds ±{bound} m")
         rng = self._check_free(robot_id)
-        n = self.noise
-        actual = abs(d) * max(0.0, 1.0 + n.distance_scale * float(rng.standard_normal()))
-        kappa = self.drift[robot_id] + n.curvature * float(rng.standard_normal())
-        self._active[robot_id] = _Motion(
-            "walk", actual, 1.0 if d >= 0 else -1.0, WALK_SPEED if d >= 0 else BACK_SPEED, kappa
-        )
+        actual = abs(d) * max(0.0, 1.0 + self.noise.distance_scale * float(rng.standard_normal()))
+        return rng, actual, 1.0 if d >= 0 else -1.0
+
+    def walk(self, robot_id: int, distance: float) -> None:
+        """Start walking ``distance`` metres straight ahead (negative: backwards)."""
+        rng, actual, sign = self._stride(robot_id, distance, MAX_DISTANCE, "walk distance")
+        kappa = self.drift[robot_id] + self.noise.curvature * float(rng.standard_normal())
+        speed = WALK_SPEED if sign > 0 else BACK_SPEED
+        self._active[robot_id] = _Motion("walk", actual, sign, speed, kappa)
 
     def side(self, robot_id: int, distance: float) -> None:
         """Start stepping ``distance`` metres sideways (positive: to the left)."""
-        d = float(distance)
-        if not math.isfinite(d):
-            raise ValueError(f"sidestep {distance!r} is not finite")
-        if abs(d) > MAX_SIDE_STEP:
-            raise ValueError(f"sidestep {d} m exceeds ±{MAX_SIDE_STEP} m")
-        rng = self._check_free(robot_id)
-        actual = abs(d) * max(0.0, 1.0 + self.noise.distance_scale * float(rng.standard_normal()))
-        self._active[robot_id] = _Motion("side", actual, 1.0 if d >= 0 else -1.0, SIDE_SPEED, 0.0)
+        _, actual, sign = self._stride(robot_id, distance, MAX_SIDE_STEP, "sidestep")
+        self._active[robot_id] = _Motion("side", actual, sign, SIDE_SPEED, 0.0)
 
     def turn(self, robot_id: int, angle: float) -> None:
         """Start turning on the spot by ``angle`` radians (positive: counter-clockwise)."""

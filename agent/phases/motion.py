@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -178,20 +179,29 @@ class Motion:
         )  # fmt: skip
         return after, u
 
-    def walk_step(self, distance: float) -> MotionResult:
-        """One straight step, the compass's drift and dead reckoning (4.2, eq. 2); a
-        drift too large to be plausible is re-measured (:meth:`_confirm_drift`)."""
-        b = self.ctx.beliefs
+    def _step(
+        self, command: str, distance: float, send: Callable[[float, int], MotionResult]
+    ) -> tuple[Frame, Frame, MotionResult, float, float | None]:
+        """What a straight step and a sidestep share: the command journaled with its
+        request id and sent, then the compass between the yaw-0 images before and after
+        (the walk's central band, :meth:`_read`). Returns (before, after, the body's
+        result, drift, suspect)."""
         before = self.reference()
-        h0, p0 = b.heading, b.position
-        body = self.ctx.body
-        rid = body.new_request_id()
-        self.ctx.journal_hook("walk", distance, rid)
-        rep = body.walk(distance, rid)
+        rid = self.ctx.body.new_request_id()
+        self.ctx.journal_hook(command, distance, rid)
+        rep = send(distance, rid)
         self.steps += 1
         self.fleet.pump()
         after = self.look(0.0)
         drift, suspect = self._read(before, after, 0.0, walking=True)
+        return before, after, rep, drift, suspect
+
+    def walk_step(self, distance: float) -> MotionResult:
+        """One straight step, the compass's drift and dead reckoning (4.2, eq. 2); a
+        drift too large to be plausible is re-measured (:meth:`_confirm_drift`)."""
+        b = self.ctx.beliefs
+        h0, p0 = b.heading, b.position
+        before, after, rep, drift, suspect = self._step("walk", distance, self.ctx.body.walk)
         turned = 0.0
         if suspect is not None and rep.status != "contact":
             # the step is over: believed (drift unknown yet) before the re-measuring
@@ -221,16 +231,8 @@ class Motion:
         alignment's few centimetres across the axis (:mod:`agent.phases.hold`) otherwise
         cost a turn there and back (issue 21)."""
         b = self.ctx.beliefs
-        before = self.reference()
         h0, p0 = b.heading, b.position
-        body = self.ctx.body
-        rid = body.new_request_id()
-        self.ctx.journal_hook("side", distance, rid)
-        rep = body.side(distance, rid)
-        self.steps += 1
-        self.fleet.pump()
-        after = self.look(0.0)
-        drift, suspect = self._read(before, after, 0.0, walking=True)
+        _, after, rep, drift, suspect = self._step("side", distance, self.ctx.body.side)
         if suspect is not None:
             drift = 0.0
         b.heading = wrap_pi(h0 + drift)

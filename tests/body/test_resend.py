@@ -9,10 +9,8 @@ resumed agent's belief follows the answer once.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterator
 
-import numpy as np
 import pytest
 
 from agent.adapters import FormationAdapter, PerceptionAdapter
@@ -54,22 +52,23 @@ def test_a_repeated_walk_is_answered_from_the_worlds_cache(zenoh: Rig) -> None:
     assert zenoh.world.pose(1) == pytest.approx((x0, y0, h0), abs=1e-6)
 
 
-def test_a_resumed_agent_sends_the_walk_in_flight_again_and_moves_once(
-    zenoh: Rig, perception: PerceptionAdapter
+@pytest.mark.parametrize(("command", "moved"), [("walk", (0.0, 0.1)), ("side", (-0.1, 0.0))])
+def test_a_resumed_agent_sends_the_motion_in_flight_again_and_moves_once(
+    zenoh: Rig, perception: PerceptionAdapter, command: str, moved: tuple[float, float]
 ) -> None:
+    """A walk, or a sidestep (issue 21, journaled as ``side``), in flight at the crash:
+    asked again with its id, answered from the world's cache, believed once (a sidestep
+    across the heading: facing north, to the west)."""
     x0, y0, h0 = zenoh.world.pose(1)
     crashed = restarted(zenoh)
     rid = crashed.new_request_id()
-    # journaled before the walk was sent; the agent crashed before it saw the reply
+    # journaled before the motion was sent; the agent crashed before it saw the reply
     st = JournalState(
-        robot_id=1,
-        phase="search",
-        heading=NORTH,
-        command="walk",
-        command_value=0.1,
+        robot_id=1, phase="search", heading=NORTH, command=command, command_value=0.1,
         request_id=rid,
-    )
-    assert crashed.walk(0.1, rid).status == "done"
+    )  # fmt: skip
+    send = crashed.walk if command == "walk" else crashed.side
+    assert send(0.1, rid).status == "done"
     body = restarted(zenoh)
     runner = Runner(
         body.bus, body, AgentConfig(robot_id=1, fleet_size=2), perception, FormationAdapter()
@@ -77,34 +76,10 @@ def test_a_resumed_agent_sends_the_walk_in_flight_again_and_moves_once(
     repeats = zenoh.server.motions.repeats
     assert runner.resumption.resume(st, Verdict(True, "peers searching")) == ("search", None)
     assert zenoh.server.motions.repeats == repeats + 1  # answered from the cache
-    assert zenoh.world.pose(1) == pytest.approx((x0, y0 + 0.1, h0), abs=1e-6)  # once
+    want = (x0 + moved[0], y0 + moved[1], h0)
+    assert zenoh.world.pose(1) == pytest.approx(want, abs=1e-6)  # once
     assert runner.ctx.beliefs.heading == pytest.approx(NORTH)
-    # the belief followed the walk once (before the new search resets the frame)
-    assert math.isclose(runner.ctx.beliefs.position[1], 0.1, abs_tol=1e-9)
-    assert np.isclose(runner.ctx.beliefs.position[0], 0.0)
-    assert body.walk(-0.1).status == "done"
-
-
-def test_a_resumed_agent_sends_the_sidestep_in_flight_again_and_moves_once(
-    zenoh: Rig, perception: PerceptionAdapter
-) -> None:
-    """Issue 21's sidesteps are journaled as ``side`` and resumed like a walk: asked
-    again with their id, believed once, across the heading."""
-    x0, y0, h0 = zenoh.world.pose(1)
-    crashed = restarted(zenoh)
-    rid = crashed.new_request_id()
-    st = JournalState(
-        robot_id=1, phase="search", heading=NORTH, command="side", command_value=0.1,
-        request_id=rid,
-    )  # fmt: skip
-    assert crashed.side(0.1, rid).status == "done"
-    body = restarted(zenoh)
-    runner = Runner(
-        body.bus, body, AgentConfig(robot_id=1, fleet_size=2), perception, FormationAdapter()
-    )
-    repeats = zenoh.server.motions.repeats
-    assert runner.resumption.resume(st, Verdict(True, "peers searching")) == ("search", None)
-    assert zenoh.server.motions.repeats == repeats + 1
-    assert zenoh.world.pose(1) == pytest.approx((x0 - 0.1, y0, h0), abs=1e-6)  # once, west
-    assert runner.ctx.beliefs.position == pytest.approx((-0.1, 0.0), abs=1e-9)
-    assert body.side(-0.1).status == "done"
+    # the belief followed the motion once (before the new search resets the frame)
+    assert runner.ctx.beliefs.position == pytest.approx(moved, abs=1e-9)
+    back = body.walk if command == "walk" else body.side
+    assert back(-0.1).status == "done"
