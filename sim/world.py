@@ -1,4 +1,4 @@
-"""The simulated room and its robots (issue 3; DESIGN.md §4).
+"""The simulated room and its robots (docs/design.md §4).
 
 PyBullet in DIRECT mode (GUI opt-in) holds a square room whose floor and four walls are
 each one textured quad with a rich, seeded texture (rectangles, discs, lines and
