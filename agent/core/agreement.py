@@ -135,8 +135,7 @@ R = TypeVar("R", bound=RecordLike)
 DigestFn = Callable[[Sequence[R]], str]
 
 #: Publications of one kind (repairs of complete sets; progress statuses) a member hears
-#: per second from the fleet, at most (docs/agent.md: at 100 NAOs, repairs every 1 s flooded the
-#: fleet).
+#: per second from the fleet, at most (docs/agent.md: repairs every 1 s flooded 100 NAOs).
 HEARD_PER_S = 10.0
 
 #: Phases an agent reports only after it has agreed (acknowledges our digest).

@@ -1,4 +1,4 @@
-"""How a plan is executed, and how long it takes (our addition to NAO paper 5.2.2 (7)).
+"""How a plan is executed, and how long it takes (our addition to NAO paper 5.2.2 (iii) step 7).
 
 Two execution rules, both safe for every plan built by :mod:`plan`:
 
