@@ -1,5 +1,5 @@
 # nao-formation: one image for the router, the world, the observer and the agents
-# (DESIGN.md §5); no credentials inside (docker-compose.yml mounts them as secrets).
+# (docs/design.md §5); no credentials inside (docker-compose.yml mounts them as secrets).
 #   docker compose build                      # from python:3.11-slim
 #   docker-compose build --build-arg BASE_IMAGE=localhost/nao-base:bookworm   # local base
 # The base needs python3 with the venv module and ca-certificates (Debian bookworm or

@@ -1,4 +1,4 @@
-"""``python -m agent``: one identical agent process per NAO (DESIGN.md §1–3).
+"""``python -m agent``: one identical agent process per NAO (docs/design.md §1–3).
 
     python -m agent --id N|auto [--fleet-size N] [--connect EP]... [--listen EP]...
                     [--world-connect EP]...
@@ -17,12 +17,12 @@ Every agent of a fleet must be started with the same planning parameters (``--d-
 ``--phi-e-deg``, ``--orientation``, ``--strategy``, the route): the agreement compares
 their digests and stops the whole fleet, naming the odd robot, when they differ.
 
-``--world-connect EP`` (issue #9): the body's queries to the world (register, camera,
-walk, turn) go through a second zenoh session connected to ``EP`` (the router's world
-port, ``agent.wire.WORLD_PORT``); records, digests, statuses and liveliness stay on
+``--world-connect EP`` (so that loss on the robots' radio spares the body): the body's queries to
+the world (register, camera, walk, turn) go through a second zenoh session connected to ``EP`` (the
+router's world port, ``agent.wire.WORLD_PORT``); records, digests, statuses and liveliness stay on
 the first. Without it one session carries both.
 
-``--publish-camera`` (issue 22): publish a small JPEG of each analysed camera frame, with
+``--publish-camera`` (for viewers): publish a small JPEG of each analysed camera frame, with
 its detections, on ``nao/{id}/camera`` for viewers (at most 2 frames/s, ~10 kB/s; see
 docs/agent.md). Off by default: opt in on a real fleet.
 
@@ -35,9 +35,9 @@ from __future__ import annotations
 
 import os
 
-# One BLAS thread per agent, set before numpy is imported (issue 21). An agent's linear
-# algebra is small (a least squares over its fleet's sightings), and with many agents on
-# one host (the simulation, ``docker compose --scale agent=50``) OpenBLAS's thread pools
+# One BLAS thread per agent, set before numpy is imported (many agents share a host's cores). An
+# agent's linear algebra is small (a least squares over its fleet's sightings), and with many agents
+# on one host (the simulation, ``docker compose --scale agent=50``) OpenBLAS's thread pools
 # spun against each other: at 50 agents planning at once the machine spent its time in
 # the kernel and a 2-second plan took minutes. An explicit setting still wins.
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
@@ -146,7 +146,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--state-dir",
         metavar="DIR",
         default=None,
-        help="keep a durable journal here and resume from it after a crash (issue #9)",
+        help="keep a durable journal here and resume from it after a crash",
     )
     p.add_argument(
         "--sensor-fault",
@@ -333,7 +333,7 @@ def main(argv: list[str] | None = None) -> int:
             except BodyError as exc:
                 return report_unavailable(bus, rid, str(exc))
         else:
-            attempt, total = camera_waits(args.fleet_size)  # the world's queue (issue 21)
+            attempt, total = camera_waits(args.fleet_size)  # the world's queue (large fleets)
             body = ZenohBody(world_bus, rid, camera_timeout=total, camera_attempt=attempt)
         try:
             runner = Runner(

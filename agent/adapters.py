@@ -164,7 +164,7 @@ class FormationAdapter:
         The last plan is kept: asked again for equal records and parameters, it is
         returned (or its ``ValueError`` raised again) without planning twice. The
         agreement plans to adopt a member's plan and the planning phase then asks for the
-        same one (issue 21: ~7 CPU s an agent at 50 NAOs).
+        same one (~7 CPU s an agent at 50 NAOs).
         """
         last = self._last
         if last is not None and last[0] == msgs and last[1] == params:

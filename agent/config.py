@@ -1,4 +1,4 @@
-"""The agent's settings (DESIGN.md §1; NAO paper 5.2.2): one immutable, validated value.
+"""The agent's settings (docs/design.md §1; NAO paper 5.2.2): one immutable, validated value.
 
 The runner (:mod:`agent.phases.runner`) takes an :class:`AgentConfig`; ``python -m agent``
 builds it from the command line.
@@ -69,7 +69,7 @@ class AgentConfig:
     backoff_max: float = 16.0
     correct: bool = True  # final visual alignment to the parent (see Hold.correct)
     max_correction: float = 0.3  # m
-    march: Route | None = None  # the march after hold (issue #13); None: stop at hold
+    march: Route | None = None  # march in formation after hold; None: stop at hold
     march_step: float = 0.1  # m per leader step: half a follower's 20 cm, so they keep up
     march_pause: float = 4.0  # the leader rests this many times each step's duration
     lost_rounds: int = 3  # head searches for a lost parent before the fleet halts
@@ -81,7 +81,7 @@ class AgentConfig:
     research_timeout: float = 300.0
     # test tool (agent/core/perception/sensor_fault.py): corrupt this robot's own record
     sensor_fault: SensorFault | None = None
-    # issue 22: publish thumbnails of the analysed frames for viewers on nao/{id}/camera
+    # publish thumbnails of the analysed frames for viewers on nao/{id}/camera
     # (agent/phases/camera_feed.py); off by default, opt-in on real fleets
     publish_camera: bool = False
 

@@ -1,4 +1,4 @@
-"""The typed seams of the runner (issue #11; DESIGN.md §8 "Bodies").
+"""The typed seams of the runner (a body that may be a real NAO; docs/design.md §8 "Bodies").
 
 The phase machine (:mod:`agent.phases.runner`) and its collaborators depend on the
 :class:`agent.body.base.Body` protocol and on these two (the seams between the

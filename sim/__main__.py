@@ -1,4 +1,4 @@
-"""``python -m sim``: start the simulated world and serve it on the bus (issue 3).
+"""``python -m sim``: start the simulated world and serve it on the bus.
 
 Prints ``sim ready robots=1,2,3`` on stdout once every queryable is declared; logs go to
 stderr. Stops cleanly on SIGINT/SIGTERM.
@@ -30,7 +30,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="python -m sim",
         description=(
             "The simulated world: a PyBullet room with NAO robots, serving each robot's "
-            "forehead camera and walking over zenoh (keys world/**, see DESIGN.md §3). "
+            "forehead camera and walking over zenoh (keys world/**, see docs/design.md §3). "
             "Prints 'sim ready robots=...' on stdout when it serves."
         ),
     )

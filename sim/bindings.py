@@ -1,4 +1,4 @@
-"""Who drives which robot of the world: claims, live agents and session binding (DESIGN.md
+"""Who drives which robot of the world: claims, live agents and session binding (docs/design.md
 §3 ``world/register``, §8 "The world obeys robot i's key alone for robot i").
 
 - **Claims** (``world/register``, for ``--id auto``): a request gets the lowest free robot

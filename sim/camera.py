@@ -1,4 +1,4 @@
-"""The NAO forehead camera (NAO paper §3, Fig. 1; DESIGN.md §4).
+"""The NAO forehead camera (NAO paper §3, Fig. 1; docs/design.md §4).
 
 A pinhole camera, 640 x 480, horizontal FOV 60.9°, vertical 47.6° (square pixels,
 fx = fy = 320 / tan(30.45°) ≈ 543.9 px, principal point at the image centre), at

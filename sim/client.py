@@ -1,6 +1,6 @@
 """``python -m sim.client``: poke a running world by hand (camera, walk, turn, poses).
 
-A small command-line client of the world's bus contract (DESIGN.md §3), for people
+A small command-line client of the world's bus contract (docs/design.md §3), for people
 trying the world and for debugging; agents use ``agent/body/zenoh_world.py`` instead::
 
     python -m sim.client --credentials fleet/ --connect tls/127.0.0.1:7447 camera 1 --yaw 30
@@ -8,7 +8,7 @@ trying the world and for debugging; agents use ``agent/body/zenoh_world.py`` ins
     python -m sim.client --credentials fleet/ --connect tls/127.0.0.1:7447 poses
     python -m sim.client --insecure --connect tcp/127.0.0.1:7447 turn 1 -15
 
-With credentials (DESIGN.md §8) the client acts with a key of the folder: robot N's for
+With credentials (docs/design.md §8) the client acts with a key of the folder: robot N's for
 ``camera``/``walk``/``turn N`` and ``register --want N``, the observer's for ``poses``
 (``--as CN`` chooses another); it seals its requests and accepts only what the world
 signed. The world obeys robot N's key only in the session that drives robot N, so a

@@ -1,5 +1,6 @@
 """A slow world: camera and motion replies held back by a seeded random delay
-(``python -m sim --reply-delay MAX_S``; DESIGN.md §6 fault injection, issue 20).
+(``python -m sim --reply-delay MAX_S``; docs/design.md §6 fault injection: a slow world in the chaos
+soak).
 
 The papers assume the robot's own camera and legs answer at once. A world loaded by
 many robots, or a real NAO's busy NAOqi, answers late; ``tools.eval_chaos`` measures what

@@ -1,4 +1,4 @@
-"""Walking and turning on the sim clock, with seeded noise and contacts (issue 3).
+"""Walking and turning on the sim clock, with seeded noise and contacts.
 
 NAO paper §4.2 and §5.2.2 (Table 2, Fig. 23): open-loop walking drifts; the heading error
 grows with the length of a segment (about 0.02-0.23 rad after 0.2 m, 0.33-0.53 rad after
@@ -27,7 +27,7 @@ robot id, so results do not depend on what other robots do):
 - turn: actual = commanded × (1 + N(0, 0.05)) + N(0, 0.02 rad).
 
 :meth:`NoiseModel.scaled` multiplies every σ by K (``python -m sim --noise-scale K``,
-issue #10: execution noise that moves robots off their planned corridors).
+for execution noise that moves robots off their planned corridors).
 
 **Contacts.** Each robot is a disc of radius :data:`~sim.nao_model.FOOTPRINT_RADIUS`
 (0.155 m, half the NAO's 0.311 m depth); obstacles are discs of their radius; the walls

@@ -1,5 +1,5 @@
-"""The world's walks and turns in flight, and motion request ids (DESIGN.md §8 "motion
-commands carry ids so a retry never walks twice"; docs/faults.md, issue #9).
+"""The world's walks and turns in flight, and motion request ids (docs/design.md §8 "motion
+commands carry ids so a retry never walks twice"; docs/faults.md: lost replies on a lossy radio).
 
 A robot runs one motion at a time: a second one while it moves is refused as busy. A
 ``WalkRequest`` / ``TurnRequest`` with a ``request_id`` (> 0) is executed once per

@@ -1,4 +1,4 @@
-"""A NAO-like body built from primitives (DESIGN.md §4; NAO paper §3.1, Fig. 3).
+"""A NAO-like body built from primitives (docs/design.md §4; NAO paper §3.1, Fig. 3).
 
 Sized to the NAO H25: 0.573 m tall, 0.275-0.28 m wide (shoulder to shoulder covers),
 about 0.16 m deep at the feet (the paper's 0.311 m depth includes the arms held forward;

@@ -1,6 +1,7 @@
-"""Virtual NAOs: every simulated robot served as NAOqi services over the qi protocol (issue #11).
+"""Virtual NAOs: every simulated robot served as NAOqi services over the qi protocol (rehearsal for
+a real NAO).
 
-DESIGN.md §8 "Bodies": a real NAO exposes its services at ``tcp://nao.local:9559``; here
+docs/design.md §8 "Bodies": a real NAO exposes its services at ``tcp://nao.local:9559``; here
 each robot of the world gets one standalone qi session (its own service directory) on
 its own port, with the services and methods an agent's NAOqi body uses, under their
 NAOqi names and signatures:

@@ -1,5 +1,5 @@
 """Camera requests waiting for render workers: one picture per robot, a fair bound
-(DESIGN.md §5, the world's camera service; issue 21, fifty NAOs and beyond).
+(docs/design.md §3, the world's camera service, for fleets of fifty NAOs and beyond).
 
 A robot waits for one picture at a time. The world keeps at most one picture in the
 works per robot and never refuses a robot of its own for want of room:

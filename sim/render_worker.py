@@ -1,4 +1,5 @@
-"""``python -m sim.render_worker``: forehead cameras drawn in a process of their own (issue 21).
+"""``python -m sim.render_worker``: forehead cameras drawn in a process of their own (rendering is
+the world's bottleneck in large fleets).
 
     python -m sim.render_worker --connect tls/ROUTER:7448 --credentials DIR [--shard 1/2]
 
@@ -25,7 +26,7 @@ uses a frame older than its last motion (:mod:`agent.body.zenoh_world`). Heads: 
 requesting robot's head is turned to the asked yaw; the others' heads are as this worker
 last drew them (a worker does not hear other workers' requests).
 
-Secure (DESIGN.md §8): it joins with the ``render`` key; it opens only what the world
+Secure (docs/design.md §8): it joins with the ``render`` key; it opens only what the world
 signed (scenario, poses), answers a robot's camera only to that robot's key, and signs
 its replies (bound to the request) with its own key; the router's access control lets the
 ``render`` key do nothing else. Prints ``render ready robots=1,3 shard=1/2 seed=7`` on
@@ -337,7 +338,8 @@ def fetch_scenario(link: Link, wait_s: float) -> Scenario:
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="python -m sim.render_worker",
-        description="A render worker: draws the world's forehead cameras (issue 21).",
+        description="A render worker: draws the world's forehead cameras, so that the world "
+        "spreads over cores and hosts.",
     )
     add_network_arguments(p, ("peer", "client"))
     p.add_argument(

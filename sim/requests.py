@@ -1,4 +1,4 @@
-"""A query to the world as its zenoh callbacks take it (DESIGN.md §3 queryables, §8 trust).
+"""A query to the world as its zenoh callbacks take it (docs/design.md §3 queryables, §8 trust).
 
 The world's callbacks run on zenoh's threads; what they may do is here, and none of it
 touches the world. :class:`Request` is a query authenticated when the world runs with

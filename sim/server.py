@@ -1,4 +1,4 @@
-"""The world on the bus: zenoh queryables and publications of DESIGN.md §3 (issue 3).
+"""The world on the bus: zenoh queryables and publications of docs/design.md §3.
 
 Queryables (payloads are :mod:`agent.wire` messages; what a query may carry and how it
 is authenticated and checked: :mod:`sim.requests`):
@@ -21,7 +21,7 @@ is authenticated and checked: :mod:`sim.requests`):
 Anything malformed or impossible (unknown robot, NaN, yaw out of range, wrong schema
 version, busy robot) gets an ``ErrorReply`` with the reason; the world keeps serving.
 
-**Hardening (issue #8).** The zenoh callbacks check each request cheaply where it
+**Hardening against hostile input.** The zenoh callbacks check each request cheaply where it
 arrives (payload length before the copy, at most ``MAX_REQUEST_BYTES``; robot id; schema;
 yaw) and queue it in one of two bounded lanes: well-formed requests, served first, and
 malformed ones, answered with their reason when nothing else waits. A full lane drops

@@ -1,9 +1,9 @@
-"""The simulated room and its robots (issue 3; DESIGN.md §4).
+"""The simulated room and its robots (docs/design.md §4).
 
 PyBullet in DIRECT mode (GUI opt-in) holds a square room whose floor and four walls are
 each one textured quad with a rich, seeded texture (rectangles, discs, lines and
 text-like marks in many colours) so that feature matching -- the visual compass of the
-NAO paper §3.3 -- has plenty to hold on to; optional static obstacles (cylinders in the obstacle rose of :mod:`agent.core.nao`),
+NAO paper 3.2.1 -- has plenty to hold on to; optional static obstacles (cylinders in the obstacle rose of :mod:`agent.core.nao`),
 optional orange lookalike clutter and a light whose strength and direction vary for the
 detector's hard cases. No wall or floor colour falls in (or near) the detector's orange
 range nor in the obstacle range: hues near orange and rose are desaturated, and every

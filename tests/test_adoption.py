@@ -1,4 +1,4 @@
-"""Agreement by adoption (issue #9): a member already acting on the plan of exactly our
+"""Agreement by adoption (a lossy radio): a member already acting on the plan of exactly our
 records is adopted, computed while the bus is pumped (agent/phases/pumping.py)."""
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """The agreement's timeout (agent/core/agreement.py): it counts from the fleet's last news.
 
 News is a record that changes the set held or a member's digest that changes; an agent
-that searched early waits while the others' records keep arriving (issue 21: at 100
+that searched early waits while the others' records keep arriving (at 100
 NAOs the searches end over ~15 minutes) and fails, naming who is missing, once nothing
 moved for ``timeout`` seconds.
 """

@@ -225,7 +225,8 @@ def test_query_to_a_queryable_that_holds_the_reply_times_out(pair: tuple[Bus, Bu
                 continue
             except QueryTimeout as exc:
                 # zenoh itself ends a timed-out get with an error reply "Timeout": it is
-                # a timeout (asked again by the body), not a world's error (issue 21)
+                # a timeout (asked again by the body), not a world's error (at 100 NAOs one stopped
+                # a robot)
                 assert "no reply within 1 s" in str(exc)
                 break
     finally:
@@ -300,7 +301,7 @@ def test_long_exception_text_is_cut_in_the_log(
 
     class Huge:
         def __len__(self) -> int:
-            raise ValueError("x" * 11_000_000)  # the 11 MB exception text of issue #8
+            raise ValueError("x" * 11_000_000)  # an 11 MB exception text (hostile input)
 
     b._on_sample(sample("nao/1/status", Huge()))
     (line,) = [r.getMessage() for r in caplog.records]
@@ -325,7 +326,7 @@ def test_event_queue_is_bounded_oldest_dropped_and_counted(pair: tuple[Bus, Bus,
 
 
 def test_a_status_flood_cannot_push_records_out(pair: tuple[Bus, Bus, str]) -> None:
-    """Issue 21, 100 NAOs (try 11): the run's observer lost 23 of the 100 records to a
+    """At 100 NAOs the run's observer lost 23 of the 100 records to a
     flood of statuses. Records have a lane of their own: a flood of statuses drops the
     oldest statuses, never a record."""
     _, b, _ = pair
@@ -503,7 +504,7 @@ def test_open_retrying_rejects_bad_bounds(
 
 
 def test_a_sample_carries_the_time_it_arrived(pair: tuple[Bus, Bus, str]) -> None:
-    """Issue 21: a loaded reader's queue must not delay when a message is said to have
+    """A loaded reader's queue must not delay when a message is said to have
     arrived (the harness's phase times): the callback stamps it before any check."""
     _, b, _ = pair
     before = time.monotonic()

@@ -1,4 +1,4 @@
-"""The agent's camera feed for viewers (issue 22; agent/phases/camera_feed.py): thumbnails,
+"""The agent's camera feed for viewers (agent/phases/camera_feed.py): thumbnails,
 boxes in thumbnail pixels, the rate limit, failures that never reach the phases, and
 the ``--publish-camera`` switch (off: nothing of it on the bus)."""
 

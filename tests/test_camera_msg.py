@@ -1,4 +1,4 @@
-"""The camera frames agents publish for viewers (issue 22): ``CameraMsg`` on
+"""The camera frames agents publish for viewers: ``CameraMsg`` on
 ``nao/{id}/camera``, its bounds and every validation error, its key and the access
 control and signatures that keep a robot to its own camera."""
 

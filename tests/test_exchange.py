@@ -487,7 +487,7 @@ def test_adopt_needs_a_record_from_every_member() -> None:
         b.adopt(0.0, "x")
 
 
-# ------------------------------------------------------------- re-sends that scale (issue 21)
+# ---------------------------------------------------- re-sends that scale to 50 NAOs and more
 
 
 def _peer_digest(sender: int, members: tuple[int, ...], digest: str = "ab" * 32) -> DigestMsg:
@@ -563,7 +563,7 @@ def test_a_complete_set_is_announced_then_repeated_quickly() -> None:
 def test_a_large_fleets_complete_set_is_repaired_at_a_bounded_rate() -> None:
     """100 members (backoff 0.25 to 16 s, the agent's settings), every record held, nobody's
     digest heard: our repairs double from 0.25 s up to 100 / HEARD_PER_S = 10 s,
-    not 4·0.25 s (try 6 of issue 21)."""
+    not 4·0.25 s (a 100-NAO run flooded with repairs)."""
     n = 100
     a = Agreement(0, rec(0), 0.0, fleet_size=n, backoff_max=16.0, digest_fn=canonical_digest)
     for j in range(1, n):
@@ -584,7 +584,7 @@ def test_a_large_fleets_complete_set_is_repaired_at_a_bounded_rate() -> None:
 
 def test_exchange_bytes_stay_linear_when_searches_end_apart() -> None:
     """Seeded, simulated medium (tools.bench agent): 30 agents whose searches end over
-    30 s publish a few kB each (before issue 21: ~7 kB mean, ~13 kB max)."""
+    30 s publish a few kB each (before re-sends on news: ~7 kB mean, ~13 kB max)."""
     import numpy as np
 
     from tools.bench.agent import simulate

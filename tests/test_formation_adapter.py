@@ -1,5 +1,6 @@
 """The formation adapter (agent/adapters.py) keeps its last plan: the agreement's
-adoption check and the planning phase plan the same records once (issue 21)."""
+adoption check and the planning phase plan the same records once (a plan cost ~7 CPU s an agent at
+50 NAOs)."""
 
 from __future__ import annotations
 

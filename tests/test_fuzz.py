@@ -1,4 +1,5 @@
-"""Property-based fuzz of the wire codec (issue #8): nothing but ProtocolError leaves decode.
+"""Property-based fuzz of the wire codec (every input hardened): nothing but ProtocolError leaves
+decode.
 
 Each hypothesis example draws a seed and runs a batch of ``BATCH`` mutants of one message
 type through :func:`agent.wire.decode` (generators of :mod:`tools.fuzz_payloads`, shared

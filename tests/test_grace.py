@@ -1,5 +1,5 @@
 """Membership grace (agent/core/grace.py): a vanished liveliness token counts as a
-departure only after the grace period, unless the member is heard again (issue 9)."""
+departure only after the grace period, unless the member is heard again (a lossy radio)."""
 
 from __future__ import annotations
 

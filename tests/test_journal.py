@@ -1,4 +1,4 @@
-"""agent/phases/journal.py: round trips, corruption and every error branch (issue #9)."""
+"""agent/phases/journal.py: round trips, corruption and every error branch."""
 
 from __future__ import annotations
 
@@ -232,7 +232,7 @@ def test_bad_robot_id_for_a_journal(tmp_path: Path) -> None:
         Journal(tmp_path, -1)
 
 
-# --------------------------------------------------------------------------- issue 20
+# ------------------------------------------------ journals bound to their run
 
 
 def test_run_identity_request_id_and_final_round_trip(tmp_path: Path) -> None:

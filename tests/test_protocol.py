@@ -505,7 +505,7 @@ def test_status_names_the_blocker_of_a_jammed_robot() -> None:
 
 
 def test_status_carries_the_way_walked_along_the_path() -> None:
-    """Issue 21 (finer waits): metres along the planned path, bounded and finite."""
+    """Finer waits: metres along the planned path, bounded and finite."""
     msg = p.StatusMsg(sender=4, phase="move", walked=12.5)
     assert p.decode(p.encode(msg)).walked == 12.5
     assert p.decode(p.encode(p.StatusMsg(sender=4, phase="move"))).walked == 0.0
@@ -523,7 +523,7 @@ def test_status_check_fields_are_bounded(field: str, value: float) -> None:
 
 
 def test_status_carries_the_steps_taken_since_arrival() -> None:
-    """Issue 21: a child follows its parent's steps (agent/phases/hold.py)."""
+    """A child follows its parent's steps (agent/phases/hold.py)."""
     msg = p.StatusMsg(sender=4, phase="hold", shift_x=-0.15, shift_y=0.05)
     got = p.decode(p.encode(msg))
     assert (got.shift_x, got.shift_y) == (-0.15, 0.05)

@@ -1,4 +1,4 @@
-"""Long computations while the bus is pumped (agent/phases/pumping.py, issue 21)."""
+"""Long computations while the bus is pumped (agent/phases/pumping.py: agreement that scales)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""The agreed record set by digest (issue #9): served by every agent, checked by the asker.
+"""The agreed record set by digest (for agents restarted after a crash): served by every agent,
+checked by the asker.
 
 Pure checks (agent/phases/resume.py), the restored agreement (agent/core/agreement.py), the runner's
 acceptance of a restarted member's new session, and the query over real zenoh sessions:

@@ -1,5 +1,5 @@
 """agent/phases/resume.py, agent/phases/runs.py and the runner's journal hooks, without
-the world (issue #9, issue 20).
+the world (crashed agents and stale journals).
 
 The runner of tests/test_runner.py (robot 3, an unconnected zenoh session): what is
 journaled, what a corrupt journal does, where each journaled phase resumes, and which

@@ -1,4 +1,4 @@
-"""Revoking a key (issue 20; DESIGN.md §8 "Trust"): agent/wire/revocation.py, the checks in
+"""Revoking a key (docs/design.md §8 "Trust"): agent/wire/revocation.py, the checks in
 agent/wire/credentials.py, the verifier and the router's access control, ``tools.fleet
 revoke`` and, marked ``system``, a real TLS router that refuses a revoked robot's traffic.
 """

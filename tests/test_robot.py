@@ -111,7 +111,7 @@ def test_retry_timeout_counts_attempts_and_raises_past_the_total() -> None:
 
 
 # --------------------------------------------------------------------------- pose time
-# issue 21: a render worker follows the world's poses a little behind; a frame drawn
+# a render worker follows the world's poses a little behind; a frame drawn
 # from poses older than the end of the robot's last motion is never used.
 
 

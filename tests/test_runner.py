@@ -248,7 +248,7 @@ def test_failed_member_of_an_earlier_wave_stops_us(runner: Runner) -> None:
 
 
 def test_a_robot_blocked_by_us_makes_us_yield(runner: Runner) -> None:
-    """Issue 21 (agent/core/formation/jam.py rule 2): robot 1 cannot reach its slot
+    """Jams (agent/core/formation/jam.py rule 2): robot 1 cannot reach its slot
     because robot 3 (us, not moved yet) stands too near it, and we wait for robot 1."""
     after(runner, (1, 2))
     runner.membership.peers[1] = Peer(alive=True, phase="move", seen_alive=True, blocked_by=3)
@@ -291,7 +291,7 @@ def at(r: Runner, ids: tuple[int, ...], arcs: tuple[float, ...]) -> None:
 
 
 def test_a_robot_past_its_release_point_lets_us_start(runner: Runner) -> None:
-    """Issue 21 (finer waits): robot 1 walks on the same plan and is 1.5 m along its
+    """Finer waits: robot 1 walks on the same plan and is 1.5 m along its
     path, past the 1.2 m we wait for; robot 2 holds."""
     at(runner, (1, 2), (1.2, 0.7))
     digest = runner.ctx.plan_digest

@@ -1,4 +1,4 @@
-"""The bounds that let 100 NAOs run (issue 21): each raised, none removed.
+"""The bounds that let 100 NAOs run: each raised, none removed.
 
 - ``tools.demo --robots`` in [1, MAX_ROBOTS = 128];
 - a record carries at most ``MAX_NEIGHBOURS`` = 128 neighbours; the largest record fits
@@ -81,7 +81,8 @@ def test_a_generated_fleet_of_100_fits_the_room_and_the_records() -> None:
 
 
 def test_status_cadence_is_bounded_by_what_a_member_hears() -> None:
-    """Known answers: 3 s up to 30 NAOs, then fleet / 10 statuses a second (issue 21)."""
+    """Known answers: 3 s up to 30 NAOs, then fleet / 10 statuses a second (so that 100 NAOs do not
+    flood each other)."""
     from agent.phases.context import STATUS_MIN_INTERVAL, status_interval
 
     assert status_interval(None) == STATUS_MIN_INTERVAL == 3.0

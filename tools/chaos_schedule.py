@@ -1,6 +1,6 @@
-"""The fault schedule of one chaos run (``tools.eval_chaos``; DESIGN.md §6 fault injection,
-issue 20): which faults strike when, drawn from a numpy ``Generator`` seeded by the run's
-seed, so that a run can be repeated fault for fault.
+"""The fault schedule of one chaos run (``tools.eval_chaos``; docs/design.md §6 fault injection,
+a random mix of faults per run): which faults strike when, drawn from a numpy ``Generator`` seeded
+by the run's seed, so that a run can be repeated fault for fault.
 
 The papers assume robots, radios and the robot's own body never fail. A schedule mixes,
 over the first ``horizon_s`` seconds after the agents started:

@@ -19,7 +19,7 @@ agent computed the same plan digest. Writes ``DIR/result.json``, a Fig. 16/24-li
 Success (exit 0): every agent exited 0, identical plan digests, zero contacts, and
 every pair within |r_d| <= 12.5 % and |r_φ| <= 30 %.
 
-Marching (issue #13): ``--march D`` (metres along the pyramid's axis) or ``--march-to
+Marching in formation: ``--march D`` (metres along the pyramid's axis) or ``--march-to
 X,Y`` (common frame) is given to every agent; after ``hold`` the fleet marches. The
 world's room is then enlarged by the route's length (the demo generates the seed's
 scenario, widens its room and starts the world with ``--scenario``), so the march
@@ -34,12 +34,12 @@ are given to every agent and used by the evaluator's plan. ``--scenario FILE`` s
 world on a scenario file (robot count and ids from the file); ``--isolated`` generates
 the seed's scenario with one robot 2-3 m from every other (``sim.scenarios.generate``).
 
-Camera frames (issue 22): the demo's agents run with ``--publish-camera`` (turn it off
+Camera frames for viewers: the demo's agents run with ``--publish-camera`` (turn it off
 with ``--no-publish-camera``), so ``run.mcap`` holds each robot's camera thumbnails with
 their detections (``/nao/ID/camera``, ``/nao/ID/camera/annotations``); the table gives
 their kB/s per robot, apart from the fleet's own bytes.
 
-Watching (issue 22, docs/view.md): ``--live [HOST:PORT]`` serves the run's scene over the
+Watching (docs/view.md): ``--live [HOST:PORT]`` serves the run's scene over the
 Foxglove WebSocket protocol (default 127.0.0.1:8765) for Foxglove or Lichtblick;
 ``--view [HOST:PORT]`` also serves the page in the browser (default 127.0.0.1:8080) and
 opens it where there is a desktop.
@@ -131,7 +131,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     march = p.add_mutually_exclusive_group()
     march.add_argument(
         "--march", type=float, default=None, metavar="D",
-        help="after hold, the fleet marches D m along the pyramid's axis (issue #13)",
+        help="after hold, the fleet marches D m along the pyramid's axis",
     )  # fmt: skip
     march.add_argument(
         "--march-to", default=None, metavar="X,Y",
@@ -140,7 +140,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument(
         "--publish-camera", action=argparse.BooleanOptionalAction, default=True,
         help="agents publish thumbnails of their camera frames with detections for viewers "
-        "(issue 22; run.mcap's /nao/ID/camera channels); on in the demo, off on real fleets",
+        "(run.mcap's /nao/ID/camera channels); on in the demo, off on real fleets",
     )  # fmt: skip
     p.add_argument("--agent-log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING"))
     p.add_argument("--world-timeout", type=float, default=120.0)
@@ -160,7 +160,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument(
         "--render-service", type=int, default=0, metavar="K",
         help="K render workers (python -m sim.render_worker --shard i/K) draw the cameras "
-        "instead of the world (issue 21; default 0: the world draws them)",
+        "instead of the world (for large fleets; default 0: the world draws them)",
     )  # fmt: skip
     p.add_argument(
         "--agent-arg",
@@ -184,7 +184,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         type=float,
         default=0.0,
         metavar="S",
-        help="attack the fleet with tools.rogue for S seconds while it works (issue #8)",
+        help="attack the fleet with tools.rogue for S seconds while it works (docs/security.md)",
     )
     p.add_argument(
         "--rogue-replay",

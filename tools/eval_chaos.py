@@ -1,4 +1,5 @@
-"""``python -m tools.eval_chaos``: the chaos soak (issue 20; DESIGN.md §6 fault injection).
+"""``python -m tools.eval_chaos``: the chaos soak (random mixes of faults; docs/design.md §6 fault
+injection).
 
 ``tools.eval_faults`` injects one fault at one moment; a fleet in the field meets several
 at once. Each run here gets a random mix of faults, its schedule drawn from a numpy

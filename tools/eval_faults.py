@@ -1,4 +1,4 @@
-"""``python -m tools.eval_faults``: crashed agents and restarted routers (issue #9).
+"""``python -m tools.eval_faults``: crashed agents and restarted routers.
 
 The papers assume robots and radios never fail. For each fault and seed this tool runs
 the fleet as ``tools.demo`` does (secure by default: a TLS router, every process a

@@ -6,7 +6,7 @@ neighbour records the robots published, and ``result.json`` with the true start 
 the agent arguments (``--sensor-fault`` says which robot's record is corrupted). This tool
 runs today's :func:`agent.core.formation.fleet_frame.fleet_frame` on the last record of
 every robot of every run found under the folders given, with no simulator and no robot,
-and compares it with the truth (DESIGN.md §9):
+and compares it with the truth (docs/design.md §9):
 
 * the frame's error: the estimated start positions, fitted to the true ones by a rigid
   motion (the common frame is any robot's fixed frame), worst position error (m) and

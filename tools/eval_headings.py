@@ -1,4 +1,4 @@
-"""``python -m tools.eval_headings``: robots set down facing any direction (issue 19).
+"""``python -m tools.eval_headings``: robots set down facing any direction.
 
 The papers (NAO 4.1.1) assume every robot starts facing the same way. This tool runs the
 fleet as ``tools.demo`` does (secure, a TLS router, one agent process per robot) on

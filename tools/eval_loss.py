@@ -1,4 +1,4 @@
-"""What packet loss does to the formation (DESIGN.md §3 "Agree", §6 fault injection).
+"""What packet loss does to the formation (docs/design.md §1 "Agree", §6 fault injection).
 
 The NAO paper (4.1.2) sends every neighbour record once and assumes lossless WiFi; this
 project re-publishes records until every agent holds the same record-set digest. This
@@ -381,7 +381,7 @@ def main(argv: list[str] | None = None) -> int:
         choices=("peer", "client"),
         default="client",
         help="zenoh mode of the agents: client (via the router, the default) or peer "
-        "(mesh, DESIGN.md §3; only with --insecure)",
+        "(mesh, docs/design.md §3; only with --insecure)",
     )
     ap.add_argument("--d-e", type=float, default=0.8, help="pyramid distance (m)")
     ap.add_argument("--phi-e-deg", type=float, default=30.0, help="pyramid angle (deg)")

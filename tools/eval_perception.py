@@ -1,6 +1,6 @@
 """``python -m tools.eval_perception``: measure the perception of the NAO paper, section 3.
 
-Renders N labelled views in the simulated world (issue 3): an observer with a random
+Renders N labelled views in the simulated world: an observer with a random
 heading and head yaw across ±119.5°, 1-3 other NAOs at 0.4 m to ``--max-distance`` +
 0.15 m (default 3.0 m) with any orientation in its field of view, optionally orange
 lookalike clutter in the room; runs the

@@ -1,4 +1,5 @@
-"""``python -m tools.eval_render``: the demo on test hosts with render workers (issue 21).
+"""``python -m tools.eval_render``: the demo on test hosts with render workers (the world spread
+over hosts).
 
     sudo python -m tools.eval_render --robots 3 --seed 1 --workers 2 --out out/render_hosts
 

@@ -1,5 +1,5 @@
 """``python -m tools.eval_scale``: the fleet at 10, 30, 50 and 100 NAOs and where the wall
-time goes (issue 21, "Fifty NAOs and beyond"; DESIGN.md §1 phases, §9 "Honest results").
+time goes (fifty NAOs and beyond; docs/design.md §1 phases, §9 "Honest results").
 
 Runs the fleet as ``tools.demo`` does (secure, a TLS router, the world and one agent
 process per robot, camera frames for viewers off) once per fleet size and seed, one run
@@ -42,7 +42,7 @@ from tools.harness import report
 from tools.harness.judge import PHASE_ORDER, outcome
 from tools.harness.progress import Progress
 
-#: The phases drawn, in the order of DESIGN.md §1 (``done`` ends a run: no duration).
+#: The phases drawn, in the order of docs/design.md §1 (``done`` ends a run: no duration).
 PHASES = tuple(p for p in PHASE_ORDER if p != "done")
 #: The world's start-up before the agents start: the first segment of a bar.
 WORLD = "world start"

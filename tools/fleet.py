@@ -1,4 +1,4 @@
-"""Fleet credentials (DESIGN.md §8): create them, show them, hand them out per host.
+"""Fleet credentials (docs/design.md §8): create them, show them, hand them out per host.
 
     python -m tools.fleet init --robots 3 --out fleet/          # CA + robot-1..3, world,
                                                                  # observer, router

@@ -1,4 +1,5 @@
-"""``python -m tools.fuzz``: attack the wire codec and the world as an attacker would (issue #8).
+"""``python -m tools.fuzz``: attack the wire codec and the world as an attacker would (every input
+hardened).
 
     python -m tools.fuzz --n 1000000 [--seed 1] [--json FILE]
     python -m tools.fuzz --n 0 --flood                  (start a world on loopback)

@@ -1,6 +1,6 @@
-"""Hostile payloads for the wire codec and the world, made from a seed (issue #8; DESIGN.md
-§3: decoding validates types, ranges and sizes and rejects what does not fit; §8: every
-message bounded and validated).
+"""Hostile payloads for the wire codec and the world, made from a seed (every input hardened;
+docs/design.md §3: decoding validates types, ranges and sizes and rejects what does not fit; §8:
+every message bounded and validated).
 
 The generators of ``python -m tools.fuzz`` and tests/test_fuzz.py (the runner, the
 measurements and their report are in :mod:`tools.fuzz`):

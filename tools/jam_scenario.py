@@ -1,5 +1,5 @@
-"""A jam for good (issue 21; the CI test ``tests/system/test_dense_jam.py``): a NAO that
-runs no agent stands on a slot of the fleet's plan.
+"""A jam for good (a dense fleet must repair its plan or stop honestly; the CI test
+``tests/system/test_dense_jam.py``): a NAO that runs no agent stands on a slot of the fleet's plan.
 
 The fleet's plan keeps every path clear of every robot it knows (NAO paper 4.2; the
 safety rule of agent/core/formation/safety.py), so its members never jam one another for

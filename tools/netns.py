@@ -1,4 +1,5 @@
-"""Test hosts on one machine: network namespaces joined by veth pairs to a bridge (DESIGN.md §6).
+"""Test hosts on one machine: network namespaces joined by veth pairs to a bridge (docs/design.md
+§6).
 
 The papers assume lossless WiFi between the NAOs; to measure what real loss does we run
 every process of a formation on its own "host". A host here is a Linux network namespace

@@ -1,4 +1,4 @@
-"""Random packet loss inside a network namespace (DESIGN.md §6 fault injection).
+"""Random packet loss inside a network namespace (docs/design.md §6 fault injection).
 
 The NAO paper (4.1.2) exchanges every neighbour record once over WiFi it assumes lossless;
 this tool makes the link lossy so we can measure what the exchange-until-agreement

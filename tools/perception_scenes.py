@@ -1,5 +1,5 @@
 """Labelled views for measuring the perception of the NAO paper, section 3, in the
-simulated world (issue 3): the scenes of ``python -m tools.eval_perception``.
+simulated world: the scenes of ``python -m tools.eval_perception``.
 
 Each view: an observer with a random pose and head yaw across ±119.5°, 1-3 other NAOs at
 0.4 m to ``max_distance`` + 0.15 m with any orientation in its field of view (unused

@@ -1,4 +1,4 @@
-"""``python -m tools.plan``: the planner's command-line contract (issue 2, section 3).
+"""``python -m tools.plan``: the planner's command-line contract (JSON records in, JSON plan out).
 
 Reads one JSON scenario on stdin, writes one JSON plan on stdout, exit code 0; bad
 input gives exit code 2 and a one-line reason on stderr.

@@ -5,7 +5,8 @@
         [--replay-file FILE] [--json FILE]
 
 It opens a raw zenoh session (no agent code: it crafts payloads itself) and, for
-``--duration`` seconds, repeats every attack of issue #8 against robot ``--target``:
+``--duration`` seconds, repeats every attack of the threat model (docs/security.md) against robot
+``--target``:
 
 ============  ================================================================
 forge         record, digest and ``done`` status on ``nao/{target}/...``: unsigned,

@@ -1,6 +1,6 @@
-"""A zenoh router: the rendezvous of agents and world on separate hosts (DESIGN.md §3, §5).
+"""A zenoh router: the rendezvous of agents and world on separate hosts (docs/design.md §3, §5).
 
-Secure (the default, DESIGN.md §8): ``--credentials DIR`` (or ``$NAO_CREDENTIALS``); the
+Secure (the default, docs/design.md §8): ``--credentials DIR`` (or ``$NAO_CREDENTIALS``); the
 router listens on ``tls/0.0.0.0:7447`` and ``tls/0.0.0.0:7448``, accepts only links with a certificate of the
 fleet CA (mutual TLS) and enforces the fleet's access control by common name
 (``agent.wire.trust.acl_settings``); identities revoked by the folder's ``crl.pem``

@@ -1,5 +1,5 @@
-"""``python -m tools.view``: watch a fleet live, in Foxglove or in a browser page (issue 22
-"Live", "A page in the browser"; DESIGN.md §10 "Seeing the fleet"; docs/view.md).
+"""``python -m tools.view``: watch a fleet live, in Foxglove or in a browser page (docs/design.md
+§10 "Seeing the fleet"; docs/view.md).
 
     python -m tools.view --connect tls/ROUTER:7447 --credentials observer/ [--web]
     python -m tools.view --connect tcp/127.0.0.1:7447 --insecure --web

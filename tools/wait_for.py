@@ -1,4 +1,4 @@
-"""Wait until a zenoh key is served: start-up ordering for containers (DESIGN.md §5).
+"""Wait until a zenoh key is served: start-up ordering for containers (docs/design.md §5).
 
 ``docker compose`` starts the agents as soon as the world's container exists, but the
 world needs a few seconds before it serves ``world/register``, and a zenoh query that

@@ -1,4 +1,4 @@
-"""The Body protocol: one NAO's camera and legs as the agent drives them (DESIGN.md §8
+"""The Body protocol: one NAO's camera and legs as the agent drives them (docs/design.md §8
 "Bodies").
 
 Implemented by :class:`agent.body.zenoh_world.ZenohBody` (the world's queryables over
@@ -8,12 +8,12 @@ and errors are dataclasses: a body raises :class:`BodyError` when the robot or i
 refuses or fails an action, and ``ValueError`` for a request that is wrong before
 anything is sent (a head yaw outside ±119.5°, a non-finite distance).
 
-Motion request ids (issue 20; docs/faults.md): the agent journals each walk or turn with
-its request id *before* sending it (:meth:`Body.new_request_id`), so that after a crash it
-can send the command in flight again with the same id. A body with ids (the zenoh world)
-has each id executed once and answers a repeat with the first result: the robot never
-moves twice. A body without them (NAOqi, the in-process world) hands out 0 and ignores
-the id; a command in flight at a crash then counts as executed.
+Motion request ids (so that a resume that survives a second crash never walks twice;
+docs/faults.md): the agent journals each walk or turn with its request id *before* sending it
+(:meth:`Body.new_request_id`), so that after a crash it can send the command in flight again with
+the same id. A body with ids (the zenoh world) has each id executed once and answers a repeat with
+the first result: the robot never moves twice. A body without them (NAOqi, the in-process world)
+hands out 0 and ignores the id; a command in flight at a crash then counts as executed.
 """
 
 from __future__ import annotations

@@ -1,6 +1,7 @@
-"""The in-process body: a :class:`~agent.body.base.Body` on an in-process world (issue #11).
+"""The in-process body: a :class:`~agent.body.base.Body` on an in-process world (the runner's phases
+tested without a network).
 
-For tests of the runner's phases without a network (DESIGN.md §8 "Bodies"): the same
+For tests of the runner's phases without a network (docs/design.md §8 "Bodies"): the same
 renders and the same locomotion (noise, contacts) as the world process, called
 directly. A motion steps the world's clock until this robot's command has finished;
 other robots of the world stand still meanwhile (one agent drives one body).

@@ -1,4 +1,4 @@
-"""The NAOqi body: a :class:`~agent.seams.Body` on a NAO over the qi protocol (issue #11).
+"""The NAOqi body: a :class:`~agent.seams.Body` on a NAO over the qi protocol (a real NAO).
 
 The only agent module that imports ``qi`` (the libqi Python bindings). It drives a real
 NAO (``tcp://nao.local:9559``) or a virtual one served by ``python -m sim --naoqi``

@@ -1,24 +1,24 @@
-"""The zenoh body (DESIGN.md §2–3, §8): a :class:`~agent.seams.Body` on the world process.
+"""The zenoh body (docs/design.md §2–3, §8): a :class:`~agent.seams.Body` on the world process.
 
 Forehead camera at a head yaw, walk, turn. Each action is a query to the world's
-queryables (``world/robot/{id}/camera|walk|turn``, DESIGN.md §3); walk and turn replies
+queryables (``world/robot/{id}/camera|walk|turn``, docs/design.md §3); walk and turn replies
 arrive when the motion has finished in sim time.
 
-Lost replies (issue #9): every walk and turn carries a request id, unique to this body
+Lost replies (a lossy radio): every walk and turn carries a request id, unique to this body
 (a random 40-bit start, then counting up, so that a restarted agent does not reuse its
 predecessor's ids); a query that times out is asked again with the same id, and the
 world executes each (robot, id) once and answers a repeat with the first result. The
 agent takes the id first (:meth:`ZenohBody.new_request_id`) and journals it, so that a
-restarted agent sends the command in flight again with the same id (issue 20). A
-camera query that times out is asked again as it is (a picture moves nothing but the
+restarted agent sends the command in flight again with the same id (a resume that survives a second
+crash). A camera query that times out is asked again as it is (a picture moves nothing but the
 head, to the same yaw).
 The body reports no pose: the agent knows only what it commanded and what it sees.
 
-Render workers (issue 21; docs/world.md "Render workers"): a camera query goes to one
-complete queryable (``best``: zenoh's best-matching target), a render worker when one
-serves the robot, else the world. Each reply carries the world time of the poses it was
-drawn from (``CameraReply.t_sim``); a worker follows the world's poses a little behind.
-The pose-time rule: a frame whose poses precede the end of this robot's last motion
+Render workers (the world's cameras drawn by other processes, for large fleets; docs/world.md
+"Render workers"): a camera query goes to one complete queryable (``best``: zenoh's best-matching
+target), a render worker when one serves the robot, else the world. Each reply carries the world
+time of the poses it was drawn from (``CameraReply.t_sim``); a worker follows the world's poses a
+little behind. The pose-time rule: a frame whose poses precede the end of this robot's last motion
 (the ``t_sim`` of its last walk or turn reply) shows the robot where it was, and is never
 used: the body asks again, after a short pause, until a fresh frame comes or the camera
 timeout is spent (then a :class:`BodyError`). Frames refused so are counted in
@@ -77,13 +77,13 @@ STALE_WAIT_S = 0.02
 STALE_WAIT_MAX_S = 0.5
 #: A busy world (its bounded render queue full, :class:`~agent.net.bus.Busy`) is asked
 #: again after this pause, doubling up to BUSY_WAIT_MAX_S, within the camera timeout
-#: (issue 21: at 100 NAOs 36 agents stopped on "world busy: 64 pictures being drawn").
+#: (at 100 NAOs 36 agents stopped on "world busy: 64 pictures being drawn").
 BUSY_WAIT_S = 0.5
 BUSY_WAIT_MAX_S = 4.0
 CAMERA_TIMEOUT_S = 30.0
-#: Seconds of a camera query's attempt per robot of the fleet (issue 21). The world draws
-#: one picture at a time, so in a fleet that searches at once a query waits behind one
-#: query of nearly every other robot: 10 NAOs on the 2-core machine at load 34 took
+#: Seconds of a camera query's attempt per robot of the fleet (so that large fleets wait their
+#: turn). The world draws one picture at a time, so in a fleet that searches at once a query waits
+#: behind one query of nearly every other robot: 10 NAOs on the 2-core machine at load 34 took
 #: ~0.75 s a picture (261 s of search, ~35 pictures each). An attempt shorter than that
 #: queue asks again while the first query still waits: the world then draws pictures
 #: nobody waits for, and the queue grows (at 100 NAOs every query would time out).

@@ -1,4 +1,4 @@
-"""Agreed planning parameters (DESIGN.md §1 "Agree"; the papers assume one program).
+"""Agreed planning parameters (docs/design.md §1 "Agree"; the papers assume one program).
 
 Equal records are not enough: every agent must also plan with the same d_e, φ_e,
 radius, orientation and strategy, and march the same route. Each agent hashes its own

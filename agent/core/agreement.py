@@ -1,4 +1,4 @@
-"""Exchange and agreement of neighbour records (NAO paper 4.1.2, DESIGN.md §1 steps 3–4).
+"""Exchange and agreement of neighbour records (NAO paper 4.1.2, docs/design.md §1 steps 3–4).
 
 The paper exchanges each robot's record ``{i, N_i, (x_ij, y_ij)}`` once over WiFi and
 assumes nothing is lost. Here every agent re-publishes until the fleet provably holds
@@ -17,13 +17,13 @@ the same record set, and moves only then:
   record we do not hold (or that reported ``failed``) leaves before agreement, the live
   set exceeds ``fleet_size``,
   or ``timeout`` seconds pass without news; the reason names who is missing. A member that leaves after
-  its record arrived is out of reach, not gone (issue #9: at 50 % loss a session stays
+  its record arrived is out of reach, not gone (at 50 % loss a session stays
   cut for longer than any sensible grace): the agreement waits for it to come back
   (:meth:`Agreement.member_joined`) until ``timeout``, and nobody moves meanwhile,
   since agreement needs every member's matching digest.
 
-**The timeout counts from the fleet's last news** (issue 21), not from this agent's
-start: news is a record that changes the set held or a member's digest that changes.
+**The timeout counts from the fleet's last news** (at 100 NAOs searches end far apart), not from
+this agent's start: news is a record that changes the set held or a member's digest that changes.
 In a fleet of 100 the searches end over ~15 minutes; an agent that searched early
 would otherwise give up while the fleet is still converging (and, having stopped, end
 everyone's agreement: "member left before agreement"). Each member's record and
@@ -31,8 +31,8 @@ digest can change only finitely often in a round (its held set only grows), so t
 agreement still ends: agreed, or failed after ``timeout`` seconds in which nothing
 moved.
 
-Re-publishing (what :meth:`Agreement.due` returns, issue 21): prompt sends answer news
-(the record when it was never sent, a member joined, or a member's new digest lacks it;
+Re-publishing (what :meth:`Agreement.due` returns; its bytes stay O(N) at 50 NAOs): prompt sends
+answer news (the record when it was never sent, a member joined, or a member's new digest lacks it;
 the digest when it changed and the set held is complete, and once more on agreement);
 a backoff timer (``backoff_min`` doubling to ``backoff_max``; after the set is complete
 at most 4·``backoff_min``, or one repair per ``live / HEARD_PER_S`` seconds in a
@@ -41,8 +41,8 @@ member's digest is missing or differs, after agreement until every member has re
 a post-agreement phase, and after a failure on parameters (as long as the caller
 pumps). Pure: the caller passes the time and does the I/O.
 
-Per-sender state is kept only for fleet members (issue #8): a record, digest or phase
-from a sender that is not a live member is ignored and counted in ``ignored``, so a
+Per-sender state is kept only for fleet members (hardened against hostile senders): a record, digest
+or phase from a sender that is not a live member is ignored and counted in ``ignored``, so a
 stranger cycling through 65 536 ids cannot grow it. Nothing is lost for a real member
 whose record outran its liveliness token: our digest does not list it, which makes it
 re-send its record (see the re-publishing rules above).
@@ -58,7 +58,7 @@ fleet complete when ``fleet_size`` is given; members that left count with their 
 digest), or until ``timeout``; then the robots outside the largest group of equal
 digests are named (:func:`agent.core.agreed_params.odd_params`; a tie goes to the group holding the smallest id).
 
-**Membership grace (issue #9).** On a lossy radio a live member's liveliness token can
+**Membership grace.** On a lossy radio a live member's liveliness token can
 vanish for a while (its zenoh lease expires, its client reconnects and declares the
 token again). :class:`agent.core.grace.Grace` turns token changes and the member's own publications into
 membership: a vanished token counts as gone only after ``grace`` seconds in which
@@ -70,7 +70,7 @@ Tie-breaks: a record with a higher ``round`` replaces an older one; for the same
 the latest received wins (re-publications are identical). Digests are over the
 records sorted by sender id.
 
-**Adopting** (issue #9, :meth:`Agreement.adopt`): agreement is asymmetric (two
+**Adopting** (a lossy radio, :meth:`Agreement.adopt`): agreement is asymmetric (two
 generals); a member may agree and move while its matching digest never reaches us (its
 session cut until it exits). The runner then lets us agree too when such a member,
 with our parameters digest, reports the plan digest of exactly the records we hold:
@@ -135,7 +135,7 @@ R = TypeVar("R", bound=RecordLike)
 DigestFn = Callable[[Sequence[R]], str]
 
 #: Publications of one kind (repairs of complete sets; progress statuses) a member hears
-#: per second from the fleet, at most (issue 21, docs/agent.md: 1 s repairs flooded 100).
+#: per second from the fleet, at most (docs/agent.md: repairs every 1 s flooded 100 NAOs).
 HEARD_PER_S = 10.0
 
 #: Phases an agent reports only after it has agreed (acknowledges our digest).
@@ -246,7 +246,7 @@ class Agreement(Generic[R]):
         params: str = "",
         backoff_max: float = 4.0,
     ) -> Agreement[R]:
-        """The agreement of an agent restarted after it had agreed (issue #9): the agreed
+        """The agreement of an agent restarted after it had agreed (a crash): the agreed
         ``records`` (its own among them), every member live, the decision ``agreed``.
 
         It re-publishes its digest until every member reports a post-agreement phase
@@ -328,7 +328,7 @@ class Agreement(Generic[R]):
         if news and self.self_id not in msg.members:
             self._record_hint = True  # it lacks our record: answer once
         # A digest that differs from ours needs records, not our digest: no re-send.
-        # (Before issue 21 it reset our digest timer, which at 50 robots made every
+        # (Before agreement had to scale, it reset our digest timer, which at 50 robots made every
         # agent publish its digest several times per record that arrived.)
 
     def _this_round(self, sender: int, round_: int) -> bool:
@@ -428,8 +428,8 @@ class Agreement(Generic[R]):
 
     def adopt(self, now: float, why: str) -> Decision[R]:
         """Agreed on the records held, without every member's matching digest: the caller
-        saw a member act on the plan of exactly these records (``agent.phases.runner``, issue #9:
-        that member's digest may never reach us). Needs a record from every member of a
+        saw a member act on the plan of exactly these records (``agent.phases.runner``; on a lossy
+        radio that member's digest may never reach us). Needs a record from every member of a
         fleet of known size (members out of reach included); final like :meth:`decide`.
         """
         if self._final is not None:
@@ -523,7 +523,7 @@ class Agreement(Generic[R]):
         reset by a newcomer and when our set becomes complete, then capped at
         :meth:`complete_cap`) re-sends while something is still unacknowledged, so
         that lost publications are repaired: bytes per agent grow with the fleet size and
-        the time spent waiting, not with their product (issue 21). The caller publishes
+        the time spent waiting, not with their product (also at 50 NAOs). The caller publishes
         and then calls :meth:`sent` with the same list.
         """
         out: list[str] = []

@@ -1,4 +1,4 @@
-"""Membership grace on a lossy radio (issue #9; DESIGN.md §8 "Faults").
+"""Membership grace on a lossy radio (docs/design.md §8 "Faults").
 
 A live member's liveliness token can vanish for a while (its zenoh lease expires, its
 client reconnects and declares the token again). :class:`Grace` turns token changes and

@@ -1,6 +1,6 @@
 """Facts of the NAO robot (H25 V4–V6) that the agent and the simulated world share.
 
-DESIGN.md §4 and the NAO paper (§3, Fig. 1; §5.2.2): the forehead ("top") camera, the
+docs/design.md §4 and the NAO paper (§3, Fig. 1; §5.2.2): the forehead ("top") camera, the
 head-yaw range and the walking speeds; and the static obstacles of the arena (§5.1.2),
 whose colour and size the world draws and the obstacle detector looks for. This module is the one home of these numbers:
 the agent imports it directly, ``sim/`` imports it through :mod:`agent.wire`

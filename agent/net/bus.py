@@ -1,4 +1,4 @@
-"""The agent's Zenoh session (DESIGN.md §3): the only module of ``agent/`` that imports zenoh.
+"""The agent's Zenoh session (docs/design.md §3): the only module of ``agent/`` that imports zenoh.
 
 Peer mode by default with multicast scouting (the one-machine demo); ``connect`` /
 ``listen`` endpoints, ``no_multicast_scouting`` and ``mode`` mirror zenoh's own example
@@ -8,11 +8,11 @@ counted, never raised into the caller's loop.
 
 Callbacks only hand samples to thread-safe queues (zenoh must not be called, and
 nothing may block, inside a callback); the caller drains them with :meth:`Bus.drain`.
-The one exception is :meth:`Bus.serve` (issue #9: the agreed record set by digest): it
-replies from within the queryable's callback, as zenoh's own queryable examples do, with
-an answer computed from an immutable snapshot (no lock, no I/O but the reply).
+The one exception is :meth:`Bus.serve` (the agreed record set by digest, for an agent restarted
+after a crash): it replies from within the queryable's callback, as zenoh's own queryable examples
+do, with an answer computed from an immutable snapshot (no lock, no I/O but the reply).
 
-Hardening (issue #8): a payload's size is checked before it is copied out of zenoh
+Hardening against hostile input: a payload's size is checked before it is copied out of zenoh
 (``MAX_PUBLICATION_BYTES`` for subscriptions, ``MAX_MESSAGE_BYTES`` for query replies);
 every callback survives every exception, counts it in ``stats.rejected`` and logs a
 reason of at most 200 characters (rate limited); the event queue is bounded in events
@@ -73,7 +73,7 @@ NO_ROUTE_WINDOW = 0.25
 #: liveliness changes have their own lane so that a message flood cannot push out a
 #: membership change, and so do neighbour records: a record is published once and
 #: repaired only on a hint, and at 100 NAOs a flood of statuses pushed 23 of the 100
-#: records out of the run observer's lane (issue 21, try 11: the evaluator could not
+#: records out of the run observer's lane (at 100 NAOs the evaluator could not
 #: recompute the plan, and judged a formation it had no plan for).
 EVENT_CAPS = {"alive": 1024, "record": 1024, "msg": 4096}
 #: ... and the payload bytes the message lanes may hold (a decoded message takes up to
@@ -132,7 +132,7 @@ def open_retrying(
     """``open_fn()``, called again after :class:`SessionUnavailable` until ``give_up_s``
     seconds have passed (then the last error is raised).
 
-    Issue #9: at 50 % loss per direction a TLS session may not open within zenoh's own
+    On a lossy radio, at 50 % loss per direction a TLS session may not open within zenoh's own
     connect window (``connect/timeout_ms`` of ``agent.wire.LOSSY_LINK_SETTINGS``); a
     lossy start should only delay the agent. Waits between attempts double from
     ``wait[0]`` to ``wait[1]`` s and never pass the deadline.
@@ -174,7 +174,8 @@ def key_owner(key: str) -> Identity:
 
 def reply_signers(key: str) -> tuple[Identity, ...]:
     """Who may sign a reply on ``key``: its owner, and on a camera key
-    (``world/robot/{i}/camera``) also the render workers (issue 21)."""
+    (``world/robot/{i}/camera``) also the render workers (the world's cameras drawn by other
+    processes, for large fleets)."""
     owner = key_owner(key)
     if owner == Identity("world") and key.startswith("world/robot/") and key.endswith("/camera"):
         return owner, Identity("render")
@@ -451,8 +452,8 @@ class Bus:
 
         ``best``: zenoh sends the query to one complete queryable, the nearest, if there
         is one, else to every matching one (``QueryTarget.BEST_MATCHING``): a camera
-        query goes to one render worker, not to all (issue 21). Default: to every
-        matching queryable.
+        query goes to one render worker, not to all (so that more workers draw more pictures).
+        Default: to every matching queryable.
         """
         data = encode(msg)
         nonce = b""
@@ -482,7 +483,7 @@ class Bus:
             return out
         if errors and all(e == ZENOH_TIMEOUT for e in errors):
             # the get's own timeout ran out: zenoh ends it with an error reply "Timeout"
-            # (issue 21: at 100 NAOs a camera query that waited past its attempt was
+            # (at 100 NAOs a camera query that waited past its attempt was
             # taken for a world's error, and the robot stopped instead of asking again)
             raise QueryTimeout(f"{key}: no reply within {timeout:g} s")
         if errors:

@@ -1,11 +1,11 @@
 """Exchange and agreement: one round of records until the fleet agrees (NAO paper 4.1.2;
-DESIGN.md §1 step 4, the project's addition: the papers assume lossless WiFi).
+docs/design.md §1 step 4, the project's addition: the papers assume lossless WiFi).
 
 EXCHANGE publish this robot's record and collect every member's;
 AGREE    move on only once every live member published the same record-set digest
          (agent/core/agreement.py: re-sends, back-off, members joining and leaving).
 
-Agreement is asymmetric on a lossy link (issue #9): a member that already acts on the
+Agreement is asymmetric on a lossy link: a member that already acts on the
 plan of exactly the records held here has agreed on them, and this robot adopts that
 agreement (:meth:`Agreeing.adopt_plan`), once it has held every record for
 :data:`ADOPT_AFTER` seconds without agreeing.
@@ -26,7 +26,7 @@ log = logging.getLogger("agent.phases.agreeing")
 
 #: Seconds of holding every member's record before a member's plan is checked for
 #: adoption (it costs a whole plan, ~7 CPU s at 50 NAOs, during which nothing is pumped;
-#: on a sound link the digests agree well before, issue 21).
+#: on a sound link the digests agree well before, also at 50 NAOs).
 ADOPT_AFTER = 2.0
 
 
@@ -81,7 +81,7 @@ class Agreeing:
             ctx.status(phase, (held + agreeing) / (2 * n), d.reason)
 
     def adopt_plan(self, agr: Agreement[NeighborRecordMsg]) -> Decision[NeighborRecordMsg] | None:
-        """Agreed, when a member already acts on the plan of exactly our records (issue #9).
+        """Agreed, when a member already acts on the plan of exactly our records (a lossy link).
 
         Agreement is asymmetric: a member agrees once it holds every matching digest, and
         ours may reach it while its own never reaches us (a session cut until it exits).

@@ -1,4 +1,4 @@
-"""Camera frames for viewers (issue 22; DESIGN.md §10 "Seeing the fleet").
+"""Camera frames for viewers (docs/design.md §10 "Seeing the fleet").
 
 With ``--publish-camera`` an agent publishes, on its own key ``nao/{id}/camera``, a small
 JPEG of the frames it analyses with what the detector found in them (NAO paper §3:

@@ -1,4 +1,4 @@
-"""What every collaborator of the phase machine shares (DESIGN.md §1, §8; NAO paper 4.1.1).
+"""What every collaborator of the phase machine shares (docs/design.md §1, §8; NAO paper 4.1.1).
 
 The phase machine (:mod:`agent.phases.runner`) is split into collaborators, one per
 concern (membership, motion, safe steps, search, agreement, re-search, waves, hold,
@@ -16,7 +16,7 @@ typed roles of :mod:`agent.phases.roles`:
   ground truth;
 * where it is: the phase, its record and round, the agreed plan, its wave and leg;
 * the status publisher (:meth:`Context.status`), which marks the :class:`Timeline` and
-  writes the journal (issue #9) at every phase change through ``journal_hook``.
+  writes the journal (crashed agents resume) at every phase change through ``journal_hook``.
 
 :class:`AgentFailure` is the one way a collaborator stops the robot safely.
 """
@@ -120,23 +120,23 @@ class Context:
     leg: int = 0  # the move's current leg
     final_heading: float = NORTH  # the pyramid axis, once the goals are known
     timeline: Timeline = field(default_factory=Timeline)
-    # issue #9: the durable journal (None: not kept); the hook writes it before each
+    # the durable journal (None: not kept); the hook writes it before each
     # command (with its motion request id) and at each phase change
     # (agent/phases/journaling.py)
     journal: Journal | None = None
     journal_hook: Callable[[str, float, int], None] = _no_journal
-    # issue 20: when this robot's first process of the current run started (ms since the
+    # when this robot's first process of the current run started (ms since the
     # Unix epoch; journaled, kept across resumptions; agent/phases/runs.py)
     run_epoch: int = 0
     last_status: float = -math.inf  # when the last status was published
-    # issue 21: the member this robot's way is blocked by, beyond its patience (-1: none;
+    # the member this robot's way is blocked by, beyond its patience (-1: none;
     # agent/core/formation/jam.py), published in every status
     blocked_by: int = -1
-    # issue 21 (finer waits): how far this robot has walked along its planned path (m,
+    # finer waits: how far this robot has walked along its planned path (m,
     # plan arc length, never decreasing during a move; agent/phases/waves.py), published
     # in every status: a robot waiting for it starts once it is past its release point
     walked: float = 0.0
-    # issue 21: how far this robot has stepped since it arrived (m, common frame of the
+    # how far this robot has stepped since it arrived (m, common frame of the
     # plan; agent/phases/hold.py), published in every status: its children follow it
     shift: tuple[float, float] = (0.0, 0.0)
 

@@ -1,22 +1,22 @@
-"""Hold, correct, march and finish: what a robot does once it has arrived (DESIGN.md §1
-HOLD, §8 MARCH; the correction follows AUV paper §II, robots follow the robot in front
+"""Hold, correct, march and finish: what a robot does once it has arrived (docs/design.md §1 step 7,
+hold and march; the correction follows AUV paper §II, robots follow the robot in front
 by visual servoing; NAO paper 5.2.2 (iii) step 7 for holding).
 
 HOLD     arrived (status ``hold``); once the parent is ``done`` (or ``march``) and no
          robot may still walk near the sight line to it, look at the parent and step by
          the measured offset error (an addition, :meth:`Hold.correct`; meanwhile step
          with the parent, :meth:`Hold._follow`); then measure the pair once more and
-         judge it (:meth:`Hold.verify`, DESIGN.md §9): out of tolerance, the robot stops
+         judge it (:meth:`Hold.verify`, docs/design.md §9): out of tolerance, the robot stops
          with the figure instead of reporting done.
-MARCH    with a route (issue #13, agent/phases/march.py): ``march`` and wait until every
+MARCH    with a route (march in formation, agent/phases/march.py): ``march`` and wait until every
          member is marching; the leader walks the route, followers keep station on their
          parent by vision.
 DONE     ``done``, and stay until every member is, repeating the status as heartbeats
          (:meth:`Hold.wait_all`; a final status published once into a cut session
-         reaches nobody, issue #9). A member of the plan that failed leaves a hole: every
+         reaches nobody on a lossy radio). A member of the plan that failed leaves a hole: every
          waiting robot, and every robot that was done, then stops with the fleet's one
-         reason (issue 21, agent/core/formation/jam.py rule 4) instead of reporting a
-         formation held.
+         reason (agent/core/formation/jam.py rule 4: a dense fleet never reports a formation around
+         a hole) instead of reporting a formation held.
 """
 
 from __future__ import annotations
@@ -151,7 +151,7 @@ class Hold:
 
         Up to :data:`SIDE_MAX` across the robot's heading is a sidestep and the rest a
         step straight ahead or back, without turning (:meth:`Motion.side_step`); a
-        larger step turns to it, walks and turns back (before issue 21's sidesteps,
+        larger step turns to it, walks and turns back (before the sidesteps,
         every correction did: at 50 NAOs a 4 cm correction took ~20 s of turn steps,
         on every level of the pyramid in turn). The sidestep is not checked by the camera,
         which looks ahead: it is short, and it is taken only once no robot may still
@@ -185,7 +185,7 @@ class Hold:
         """Step as far as ``parent`` has stepped since it arrived, not yet followed (its
         ``shift``, common frame): while the parent aligns to its own parent, its children
         move with it, so that a correction near the top of the pyramid does not pass down
-        it one level after another (issue 21: at 50 NAOs one robot's 0.15 m made every
+        it one level after another (at 50 NAOs one robot's 0.15 m made every
         robot below it walk the same 0.15 m in turn, ~8 s a level). Only steps of at least
         :data:`FOLLOW_MIN` and within twice ``max_correction``; the child's own alignment
         measures the parent afterwards."""
@@ -211,13 +211,13 @@ class Hold:
         """Wait until ``parent`` is ``done`` (or ``march``) and every robot that may still
         pass near this robot's sight line to it has arrived
         (:func:`~agent.core.formation.passers_by.passers_by`: within twice the robot
-        radius plus ``max_correction``; until issue 21, the whole fleet); "" then, else
+        radius plus ``max_correction``; before, the whole fleet); "" then, else
         why not (the parent failed, or did not finish within
         ``wave_timeout``; that answer is kept, so the check after the correction does not
         wait a second time).
 
         A parent out of reach (its token gone and silent for the membership grace) is
-        waited for, as the agreement waits for a member out of reach (issue #9): on a
+        waited for, as the agreement waits for a member out of reach on a lossy radio: on a
         lossy link it is usually this robot's own session that was cut, and the parent
         it cannot hear stands in the formation all the same. Before, a parent out of
         reach stopped this robot at once ("formation unverified").
@@ -259,7 +259,7 @@ class Hold:
         return why
 
     def verify(self) -> None:
-        """ "Done" is a measurement (DESIGN.md §9): look at the parent and judge the pair.
+        """ "Done" is a measurement (docs/design.md §9): look at the parent and judge the pair.
 
         The child looks where the plan puts its parent (:meth:`_find_parent`; or takes
         the correction's last look, when it did not move after it) and judges
@@ -355,7 +355,7 @@ class Hold:
 
         ``linger``: a member out of reach (its token gone) not yet seen in ``phases`` is
         waited for too, for up to ``linger`` s, while our heartbeats repeat our status: on
-        a lossy link (issue #9) a session can stay cut for longer than the membership
+        a lossy link a session can stay cut for longer than the membership
         grace, and a final ``done`` published once into a cut session reaches nobody.
         """
         ctx, fleet = self.ctx, self.fleet

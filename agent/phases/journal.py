@@ -1,4 +1,4 @@
-"""The agent's durable journal (issue #9): what a restarted agent resumes from.
+"""The agent's durable journal: what a restarted agent resumes from.
 
 The papers assume robots never crash. An agent started with ``--state-dir DIR`` writes
 its state to ``DIR/robot-{id}.journal`` at every phase change and before every motion;
@@ -12,10 +12,10 @@ restarted after a crash with the same ``--state-dir`` it resumes from it
   motion request id: written *before* the body is asked, so after a crash it is known
   what the robot may have been doing, and the command can be asked again with the same
   id, which the world answers with its first result);
-* which fleet run it belongs to (issue 20): ``run_epoch``, when this robot's first
-  process of the run started (ms since the Unix epoch, kept across resumptions), and
-  ``written_ms``, when it was written; with the record's round before agreement, and the
-  agreed digest and members after, they name the run (the rule that decides whether it
+* which fleet run it belongs to (a finished run's journal must not derail the next): ``run_epoch``,
+  when this robot's first process of the run started (ms since the Unix epoch, kept across
+  resumptions), and ``written_ms``, when it was written; with the record's round before agreement,
+  and the agreed digest and members after, they name the run (the rule that decides whether it
   is still going is in :mod:`agent.phases.runs`);
 * ``final``: ``done``, ``failed`` or ``stopped`` once the run is over for this robot
   (the last record written); a final journal is never resumed, only archived;

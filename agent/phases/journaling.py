@@ -1,8 +1,8 @@
-"""Writing the journal (issue #9; DESIGN.md §8 "Faults"): before every command sent to the
-body and at every phase change, so that a restarted agent knows where it was and what it
+"""Writing the journal (crashed agents resume; docs/design.md §8 "Faults"): before every command
+sent to the body and at every phase change, so that a restarted agent knows where it was and what it
 may have been doing (agent/phases/journal.py holds the format, agent/phases/resume.py
-reads it back). Each command is journaled with its motion request id (issue 20), and
-the run's identity with every write; once the run is over for this robot (``done``,
+reads it back). Each command is journaled with its motion request id (so that a resume never walks
+twice), and the run's identity with every write; once the run is over for this robot (``done``,
 ``failed``, or stopped by the operator) a final record says so (:meth:`Journaling.finish`).
 
 A failing disk never stops the agent: the error is logged and the journal given up.
@@ -62,13 +62,14 @@ class Journaling:
         self.fleet = fleet
 
     def save(self, command: str = "", value: float = 0.0, request_id: int = 0) -> None:
-        """Write the journal (issue #9), before ``command`` is sent with ``request_id``;
+        """Write the journal, before ``command`` is sent with ``request_id``;
         a failing disk is logged and the journal given up, never fatal."""
         self._write(command, value, request_id, "")
 
     def finish(self, end: str) -> None:
-        """The final record (issue 20): the run is over for this robot (``done``,
-        ``failed`` or ``stopped``); the next start archives this journal."""
+        """The final record (a finished run's journal must not derail the next run): the run is over
+        for this robot (``done``, ``failed`` or ``stopped``); the next start archives this
+        journal."""
         self._write("", 0.0, 0, end)
 
     def _write(self, command: str, value: float, request_id: int, final: str) -> None:

@@ -1,4 +1,4 @@
-"""Marching in formation after ``hold`` (issue #13; AUV paper §I–II: "the multi-robot
+"""Marching in formation after ``hold`` (AUV paper §I–II: "the multi-robot
 system should march in a pattern", followers "follow the leaders or other robots in
 front of them by visual servoing"; NAO paper 4.2 for the 20 cm steps).
 

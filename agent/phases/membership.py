@@ -1,4 +1,4 @@
-"""Membership: what this agent hears of the fleet, and says back (DESIGN.md §8 "Faults";
+"""Membership: what this agent hears of the fleet, and says back (docs/design.md §8 "Faults";
 NAO paper 4.1.2, the exchange of records).
 
 The papers assume lossless WiFi and robots that never leave. Here the fleet is whoever
@@ -11,7 +11,7 @@ what it knows of each member (:class:`Peer`):
 * **Key ownership and sessions.** A record, digest or status counts only from the robot
   its key names, and only from that robot's current session (:meth:`current_session`):
   after agreement, from the session whose record was agreed, or a new one that shows the
-  agreed digest (a member resumed after a crash, issue #9).
+  agreed digest (a member resumed after a crash).
 * **Early records.** Records and digests heard before this agent's own agreement round
   (or of a later round) are kept per sender, newest round first, and handed to the
   agreement when it opens (:meth:`open_round`).
@@ -78,8 +78,8 @@ class Peer:
     plan_digest: str = ""
     seen_alive: bool = False
     error: str = ""  # the reason of a ``failed`` status
-    blocked_by: int = -1  # the member it is blocked by (issue 21); -1: none
-    # how far it has walked along its path of plan ``plan_digest`` (issue 21, finer
+    blocked_by: int = -1  # the member it is blocked by (a dense fleet's jam); -1: none
+    # how far it has walked along its path of plan ``plan_digest`` (finer
     # waits): the largest value heard for that plan (the robot only walks on)
     walked: float = 0.0
     # how far it has stepped since it arrived (m, common frame of ``plan_digest``)
@@ -225,7 +225,7 @@ class Membership:
         return peer is not None and peer.alive
 
     def current_session(self, ev: Event, sender: int) -> bool:
-        """Whether ``ev`` comes from the member's current session (DESIGN.md §8).
+        """Whether ``ev`` comes from the member's current session (docs/design.md §8).
 
         Secure buses tag each message with its signer's epoch (the sending process's
         start). A message from an older session of a member than one already heard is
@@ -237,7 +237,7 @@ class Membership:
         pinned = self.agreed_epochs.get(sender)
         if pinned is not None:
             if ev.epoch > pinned and self.proves_agreement(ev.msg):
-                # a member restarted after agreeing (issue #9): its new session counts
+                # a member restarted after agreeing: its new session counts
                 log.info("robot %d resumed in a new session with the agreed digest", sender)
                 self.agreed_epochs[sender] = self.epochs[sender] = ev.epoch
             return ev.epoch == self.agreed_epochs[sender]

@@ -1,4 +1,5 @@
-"""Long computations while the bus is pumped (issue 21, agreement that scales).
+"""Long computations while the bus is pumped (so that agreement scales to 50 NAOs and more: an agent
+keeps hearing the fleet while it plans).
 
 An agent that agreed must go on answering the agreement while it plans: it repeats its
 digest until every member has moved on (:mod:`agent.core.agreement`, NAO paper 4.1.2's

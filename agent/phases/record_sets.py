@@ -1,4 +1,5 @@
-"""The agreed record set by digest (issue #9; DESIGN.md §8 "Faults"; NAO paper 4.1.2).
+"""The agreed record set by digest (an agent restarted after agreement gets the records back;
+docs/design.md §8 "Faults"; NAO paper 4.1.2).
 
 Once agreed, every agent serves the records it agreed on at ``nao/{id}/records``
 (:func:`record_set`, :func:`answer`), so that an agent restarted after a crash can fetch

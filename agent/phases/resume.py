@@ -1,5 +1,5 @@
-"""Resuming an agent after a crash (issue #9, issue 20; DESIGN.md §1 phases, NAO paper
-4.1–5.2).
+"""Resuming an agent after a crash (crashed agents and stale journals; docs/design.md §1 phases, NAO
+paper 4.1–5.2).
 
 The papers assume no robot ever crashes. An agent started with ``--state-dir`` journals
 its state (:mod:`agent.phases.journal`, written by :mod:`agent.phases.journaling`).

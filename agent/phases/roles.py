@@ -1,4 +1,4 @@
-"""The roles the runner's collaborators play for each other (typed seams; DESIGN.md §1, §8).
+"""The roles the runner's collaborators play for each other (typed seams; docs/design.md §1, §8).
 
 The phase machine (:mod:`agent.phases.runner`) composes one collaborator per concern; each
 depends on the shared :class:`~agent.phases.context.Context` and on these protocols, never
@@ -44,13 +44,14 @@ class Hearing(Protocol):
 
 
 class Listening(Hearing, Protocol):
-    """Hearing, and watching every record, digest and status accepted (issue 20)."""
+    """Hearing, and watching every record, digest and status accepted (a journal resumes only a run
+    still going)."""
 
     observers: list[Callable[[Event], None]]
 
 
 class Fleet(Listening, Protocol):
-    """The fleet as one agent knows it (DESIGN.md §8 "Faults")."""
+    """The fleet as one agent knows it (docs/design.md §8 "Faults")."""
 
     peers: dict[int, Peer]
     agreement: Agreement[NeighborRecordMsg] | None
@@ -97,7 +98,8 @@ class Surveyor(Protocol):
 
 
 class Stepper(Protocol):
-    """Distance control to a goal with safe steps (NAO paper 4.2; issue #10)."""
+    """Distance control to a goal with safe steps (NAO paper 4.2; execution noise moves robots off
+    their planned corridors)."""
 
     def walk_to(
         self, goal: np.ndarray, progress: Callable[[float], None], backward_within: float = 0.0

@@ -1,4 +1,4 @@
-"""The phase machine of one agent (DESIGN.md §1, §8; NAO paper 5.2.2 (iii) steps 1–7).
+"""The phase machine of one agent (docs/design.md §1, §8; NAO paper 5.2.2 (iii) steps 1–7).
 
 ::
 
@@ -23,7 +23,7 @@ PLAN/WAIT/MOVE   the formation core on the agreed records, identical on every ag
 HOLD/MARCH/DONE  correct against the parent, march the route if there is one, ``done``
                  and stay until all are (agent/phases/hold.py, march.py).
 
-With ``--publish-camera`` (issue 22) the perception is wrapped by
+With ``--publish-camera`` (for viewers) the perception is wrapped by
 agent/phases/camera_feed.py, which publishes thumbnails of the analysed frames for viewers.
 
 The :class:`Runner` only composes the collaborators around one shared
@@ -82,7 +82,7 @@ class Runner:
     ) -> None:
         if body.robot_id != config.robot_id:
             raise ValueError(f"robot {body.robot_id} driven with config for {config.robot_id}")
-        if config.publish_camera:  # issue 22: every analysed frame offered to viewers
+        if config.publish_camera:  # every analysed frame offered to viewers
             perception = CameraFeed(perception, bus, config.robot_id, lambda: body.t_sim, clock)
         self.ctx = ctx = Context(bus, body, config, perception, formation, clock)
         self.membership = fleet = Membership(ctx)

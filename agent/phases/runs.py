@@ -1,5 +1,6 @@
 """Which run of the fleet a journal belongs to, and whether that run is still going
-(issue 20; DESIGN.md §8 "Faults"; docs/faults.md "Crashed agents and restarted routers").
+(a finished run's journal must not derail the next run; docs/design.md §8 "Faults"; docs/faults.md
+"Crashed agents and restarted routers").
 
 A journal (:mod:`agent.phases.journal`) belongs to one run of the fleet. Its identity:
 

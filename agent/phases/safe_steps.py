@@ -1,4 +1,5 @@
-"""Safe steps: where a robot decides to take a step (an addition to NAO paper 4.2; issue #10).
+"""Safe steps: where a robot decides to take a step (an addition to NAO paper 4.2: execution noise
+moves robots off their planned corridors).
 
 The papers walk each trajectory open-loop in 20 cm steps (distance control, 4.2). Here
 every step is checked first (:meth:`SafeSteps.clear_way`, the rule of
@@ -18,10 +19,10 @@ out of the image but still there):
   A blocker taken for a member that holds its slot, that the plan left out, or that
   has not moved and waits (through the plan) for this robot will not walk on before
   this one passes: the patience is then the first rank's (one poll), whatever this
-  robot's rank (issue 21: at 50 NAOs robot 37, rank ~30, waited 32-33 polls, 80 s of
+  robot's rank (at 50 NAOs robot 37, rank ~30, waited 32-33 polls, 80 s of
   the critical chain, for robot 6 standing at its start, whose ``after`` list names 37).
-* **jam** (issue 21, agent/core/formation/jam.py): still blocked once the patience is
-  spent, the robot names the member it takes for the blocker (status ``blocked_by``,
+* **jam** (a dense fleet never jams for good, agent/core/formation/jam.py): still blocked once the
+  patience is spent, the robot names the member it takes for the blocker (status ``blocked_by``,
   :meth:`SafeSteps._claim`): a robot that has not moved yet and waits for this one
   yields (agent/phases/waves.py). It waits longer for a blocker that has not moved yet
   (up to the wave timeout) than for any other (``max_polls``), then stops naming it;
@@ -135,7 +136,7 @@ class SafeSteps:
         False, not walked, when that corridor stays blocked past this robot's patience:
         the image after the turn shows what the via was planned without (a NAO out of
         the earlier view, one seen afresh nearer). The caller then plans the detour again
-        from what it has seen since (issue 21: at 50 NAOs robot 37 waited 60 polls, then
+        from what it has seen since (at 50 NAOs robot 37 waited 60 polls, then
         stopped the fleet, facing a NAO that held its slot 0.6 m ahead)."""
         turn = wrap_pi(v.heading - self.ctx.beliefs.heading)
         if abs(turn) > self.ctx.cfg.rotation_tolerance:

@@ -11,7 +11,7 @@ LOCALISE the detections into the fixed frame (eqs. 7–8) with the compass-estim
          with the static obstacles seen (:meth:`Search.localise`).
 
 The head-yaw-0 image taken first *defines* the fixed frame; it is journaled as the
-reference view a restarted agent re-measures its heading against (issue #9).
+reference view a restarted agent re-measures its heading against after a crash.
 """
 
 from __future__ import annotations

@@ -1,24 +1,24 @@
 """Plan, wait and move: the agreed plan executed wave by wave (NAO paper 4.1.2–4.2,
-5.2.2 (iii) steps 3–7; AUV III.B–C for the pyramid; DESIGN.md §1 steps 5–6).
+5.2.2 (iii) steps 3–7; AUV III.B–C for the pyramid; docs/design.md §1 steps 5–6).
 
 PLAN  the formation core on the agreed records (identical on every agent): this
       robot's slot, wave and parent (:meth:`Waves.make_plan`; computed in a worker
       thread while this one keeps pumping the bus, agent/phases/pumping.py), turned to
-      its own fixed frame by its estimated start heading (DESIGN.md §9); a robot the
+      its own fixed frame by its estimated start heading (docs/design.md §9); a robot the
       fleet's check left out stands still and stops with the reason. From then on the agreed
       record set is served (agent/phases/record_sets.py) and only the agreed sessions
       count (agent/phases/membership.py).
 WAIT  for every robot of this robot's ``after`` list to walk past its release point
       (the plan's ``after_at``: that robot's published ``walked`` along its path, or it
-      holds its slot; issue 21, agent/core/formation/release.py), leader first
-      (agent/core/formation/execution.py): an event, never a time; but yield (start now) when the robots it
-      still waits for are blocked by it, or wait for one that is (issue 21,
-      agent/core/formation/jam.py rule 2); stop with the fleet's reason once a member of
-      the plan has failed (rule 4).
+      holds its slot, so that it need not wait for the whole walk; agent/core/formation/release.py),
+      leader first (agent/core/formation/execution.py): an event, never a time; but yield (start
+      now) when the robots it still waits for are blocked by it, or wait for one that is (dense
+      fleets never jam for good, agent/core/formation/jam.py rule 2); stop with the fleet's reason
+      once a member of the plan has failed (rule 4).
 MOVE  rotation control to face each leg's goal, distance control in 20 cm steps with
       the heading corrected after each (4.2, 5.2.2), every step checked first
       (agent/phases/safe_steps.py), then the turn to the pyramid axis. A robot restarted
-      mid-move (issue #9) goes on from its journaled leg. While it walks it publishes
+      mid-move (a crash) goes on from its journaled leg. While it walks it publishes
       how far along its planned path it is (``walked``, :func:`~agent.core.formation.release.walked_along`), at once
       when it passes a release point that a robot waits for.
 """
@@ -66,7 +66,7 @@ class Waves:
         except ValueError as exc:
             raise AgentFailure(f"planning failed on the agreed records: {exc}") from None
         ctx.plan_digest = str(plan.digest)
-        if ctx.me in plan.excluded:  # the fleet's check named this robot (DESIGN.md §9)
+        if ctx.me in plan.excluded:  # the fleet's check named this robot (docs/design.md §9)
             ctx.plan = plan
             raise AgentFailure(
                 f"left out of the plan, standing still: {plan.verdict or 'sightings do not fit'}"
@@ -149,7 +149,7 @@ class Waves:
         n = len(goals)
         for k, goal in enumerate(goals):
             if k < ctx.leg:
-                continue  # walked before a restart (issue #9)
+                continue  # walked before a restart (a crash mid-move)
             ctx.leg = k
 
             def progress(p: float, k: int = k) -> None:

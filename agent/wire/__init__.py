@@ -1,4 +1,4 @@
-"""The wire contract: what every process of the fleet agrees on (DESIGN.md §3, §8).
+"""The wire contract: what every process of the fleet agrees on (docs/design.md §3, §8).
 
 The one part of ``agent/`` that ``sim/`` and the tools may import. One module per
 concept:

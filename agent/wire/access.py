@@ -1,4 +1,4 @@
-"""zenoh TLS and access-control settings built from the fleet credentials (DESIGN.md §8,
+"""zenoh TLS and access-control settings built from the fleet credentials (docs/design.md §8,
 layer 2: transport). Pure data: dicts that become JSON5 in ``zenoh.Config``.
 """
 
@@ -84,7 +84,8 @@ def acl_settings(roster: Iterable[Identity]) -> dict[str, Any]:
             ["egress"],
             ["nao/**", "world/clock"],
         ),
-        # the agreed record sets (issue #9): any member asks, every robot serves its own
+        # the agreed record sets (for agents restarted after a crash): any member asks, every robot
+        # serves its own
         _rule("ask-records", ["query"], ["ingress"], [KEY_RECORDS_ALL]),
         _rule(
             "deliver-records",
@@ -95,8 +96,9 @@ def acl_settings(roster: Iterable[Identity]) -> dict[str, Any]:
         # the world: serves and publishes world/**, hears membership
         _rule("world-serve", ["declare_queryable", "reply", "put"], ["ingress"], ["world/**"]),
         _rule("world-take", ["query", "declare_subscriber"], ["egress"], ["world/**"]),
-        # render workers (issue 21): follow the world's poses, ask its scenario, serve
-        # the cameras; nothing else (no walking, no registering, no fleet traffic)
+        # render workers (cameras drawn by other processes, for large fleets): follow the world's
+        # poses, ask its scenario, serve the cameras; nothing else (no walking, no registering, no
+        # fleet traffic)
         _rule(
             "render-serve",
             ["declare_queryable", "reply", "query", "declare_subscriber"],

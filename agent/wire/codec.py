@@ -1,4 +1,4 @@
-"""The bounded msgpack codec (DESIGN.md §3): encode, and decode untrusted bytes.
+"""The bounded msgpack codec (docs/design.md §3): encode, and decode untrusted bytes.
 
 :func:`decode` validates the version, the type tag, every field's type, range and size,
 and rejects anything that does not fit with a :class:`ProtocolError` whose text is the

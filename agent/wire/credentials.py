@@ -1,4 +1,4 @@
-"""Fleet credentials (DESIGN.md §8 "Trust", layer 1): identities, the credentials folder,
+"""Fleet credentials (docs/design.md §8 "Trust", layer 1): identities, the credentials folder,
 creating a fleet, revoking a key, loading and checking certificates (issuer, validity
 period, revocation: :mod:`agent.wire.revocation`). See :mod:`agent.wire.trust`.
 """

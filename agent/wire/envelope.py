@@ -1,4 +1,4 @@
-"""The signed envelope (DESIGN.md §8 "Trust", layer 3: end to end).
+"""The signed envelope (docs/design.md §8 "Trust", layer 3: end to end).
 
 Every payload travels sealed (:meth:`Signer.seal`): a msgpack array ``[1, signer, epoch,
 seq, dt, payload, signature]``. :class:`Verifier` checks the signature against the

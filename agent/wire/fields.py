@@ -1,4 +1,4 @@
-"""Limits and field validators of the wire contract (DESIGN.md §3).
+"""Limits and field validators of the wire contract (docs/design.md §3).
 
 Every message field is checked by one of these validators when it is decoded: type,
 range and size. A value that does not fit raises :class:`ProtocolError` (a
@@ -16,7 +16,7 @@ from agent.core import nao
 
 SCHEMA_VERSION = 1
 MAX_ROBOT_ID = 65535
-#: Neighbours one record may carry (issue 21: 100 NAOs). A robot sees at most the others
+#: Neighbours one record may carry (fleets of 100 NAOs). A robot sees at most the others
 #: within sight (``nao.SIGHT_MAX`` = 3 m); generated fleets of 100-200 put <= 50 there,
 #: and a fleet of up to 128 robots (``tools.demo``'s limit) fits even if one saw them all.
 MAX_NEIGHBOURS = 128
@@ -30,7 +30,7 @@ MAX_MESSAGE_BYTES = MAX_IMAGE_BYTES + 4096
 MAX_PUBLICATION_BYTES = 64 * 1024
 #: World requests (register, camera, walk, turn) are a few dozen bytes.
 MAX_REQUEST_BYTES = 1024
-#: Camera frames for viewers (issue 22, ``nao/{id}/camera``): a JPEG thumbnail of at most
+#: Camera frames for viewers (``nao/{id}/camera``): a JPEG thumbnail of at most
 #: this many bytes (160x120 at quality 70 is 3-8 kB), at most this size in pixels, with at
 #: most this many detections.
 MAX_THUMBNAIL_BYTES = 32 * 1024
@@ -51,7 +51,7 @@ MAX_COORD = 1000.0  # metres: no NAO fleet spans a kilometre
 MAX_SHIFT = 10.0
 MAX_STEP = 50.0  # metres: the longest single walk command accepted
 MAX_SIDE_STEP = 0.3  # metres: the longest single sidestep accepted (NAOqi moveTo(0, y, 0))
-#: metres: the longest planned path a status reports walking along (issue 21, finer
+#: metres: the longest planned path a status reports walking along (finer
 #: waits): a path with two via points across a fleet of MAX_COORD spans < 9 km
 MAX_WALKED = 10.0 * MAX_COORD
 HEAD_YAW_LIMIT = nao.HEAD_YAW_LIMIT

@@ -1,7 +1,7 @@
-"""Fleet identities (DESIGN.md §8 "Trust"): who a certificate's common name says it is.
+"""Fleet identities (docs/design.md §8 "Trust"): who a certificate's common name says it is.
 
 ``robot-{id}``, ``world``, ``observer``, ``router`` and ``render`` (the render workers of
-issue 21, one key for all of them); the common name *is* the identity.
+large fleets, one key for all of them); the common name *is* the identity.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Key expressions of the bus (DESIGN.md §3 table): who publishes and serves what."""
+"""Key expressions of the bus (docs/design.md §3 table): who publishes and serves what."""
 
 from __future__ import annotations
 
@@ -13,14 +13,16 @@ KEY_ALIVE_ALL = "nao/alive/*"
 KEY_RECORD_ALL = "nao/*/record"
 KEY_DIGEST_ALL = "nao/*/digest"
 KEY_STATUS_ALL = "nao/*/status"
-#: Every agent's record-set queryable (issue #9): the agreed records by digest.
+#: Every agent's record-set queryable (for agents restarted after a crash): the agreed records by
+#: digest.
 KEY_RECORDS_ALL = "nao/*/records"
-#: Every agent's camera frames for viewers (issue 22; ``--publish-camera``).
+#: Every agent's camera frames for viewers (``--publish-camera``).
 KEY_CAMERA_FEED_ALL = "nao/*/camera"
 KEY_WORLD_REGISTER = "world/register"
 #: The world's scenario (render workers build their copy of the room from it).
 KEY_WORLD_SCENARIO = "world/scenario"
-#: Every robot's forehead camera: served by the world, or by render workers (issue 21).
+#: Every robot's forehead camera: served by the world, or by render workers (processes of their own,
+#: for large fleets).
 KEY_CAMERA_ALL = "world/robot/*/camera"
 KEY_WORLD_CLOCK = "world/clock"
 KEY_WORLD_TRUTH_POSES = "world/truth/poses"

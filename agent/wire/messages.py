@@ -1,4 +1,4 @@
-"""Message schemas of the wire contract (DESIGN.md §3).
+"""Message schemas of the wire contract (docs/design.md §3).
 
 Every message on the wire is a msgpack map ``{"v": SCHEMA_VERSION, "t": <type tag>,
 ...fields}``; each class declares its fields' validators (:mod:`agent.wire.fields`).
@@ -168,16 +168,16 @@ class StatusMsg(Message):
     -1: no such measurement (yet, or the leader).
 
     ``blocked_by`` >= 0: the robot's way to its slot has stayed blocked by that member
-    beyond its patience (issue 21, ``agent.core.formation.jam``); -1: not blocked.
+    beyond its patience (a dense fleet's jam, ``agent.core.formation.jam``); -1: not blocked.
 
     ``walked``: how far the robot has walked along its planned path (m, arc length of the
     plan ``plan_digest``, never decreasing during its ``move``; 0 before it): a robot
     that waits for it starts once it is past the release point in the plan's
-    ``after_at`` (issue 21, ``agent.core.formation.release``).
+    ``after_at`` (finer waits, ``agent.core.formation.release``).
 
     ``shift_x``, ``shift_y``: how far the robot has stepped since it arrived (m, the
     common frame of ``plan_digest``): its alignment to its own parent, which its children
-    follow at once instead of one level after another (issue 21, ``agent.phases.hold``).
+    follow at once instead of one level after another (``agent.phases.hold``).
     """
 
     TAG: ClassVar[str] = "status"
@@ -224,7 +224,7 @@ MAX_RECORD_BYTES = 8192
 
 @dataclass(frozen=True)
 class RecordSetRequest(Message):
-    """Ask the agents for the agreed record set whose digest is ``digest`` (issue #9:
+    """Ask the agents for the agreed record set whose digest is ``digest`` (crashed agents:
     a restarted agent fetches what it agreed on); empty: whatever set they agreed on.
     Only agents holding it answer."""
 
@@ -323,8 +323,8 @@ class CameraReply(Message):
     }
 
 
-#: Motion request ids (issue #9): 0 is "no id" (executed every time); 1..MAX_REQUEST_ID
-#: are executed once per (robot, id) by the world, which answers a repeat with the
+#: Motion request ids (lost replies on a lossy radio): 0 is "no id" (executed every time);
+#: 1..MAX_REQUEST_ID are executed once per (robot, id) by the world, which answers a repeat with the
 #: first result, so a client may retry a timed-out motion with the same id.
 MAX_REQUEST_ID = 2**53 - 1
 _REQUEST_ID = _int("request_id", 0, MAX_REQUEST_ID)
@@ -386,7 +386,7 @@ class CommandReply(Message):
 
 
 #: How the reason of an :class:`ErrorReply` begins when the server is overloaded and
-#: executed nothing: the caller may ask again later (issue 21: at 100 NAOs the world's
+#: executed nothing: the caller may ask again later (at 100 NAOs the world's
 #: bounded render queue refused pictures, and agents stopped on it).
 BUSY = "world busy"
 
@@ -489,7 +489,7 @@ def _detection(v: Any) -> CameraDetection:
 
 @dataclass(frozen=True)
 class CameraMsg(Message):
-    """A camera frame robot ``robot`` analysed, for viewers (issue 22; DESIGN.md §10):
+    """A camera frame robot ``robot`` analysed, for viewers (docs/design.md §10):
     published on ``nao/{robot}/camera`` only with ``--publish-camera``, at most a few per
     second (agent/phases/camera_feed.py).
 

@@ -1,4 +1,4 @@
-"""How a process joins the bus (DESIGN.md §3, §8): the join flags every process shares and
+"""How a process joins the bus (docs/design.md §3, §8): the join flags every process shares and
 the zenoh settings they produce (pure data: JSON5 text for ``zenoh.Config``).
 """
 
@@ -20,7 +20,7 @@ from agent.wire.identity import Identity
 ZENOH_MODES = ("peer", "client", "router")
 
 
-#: zenoh settings for lossy radio links (issue #9), for every process. zenoh's defaults
+#: zenoh settings for lossy radio links, for every process. zenoh's defaults
 #: (10 s lease, 10 s to open a TLS session, a client that gives up after its first
 #: failed connection) break at 30 % loss per direction, where TCP retransmission stalls
 #: for seconds. Measured with ``tools.eval_loss`` (README "Fault injection and
@@ -40,7 +40,7 @@ LOSSY_LINK_SETTINGS: tuple[tuple[str, str], ...] = (
 
 @dataclass(frozen=True)
 class NetworkSpec:
-    """How a process joins the bus (DESIGN.md §3): zenoh mode, endpoints, scouting.
+    """How a process joins the bus (docs/design.md §3): zenoh mode, endpoints, scouting.
 
     Pure data shared by every process (agents, world, router, tools), so that all of them
     accept and check the same flags; :meth:`json5_items` gives the zenoh config entries,
@@ -111,7 +111,7 @@ class NetworkSpec:
 
 #: The router's port for robot-to-robot traffic (records, digests, statuses, tokens).
 BUS_PORT = 7447
-#: The router's second port (issue #9): world links and the agents' body sessions
+#: The router's second port (spared by fault injection): world links and the agents' body sessions
 #: (``python -m agent --world-connect``). On a real NAO camera and legs are on board, so
 #: fault injection (``tools.packet_drop --exempt-port``) spares this port and drops only
 #: robot-to-robot traffic.

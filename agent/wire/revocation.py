@@ -1,4 +1,4 @@
-"""The fleet's revocation list (DESIGN.md §8 "Trust"; RFC 5280 §5, the X.509 CRL): the
+"""The fleet's revocation list (docs/design.md §8 "Trust"; RFC 5280 §5, the X.509 CRL): the
 certificates the fleet CA has withdrawn before they expire (a stolen or retired robot).
 
 ``crl.pem`` in a credentials folder is public and signed by the fleet CA; it lists the

@@ -1,4 +1,4 @@
-"""Fleet trust (DESIGN.md §8): credentials, the signed envelope, TLS and access control.
+"""Fleet trust (docs/design.md §8): credentials, the signed envelope, TLS and access control.
 
 Three layers, each useful without the others:
 
@@ -23,8 +23,8 @@ Three layers, each useful without the others:
    each common name its role: robot i publishes ``nao/i/**``, declares ``nao/alive/i``,
    serves ``nao/i/records`` (the agreed record sets, any member may ask) and
    queries ``world/robot/i/**`` and ``world/register``; the world serves ``world/**``;
-   render workers (issue 21) serve ``world/robot/*/camera``, ask ``world/scenario`` and
-   follow ``world/truth/poses``; observers only subscribe.
+   render workers (cameras drawn by other processes) serve ``world/robot/*/camera``, ask
+   ``world/scenario`` and follow ``world/truth/poses``; observers only subscribe.
 
 3. **End to end.** Every payload travels in a sealed envelope (:meth:`Signer.seal`), a
    msgpack array ``[1, signer, epoch, seq, dt, payload, signature]``: the signer's

@@ -1,6 +1,6 @@
 """Scenarios of the simulated world: robots, obstacles, clutter, lighting, seed.
 
-A scenario fixes everything the world needs to start (issue 3, DESIGN.md §4): robot ids
+A scenario fixes everything the world needs to start (docs/design.md §4): robot ids
 and initial poses ``(x, y, heading)`` in world metres/radians, static obstacles (cylinders,
 radius :data:`agent.core.nao.OBSTACLE_RADIUS` by default), optional orange lookalike clutter for the detector's hard
 cases, the light, the seed of the textures and of the motion noise, and the half-size of
@@ -11,7 +11,7 @@ every robot faces the same "north" (world +y, heading pi/2), nearest spacing 0.6
 every robot within the range of sight [DETECT_MIN, DETECT_MAX] = [0.5, 3.0] m (the
 perception's, :data:`agent.core.nao.SIGHT_MAX`) of at least one other, the whole fleet
 connected by that relation. With ``isolated`` one robot stands 2-3 m from every other
-(at the far end of sight). ``headings`` leaves the papers' alignment (DESIGN.md §9):
+(at the far end of sight). ``headings`` leaves the papers' alignment (docs/design.md §9):
 ``aligned`` (every robot faces north, the default), ``random`` (uniform over the
 circle) or ``jitter:DEG`` (north ± DEG degrees, uniform), drawn from a stream of their own
 so that the positions of a seed do not depend on them. Scenario files are JSON

@@ -1,4 +1,5 @@
-"""What a body costs per camera frame and per motion, by body (issue #11 measurements).
+"""What a body costs per camera frame and per motion, by body (the zenoh, NAOqi and in-process
+bodies measured).
 
     python -m tests.body.bench_bodies [--n 40]
 

@@ -1,4 +1,5 @@
-"""The three bodies of :class:`agent.seams.Body` on one simulated world each (issue #11).
+"""The three bodies of :class:`agent.seams.Body` on one simulated world each (one contract suite for
+every body).
 
 - ``world``: :class:`agent.body.in_process.WorldBody`, the world in this process;
 - ``zenoh``: :class:`agent.body.zenoh_world.ZenohBody` over a real zenoh session (loopback) to a

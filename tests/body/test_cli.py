@@ -1,4 +1,4 @@
-"""``python -m agent`` selects its body: ``--body zenoh|naoqi`` and ``--nao URL`` (issue #11)."""
+"""``python -m agent`` selects its body: ``--body zenoh|naoqi`` and ``--nao URL`` (a real NAO)."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """A step's drift the compass reports implausibly large is re-measured
-(:meth:`agent.phases.motion.Motion._confirm_drift`, issue #10).
+(:meth:`agent.phases.motion.Motion._confirm_drift`: execution noise).
 
 At ``--noise-scale 2`` a NAO that veers strongly drifts 20–30° in one 20 cm step; the
 compass measured it correctly, the runner took it for a mismatch and believed 0°, and

@@ -1,6 +1,6 @@
 """The march (agent/phases/march.py) on an in-process world: a follower keeps station on a
 parent that the test moves, a lost parent halts it with the reason, a failed member
-halts the fleet, the leader waits for a follower that lost its parent (issue #13).
+halts the fleet, the leader waits for a follower that lost its parent.
 
 The parent is moved by the body's camera: every image the child takes first moves the
 parent 5 cm along the axis until it has marched 0.6 m, then the parent reports ``done``

@@ -1,4 +1,4 @@
-"""The NAOqi body and the virtual NAOs beyond the shared contract (issue #11).
+"""The NAOqi body and the virtual NAOs beyond the shared contract.
 
 Raw qi clients check that the virtual NAO speaks the NAOqi API (names, signatures,
 limits), and the NAOqi body's own duties: wake up and stand, turn qi errors into

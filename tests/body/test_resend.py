@@ -1,4 +1,5 @@
-"""The motion in flight at a crash, asked again with its journaled request id (issue 20).
+"""The motion in flight at a crash, asked again with its journaled request id (a resume that
+survives a second crash).
 
 On the zenoh world of tests/body/conftest.py (real zenoh sessions on loopback, the
 world's loop in a thread of this process): robot 1 walks with a request id, its agent
@@ -56,7 +57,7 @@ def test_a_repeated_walk_is_answered_from_the_worlds_cache(zenoh: Rig) -> None:
 def test_a_resumed_agent_sends_the_motion_in_flight_again_and_moves_once(
     zenoh: Rig, perception: PerceptionAdapter, command: str, moved: tuple[float, float]
 ) -> None:
-    """A walk, or a sidestep (issue 21, journaled as ``side``), in flight at the crash:
+    """A walk, or a sidestep (journaled as ``side``), in flight at the crash:
     asked again with its id, answered from the world's cache, believed once (a sidestep
     across the heading: facing north, to the west)."""
     x0, y0, h0 = zenoh.world.pose(1)

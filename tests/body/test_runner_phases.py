@@ -1,4 +1,4 @@
-"""The runner's moving phases, one by one, on an in-process world (issue #11).
+"""The runner's moving phases, one by one, on an in-process world (no network).
 
 :class:`agent.body.in_process.WorldBody` gives real renders and the world's seeded motion
 noise without a network; the bus is a real zenoh session with no peers (the phases
@@ -146,7 +146,7 @@ def test_correct_steps_towards_the_planned_offset_to_the_parent(
 def test_a_small_correction_is_a_sidestep_without_turning(
     world: World, bus: Bus, perception: PerceptionAdapter
 ) -> None:
-    """Issue 21: a correction across the axis stepped sideways (NAOqi moveTo(0, y, 0))
+    """A correction across the axis stepped sideways (NAOqi moveTo(0, y, 0))
     instead of turning to it, walking and turning back (~12 compass turn steps, ~20 s a
     level of the pyramid at 50 NAOs)."""
     r, plan, child, axis = _holding(world, bus, perception)
@@ -276,7 +276,7 @@ def test_verify_measures_a_parent_out_of_reach_that_reported_done(
 def test_a_child_waits_for_the_robots_passing_its_sight_line_only(
     world: World, bus: Bus, perception: PerceptionAdapter
 ) -> None:
-    """Issue 21: the alignment waits for the parent and for the robots that may still
+    """The alignment waits for the parent and for the robots that may still
     walk near the sight line to it, not for the whole fleet."""
     from tests.formation.test_passers_by import plan_of, robot
 
@@ -302,7 +302,7 @@ def test_a_child_waits_for_the_robots_passing_its_sight_line_only(
 def test_verify_judges_the_last_look_of_a_correction_that_did_not_walk(
     world: World, bus: Bus, perception: PerceptionAdapter
 ) -> None:
-    """Issue 21: a robot on its slot finds nothing to correct; that look is the final
+    """A robot on its slot finds nothing to correct; that look is the final
     state's, and verify judges it instead of asking the world for the same picture."""
     r, _, child, _ = _holding(world, bus, perception)
     pictures: list[float] = []
@@ -327,7 +327,7 @@ def test_verify_judges_the_last_look_of_a_correction_that_did_not_walk(
 def test_a_child_follows_the_steps_its_parent_announces(
     world: World, bus: Bus, perception: PerceptionAdapter
 ) -> None:
-    """Issue 21: while the parent aligns to its own parent, the child steps with it (the
+    """While the parent aligns to its own parent, the child steps with it (the
     parent's ``shift``), so a correction near the top of the pyramid does not pass down
     it one level at a time; the child then announces its own shift for its children."""
     r, _, child, axis = _holding(world, bus, perception)

@@ -1,6 +1,7 @@
 """Safe steps (agent/core/control/corridor.py in agent/phases/safe_steps.py) on an in-process
 world: a NAO stands in the robot's corridor; the robot sees it in the compass image, waits, then
-walks round it by via steps and reaches its goal without contact (issue #10).
+walks round it by via steps and reaches its goal without contact (execution noise moves robots off
+their planned corridors).
 
 Real renders and the real detector; the world's motion noise is on. Ground truth comes
 from the world, which the agent never reads.
@@ -107,7 +108,7 @@ def test_a_nao_standing_on_the_goal_stops_the_robot_with_a_reason(
 
 def _plan_with_robot_2_on_the_goal() -> Plan:
     """Robot 1 (world (0, -0.8)) planned to (0, -0.05), robot 2 standing at its start
-    (0, 0), planned to (1.5, 0) after robot 1: the jam of issue 21 (world = fixed frame
+    (0, 0), planned to (1.5, 0) after robot 1: the jam of a dense fleet (world = fixed frame
     shifted, both facing north at the start of robot 1's frame)."""
 
     def rp(i: int, start: tuple[float, float], target: tuple[float, float], wave: int) -> RobotPlan:
@@ -138,7 +139,7 @@ def _jammed(world: World, bus: Bus, perception: PerceptionAdapter, phase: str) -
 def test_a_jammed_robot_names_its_blocker_and_goes_on_once_it_yields(
     blocked: World, bus: Bus, perception: PerceptionAdapter
 ) -> None:
-    """Issue 21: robot 2 has not moved (``wait``) and stands on robot 1's goal: robot 1
+    """Robot 2 has not moved (``wait``) and stands on robot 1's goal: robot 1
     names it (``blocked_by`` 2) and waits; robot 2 yields (here: the world moves it, as
     its own agent would walk away), and robot 1 reaches its goal."""
     r = _jammed(blocked, bus, perception, "wait")
@@ -183,7 +184,7 @@ def test_a_jammed_robot_stops_naming_its_blocker(
 def test_a_nao_standing_beside_the_way_is_walked_round_not_crept_past(
     bus: Bus, perception: PerceptionAdapter, seed: int
 ) -> None:
-    """Issue 21, 100 NAOs: a NAO holding 0.25 m beside a robot's straight way. Checked one
+    """At 100 NAOs: a NAO holding 0.25 m beside a robot's straight way. Checked one
     step ahead only, it blocked the step once it was 0.6 m ahead, too near to be seen
     surely: the robot stepped back, saw the step clear, stepped on, and crept past it until
     the sighting was lost beside it, then touched it (both seeds, before the lookahead).
@@ -243,7 +244,7 @@ def test_a_nao_that_holds_its_slot_is_walked_round_without_waiting_out_the_rank(
     unmoved: bool,
     polls: tuple[int, int],
 ) -> None:
-    """Issue 21, 50 NAOs: a robot of rank ~30 waited 33 polls (80 s of the critical
+    """At 50 NAOs: a robot of rank ~30 waited 33 polls (80 s of the critical
     chain) for a NAO that stood on its slot. A blocker taken for a member that holds
     will not walk on: one poll, then round it; so for one that has not moved and waits
     for this robot (it was robot 6 at its start, waiting for robot 37); a NAO walking
@@ -264,7 +265,7 @@ def test_a_nao_that_holds_its_slot_is_walked_round_without_waiting_out_the_rank(
 def test_a_via_step_blocked_after_the_turn_is_planned_again(
     bus: Bus, perception: PerceptionAdapter
 ) -> None:
-    """Issue 21, 50 NAOs: robot 37 turned for a via step, saw a NAO that held its slot
+    """At 50 NAOs: robot 37 turned for a via step, saw a NAO that held its slot
     0.6 m ahead in the turned image, waited 60 polls for it and stopped the fleet. Here
     robot 3 stands on the right tangent round robot 2, outside the first image (44° off
     the heading): the via step planned without it is found blocked after the turn, not

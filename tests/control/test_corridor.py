@@ -244,7 +244,7 @@ def test_back_off_known_answers() -> None:
 
 
 def test_a_nao_believed_near_the_edge_or_just_past_view_near_is_not_forgotten() -> None:
-    """Issue 21, 100 NAOs: robot 91 stepped back from robot 99 to a believed ~0.6 m,
+    """At 100 NAOs: robot 91 stepped back from robot 99 to a believed ~0.6 m,
     forgot it when the image did not show it (truly 0.58 m, 35° off the heading), walked
     on and touched it. An image forgets only what it surely shows: believed at least
     FORGET_NEAR away and FORGET_EDGE inside the field of view (30.45° - 10° = 20.45°)."""

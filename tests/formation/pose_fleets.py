@@ -1,4 +1,4 @@
-"""Fleets with unaligned start poses, their records, and record faults (DESIGN.md §9).
+"""Fleets with unaligned start poses, their records, and record faults (docs/design.md §9).
 
 A robot's start pose is (x, y, h) in the world, h its body heading; its fixed frame is
 its start pose with the body facing +y (π/2), so ψ = h − π/2 and a world vector w reads

@@ -1,4 +1,4 @@
-"""Dense fleets' frames (agent/core/formation/fleet_frame.py with firm_pairs.py; issue 21).
+"""Dense fleets' frames (agent/core/formation/fleet_frame.py with firm_pairs.py; 50–100 NAOs).
 
 In a room of 50-100 NAOs ~0.7 m apart, eq. 9 pairs one-way sightings by chance; the
 least-squares frame on every pair was ~1 m off, and the fleet fell to the pose pairing
@@ -46,7 +46,7 @@ def no_pose_pairing(monkeypatch: pytest.MonkeyPatch) -> None:
 
 
 def _recorded() -> tuple[np.ndarray, list[NeighborRecord]]:
-    """The 100-NAO run of issue 21's try 7 (seed 11): its records and true start positions."""
+    """A recorded 100-NAO run (seed 11): its records and true start positions."""
     data = np.load(RECORDED)
     ends = np.cumsum(data["counts"])
     recs = []
@@ -112,7 +112,7 @@ def test_a_dense_room_set_down_askew_is_never_planned_wrong(seed: int) -> None:
 
 @pytest.mark.parametrize(("n", "seed"), [(20, 1), (20, 2), (30, 0), (30, 2)])
 def test_masks_of_a_robot_seen_turning_do_not_stop_an_aligned_room(n: int, seed: int) -> None:
-    """Issue 21, 30 NAOs, seed 7: 12 of robot 25's 13 masks agreed on -34° (the others
+    """At 30 NAOs, seed 7: 12 of robot 25's 13 masks agreed on -34° (the others
     looked while it turned through its own search), its start was north and its 12
     sightings all landed at ψ = 0. The masks' "turned" kept the fleet from the aligned
     frame: every agent stopped. Here the same on synthetic aligned rooms: planned right

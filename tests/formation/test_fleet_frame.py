@@ -1,4 +1,4 @@
-"""The fleet's frame for planning (agent/core/formation/fleet_frame.py, DESIGN.md §9)."""
+"""The fleet's frame for planning (agent/core/formation/fleet_frame.py, docs/design.md §9)."""
 
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ def _fleet(seed: int, headings: np.ndarray | None = None):  # type: ignore[no-un
 def test_aligned_starts_are_planned_without_the_pose_pairing(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    """Issue 21: aligned starts the papers' model explains (or explains once its sightings
+    """Aligned starts the papers' model explains (or explains once its sightings
     are identified where they land) never run the pose pairing; a turned robot does."""
     import agent.core.formation.fleet_frame as ff_mod
 
@@ -262,7 +262,7 @@ def test_a_turned_robot_is_named_by_the_others_masks() -> None:
 def test_an_aligned_fleet_with_misfit_pairs_plans_without_the_search(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    """Issue 21: the search for a robot to blame (one fit per robot) is not run when the
+    """The search for a robot to blame (one fit per robot) is not run when the
     frame is the papers' aligned one anyway; the same frame as with the search."""
     import dataclasses
 

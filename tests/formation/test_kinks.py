@@ -1,4 +1,4 @@
-"""Start sidesteps (agent/core/formation/kinks.py, issue 21): which robots step aside at
+"""Start sidesteps (agent/core/formation/kinks.py): which robots step aside at
 the start, where to, worked by hand, and as properties (row order, clearance)."""
 
 from __future__ import annotations

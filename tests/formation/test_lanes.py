@@ -1,4 +1,4 @@
-"""Bundle lanes (agent/core/formation/lanes.py, issue 21): which robots get a lane, which
+"""Bundle lanes (agent/core/formation/lanes.py): which robots get a lane, which
 lane, the re-pairing and the via points, worked by hand; properties on pyramid slots
 (every lane clear of every slot, the bundle keeps its slots, bit-identical results for
 permuted rows); the errors; a lane plan of a line scheduled and checked (both rules)."""

@@ -1,6 +1,6 @@
 """Loop-consistency support of candidate pairs (agent/core/formation/pair_support.py):
 known answers by hand, the vectorised count against a plain loop over candidates (the
-implementation it replaced, issue 21), and one test per error branch."""
+implementation it replaced), and one test per error branch."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Plans from records of robots set down facing any direction (DESIGN.md §9, issue 19).
+"""Plans from records of robots set down facing any direction (docs/design.md §9).
 
 Records are in each robot's own fixed frame, so turning a robot's start heading changes
 its record; the plan, mapped back to the world through the frame robot's start pose,

@@ -1,4 +1,4 @@
-"""Poses without the papers' alignment (DESIGN.md §9): pairing, SE(2) fit, consistency."""
+"""Poses without the papers' alignment (docs/design.md §9): pairing, SE(2) fit, consistency."""
 
 from __future__ import annotations
 
@@ -475,7 +475,7 @@ def test_a_faulty_robot_is_named_beside_a_wrong_pairing() -> None:
 
 
 def test_candidates_built_in_blocks_give_the_same_pairs(monkeypatch: pytest.MonkeyPatch) -> None:
-    """Issue 21: the pairing's candidates are built in blocks (memory); every key is
+    """The pairing's candidates are built in blocks (memory); every key is
     elementwise, so blocks of a few sighting pairs give exactly the pairs of one block."""
     import agent.core.formation.pose_pairing as pose_pairing
 

@@ -1,4 +1,4 @@
-"""Release points (agent/core/formation/release.py, issue 21): how far a robot must have
+"""Release points (agent/core/formation/release.py): how far a robot must have
 walked before a robot waiting for it may start, worked by hand and as properties."""
 
 from __future__ import annotations

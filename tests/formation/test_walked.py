@@ -1,4 +1,4 @@
-"""How far along its planned path a walking robot says it is (issue 21, finer waits:
+"""How far along its planned path a walking robot says it is (finer waits:
 ``agent.core.formation.release.walked_along``, published as ``StatusMsg.walked``)."""
 
 from __future__ import annotations

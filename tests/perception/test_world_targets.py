@@ -1,4 +1,4 @@
-"""The issue's targets on a fixed seeded set of views rendered by the world (issue 3).
+"""The perception's targets on a fixed seeded set of views rendered by the world.
 
 Recall >= 95 %, precision >= 99 % (also with orange clutter), distance within 5 % of
 the distance for >= 95 % and bearing within ±3° for >= 95 % of the robots in

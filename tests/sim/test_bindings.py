@@ -1,4 +1,4 @@
-"""sim/bindings.py: who may claim and drive which robot, without zenoh (DESIGN.md §8)."""
+"""sim/bindings.py: who may claim and drive which robot, without zenoh (docs/design.md §8)."""
 
 from __future__ import annotations
 

@@ -193,7 +193,7 @@ def test_clutter_is_orange_and_light_varies() -> None:
 
 
 def test_culling_the_naos_out_of_view_leaves_every_picture_unchanged() -> None:
-    """Issue 21: NAOs out of the camera's view are made transparent before a render
+    """NAOs out of the camera's view are made transparent before a render
     (TinyRenderer skips them: ~16 % of a picture at 50 NAOs); the pictures are the same,
     pixel for pixel, as a world that draws every NAO, while robots move and heads turn."""
     sc = generate(20, 5)

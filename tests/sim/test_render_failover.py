@@ -1,4 +1,4 @@
-"""Render workers and the world over real zenoh sessions (issue 21): a camera query asked
+"""Render workers and the world over real zenoh sessions: a camera query asked
 with the best-matching target goes to the worker serving that robot, and back to the
 world's own (not complete) camera when the worker is gone."""
 

@@ -174,7 +174,7 @@ def test_dump_is_plain_json(tmp_path: Path) -> None:
     assert scenarios.from_dict(data) == generate(2, 1)
 
 
-# ------------------------------------------------------------------ start headings (issue 19)
+# ------------------------------------------- start headings: robots set down facing anywhere
 
 
 @pytest.mark.parametrize(

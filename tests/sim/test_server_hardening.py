@@ -245,7 +245,7 @@ def test_the_motion_cache_is_bounded_per_robot(server: Any, legs: FakeLegs) -> N
 
 
 def test_a_full_render_queue_answers_busy(server: Any) -> None:
-    """Issue 21: with every render slot taken the world draws nothing and says so with
+    """With every render slot taken the world draws nothing and says so with
     agent.wire.BUSY first, so that the robot asks again later (agent.net.bus.Busy)."""
     from types import SimpleNamespace
 
@@ -265,7 +265,7 @@ def test_a_full_render_queue_answers_busy(server: Any) -> None:
 
 
 def test_a_repeated_camera_query_is_answered_by_the_picture_in_the_works(server: Any) -> None:
-    """Issue 21 (100 NAOs): a robot that asks again while its picture is drawn gets that
+    """At 100 NAOs: a robot that asks again while its picture is drawn gets that
     picture, once; no second job is queued; at another yaw it is told the world is busy."""
     from types import SimpleNamespace
 

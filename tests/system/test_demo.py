@@ -54,7 +54,7 @@ def test_three_robot_demo_builds_the_pyramid(tmp_path: Path) -> None:
     assert "RESULT: SUCCESS" in report
     fig = out / "formation.png"
     assert fig.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    # camera frames for viewers (issue 22): on in the demo, bounded, apart from the bytes above
+    # camera frames for viewers: on in the demo, bounded, apart from the bytes above
     for i in ("1", "2", "3"):
         cam = r["camera"][i]
         assert cam["frames"] >= 3 and cam["bytes"] < 32_768 * cam["frames"], cam
@@ -72,7 +72,7 @@ def test_three_robot_demo_builds_the_pyramid(tmp_path: Path) -> None:
 
 
 def check_recording_schemas(path: Path) -> None:
-    """The schema test of issue 22: ``run.mcap`` holds Foxglove's scene, image and log
+    """The schema test of the recording: ``run.mcap`` holds Foxglove's scene, image and log
     channels, each with messages, and the annotations of every robot's camera."""
     from collections import Counter
 
@@ -109,7 +109,7 @@ def test_three_robot_demo_with_body_naoqi(tmp_path: Path) -> None:
     """``tools.demo --body naoqi``: the world serves its robots as virtual NAOs over the qi
     protocol; each agent drives its NAO through ALMotion/ALVideoDevice/ALRobotPosture
     and talks zenoh to the others only. With ``--no-publish-camera``, as a real fleet
-    runs by default: no camera frame on the bus (issue 22)."""
+    runs by default: no camera frame on the bus."""
     out = tmp_path / "demo"
     res = run(
         [sys.executable, "-m", "tools.demo", "--body", "naoqi", "--robots", "3", "--seed", "1",

@@ -1,4 +1,4 @@
-"""Dense jam (issue 21), as real processes: the world and four agents over loopback; a
+"""Dense jam (no robot jams for good), as real processes: the world and four agents over loopback; a
 fifth NAO, which runs no agent, stands on a slot of the fleet's plan
 (tools/jam_scenario.py). The robot of that slot cannot reach it; the fleet must stop
 honestly (agent/core/formation/jam.py): every agent ends ``failed``, the robot of the

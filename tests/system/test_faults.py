@@ -1,11 +1,11 @@
-"""Crashed agents and restarted routers with real processes (issue #9; tools.eval_faults).
+"""Crashed agents and restarted routers with real processes (tools.eval_faults).
 
 A secure fleet (TLS router, every process a zenoh client, agents with ``--state-dir``):
 
 * an agent killed (SIGKILL) after agreement, during its move, and started again 3 s
   later resumes from its journal (fetches the agreed records by digest, recomputes the
   same plan, goes on from its leg) and the fleet finishes the formation;
-* the same run again over the same folder (issue 20, the stale journal): every agent
+* the same run again over the same folder (the stale journal): every agent
   finds its journal of the finished run in the same ``--state-dir``, archives it and
   starts a new run, which completes too (before, it resumed the old agreement and
   stopped after 60 s with "nobody served the agreed records");

@@ -1,4 +1,4 @@
-"""Robots set down facing any direction, as real processes (issue 19, DESIGN.md §9).
+"""Robots set down facing any direction, as real processes (docs/design.md §9).
 
 ``python -m tools.demo --headings random`` (world + agents over loopback, secure by
 default) and one robot with an injected sensor fault (``--sensor-fault``, the agent's

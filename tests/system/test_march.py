@@ -1,4 +1,4 @@
-"""A 3-robot march as real processes (issue #13): world + 3 agents over loopback, secure
+"""A 3-robot march as real processes: world + 3 agents over loopback, secure
 by default, ``python -m tools.demo --march 2``; judged from ground truth at the end of
 the march. Bounded by the demo's own limits."""
 

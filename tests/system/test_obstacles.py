@@ -1,4 +1,4 @@
-"""One obstacle in the way, as real processes (issue #10, NAO paper 5.1.2): world + 4
+"""One obstacle in the way, as real processes (NAO paper 5.1.2): world + 4
 agents over loopback, secure by default, ``python -m tools.demo --obstacles 1``. The
 obstacle stands on a straight path of the obstacle-free plan; the robots see it, report
 it in their records, and the agreed plan routes around it. Bounded by the demo's own

@@ -1,4 +1,4 @@
-"""Fleet parameters end to end, with real processes (issue #10).
+"""Fleet parameters end to end, with real processes (agreed planning parameters).
 
 * A mismatched agent: the world and three ``python -m agent`` processes over loopback,
   one started with ``--orientation cp`` while the others plan with ``pca``. Every agent

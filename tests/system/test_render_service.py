@@ -1,5 +1,5 @@
-"""Render workers as a service (issue 21), end to end: the world and one render worker as
-separate processes, three agents served by the worker.
+"""Render workers as a service (the world spread over processes), end to end: the world and one
+render worker as separate processes, three agents served by the worker.
 
 Runs ``python -m tools.demo --render-service 1`` (secure: a TLS router, the worker with
 the fleet's ``render`` key): the worker fetches the scenario from the world, follows its

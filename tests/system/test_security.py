@@ -1,4 +1,4 @@
-"""Trust on real zenoh sessions (DESIGN.md §8, issue #8): TLS, access control, signatures.
+"""Trust on real zenoh sessions (docs/design.md §8): TLS, access control, signatures.
 
 - A TLS router with the fleet's access control: a stranger cannot open a link; an
   observer's key and robot 1's key cannot publish as robot 2 (records, camera frames);
@@ -112,7 +112,7 @@ def test_tls_router_refuses_strangers_and_enforces_roles(fleet: T.Credentials) -
             payloads.append(got2.get())
         assert b"forged" not in payloads
         sub2.undeclare()
-        # camera frames for viewers (issue 22): robot 2's own reach the observer, robot 1's
+        # camera frames for viewers: robot 2's own reach the observer, robot 1's
         # and the observer's on robot 2's camera key never do
         got3: queue.Queue[bytes] = queue.Queue()
         sub3 = obs.declare_subscriber("nao/2/camera", lambda s: got3.put(s.payload.to_bytes()))

@@ -1,4 +1,4 @@
-"""The recording that Foxglove opens (issue 22): a fake observer stream written by the
+"""The recording that Foxglove opens: a fake observer stream written by the
 recorder and read back with ``mcap``'s reader (tools/harness/observe.py ``Recorder``,
 tools/harness/scene.py, tools/harness/foxglove.py)."""
 

@@ -1,4 +1,5 @@
-"""Tools' zenoh callbacks and readers survive any input, count it and go on (issue #8)."""
+"""Tools' zenoh callbacks and readers survive any input, count it and go on (every input
+hardened)."""
 
 from __future__ import annotations
 
@@ -110,7 +111,7 @@ def test_sim_client_ask_skips_bad_replies() -> None:
 
 
 def test_the_observer_dates_a_phase_by_its_arrival_not_its_turn_in_the_queue() -> None:
-    """Issue 21: the observer's phase times are arrival times; a status that waited in
+    """The observer's phase times are arrival times; a status that waited in
     its queue (behind the recording of others) keeps the time it arrived."""
     from tools.harness.observe import Observer
 

@@ -1,4 +1,4 @@
-"""The live view (issue 22 "Live"): foxglove-sdk's WebSocket server fed by the same scene
+"""The live view: foxglove-sdk's WebSocket server fed by the same scene
 builder as the recorder (tools/harness/live.py, tools/view.py). A client of the Foxglove
 WebSocket protocol (the ``websockets`` package) joins, receives ``advertise``, subscribes
 and receives messages; the source is a real 3-NAO demo run (its recording,

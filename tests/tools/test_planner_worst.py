@@ -1,4 +1,4 @@
-"""The planner's known-bad instances (issue 21, "Planner worst case"): the fleets of
+"""The planner's known-bad instances (the planner's worst makespan over CAPT's): the fleets of
 ``python -m tools.bench plan`` whose makespan over CAPT was the worst before the wide
 critical-chain search (agent/core/formation/detours.py) and the release points
 (agent/core/formation/release.py: a robot starts once those it waits for are far enough

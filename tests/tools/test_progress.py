@@ -1,4 +1,4 @@
-"""The progress bar of long tools (tools/harness/progress.py, issue 22 "Progress"): rich's
+"""The progress bar of long tools (tools/harness/progress.py): rich's
 bar with the estimate on a terminal, one plain line per item elsewhere (CI logs)."""
 
 from __future__ import annotations

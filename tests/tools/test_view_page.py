@@ -1,4 +1,4 @@
-"""The page in the browser (issue 22), in a real headless browser: Debian's ``chromium``
+"""The page in the browser, in a real headless browser: Debian's ``chromium``
 driven by Playwright for Python (tools/web/, tools/harness/webpage.py, tools/view.py).
 
 Fed by a real 3-NAO demo run: its recording (tests/data/demo-3-seed1.mcap) replayed

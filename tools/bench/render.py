@@ -1,4 +1,5 @@
-"""``python -m tools.bench render``: camera throughput of the render service (issue 21).
+"""``python -m tools.bench render``: camera throughput of the render service (render workers, for
+large fleets).
 
 For each setting (``--modes``, default ``0,1,2``: the world draws every picture itself,
 or K render workers with shards 1/K..K/K draw them) it starts a router

@@ -1,4 +1,4 @@
-"""``python -m tools.bench world``: camera latency over zenoh and sim speed (issue 3).
+"""``python -m tools.bench world``: camera latency over zenoh and sim speed.
 
 1. Starts ``python -m sim`` (3 robots) listening on a loopback port, connects a zenoh
    session and times ``--requests`` camera queries at varying head yaws: render + PNG

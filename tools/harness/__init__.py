@@ -1,4 +1,5 @@
-"""One harness for every tool and test that runs the fleet as processes (issue #9).
+"""One harness for every tool and test that runs the fleet as processes (one way to start, observe
+and judge runs).
 
 ``procs``: ports, the world, router, agents and rogues, the fleet's network, stopping.
 ``observe``: the MCAP recorder, the bus observer, the live status lines.

@@ -1,5 +1,5 @@
 """Foxglove's well-known message schemas, written as JSON Schema for JSON-encoded MCAP
-channels (DESIGN.md §10 "Seeing the fleet"; issue 22).
+channels (docs/design.md §10 "Seeing the fleet").
 
 Foxglove and Lichtblick recognise a channel by its schema's *name* (``foxglove.SceneUpdate``,
 ``foxglove.Log``, ...) and decode JSON messages with the ``jsonschema`` schema encoding, so
@@ -9,7 +9,7 @@ enum values; descriptions left out; checked against ``@foxglove/schemas`` 2.1.0)
 from small shared parts; every field is required but those Foxglove added later, and the
 builders below fill every field. ``foxglove.CompressedImage``
 and ``foxglove.ImageAnnotations`` carry the camera frames agents publish with
-``--publish-camera`` (issue 22; tools/harness/scene.py).
+``--publish-camera`` (tools/harness/scene.py).
 
 The builders (:func:`stamp`, :func:`pose`, :func:`colour`, primitives, :func:`log`,
 :func:`frame_transform`) return plain dicts ready for ``json.dumps``.

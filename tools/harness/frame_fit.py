@@ -1,4 +1,4 @@
-"""Where the fleet's common frame lies in the world, for evaluation (DESIGN.md §9).
+"""Where the fleet's common frame lies in the world, for evaluation (docs/design.md §9).
 
 The common frame is the frame robot's fixed frame *as it believes it*: its start pose if
 its sensors are right, turned and moved if its record is not (an injected

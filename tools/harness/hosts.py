@@ -1,4 +1,4 @@
-"""One run's fleet on test hosts, with the levers of fault injection (DESIGN.md §6, §8;
+"""One run's fleet on test hosts, with the levers of fault injection (docs/design.md §6, §8;
 docs/faults.md "Chaos soak").
 
 As ``tools.eval_loss`` lays it out (:mod:`tools.netns`, all on this machine):
@@ -11,7 +11,7 @@ host 2     the world (``python -m sim``)
 host 3     the monitor (:mod:`tools.harness.monitor`), which records and judges the run
 host 4..   one agent each (``python -m agent --id I --state-dir``, ids from the world's
            ready line)
-then       one render worker each when ``render_workers`` K > 0 (issue 21:
+then       one render worker each when ``render_workers`` K > 0 (the world spread over hosts:
            ``python -m sim.render_worker --shard i/K`` on the world's port), started
            after the world; they draw every camera picture
 =========  ====================================================================

@@ -23,7 +23,7 @@ from tools.harness.frame_fit import common_frame_pose
 from tools.harness.observe import AgentView, Observer
 from tools.harness.procs import rogue_reports
 
-#: The phases of DESIGN.md §1 in order (the wire's list, less the terminal "failed").
+#: The phases of docs/design.md §1 in order (the wire's list, less the terminal "failed").
 PHASE_ORDER = tuple(p for p in PHASES if p != "failed")
 
 
@@ -229,7 +229,7 @@ def plot(obs: Observer, result: dict[str, Any], path: Path) -> None:
 def fleet_verdict(
     views: dict[int, AgentView], ids: list[int], all_done: bool, truth_ok: bool, judged: bool = True
 ) -> dict[str, Any]:
-    """The fleet's own verdict beside the ground truth's (DESIGN.md §9 "Honest results").
+    """The fleet's own verdict beside the ground truth's (docs/design.md §9 "Honest results").
 
     The fleet says "formation held" when every agent reports ``done``; each child's own
     check of its pair (``StatusMsg.r_d``/``r_phi``) is reported too. ``silent_wrong``: every
@@ -333,7 +333,7 @@ def summarise(
         str(i): {**dict(views[i].bytes_by_kind), "total": sum(views[i].bytes_by_kind.values())}
         for i in ids
     }
-    # issue 22: camera frames for viewers (--publish-camera), apart from the fleet's bytes
+    # camera frames for viewers (--publish-camera), apart from the fleet's bytes
     result["camera"] = {
         str(i): camera_rate(views[i], result.get("wall_total", 0.0))
         for i in ids

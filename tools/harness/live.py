@@ -1,5 +1,5 @@
 """The live view of a run: the Foxglove WebSocket server that the scene's channels are
-also sent to while the recorder writes them (DESIGN.md §10 "Seeing the fleet"; issue 22
+also sent to while the recorder writes them (docs/design.md §10 "Seeing the fleet",
 "Live"; docs/view.md).
 
 One scene builder (:class:`tools.harness.scene.Scene`), several sinks: the MCAP recorder

@@ -1,4 +1,4 @@
-"""The monitor: one run observed and judged by a process of its own (DESIGN.md §10
+"""The monitor: one run observed and judged by a process of its own (docs/design.md §10
 "Viewers are observers"; docs/faults.md).
 
 ``python -m tools.eval_loss --monitor`` runs it on a lossless test host of every

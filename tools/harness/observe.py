@@ -1,5 +1,5 @@
 """What a run shows on the bus: the MCAP recorder, the observer of statuses, records,
-digests and ground truth, and the live status lines (DESIGN.md §1 phases).
+digests and ground truth, and the live status lines (docs/design.md §1 phases).
 
 An evaluator's view: it reads ground truth (``world/truth/**``); agents never do.
 """
@@ -171,7 +171,7 @@ class AgentView:
     exit_code: int | None = None
     #: the robot's own check of its pair after hold (parent id, r_d, r_φ); None: none
     check: tuple[int, float, float] | None = None
-    #: camera frames for viewers (``--publish-camera``, issue 22): kept apart from the
+    #: camera frames for viewers (``--publish-camera``): kept apart from the
     #: bytes above, which are the fleet's own traffic; observer wall times of the first
     #: and the last frame (s)
     camera_frames: int = 0

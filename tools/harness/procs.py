@@ -1,5 +1,5 @@
 """Processes of one run: free ports, the world, the router, the agents, the rogues, the
-fleet's network (DESIGN.md §8), and stopping them.
+fleet's network (docs/design.md §8), and stopping them.
 
 Every tool and test that starts ``python -m sim``, ``python -m agent`` or
 ``python -m tools.router`` on this machine does it here (``tools.demo``, ``tools.fuzz``,
@@ -206,7 +206,7 @@ def start_router(endpoint: str, out: Path, net: list[str]) -> Proc:
 
 @dataclass(frozen=True)
 class FleetNet:
-    """How one run's processes join the bus (DESIGN.md §8): see :func:`fleet_network`."""
+    """How one run's processes join the bus (docs/design.md §8): see :func:`fleet_network`."""
 
     endpoint: str
     flags: list[str]  # join flags every process gets (besides --listen/--connect)
@@ -259,7 +259,7 @@ def fleet_network(
 def start_rogues(
     net: FleetNet, out: Path, ids: list[int], duration: float, replay: Path | None = None
 ) -> list[Proc]:
-    """``tools.rogue`` attackers for ``--rogue`` (issue #8), each writing a JSON report.
+    """``tools.rogue`` attackers for ``--rogue`` (docs/security.md), each writing a JSON report.
 
     Always a stranger (no credentials). Secure TLS fleets: also an insider holding the
     observer's key (access control limits it). Plain-links fleets: also an insider

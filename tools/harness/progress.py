@@ -1,4 +1,4 @@
-"""Progress of a long evaluation (issue 22 "Progress"): a bar with the estimate of the time
+"""Progress of a long evaluation (docs/design.md §10): a bar with the estimate of the time
 left, ``[name] [#####...] k/n 37 % elapsed 4:10, about 7:05 left - label``.
 
 On a terminal the bar is ``rich``'s (redrawn in place, the label of each finished item

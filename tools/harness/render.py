@@ -1,5 +1,5 @@
-"""Render workers of one run (issue 21; docs/world.md "Render workers"): their command
-line, starting K of them beside the world, and what each one served.
+"""Render workers of one run (cameras drawn beside the world; docs/world.md "Render workers"): their
+command line, starting K of them beside the world, and what each one served.
 
 ``tools.demo --render-service K`` starts K ``python -m sim.render_worker`` processes with
 shards 1/K..K/K once the world is ready and before the agents; each writes

@@ -1,4 +1,4 @@
-"""The report of an evaluation matrix (DESIGN.md §9 "Honest results"; docs/faults.md).
+"""The report of an evaluation matrix (docs/design.md §9 "Honest results"; docs/faults.md).
 
 Runs judged by the one rule of :func:`tools.harness.judge.outcome` (``complete``,
 ``safe_abort``, ``unsafe``) are written as the shared ``{"runs": [...]}`` JSON, printed

@@ -1,6 +1,7 @@
 """One run of the demo: the world, a router for secure TLS fleets, optional render workers
-(issue 21), one agent process per robot and optional rogues, observed on the bus until the agents have finished, then
-judged (``tools.harness.judge``). ``args`` is ``tools.demo``'s argument namespace.
+(cameras drawn beside the world), one agent process per robot and optional rogues, observed on the
+bus until the agents have finished, then judged (``tools.harness.judge``). ``args`` is
+``tools.demo``'s argument namespace.
 """
 
 from __future__ import annotations
@@ -127,7 +128,7 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
         wait_ready(world, args.world_timeout, take)
         result["wall_world_ready"] = time.monotonic() - t0
         workers = int(getattr(args, "render_service", 0) or 0)
-        if workers > 0:  # issue 21: cameras drawn by render workers, not the world
+        if workers > 0:  # cameras drawn by render workers, not the world
             procs.extend(start_render_workers(workers, ["--connect", endpoint, *net.flags], out))
             result["render_workers"] = workers
             result["wall_render_ready"] = time.monotonic() - t0

@@ -1,5 +1,5 @@
 """A run as Foxglove draws it: the channels the recorder writes beside the raw wire
-channels (DESIGN.md §10 "Seeing the fleet"; issue 22; docs/agent.md "Recordings").
+channels (docs/design.md §10 "Seeing the fleet"; docs/agent.md "Recordings").
 
 :class:`Scene` takes what the observer sees on the bus (ground truth, statuses, records,
 digests, contacts) and emits JSON messages of Foxglove's well-known schemas

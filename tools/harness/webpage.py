@@ -1,7 +1,8 @@
 """The page in the browser: a small static page (``tools/web/``: HTML, CSS, one script,
 no build step, nothing fetched from elsewhere) served by the standard library's HTTP
 server, that connects to the live Foxglove WebSocket server and draws the run
-(DESIGN.md §10 "Seeing the fleet"; issue 22 "A page in the browser"; docs/view.md).
+(docs/design.md §10 "Seeing the fleet", a page in the browser with nothing to install;
+docs/view.md).
 
 ``/config.json`` tells the page where the live server is (``ws``); the page also takes
 ``?ws=ws://HOST:PORT`` in its address. ``tools.view --web`` and ``tools.demo --view``

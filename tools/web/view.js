@@ -1,4 +1,4 @@
-// nao-formation live view (docs/view.md; issue 22 "A page in the browser").
+// nao-formation live view (docs/view.md: a page in the browser with nothing to install).
 //
 // A client of the Foxglove WebSocket protocol as foxglove-sdk's server speaks it
 // (subprotocol "foxglove.sdk.v1"): text frames are JSON ops (serverInfo, advertise,

@@ -1,4 +1,5 @@
-"""Safe steps under noise: check the corridor of the next step before taking it (issue #10).
+"""Safe steps under noise: check the corridor of the next step before taking it (execution noise
+moves robots off their planned corridors).
 
 The project's addition to NAO paper 4.2 and 5.2.2: the paper's robots walk their planned
 segments open loop (20 cm steps, the heading corrected by the visual compass after each),
@@ -13,7 +14,7 @@ yaw 0, straight ahead) and decides:
   beside the way while the image still shows it: checked one step ahead only, a NAO
   0.25 m beside the way blocks the step only once it is 0.6 m ahead, too near to be seen
   surely, and the robot crept past it (step back to see it, step on, the sighting lost
-  beside the robot; issue 21, 100 NAOs and ``tests/body/test_safe_steps.py``).
+  beside the robot; at 100 NAOs, and ``tests/body/test_safe_steps.py``).
   A NAO the step does not approach (the closest point of the segment is its start:
   stepping away from a robot already close) does not block, as in
   :func:`agent.core.control.station.safe_walk`.
@@ -178,8 +179,8 @@ def blocking(walk: float, heading: float, others: np.ndarray, clearance: float) 
 #: m: the nearest a NAO is found again in a yaw-0 image (closer, the image cuts it)
 VIEW_NEAR = 0.6
 #: m: the nearest a remembered NAO may be *believed* for an image that does not show it to
-#: forget it: VIEW_NEAR plus the range error of a step back and of the detector. Issue
-#: 21, 100 NAOs: robot 91 stepped back from robot 99 to a believed ~0.6 m, forgot it
+#: forget it: VIEW_NEAR plus the range error of a step back and of the detector. At
+#: 100 NAOs, robot 91 stepped back from robot 99 to a believed ~0.6 m, forgot it
 #: when the next image did not show it (truly 0.58 m, 35° off its heading: outside the
 #: image), walked on and touched it.
 FORGET_NEAR = VIEW_NEAR + 0.1

@@ -1,4 +1,4 @@
-"""Distance control (NAO paper 4.2 and 5.2.2 (iii)(2)).
+"""Distance control (NAO paper 4.2, and 5.2.2 (2), distance control).
 
 The planned trajectory ``(eta_i, d_i)`` is walked open-loop in steps of at most
 ``d_stp = 20 cm`` (paper Table 2: longer segments do not stay straight); after each

@@ -1,4 +1,4 @@
-"""Rotation control (NAO paper 4.2 and 5.2.2 (iii)(1)).
+"""Rotation control (NAO paper 4.2, and 5.2.2 (1), rotation control).
 
 A PD(-I) loop on the rotation still to do, with the visual compass as feedback:
 the robot must turn by ``theta``; after each commanded step the compass reports the

@@ -1,4 +1,5 @@
-"""Via points instead of waiting: shorten the critical chain of a packed plan (issue 12).
+"""Via points instead of waiting: shorten the critical chain of a packed plan (shorter schedules,
+same safety rule).
 
 After :mod:`packing`, the makespan is the end of a chain of robots each waiting for the
 one before it to pass its release point (a close pair that may not walk together, see
@@ -23,9 +24,9 @@ other, so that both may walk together. Local search, deterministic:
    MAX_EVALS plans were packed.
 
 The search runs twice (:mod:`scheduled`): the *narrow* neighbourhood above, then, from
-its result, the *wide* one (issue 21, "Planner worst case"), which adds what a chain of
-long parallel walks needs (a robot passing the start of the one ahead of it, both long:
-the worst cases of the line and two-blob fleets): sidesteps at a fixed distance from
+its result, the *wide* one (to bring the planner's worst makespan to at most 2× CAPT's), which adds
+what a chain of long parallel walks needs (a robot passing the start of the one ahead of it, both
+long: the worst cases of the line and two-blob fleets): sidesteps at a fixed distance from
 either end (``SIDESTEP_ALONG`` × ``SIDESTEP_OFFSETS`` clearances, a lane taken early
 whatever the path's length), both robots of a link bent at once (a lane each, the pairs
 of candidates >= the pair's clearance apart, shortest first), and slot swaps of each

@@ -1,10 +1,10 @@
-"""How a plan is executed, and how long it takes (our addition to NAO paper 5.2.2 (7)).
+"""How a plan is executed, and how long it takes (our addition to NAO paper 5.2.2 (iii) step 7).
 
 Two execution rules, both safe for every plan built by :mod:`plan`:
 
 * **waves** (the paper's "leader first, then the followers", generalised): a robot
   starts when every robot of every earlier wave holds its slot.
-* **dependencies** (issue 21, finer waits): a robot starts when every robot j of its
+* **dependencies** (finer waits): a robot starts when every robot j of its
   ``after`` list has walked past the arc length ``after_at`` of its path (j's release
   point, :mod:`release`; j's whole length: j holds its slot, the rule before release
   points, still what ``after_at=None`` means). Every robot pair whose paths come within

@@ -1,5 +1,6 @@
 """The banded plan: a safe plan that always exists, built in O(n log n) (our addition to
-NAO paper 4.2; the "one conflict class at a time" fallback of issue 12).
+NAO paper 4.2; a "one conflict class at a time" fallback, so that every valid input gets a safe
+plan).
 
 Work in the pyramid frame (x to the right, y = the facing axis). Let ``y_max`` be the
 front-most start and ``g = 1.5·c`` (c = 2·radius). The pyramid is placed *ahead* of the

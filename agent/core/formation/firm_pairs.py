@@ -1,11 +1,11 @@
 """The pairs a dense fleet's first fit can trust (NAO paper 4.1.2, Algorithm 2, eq. 9;
-4.1.3, eq. 10; DESIGN.md §9).
+4.1.3, eq. 10; docs/design.md §9).
 
 Eq. 9 accepts a detection pair when ``v_ij ≈ −v_ji`` within ε. In a dense fleet that is
 met by chance: robot i's one-way sighting of k and robot j's one-way sighting of l,
 2-3.5 m long, agree within ε = 0.35 m about once in thirty candidates, and where neither
 detection has its true partner (the other robot missed it) the global greedy of
-:func:`neighbour_check.identify_neighbours` accepts the chance pair. Issue 21, 100 NAOs
+:func:`neighbour_check.identify_neighbours` accepts the chance pair. At 100 NAOs
 (median spacing 0.68 m, 5-39 sightings a robot): 148 of 1 147 eq. 9 pairs were wrong,
 the least-squares common frame built on all of them was ~1 m off everywhere, and
 identifying the sightings again from it (:mod:`reidentify`) could not recover.
@@ -22,7 +22,7 @@ what they leave apart by a maximum-support spanning forest (Kruskal: pairs by su
 descending; ties: smaller ε_d, then lower (i, j)); the graph it returns connects exactly
 the robots the full graph connects. Its least-squares frame is only a start: every
 sighting is then identified where it lands (:func:`reidentify.refine_poses`), which
-brings the dropped right pairs back. On the recorded record sets of issue 21 (five of
+brings the dropped right pairs back. On the recorded record sets of dense fleets (five of
 50 NAOs, one of 100) that start gave consistent frames within 0.09 m of the truth for
 every threshold from 6 up to a bare spanning tree; 4 failed at 100 NAOs. 12 keeps the
 redundancy of the well-seen pairs and sits above the support of every wrong pair

@@ -1,11 +1,11 @@
-"""The fleet's frame for planning: poses, and the robot left out (DESIGN.md §9).
+"""The fleet's frame for planning: poses, and the robot left out (docs/design.md §9).
 
 NAO paper 4.1.3 builds the common frame from positions alone, assuming parallel fixed
 frames (4.1.1). Here the common frame carries every robot's start *pose*: the pairing and
 robust SE(2) fit of :mod:`poses` (exactly the papers' result when the starts are
 aligned), checked by :mod:`pose_check`, which names a robot whose sightings do not fit.
 
-* First, without the pose pairing (issue 21: its support is the costly part at 50 NAOs):
+* First, without the pose pairing (its support was the costly part at 50 NAOs):
   the papers' model (eq. 9 pairs, least squares, ψ ≡ 0), or that model with its
   sightings identified again where they land (:mod:`reidentify`), or the same started
   from the firm eq. 9 pairs alone (:mod:`firm_pairs`: a dense fleet's chance pairs left
@@ -42,7 +42,7 @@ aligned), checked by :mod:`pose_check`, which names a robot whose sightings do n
   exactly as the papers do, on aligned frames (checked first, on the fit as the check's
   steps that leave nobody out leave it, :func:`pose_check.quick_check`; the check's search
   for a robot to blame, one fit per robot, runs only when it can change the frame:
-  issue 21, 50 aligned NAOs plan in ~9 CPU s instead of ~110 s).
+  50 aligned NAOs plan in ~9 CPU s instead of ~110 s).
 
 Deterministic: the same records in any order give bit-identical output (the pose fit's
 own guarantee; the named robot's place is a mean over sightings sorted by owner id).
@@ -200,7 +200,7 @@ def _aligned_at_once(
     fleet, :func:`firm_pairs.firm_start`, its chance eq. 9 pairs left out, then from all
     pairs), when it is consistent, connects every robot and every robot's own sightings
     mostly land on the others (:func:`mostly_land`: a turned robot's do not); else None.
-    Aligned starts need no pose pairing then (issue 21: the pairing's support was ~5 of
+    Aligned starts need no pose pairing then (the pairing's support was ~5 of
     the ~7 CPU s an agent planned at 50 NAOs, and 31 CPU s and ~470 MB at 100)."""
     if papers is None or set(papers.ids) != {r.robot_id for r in records}:
         return None
@@ -269,7 +269,7 @@ def fleet_frame(records: Sequence[NeighborRecord], epsilon: float) -> FleetFrame
         # the fit finds the starts aligned: plan exactly as the papers do (a distance-only
         # pose pairing of a dense fleet can pair a long one-way sighting wrongly and blame
         # a sound robot for it; 15 NAOs, seed 1, robot 5). Nobody is left out here, so the
-        # check's search for a robot to blame is not run (issue 21: ~100 fits at 50 NAOs);
+        # check's search for a robot to blame is not run (it cost ~100 fits at 50 NAOs);
         # with misfits nobody explains, only up to UNEXPLAINED_MAX_N robots (the rule below:
         # synthetic aligned rooms of 20 and 30 were planned 0.52-0.55 m off here)
         model = _papers_model(papers)

@@ -1,5 +1,5 @@
 """No robot jams for good: who blocks a robot, who yields, and when the fleet stops
-(issue 21; an addition to NAO paper 4.2 and 5.2.2 (iii) steps 5–7, where the robots
+(dense fleets; an addition to NAO paper 4.2 and 5.2.2 (iii) steps 5–7, where the robots
 walk their planned paths open loop and never meet).
 
 The plan keeps every path 2·radius from every robot it may meet (:mod:`safety`,

@@ -1,6 +1,6 @@
 """Start sidesteps: a robot whose straight path runs past other robots' starts steps aside
-first (issue 21, "Planner worst case"; our addition to NAO paper 4.2's straight paths,
-kept to the safety rule of :mod:`safety` by the scheduler as every via point is).
+first (to bring the planner's worst makespan to at most 2× CAPT's; our addition to NAO paper 4.2's
+straight paths, kept to the safety rule of :mod:`safety` by the scheduler as every via point is).
 
 The worst fleet of ``python -m tools.bench plan`` is a line: tens of robots stand in one
 column and walk along it to the pyramid. Each straight path then runs within the

@@ -1,6 +1,6 @@
 """Bundle lanes: robots that walk along the pyramid's axis past each other's starts get a
-lane each, between two slot columns (issue 21, "Planner worst case"; our addition to
-NAO paper 4.2's straight paths, kept to the safety rule of :mod:`safety` by the
+lane each, between two slot columns (to bring the planner's worst makespan to at most 2× CAPT's; our
+addition to NAO paper 4.2's straight paths, kept to the safety rule of :mod:`safety` by the
 scheduler as every via point is).
 
 The worst fleet of ``python -m tools.bench plan`` is a line of 100 robots along the

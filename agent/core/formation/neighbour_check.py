@@ -107,7 +107,7 @@ def mutual_support(
     shifted by ``-v_ia``, should appear among k's detections when k sees it too. The
     support is the number of i's other detections that do (within ε).
 
-    Vectorised per k (issue 21: ~5 000 candidates at 50 NAOs took 0.14 CPU s one query at
+    Vectorised per k (~5 000 candidates at 50 NAOs took 0.14 CPU s one query at
     a time, twice per agent, 50 agents at once): every candidate's shifted detections
     are queried against k's KD-tree in one call; the counts are the same integers.
     """

@@ -3,7 +3,7 @@
 NAO paper 4.1.1 assumes every robot's fixed frame is parallel to the others (all start
 facing the same way), so a plan in the common frame (the frame robot's fixed frame,
 4.1.3) is used by every robot as it is: a point p is p − start in its own fixed frame.
-Without that assumption (DESIGN.md §9) robot i's fixed frame is the common frame turned
+Without that assumption (docs/design.md §9) robot i's fixed frame is the common frame turned
 by ψ_i, its start heading estimated by the pose fit. :func:`in_own_frame` turns the whole
 plan by −ψ_i about the common origin: every relative vector of the result (a goal minus
 the start, a parent's offset, a route) is then exactly what robot i measures in its own

@@ -1,6 +1,6 @@
-"""Wave packing: start every robot as soon as its own conflicts are clear (issue 12; the
-execution rules are those of :mod:`execution`, the release points those of
-:mod:`release`, issue 21).
+"""Wave packing: start every robot as soon as its own conflicts are clear (shorter schedules, same
+safety rule; the execution rules are those of :mod:`execution`, the release points those of
+:mod:`release`).
 
 Input: the pair flags of :mod:`safety` for paths that can be scheduled (no pair that can
 go in no order, no precedence cycle). Robots walk at unit speed in this model, so a

@@ -1,4 +1,4 @@
-"""Loop-consistency support of candidate pairs, for every candidate at once (DESIGN.md §9;
+"""Loop-consistency support of candidate pairs, for every candidate at once (docs/design.md §9;
 the triangles of NAO paper 4.1.2's neighbour check, eq. 9, rotated by the candidate's
 relative heading).
 
@@ -13,7 +13,7 @@ within ``ε/2 + rel_tol·|v_k − v_src|`` of m_k and is not ``dst`` itself: the
 i–j–c closes. :mod:`pose_pairing` adds the counts of both sides.
 
 This is the same count a k-d tree per robot gives, computed without a Python loop over the
-candidates (issue 21: a 50-NAO record set has ~10⁵ candidates, a 100-NAO one ~7·10⁵, and
+candidates (a 50-NAO record set has ~10⁵ candidates, a 100-NAO one ~7·10⁵, and
 every agent plans on the same records): candidates are grouped by the sighting counts of
 their two robots, and within a group the nearest sighting is found by brute force over
 j's sightings (a robot reports at most ``MAX_NEIGHBOURS``), in chunks of at most

@@ -57,7 +57,7 @@ class PlanParams:
     strategy: str = "default"  # "paper" | "optimal" | "capt" | "banded" | "default"
     orientation: str = "pca"  # "pca" | "cp"
     #: "bfs" (paper eq. 10) | "lsq" (least squares), both on the papers' aligned frames;
-    #: "default": start poses (fleet_frame, DESIGN.md §9), = lsq when starts are aligned
+    #: "default": start poses (fleet_frame, docs/design.md §9), = lsq when starts are aligned
     frame_method: str = "default"
     epsilon: float = DEFAULT_EPSILON  # eq. 9 threshold, metres (see neighbour_check)
     # "centroid" (slots centred on the starts) | "front" (pyramid ahead of the fleet) |

@@ -2,7 +2,7 @@
 final alignment to the parent, ``agent/phases/hold.py``; the paths of 4.2).
 
 Once it has arrived, a child looks at its parent and steps by the measured error
-(at most ``max_correction``). Until issue 21 every robot waited for the whole fleet to
+(at most ``max_correction``). Before, every robot waited for the whole fleet to
 arrive first, so the alignment, which runs down the pyramid one level at a time, began
 only after the last walk: a minute of 50 NAOs' wall time. What the alignment needs is
 narrower: no robot may still walk near the child's slot (which the correction step

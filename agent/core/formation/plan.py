@@ -97,7 +97,7 @@ class Plan:
     strategy: str = ""
     obstacles: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     #: (N,) ψ of each robot (``robots`` order): its fixed frame turned from the common
-    #: frame (DESIGN.md §9); empty: all 0 (the papers' aligned starts)
+    #: frame (docs/design.md §9); empty: all 0 (the papers' aligned starts)
     psi: np.ndarray = field(default_factory=lambda: np.zeros(0))
     #: robots left out by the consistency check: they stand still, planned around
     excluded: tuple[int, ...] = ()
@@ -333,7 +333,7 @@ def plan_from_records(
 ) -> Plan:
     """The whole pipeline on a record set (any order): the same records -> the same plan.
 
-    The common frame holds every robot's start pose (:mod:`fleet_frame`, DESIGN.md §9;
+    The common frame holds every robot's start pose (:mod:`fleet_frame`, docs/design.md §9;
     ``frame_method`` ``bfs`` or ``lsq``: positions on the papers' aligned frames instead). A robot the
     consistency check names is left out (``Plan.excluded``): it stands still where the
     others saw it and is planned around like an obstacle. ``obstacles`` (M, 2), if any, are

@@ -1,5 +1,5 @@
 """Consistency check of the common frame: name the robot whose sightings do not fit
-(DESIGN.md §9, "per-robot residuals name a robot whose sightings do not fit").
+(docs/design.md §9, "per-pair residuals name a robot whose sightings do not fit").
 
 A robot with a broken compass (its sightings rotated), a wrong D-base (its distances
 scaled) or a lying insider (its sightings shifted) disagrees with what the others saw of
@@ -240,7 +240,7 @@ def may_explain(poses: PoseFrame, cleaning: bool) -> list[int]:
     bounds what its sightings did to the others' poses, so a misfit pair between two other
     robots stays misfit in the rest. Without this rule the search fitted the fleet once
     per robot, twice over: ~100 fits, ~100 CPU s at 50 NAOs whose misfit pairs spread
-    over the whole fleet (issue 21), to find what this rule says at once: nobody."""
+    over the whole fleet, to find what this rule says at once: nobody."""
     bad = [p for p in poses.pairs if p.score > 1.0]
     ends = {r for p in bad for r in (p.i, p.j)} | set(poses.turned)
     out = []

@@ -1,4 +1,4 @@
-"""Neighbour pairing without the papers' alignment (DESIGN.md §9; generalises NAO paper
+"""Neighbour pairing without the papers' alignment (docs/design.md §9; generalises NAO paper
 4.1.2, Algorithm 2, eq. 9).
 
 Eq. 9 pairs robot i's sighting ``v_ij`` with robot j's sighting ``v_ji`` by requiring
@@ -75,7 +75,7 @@ def wrap_half(a: np.ndarray | float) -> np.ndarray:
 
 
 def relative_heading(v_ij: np.ndarray, v_ji: np.ndarray) -> float:
-    """ψ_j − ψ_i from a mutual pair (DESIGN.md §9), wrapped to (−π, π].
+    """ψ_j − ψ_i from a mutual pair (docs/design.md §9), wrapped to (−π, π].
 
     Parameters
     ----------
@@ -246,7 +246,7 @@ def _scored_candidates(
     """Every candidate (sighting ``ra`` of a robot, ``rb`` of a later one) that passes the
     distance agreement, with its sort keys: cost, |ψ_j − ψ_i| and support.
 
-    Built in blocks of at most :data:`BLOCK_ELEMENTS` sighting pairs (issue 21: at 100
+    Built in blocks of at most :data:`BLOCK_ELEMENTS` sighting pairs (at 100
     NAOs the 2 409 sightings give 2.9 M ordered pairs and 1.87 M candidates; built at
     once, ~470 MB an agent, and 100 agents on one host were stopped by the OOM killer).
     Every key is elementwise per candidate, so the blocks change no value; what is kept

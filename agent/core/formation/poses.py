@@ -1,5 +1,5 @@
 """Poses (x, y, ψ) of every robot in the common frame, without the papers' alignment
-(DESIGN.md §9; generalises NAO paper 4.1.3 eq. 10 and the least-squares variant of
+(docs/design.md §9; generalises NAO paper 4.1.3 eq. 10 and the least-squares variant of
 :mod:`common_frame`).
 
 Robot i's fixed frame is its own start pose: a point ``v`` of i's fixed frame is

@@ -1,4 +1,4 @@
-"""Sightings identified again against the fitted poses (DESIGN.md §9; refines NAO paper
+"""Sightings identified again against the fitted poses (docs/design.md §9; refines NAO paper
 4.1.2, Algorithm 2, for dense fleets).
 
 The pairing of :mod:`pose_pairing` (and eq. 9 before it) decides which robot a sighting
@@ -32,7 +32,7 @@ would: where does it land? This module does that, in rounds (at most
    :data:`RESEAT_SHARE` of its own, the two counts together gain :data:`RESEAT_GAIN`
    over the fitted position, and the others' sightings landing on it are no fewer than
    there (ties: the candidate nearest the fitted position, then the lower index).
-   Issue 21, 50 NAOs, seed 12: robot 36, seen only one way, was placed ~1 m off by a
+   At 50 NAOs, seed 12: robot 36, seen only one way, was placed ~1 m off by a
    wrong pairing, and the fleet fell back to the pose pairing (4.8 CPU s an agent
    instead of ~0.5, ×50 agents on 2 cores: a 194 s plan phase). Counting the others'
    sightings keeps a robot from being moved off the place they see it at, where its
@@ -394,7 +394,7 @@ def masks_outvoted(frame: PoseFrame, records: Sequence[NeighborRecord]) -> bool:
     True when the masks call nobody turned.
 
     A mask is the body's orientation at the instant of the image, and in a concurrent
-    search the robots turn twice by 180° while the others look (issue 21, 30 NAOs, seed 7:
+    search the robots turn twice by 180° while the others look (30 NAOs, seed 7:
     12 of robot 25's 13 masks agreed on −34°, taken while it turned through its search,
     over 100 s of a loaded world; its 12 sightings all land at ψ = 0 and 2 of 12 at ±34°;
     the fleet stopped, "inconsistent beyond one robot"). A robot truly turned by ψ ≥ 33°

@@ -1,6 +1,6 @@
 """Release points: how far a robot must have walked before a robot waiting for it may
-start (issue 21, "finer waits"; our addition to NAO paper 5.2.2 (7), "the leader goes to
-its destination firstly, and then the followers", and to the rule of :mod:`safety`).
+start (finer waits than whole waves; our addition to NAO paper 5.2.2 (iii) step 7, "the leader goes
+to its destination firstly, and then the followers", and to the rule of :mod:`safety`).
 
 A robot b that waits for robot a (a before b, :mod:`safety`'s ``ab_ok``) need not wait
 for a to hold its slot: once a has walked past arc length ``s`` of its path, a stays on

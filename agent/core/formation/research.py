@@ -170,7 +170,7 @@ def decide_research(
     graph = identify_neighbours(records, epsilon)
     comps = components(graph)
     if len(comps) > 1:
-        # frames that are not parallel (DESIGN.md §9): the pose fit's pairing may join
+        # frames that are not parallel (docs/design.md §9): the pose fit's pairing may join
         # what eq. 9 cannot; the planner uses it too, so the fewer groups win
         unaligned = identify_pairs(records, epsilon)
         if len(components(unaligned)) < len(comps):

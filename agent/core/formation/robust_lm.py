@@ -1,5 +1,5 @@
 """Robust Levenberg–Marquardt on sparse normal equations, for the pose fit of
-:mod:`poses` (DESIGN.md §9).
+:mod:`poses` (docs/design.md §9).
 
 Minimises ``½ Σ ρ(f_k(x)²)`` with the soft-L1 loss ``ρ(z) = 2(√(1 + z) − 1)`` (the loss
 ``scipy.optimize.least_squares(loss="soft_l1", f_scale=1)`` uses, the same stationary

@@ -1,5 +1,5 @@
-"""The march route: where the whole pyramid goes after it holds (AUV paper III: the
-formation moves as one, followers tracking the robot in front; DESIGN.md §8 "March").
+"""The march route: where the whole pyramid goes after it holds (AUV paper I–II: the
+formation marches in a pattern, followers tracking the robot in front; docs/design.md §1 step 7).
 
 A route is a distance along the pyramid's axis or a point of the common frame. The
 pyramid *translates* by V (:func:`route_vector`): its axis keeps its direction, and every
@@ -20,7 +20,7 @@ MAX_ROUTE = 50.0  # m: the longest march accepted (the longest walk command the 
 
 @dataclass(frozen=True)
 class Route:
-    """The march after ``hold`` (issue #13): the leader walks ``distance`` m along the
+    """The march after ``hold``: the leader walks ``distance`` m along the
     pyramid's axis, or to the point ``to`` (x, y) of the common frame. Exactly one is
     given. The pyramid translates: its axis keeps its direction (see agent/phases/march.py)."""
 

@@ -1,4 +1,4 @@
-"""The safety rule and its checker (NAO paper 4.2 and 5.2.2(7): "the leader goes to its
+"""The safety rule and its checker (NAO paper 4.2 and 5.2.2 (iii) step 7: "the leader goes to its
 destination firstly, and then the followers"; our strengthening of Lemma 1).
 
 Lemma 1 only promises that matched straight paths do not *cross*; two robots on

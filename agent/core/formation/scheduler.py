@@ -1,5 +1,5 @@
 """The wave scheduler: waves (and via points where needed) that pass the safety rule
-(NAO paper 4.2 and 5.2.2(7): "the leader goes to its destination firstly, and then the
+(NAO paper 4.2 and 5.2.2 (iii) step 7: "the leader goes to its destination firstly, and then the
 followers"; the rule itself, our strengthening of Lemma 1, is :mod:`safety`).
 
 Scheduling (:func:`schedule`): wave 0 = the leader alone. Pairs that may not share a

@@ -10,7 +10,7 @@ A pair is *in tolerance* when |r_d| <= :data:`R_D_MAX` and |r_φ| <= :data:`R_PH
 (the papers' simulations report r_d mainly within ±20 % and r_φ within ±30 %; the real
 NAOs of 5.2 hold ±0.1 m at d_e = 0.8 m, i.e. 12.5 %).
 
-"Done" is a measurement, not an assumption (DESIGN.md §9): after hold each child
+"Done" is a measurement, not an assumption (docs/design.md §9): after hold each child
 measures its parent with the camera and judges the pair with :func:`check_pair`; the
 evaluation tools judge the ground truth with the same function. A child whose own start
 heading is misjudged measures in a turned frame and would find a bent pair in tolerance;

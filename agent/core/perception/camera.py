@@ -25,7 +25,7 @@ from agent.core import nao
 
 @dataclass(frozen=True)
 class CameraModel:
-    """Intrinsics and mounting of the NAO forehead camera (DESIGN.md §4).
+    """Intrinsics and mounting of the NAO forehead camera (docs/design.md §4).
 
     ``cam_forward`` is how far the optical centre sits ahead of the neck (head-yaw) axis
     and ``neck_forward`` how far the neck axis sits ahead of the body centre, both in

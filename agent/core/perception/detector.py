@@ -148,7 +148,7 @@ class Detector:
             px = ox + d_cam * math.cos(head_yaw + beta)
             py = oy + d_cam * math.sin(head_yaw + beta)
             # the matched mask's orientation: the observed NAO's heading minus the line of
-            # sight (mbase.py), which is what a record carries (DESIGN.md §9 pose fit)
+            # sight (mbase.py), which is what a record carries (docs/design.md §9 pose fit)
             orient = float(self.mbase.orientation[m.mask]) % TWO_PI
             out.append(
                 Detection(

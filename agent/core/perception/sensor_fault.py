@@ -1,4 +1,4 @@
-"""Injected sensor faults: a test tool for the fleet's consistency check (DESIGN.md §9).
+"""Injected sensor faults: a test tool for the fleet's consistency check (docs/design.md §9).
 
 The papers trust every record (NAO paper 4.1.2). A real robot can be wrong about what it
 saw, and the fleet must notice. For evaluation an agent can corrupt its *own* record,
