@@ -199,7 +199,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         p.error("--explore-step must be in [0.2, 5] m")
     args.route = None
     try:
-        from agent.core.formation.route import Route
+        from agent.core.formation.view.route import Route
 
         if args.march is not None:
             args.route = Route(distance=args.march)

@@ -11,10 +11,10 @@ import math
 from dataclasses import dataclass
 
 from agent.core.agreed_params import ParamValue
+from agent.core.formation.frame.research import DEFAULT_STEP
 from agent.core.formation.params import PLAN_STRATEGIES, PlanParams
-from agent.core.formation.pyramid import ORIENTATIONS
-from agent.core.formation.research import DEFAULT_STEP
-from agent.core.formation.route import Route
+from agent.core.formation.shape.pyramid import ORIENTATIONS
+from agent.core.formation.view.route import Route
 from agent.core.nao import HEAD_YAW_LIMIT
 from agent.core.perception.camera import CameraModel
 from agent.core.perception.sensor_fault import SensorFault
@@ -73,7 +73,7 @@ class AgentConfig:
     march_step: float = 0.1  # m per leader step: half a follower's 20 cm, so they keep up
     march_pause: float = 4.0  # the leader rests this many times each step's duration
     lost_rounds: int = 3  # head searches for a lost parent before the fleet halts
-    # Re-search (NAO paper 4.1.3 rule 2, agent/core/formation/research.py): rounds before the
+    # Re-search (NAO paper 4.1.3 rule 2, agent/core/formation/frame/research.py): rounds before the
     # fleet stops, the first exploration leg (m), and how long the robots that keep their
     # place wait for the others to explore and search again (s).
     research_rounds: int = 2

@@ -17,9 +17,9 @@ from typing import Protocol
 
 import numpy as np
 
+from agent.core.formation.frame.research import Research
 from agent.core.formation.params import PlanParams
 from agent.core.formation.plan import Plan
-from agent.core.formation.research import Research
 from agent.core.perception.compass import CompassResult
 from agent.core.perception.detector import Detection
 from agent.core.perception.obstacles import ObstacleDetection

@@ -238,7 +238,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         p.error("--body naoqi drives the robot at a fixed URL: no --auto-ids")
     if not (math.isfinite(a.d_e) and a.d_e > 0) or not 0 < a.phi_e_deg < 90:
         p.error("--d-e must be > 0 and --phi-e-deg in (0, 90)")
-    from agent.core.formation.route import Route
+    from agent.core.formation.view.route import Route
 
     try:
         if a.march is not None:

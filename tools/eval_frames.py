@@ -4,7 +4,7 @@ re-estimated offline from recorded runs and judged against their ground truth.
 A run of ``tools.demo`` (and of every eval tool built on it) leaves ``run.mcap`` with the
 neighbour records the robots published, and ``result.json`` with the true start poses and
 the agent arguments (``--sensor-fault`` says which robot's record is corrupted). This tool
-runs today's :func:`agent.core.formation.fleet_frame.fleet_frame` on the last record of
+runs today's :func:`agent.core.formation.frame.fleet_frame.fleet_frame` on the last record of
 every robot of every run found under the folders given, with no simulator and no robot,
 and compares it with the truth (docs/design.md §9):
 
@@ -33,8 +33,8 @@ from pathlib import Path
 import numpy as np
 
 from agent.adapters import FormationAdapter
-from agent.core.formation.fleet_frame import fleet_frame
-from agent.core.formation.neighbour_check import DEFAULT_EPSILON
+from agent.core.formation.frame.fleet_frame import fleet_frame
+from agent.core.formation.frame.neighbour_check import DEFAULT_EPSILON
 from agent.wire import NeighborRecordMsg, decode
 from tools.harness.frame_fit import common_frame_pose
 

@@ -22,7 +22,7 @@ Three measurements:
    request on an idle world. Target: delayed by under 1 s.
 
 Exit status 0 when every target is met, 1 otherwise, 2 on bad arguments.
-The payloads come from :mod:`tools.fuzz_payloads`, whose generators tests/test_fuzz.py
+The payloads come from :mod:`tools.fuzz_payloads`, whose generators tests/wire/test_fuzz.py
 shares for a shorter fuzz in CI; this module runs them and reports.
 """
 

@@ -2,7 +2,7 @@
 docs/design.md §3: decoding validates types, ranges and sizes and rejects what does not fit; §8:
 every message bounded and validated).
 
-The generators of ``python -m tools.fuzz`` and tests/test_fuzz.py (the runner, the
+The generators of ``python -m tools.fuzz`` and tests/wire/test_fuzz.py (the runner, the
 measurements and their report are in :mod:`tools.fuzz`):
 
 - **Mutants** (:func:`payloads`): each derived from a valid message of its type

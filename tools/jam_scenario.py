@@ -2,12 +2,12 @@
 ``tests/system/test_dense_jam.py``): a NAO that runs no agent stands on a slot of the fleet's plan.
 
 The fleet's plan keeps every path clear of every robot it knows (NAO paper 4.2; the
-safety rule of agent/core/formation/safety.py), so its members never jam one another for
+safety rule of agent/core/formation/waves/safety.py), so its members never jam one another for
 good. A NAO that is not a member (switched off, or fallen) is seen but never identified
 (Algorithm 2 leaves a one-sided detection unidentified), so the plan may put a slot on
 it: the robot of that slot waits at the corridor check (agent/core/control/corridor.py)
 and cannot reach it, whatever it does. The fleet must then stop honestly, with one
-reason on every agent (agent/core/formation/jam.py), and never report the formation
+reason on every agent (agent/core/formation/waves/jam.py), and never report the formation
 with its hole as held.
 
 :func:`jam_scenario` plans the pyramid from the ground-truth starts of ``generate(n,

@@ -42,21 +42,21 @@ from typing import Any
 
 import numpy as np
 
-from agent.core.formation.assignment import optimal_assignment
-from agent.core.formation.common_frame import build_common_frame
-from agent.core.formation.execution import (
+from agent.core.formation.frame.common_frame import build_common_frame
+from agent.core.formation.frame.neighbour_check import identify_neighbours
+from agent.core.formation.frame.records import NeighborRecord
+from agent.core.formation.params import PlanParams
+from agent.core.formation.paths.assignment import optimal_assignment
+from agent.core.formation.paths.geometry import paths_cross
+from agent.core.formation.plan import Plan, plan_from_positions, plan_from_records
+from agent.core.formation.shape.pyramid import parent_of
+from agent.core.formation.waves.execution import (
     capt_makespan,
     dependency_makespan,
     path_lengths,
     wave_makespan,
 )
-from agent.core.formation.geometry import paths_cross
-from agent.core.formation.neighbour_check import identify_neighbours
-from agent.core.formation.params import PlanParams
-from agent.core.formation.plan import Plan, plan_from_positions, plan_from_records
-from agent.core.formation.pyramid import parent_of
-from agent.core.formation.records import NeighborRecord
-from agent.core.formation.safety import check_safety
+from agent.core.formation.waves.safety import check_safety
 
 D_E = 2.0
 PHI_E = math.radians(30)

@@ -18,7 +18,7 @@ Output (everything in the input's frame)::
 
 A robot may start once every robot of its ``after`` list has walked past the arc length
 of its path given at the same place in ``after_at`` (its release point; empty: once it
-holds its slot), the dependency rule of ``agent.core.formation.execution``; waiting for
+holds its slot), the dependency rule of ``agent.core.formation.waves.execution``; waiting for
 every robot of the earlier waves to hold is safe too.
 
 ``--png FILE`` also draws the plan (starts, paths coloured by wave, slots, leader, axis).

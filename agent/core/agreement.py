@@ -76,7 +76,7 @@ session cut until it exits). The runner then lets us agree too when such a membe
 with our parameters digest, reports the plan digest of exactly the records we hold:
 it planned from the same inputs, so moving on that plan is moving on a shared plan.
 
-**Rounds** (re-search, NAO paper 4.1.3 rule 2, :mod:`agent.core.formation.research`): an
+**Rounds** (re-search, NAO paper 4.1.3 rule 2, :mod:`agent.core.formation.frame.research`): an
 agreement belongs to the round of its own record (``round``). Records and digests of an
 older round are stale and ignored (counted in ``stale``); a record or digest of a newer
 round from a member proves that member agreed on ours and moved on, so it acknowledges

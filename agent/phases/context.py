@@ -35,7 +35,7 @@ from agent.body.base import Body
 from agent.config import AgentConfig
 from agent.core.agreement import HEARD_PER_S
 from agent.core.formation.plan import Plan
-from agent.core.formation.verdict import PairCheck
+from agent.core.formation.shape.verdict import PairCheck
 from agent.net.bus import Bus
 from agent.phases.journal import Journal
 from agent.seams import Formation, Perception
@@ -115,7 +115,7 @@ class Context:
     planned: Plan | None = None  # the agreed plan, once made (see :attr:`plan`)
     plan_digest: str = ""
     wave: int = -1
-    # the robot's own check of its pair after hold (agent/core/formation/verdict.py)
+    # the robot's own check of its pair after hold (agent/core/formation/shape/verdict.py)
     check: PairCheck | None = None
     leg: int = 0  # the move's current leg
     final_heading: float = NORTH  # the pyramid axis, once the goals are known
@@ -130,7 +130,7 @@ class Context:
     run_epoch: int = 0
     last_status: float = -math.inf  # when the last status was published
     # the member this robot's way is blocked by, beyond its patience (-1: none;
-    # agent/core/formation/jam.py), published in every status
+    # agent/core/formation/waves/jam.py), published in every status
     blocked_by: int = -1
     # finer waits: how far this robot has walked along its planned path (m,
     # plan arc length, never decreasing during a move; agent/phases/waves.py), published

@@ -15,7 +15,7 @@ DONE     ``done``, and stay until every member is, repeating the status as heart
          (:meth:`Hold.wait_all`; a final status published once into a cut session
          reaches nobody on a lossy radio). A member of the plan that failed leaves a hole: every
          waiting robot, and every robot that was done, then stops with the fleet's one
-         reason (agent/core/formation/jam.py rule 4: a dense fleet never reports a formation around
+         reason (agent/core/formation/waves/jam.py rule 4: a dense fleet never reports a formation around
          a hole) instead of reporting a formation held.
 """
 
@@ -28,9 +28,9 @@ import numpy as np
 
 from agent.core.control import PAPER_GAINS, wrap_pi
 from agent.core.control.alignment import look_yaws, match_parent
-from agent.core.formation.passers_by import passers_by
-from agent.core.formation.route import Route
-from agent.core.formation.verdict import FACING_TOL, check_pair, facing_misfit
+from agent.core.formation.shape.verdict import FACING_TOL, check_pair, facing_misfit
+from agent.core.formation.view.passers_by import passers_by
+from agent.core.formation.view.route import Route
 from agent.core.nao import CAMERA_HFOV, HEAD_YAW_LIMIT
 from agent.phases.context import AgentFailure, Context
 from agent.phases.march import Marcher
@@ -210,7 +210,7 @@ class Hold:
     def _wait_for_parent(self, parent: int) -> str:
         """Wait until ``parent`` is ``done`` (or ``march``) and every robot that may still
         pass near this robot's sight line to it has arrived
-        (:func:`~agent.core.formation.passers_by.passers_by`: within twice the robot
+        (:func:`~agent.core.formation.view.passers_by.passers_by`: within twice the robot
         radius plus ``max_correction``; before, the whole fleet); "" then, else
         why not (the parent failed, or did not finish within
         ``wave_timeout``; that answer is kept, so the check after the correction does not
@@ -264,7 +264,7 @@ class Hold:
         The child looks where the plan puts its parent (:meth:`_find_parent`; or takes
         the correction's last look, when it did not move after it) and judges
         the measured offset with the formula the evaluation uses
-        (:func:`agent.core.formation.verdict.check_pair`: r_d, r_φ against the pyramid
+        (:func:`agent.core.formation.shape.verdict.check_pair`: r_d, r_φ against the pyramid
         axis). The figures travel in every later status. A parent not found within
         ``max_correction`` of its planned place, a pair out of tolerance, or a parent whose
         mask says it faces more than ``FACING_TOL`` from the axis this robot believes in

@@ -57,13 +57,13 @@ import numpy as np
 from agent.core.control import PAPER_GAINS, STEP_GAINS, next_leg, wrap_pi
 from agent.core.control.station import StationGains, StationKeeper, safe_walk, unicycle_step
 from agent.core.formation.params import PlanParams
-from agent.core.formation.route import route_vector, station_offset
+from agent.core.formation.view.route import route_vector, station_offset
 from agent.core.nao import HEAD_YAW_LIMIT
 from agent.phases.context import Context
 from agent.phases.roles import Fleet, Mover
 
 if TYPE_CHECKING:
-    from agent.core.formation.route import Route
+    from agent.core.formation.view.route import Route
 
 log = logging.getLogger("agent.phases.march")
 

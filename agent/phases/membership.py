@@ -32,7 +32,7 @@ from dataclasses import asdict, dataclass
 from typing import TypeVar
 
 from agent.core.agreement import Agreement
-from agent.core.formation.jam import stop_reason
+from agent.core.formation.waves.jam import stop_reason
 from agent.core.grace import Grace
 from agent.net.bus import Event
 from agent.phases.context import Context
@@ -284,7 +284,7 @@ class Membership:
 
     def fleet_stop(self) -> str:
         """Why this robot must stop because a member of the plan failed ("" if none): the
-        one reason of agent/core/formation/jam.py rule 4, so that no agent reports a
+        one reason of agent/core/formation/waves/jam.py rule 4, so that no agent reports a
         formation with a hole as held. Robots the plan left out (they stop by design)
         and members that only left do not count."""
         plan = self.ctx.planned

@@ -1,5 +1,5 @@
 """Re-search rounds: robots left outside the fleet explore and every robot searches again
-(NAO paper 4.1.3 rule 2; the decision is agent/core/formation/research.py).
+(NAO paper 4.1.3 rule 2; the decision is agent/core/formation/frame/research.py).
 
 When the agreed records leave robots outside the connected fleet, every agent decides
 alike who is outside and where each of those robots moves. Those robots make their
@@ -18,7 +18,7 @@ import numpy as np
 
 from agent.core.agreement import Decision
 from agent.core.control import PAPER_GAINS, next_leg
-from agent.core.formation.research import step_blocked
+from agent.core.formation.frame.research import step_blocked
 from agent.phases.context import AgentFailure, Context
 from agent.phases.roles import Fleet, Mover, Surveyor
 from agent.wire import NeighborRecordMsg
@@ -39,7 +39,7 @@ class Research:
         """Re-search (NAO paper 4.1.3 rule 2) on the agreed records: ``None`` when the
         fleet is connected, else this robot's record of the next round.
 
-        Every agent decides alike from the agreed records (agent/core/formation/research.py).
+        Every agent decides alike from the agreed records (agent/core/formation/frame/research.py).
         The robots outside the kept group make their exploration move, checked with the
         camera before each step (:meth:`explore`); the others wait until each of them
         has published a record or digest of the new round (it has walked and searched),
@@ -74,7 +74,7 @@ class Research:
     def explore(self, move: np.ndarray) -> None:
         """Walk the exploration ``move`` (fixed frame, m) in steps; before each step the
         yaw-0 image is checked: a NAO inside the step's sweep (2·radius + 0.1 m wide,
-        :func:`~agent.core.formation.research.step_blocked`) ends the move there."""
+        :func:`~agent.core.formation.frame.research.step_blocked`) ends the move there."""
         ctx, b, motion = self.ctx, self.ctx.beliefs, self.motion
         goal = b.position + np.asarray(move, dtype=np.float64)
         total = float(np.hypot(*move)) or 1.0

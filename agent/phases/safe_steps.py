@@ -21,7 +21,7 @@ out of the image but still there):
   this one passes: the patience is then the first rank's (one poll), whatever this
   robot's rank (at 50 NAOs robot 37, rank ~30, waited 32-33 polls, 80 s of
   the critical chain, for robot 6 standing at its start, whose ``after`` list names 37).
-* **jam** (a dense fleet never jams for good, agent/core/formation/jam.py): still blocked once the
+* **jam** (a dense fleet never jams for good, agent/core/formation/waves/jam.py): still blocked once the
   patience is spent, the robot names the member it takes for the blocker (status ``blocked_by``,
   :meth:`SafeSteps._claim`): a robot that has not moved yet and waits for this one
   yields (agent/phases/waves.py). It waits longer for a blocker that has not moved yet
@@ -52,7 +52,7 @@ from agent.core.control.corridor import (
     patience,
     plan_rank,
 )
-from agent.core.formation.jam import (
+from agent.core.formation.waves.jam import (
     HOLDING,
     STOP,
     UNMOVED,
@@ -68,7 +68,7 @@ from agent.phases.roles import Fleet, Mover
 log = logging.getLogger("agent.phases.safe_steps")
 
 #: m: a NAO seen this near a member's expected place is taken for that member (rule 1 of
-#: agent/core/formation/jam.py): the detector's range error at 1 m and a step's drift
+#: agent/core/formation/waves/jam.py): the detector's range error at 1 m and a step's drift
 BLOCKER_MATCH = 0.3
 
 
@@ -166,7 +166,7 @@ class SafeSteps:
         (``via``) VIA once this robot's patience (its plan rank) is spent; waits
         meanwhile, looking again every poll (status detail ``waiting: NAO ahead at
         [x, y]``, fixed frame). Past its patience it names its blocker (:meth:`_claim`).
-        Bounded (agent/core/formation/jam.py rule 3): AgentFailure after ``max_polls``
+        Bounded (agent/core/formation/waves/jam.py rule 3): AgentFailure after ``max_polls``
         polls, or the wave timeout's worth for a blocker that has not moved yet; at once
         when a member of the plan has failed (rule 4). A via step's own check (``via``
         False) returns its blocked verdict once the patience is spent, for the caller to

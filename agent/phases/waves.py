@@ -10,16 +10,16 @@ PLAN  the formation core on the agreed records (identical on every agent): this
       count (agent/phases/membership.py).
 WAIT  for every robot of this robot's ``after`` list to walk past its release point
       (the plan's ``after_at``: that robot's published ``walked`` along its path, or it
-      holds its slot, so that it need not wait for the whole walk; agent/core/formation/release.py),
-      leader first (agent/core/formation/execution.py): an event, never a time; but yield (start
+      holds its slot, so that it need not wait for the whole walk; agent/core/formation/waves/release.py),
+      leader first (agent/core/formation/waves/execution.py): an event, never a time; but yield (start
       now) when the robots it still waits for are blocked by it, or wait for one that is (dense
-      fleets never jam for good, agent/core/formation/jam.py rule 2); stop with the fleet's reason
+      fleets never jam for good, agent/core/formation/waves/jam.py rule 2); stop with the fleet's reason
       once a member of the plan has failed (rule 4).
 MOVE  rotation control to face each leg's goal, distance control in 20 cm steps with
       the heading corrected after each (4.2, 5.2.2), every step checked first
       (agent/phases/safe_steps.py), then the turn to the pyramid axis. A robot restarted
       mid-move (a crash) goes on from its journaled leg. While it walks it publishes
-      how far along its planned path it is (``walked``, :func:`~agent.core.formation.release.walked_along`), at once
+      how far along its planned path it is (``walked``, :func:`~agent.core.formation.waves.release.walked_along`), at once
       when it passes a release point that a robot waits for.
 """
 
@@ -30,10 +30,10 @@ import math
 
 from agent.core.agreement import Decision
 from agent.core.control import PAPER_GAINS, wrap_pi
-from agent.core.formation.jam import yields
-from agent.core.formation.own_frame import in_own_frame
 from agent.core.formation.plan import Plan
-from agent.core.formation.release import walked_along
+from agent.core.formation.view.own_frame import in_own_frame
+from agent.core.formation.waves.jam import yields
+from agent.core.formation.waves.release import walked_along
 from agent.phases.context import AgentFailure, Context
 from agent.phases.pumping import plan_pumping
 from agent.phases.record_sets import record_set
@@ -81,7 +81,7 @@ class Waves:
 
     def wait_for_earlier_waves(self) -> None:
         """Start once every robot of this robot's ``after`` list holds its slot (the plan's
-        execution rule, ``agent/core/formation/execution.py``; the leader's list is empty),
+        execution rule, ``agent/core/formation/waves/execution.py``; the leader's list is empty),
         or once the robots still pending are jammed on this one (module docstring)."""
         ctx = self.ctx
         plan = ctx.plan

@@ -206,7 +206,7 @@ def decode(
     """Parse and validate one message. ``expect`` restricts the accepted type.
 
     Raises :class:`ProtocolError` with the reason for anything that does not fit; no
-    other exception leaves this function (the fuzz test in tests/test_fuzz.py and
+    other exception leaves this function (the fuzz test in tests/wire/test_fuzz.py and
     ``python -m tools.fuzz`` hold it to that).
     """
     obj = unpack_bounded(data, max_bytes)

@@ -164,16 +164,16 @@ class StatusMsg(Message):
     """Phase and progress of one agent, for viewers and for wave sequencing.
 
     ``check_parent`` >= 0: the robot measured that parent with its camera after hold and
-    judged the pair (``r_d``, ``r_phi``: NAO paper 5.1.1, ``agent.core.formation.verdict``);
+    judged the pair (``r_d``, ``r_phi``: NAO paper 5.1.1, ``agent.core.formation.shape.verdict``);
     -1: no such measurement (yet, or the leader).
 
     ``blocked_by`` >= 0: the robot's way to its slot has stayed blocked by that member
-    beyond its patience (a dense fleet's jam, ``agent.core.formation.jam``); -1: not blocked.
+    beyond its patience (a dense fleet's jam, ``agent.core.formation.waves.jam``); -1: not blocked.
 
     ``walked``: how far the robot has walked along its planned path (m, arc length of the
     plan ``plan_digest``, never decreasing during its ``move``; 0 before it): a robot
     that waits for it starts once it is past the release point in the plan's
-    ``after_at`` (finer waits, ``agent.core.formation.release``).
+    ``after_at`` (finer waits, ``agent.core.formation.waves.release``).
 
     ``shift_x``, ``shift_y``: how far the robot has stepped since it arrived (m, the
     common frame of ``plan_digest``): its alignment to its own parent, which its children

@@ -41,7 +41,7 @@ Three layers, each useful without the others:
    planner is exactly what each robot signed.
 
 Insider limit: a robot's own key can still lie about what it saw; Algorithm 2's
-consistency check (``agent/core/formation/neighbour_check.py``) is the defence there.
+consistency check (``agent/core/formation/frame/neighbour_check.py``) is the defence there.
 
 This module uses ``cryptography`` only (no hand-written crypto) and is part of the wire
 contract: ``sim/`` reaches it through ``agent.wire``. The three layers live in

@@ -21,7 +21,7 @@ from agent.config import AgentConfig
 from agent.core.control import wrap_pi
 from agent.core.formation.params import PlanParams
 from agent.core.formation.plan import Plan
-from agent.core.formation.route import Route, route_vector, station_offset
+from agent.core.formation.view.route import Route, route_vector, station_offset
 from agent.net.bus import Bus
 from agent.phases.march import LOST, Marcher, MarchHalt
 from agent.phases.membership import Peer

@@ -221,7 +221,7 @@ def test_verify_of_a_failed_parent_is_no_verdict(
 
     r, _, child, _ = _holding(world, bus, perception)
     r.membership.peers[int(child.parent)] = Peer(alive=True, phase="failed", seen_alive=True)
-    # the fleet's one reason (agent/core/formation/jam.py rule 4), naming the failed parent
+    # the fleet's one reason (agent/core/formation/waves/jam.py rule 4), naming the failed parent
     with pytest.raises(AgentFailure, match=f"formation incomplete: robot {child.parent} failed"):
         r.hold.verify()
 
@@ -278,7 +278,7 @@ def test_a_child_waits_for_the_robots_passing_its_sight_line_only(
 ) -> None:
     """The alignment waits for the parent and for the robots that may still
     walk near the sight line to it, not for the whole fleet."""
-    from tests.formation.test_passers_by import plan_of, robot
+    from tests.formation.view.test_passers_by import plan_of, robot
 
     plan = plan_of(
         robot(1, (0.0, 3.0), (0.0, 0.0), -1),

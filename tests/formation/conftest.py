@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from agent.core.formation.records import NeighborRecord
+from agent.core.formation.frame.records import NeighborRecord
 
 
 def random_fleet(

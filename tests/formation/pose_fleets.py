@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from agent.core.formation.records import NeighborRecord
+from agent.core.formation.frame.records import NeighborRecord
 from tests.formation.conftest import random_fleet
 
 MASK_STEP = math.radians(5.0)

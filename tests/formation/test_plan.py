@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 
 from agent.core.formation import plan as plan_module
-from agent.core.formation.obstacles import SLOT_CLEARANCE
+from agent.core.formation.frame.records import NeighborRecord
 from agent.core.formation.params import PlanParams
 from agent.core.formation.plan import Plan, plan_from_positions, plan_from_records
-from agent.core.formation.pyramid import parent_of
-from agent.core.formation.records import NeighborRecord
-from agent.core.formation.safety import check_safety
+from agent.core.formation.shape.pyramid import parent_of
+from agent.core.formation.waves.obstacles import SLOT_CLEARANCE
+from agent.core.formation.waves.safety import check_safety
 from tests.formation.conftest import random_fleet, records_from_positions
 
 

@@ -14,9 +14,9 @@ import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from agent.core.formation.own_frame import in_own_frame
 from agent.core.formation.params import PlanParams
 from agent.core.formation.plan import Plan, plan_from_records
+from agent.core.formation.view.own_frame import in_own_frame
 from tests.formation.pose_fleets import sim_layout, unaligned_records
 
 IDS = [1, 2, 3, 4, 5]

@@ -1,7 +1,7 @@
 """Dense jam (no robot jams for good), as real processes: the world and four agents over loopback; a
 fifth NAO, which runs no agent, stands on a slot of the fleet's plan
 (tools/jam_scenario.py). The robot of that slot cannot reach it; the fleet must stop
-honestly (agent/core/formation/jam.py): every agent ends ``failed``, the robot of the
+honestly (agent/core/formation/waves/jam.py): every agent ends ``failed``, the robot of the
 slot naming why it cannot reach it and every other agent the same root, nobody reports
 the formation held, and ground truth agrees (the slot is still taken by the bystander,
 no contact).
@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from agent.core.formation.jam import FLEET_STOP
+from agent.core.formation.waves.jam import FLEET_STOP
 from agent.net.bus import Bus, BusConfig
 from agent.wire import KEY_STATUS_ALL, KEY_WORLD_TRUTH_ALL, ContactMsg, StatusMsg
 from sim.nao_model import FOOTPRINT_RADIUS

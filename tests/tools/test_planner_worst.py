@@ -1,7 +1,7 @@
 """The planner's known-bad instances (the planner's worst makespan over CAPT's): the fleets of
 ``python -m tools.bench plan`` whose makespan over CAPT was the worst before the wide
-critical-chain search (agent/core/formation/detours.py) and the release points
-(agent/core/formation/release.py: a robot starts once those it waits for are far enough
+critical-chain search (agent/core/formation/waves/detours.py) and the release points
+(agent/core/formation/waves/release.py: a robot starts once those it waits for are far enough
 along their paths). Every plan keeps the clearance under both execution rules (the
 dependency rule with the plan's release points), is identical for shuffled input, and
 its makespan over CAPT stays within the bound measured after the change.
@@ -14,10 +14,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent.core.formation.execution import check_dependencies
 from agent.core.formation.params import PlanParams
 from agent.core.formation.plan import plan_from_positions
-from agent.core.formation.safety import check_safety
+from agent.core.formation.waves.execution import check_dependencies
+from agent.core.formation.waves.safety import check_safety
 from tools.bench.plan import D_E, _rows_after, _rows_at, family, measures
 
 R = 0.2

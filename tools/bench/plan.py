@@ -42,7 +42,10 @@ from typing import Any
 
 import numpy as np
 
-from agent.core.formation.execution import (
+from agent.core.formation.params import PlanParams
+from agent.core.formation.plan import Plan, plan_from_positions
+from agent.core.formation.shape.pyramid import placed_slots, pyramid_frame
+from agent.core.formation.waves.execution import (
     capt_makespan,
     check_dependencies,
     dependency_makespan,
@@ -51,10 +54,7 @@ from agent.core.formation.execution import (
     path_lengths,
     wave_makespan,
 )
-from agent.core.formation.params import PlanParams
-from agent.core.formation.plan import Plan, plan_from_positions
-from agent.core.formation.pyramid import placed_slots, pyramid_frame
-from agent.core.formation.safety import check_safety
+from agent.core.formation.waves.safety import check_safety
 
 D_E = 2.0
 PHI_E = math.radians(30)

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from agent.core.formation.verdict import R_D_MAX, R_PHI_MAX, check_pair
+from agent.core.formation.shape.verdict import R_D_MAX, R_PHI_MAX, check_pair
 from agent.wire import PHASES
 from tools.harness.frame_fit import common_frame_pose
 from tools.harness.observe import AgentView, Observer
@@ -57,7 +57,7 @@ def evaluate(
     phi_e: float,
 ) -> list[dict[str, float]]:
     """Per pair: distance, angle off the backward axis, r_d, r_φ (NAO paper 5.1.1), by the
-    formula the robots' own check uses (:func:`agent.core.formation.verdict.check_pair`)."""
+    formula the robots' own check uses (:func:`agent.core.formation.shape.verdict.check_pair`)."""
     rows = []
     for child, parent in pairs:
         offset = np.array(final[parent][:2]) - np.array(final[child][:2])
@@ -93,7 +93,7 @@ def judge_march(
     Sets ``march_distance`` (the leader's displacement, m), ``march_route`` (V, m),
     ``march_error`` (|displacement − V| / |V|), ``march_ok`` and the worst |r_d|, |r_φ|
     over every truth sample of the march."""
-    from agent.core.formation.route import Route, route_vector
+    from agent.core.formation.view.route import Route, route_vector
 
     rt = result["route"]
     route = Route(distance=rt["distance"]) if "distance" in rt else Route(to=tuple(rt["to"]))

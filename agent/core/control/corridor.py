@@ -3,7 +3,7 @@ moves robots off their planned corridors).
 
 The project's addition to NAO paper 4.2 and 5.2.2: the paper's robots walk their planned
 segments open loop (20 cm steps, the heading corrected by the visual compass after each),
-and the plan keeps every path 2·radius from every robot it may meet (agent/core/formation
+and the plan keeps every path 2·radius from every robot it may meet (agent/core/formation/waves
 safety, execution). Execution noise moves robots off those corridors, so before each
 step the robot looks at the NAOs in the image it already takes for the compass (head
 yaw 0, straight ahead) and decides:

@@ -13,10 +13,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from agent.core.formation.assignment import STRATEGIES
-from agent.core.formation.common_frame import METHODS
-from agent.core.formation.neighbour_check import DEFAULT_EPSILON
-from agent.core.formation.pyramid import ORIENTATIONS, PLACEMENTS, check_geometry
+from agent.core.formation.frame.common_frame import METHODS
+from agent.core.formation.frame.neighbour_check import DEFAULT_EPSILON
+from agent.core.formation.paths.assignment import STRATEGIES
+from agent.core.formation.shape.pyramid import ORIENTATIONS, PLACEMENTS, check_geometry
 
 #: ``default`` strategy: exact min-sum (``optimal``, O(n³)) up to this many robots; the
 #: paper's O(n log n) strategy above. Whatever it starts with, ``default`` falls back to

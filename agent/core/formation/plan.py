@@ -42,17 +42,17 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from agent.core.formation.choice import choose
-from agent.core.formation.common_frame import build_common_frame
-from agent.core.formation.fallback import banded_plan
-from agent.core.formation.fleet_frame import FleetFrame, fleet_frame
-from agent.core.formation.neighbour_check import identify_neighbours
-from agent.core.formation.obstacle_map import common_frame_obstacles
-from agent.core.formation.obstacles import plan_around_obstacles, plan_near_obstacles
+from agent.core.formation.frame.common_frame import build_common_frame
+from agent.core.formation.frame.fleet_frame import FleetFrame, fleet_frame
+from agent.core.formation.frame.neighbour_check import identify_neighbours
+from agent.core.formation.frame.obstacle_map import common_frame_obstacles
+from agent.core.formation.frame.records import NeighborRecord
 from agent.core.formation.params import PlanParams
-from agent.core.formation.pyramid import pyramid_frame
-from agent.core.formation.records import NeighborRecord
-from agent.core.formation.scheduled import Scheduled, scheduled_plan
+from agent.core.formation.paths.fallback import banded_plan
+from agent.core.formation.shape.pyramid import pyramid_frame
+from agent.core.formation.waves.choice import choose
+from agent.core.formation.waves.obstacles import plan_around_obstacles, plan_near_obstacles
+from agent.core.formation.waves.scheduled import Scheduled, scheduled_plan
 
 
 @dataclass(frozen=True)

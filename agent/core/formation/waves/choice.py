@@ -1,0 +1,162 @@
+"""Which scheduled plan, without obstacles: the ``default`` strategy's comparison of
+candidate assignments, or the attempts of :meth:`params.PlanParams.attempts` in turn.
+
+Candidates (n <= ``CANDIDATES_MAX_N``): the min-sum assignment (``optimal``), min-sum
+under bounds on the longest path between B* and min-sum's own (the CAT-ORA idea), and
+CAPT, all on the centred pyramid (AUV eqs. 5-7). Each is made safe and packed
+(:mod:`scheduled`); of those whose total path stays within ``PATH_SLACK`` of the
+optimum, the best by dependency makespan get detours on their critical chain, a copy
+with start sidesteps (:mod:`kinks`) and two copies with bundle lanes (:mod:`lanes`: the
+slots of each bundle re-paired per side and jointly, from the detoured plan's
+assignment), and the smallest makespan wins; a lane plan only when its makespan is
+strictly smaller than every other. Otherwise the paper's matching (NAO paper 4.2, Lemma 1) or the
+explicit strategy is tried per placement until one schedules safely.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from agent.core.formation.params import CANDIDATES_MAX_N, PlanParams
+from agent.core.formation.paths.assignment import assign, bounded_assignment, min_bottleneck
+from agent.core.formation.paths.kinks import start_kinks
+from agent.core.formation.paths.lanes import bundle_lanes
+from agent.core.formation.shape.pyramid import PyramidFrame, placed_slots
+from agent.core.formation.waves.scheduled import Scheduled, scheduled_plan
+
+#: The ``default`` strategy keeps a plan whose total path is at most this many times the
+#: smallest total (the min-sum assignment's straight paths).
+PATH_SLACK = 1.05
+
+#: Bounds on the longest path the ``default`` strategy tries (n <= CANDIDATES_MAX_N), as
+#: fractions of the way from B* (the smallest possible longest path) to the longest path
+#: of the min-sum assignment.
+BOUND_STEPS = (0.0, 0.25, 0.5, 0.75)
+
+#: How many of the best candidates (by makespan before detours) get detours.
+SHORTENED = 3
+
+#: A bundle-lane plan (:mod:`lanes`) replaces the best plan only when its makespan is
+#: smaller by more than this (path-length units: rounding).
+LANES_MARGIN = 1e-9
+
+_NO_OBS = np.zeros((0, 2))
+
+
+def _candidates(starts_p: np.ndarray, slots_p: np.ndarray) -> list[tuple[str, np.ndarray]]:
+    """Assignments the ``default`` strategy compares: min-sum first, then min-sum under
+    bounds on the longest path between B* and min-sum's own (CAT-ORA's idea), then CAPT.
+    Duplicates are dropped (first kept)."""
+    opt = assign(starts_p, slots_p, "optimal", 1.0, 0.5)
+    longest = float(np.max(np.hypot(*(starts_p - slots_p[opt]).T)))
+    b_star = min_bottleneck(starts_p, slots_p)
+    out = [("optimal", opt)]
+    for f in BOUND_STEPS:
+        out.append(
+            ("bottleneck", bounded_assignment(starts_p, slots_p, b_star + f * (longest - b_star)))
+        )
+    out.append(("capt", assign(starts_p, slots_p, "capt", 1.0, 0.5)))
+    seen: set[bytes] = set()
+    uniq = []
+    for name, perm in out:
+        key = perm.tobytes()
+        if key not in seen:
+            seen.add(key)
+            uniq.append((name, perm))
+    return uniq
+
+
+def choose(
+    pos: np.ndarray, frame: PyramidFrame, starts_p: np.ndarray, params: PlanParams
+) -> Scheduled | None:
+    """The scheduled plan of the first attempt that succeeds (see PlanParams.attempts).
+
+    ``default`` with n <= CANDIDATES_MAX_N first compares the :func:`_candidates` assignments on the
+    centred pyramid: of those that schedule with a total path <= PATH_SLACK × the
+    min-sum total, the smallest dependency makespan wins (then the smaller total, then
+    the order of CANDIDATES). None: no attempt could be scheduled.
+    """
+    n = pos.shape[0]
+    empty: list[tuple[np.ndarray, ...]] = [() for _ in range(n)]
+    exact = params.strategy == "default" and params.placement in ("default", "centroid")
+    if exact and n <= CANDIDATES_MAX_N:
+        slots_p = placed_slots(n, params.d_e, params.phi_e, starts_p, "centroid")
+        good: list[tuple[float, float, int, Scheduled]] = []
+        bound = math.inf
+        for k, (strat, perm) in enumerate(_candidates(starts_p, slots_p)):
+            if k == 0:
+                straight = np.hypot(*(starts_p - slots_p[perm]).T)
+                bound = PATH_SLACK * float(straight.sum()) + 1e-9
+            try:
+                sc = scheduled_plan(
+                    pos, frame.to_common(slots_p[perm]), perm, empty, _NO_OBS, params, strat
+                )
+            except ValueError:
+                continue
+            if sc.total <= bound:
+                good.append((sc.makespan, sc.total, k, sc))
+        good.sort(key=lambda g: g[:3])
+        axis = np.array([math.cos(frame.beta), math.sin(frame.beta)])
+        kinked: list[tuple[float, float, int, Scheduled]] = []
+        laned: list[tuple[float, float, int, Scheduled]] = []
+        clear = 2.0 * params.radius
+        for j, (_, _, k, sc) in enumerate(good[:SHORTENED]):  # detours for the best
+            better = scheduled_plan(
+                pos, sc.targets, sc.order, empty, _NO_OBS, params, sc.strategy, bound=bound
+            )
+            good[j] = (better.makespan, better.total, k, better)
+            # the same with start sidesteps (kinks), ranked after every plan without
+            vias = start_kinks(pos, sc.targets, axis, clear)
+            alt = None
+            if any(vias):
+                try:
+                    alt = scheduled_plan(
+                        pos, sc.targets, sc.order, vias, _NO_OBS, params, sc.strategy, bound=bound
+                    )
+                except ValueError:
+                    alt = None
+            if alt is not None and alt.total <= bound:
+                kinked.append((alt.makespan, alt.total, len(BOUND_STEPS) + 2 + k, alt))
+            # the same with bundle lanes (a lane each, slots re-paired in the bundle)
+            for m, joint in enumerate((False, True)):
+                ln = bundle_lanes(
+                    starts_p, slots_p, better.order, params.d_e, params.phi_e, clear, joint
+                )
+                if ln is None:
+                    continue
+                lanes_order, lanes_vias = ln
+                try:
+                    alt = scheduled_plan(
+                        pos,
+                        frame.to_common(slots_p[lanes_order]),
+                        lanes_order,
+                        [tuple(frame.to_common(v) for v in vs) for vs in lanes_vias],
+                        _NO_OBS,
+                        params,
+                        sc.strategy,
+                        bound=bound,
+                    )
+                except ValueError:
+                    continue
+                if alt.total <= bound:
+                    laned.append((alt.makespan, alt.total, 2 * k + m, alt))
+        good += kinked
+        if good:
+            win = min(good, key=lambda g: g[:3])
+            if laned:  # kept only when its makespan is strictly smaller
+                lane_win = min(laned, key=lambda g: g[:3])
+                if lane_win[0] < win[0] - LANES_MARGIN:
+                    win = lane_win
+            return win[3]
+    for strat, placement in params.attempts(n):
+        slots_p = placed_slots(n, params.d_e, params.phi_e, starts_p, placement)
+        perm = assign(starts_p, slots_p, strat, params.d_e, params.phi_e)
+        try:
+            return scheduled_plan(
+                pos, frame.to_common(slots_p[perm]), perm, empty, _NO_OBS, params, strat
+            )
+        except ValueError:
+            continue
+    return None

@@ -1,0 +1,183 @@
+"""Loop-consistency support of candidate pairs (agent/core/formation/frame/pair_support.py):
+known answers by hand, the vectorised count against a plain loop over candidates (the
+implementation it replaced), and one test per error branch."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.spatial import cKDTree
+
+from agent.core.formation.frame import pair_support
+from agent.core.formation.frame.pair_support import support_one_side
+
+EPS = 0.35
+REL = 0.08
+
+
+def rot(a: float, v: tuple[float, float]) -> tuple[float, float]:
+    c, s = math.cos(a), math.sin(a)
+    return (c * v[0] - s * v[1], s * v[0] + c * v[1])
+
+
+def loop_reference(
+    src: np.ndarray,
+    dst: np.ndarray,
+    turn: np.ndarray,
+    owner: np.ndarray,
+    vecs: np.ndarray,
+    epsilon: float,
+    rel_tol: float,
+) -> np.ndarray:
+    """One candidate at a time, a k-d tree per robot (as pose_pairing counted before)."""
+    out = np.zeros(src.shape[0], dtype=np.int64)
+    for t in range(src.shape[0]):
+        oi, oj = owner[src[t]], owner[dst[t]]
+        others = np.flatnonzero((owner == oi) & (np.arange(owner.size) != src[t]))
+        mine = np.flatnonzero(owner == oj)
+        if others.size == 0 or mine.size < 2:
+            continue
+        rel = vecs[others] - vecs[src[t]]
+        c, s = math.cos(-turn[t]), math.sin(-turn[t])
+        moved = np.stack([rel[:, 0] * c - rel[:, 1] * s, rel[:, 0] * s + rel[:, 1] * c], axis=1)
+        dist, k = cKDTree(vecs[mine]).query(moved)
+        tol = 0.5 * epsilon + rel_tol * np.hypot(rel[:, 0], rel[:, 1])
+        out[t] = int(np.sum((dist <= tol) & (mine[k] != dst[t])))
+    return out
+
+
+def triangle(psi_j: float) -> tuple[np.ndarray, np.ndarray]:
+    """Robots i at (0, 0), j at (1, 0), c at (0, 1) in the world; i's frame is the world's,
+    j's is turned by ``psi_j``. Rows: i sees j, i sees c, j sees i, j sees c."""
+
+    def in_j(v: tuple[float, float]) -> tuple[float, float]:
+        return rot(-psi_j, v)
+
+    vecs = np.array([(1.0, 0.0), (0.0, 1.0), in_j((-1.0, 0.0)), in_j((-1.0, 1.0))])
+    return np.array([0, 0, 1, 1]), vecs
+
+
+@pytest.mark.parametrize("psi_j", [0.0, math.pi / 2, -2.0, math.pi])
+def test_a_closed_triangle_counts_one_from_each_side(psi_j: float) -> None:
+    owner, vecs = triangle(psi_j)
+    turn = np.array([psi_j])
+    assert support_one_side(np.array([0]), np.array([2]), turn, owner, vecs, EPS, REL).tolist() == [
+        1
+    ]
+    assert support_one_side(
+        np.array([2]), np.array([0]), -turn, owner, vecs, EPS, REL
+    ).tolist() == [1]
+
+
+def test_the_wrong_turn_closes_nothing() -> None:
+    owner, vecs = triangle(math.pi / 2)
+    out = support_one_side(np.array([0]), np.array([2]), np.array([0.0]), owner, vecs, EPS, REL)
+    assert out.tolist() == [0]  # (−1, 1) unturned lands 1.4 m from j's (1, 1)
+
+
+def test_a_hit_on_the_candidates_own_sighting_does_not_count() -> None:
+    # i: a = (1, 0), k = (0.05, 0): k − a = (−0.95, 0) lands on j's sighting of i itself
+    owner = np.array([0, 0, 1, 1])
+    vecs = np.array([(1.0, 0.0), (0.05, 0.0), (-1.0, 0.0), (3.0, 3.0)])
+    out = support_one_side(np.array([0]), np.array([2]), np.array([0.0]), owner, vecs, EPS, REL)
+    assert out.tolist() == [0]
+
+
+def test_robots_with_a_single_sighting_close_nothing() -> None:
+    owner = np.array([0, 1, 1])
+    vecs = np.array([(1.0, 0.0), (-1.0, 0.0), (-1.0, 1.0)])
+    out = support_one_side(np.array([0]), np.array([1]), np.array([0.0]), owner, vecs, EPS, REL)
+    assert out.tolist() == [0]
+    empty = np.zeros(0, dtype=np.int64)
+    assert support_one_side(empty, empty, np.zeros(0), owner, vecs, EPS, REL).shape == (0,)
+
+
+@st.composite
+def sighting_sets(draw: st.DrawFn) -> tuple[np.ndarray, ...]:
+    n = draw(st.integers(2, 6))
+    counts = draw(st.lists(st.integers(1, 6), min_size=n, max_size=n))
+    owner = np.repeat(np.arange(n), counts)
+    coord = st.floats(-3.0, 3.0, allow_nan=False, width=32)
+    flat = draw(st.lists(coord, min_size=2 * owner.size, max_size=2 * owner.size))
+    # a lattice of 0.1 m makes exact ties between equidistant sightings likely
+    vecs = np.round(np.array(flat, dtype=np.float64).reshape(-1, 2), 1)
+    pairs = [(a, b) for a in range(owner.size) for b in range(owner.size) if owner[a] != owner[b]]
+    chosen = draw(st.lists(st.sampled_from(pairs), min_size=1, max_size=40))
+    src = np.array([a for a, _ in chosen], dtype=np.int64)
+    dst = np.array([b for _, b in chosen], dtype=np.int64)
+    turns = draw(
+        st.lists(
+            st.sampled_from([0.0, math.pi / 2, -math.pi, 0.3, -2.1]),
+            min_size=len(chosen),
+            max_size=len(chosen),
+        )
+    )
+    return src, dst, np.array(turns), owner, vecs
+
+
+@settings(max_examples=300, deadline=None)
+@given(sighting_sets())
+def test_the_vectorised_count_is_the_loop_over_candidates(case: tuple[np.ndarray, ...]) -> None:
+    src, dst, turn, owner, vecs = case
+    got = support_one_side(src, dst, turn, owner, vecs, EPS, REL)
+    want = loop_reference(src, dst, turn, owner, vecs, EPS, REL)
+    # exact ties between two of j's sightings may go either way in the k-d tree; the
+    # count differs only where such a tie involves the candidate's own sighting
+    assert np.array_equal(got, want) or _only_ties_differ(case, got, want)
+
+
+def _only_ties_differ(case: tuple[np.ndarray, ...], got: np.ndarray, want: np.ndarray) -> bool:
+    """Every differing count has a moved sighting equally near dst and another of j's."""
+    src, dst, turn, owner, vecs = case
+    for t in np.flatnonzero(got != want):
+        others = np.flatnonzero((owner == owner[src[t]]) & (np.arange(owner.size) != src[t]))
+        mine = np.flatnonzero(owner == owner[dst[t]])
+        rel = vecs[others] - vecs[src[t]]
+        c, s = math.cos(-turn[t]), math.sin(-turn[t])
+        moved = np.stack([rel[:, 0] * c - rel[:, 1] * s, rel[:, 0] * s + rel[:, 1] * c], axis=1)
+        d = np.hypot(*(moved[:, None, :] - vecs[mine][None, :, :]).transpose(2, 0, 1))
+        at_dst = d[:, mine == dst[t]][:, 0]
+        tie = np.isclose(d, at_dst[:, None], rtol=1e-9, atol=1e-12) & (mine != dst[t])[None, :]
+        if not np.any(tie.any(axis=1) & np.isclose(at_dst, d.min(axis=1), rtol=1e-9, atol=1e-12)):
+            return False
+    return True
+
+
+def test_small_chunks_give_the_same_counts(monkeypatch: pytest.MonkeyPatch) -> None:
+    rng = np.random.default_rng(3)
+    owner = np.repeat(np.arange(8), rng.integers(2, 7, size=8))
+    vecs = rng.uniform(-3, 3, size=(owner.size, 2))
+    src, dst = np.nonzero(owner[:, None] != owner[None, :])
+    turn = rng.uniform(-math.pi, math.pi, size=src.size)
+    whole = support_one_side(src, dst, turn, owner, vecs, EPS, REL)
+    monkeypatch.setattr(pair_support, "CHUNK_ELEMENTS", 7)
+    assert np.array_equal(support_one_side(src, dst, turn, owner, vecs, EPS, REL), whole)
+    assert np.array_equal(whole, loop_reference(src, dst, turn, owner, vecs, EPS, REL))
+
+
+@pytest.mark.parametrize(
+    ("src", "dst", "turn", "owner", "vecs", "match"),
+    [
+        ([0], [1, 2], [0.0], [0, 1, 1], np.zeros((3, 2)), "src, dst and turn"),
+        ([0], [1], [0.0], [0, 1], np.zeros((3, 2)), "owner must be"),
+        ([0], [5], [0.0], [0, 1, 1], np.zeros((3, 2)), "out of range"),
+        ([-1], [1], [0.0], [0, 1, 1], np.zeros((3, 2)), "out of range"),
+        ([0], [1], [0.0], [1, 0, 1], np.zeros((3, 2)), "ascending"),
+    ],
+)
+def test_bad_input_is_refused(
+    src: list[int],
+    dst: list[int],
+    turn: list[float],
+    owner: list[int],
+    vecs: np.ndarray,
+    match: str,
+) -> None:
+    with pytest.raises(ValueError, match=match):
+        support_one_side(
+            np.array(src), np.array(dst), np.array(turn), np.array(owner), vecs, EPS, REL
+        )
