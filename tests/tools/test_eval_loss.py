@@ -205,7 +205,7 @@ def test_run_rows_take_the_outcome_of_the_one_rule() -> None:
     unshared = dict(moved, plan_digests={"1": "a", "2": "b"}, identical_digests=False)
     assert _outcome(unshared) == "unsafe"
     assert _outcome(dict(_ok_result(), contacts=1)) == "unsafe"
-    assert _outcome({}) == "safe_abort"  # the monitor wrote no result
+    assert _outcome({}) == "no_result"  # the monitor wrote no result: a failure
 
 
 def test_run_rows_have_the_shared_schema_and_the_outcomes_plot(tmp_path: Path) -> None:
@@ -215,7 +215,7 @@ def test_run_rows_have_the_shared_schema_and_the_outcomes_plot(tmp_path: Path) -
         "detail": "done, pairs within tolerance",
     }  # fmt: skip
     lost = eval_loss.run_row(_run(0.3, False, None, [500]), {})
-    assert lost["outcome"] == "safe_abort" and lost["detail"] == "x"  # the run's reason
+    assert lost["outcome"] == "no_result" and lost["detail"] == "x"  # the run's reason
     bad = dict(row, seed=2, outcome="safe_abort", detail="x")
     counts = report.count_outcomes([row, bad], "loss")
     report.plot_outcomes(counts, tmp_path / "outcomes.png", "test")
