@@ -8,6 +8,7 @@
                     [--research-rounds K] [--explore-step M]
                     [--body zenoh|naoqi]
                     [--nao tcp://HOST:9559] [--state-dir DIR] [--publish-camera]
+                    [--exit-record FILE]
 
 The body is the simulated world over zenoh (``--body zenoh``, the default) or a NAO
 over its qi protocol (``--body naoqi --nao tcp://nao.local:9559``: a real robot, or a
@@ -46,6 +47,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse
 import contextlib
 import dataclasses
+import json
 import logging
 import math
 import sys
@@ -147,6 +149,14 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         metavar="DIR",
         default=None,
         help="keep a durable journal here and resume from it after a crash",
+    )
+    p.add_argument(
+        "--exit-record",
+        metavar="FILE",
+        default=None,
+        help='append {"robot": ID} to FILE once this agent knows its robot (after --id auto '
+        "claimed it), so that a supervisor can file the process's real exit status under the "
+        'robot: it appends {"exit": CODE} when the process ends (docker-compose.yml)',
     )
     p.add_argument(
         "--sensor-fault",
@@ -314,6 +324,12 @@ def main(argv: list[str] | None = None) -> int:
         log.error("%s", exc)
         return 1
     bus, world_bus, rid = opened
+    if args.exit_record:
+        try:
+            with open(args.exit_record, "a", encoding="utf-8") as f:
+                f.write(json.dumps({"robot": rid}) + "\n")
+        except OSError as exc:  # the supervisor then files the exit under no robot
+            log.warning("no exit record in %s: %s", args.exit_record, exc)
     with bus, contextlib.ExitStack() as stack:
         if world_bus is not bus:
             stack.enter_context(world_bus)

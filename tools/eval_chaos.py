@@ -16,14 +16,15 @@ secure by default (a TLS router, signed messages).
 A fault whose moment comes after the agents finished is not injected (noted in the
 schedule); killing an agent that has exited is skipped. Each run is judged by the one
 rule of :func:`tools.harness.judge.outcome` from the monitor's ground truth: ``complete``,
-``unsafe`` (a contact, robots walking on differing plans, or every agent done on a
-formation the ground truth fails; robots the fleet left out only stand still) or
-``safe_abort``. Writes ``--json`` and ``results.json`` (``{"runs": [...]}`` as
+``degraded`` (formed, but without a sound robot), ``unsafe`` (a contact, a robot that moved
+off the plan the movers share, or every agent done on a formation the ground truth fails;
+robots the fleet left out only stand still), ``safe_abort``, or ``no_result`` (the
+monitor wrote none). Writes ``--json`` and ``results.json`` (``{"runs": [...]}`` as
 ``tools.eval_faults``, each run with its schedule and what was done when), ``chaos.png``
 (per run a time line: the faults as injected, the outcome's colour) under ``--out`` (one
 folder per run with the processes' logs, ``schedule.json``, ``result.json``,
 ``formation.png`` and ``run.mcap``), prints a table and a progress line with an estimate.
-Exit 0 when no run was unsafe.
+Exit 0 when no run failed (degraded, unsafe or no result).
 
 ``python -m tools.eval_chaos --runs 10 --seed-start 1 [--robots 3] [--out DIR] [--json FILE]``
 """
@@ -46,7 +47,7 @@ from typing import Any, Protocol
 from tools import netns
 from tools.chaos_schedule import TAGS, Limits, Schedule, draw, with_injected
 from tools.harness import report
-from tools.harness.judge import outcome
+from tools.harness.judge import FAILURES, outcome
 from tools.harness.progress import Progress
 
 
@@ -228,7 +229,7 @@ def run_one(args: argparse.Namespace, sched: Schedule, out: Path, credentials: s
         dropped = fleet.dropped_packets
     doc = inj.schedule_doc()
     (out / "schedule.json").write_text(json.dumps(doc, indent=2))
-    got, detail = outcome(res) if res else ("safe_abort", cut or "the monitor wrote no result")
+    got, detail = outcome(res or {"no_result": cut or "the monitor wrote no result"})
     if not inj.injected_at and sched.reply_delay_s == 0:
         detail = f"no fault injected; {detail}"
     return Run(
@@ -253,12 +254,14 @@ def run_one(args: argparse.Namespace, sched: Schedule, out: Path, credentials: s
 def print_table(runs: list[Run]) -> None:
     """One line per run (its injected mix), then the outcomes per fault kind injected."""
     report.print_runs([asdict(r) for r in runs], "mix", detail_width=70)
-    print(f"\n{'fault (runs it hit)':20s} {'complete':>8} {'safe_abort':>10} {'unsafe':>6}")
+    print(f"\n{'fault (runs it hit)':20s} {'complete':>8} {'degraded':>8} {'safe_abort':>10} "
+          f"{'unsafe':>6} {'no_result':>9}")  # fmt: skip
     for tag in [*TAGS, "all"]:
         mine = [r for r in runs if tag == "all" or tag in r.mix.split("+")]
         if mine:
             c = Counter(r.outcome for r in mine)
-            print(f"{tag:20s} {c['complete']:8d} {c['safe_abort']:10d} {c['unsafe']:6d}")
+            print(f"{tag:20s} {c['complete']:8d} {c['degraded']:8d} {c['safe_abort']:10d} "
+                  f"{c['unsafe']:6d} {c['no_result']:9d}")  # fmt: skip
 
 
 def plot(runs: list[Run], path: Path) -> None:
@@ -310,10 +313,8 @@ def plot(runs: list[Run], path: Path) -> None:
     names = [*report.COLOURS, "agent killed .. restarted (its id)", "router restart", "loss burst"]
     ax.legend(handles, names, loc="upper center", bbox_to_anchor=(0.5, -0.5 / (1 + len(runs) / 3)),
               ncol=3, fontsize=8)  # fmt: skip
-    c = Counter(r.outcome for r in runs)
-    ax.set_title(f"Chaos soak, {len(runs)} runs: {c['complete']} complete, {c['safe_abort']} "
-                 f"safe abort, {c['unsafe']} unsafe; contacts {sum(r.contacts for r in runs)} "
-                 "(grey: not injected)", fontsize=10)  # fmt: skip
+    ax.set_title(f"Chaos soak, {len(runs)} runs: {report.outcome_counts(asdict(r) for r in runs)}; "
+                 f"contacts {sum(r.contacts for r in runs)} (grey: not injected)", fontsize=10)  # fmt: skip
     ax.set_xlabel("seconds after the agents started")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -432,7 +433,7 @@ def soak(args: argparse.Namespace, plan: list[Schedule]) -> int:
         progress.step(f"seed {sched.seed} {r.mix}: {r.outcome} ({r.detail[:60]})")
     print_table(runs)
     print(f"wrote {args.out / 'results.json'}, {args.out / 'chaos.png'}")
-    return 0 if all(r.outcome != "unsafe" for r in runs) else 1
+    return 0 if all(r.outcome not in FAILURES for r in runs) else 1
 
 
 if __name__ == "__main__":

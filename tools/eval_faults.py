@@ -14,10 +14,11 @@ the fault, and judges the run from ground truth:
   reconnect and declare their tokens again, the membership grace period covers the gap.
 
 Outcomes, by the one rule of :func:`tools.harness.judge.outcome`: ``complete`` (every
-agent exited 0 in ``done``, identical plan digests, no contact, the pairs within the
-demo's tolerances), ``unsafe`` (a contact, a robot that walked on a plan another robot
-that planned did not share, or every agent done on a formation the ground truth fails),
-else ``safe_abort``; ``detail`` says why. Writes ``--json`` (``{"runs": [...]}``),
+agent exited 0 in ``done``, identical plan digests, no contact, the true shape within the
+demo's tolerances), ``degraded`` (the same, but a sound robot left out), ``unsafe`` (a
+contact, a robot that moved, by the ground truth, off the plan the others share, or
+every agent done on a formation the ground truth fails), else ``safe_abort``; ``detail``
+says why. Exit 0 when no run failed (degraded, unsafe, no result). Writes ``--json`` (``{"runs": [...]}``),
 ``results.json`` and ``faults.png`` under ``--out`` (one directory per run with the
 processes' logs, ``result.json``, ``formation.png`` and ``run.mcap``) and prints a table
 (:mod:`tools.harness.report`, as every evaluation tool).
@@ -39,7 +40,7 @@ from pathlib import Path
 from typing import Any
 
 from tools.harness import report
-from tools.harness.judge import outcome, summarise
+from tools.harness.judge import FAILURES, outcome, summarise
 from tools.harness.live import add_live_arguments, check_live_argument, live_sinks
 from tools.harness.observe import AgentView, Observer, Recorder, observe_for, observer_bus
 from tools.harness.procs import (
@@ -211,24 +212,23 @@ def injected(row: report.Row) -> bool:
 
 def print_table(runs: list[Run]) -> None:
     report.print_runs([asdict(r) for r in runs], "fault")
-    print(f"\n{'fault (injected runs)':22s} {'complete':>8} {'safe_abort':>10} {'unsafe':>6} "
-          f"{'not injected':>12}")  # fmt: skip
+    print(f"\n{'fault (injected runs)':22s} {'complete':>8} {'degraded':>8} {'safe_abort':>10} "
+          f"{'unsafe':>6} {'no_result':>9} {'not injected':>12}")  # fmt: skip
     for fault in [*dict.fromkeys(r.fault for r in runs), "all"]:
         mine = [r for r in runs if fault in ("all", r.fault)]
         c = Counter(r.outcome for r in mine if r.injected_at_s is not None)
         missed = sum(1 for r in mine if r.injected_at_s is None)
-        print(f"{fault:22s} {c['complete']:8d} {c['safe_abort']:10d} {c['unsafe']:6d} {missed:12d}")
+        print(f"{fault:22s} {c['complete']:8d} {c['degraded']:8d} {c['safe_abort']:10d} "
+              f"{c['unsafe']:6d} {c['no_result']:9d} {missed:12d}")  # fmt: skip
 
 
 def plot(runs: list[Run], path: Path) -> None:
     """Outcomes per fault, of the runs in which it was injected."""
     done = [r for r in runs if r.injected_at_s is not None]
-    total = Counter(r.outcome for r in done)
     report.plot_outcomes(
         report.count_outcomes([asdict(r) for r in runs], "fault", injected),
         path,
-        f"Faults injected in {len(done)} runs: {total['complete']} complete, "
-        f"{total['safe_abort']} safe abort, {total['unsafe']} unsafe; "
+        f"Faults injected in {len(done)} runs: {report.outcome_counts(asdict(r) for r in done)}; "
         f"contacts {sum(r.contacts for r in runs)}",
         xlabel="runs (seeds) in which the fault was injected",
     )
@@ -297,7 +297,7 @@ def main(argv: list[str] | None = None) -> int:
             runs.append(r)
             write(args, runs)
     print_table(runs)
-    return 0 if all(r.outcome != "unsafe" for r in runs) else 1
+    return 0 if all(r.outcome not in FAILURES for r in runs) else 1
 
 
 def write(args: argparse.Namespace, runs: list[Run]) -> None:

@@ -37,6 +37,7 @@ from agent.core.formation.frame.fleet_frame import fleet_frame
 from agent.core.formation.frame.neighbour_check import DEFAULT_EPSILON
 from agent.wire import NeighborRecordMsg, decode
 from tools.harness.frame_fit import common_frame_pose
+from tools.harness.judge import injected_faults
 
 
 @dataclass(frozen=True)
@@ -76,13 +77,8 @@ def records_of(mcap: Path) -> tuple[NeighborRecordMsg, ...]:
 
 
 def faulty_robot(result: dict[str, object]) -> int:
-    """The robot whose agent ran with ``--sensor-fault`` (-1: none)."""
-    args = result.get("agent_args") or []
-    for arg in args if isinstance(args, list) else []:
-        rid, _, rest = str(arg).partition(":")
-        if rest.startswith("--sensor-fault") and rid.isdigit():
-            return int(rid)
-    return -1
+    """The robot whose agent ran with ``--sensor-fault`` (-1: none; the lowest of several)."""
+    return min(injected_faults(dict(result)), default=-1)
 
 
 def _wrap_deg(a: float) -> float:

@@ -8,9 +8,12 @@ test tool ``--sensor-fault rotate:DEG|scale:F|shift:M`` on robot ``1 + seed mod 
 and judges every run from the ground truth with the one rule of
 :func:`tools.harness.judge.outcome`:
 
-* ``complete``: every agent done on identical plans, every pair within tolerance;
-* ``unsafe``: a contact, a robot that walked on a plan another did not share, or every
-  agent reporting done on a formation the ground truth fails (a silent wrong "done");
+* ``complete``: every agent done on identical plans, the true shape within tolerance,
+  a robot left out only if it carries the injected fault;
+* ``degraded``: the same, but the fleet left out a sound robot (a failure);
+* ``unsafe``: a contact, a robot that moved (ground truth) off the plan the others share,
+  or every agent reporting done on a formation the ground truth fails (a silent wrong "done");
+* ``no_result``: the run gave no result (a failure);
 * ``safe_abort``: everything else (the fleet stopped, and said why).
 
 For a sensor fault it also records whom the fleet named (the robots the plan leaves out,
@@ -37,7 +40,7 @@ from typing import Any
 
 from sim.scenarios import Headings
 from tools.harness import report
-from tools.harness.judge import outcome
+from tools.harness.judge import FAILURES, outcome
 from tools.harness.live import add_live_arguments, check_live_argument
 from tools.harness.progress import Progress
 
@@ -93,7 +96,7 @@ def run_one(args: argparse.Namespace, case: Case, seed: int, out: Path) -> Run:
     try:
         r = run_once(parse_args(argv), seed, out, quiet=True)
     except RuntimeError as exc:
-        r = {"errors": {"demo": str(exc)}, "contacts": 0}
+        r = {"no_result": f"demo: {exc}"}
     got, detail = outcome(r)
     return Run(
         case=case.name,
@@ -127,26 +130,25 @@ def print_table(runs: list[Run]) -> None:
         named = ",".join(map(str, r.named)) or "-"
         print(f"{r.case:28s} {r.seed:4d} {r.outcome:10s} {named:>8} {rd:>8} {rp:>10} "
               f"{r.wall_s:6.0f}  {r.detail[:80]}")  # fmt: skip
-    print(f"\n{'case':28s} {'complete':>8} {'safe_abort':>10} {'unsafe':>6} {'contacts':>8} "
-          f"{'named right':>11} {'verdicts agree':>14}")  # fmt: skip
+    print(f"\n{'case':28s} {'complete':>8} {'degraded':>8} {'safe_abort':>10} {'unsafe':>6} "
+          f"{'no_result':>9} {'contacts':>8} {'named right':>11} {'verdicts agree':>14}")  # fmt: skip
     for case in [*dict.fromkeys(r.case for r in runs), "all"]:
         mine = [r for r in runs if case in ("all", r.case)]
         c = Counter(r.outcome for r in mine)
         faulty = [r for r in mine if r.fault]
         right = f"{sum(r.named == [r.victim] for r in faulty)}/{len(faulty)}" if faulty else "-"
         agree = f"{sum(r.verdicts_agree for r in mine)}/{len(mine)}"
-        print(f"{case:28s} {c['complete']:8d} {c['safe_abort']:10d} {c['unsafe']:6d} "
-              f"{sum(r.contacts for r in mine):8d} {right:>11} {agree:>14}")  # fmt: skip
+        print(f"{case:28s} {c['complete']:8d} {c['degraded']:8d} {c['safe_abort']:10d} "
+              f"{c['unsafe']:6d} {c['no_result']:9d} {sum(r.contacts for r in mine):8d} "
+              f"{right:>11} {agree:>14}")  # fmt: skip
 
 
 def plot(runs: list[Run], path: Path) -> None:
     """Outcomes per case."""
-    total = Counter(r.outcome for r in runs)
     report.plot_outcomes(
         report.count_outcomes([asdict(r) for r in runs], "case"),
         path,
-        f"Start headings: {len(runs)} runs, {total['complete']} complete, "
-        f"{total['safe_abort']} safe abort, {total['unsafe']} unsafe; "
+        f"Start headings: {len(runs)} runs, {report.outcome_counts(asdict(r) for r in runs)}; "
         f"silent wrong 'done' {sum(r.silent_wrong for r in runs)}",
     )
 
@@ -214,7 +216,7 @@ def main(argv: list[str] | None = None) -> int:
             bar.step(f"{case.name} seed {seed}: {r.outcome} ({r.detail[:70]})")
     print_table(runs)
     print(f"figure: {args.out / 'headings.png'}", file=sys.stderr)
-    return 0 if all(r.outcome != "unsafe" for r in runs) else 1
+    return 0 if all(r.outcome not in FAILURES for r in runs) else 1
 
 
 if __name__ == "__main__":

@@ -475,8 +475,8 @@ def main(argv: list[str] | None = None) -> int:
 def run_row(r: RunResult, res: dict[str, Any]) -> dict[str, Any]:
     """One run in the rows of :mod:`tools.harness.report` (the JSON schema shared with
     ``tools.eval_faults``): its outcome and detail by :func:`tools.harness.judge.outcome`
-    from the monitor's ``result.json`` (``res``; empty: no result, a safe abort)."""
-    oc, detail = outcome(res) if res else ("safe_abort", r.reason)
+    from the monitor's ``result.json`` (``res``; empty: ``no_result``, a failure)."""
+    oc, detail = outcome(res or {"no_result": r.reason})
     return {
         "seed": r.seed,
         "loss": r.loss,

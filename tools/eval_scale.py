@@ -4,8 +4,9 @@ time goes (fifty NAOs and beyond; docs/design.md §1 phases, §9 "Honest results
 Runs the fleet as ``tools.demo`` does (secure, a TLS router, the world and one agent
 process per robot, camera frames for viewers off) once per fleet size and seed, one run
 at a time, and judges every run from the ground truth with the one rule of
-:func:`tools.harness.judge.outcome` (``complete``, ``safe_abort``, ``unsafe``; a silent
-wrong "done" is unsafe). Per run it keeps the contacts, the wall time, the agreement's
+:func:`tools.harness.judge.outcome` (``complete``, ``degraded``, ``safe_abort``,
+``unsafe``, ``unjudged``, ``no_result``; a silent wrong "done" is unsafe; exit 0 when no
+run failed: degraded, unsafe or no result). Per run it keeps the contacts, the wall time, the agreement's
 own time (``agreement_s``: the last agent entering exchange to the last one planning),
 the exchange bytes per agent (records and digests, the largest and the median agent),
 the slowest agent's wall time in each phase (``result.json``'s ``phases``) and the
@@ -39,7 +40,7 @@ from typing import Any
 
 from tools.demo import MAX_ROBOTS
 from tools.harness import report
-from tools.harness.judge import PHASE_ORDER, outcome
+from tools.harness.judge import FAILURES, PHASE_ORDER, outcome
 from tools.harness.progress import Progress
 
 #: The phases drawn, in the order of docs/design.md §1 (``done`` ends a run: no duration).
@@ -182,7 +183,7 @@ def run_one(args: argparse.Namespace, robots: int, seed: int, out: Path) -> Run:
         try:
             r = run_once(parse_args(argv), seed, out, quiet=True)
         except RuntimeError as exc:
-            r = {"errors": {"demo": str(exc)}, "contacts": 0}
+            r = {"no_result": f"demo: {exc}"}
     return row_of(r, robots, seed, load, agree_s, wave_s)
 
 
@@ -388,7 +389,7 @@ def main(argv: list[str] | None = None) -> int:
             )
     print_table(runs)
     print(f"figure: {args.figure or args.out / FIGURE}", file=sys.stderr)
-    return 0 if all(r.outcome != "unsafe" for r in runs) else 1
+    return 0 if all(r.outcome not in FAILURES for r in runs) else 1
 
 
 if __name__ == "__main__":

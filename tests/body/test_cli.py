@@ -28,6 +28,13 @@ def test_body_defaults_to_the_zenoh_world() -> None:
     assert a.body == "zenoh" and a.nao is None
 
 
+def test_exit_record_names_the_file_a_supervisor_files_the_exit_under() -> None:
+    assert parse_args(["--id", "2"]).exit_record is None
+    assert parse_args(["--id", "auto", "--exit-record", "/exits/c.jsonl"]).exit_record == (
+        "/exits/c.jsonl"
+    )
+
+
 def test_planning_parameters_default_and_choices(capsys: pytest.CaptureFixture[str]) -> None:
     a = parse_args(["--id", "2"])
     assert (a.orientation, a.strategy) == ("pca", "default")

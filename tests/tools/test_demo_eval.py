@@ -175,6 +175,7 @@ def _judged(**kw: object) -> dict[str, object]:
         "max_abs_r_phi": 0.54,
         "errors": {},
         "evaluator_plan_digest": "aa",
+        "shape": {"ok": True, "missing": [], "leader_in_front": True},
     }
     return {**base, **kw}
 
@@ -186,9 +187,15 @@ def _judged(**kw: object) -> dict[str, object]:
         ({"contacts": 2}, "unsafe", "contact"),
         ({"plan_digests": {"1": "aa", "2": "bb"}, "identical_digests": False}, "unsafe", "differ"),
         ({"within_tolerance": False}, "unsafe", "wrong formation"),
-        # the evaluator lacks records (100 NAOs: its observer's queue): nothing to judge
-        ({"within_tolerance": False, "evaluator_plan_digest": None, "records_observed": 1},
-         "unjudged", "holds 1 of 2 records"),
+        # the truth holds no final pose of robot 2: nothing to judge
+        ({"within_tolerance": False, "shape": {"ok": False, "missing": [2]}},
+         "unjudged", "no final pose of [2]"),
+        ({"within_tolerance": False, "shape": {"ok": False, "missing": [],
+          "leader_in_front": False}}, "unsafe", "leader not in front"),
+        # robot 2 walked (ground truth) but reported no plan: whatever its statuses said
+        ({"plan_digests": {"1": "aa", "2": ""}, "identical_digests": False}, "unsafe",
+         "moved without reporting a plan"),
+        ({}, "complete", "within"),
         ({"final_phase": {"1": "done", "2": "failed"}, "exit_codes": {"1": 0, "2": 1},
           "errors": {"2": "formation off: r_phi -54 % to parent 1"}}, "safe_abort", "formation off"),
         ({"timeout": "agents still running"}, "complete", "within"),
@@ -206,9 +213,19 @@ def test_a_robot_the_fleet_left_out_only_stands_still() -> None:
 
     r = _judged(
         excluded=[2],
+        movers=[1, 3],
+        plan_digests={"1": "aa", "2": "aa", "3": "aa"},
         exit_codes={"1": 0, "2": 1, "3": 0},
         final_phase={"1": "done", "2": "failed", "3": "done"},
+        agent_args=["2:--sensor-fault=rotate:40"],
     )
     assert outcome(r) == ("complete", "done, pairs within tolerance (robots [2] left out)")
+    # left out, but sound: the fleet formed without a good robot
+    sound = {**r, "agent_args": ["3:--sensor-fault=rotate:40"]}
+    assert outcome(sound) == ("degraded", "formed without sound robots [2] (left out of the plan)")
+    assert outcome({**r, "movers": [1, 2, 3]}) == (
+        "unsafe",
+        "robots [2] were left out of the plan but moved",
+    )
     r["excluded"] = []
     assert outcome(r)[0] == "safe_abort"

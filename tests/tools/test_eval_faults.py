@@ -60,6 +60,7 @@ def _result(**over: Any) -> dict[str, Any]:
         "within_tolerance": True,
         "errors": {},
         "evaluator_plan_digest": "a" * 64,
+        "shape": {"ok": True, "missing": [], "leader_in_front": True},
     }
     r.update(over)
     return r
@@ -79,7 +80,7 @@ def test_judge_complete_safe_abort_and_unsafe() -> None:
     assert judge(_result(contacts=2), done) == ("unsafe", "2 contact(s)")
     split = {1: view("move", digest=D1), 2: view("wait", digest=D2)}
     got, detail = judge(_result(identical_digests=False), split)
-    assert got == "unsafe" and "walked" in detail
+    assert got == "unsafe" and "moved; plan digests differ" in detail
     failed = {1: view("failed"), 2: view("failed")}
     res = _result(
         exit_codes={"1": 1, "2": 1},

@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import subprocess
 import sys
 import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -178,7 +180,7 @@ def test_observer_stops_when_every_agent_is_gone(tmp_path: Path) -> None:
                 t.join(timeout=5)
         assert mon.wait(timeout=30) == 1  # not a success: the agent never finished
         result = json.loads((out / "result.json").read_text())
-        assert result["exit_codes"] == {"5": 1}
+        assert result["exit_codes"] == {"5": None}  # no exit record: it never finished
         assert result["final_phase"] == {"5": "move"}
         assert result["phases_visited"] == {"5": ["move"]}
         assert result["seed"] == 4 and result["success"] is False
@@ -205,7 +207,7 @@ def test_run_rows_take_the_outcome_of_the_one_rule() -> None:
     unshared = dict(moved, plan_digests={"1": "a", "2": "b"}, identical_digests=False)
     assert _outcome(unshared) == "unsafe"
     assert _outcome(dict(_ok_result(), contacts=1)) == "unsafe"
-    assert _outcome({}) == "safe_abort"  # the monitor wrote no result
+    assert _outcome({}) == "no_result"  # the monitor wrote no result: a failure
 
 
 def test_run_rows_have_the_shared_schema_and_the_outcomes_plot(tmp_path: Path) -> None:
@@ -215,7 +217,7 @@ def test_run_rows_have_the_shared_schema_and_the_outcomes_plot(tmp_path: Path) -
         "detail": "done, pairs within tolerance",
     }  # fmt: skip
     lost = eval_loss.run_row(_run(0.3, False, None, [500]), {})
-    assert lost["outcome"] == "safe_abort" and lost["detail"] == "x"  # the run's reason
+    assert lost["outcome"] == "no_result" and lost["detail"] == "x"  # the run's reason
     bad = dict(row, seed=2, outcome="safe_abort", detail="x")
     counts = report.count_outcomes([row, bad], "loss")
     report.plot_outcomes(counts, tmp_path / "outcomes.png", "test")
@@ -257,3 +259,18 @@ def test_cap_tcp_rto_sets_the_sysctl_on_every_host() -> None:
     for bad in (999, 120001):
         with pytest.raises(ValueError, match="tcp_rto_max_ms must be in"):
             eval_loss.cap_tcp_rto(_Hosts(1), bad)  # type: ignore[arg-type]
+
+
+def test_exit_records_give_the_processes_exit_codes(tmp_path: Path) -> None:
+    """The compose observer's exit codes: the agent containers' exit records."""
+    from tools.harness.monitor import read_exits
+
+    (tmp_path / "a.jsonl").write_text('{"robot": 2}\n{"exit": 0}\n')
+    (tmp_path / "b.jsonl").write_text('{"robot": 3}\nnot json\n')  # still running
+    (tmp_path / "c.jsonl").write_text('{"exit": 1}\n')  # ended before claiming a robot
+    stale = tmp_path / "d.jsonl"
+    stale.write_text('{"robot": 1}\n{"exit": 0}\n')
+    os.utime(stale, (time.time() - 3600, time.time() - 3600))  # an earlier run's
+    (tmp_path / "e.txt").write_text(json.dumps({"robot": 5, "exit": 0}))  # not a record
+    assert read_exits(tmp_path, time.time() - 60) == ({2: 0, 3: None}, [1])
+    assert read_exits(tmp_path / "none", 0.0) == ({}, [])

@@ -7,6 +7,8 @@ and judge runs).
 ``foxglove``: Foxglove's well-known schemas as JSON Schema, and their message builders.
 ``judge``: a run judged from ground truth, its outcome (one rule), the result table, the
 formation figure.
+``truth``: the ground truth read as a user would: who moved, the pyramid's shape from the
+true final poses.
 ``run``: one demo run (world, agents, observation, judgement), as ``tools.demo`` runs it.
 ``monitor``: one run observed and judged by a process of its own (``tools.eval_loss``,
 the compose observer).

@@ -2,9 +2,14 @@
 and r_φ = (φ - φ_e)/φ_e (NAO paper 5.1.1), contacts, the march, phase times, bytes,
 identical plan digests; the result table and the formation figure (Fig. 16/24-like).
 
-Success: every agent exited 0 in ``done``, identical plan digests, zero contacts, and
-every pair within |r_d| <= 12.5 % and |r_φ| <= 30 % (and, with a march, the leader's
-displacement within 10 % of the route; with rogues, none of their attacks worked).
+Success: the run's :func:`outcome` is ``complete`` (every agent the fleet kept exited 0
+in ``done``, identical plan digests, zero contacts, nobody moved off the shared plan, the
+true shape in tolerance: every pair within |r_d| <= 12.5 % and |r_φ| <= 30 % on its own
+side, the leader in front; any robot left out carries the injected fault), and, with a
+march, the leader's displacement within 10 % of the route; with rogues, none of their
+attacks worked. Who moved and the shape come from the truth alone
+(:mod:`tools.harness.truth`); the evaluator's plan, recomputed from the signed records,
+only names the robots the fleet left out and judges the march and the rogues.
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ from agent.wire import PHASES
 from tools.harness.frame_fit import common_frame_pose
 from tools.harness.observe import AgentView, Observer
 from tools.harness.procs import rogue_reports
+from tools.harness.truth import MOVED_M, excursions, judge_shape
 
 #: The phases of docs/design.md §1 in order (the wire's list, less the terminal "failed").
 PHASE_ORDER = tuple(p for p in PHASES if p != "failed")
@@ -249,48 +255,82 @@ def fleet_verdict(
     }
 
 
-OUTCOMES = ("complete", "safe_abort", "unsafe", "unjudged")
+#: Every outcome of a run (:func:`outcome`); :data:`FAILURES` fail an evaluation tool.
+OUTCOMES = ("complete", "degraded", "safe_abort", "unsafe", "unjudged", "no_result")
+FAILURES = ("degraded", "unsafe", "no_result")
+
+
+def injected_faults(result: dict[str, Any]) -> list[int]:
+    """The robots whose agent ran with the injected ``--sensor-fault`` (the harness gave
+    it: ``agent_args`` ``ID:--sensor-fault=...``), sorted."""
+    args = result.get("agent_args") or []
+    out = set()
+    for arg in args if isinstance(args, list) else []:
+        rid, _, rest = str(arg).partition(":")
+        if rest.startswith("--sensor-fault") and rid.isdigit():
+            out.add(int(rid))
+    return sorted(out)
 
 
 def outcome(result: dict[str, Any]) -> tuple[str, str]:
-    """(outcome, detail) of a judged run, one rule for every evaluation tool.
+    """(outcome, detail) of a judged run, one rule for every evaluation tool; who moved and
+    the shape come from the ground truth (:mod:`tools.harness.truth`), the exit codes from
+    the processes.
 
-    ``unsafe``: a contact; a robot walked on a plan that another robot that planned did not
-    share; or every agent reported done while the ground truth fails (a silent wrong
-    formation is as bad as a contact). ``complete``: every agent done on identical plans,
-    the ground truth within tolerance; robots the fleet left out (``excluded``, named by
-    its consistency check) only stand still. ``unjudged``: every agent done on identical
-    plans, but the evaluator could not recompute the plan (its observer lacks records: at
-    100 NAOs a status flood pushed 23 records out of its queue), so the ground truth has
-    nothing to be held against; never counted as a success nor as a silent wrong "done".
+    ``no_result``: no result at all: an empty one, or the stand-in ``{"no_result": why}``
+    of a tool whose run gave none (a monitor that wrote nothing, a harness error); a
+    failure.
+    ``unsafe``: a contact; a robot that moved (the truth's ``movers``) without a plan
+    digest, or while the robots that planned hold different ones; a robot the fleet left
+    out that moved; or every agent done while the truth's shape fails (a silent wrong
+    formation is as bad as a contact). ``complete``: every agent that the fleet kept
+    (all but ``excluded``) exited 0 in ``done`` on identical plans, the true shape in
+    tolerance, and each robot left out carries the injected fault (``injected_faults``).
+    ``degraded``: the same, but the fleet left out a sound robot; a failure.
+    ``unjudged``: every agent done on identical plans, but the truth holds no final pose
+    of some member: nothing to judge; neither a success nor a silent wrong "done".
     Everything else is a ``safe_abort``.
     """
+    if not result or "no_result" in result:
+        return "no_result", str(result.get("no_result", "no result"))
     contacts = int(result.get("contacts", 0))
     if contacts:
         return "unsafe", f"{contacts} contact(s)"
-    planned = {d for d in result.get("plan_digests", {}).values() if d}
-    movers = result.get("movers", [])
+    digests = result.get("plan_digests", {})
+    planned = {d for d in digests.values() if d}
+    movers = [int(i) for i in result.get("movers", [])]
+    blind = [i for i in movers if not digests.get(str(i))]
+    if blind:
+        return "unsafe", f"robots {blind} moved without reporting a plan"
     if movers and len(planned) > 1:
-        return "unsafe", f"robots {movers} walked; plan digests differ {sorted(planned)}"
+        return "unsafe", f"robots {movers} moved; plan digests differ {sorted(planned)}"
+    left_out = sorted(int(i) for i in result.get("excluded", []))
+    strayed = [i for i in left_out if i in movers]
+    if strayed:
+        return "unsafe", f"robots {strayed} were left out of the plan but moved"
     codes, phases = result.get("exit_codes", {}), result.get("final_phase", {})
-    out = {str(i) for i in result.get("excluded", [])}  # left out by the fleet: stand still
+    out = {str(i) for i in left_out}  # left out by the fleet: they stand still
     all_done = bool(codes) and all(
         codes.get(i) == 0 and phases.get(i) == "done" for i in codes if i not in out
     )
     if all_done and result.get("identical_digests"):
         if result.get("within_tolerance"):
-            rest = f" (robots {sorted(int(i) for i in out)} left out)" if out else ""
+            sound = [i for i in left_out if i not in injected_faults(result)]
+            if sound:
+                return "degraded", f"formed without sound robots {sound} (left out of the plan)"
+            rest = f" (robots {left_out} left out)" if left_out else ""
             return "complete", f"done, pairs within tolerance{rest}"
-        if not result.get("evaluator_plan_digest"):
-            held = result.get("records_observed", "?")
+        missing = (result.get("shape") or {}).get("missing")
+        if "shape" not in result or missing:
             return "unjudged", (
-                f"every agent done, but the evaluator holds {held} of {len(codes)} records: "
-                "no plan to judge the ground truth against"
+                f"every agent done, but the truth holds no final pose of {missing or 'any'}: "
+                "no shape to judge"
             )
         worst = f"max |r_d| {result.get('max_abs_r_d', math.nan):.1%}, |r_phi| " + (
             f"{result.get('max_abs_r_phi', math.nan):.1%}"
         )
-        return "unsafe", f"every agent said done on a wrong formation ({worst})"
+        front = "" if result["shape"].get("leader_in_front", True) else ", leader not in front"
+        return "unsafe", f"every agent said done on a wrong formation ({worst}{front})"
     errors = "; ".join(f"{k}: {v[:90]}" for k, v in result.get("errors", {}).items())
     if "timeout" in result:
         errors = f"{result['timeout']}; {errors}"
@@ -323,7 +363,6 @@ def summarise(
     n = len(ids)
     views = {i: obs.agents.get(i, AgentView()) for i in ids}
     result["exit_codes"] = {str(i): views[i].exit_code for i in ids}
-    result["movers"] = [i for i in ids if "move" in views[i].phase_wall]
     result["final_phase"] = {str(i): views[i].phase for i in ids}
     result["errors"] = {str(i): views[i].error for i in ids if views[i].error}
     digests = {views[i].plan_digest for i in ids}
@@ -396,10 +435,8 @@ def summarise(
             frame = common_frame_pose(starts, obs.truth[0][1])
             axis = fa.axis_angle(plan) + frame[2] - math.pi / 2
             result["axis_deg"] = math.degrees(axis)
-            pairs = pyramid_pairs(plan, [i for i in ids if i in plan.ids])
-            final = obs.truth[-1][1]
-            result["pairs"] = evaluate(final, pairs, axis, d_e, phi_e)
-            if result.get("route"):
+            if result.get("route"):  # the march against the plan's route and pairs
+                pairs = pyramid_pairs(plan, [i for i in ids if i in plan.ids])
                 judge_march(obs, result, plan, axis, pairs, d_e, phi_e)
             if "obstacles" in result:
                 from tools.obstacle_scenario import judge_obstacles
@@ -407,18 +444,29 @@ def summarise(
                 judge_obstacles(result, obs.truth, obs.contacts, plan)
         except (ValueError, KeyError, AttributeError, ImportError) as exc:
             result["evaluation_error"] = f"{type(exc).__name__}: {exc}"
+    # who moved, from the truth: from where each robot stood at its last search record
+    far = excursions(obs.truth, ids, obs.record_sample)
+    result["moved_m"] = {str(i): m for i, m in far.items()}
+    result["movers"] = [i for i in ids if far.get(i, 0.0) > MOVED_M]
+    result["injected_faults"] = injected_faults(result)
+    # the shape, from the true final poses alone (the fleet's members: all but those it
+    # left out)
+    left_out = set(result.get("excluded", []))  # named by the fleet: they only stand still
+    members = [i for i in ids if i not in left_out]
+    judged = False
+    if obs.truth and members:
+        shape = judge_shape(obs.truth[-1][1], members, d_e, phi_e)
+        result["pairs"], result["shape"] = shape.rows, shape.summary()
+        result.setdefault("leader", shape.leader)
+        judged = not shape.missing
     rows = result["pairs"]
     result["max_abs_r_d"] = max((abs(r["r_d"]) for r in rows), default=math.nan)
     result["max_abs_r_phi"] = max((abs(r["r_phi"]) for r in rows), default=math.nan)
-    within = bool(rows) and all(
-        abs(r["r_d"]) <= R_D_MAX and abs(r["r_phi"]) <= R_PHI_MAX for r in rows
-    )
+    within = bool(result.get("shape", {}).get("ok"))
     result["within_tolerance"] = within
-    left_out = set(result.get("excluded", []))  # named by the fleet: they only stand still
     ok_agents = all(
         views[i].exit_code == 0 and views[i].phase == "done" for i in ids if i not in left_out
     )
-    judged = bool(result.get("evaluator_plan_digest"))
     result.update(fleet_verdict(views, ids, ok_agents, within, judged))
     # The agents planned from exactly the records the robots signed: the evaluator, which
     # accepts only verified envelopes, recomputes the same plan digest from them.
@@ -439,10 +487,10 @@ def summarise(
         )
         result["rogue_defeated"] = trusted
     marched = result.get("march_ok", True)
+    result["outcome"], result["outcome_detail"] = outcome(result)
     result["success"] = bool(
-        ok_agents and within and result["identical_digests"] and result["contacts"] == 0
-        and "timeout" not in result and trusted and marched
-    )  # fmt: skip
+        result["outcome"] == "complete" and "timeout" not in result and trusted and marched
+    )
     if obs.truth:
         try:
             plot(obs, result, out / "formation.png")
@@ -460,14 +508,15 @@ def print_table(r: dict[str, Any]) -> None:
     p = print
     p(f"\nnao-formation demo: {r['robots']} robots, seed {r['seed']}, "
       f"d_e {r['d_e']:.2f} m, phi_e {r['phi_e_deg']:.0f} deg")  # fmt: skip
-    p(f"{'child':>5} {'parent':>6} {'dist (m)':>9} {'angle (deg)':>11} {'r_d':>8} {'r_phi':>8}  ok"
-      "   robot's own check (r_d, r_phi)")  # fmt: skip
+    p(f"{'child':>5} {'parent':>6} {'side':>5} {'dist (m)':>9} {'angle (deg)':>11} {'r_d':>8} "
+      f"{'r_phi':>8}  ok   robot's own check (r_d, r_phi)")  # fmt: skip
     checks = r.get("own_checks", {})
     for row in r["pairs"]:
         ok = abs(row["r_d"]) <= R_D_MAX and abs(row["r_phi"]) <= R_PHI_MAX
         own = checks.get(str(row["child"]))
         mine = f"{own[1]:+8.1%} {own[2]:+8.1%}" if own else "       -"
-        p(f"{row['child']:>5} {row['parent']:>6} {row['distance']:9.3f} {row['angle_deg']:11.1f} "
+        p(f"{row['child']:>5} {row['parent']:>6} {row.get('side', '-'):>5} "
+          f"{row['distance']:9.3f} {row['angle_deg']:11.1f} "
           f"{row['r_d']:+8.1%} {row['r_phi']:+8.1%}  {'yes' if ok else 'NO ':3s}   {mine}")  # fmt: skip
     if not r["pairs"]:
         p(
@@ -525,4 +574,7 @@ def print_table(r: dict[str, Any]) -> None:
         truth = "within tolerance" if r["within_tolerance"] else "NOT within tolerance"
         p(f"verdicts: the fleet says {fleet}; the ground truth says {truth}"
           + ("  <- SILENT WRONG FORMATION" if r["silent_wrong"] else ""))  # fmt: skip
-    p("RESULT: " + ("SUCCESS" if r["success"] else "FAILURE"))
+    if "outcome" in r:
+        p(f"outcome: {r['outcome']} ({r.get('outcome_detail', '')})")
+    degraded = r.get("outcome") == "degraded"
+    p("RESULT: " + ("SUCCESS" if r["success"] else "DEGRADED" if degraded else "FAILURE"))

@@ -12,6 +12,15 @@ agent's ``phases_visited``, each robot's ``displacement_m`` and the protocol's
 agreement time ``agree_s``. The exit code of an agent is the authority on ``done``
 (:func:`done_by_exit_code`): one status packet that a cut session swallowed does not
 turn a finished run into a failed one.
+
+Exit codes are the processes' own, never read from what an agent claims: the
+orchestrator of ``tools.eval_loss`` and ``tools.eval_chaos`` hands them over on stdin;
+beside a containerised fleet (``--until-done``) the monitor reads the agents' exit
+records (:func:`read_exits`): every agent container of docker-compose.yml appends to its
+own file in a folder it shares with the observer ``{"robot": ID}`` (the agent, once it
+has claimed its robot: ``python -m agent --exit-record``) and ``{"exit": CODE}`` (the
+container's shell, the agent process's real exit status ``$?``, or 1 when it never
+started). A robot without an ``exit`` line has no exit code: it did not finish.
 """
 
 from __future__ import annotations
@@ -45,6 +54,7 @@ def monitor(
     timeout_s: float = 900.0,
     seed: int | None = None,
     credentials: str = "",
+    exits: Path | None = None,
 ) -> int:
     """Observe the bus like ``tools.demo`` does, until the run is over; judge it.
 
@@ -56,11 +66,12 @@ def monitor(
     Prints ``monitor ready`` once subscribed, then records statuses, records, digests and
     ground truth (``tools.harness.observe.Observer``, MCAP recording). The run is over when the
     orchestrator writes one JSON line to stdin, ``{"ids": [...], "exit_codes": {...},
-    "timeout": str|null}``, or, with ``until_done=N`` (the compose ``observer``, which
-    cannot see exit codes), when N agents have reached ``done`` or ``failed``, or N agents
-    were alive and every liveliness token has been gone for 5 s (a final status lost on a
-    dead link), or ``timeout_s`` has passed; the exit code is taken as 0 for an agent in
-    ``done``, 1 otherwise. It then drains 1.5 s more and writes ``out/result.json`` (and
+    "timeout": str|null}``, or, with ``until_done=N`` (the compose ``observer``), when N
+    agents have an exit record with their exit status in ``exits`` (default
+    ``out/exits``; :func:`read_exits`), or N agents were alive and every liveliness token
+    has been gone for 5 s, or ``timeout_s`` has passed; the robots are those of the
+    ground truth (else those seen), each with the exit code of its record (none: it did
+    not finish). It then drains 1.5 s more and writes ``out/result.json`` (and
     the formation figure) with ``tools.harness.judge.summarise``. Returns 0 when the run
     succeeded.
     """
@@ -74,6 +85,8 @@ def monitor(
 
     if not until_done:
         threading.Thread(target=read_stdin, daemon=True).start()
+    exits = out / "exits" if exits is None else exits
+    since = time.time() - 1.0  # exit records of earlier runs are older
     deadline = time.monotonic() + timeout_s
     rec = Recorder(out / "run.mcap")
     obs = Observer(time.monotonic())
@@ -93,6 +106,8 @@ def monitor(
         alive: set[int] = set()
         ever_alive: set[int] = set()
         all_gone_since: float | None = None
+        unclaimed: list[int] = []
+        next_read = 0.0
         while order is None:
             for ev in bus.drain(0.1):
                 if ev.kind == "msg":
@@ -107,18 +122,23 @@ def monitor(
                     alive.discard(ev.robot_id)
             if until_done:
                 now = time.monotonic()
+                if now < next_read:
+                    continue
+                next_read = now + 0.5
                 if alive or len(ever_alive) < until_done:
                     all_gone_since = None
                 elif all_gone_since is None:
                     all_gone_since = now
-                final = {i: v.phase for i, v in obs.agents.items() if v.phase in TERMINAL_PHASES}
+                codes, unclaimed = read_exits(exits, since)
+                ended = sum(c is not None for c in codes.values()) + len(unclaimed)
                 gone = all_gone_since is not None and now - all_gone_since > 5.0
                 late = now > deadline
-                if len(final) >= until_done or gone or late:
-                    ids = sorted(final) if len(final) >= until_done else sorted(obs.agents)
+                if ended >= until_done or gone or late:
+                    world = set(obs.truth[-1][1]) if obs.truth else set()
+                    ids = sorted(world or set(codes) | set(obs.agents))
                     order = {
-                        "ids": ids[:until_done],
-                        "exit_codes": {str(i): int(final.get(i) != "done") for i in ids},
+                        "ids": ids,
+                        "exit_codes": {str(i): codes.get(i) for i in ids},
                         "timeout": f"agents not finished after {timeout_s:g} s" if late else None,
                     }
                 continue
@@ -143,6 +163,8 @@ def monitor(
     }
     if order.get("timeout"):
         result["timeout"] = order["timeout"]
+    if unclaimed:  # agents that ended before they claimed a robot: its exit code is theirs
+        result["unclaimed_exits"] = unclaimed
     if lost:
         result["final_status_unheard"] = lost
     # which phases each agent went through (did it move?), and how far each robot walked
@@ -172,6 +194,35 @@ def monitor(
         print_table(result)
     print("monitor done", flush=True)
     return 0 if result.get("success") else 1
+
+
+def read_exits(folder: Path, since: float) -> tuple[dict[int, int | None], list[int]]:
+    """The agents' exit records in ``folder`` (module docstring), of files changed after
+    ``since`` (epoch s): (robot -> its process's exit code, None while it runs; the exit
+    codes of agents that ended without a robot). Lines that are no record are skipped."""
+    codes: dict[int, int | None] = {}
+    unclaimed: list[int] = []
+    for path in sorted(folder.glob("*.jsonl")) if folder.is_dir() else []:
+        try:
+            if path.stat().st_mtime < since:
+                continue
+            lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
+        except OSError:
+            continue
+        robot: int | None = None
+        code: int | None = None
+        for line in lines:
+            with contextlib.suppress(ValueError, TypeError, AttributeError):
+                rec = json.loads(line)
+                if "robot" in rec:
+                    robot = int(rec["robot"])
+                if "exit" in rec:
+                    code = int(rec["exit"])
+        if robot is not None:
+            codes[robot] = code
+        elif code is not None:
+            unclaimed.append(code)
+    return codes, unclaimed
 
 
 def done_by_exit_code(obs: Observer, ids: list[int]) -> list[int]:

@@ -187,6 +187,9 @@ class Observer:
     contacts: list[tuple[float, int, int]] = field(default_factory=list)
     truth_contacts: int = 0
     records: dict[int, NeighborRecordMsg] = field(default_factory=dict)
+    #: per robot the truth sample at which its newest (re-)search round's record arrived:
+    #: where it stood when it published the start its plan is built from
+    record_sample: dict[int, int] = field(default_factory=dict)
     digests: dict[int, DigestMsg] = field(default_factory=dict)
     #: events whose handling failed (counted, reason logged, the observer goes on)
     rejected: int = 0
@@ -243,8 +246,10 @@ class Observer:
             view.phase, view.progress, view.detail = msg.phase, msg.progress, msg.detail
             if msg.phase == "march" and view.march_sample is None:
                 view.march_sample = len(self.truth)
+            # the plan a robot reported last (a status without one, e.g. of an agent
+            # restarted before it resumed, does not erase it)
             view.error, view.plan_digest, view.wave, view.t_sim = (
-                msg.error, msg.plan_digest, msg.wave, msg.t_sim,
+                msg.error, msg.plan_digest or view.plan_digest, msg.wave, msg.t_sim,
             )  # fmt: skip
             if msg.check_parent >= 0:
                 view.check = (msg.check_parent, msg.r_d, msg.r_phi)
@@ -252,6 +257,8 @@ class Observer:
             old = self.records.get(msg.sender)
             if old is None or old.round <= msg.round:  # the newest (re-)search round
                 self.records[msg.sender] = msg
+            if old is None or old.round < msg.round:
+                self.record_sample[msg.sender] = max(len(self.truth) - 1, 0)
         elif isinstance(msg, DigestMsg):
             self.digests[msg.sender] = msg
 

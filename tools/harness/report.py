@@ -1,7 +1,7 @@
 """The report of an evaluation matrix (docs/design.md §9 "Honest results"; docs/faults.md).
 
 Runs judged by the one rule of :func:`tools.harness.judge.outcome` (``complete``,
-``safe_abort``, ``unsafe``) are written as the shared ``{"runs": [...]}`` JSON, printed
+``degraded``, ``safe_abort``, ``unsafe``, ``unjudged``, ``no_result``) are written as the shared ``{"runs": [...]}`` JSON, printed
 as a table with one line per run and drawn as one figure of the outcomes per group (a
 loss rate, a fault, a case): the one copy that ``tools.eval_loss``, ``tools.eval_faults``
 and ``tools.eval_headings`` use.
@@ -18,16 +18,30 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from tools.harness.judge import OUTCOMES
+from tools.harness.judge import FAILURES, OUTCOMES
 
 Row = Mapping[str, Any]
 
 COLOURS = {
     "complete": "tab:green",
+    "degraded": "tab:olive",
     "safe_abort": "tab:orange",
     "unsafe": "tab:red",
     "unjudged": "tab:grey",
+    "no_result": "black",
 }
+
+
+def failures(rows: Iterable[Row]) -> int:
+    """How many runs ended in a failure (:data:`tools.harness.judge.FAILURES`: degraded,
+    unsafe, no result): an evaluation tool exits non-zero when there is any."""
+    return sum(1 for r in rows if r["outcome"] in FAILURES)
+
+
+def outcome_counts(rows: Iterable[Row]) -> str:
+    """``complete 3, degraded 1, ...``: every outcome that occurred, in :data:`OUTCOMES`' order."""
+    c = Counter(str(r["outcome"]) for r in rows)
+    return ", ".join(f"{o} {c[o]}" for o in OUTCOMES if c[o])
 
 
 def write_runs(rows: Sequence[Row], *paths: Path | None) -> None:

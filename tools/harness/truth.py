@@ -1,0 +1,200 @@
+"""A run's ground truth read as a user would read it: who moved, and the pyramid's shape
+(DESIGN.md §9 "Honest results"; NAO paper 5.1.1 for r_d and r_φ; AUV paper II eqs. 5-7
+for the pyramid's slots).
+
+Who moved (:func:`excursions`, :data:`MOVED_M`): a robot moved when its true position got
+farther than :data:`MOVED_M` from where it stood when it published its last search record
+(the position the plan starts from; before it, robots a re-search round sends exploring
+walk on no plan by design, NAO paper 4.1.3 rule 2), whatever its statuses said.
+
+The shape (:func:`judge_shape`), from the true final poses alone, never from the agents'
+planner: the formation faces the mean of its members' true headings (a held pyramid
+faces its axis); its slot tree is the pyramid's definition for that many members
+(:func:`slot_tree`: the leader, and per slot its parent's slot and its side); robots are
+matched to slots by position (:func:`assign_slots`). :func:`check_shape` then judges
+the true poses against any parent links: the leader in front of every other robot, each
+child behind its parent at d_e (|r_d| <= ``R_D_MAX``) and on its own side at ±φ_e (a left
+child on the parent's left, a right child on its right, in the facing frame; |r_φ| <=
+``R_PHI_MAX``, where a child on the wrong side has r_φ near -200 %), every robot with a
+true pose in a slot.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from agent.core.formation.pyramid import layer_of, parent_of, slot_positions
+from agent.core.formation.verdict import R_D_MAX, R_PHI_MAX
+
+Pose = tuple[float, float, float]
+Truth = Sequence[tuple[float, Mapping[int, Pose]]]
+
+#: A robot that got farther than this (m) from its reference position moved (the truth's
+#: noise bound: a robot only turning on the spot stays well within it).
+MOVED_M = 0.05
+#: A child's side: on its parent's left or right in the formation's facing frame.
+LEFT, RIGHT = 1, -1
+
+
+def excursions(truth: Truth, ids: Sequence[int], refs: Mapping[int, int]) -> dict[int, float]:
+    """Per robot of ``ids`` with a true pose: the farthest (m) its true position got from
+    where it stood at truth sample ``refs[i]`` (default 0; clipped to the stream), to the
+    end of the stream."""
+    out: dict[int, float] = {}
+    for i in ids:
+        k0 = min(max(int(refs.get(i, 0)), 0), max(len(truth) - 1, 0))
+        track = [poses[i] for _, poses in truth[k0:] if i in poses]
+        if track:
+            x0, y0 = track[0][0], track[0][1]
+            out[i] = max(math.hypot(p[0] - x0, p[1] - y0) for p in track)
+    return out
+
+
+def slot_tree(k: int) -> list[tuple[int, int]]:
+    """Per slot order 0..k-1 of a pyramid of ``k``: (parent slot, side); the leader's is
+    (-1, 0). Eq. 6: the last slot of a layer is its parent's right child, every other
+    one a left child (slot positions: ``pyramid.slot_positions``)."""
+    tree = [(-1, 0)]
+    for order in range(1, k):
+        parent = parent_of(order)
+        layer = layer_of(order)
+        last = layer * (layer + 1) // 2 - 1
+        tree.append((parent, RIGHT if order == last else LEFT))
+    return tree
+
+
+def facing_of(final: Mapping[int, Pose], members: Sequence[int]) -> float:
+    """The formation's facing (rad, CCW from world +x): the circular mean of the true
+    headings of ``members`` (those with a pose)."""
+    hs = [final[i][2] for i in members if i in final]
+    if not hs:
+        raise ValueError("no member has a true pose")
+    return math.atan2(sum(math.sin(h) for h in hs), sum(math.cos(h) for h in hs))
+
+
+def _frame(facing: float) -> tuple[np.ndarray, np.ndarray]:
+    """(forward, left) unit vectors of the facing frame in the world."""
+    fwd = np.array([math.cos(facing), math.sin(facing)])
+    return fwd, np.array([-fwd[1], fwd[0]])
+
+
+def assign_slots(
+    final: Mapping[int, Pose], members: Sequence[int], facing: float, d_e: float, phi_e: float
+) -> dict[int, int]:
+    """robot -> slot order: the pyramid of ``len(members)`` slots turned to ``facing`` and
+    centred on the members' true centroid (the translation that fits any assignment
+    best), matched to the members' true positions by least total squared distance."""
+    from scipy.optimize import linear_sum_assignment
+
+    ids = sorted(members)
+    fwd, left = _frame(facing)
+    slots = slot_positions(len(ids), d_e, phi_e)  # x to the right, y forward
+    world = np.outer(slots[:, 1], fwd) - np.outer(slots[:, 0], left)
+    pts = np.array([final[i][:2] for i in ids], dtype=np.float64)
+    world += pts.mean(axis=0) - world.mean(axis=0)
+    cost = ((pts[:, None, :] - world[None, :, :]) ** 2).sum(axis=2)
+    rows, cols = linear_sum_assignment(cost)
+    return {ids[int(r)]: int(c) for r, c in zip(rows, cols, strict=True)}
+
+
+@dataclass(frozen=True)
+class Link:
+    """A child of the pyramid, its parent, and its side (:data:`LEFT` or :data:`RIGHT`)."""
+
+    child: int
+    parent: int
+    side: int
+
+
+def links_of(slot_of: Mapping[int, int]) -> tuple[int, list[Link]]:
+    """(leader, links) of an assignment robot -> slot of a whole pyramid (:func:`slot_tree`)."""
+    robot_at = {s: i for i, s in slot_of.items()}
+    tree = slot_tree(len(robot_at))
+    links = [Link(robot_at[s], robot_at[p], side) for s, (p, side) in enumerate(tree) if p >= 0]
+    return robot_at[0], sorted(links, key=lambda lk: lk.child)
+
+
+@dataclass(frozen=True)
+class Shape:
+    """The verdict of :func:`check_shape`: ``rows`` per link (child, parent, side, distance,
+    angle_deg on its own side, r_d, r_phi), whether the leader is in front, the robots
+    without a true pose, and whether all of it holds (``ok``)."""
+
+    leader: int
+    facing: float
+    rows: list[dict[str, Any]] = field(default_factory=list)
+    leader_in_front: bool = True
+    missing: list[int] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return (
+            self.leader_in_front
+            and not self.missing
+            and all(abs(r["r_d"]) <= R_D_MAX and abs(r["r_phi"]) <= R_PHI_MAX for r in self.rows)
+        )
+
+    def summary(self) -> dict[str, Any]:
+        return {
+            "leader": self.leader,
+            "facing_deg": math.degrees(self.facing),
+            "leader_in_front": self.leader_in_front,
+            "missing": self.missing,
+            "ok": self.ok,
+        }
+
+
+def check_shape(
+    final: Mapping[int, Pose],
+    leader: int,
+    links: Sequence[Link],
+    d_e: float,
+    phi_e: float,
+    facing: float | None = None,
+) -> Shape:
+    """Judge the true final poses against the parent links (module docstring). ``facing``
+    (rad): the formation's facing in the world; default: :func:`facing_of` its robots.
+    Per link r_d = (d - d_e)/d_e and r_φ = (φ - φ_e)/φ_e with φ the angle between the
+    backward axis and the line parent -> child, positive towards the child's own side."""
+    robots = sorted({leader, *(lk.child for lk in links), *(lk.parent for lk in links)})
+    missing = [i for i in robots if i not in final]
+    if facing is None:
+        facing = facing_of(final, robots)
+    if missing:
+        return Shape(leader, facing, leader_in_front=False, missing=missing)
+    fwd, left = _frame(facing)
+    rows = []
+    for lk in links:
+        v = np.array(final[lk.child][:2]) - np.array(final[lk.parent][:2])  # parent -> child
+        d = float(np.hypot(*v))
+        angle = lk.side * math.atan2(float(v @ left), -float(v @ fwd))
+        rows.append({
+            "child": lk.child, "parent": lk.parent, "side": "left" if lk.side == LEFT else "right",
+            "distance": d, "angle_deg": math.degrees(angle),
+            "r_d": (d - d_e) / d_e, "r_phi": (angle - phi_e) / phi_e,
+        })  # fmt: skip
+    ahead = {i: float(np.array(final[i][:2]) @ fwd) for i in robots}
+    front = all(ahead[leader] > ahead[i] for i in robots if i != leader)
+    return Shape(leader, facing, rows, front, [])
+
+
+def judge_shape(
+    final: Mapping[int, Pose], members: Sequence[int], d_e: float, phi_e: float
+) -> Shape:
+    """The pyramid of ``members`` judged from their true final poses alone: facing
+    (:func:`facing_of`), slots by matching (:func:`assign_slots`), then :func:`check_shape`.
+    A member without a true pose fails it (``missing``)."""
+    if not members:
+        raise ValueError("no members to judge")
+    missing = sorted(i for i in members if i not in final)
+    if missing:
+        facing = facing_of(final, members) if len(missing) < len(members) else 0.0
+        return Shape(min(members), facing, leader_in_front=False, missing=missing)
+    facing = facing_of(final, members)
+    leader, links = links_of(assign_slots(final, members, facing, d_e, phi_e))
+    return check_shape(final, leader, links, d_e, phi_e, facing)
