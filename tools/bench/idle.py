@@ -130,12 +130,15 @@ def main(argv: list[str] | None = None) -> int:
     # find each other through it; it hears their statuses to know when all of them wait
     bus = Bus(BusConfig(listen=(endpoint,), multicast_scouting=False))
     bus.subscribe(KEY_STATUS_ALL)
+
+    def command(i: int) -> list[str]:
+        return [sys.executable, "-m", "tools.bench", "idle", "--child", str(i),
+                "--fleet-size", str(a.agents + 1), "--connect", endpoint]  # fmt: skip
+
     procs = [
         subprocess.Popen(
-            [sys.executable, "-m", "tools.bench", "idle", "--child", str(i),
-             "--fleet-size", str(a.agents + 1), "--connect", endpoint],
-            cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-        )  # fmt: skip
+            command(i), cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+        )
         for i in range(a.agents)
     ]
     try:
