@@ -2,9 +2,9 @@
 
 An agent that waits for the fleet (agreement, waves, hold, done) should cost next to
 nothing (docs/design.md §1, §8: every wait hears the fleet). This benchmark starts N
-real agent processes (``agent.phases.runner.Runner`` on a real zenoh
-:class:`~agent.net.bus.Bus`: insecure, peers over loopback TCP meeting at this
-process's listener, no multicast) that have nothing to do but wait:
+real agent processes (``python -m agent.idle``: the real phase machine on a real zenoh
+session; insecure, peers over loopback TCP meeting at this process's listener, no
+multicast) that have nothing to do but wait:
 
 * each agent enters the phase machine at the agreement (``Runner.phases("agree", ...)``)
   with an empty record of its own, as a robot does once its search is over;
@@ -33,9 +33,8 @@ import os
 import subprocess
 import sys
 import time
-from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, cast
+from typing import TYPE_CHECKING
 
 from tools.harness.procs import ROOT, free_port
 
@@ -54,42 +53,17 @@ def cpu_seconds(pid: int, tid: int | None = None) -> float:
     return (int(fields[11]) + int(fields[12])) / TICKS  # utime, stime (fields 14, 15)
 
 
-def child(argv: Sequence[str]) -> int:
-    """One waiting agent (module docstring): ``--child ID --fleet-size F --connect EP``."""
-    p = argparse.ArgumentParser(prog="python -m tools.bench idle --child")
-    p.add_argument("--child", type=int, required=True)
-    p.add_argument("--fleet-size", type=int, required=True)
-    p.add_argument("--connect", required=True)
-    a = p.parse_args(argv)
-    from agent.adapters import FormationAdapter
-    from agent.body.base import Body
-    from agent.config import AgentConfig
-    from agent.net.bus import Bus, BusConfig
-    from agent.phases.runner import Runner
-    from agent.seams import Perception
-    from agent.wire import NeighborRecordMsg
-
-    class Still:
-        """A body that stands still: the waits never move it."""
-
-        robot_id = a.child
-        t_sim = 0.0
-
-        def stop(self) -> None:
-            """Nothing moves."""
-
-    bus = Bus(BusConfig(connect=(a.connect,), multicast_scouting=False))
-    cfg = AgentConfig(robot_id=a.child, fleet_size=a.fleet_size, timeout=1e6)
-    runner = Runner(bus, cast(Body, Still()), cfg, cast(Perception, None), FormationAdapter())
-    runner.membership.start()
-    runner.ctx.status("start", 0.0, "joined", force=True)
-    try:
-        runner.phases("agree", NeighborRecordMsg(sender=a.child, round=0, neighbours=()))
-    except KeyboardInterrupt:
-        pass
-    finally:
-        bus.close()
-    return 0
+def threads(pid: int) -> dict[int, tuple[str, float]]:
+    """Thread id -> (name, CPU seconds) of every thread of ``pid``."""
+    out: dict[int, tuple[str, float]] = {}
+    for tid in sorted(int(t) for t in os.listdir(f"/proc/{pid}/task")):
+        try:
+            with open(f"/proc/{pid}/task/{tid}/comm") as f:
+                name = f.read().strip()
+            out[tid] = (name, cpu_seconds(pid, tid))
+        except OSError:  # the thread ended meanwhile
+            continue
+    return out
 
 
 def wait_settled(bus: Bus, n: int, timeout: float) -> bool:
@@ -110,12 +84,13 @@ def wait_settled(bus: Bus, n: int, timeout: float) -> bool:
 
 def main(argv: list[str] | None = None) -> int:
     args = list(sys.argv[1:] if argv is None else argv)
-    if "--child" in args:
-        return child(args)
     p = argparse.ArgumentParser(prog="python -m tools.bench idle", description=__doc__)
     p.add_argument("--agents", type=int, default=10, help="agent processes (default 10)")
     p.add_argument("--seconds", type=float, default=30.0, help="sampling window (s)")
     p.add_argument("--settle", type=float, default=10.0, help="s after all wait, then sample")
+    p.add_argument(
+        "--start-timeout", type=float, default=300.0, help="s for all agents to start waiting"
+    )
     p.add_argument("--out", type=Path, default=Path("out/bench_idle.png"), help="PNG")
     a = p.parse_args(args)
     if a.agents < 2 or a.seconds <= 0:
@@ -132,7 +107,7 @@ def main(argv: list[str] | None = None) -> int:
     bus.subscribe(KEY_STATUS_ALL)
 
     def command(i: int) -> list[str]:
-        return [sys.executable, "-m", "tools.bench", "idle", "--child", str(i),
+        return [sys.executable, "-m", "agent.idle", "--id", str(i),
                 "--fleet-size", str(a.agents + 1), "--connect", endpoint]  # fmt: skip
 
     procs = [
@@ -157,18 +132,25 @@ def main(argv: list[str] | None = None) -> int:
 def measure(a: argparse.Namespace, procs: list[subprocess.Popen[bytes]], bus: Bus) -> int:
     """Wait for the agents to settle, sample their CPU, print and draw (module docstring)."""
     t0 = time.monotonic()
-    if not wait_settled(bus, a.agents, 120.0):
-        print("the agents did not all reach the agreement within 120 s", file=sys.stderr)
+    if not wait_settled(bus, a.agents, a.start_timeout):
+        print(
+            f"the agents did not all reach the agreement within {a.start_timeout:g} s",
+            file=sys.stderr,
+        )
         return 1
     print(f"{a.agents} agents waiting in the agreement after {time.monotonic() - t0:.0f} s")
     time.sleep(a.settle)
+    bus.drain()
     load0 = os.getloadavg()
     start = {pr.pid: (cpu_seconds(pr.pid), cpu_seconds(pr.pid, pr.pid)) for pr in procs}
+    t_start = {pr.pid: threads(pr.pid) for pr in procs}
     w0 = time.monotonic()
     time.sleep(a.seconds)
     wall = time.monotonic() - w0
     end = {pr.pid: (cpu_seconds(pr.pid), cpu_seconds(pr.pid, pr.pid)) for pr in procs}
+    t_end = {pr.pid: threads(pr.pid) for pr in procs}
     load1 = os.getloadavg()
+    heard = len(bus.drain())  # the agents' statuses during the window
     if any(pr.poll() is not None for pr in procs):
         print("an agent exited during the sampling window", file=sys.stderr)
         return 1
@@ -185,6 +167,15 @@ def measure(a: argparse.Namespace, procs: list[subprocess.Popen[bytes]], bus: Bu
         f"({os.cpu_count()} cores); CPU tick {1000 / TICKS:.0f} ms "
         f"(resolution {100.0 / TICKS / wall:.3f} % over the window)"
     )
+    by_name: dict[str, float] = {}
+    for pid, ts in t_end.items():
+        for tid, (name, cpu) in ts.items():
+            cpu0 = t_start[pid].get(tid, (name, 0.0))[1]
+            key = "main (Python)" if tid == pid else name
+            by_name[key] = by_name.get(key, 0.0) + 100.0 * (cpu - cpu0) / wall / len(procs)
+    top = sorted(by_name.items(), key=lambda kv: (-kv[1], kv[0]))[:6]
+    print("per agent, by thread: " + ", ".join(f"{n} {v:.3f} %" for n, v in top))
+    print(f"statuses heard: {60.0 * heard / wall / len(procs):.1f} per agent per minute")
     draw(a.out, pct, main_pct, mean, load1[0], wall)
     return 0
 
