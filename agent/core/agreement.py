@@ -31,9 +31,20 @@ digest can change only finitely often in a round (its held set only grows), so t
 agreement still ends: agreed, or failed after ``timeout`` seconds in which nothing
 moved.
 
-Re-publishing (what :meth:`Agreement.due` returns; its bytes stay O(N) at 50 NAOs): prompt sends
-answer news (the record when it was never sent, a member joined, or a member's new digest lacks it;
-the digest when it changed and the set held is complete, and once more on agreement);
+**Patience follows the fleet** (docs/design.md §1 steps 1–4: every robot searches,
+then exchanges; the agreement waits for every live member). A member that is alive and
+still searching is news too: its status of a searching phase (:data:`SEARCHING_PHASES`,
+progress or heartbeat, :meth:`Agreement.on_peer_phase` with the time) counts as news
+while we hold no record of it for this round, so the agreement never gives up on a
+member whose statuses show it still searching (at 100 NAOs, 23 robots still searching
+at 780 s found the 77 others gone: "no news for 120 s"). It gives up only on members
+that are truly silent (no record, digest or searching status for ``timeout`` s) or
+gone (token lost and silent for the membership grace, below). A searcher ends its
+search by itself (a record, or ``failed``), so the agreement still ends.
+
+Re-publishing (what :meth:`Agreement.due` returns; its bytes stay O(N) at 50 NAOs):
+prompt sends answer news (the record when it was never sent, a member joined, or a
+member's new digest lacks it; the digest when it changed and the set held is complete, and once more on agreement);
 a backoff timer (``backoff_min`` doubling to ``backoff_max``; after the set is complete
 at most 4·``backoff_min``, or one repair per ``live / HEARD_PER_S`` seconds in a
 larger fleet, so that what every member hears stays bounded) repairs losses while some
@@ -86,53 +97,21 @@ our digest (no more re-publication for it) and is left to the next round's agree
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass
-from typing import Generic, Protocol, TypeVar
+from collections.abc import Iterable, Sequence
+from typing import Generic
 
 from agent.core.agreed_params import odd_params
+from agent.core.agreement_terms import (
+    Decision,
+    DigestFn,
+    DigestLike,
+    DigestNote,
+    R,
+    RecordLike,
+)
+from agent.core.backoff import Backoff
 
-
-class RecordLike(Protocol):
-    """What the agreement reads of a neighbour record (``agent.wire.NeighborRecordMsg``)."""
-
-    @property
-    def sender(self) -> int: ...
-    @property
-    def round(self) -> int: ...
-
-
-class DigestLike(Protocol):
-    """What the agreement reads of a member's digest (``agent.wire.DigestMsg``)."""
-
-    @property
-    def sender(self) -> int: ...
-    @property
-    def round(self) -> int: ...
-    @property
-    def digest(self) -> str: ...
-    @property
-    def members(self) -> tuple[int, ...]: ...
-    @property
-    def params(self) -> str: ...
-
-
-@dataclass(frozen=True)
-class DigestNote:
-    """This agent's digest, to publish (the wire form is ``agent.wire.DigestMsg``, whose
-    fields these are)."""
-
-    sender: int
-    round: int
-    digest: str
-    members: tuple[int, ...]
-    params: str
-
-
-R = TypeVar("R", bound=RecordLike)
-#: The digest of a record set: the caller's, over the records' wire form sorted by sender
-#: (``agent.wire.canonical_digest``), so that equal digests mean bit-identical inputs.
-DigestFn = Callable[[Sequence[R]], str]
+__all__ = ["HEARD_PER_S", "Agreement", "Decision", "DigestLike", "DigestNote", "RecordLike"]
 
 #: Publications of one kind (repairs of complete sets; progress statuses) a member hears
 #: per second from the fleet, at most (docs/agent.md: repairs every 1 s flooded 100 NAOs).
@@ -140,35 +119,9 @@ HEARD_PER_S = 10.0
 
 #: Phases an agent reports only after it has agreed (acknowledges our digest).
 POST_AGREE_PHASES = frozenset({"plan", "wait", "move", "hold", "march", "done"})
-
-
-@dataclass(frozen=True)
-class Decision(Generic[R]):
-    """The state of the agreement: ``wait``, ``agreed`` or ``failed`` (with ``reason``)."""
-
-    kind: str
-    reason: str = ""
-    digest: str = ""
-    members: tuple[int, ...] = ()
-    records: tuple[R, ...] = ()
-
-
-class _Backoff:
-    def __init__(self, lo: float, hi: float) -> None:
-        self.lo, self.hi = lo, hi
-        self.interval = lo
-        self.next_at = -math.inf  # due at once
-
-    def reset(self, now: float) -> None:
-        self.interval = self.lo
-        self.next_at = min(self.next_at, now)
-
-    def due(self, now: float) -> bool:
-        return now >= self.next_at
-
-    def fired(self, now: float) -> None:
-        self.next_at = now + self.interval
-        self.interval = min(self.hi, self.interval * 2.0)
+#: Phases of a member still making its record (joined, searching, localising, walking to
+#: search again): its statuses are news while its record is missing (module doc).
+SEARCHING_PHASES = frozenset({"start", "search", "localise", "explore"})
 
 
 class Agreement(Generic[R]):
@@ -219,14 +172,14 @@ class Agreement(Generic[R]):
         self.round = own_record.round  # the (re-)search round this agreement is about
         self.stale = 0  # records and digests of an older round, not kept
         self.membership_changed = now
-        self._record_tx = _Backoff(backoff_min, backoff_max)
+        self._record_tx = Backoff(backoff_min, backoff_max)
         self._record_pending = True  # publish at least once (again after a newcomer)
         self._record_hint = False  # a member's new digest lacks our record: send once
         #: answers to such hints are at least this far apart, doubling with each answer
         #: (digests sent before our record reached their senders keep arriving after it)
         self._hint_gap = backoff_min
         self._digest_at: dict[int, float] = {}  # member -> when its latest digest arrived
-        self._digest_tx = _Backoff(backoff_min, backoff_max)
+        self._digest_tx = Backoff(backoff_min, backoff_max)
         self._digest_dirty = True  # our digest changed since we last published it
         self._min_gap = backoff_min  # prompt sends are at least this far apart
         self._backoff_max = backoff_max
@@ -343,14 +296,18 @@ class Agreement(Generic[R]):
             return False
         return True
 
-    def on_peer_phase(self, robot_id: int, phase: str) -> None:
-        """A member's status: a post-agreement phase acknowledges our digest."""
+    def on_peer_phase(self, robot_id: int, phase: str, now: float | None = None) -> None:
+        """A member's status: a post-agreement phase acknowledges our digest; heard at
+        ``now``, a searching phase of a member whose record we lack is news (patience,
+        module doc; without ``now``, e.g. a phase remembered from before, it is not)."""
         if robot_id not in self.live:
             self.ignored += 1
         elif phase in POST_AGREE_PHASES:
             self.peer_agreed.add(robot_id)
         elif phase == "failed":
             self.stopped.add(robot_id)  # when it leaves, it will not return
+        elif now is not None and phase in SEARCHING_PHASES and robot_id not in self.records:
+            self.last_news = max(self.last_news, now)
 
     # ----------------------------------------------------------------- state
 
@@ -544,13 +501,7 @@ class Agreement(Generic[R]):
         # searching publishes its digest when it starts exchanging, which re-arms us.
         # ... and only a digest that arrived after our last send: an older one is no news
         # (a member whose set is incomplete publishes its digest only on its slow timer)
-        unacked = [
-            i
-            for i in others
-            if i in self.digests
-            and self.self_id not in self._members_of(i)
-            and self._digest_at.get(i, -math.inf) > self._last_sent["record"]
-        ]
+        unacked = self._unacked(others)
         hinted = self._record_hint and now - self._last_sent["record"] >= self._hint_gap
         if (
             (self._record_pending and self._spaced("record", now))
@@ -567,6 +518,48 @@ class Agreement(Generic[R]):
         elif (self.disagreeing() or not others) and self._digest_tx.due(now):
             out.append("digest")
         return out
+
+    def _unacked(self, others: set[int]) -> list[int]:
+        """Members whose digest lacks our record and arrived after our last send."""
+        return [
+            i
+            for i in others
+            if i in self.digests
+            and self.self_id not in self._members_of(i)
+            and self._digest_at.get(i, -math.inf) > self._last_sent["record"]
+        ]
+
+    def next_wake(self, now: float) -> float:
+        """The first time after ``now`` at which, with nothing heard, :meth:`due` or
+        :meth:`decide` may answer differently (``math.inf``: never): a prompt send's
+        spacing, a re-send timer, the timeout, the settling of membership. Called right
+        after :meth:`due` was acted on, so a waiting caller sleeps until then or until
+        something arrives (agent/phases/membership.py)."""
+        last = self._last_sent
+        out: list[float] = []
+        others = self.live - {self.self_id}
+        if self._final is not None:
+            waiting = self._params_failed if self._final.kind == "failed" else self.agreed
+            if waiting and (self._final.kind == "failed" or others - self.peer_agreed):
+                if self._digest_dirty:
+                    out.append(last["digest"] + self._min_gap)
+                out.append(self._digest_tx.next_at)
+        else:
+            out.append(self.last_news + self.timeout + 1e-3)  # timed_out is strict
+            if self.fleet_size is None:
+                out.append(self.membership_changed + self.settle)
+            if self._record_pending:
+                out.append(last["record"] + self._min_gap)
+            if self._record_hint:
+                out.append(last["record"] + self._hint_gap)
+            if self._unacked(others) or not others:
+                out.append(self._record_tx.next_at)
+            complete = not self.missing_records()
+            if complete and self._digest_dirty:
+                out.append(last["digest"] + self._min_gap)
+            if self.disagreeing() or not others:
+                out.append(self._digest_tx.next_at)
+        return min((t for t in out if t > now), default=math.inf)
 
     def complete_cap(self) -> float:
         """Longest gap (s) between repairs of our complete set: 4·``backoff_min``, or

@@ -43,6 +43,11 @@ class Grace:
         """Members whose token is gone but whose grace has not run out, sorted."""
         return tuple(sorted(self._vanished))
 
+    def next_expiry(self) -> float:
+        """When the first pending member counts as gone, if nothing is heard of it
+        (``math.inf``: nobody pending): a waiting caller wakes then to :meth:`expired`."""
+        return min(self._vanished.values(), default=math.inf) + self.grace
+
     def expired(self, now: float) -> list[int]:
         """Members gone for good at ``now`` (sorted); they are forgotten here."""
         out = sorted(i for i, t in self._vanished.items() if now - t >= self.grace)

@@ -59,8 +59,8 @@ class Agreeing:
             "exchange: record of round %d, %d neighbour(s)", record.round, len(record.neighbours)
         )
         complete_at: float | None = None  # when a record from every member was first held
+        self.fleet.pump()
         while True:
-            self.fleet.pump(0.05)
             now = ctx.clock()
             d = agr.decide(now)
             if complete_at is None and not agr.missing_records():
@@ -79,6 +79,12 @@ class Agreeing:
             agreeing = n - len(agr.disagreeing())
             phase = "exchange" if agr.missing_records() else "agree"
             ctx.status(phase, (held + agreeing) / (2 * n), d.reason)
+            # asleep until news, our next status, or the adoption check is due (the
+            # agreement's own re-sends and timeout are the membership's deadlines)
+            until = ctx.status_due()
+            if complete_at is not None and now < complete_at + ADOPT_AFTER:
+                until = min(until, complete_at + ADOPT_AFTER)
+            self.fleet.wait_until(until)
 
     def adopt_plan(self, agr: Agreement[NeighborRecordMsg]) -> Decision[NeighborRecordMsg] | None:
         """Agreed, when a member already acts on the plan of exactly our records (a lossy link).

@@ -17,6 +17,12 @@ typed roles of :mod:`agent.phases.roles`:
 * where it is: the phase, its record and round, the agreed plan, its wave and leg;
 * the status publisher (:meth:`Context.status`), which marks the :class:`Timeline` and
   writes the journal (crashed agents resume) at every phase change through ``journal_hook``.
+  Statuses go out on change, with a slow heartbeat: a new phase (or ``force``) at once;
+  a changed status of the same phase (progress, detail, ...) at most every
+  :func:`status_interval`; an unchanged one only every :func:`heartbeat_interval`
+  (well inside the membership grace, agent/core/grace.py, so that a member out of reach
+  still counts while it is heard). :meth:`Context.status_due` says when the next one is
+  due, so that a waiting phase sleeps until then (agent/phases/membership.py).
 
 :class:`AgentFailure` is the one way a collaborator stops the robot safely.
 """
@@ -26,7 +32,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import numpy.typing as npt
@@ -54,6 +60,18 @@ def status_interval(fleet_size: int | None) -> float:
     if fleet_size is None:
         return STATUS_MIN_INTERVAL
     return max(STATUS_MIN_INTERVAL, fleet_size / HEARD_PER_S)
+
+
+#: Heartbeats (unchanged statuses) per membership grace: a member whose token vanished is
+#: heard this many times before it would count as gone (agent/core/grace.py).
+HEARTBEATS_PER_GRACE = 3
+
+
+def heartbeat_interval(fleet_size: int | None, grace: float) -> float:
+    """Seconds between repeats of an unchanged status (the heartbeat of a waiting robot):
+    ``grace / HEARTBEATS_PER_GRACE`` (6.7 s with the default grace of 20 s), never more
+    often than :func:`status_interval` (10 s at 100 NAOs: twice per grace)."""
+    return max(status_interval(fleet_size), grace / HEARTBEATS_PER_GRACE)
 
 
 class AgentFailure(RuntimeError):
@@ -129,6 +147,10 @@ class Context:
     # Unix epoch; journaled, kept across resumptions; agent/phases/runs.py)
     run_epoch: int = 0
     last_status: float = -math.inf  # when the last status was published
+    # what the last status published said (but its sim time and byte count), and whether
+    # a later call said something else that is not out yet (status_due)
+    status_sent: StatusMsg | None = None
+    status_pending: bool = False
     # the member this robot's way is blocked by, beyond its patience (-1: none;
     # agent/core/formation/waves/jam.py), published in every status
     blocked_by: int = -1
@@ -150,6 +172,16 @@ class Context:
         return status_interval(self.cfg.fleet_size)
 
     @property
+    def heartbeat(self) -> float:
+        """Seconds between repeats of an unchanged status (:func:`heartbeat_interval`)."""
+        return heartbeat_interval(self.cfg.fleet_size, self.cfg.member_grace)
+
+    def status_due(self) -> float:
+        """When the next status is due (on :attr:`clock`): a changed one held back by
+        :attr:`status_interval`, else the heartbeat (module docstring)."""
+        return self.last_status + (self.status_interval if self.status_pending else self.heartbeat)
+
+    @property
     def plan(self) -> Plan:
         """The agreed plan (after :meth:`agent.phases.waves.Waves.make_plan`)."""
         if self.planned is None:
@@ -169,7 +201,8 @@ class Context:
         force: bool = False,
     ) -> None:
         """Publish this robot's status: at once on a phase change (journaled then) or
-        with ``force``, else at most every :func:`status_interval` seconds."""
+        with ``force``; a changed one at most every :func:`status_interval` seconds; an
+        unchanged one every :func:`heartbeat_interval` seconds (module docstring)."""
         now = self.clock()
         changed = phase != self.phase
         if changed:
@@ -177,9 +210,6 @@ class Context:
         self.phase = phase
         if changed:
             self.journal_hook("", 0.0, 0)
-        if not (changed or force or now - self.last_status >= self.status_interval):
-            return
-        self.last_status = now
         msg = StatusMsg(
             sender=self.me,
             phase=phase,
@@ -198,4 +228,12 @@ class Context:
             shift_x=min(MAX_SHIFT, max(-MAX_SHIFT, self.shift[0])),
             shift_y=min(MAX_SHIFT, max(-MAX_SHIFT, self.shift[1])),
         )
+        said = replace(msg, t_sim=0.0, bytes_sent=0)
+        fresh = said != self.status_sent
+        gap = now - self.last_status
+        if not (changed or force or gap >= (self.status_interval if fresh else self.heartbeat)):
+            self.status_pending = fresh
+            return
+        self.last_status = now
+        self.status_sent, self.status_pending = said, False
         self.bus.publish(key_status(self.me), msg, "status")

@@ -231,8 +231,8 @@ class Hold:
         margin = 2.0 * ctx.cfg.plan_params().radius + ctx.cfg.max_correction
         passing = passers_by(ctx.plan, ctx.me, margin)
         why = ""
+        self.fleet.pump()
         while True:
-            self.fleet.pump(0.1)
             stop = self.fleet.fleet_stop()
             if stop:
                 raise AgentFailure(stop)
@@ -254,6 +254,7 @@ class Hold:
                 break
             state = "out of reach" if gone else "not done"
             ctx.status(ctx.phase, 0.5, f"arrived; waiting for parent {parent} ({state})")
+            self.fleet.wait_until(min(deadline, ctx.status_due()))  # or news
         if why:
             self._parent_wait = why
         return why
@@ -364,8 +365,8 @@ class Hold:
         members = tuple(ctx.formation.members(plan)) if plan is not None else ()
         start = ctx.clock()
         deadline = start + ctx.cfg.wave_timeout
+        fleet.pump()
         while ctx.clock() < deadline:
-            fleet.pump(0.2)
             patient = ctx.clock() - start < linger
             waiting = [
                 i
@@ -377,8 +378,12 @@ class Hold:
             agr = fleet.agreement
             if not waiting and (agr is None or not agr.due(ctx.clock())):
                 return
-            if ctx.clock() - ctx.last_status >= ctx.status_interval:
-                progress = 1.0 if mine == "done" else 0.0
-                ctx.status(mine, progress, f"{text} {waiting}", force=True)
+            progress = 1.0 if mine == "done" else 0.0
+            ctx.status(mine, progress, f"{text} {waiting}")  # on change, or a heartbeat
+            # asleep until news, the next status, the linger's end or the deadline
+            until = min(deadline, ctx.status_due())
+            if patient:
+                until = min(until, start + linger)
+            fleet.wait_until(until)
         if mine == "march":
             raise AgentFailure("the fleet did not get ready to march in time")

@@ -18,6 +18,13 @@ what it knows of each member (:class:`Peer`):
 * **Pump.** Every wait of every phase pumps: handle what arrived, expire members, and
   (re-)publish what the agreements say is due (agent/core/agreement.py); agreements of
   earlier re-search rounds are retired but acknowledged until every member moved on.
+* **Waiting costs nothing** (docs/design.md §1, every phase waits on the fleet):
+  :meth:`Membership.wait_until` sleeps on the bus's queue until something arrives or the
+  next deadline: the caller's (its phase's timeout, its next status), or this
+  membership's own (an agreement's next re-send, timeout or settling,
+  :meth:`agent.core.agreement.Agreement.next_wake`; a vanished member's grace,
+  :meth:`agent.core.grace.Grace.next_expiry`). No fixed short polls: an agent waiting
+  for a quiet fleet wakes a few times a minute (``python -m tools.bench idle``).
 
 It also serves the agreed record set (agent/phases/record_sets.py), and hands every
 record, digest and status it accepts to its :attr:`Membership.observers` (the check of
@@ -56,6 +63,13 @@ from agent.wire import (
 log = logging.getLogger("agent.phases.membership")
 
 ARRIVED = ("hold", "march", "done", "failed")  # phases of a member that has arrived
+#: The longest sleep of :meth:`Membership.wait_until` (s): a safety net, so that a
+#: condition no deadline names is still looked at (one wake-up in 2 s costs ~0.005 % of
+#: a core).
+MAX_WAIT = 2.0
+#: The sleep when the next deadline has already passed (s): its owner acts on it after
+#: this wait; this keeps a deadline nobody acts on from spinning the loop.
+MIN_WAIT = 0.01
 
 _Round = TypeVar("_Round", NeighborRecordMsg, DigestMsg)
 
@@ -118,14 +132,20 @@ class Membership:
         return self.peers.get(rid, Peer())
 
     def pump(self, timeout: float = 0.0) -> None:
-        """Handle what arrived; (re-)publish what the agreement says is due."""
-        bus, me = self.ctx.bus, self.ctx.me
+        """Handle what arrived (waiting up to ``timeout`` s for the first event); expire
+        members; (re-)publish what the agreements say is due."""
+        bus = self.ctx.bus
         for ev in bus.drain(timeout):
             try:
                 self.handle(ev)
             except Exception as exc:  # one bad event is counted and skipped, never fatal
                 bus.guard.reject(f"event on {ev.key}", exc)
         self.expire()
+        self.publish_due()
+
+    def publish_due(self) -> None:
+        """(Re-)publish what the agreements say is due now."""
+        bus, me = self.ctx.bus, self.ctx.me
         for agr in self.agreements():
             now = self.ctx.clock()
             due = agr.due(now)
@@ -135,6 +155,24 @@ class Membership:
                 else:
                     bus.publish(key_digest(me), DigestMsg(**asdict(agr.digest_note())), "digest")
             agr.sent(due, now)
+
+    def next_wake(self, now: float) -> float:
+        """This membership's next deadline after ``now`` (``math.inf``: none): an
+        agreement's (:meth:`~agent.core.agreement.Agreement.next_wake`) or a vanished
+        member's grace (module docstring)."""
+        times = [a.next_wake(now) for a in self.agreements()]
+        return min([self.grace.next_expiry(), *times])
+
+    def wait_until(self, deadline: float) -> None:
+        """Sleep until something arrives, ``deadline`` (the caller's, on ``ctx.clock``)
+        or this membership's own next deadline, whichever is first, at most
+        :data:`MAX_WAIT`; then pump (module docstring). What is due now is published
+        before the sleep."""
+        self.expire()
+        self.publish_due()
+        now = self.ctx.clock()
+        until = min(deadline, self.next_wake(now))
+        self.pump(MIN_WAIT if until <= now else min(MAX_WAIT, until - now))
 
     def agreements(self) -> list[Agreement[NeighborRecordMsg]]:
         """The current agreement and the agreed ones of earlier re-search rounds (their
@@ -195,7 +233,7 @@ class Membership:
             member.error, member.blocked_by = msg.error, msg.blocked_by
             member.shift = (msg.shift_x, msg.shift_y)
             for a in self.agreements():
-                a.on_peer_phase(msg.sender, msg.phase)
+                a.on_peer_phase(msg.sender, msg.phase, now)  # a searcher's: news
 
     def expire(self) -> None:
         """Members whose token vanished and who stayed silent for the grace period are gone."""

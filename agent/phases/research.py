@@ -111,8 +111,8 @@ class Research:
         deadline = ctx.clock() + ctx.cfg.research_timeout
         text = f"round {k}: waiting for robots {list(searchers)} to explore and search"
         ctx.status("explore", 0.0, text, force=True)
+        fleet.pump()
         while True:
-            fleet.pump(0.1)
             pending = []
             for i in searchers:
                 rec, dig = fleet.early_records.get(i), fleet.early_digests.get(i)
@@ -132,3 +132,4 @@ class Research:
                     f"{ctx.cfg.research_timeout:g} s (re-search round {k})"
                 )
             ctx.status("explore", 0.0, text)
+            fleet.wait_until(min(deadline, ctx.status_due()))  # or news

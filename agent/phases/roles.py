@@ -42,6 +42,8 @@ class Hearing(Protocol):
 
     def pump(self, timeout: float = 0.0) -> None: ...
 
+    def wait_until(self, deadline: float) -> None: ...
+
 
 class Listening(Hearing, Protocol):
     """Hearing, and watching every record, digest and status accepted (a journal resumes only a run

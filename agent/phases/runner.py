@@ -161,7 +161,7 @@ class Runner:
         # let the failure status and any pending digest reach the others
         end = self.ctx.clock() + 1.0
         while self.ctx.clock() < end:
-            self.membership.pump(0.1)
+            self.membership.wait_until(end)  # or news
         return 1
 
 

@@ -233,7 +233,7 @@ class RunCheck:
         try:
             end = self.ctx.clock() + self.peers_wait
             while not heard and self.ctx.clock() < end:
-                self.fleet.pump(0.2)
+                self.fleet.wait_until(end)  # or news
         finally:
             self.fleet.observers.remove(observe)
         return heard[0] if heard else ""

@@ -96,8 +96,8 @@ class Waves:
         )
         after = {int(r.robot_id): tuple(int(j) for j in r.after) for r in plan.robots}
         deadline = ctx.clock() + ctx.cfg.wave_timeout
+        self.fleet.pump()
         while True:
-            self.fleet.pump(0.1)
             why = self.fleet.fleet_stop()
             if why:
                 raise AgentFailure(why)
@@ -127,6 +127,7 @@ class Waves:
             if ctx.clock() > deadline:
                 raise AgentFailure(f"robots {pending} of earlier waves did not hold in time")
             ctx.status("wait", 0.0, f"waiting for wave(s) of {pending}")
+            self.fleet.wait_until(min(deadline, ctx.status_due()))  # or news
 
     def move(self) -> None:
         """Walk the plan's legs from the journaled one on, then face the pyramid axis."""

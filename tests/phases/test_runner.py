@@ -21,7 +21,7 @@ from agent.core.agreed_params import params_digest
 from agent.core.agreement import Agreement, Decision
 from agent.core.formation.params import PlanParams
 from agent.core.formation.view.route import Route
-from agent.net.bus import Bus, BusConfig
+from agent.net.bus import Bus, BusConfig, Event
 from agent.phases.context import AgentFailure
 from agent.phases.membership import Peer
 from agent.phases.runner import Runner, report_unavailable
@@ -472,14 +472,20 @@ def test_research_config_is_validated() -> None:
 
 
 def _lingering(perception: PerceptionAdapter, peers: dict[int, Peer]) -> tuple[Runner, Bus]:
-    """Robot 3 in ``done`` with a fake clock that advances 0.25 s per reading."""
+    """Robot 3 in ``done`` with a fake clock that advances 0.25 s per reading, and by
+    the time each wait on the bus would sleep (nothing arrives)."""
     t = [0.0]
 
     def clock() -> float:
         t[0] += 0.25
         return t[0]
 
+    def drain(timeout: float = 0.0) -> list[Event]:
+        t[0] += timeout
+        return []
+
     bus = Bus(BusConfig(multicast_scouting=False))
+    bus.drain = drain  # type: ignore[method-assign]
     cfg = AgentConfig(robot_id=3, fleet_size=3, wave_timeout=60.0, member_grace=10.0)
     r = Runner(bus, ZenohBody(bus, 3), cfg, perception, FormationAdapter(), clock=clock)
     r.ctx.plan = r.ctx.formation.plan(records(), PlanParams())

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from agent.core.formation.pyramid import slot_positions
+from agent.core.formation.shape.pyramid import slot_positions
 from tools.harness.judge import evaluate
 from tools.harness.truth import (
     LEFT,

@@ -1,5 +1,5 @@
 """A run's ground truth read as a user would read it: who moved, and the pyramid's shape
-(DESIGN.md §9 "Honest results"; NAO paper 5.1.1 for r_d and r_φ; AUV paper II eqs. 5-7
+(a tool's verdict comes from the ground truth, never from what the agents claim; NAO paper 5.1.1 for r_d and r_φ; AUV paper II eqs. 5-7
 for the pyramid's slots).
 
 Who moved (:func:`excursions`, :data:`MOVED_M`): a robot moved when its true position got
@@ -28,8 +28,8 @@ from typing import Any
 
 import numpy as np
 
-from agent.core.formation.pyramid import layer_of, parent_of, slot_positions
-from agent.core.formation.verdict import R_D_MAX, R_PHI_MAX
+from agent.core.formation.shape.pyramid import layer_of, parent_of, slot_positions
+from agent.core.formation.shape.verdict import R_D_MAX, R_PHI_MAX
 
 Pose = tuple[float, float, float]
 Truth = Sequence[tuple[float, Mapping[int, Pose]]]

@@ -1,0 +1,151 @@
+"""Waiting agents cost nothing (agent/phases/membership.py, agent/phases/context.py).
+
+A waiting phase sleeps on the bus's queue until something arrives or its next
+deadline, never on a fixed short poll; statuses go out on change, with a slow
+heartbeat; and a member that is still searching keeps the agreement open (patience,
+agent/core/agreement.py).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Iterator
+from typing import cast
+
+import pytest
+
+from agent.adapters import FormationAdapter
+from agent.body.base import Body
+from agent.config import AgentConfig
+from agent.core.agreement import Agreement
+from agent.core.grace import Grace
+from agent.net.bus import Bus, BusConfig, Event
+from agent.phases.context import Context, heartbeat_interval, status_interval
+from agent.phases.membership import MAX_WAIT, Membership
+from agent.seams import Perception
+from agent.wire import NeighborRecordMsg, StatusMsg, canonical_digest, encode
+
+
+class _Still:
+    """A body that stands still at sim time 0."""
+
+    robot_id = 3
+    t_sim = 0.0
+
+    def stop(self) -> None:
+        """Nothing moves."""
+
+
+def _context(bus: Bus, clock: object = time.monotonic, **kw: object) -> Context:
+    cfg = AgentConfig(robot_id=3, fleet_size=3, **kw)  # type: ignore[arg-type]
+    return Context(
+        bus, cast(Body, _Still()), cfg, cast(Perception, None), FormationAdapter(), clock
+    )  # type: ignore[arg-type]
+
+
+@pytest.fixture()
+def bus() -> Iterator[Bus]:
+    with Bus(BusConfig(multicast_scouting=False)) as b:
+        yield b
+
+
+def test_the_wait_returns_at_once_when_something_arrives(bus: Bus) -> None:
+    fleet = Membership(_context(bus))
+    fleet.handle(Event("alive", "nao/alive/1", robot_id=1))
+    status = encode(StatusMsg(sender=1, phase="agree"))
+    timer = threading.Timer(0.2, bus._enqueue_sample, ("nao/1/status", status))
+    timer.start()
+    t0 = time.monotonic()
+    fleet.wait_until(t0 + 30.0)
+    took = time.monotonic() - t0
+    timer.join()
+    assert 0.15 <= took < 1.0  # woken by the status, not by a poll nor the deadline
+    assert fleet.peer(1).phase == "agree"
+
+
+def test_the_wait_returns_at_its_deadline_when_nothing_arrives(bus: Bus) -> None:
+    fleet = Membership(_context(bus))
+    t0 = time.monotonic()
+    fleet.wait_until(t0 + 0.3)
+    took = time.monotonic() - t0
+    assert 0.29 <= took < 0.6
+    t0 = time.monotonic()
+    fleet.wait_until(t0 + 60.0)  # a far deadline: the safety net wakes it
+    assert MAX_WAIT - 0.01 <= time.monotonic() - t0 < MAX_WAIT + 0.5
+
+
+def test_the_wait_wakes_for_the_agreements_resend_and_a_members_grace(bus: Bus) -> None:
+    ctx = _context(bus, member_grace=0.4)
+    fleet = Membership(ctx)
+    now = ctx.clock()
+    rec = NeighborRecordMsg(sender=3, round=0, neighbours=())
+    agr = Agreement(3, rec, now, fleet_size=3, digest_fn=canonical_digest)
+    fleet.open_round(agr)
+    fleet.handle(Event("alive", "nao/alive/1", robot_id=1))
+    sent = bus.stats.published_count
+    t0 = time.monotonic()
+    # publishes the record and digest before it sleeps, and wakes for the digest's first
+    # repair (robot 1's digest is missing), backoff_min = 0.25 s later
+    fleet.wait_until(t0 + 60.0)
+    assert sent["record"] == 1 and sent["digest"] == 2
+    assert 0.2 <= time.monotonic() - t0 < 0.6
+    fleet.wait_until(t0 + 60.0)
+    assert sent["digest"] == 3 and 0.7 <= time.monotonic() - t0 < 1.2  # 0.5 s after
+    fleet.handle(Event("gone", "nao/alive/1", robot_id=1))
+    assert fleet.next_wake(ctx.clock()) <= ctx.clock() + 0.4
+    t0 = time.monotonic()
+    while fleet.member(1) and time.monotonic() - t0 < 3.0:
+        fleet.wait_until(t0 + 60.0)
+    assert not fleet.member(1) and time.monotonic() - t0 < 1.0  # gone after its grace
+    assert agr.left == {1}
+
+
+def test_a_searching_members_status_is_news_for_the_agreement(bus: Bus) -> None:
+    t = [0.0]
+    ctx = _context(bus, clock=lambda: t[0])
+    fleet = Membership(ctx)
+    agr = Agreement(3, NeighborRecordMsg(sender=3, round=0, neighbours=()), 0.0,
+                    fleet_size=3, timeout=120.0, digest_fn=canonical_digest)  # fmt: skip
+    fleet.open_round(agr)
+    for i in (1, 2):
+        fleet.handle(Event("alive", f"nao/alive/{i}", robot_id=i))
+    t[0] = 100.0
+    fleet.handle(Event("msg", "nao/1/status", StatusMsg(sender=1, phase="search", progress=0.4)))
+    fleet.handle(Event("msg", "nao/2/status", StatusMsg(sender=2, phase="exchange")))
+    assert agr.last_news == 100.0
+    assert agr.decide(219.0).kind == "wait"  # robot 1 searched at 100 s
+    d = agr.decide(220.5)
+    assert d.kind == "failed" and "no record from [1, 2]" in d.reason
+
+
+def test_statuses_go_out_on_change_with_a_slow_heartbeat(bus: Bus) -> None:
+    t = [0.0]
+    ctx = _context(bus, clock=lambda: t[0], member_grace=20.0)
+    assert ctx.status_interval == status_interval(3) == 3.0
+    assert ctx.heartbeat == heartbeat_interval(3, 20.0) == pytest.approx(20.0 / 3)
+    assert heartbeat_interval(100, 20.0) == 10.0  # never more often than the fleet's budget
+    sent = bus.stats.published_count
+
+    def at(when: float, detail: str, phase: str = "agree") -> int:
+        t[0] = when
+        ctx.status(phase, 0.5, detail)
+        return sent["status"]
+
+    assert at(0.0, "a") == 1  # a new phase: at once
+    assert at(1.0, "a") == 1 and ctx.status_due() == pytest.approx(20.0 / 3)  # unchanged
+    assert at(2.0, "b") == 1 and ctx.status_due() == 3.0  # changed: held back to 3 s
+    assert at(3.0, "b") == 2  # ... and out then
+    assert at(6.0, "b") == 2 and at(9.6, "b") == 2  # unchanged: no sooner than 6.67 s
+    assert at(9.7, "b") == 3  # the heartbeat
+    assert at(10.0, "c", "wait") == 4  # a new phase: at once again
+    assert at(10.5, "d", "wait") == 4 and at(13.0, "d", "wait") == 5
+
+
+def test_grace_names_its_next_expiry() -> None:
+    g = Grace(5.0)
+    assert g.next_expiry() == float("inf")
+    g.token(1, False, 2.0)
+    g.token(2, False, 3.0)
+    g.heard(1, 4.0)
+    assert g.next_expiry() == 8.0
