@@ -78,6 +78,20 @@ PROJECTION = pb.computeProjectionMatrixFOV(
 )
 
 
+def _shifted(proj: tuple[float, ...], du: float, dv: float) -> tuple[float, ...]:
+    """``proj`` (column-major 4x4) moving the picture ``du`` px right and ``dv`` px down."""
+    m = list(proj)
+    m[8] += (2.0 * du / WIDTH) * m[11]  # x_ndc += 2 du / W (w_clip = -z_eye)
+    m[9] -= (2.0 * dv / HEIGHT) * m[11]  # y_ndc -= 2 dv / H (image rows run down)
+    return tuple(m)
+
+
+#: OpenGL samples a pixel at its centre, TinyRenderer at its corner: the EGL plugin's
+#: picture sits half a pixel left of and below TinyRenderer's (measured by phase
+#: correlation, ``tests/sim/test_renderer.py``); this projection moves it back.
+PROJECTION_EGL = _shifted(PROJECTION, 0.5, -0.5)
+
+
 def render(
     client: int,
     x: float,
@@ -106,7 +120,7 @@ def render(
         WIDTH,
         HEIGHT,
         viewMatrix=view,
-        projectionMatrix=PROJECTION,
+        projectionMatrix=PROJECTION if renderer == pb.ER_TINY_RENDERER else PROJECTION_EGL,
         renderer=renderer,
         lightDirection=light_direction,
         lightColor=(1.0, 1.0, 1.0),
