@@ -34,6 +34,11 @@ PITCH = nao.CAMERA_PITCH_DOWN  # downwards
 YAW_LIMIT = nao.HEAD_YAW_LIMIT
 NEAR = 0.02
 FAR = 30.0
+#: The EGL plugin's depth buffer has 16 bits: with the near plane at 2 cm its steps reach
+#: 6 mm at 2.8 m, and the head (r 60 mm) showed through the orange cap (r 63 mm) of far
+#: NAOs. At 8 cm the steps are 4 times finer; nothing comes nearer the camera (a NAO
+#: stops 15.5 cm from a wall, its camera 6.2 cm in front of its axis).
+NEAR_EGL = 0.08
 
 
 def check_yaw(yaw: float) -> float:
@@ -89,7 +94,13 @@ def _shifted(proj: tuple[float, ...], du: float, dv: float) -> tuple[float, ...]
 #: OpenGL samples a pixel at its centre, TinyRenderer at its corner: the EGL plugin's
 #: picture sits half a pixel left of and below TinyRenderer's (measured by phase
 #: correlation, ``tests/sim/test_renderer.py``); this projection moves it back.
-PROJECTION_EGL = _shifted(PROJECTION, 0.5, -0.5)
+PROJECTION_EGL = _shifted(
+    pb.computeProjectionMatrixFOV(
+        fov=math.degrees(VFOV), aspect=WIDTH / HEIGHT, nearVal=NEAR_EGL, farVal=FAR
+    ),
+    0.5,
+    -0.5,
+)
 
 
 def render(
