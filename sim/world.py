@@ -125,8 +125,10 @@ class World:
         egl_plugin: str | None = None,
     ) -> None:
         self.scenario = scenario
-        if gui and renderer != "egl":
-            choice = renderers.Choice("tiny", "the GUI draws with TinyRenderer")
+        if gui:  # the GUI is an OpenGL window of its own; its pictures are TinyRenderer's
+            if renderers.check(renderer) == "egl":
+                raise ValueError("--gui draws the cameras with TinyRenderer, not --renderer egl")
+            choice = renderers.Choice("tiny", "the GUI draws the cameras with TinyRenderer")
         else:
             choice = renderers.choose(renderer, egl_plugin)
         self.renderer = choice.name

@@ -60,6 +60,8 @@ def test_tiny_is_chosen_without_a_self_test() -> None:
     assert renderers.choose("tiny") == renderers.Choice("tiny", "asked for (--renderer tiny)")
     with pytest.raises(ValueError, match="not one of"):
         renderers.choose("vulkan")
+    with pytest.raises(ValueError, match="renderer egl"):  # the GUI is TinyRenderer's
+        World(Scenario(robots=(RobotSpec(1, 0.0, 0.0),), seed=3), gui=True, renderer="egl")
 
 
 @pytest.mark.parametrize("bad", ["/nonexistent/eglRenderer.so", "text"])
