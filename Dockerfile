@@ -19,8 +19,11 @@ ENV PYTHONUNBUFFERED=1 \
     PIP_CERT=/etc/ssl/certs/ca-certificates.crt
 
 # iptables: fault injection inside an agent container (LOSS=0.2 in docker-compose.yml).
+# libegl1 libegl-mesa0 libgl1-mesa-dri: the cameras' EGL renderer (sim/renderer.py; Mesa's
+# llvmpipe on the CPU), else the world falls back to TinyRenderer.
 RUN apt-get update -qq \
-    && apt-get install -y -qq --no-install-recommends iptables >/dev/null \
+    && apt-get install -y -qq --no-install-recommends iptables \
+        libegl1 libegl-mesa0 libgl1-mesa-dri >/dev/null \
     && rm -rf /var/lib/apt/lists/*
 RUN if [ -n "$EXTRA_CA_CERT" ]; then \
         printf '%s\n' "$EXTRA_CA_CERT" > /usr/local/share/ca-certificates/extra-ca.crt \

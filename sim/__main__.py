@@ -19,7 +19,7 @@ import sys
 from typing import Any
 
 from agent.wire import add_network_arguments, network_spec
-from sim import scenarios
+from sim import renderer, scenarios
 from sim.delays import check_max_delay
 from sim.server import WorldServer
 from sim.world import World
@@ -100,6 +100,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="port of the first robot's NAO, the next robots on the following ports "
         "(default 0: a free port each)",
     )
+    p.add_argument(
+        "--renderer",
+        choices=renderer.RENDERERS,
+        default=renderer.DEFAULT,
+        help=renderer.RENDERER_HELP,
+    )
     p.add_argument("--gui", action="store_true", help="open the PyBullet GUI (needs a display)")
     p.add_argument("--dump-scenario", metavar="FILE", help="write the scenario used to FILE")
     return p
@@ -133,10 +139,17 @@ def main(argv: list[str] | None = None) -> int:
         print(f"sim: {exc}", file=sys.stderr)
         return 2
     try:
-        world = World(sc, gui=args.gui, noise=not args.no_noise, noise_scale=args.noise_scale)
-    except ValueError as exc:
+        world = World(
+            sc,
+            gui=args.gui,
+            noise=not args.no_noise,
+            noise_scale=args.noise_scale,
+            renderer=args.renderer,
+        )
+    except (ValueError, RuntimeError) as exc:  # RuntimeError: --renderer egl did not load
         print(f"sim: {exc}", file=sys.stderr)
         return 2
+    print(f"sim: renderer {world.renderer} ({world.renderer_why})", file=sys.stderr, flush=True)
     with world:
         try:
             server = WorldServer(

@@ -5,7 +5,8 @@ fx = fy = 320 / tan(30.45°) ≈ 543.9 px, principal point at the image centre),
 :data:`CAMERA_Z` = 0.50 m above the floor, 6.2 cm in front of the head yaw
 axis, pitched down 1.2°. The head yaws within ±119.5° (positive = to the robot's left);
 a request outside that range is an error, never a clamp. Rendered by PyBullet's CPU
-TinyRenderer and returned as a (480, 640, 3) uint8 BGR array (OpenCV order).
+TinyRenderer or its EGL plugin (:mod:`sim.renderer`) and returned as a (480, 640, 3)
+uint8 BGR array (OpenCV order).
 
 :func:`project` is the same camera model in closed form: where a world point lands in
 the image (used by tests to check the renderer against the model).
@@ -33,6 +34,11 @@ PITCH = nao.CAMERA_PITCH_DOWN  # downwards
 YAW_LIMIT = nao.HEAD_YAW_LIMIT
 NEAR = 0.02
 FAR = 30.0
+#: The EGL plugin's depth buffer has 16 bits: with the near plane at 2 cm its steps reach
+#: 6 mm at 2.8 m, and the head (r 60 mm) showed through the orange cap (r 63 mm) of far
+#: NAOs. At 8 cm the steps are 4 times finer; nothing comes nearer the camera (a NAO
+#: stops 15.5 cm from a wall, its camera 6.2 cm in front of its axis).
+NEAR_EGL = 0.08
 
 
 def check_yaw(yaw: float) -> float:
@@ -77,6 +83,26 @@ PROJECTION = pb.computeProjectionMatrixFOV(
 )
 
 
+def _shifted(proj: tuple[float, ...], du: float, dv: float) -> tuple[float, ...]:
+    """``proj`` (column-major 4x4) moving the picture ``du`` px right and ``dv`` px down."""
+    m = list(proj)
+    m[8] += (2.0 * du / WIDTH) * m[11]  # x_ndc += 2 du / W (w_clip = -z_eye)
+    m[9] -= (2.0 * dv / HEIGHT) * m[11]  # y_ndc -= 2 dv / H (image rows run down)
+    return tuple(m)
+
+
+#: OpenGL samples a pixel at its centre, TinyRenderer at its corner: the EGL plugin's
+#: picture sits half a pixel left of and below TinyRenderer's (measured by phase
+#: correlation, ``tests/sim/test_renderer.py``); this projection moves it back.
+PROJECTION_EGL = _shifted(
+    pb.computeProjectionMatrixFOV(
+        fov=math.degrees(VFOV), aspect=WIDTH / HEIGHT, nearVal=NEAR_EGL, farVal=FAR
+    ),
+    0.5,
+    -0.5,
+)
+
+
 def render(
     client: int,
     x: float,
@@ -86,9 +112,12 @@ def render(
     *,
     light_direction: tuple[float, float, float],
     light_intensity: float,
+    renderer: int = pb.ER_TINY_RENDERER,
 ) -> np.ndarray:
     """Render the forehead camera of a robot at (x, y, heading) with head ``yaw``.
 
+    ``renderer``: ``pb.ER_TINY_RENDERER``, or ``pb.ER_BULLET_HARDWARE_OPENGL`` in a client
+    with the EGL plugin (:mod:`sim.renderer`; it ignores the light coefficients).
     Returns a (480, 640, 3) uint8 BGR image.
     """
     yaw = check_yaw(yaw)
@@ -102,8 +131,8 @@ def render(
         WIDTH,
         HEIGHT,
         viewMatrix=view,
-        projectionMatrix=PROJECTION,
-        renderer=pb.ER_TINY_RENDERER,
+        projectionMatrix=PROJECTION if renderer == pb.ER_TINY_RENDERER else PROJECTION_EGL,
+        renderer=renderer,
         lightDirection=light_direction,
         lightColor=(1.0, 1.0, 1.0),
         lightDistance=10.0,

@@ -21,8 +21,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import pybullet as pb
+
+from sim import obj_mesh
 
 HEIGHT = 0.573
 WIDTH = 0.28
@@ -145,16 +148,25 @@ def sphere_mesh(r: float, rings: int = 8, segments: int = 14) -> Mesh:
 
 
 class NaoBodyFactory:
-    """Creates NAO multibodies in one PyBullet client, sharing the visual shapes."""
+    """Creates NAO multibodies in one PyBullet client, sharing the visual shapes.
 
-    def __init__(self, client: int) -> None:
+    With ``mesh_dir`` (the EGL renderer, :mod:`sim.renderer`) every part is an OBJ file
+    written there (the same vertices and normals; boxes with flat faces) and its colour is
+    multiplied by ``shade`` (the light factor that matches TinyRenderer's light).
+    """
+
+    def __init__(self, client: int, mesh_dir: Path | None = None, shade: float = 1.0) -> None:
         self._client = client
+        self._mesh_dir = mesh_dir
+        self._shade = shade
         self._body_shapes = [self._shape(p, (0.0, 0.0, 0.0)) for p in BODY_PARTS]
         # The head's root shape sits at its offset on the head link itself.
         self._head_root = self._shape(HEAD_PARTS[0], HEAD_PARTS[0].pos)
         self._head_shapes = [self._shape(p, (0.0, 0.0, 0.0)) for p in HEAD_PARTS[1:]]
 
     def _shape(self, part: Part, offset: tuple[float, float, float]) -> int:
+        if self._mesh_dir is not None:
+            return self._obj_shape(part, offset, self._mesh_dir)
         common: dict[str, object] = {
             "rgbaColor": part.rgba,
             "specularColor": (0.0, 0.0, 0.0),
@@ -175,6 +187,28 @@ class NaoBodyFactory:
             )
         else:
             raise ValueError(f"unknown part shape {part.shape!r}")
+        return int(vid)
+
+    def _obj_shape(self, part: Part, offset: tuple[float, float, float], where: Path) -> int:
+        if part.shape == "box":
+            verts, normals, idx = obj_mesh.box(part.size)
+        elif part.shape == "cyl":
+            verts, normals, idx = cylinder_mesh(part.size[0], part.size[2])
+        elif part.shape == "sphere":
+            verts, normals, idx = sphere_mesh(part.size[0])
+        else:
+            raise ValueError(f"unknown part shape {part.shape!r}")
+        path = obj_mesh.write(where / f"nao_{part.name}.obj", verts, normals, idx)
+        k = self._shade
+        vid = pb.createVisualShape(
+            pb.GEOM_MESH,
+            fileName=str(path),
+            rgbaColor=(part.rgba[0] * k, part.rgba[1] * k, part.rgba[2] * k, part.rgba[3]),
+            specularColor=(0.0, 0.0, 0.0),
+            visualFramePosition=offset,
+            visualFrameOrientation=pb.getQuaternionFromEuler(part.rpy),
+            physicsClientId=self._client,
+        )
         return int(vid)
 
     def create(self, x: float, y: float, heading: float) -> int:

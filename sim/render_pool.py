@@ -65,11 +65,11 @@ class Result:
     dead: bool = False  # the worker exited: it takes no more jobs
 
 
-def _worker(index: int, scenario: dict[str, Any], jobs: Any, results: Any) -> None:
+def _worker(index: int, scenario: dict[str, Any], renderer: str, jobs: Any, results: Any) -> None:
     from sim.world import World
 
     try:
-        world = World(from_dict(scenario), noise=False)
+        world = World(from_dict(scenario), noise=False, renderer=renderer)
     except Exception as exc:  # reported to the parent, which refuses to start
         results.send(("failed", f"{type(exc).__name__}: {exc}"))
         return
@@ -95,7 +95,10 @@ def _worker(index: int, scenario: dict[str, Any], jobs: Any, results: Any) -> No
 
 
 class RenderPool:
-    """K worker processes rendering camera jobs; results go to ``on_result``."""
+    """K worker processes rendering camera jobs; results go to ``on_result``.
+
+    ``renderer``: the world's (``tiny`` or ``egl``, :mod:`sim.renderer`), so a worker's
+    picture is the one the world would draw."""
 
     def __init__(
         self,
@@ -104,6 +107,7 @@ class RenderPool:
         on_result: Callable[[Result], None],
         *,
         start_timeout: float = 120.0,
+        renderer: str = "tiny",
     ) -> None:
         if isinstance(workers, bool) or not isinstance(workers, int) or not 1 <= workers <= 16:
             raise ValueError(f"render workers {workers!r} must be an int in [1, 16]")
@@ -121,7 +125,7 @@ class RenderPool:
         for i in range(workers):
             job_r, job_w = ctx.Pipe(duplex=False)
             res_r, res_w = ctx.Pipe(duplex=False)
-            p = ctx.Process(target=_worker, args=(i, data, job_r, res_w), daemon=True)
+            p = ctx.Process(target=_worker, args=(i, data, renderer, job_r, res_w), daemon=True)
             p.start()
             job_r.close()
             res_w.close()

@@ -70,7 +70,7 @@ from agent.wire import (
     take_payload,
     trust,
 )
-from sim import camera
+from sim import camera, renderer
 from sim.client import Link, WorldError, ask
 from sim.render_pool import png_bytes
 from sim.requests import CheckedRequest, Query, Request, check, payload_size
@@ -351,6 +351,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--wait", type=float, default=120.0, help="seconds to wait for the world's scenario/poses"
     )
+    p.add_argument(
+        "--renderer",
+        choices=renderer.RENDERERS,
+        default=renderer.DEFAULT,
+        help=renderer.RENDERER_HELP,
+    )
     return p
 
 
@@ -373,14 +379,19 @@ def main(argv: list[str] | None = None) -> int:
         print(f"render: cannot open the zenoh session: {exc}", file=sys.stderr)
         return 1
     try:
-        return _run(session, spec, shard, args.wait, stop)
+        return _run(session, spec, shard, args.wait, stop, args.renderer)
     finally:
         with contextlib.suppress(Exception):
             session.close()
 
 
 def _run(
-    session: Any, spec: NetworkSpec, shard: tuple[int, int], wait: float, stop: threading.Event
+    session: Any,
+    spec: NetworkSpec,
+    shard: tuple[int, int],
+    wait: float,
+    stop: threading.Event,
+    kind: str = renderer.DEFAULT,
 ) -> int:
     try:
         sc = fetch_scenario(Link(session, spec), wait)
@@ -394,7 +405,13 @@ def _run(
             file=sys.stderr,
         )
         return 2
-    with World(sc, noise=False) as world:
+    try:
+        world = World(sc, noise=False, renderer=kind)
+    except RuntimeError as exc:  # --renderer egl did not load
+        print(f"render: {exc}", file=sys.stderr)
+        return 1
+    print(f"render: renderer {world.renderer} ({world.renderer_why})", file=sys.stderr, flush=True)
+    with world:
         worker = RenderWorker(world, robots, spec, session, stop=stop)
         worker.follow()
         if not worker.poses.wait(wait) or stop.is_set():

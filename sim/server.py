@@ -197,6 +197,7 @@ class WorldServer:
                 self.world.scenario,
                 self.render_workers,
                 self.guard.wrap(lambda r: self._queue("rendered", r), "render result"),
+                renderer=self.world.renderer,
             )
         self.session = zenoh.open(zenoh_config(self.net))
         s = self.session

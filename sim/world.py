@@ -16,6 +16,7 @@ in-process API; :mod:`sim.server` puts it on the bus.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import sys
@@ -28,7 +29,8 @@ import numpy as np
 import pybullet as pb
 
 from agent.wire import nao
-from sim import camera
+from sim import camera, obj_mesh
+from sim import renderer as renderers
 from sim.locomotion import Locomotion, NoiseModel, Obstacle
 from sim.nao_model import BOUNDING_RADIUS, HEAD_JOINT, LINK_COLOURS, NaoBodyFactory
 from sim.scenarios import Scenario
@@ -108,6 +110,8 @@ class World:
     ``noise`` switches the seeded motion noise of :mod:`sim.locomotion` on or off;
     ``noise_scale`` multiplies it (:meth:`~sim.locomotion.NoiseModel.scaled`);
     ``world.locomotion`` runs walk/turn commands (``walk``, ``turn``, ``step``).
+    ``renderer`` (:mod:`sim.renderer`): ``tiny`` (default), ``egl`` or ``auto``;
+    ``world.renderer`` is the one used and ``world.renderer_why`` why.
     """
 
     def __init__(
@@ -117,8 +121,18 @@ class World:
         gui: bool = False,
         noise: bool = True,
         noise_scale: float = 1.0,
+        renderer: str = "tiny",
+        egl_plugin: str | None = None,
     ) -> None:
         self.scenario = scenario
+        if gui:  # the GUI is an OpenGL window of its own; its pictures are TinyRenderer's
+            if renderers.check(renderer) == "egl":
+                raise ValueError("--gui draws the cameras with TinyRenderer, not --renderer egl")
+            choice = renderers.Choice("tiny", "the GUI draws the cameras with TinyRenderer")
+        else:
+            choice = renderers.choose(renderer, egl_plugin)
+        self.renderer = choice.name
+        self.renderer_why = choice.why
         self.noise = noise
         self.noise_model = NoiseModel().scaled(noise_scale) if noise else NoiseModel.none()
         if gui and sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
@@ -129,6 +143,8 @@ class World:
             raise RuntimeError("cannot connect to PyBullet")
         self._closed = False
         try:
+            if self.renderer == "egl":
+                renderers.load_egl(self._client, egl_plugin)
             self._build()
         except Exception:
             self.close()
@@ -142,8 +158,47 @@ class World:
         pb.resetSimulation(physicsClientId=cid)
         if pb.getConnectionInfo(cid).get("connectionMethod") == pb.GUI:
             pb.configureDebugVisualizer(pb.COV_ENABLE_GUI, 0, physicsClientId=cid)
+        li = sc.light
+        self._light_dir = light_direction(li.azimuth, li.elevation)
+        self._light_intensity = li.intensity
+        with tempfile.TemporaryDirectory(prefix="nao-sim-") as tmp:
+            self._build_in(Path(tmp))
+        if self.renderer == "egl":
+            with renderers.quiet_stdout():  # the plugin prints on its first pictures
+                for _ in range(2):
+                    self._draw(0.0, 0.0, 0.0, 0.0)
+        self.robot_ids: tuple[int, ...] = tuple(sorted(self._bodies))
+        self.locomotion = Locomotion(
+            self,
+            seed=sc.seed,
+            noise=self.noise_model,
+            obstacles=tuple(Obstacle(o.x, o.y, o.radius) for o in sc.obstacles),
+            room=sc.room,
+        )
+
+    def _egl_part_shade(self) -> float:
+        """The colour factor of the EGL renderer's NAOs, obstacles and clutter: TinyRenderer's
+        light over the plugin's, averaged over horizontal normals (the sides the cameras
+        see)."""
+        normals = [(math.cos(a), math.sin(a), 0.0) for a in np.linspace(0, 2 * math.pi, 36, False)]
+        return float(
+            np.mean(
+                [
+                    renderers.tiny_shade(n, self._light_dir, self._light_intensity)
+                    / renderers.egl_shade(n, self._light_dir)
+                    for n in normals
+                ]
+            )
+        )
+
+    def _build_in(self, tmp: Path) -> None:
+        """Build the room (files for textures and, with EGL, meshes go to ``tmp``)."""
+        sc = self.scenario
+        cid = self._client
+        egl = self.renderer == "egl"
+        shade = self._egl_part_shade() if egl else 1.0
         # Near things first: TinyRenderer then skips shading wall texels hidden by them.
-        factory = NaoBodyFactory(cid)
+        factory = NaoBodyFactory(cid, tmp if egl else None, shade)
         self._bodies: dict[int, int] = {}
         self._poses: dict[int, tuple[float, float, float]] = {}
         self._head: dict[int, float] = {}
@@ -156,33 +211,32 @@ class World:
         rng = np.random.default_rng([sc.seed, 0x5EED])
         half = sc.room
         wall_h = 0.8 + 1.2 * half  # the top of the view from a far corner stays on the wall
-        with tempfile.TemporaryDirectory(prefix="nao-sim-") as tmp:
-            # Floor: z = 0, seen from above.
+        # Floor: z = 0, seen from above.
+        self._quad(
+            tmp / "floor.png",
+            [(-half, -half, 0.0), (half, -half, 0.0), (half, half, 0.0), (-half, half, 0.0)],
+            (0.0, 0.0, 1.0),
+            make_texture(rng, *_texture_size(2 * half, 2 * half, 160)),
+        )
+        corners = [(-half, -half), (half, -half), (half, half), (-half, half)]
+        for i in range(4):
+            (x0, y0), (x1, y1) = corners[i], corners[(i + 1) % 4]
+            # Inward normal: rotate the wall direction by +90° (counter-clockwise room).
+            dx, dy = (x1 - x0) / (2 * half), (y1 - y0) / (2 * half)
+            tex = make_texture(rng, *_texture_size(2 * half, wall_h, TEXELS_PER_M))
             self._quad(
-                Path(tmp) / "floor.png",
-                [(-half, -half, 0.0), (half, -half, 0.0), (half, half, 0.0), (-half, half, 0.0)],
-                (0.0, 0.0, 1.0),
-                make_texture(rng, *_texture_size(2 * half, 2 * half, 160)),
+                tmp / f"wall{i}.png",
+                [(x0, y0, 0.0), (x1, y1, 0.0), (x1, y1, wall_h), (x0, y0, wall_h)],
+                (-dy, dx, 0.0),
+                tex,
+                flip=True,  # wound to face into the room
             )
-            corners = [(-half, -half), (half, -half), (half, half), (-half, half)]
-            for i in range(4):
-                (x0, y0), (x1, y1) = corners[i], corners[(i + 1) % 4]
-                # Inward normal: rotate the wall direction by +90° (counter-clockwise room).
-                dx, dy = (x1 - x0) / (2 * half), (y1 - y0) / (2 * half)
-                tex = make_texture(rng, *_texture_size(2 * half, wall_h, TEXELS_PER_M))
-                self._quad(
-                    Path(tmp) / f"wall{i}.png",
-                    [(x0, y0, 0.0), (x1, y1, 0.0), (x1, y1, wall_h), (x0, y0, wall_h)],
-                    (-dy, dx, 0.0),
-                    tex,
-                    flip=True,  # wound to face into the room
-                )
         for ob in sc.obstacles:
             vis = pb.createVisualShape(
                 pb.GEOM_CYLINDER,
                 radius=ob.radius,
                 length=OBSTACLE_HEIGHT,
-                rgbaColor=nao.OBSTACLE_RGBA,
+                rgbaColor=_scaled(nao.OBSTACLE_RGBA, shade),
                 specularColor=(0.0, 0.0, 0.0),
                 physicsClientId=cid,
             )
@@ -191,28 +245,26 @@ class World:
                 basePosition=(ob.x, ob.y, OBSTACLE_HEIGHT / 2),
                 physicsClientId=cid,
             )
-        for cl in sc.clutter:
-            vis = pb.createVisualShape(
-                pb.GEOM_BOX,
-                halfExtents=(cl.size / 2,) * 3,
-                rgbaColor=(1.0, 0.25, 0.0, 1.0),
-                specularColor=(0.0, 0.0, 0.0),
-                physicsClientId=cid,
-            )
+        for k, cl in enumerate(sc.clutter):
+            if egl:  # the plugin shades a GEOM_BOX smooth; TinyRenderer has flat faces
+                mesh = obj_mesh.write(tmp / f"clutter{k}.obj", *obj_mesh.box((cl.size / 2,) * 3))
+                vis = pb.createVisualShape(
+                    pb.GEOM_MESH,
+                    fileName=str(mesh),
+                    rgbaColor=_scaled((1.0, 0.25, 0.0, 1.0), shade),
+                    physicsClientId=cid,
+                )
+            else:
+                vis = pb.createVisualShape(
+                    pb.GEOM_BOX,
+                    halfExtents=(cl.size / 2,) * 3,
+                    rgbaColor=(1.0, 0.25, 0.0, 1.0),
+                    specularColor=(0.0, 0.0, 0.0),
+                    physicsClientId=cid,
+                )
             pb.createMultiBody(
                 baseVisualShapeIndex=vis, basePosition=(cl.x, cl.y, cl.z), physicsClientId=cid
             )
-        self.robot_ids: tuple[int, ...] = tuple(sorted(self._bodies))
-        li = sc.light
-        self._light_dir = light_direction(li.azimuth, li.elevation)
-        self._light_intensity = li.intensity
-        self.locomotion = Locomotion(
-            self,
-            seed=sc.seed,
-            noise=self.noise_model,
-            obstacles=tuple(Obstacle(o.x, o.y, o.radius) for o in sc.obstacles),
-            room=sc.room,
-        )
 
     @property
     def t_sim(self) -> float:
@@ -235,7 +287,7 @@ class World:
         """
         cid = self._client
         cv2.imwrite(str(path), texture)
-        tex_id = pb.loadTexture(str(path), physicsClientId=cid)
+        tex_id = pb.loadTexture(str(path), physicsClientId=cid) if self.renderer == "tiny" else -1
         p0, p1, _, p3 = (np.array(v, dtype=np.float64) for v in verts)
         eu, ev = p1 - p0, p3 - p0
         nu = max(1, math.ceil(float(np.linalg.norm(eu)) / TILE))
@@ -253,6 +305,19 @@ class World:
                 k = j * (nu + 1) + i
                 q = (k, k + 1, k + nu + 2, k, k + nu + 2, k + nu + 1)
                 idx.extend((q[0], q[2], q[1], q[3], q[5], q[4]) if flip else q)
+        if self.renderer == "egl":
+            # The plugin takes the texture from the OBJ's material, and its light from
+            # the colour: TinyRenderer's light on this flat quad over the plugin's.
+            f = renderers.tiny_shade(
+                normal, self._light_dir, self._light_intensity
+            ) / renderers.egl_shade(normal, self._light_dir)
+            normals = [list(normal)] * len(vs)
+            mesh = obj_mesh.write(path.with_suffix(".obj"), vs, normals, idx, uvs, path)
+            vis = pb.createVisualShape(
+                pb.GEOM_MESH, fileName=str(mesh), rgbaColor=(f, f, f, 1.0), physicsClientId=cid
+            )
+            pb.createMultiBody(baseVisualShapeIndex=vis, physicsClientId=cid)
+            return
         vis = pb.createVisualShape(
             pb.GEOM_MESH,
             vertices=vs,
@@ -326,23 +391,30 @@ class World:
         x, y, th = self._poses[robot_id]
         body = self._bodies[robot_id]
         cid = self._client
-        self._cull(robot_id)
+        if self.renderer == "tiny":  # OpenGL clips what is out of view by itself
+            self._cull(robot_id)
         # Hide the observer's own body (under the floor) while its camera renders.
         pb.resetBasePositionAndOrientation(body, (x, y, -5.0), (0, 0, 0, 1), physicsClientId=cid)
         try:
-            return camera.render(
-                cid,
-                x,
-                y,
-                th,
-                self._head[robot_id],
-                light_direction=self._light_dir,
-                light_intensity=self._light_intensity,
-            )
+            return self._draw(x, y, th, self._head[robot_id])
         finally:
             pb.resetBasePositionAndOrientation(
                 body, (x, y, 0.0), pb.getQuaternionFromEuler((0.0, 0.0, th)), physicsClientId=cid
             )
+
+    def _draw(self, x: float, y: float, heading: float, yaw: float) -> np.ndarray:
+        return camera.render(
+            self._client,
+            x,
+            y,
+            heading,
+            yaw,
+            light_direction=self._light_dir,
+            light_intensity=self._light_intensity,
+            renderer=pb.ER_BULLET_HARDWARE_OPENGL
+            if self.renderer == "egl"
+            else pb.ER_TINY_RENDERER,
+        )
 
     def _cull(self, robot_id: int) -> None:
         """Make the NAOs out of ``robot_id``'s view transparent, and those in view opaque
@@ -378,7 +450,8 @@ class World:
     def close(self) -> None:
         if not self._closed:
             self._closed = True
-            pb.disconnect(physicsClientId=self._client)
+            with renderers.quiet_stdout() if self.renderer == "egl" else contextlib.nullcontext():
+                pb.disconnect(physicsClientId=self._client)
 
     def __enter__(self) -> World:
         return self
@@ -396,6 +469,13 @@ def _texture_size(width_m: float, height_m: float, per_m: int) -> tuple[int, int
     """Texture size for a quad, at ``per_m`` texels per metre but at most MAX_TEXTURE."""
     scale = min(float(per_m), MAX_TEXTURE / max(width_m, height_m))
     return max(16, int(width_m * scale)), max(16, int(height_m * scale))
+
+
+def _scaled(rgba: tuple[float, float, float, float], k: float) -> tuple[float, ...]:
+    """``rgba`` with its colour (not its alpha) times ``k`` (unchanged for k = 1)."""
+    if k == 1.0:
+        return tuple(rgba)
+    return (rgba[0] * k, rgba[1] * k, rgba[2] * k, rgba[3])
 
 
 def _wrap(a: float) -> float:

@@ -64,6 +64,7 @@ from agent.config import add_plan_arguments
 from agent.wire import INSECURE_WARNING
 from sim import scenarios
 from sim.locomotion import MAX_NOISE_SCALE
+from sim.renderer import RENDERERS
 from tools.harness.live import DEFAULT_LIVE, add_live_arguments, check_live_argument, serve
 from tools.harness.progress import Progress
 from tools.harness.run import run_once
@@ -157,6 +158,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument(
         "--world-arg", action="append", default=[], help="extra argument for python -m sim"
     )
+    p.add_argument(
+        "--renderer", choices=RENDERERS, default=None,
+        help="python -m sim's and the render workers' --renderer (default: theirs, auto)",
+    )  # fmt: skip
     p.add_argument(
         "--render-service", type=int, default=0, metavar="K",
         help="K render workers (python -m sim.render_worker --shard i/K) draw the cameras "

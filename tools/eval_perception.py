@@ -33,6 +33,7 @@ import numpy as np
 
 from agent.core.perception.compass import VisualCompass
 from agent.core.perception.detector import Detection, Detector
+from sim.renderer import RENDERERS, choose
 from sim.scenarios import RobotSpec, Scenario
 from sim.world import World
 from tools.perception_scenes import RANGE, VISIBLE_MIN, Truth, scenes, wrap
@@ -84,11 +85,21 @@ def run_views(
     neighbour_heads: bool = False,
     max_distance: float = RANGE[1],
     overlap: bool = False,
+    renderer: str = "tiny",
 ) -> list[ViewResult]:
     """The labelled views of :func:`tools.perception_scenes.scenes` through ``detector``,
     each matched with its labels and timed (the first ``keep_images`` keep their picture)."""
     out: list[ViewResult] = []
-    views = scenes(seed, n_views, clutter, detector.camera, neighbour_heads, max_distance, overlap)
+    views = scenes(
+        seed,
+        n_views,
+        clutter,
+        detector.camera,
+        neighbour_heads,
+        max_distance,
+        overlap,
+        renderer=renderer,
+    )
     with contextlib.closing(views):
         for v, scene in enumerate(views):
             img, yaw, truths = scene.image, scene.yaw, scene.truths
@@ -104,14 +115,16 @@ def run_views(
     return out
 
 
-def run_compass(seed: int, samples: int, steps_deg: tuple[float, ...]) -> dict[str, Any]:
+def run_compass(
+    seed: int, samples: int, steps_deg: tuple[float, ...], renderer: str = "tiny"
+) -> dict[str, Any]:
     """Compass error per turn step: the observer turns its body in place in the textured
     room (head yaw 0) and the compass measures the turn."""
     rng = np.random.default_rng([seed, 0xC0C0])
     vc = VisualCompass()
     res: dict[str, Any] = {}
     sc = Scenario(robots=(RobotSpec(1, 0.0, 0.0, math.pi / 2),), seed=seed, room=4.0)
-    with World(sc, noise=False) as w:
+    with World(sc, noise=False, renderer=renderer) as w:
         for step in steps_deg:
             errs = []
             fails = 0
@@ -346,6 +359,12 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="every view puts a NAO partly behind another in the image (measured occlusion)",
     )
+    ap.add_argument(
+        "--renderer",
+        choices=RENDERERS,
+        default="tiny",
+        help="the views' renderer (sim/renderer.py; default tiny, the reference pictures)",
+    )
     ap.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     ap.add_argument(
         "--compass-samples", type=int, default=10, help="turns per compass step (0: skip)"
@@ -364,6 +383,8 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    drawn = choose(args.renderer)  # once: a new world every few views
+    print(f"renderer {drawn.name} ({drawn.why})", file=sys.stderr)
     views = run_views(
         args.seed,
         args.views,
@@ -373,9 +394,11 @@ def main(argv: list[str] | None = None) -> int:
         neighbour_heads=args.neighbour_heads,
         max_distance=args.max_distance,
         overlap=args.overlap,
+        renderer=drawn.name,
     )
     summary: dict[str, Any] = {
         "seed": args.seed,
+        "renderer": drawn.name,
         "clutter": args.clutter,
         "neighbour_heads": args.neighbour_heads,
         "max_distance": args.max_distance,
@@ -383,7 +406,9 @@ def main(argv: list[str] | None = None) -> int:
         **summarise(views),
     }
     if args.compass_samples:
-        summary["compass"] = run_compass(args.seed, args.compass_samples, COMPASS_STEPS_DEG)
+        summary["compass"] = run_compass(
+            args.seed, args.compass_samples, COMPASS_STEPS_DEG, drawn.name
+        )
     figure(views, summary, args.png)
     if args.view_png is not None:
         best = max(

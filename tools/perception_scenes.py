@@ -95,7 +95,12 @@ def room_for(max_distance: float) -> float:
 
 
 def make_world(
-    rng: np.random.Generator, n_robots: int, clutter: bool, seed: int, room: float = 4.0
+    rng: np.random.Generator,
+    n_robots: int,
+    clutter: bool,
+    seed: int,
+    room: float = 4.0,
+    renderer: str = "tiny",
 ) -> World:
     robots = tuple(RobotSpec(i + 1, -3.0 + 0.7 * i, -3.0, math.pi / 2) for i in range(n_robots + 1))
     items: list[ClutterSpec] = []
@@ -109,7 +114,8 @@ def make_world(
             x, y = (float(v) for v in rng.uniform(-spread, spread, size=2))
             z = float(rng.uniform(size / 2, 0.75))
             items.append(ClutterSpec(round(x, 3), round(y, 3), round(z, 3), round(size, 3)))
-    return World(Scenario(robots=robots, clutter=tuple(items), seed=seed, room=room), noise=False)
+    sc = Scenario(robots=robots, clutter=tuple(items), seed=seed, room=room)
+    return World(sc, noise=False, renderer=renderer)
 
 
 def place(
@@ -271,9 +277,10 @@ def scenes(
     neighbour_heads: bool = False,
     max_distance: float = RANGE[1],
     overlap: bool = False,
+    renderer: str = "tiny",
 ) -> Generator[Scene, None, None]:
     """``n_views`` labelled views of seed ``seed`` (a new world every
-    ``VIEWS_PER_WORLD`` views), seen by ``cam``; with ``overlap`` each view puts a NAO
+    ``VIEWS_PER_WORLD`` views, drawn by ``renderer``), seen by ``cam``; with ``overlap`` each view puts a NAO
     partly behind another and measures the visible fractions. Close the generator (or
     run it to the end) to close the last world."""
     if not RANGE[0] < max_distance <= 4.0:
@@ -285,7 +292,8 @@ def scenes(
             if v % VIEWS_PER_WORLD == 0:
                 if w is not None:
                     w.close()
-                w = make_world(rng, 3, clutter, seed * 1000 + v, room_for(max_distance))
+                room = room_for(max_distance)
+                w = make_world(rng, 3, clutter, seed * 1000 + v, room, renderer)
             assert w is not None
             n_others = int(rng.integers(2, 4)) if overlap else int(rng.integers(1, 4))
             for rid in range(n_others + 2, 5):  # park unused robots in a corner, facing the wall

@@ -16,6 +16,13 @@ On a 2-core machine shared with other jobs wall-time throughput cannot grow with
 workers; CPU-seconds per frame is the number that carries to a machine with more cores
 (there frames per second should scale with the workers, up to one core per worker).
 Writes ``render_bench.json`` and ``render_bench.png`` into ``--out`` if given.
+
+``--renderer`` is passed to the world and the workers (:mod:`sim.renderer`). With
+``--in-process`` it instead times ``World.render`` itself, no processes, no PNG, no bus:
+for each renderer of ``--renderers`` and each fleet size of ``--fleets`` it draws
+``--frames`` pictures (observers and head yaws cycling, after 2 untimed ones) and prints
+frames per CPU-second of this process (every thread: llvmpipe's too) and per wall
+second, each beside the 1-minute load average.
 """
 
 from __future__ import annotations
@@ -34,6 +41,7 @@ from typing import Any
 import zenoh
 
 from agent.wire import CameraReply, CameraRequest, decode, encode, key_camera
+from sim.renderer import RENDERERS, check
 from tools.harness.procs import ROOT, Proc, free_port, stop
 from tools.harness.render import served, start_render_workers
 
@@ -107,8 +115,39 @@ def sweep(endpoint: str, robots: int, frames: int, warmup: int) -> tuple[float, 
         return time.perf_counter() - t0, time.process_time() - c0, lat
 
 
+def in_process(renderer: str, robots: int, seed: int, frames: int) -> dict[str, Any]:
+    """Frames per CPU-second and per wall second of ``World.render`` with ``robots`` NAOs."""
+    from sim.scenarios import generate
+    from sim.world import World
+
+    with World(generate(robots, seed), noise=False, renderer=renderer) as w:
+        ids = w.robot_ids
+        for rid in ids[:2]:
+            w.render(rid, 0.0)
+        c0, t0 = time.process_time(), time.perf_counter()
+        for i in range(frames):
+            w.render(ids[i % len(ids)], math.radians(-119.0 + (i * 37.0) % 238.0))
+        cpu, wall = time.process_time() - c0, time.perf_counter() - t0
+        used = w.renderer
+    return {
+        "renderer": used,
+        "robots": robots,
+        "frames": frames,
+        "frames_per_cpu_s": frames / cpu,
+        "cpu_ms_per_frame": 1000 * cpu / frames,
+        "frames_per_s": frames / wall,
+        "load_average_1min": os.getloadavg()[0],
+    }
+
+
 def measure(
-    workers: int, robots: int, seed: int, frames: int, warmup: int, out: Path
+    workers: int,
+    robots: int,
+    seed: int,
+    frames: int,
+    warmup: int,
+    out: Path,
+    renderer: str | None = None,
 ) -> dict[str, Any]:
     out.mkdir(parents=True, exist_ok=True)
     endpoint = f"tcp/127.0.0.1:{free_port()}"
@@ -118,10 +157,12 @@ def measure(
         router = [sys.executable, "-m", "tools.router", "--insecure", "--listen", endpoint,
                   "--no-multicast-scouting"]  # fmt: skip
         procs.append(_start("router", router, out, "router ready"))
-        world = [sys.executable, "-m", "sim", "--robots", str(robots), "--seed", str(seed), *net]
+        kind = ["--renderer", renderer] if renderer else []
+        world = [sys.executable, "-m", "sim", "--robots", str(robots), "--seed", str(seed), *net,
+                 *kind]  # fmt: skip
         procs.append(_start("world", world, out, "sim ready"))
         if workers:
-            procs.extend(start_render_workers(workers, net, out))
+            procs.extend(start_render_workers(workers, net, out, renderer=renderer))
         time.sleep(1.0)  # let the router learn every queryable
         before = {p.name: cpu_s(p.popen.pid) for p in procs}
         t_wall, t_client, lat = sweep(endpoint, robots, frames, warmup)
@@ -190,6 +231,19 @@ def plot(rows: list[dict[str, Any]], path: Path) -> None:
     plt.close(fig)
 
 
+def in_process_table(renderers: list[str], fleets: list[str], seed: int, frames: int) -> int:
+    for n in (int(f) for f in fleets):
+        for kind in renderers:
+            r = in_process(check(kind), n, seed, frames)
+            print(
+                f"{r['robots']:3d} NAOs {r['renderer']:>4}: {r['frames_per_cpu_s']:5.1f} frames per "
+                f"CPU-second ({r['cpu_ms_per_frame']:.1f} CPU-ms a frame), "
+                f"{r['frames_per_s']:5.1f} per wall second; load {r['load_average_1min']:.1f}",
+                flush=True,
+            )
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(
         prog="python -m tools.bench render", description=__doc__.split("\n")[0]
@@ -200,10 +254,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--frames", type=int, default=60, help="timed pictures per run")
     p.add_argument("--out", type=Path, default=Path("out/bench_render"))
     p.add_argument("--warmup", type=int, default=1, help="untimed pictures per robot first")
+    p.add_argument("--renderer", choices=RENDERERS, default=None, help="the world's and workers'")
+    p.add_argument("--in-process", action="store_true", help="time World.render itself")
+    p.add_argument("--renderers", default="tiny,egl", help="with --in-process: renderers")
+    p.add_argument("--fleets", default="3,10,50", help="with --in-process: NAOs per world")
     a = p.parse_args(argv)
+    if a.in_process:
+        return in_process_table(a.renderers.split(","), a.fleets.split(","), a.seed, a.frames)
     rows = []
     for k in (int(x) for x in a.modes.split(",")):
-        r = measure(k, a.robots, a.seed, a.frames, a.warmup, a.out / f"workers-{k}")
+        r = measure(k, a.robots, a.seed, a.frames, a.warmup, a.out / f"workers-{k}", a.renderer)
         rows.append(r)
         print(
             f"workers={k}: {r['frames']} frames in {r['wall_s']:.1f} s wall "

@@ -116,8 +116,15 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
             from tools.obstacle_scenario import obstacle_world_args
 
             room = obstacle_world_args(n, seed, args.obstacles, d_e, phi_e, out, result)
+        kind = getattr(args, "renderer", None)  # tools.demo --renderer: world and workers
+        drawn = ["--renderer", kind] if kind else []
         world = start_world(
-            n, seed, endpoint, out, [*room, *(args.world_arg or []), *naoqi, *noise], world_net
+            n,
+            seed,
+            endpoint,
+            out,
+            [*room, *(args.world_arg or []), *naoqi, *noise, *drawn],
+            world_net,
         )
         procs.append(world)
 
@@ -129,7 +136,11 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
         result["wall_world_ready"] = time.monotonic() - t0
         workers = int(getattr(args, "render_service", 0) or 0)
         if workers > 0:  # cameras drawn by render workers, not the world
-            procs.extend(start_render_workers(workers, ["--connect", endpoint, *net.flags], out))
+            procs.extend(
+                start_render_workers(
+                    workers, ["--connect", endpoint, *net.flags], out, renderer=kind
+                )
+            )
             result["render_workers"] = workers
             result["wall_render_ready"] = time.monotonic() - t0
         ids = robot_ids(world.lines, n)
