@@ -1,5 +1,5 @@
 """Meshes as Wavefront OBJ files, the form PyBullet's EGL renderer plugin can draw
-(DESIGN.md §4; :mod:`sim.renderer`).
+(docs/design.md §4; :mod:`sim.renderer`).
 
 The plugin draws a ``GEOM_MESH`` visual shape only from a file (OBJ, STL, COLLADA), not
 from the vertex lists :mod:`sim.nao_model` and :mod:`sim.world` hand to TinyRenderer, and

@@ -1,5 +1,5 @@
 """Which renderer draws the forehead cameras: PyBullet's TinyRenderer or its EGL plugin
-(DESIGN.md §4; docs/world.md "Renderers").
+(docs/design.md §4; docs/world.md "Renderers").
 
 - ``tiny``: PyBullet's CPU TinyRenderer, single-threaded (the reference pictures).
 - ``egl``: PyBullet's EGL renderer plugin (``eglRenderer``), OpenGL through EGL; with no

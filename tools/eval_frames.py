@@ -1,6 +1,13 @@
 """``python -m tools.eval_frames DIR... [--png FILE] [--json FILE]``: the fleet's frame,
 re-estimated offline from recorded runs and judged against their ground truth.
 
+``--corpus DIR`` judges the runs of a corpus of rendered records instead
+(``python -m tools.corpus``; ``tests/data/frames`` ships one): every fleet as published
+and with each injected fault, the tuned-on and the held-out fleets reported apart, and
+the exit status says whether the gates hold: no sound robot left out, the faulty robot
+named in at least ``--min-named`` of the fault runs, planning refused on at most
+``--max-refused`` of the fault-free runs.
+
 A run of ``tools.demo`` (and of every eval tool built on it) leaves ``run.mcap`` with the
 neighbour records the robots published, and ``result.json`` with the true start poses and
 the agent arguments (``--sensor-fault`` says which robot's record is corrupted). This tool
@@ -26,8 +33,12 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
-from dataclasses import asdict, dataclass
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict, dataclass, replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -53,6 +64,18 @@ class FrameRow:
     pos_err: float  # m, worst planned robot (nan when stopped)
     psi_err: float  # deg, worst planned robot (nan when stopped)
     reason: str
+    fault: str = ""  # the injected fault, e.g. "scale:1.4" ("": none, or unknown)
+    held_out: bool = False  # a corpus fleet the estimator is never tuned on
+
+    @property
+    def sound_left_out(self) -> bool:
+        """A robot without a fault was left out of the plan."""
+        return any(r != self.faulty for r in self.excluded)
+
+    @property
+    def named(self) -> bool:
+        """The robot with the fault was left out, and only it."""
+        return self.faulty >= 0 and self.excluded == (self.faulty,)
 
     def bad(self, pos_tol: float, psi_tol: float) -> bool:
         if self.stopped:
@@ -89,13 +112,33 @@ def judge_run(run: Path) -> FrameRow:
     """Re-estimate the frame of one run folder (``run.mcap`` + ``result.json``)."""
     result = json.loads((run / "result.json").read_text())
     truth = {int(k): (float(v[0]), float(v[1]), float(v[2])) for k, v in result["starts"].items()}
-    msgs = records_of(run / "run.mcap")
-    faulty = faulty_robot(result)
+    return judge_records(str(run), records_of(run / "run.mcap"), truth, faulty_robot(result))
+
+
+def judge_records(
+    name: str,
+    msgs: tuple[NeighborRecordMsg, ...],
+    truth: dict[int, tuple[float, float, float]],
+    faulty: int,
+    fault: str = "",
+    held_out: bool = False,
+) -> FrameRow:
+    """Today's frame of one record set against its truth (``faulty``: -1 for none)."""
+    row = _judge(name, msgs, truth, faulty)
+    return replace(row, fault=fault, held_out=held_out)
+
+
+def _judge(
+    run: str,
+    msgs: tuple[NeighborRecordMsg, ...],
+    truth: dict[int, tuple[float, float, float]],
+    faulty: int,
+) -> FrameRow:
     try:
         ff = fleet_frame(FormationAdapter.records(msgs), DEFAULT_EPSILON)
     except ValueError as exc:
         nan = math.nan
-        return FrameRow(str(run), len(msgs), faulty, excluded=(), aligned=False, stopped=str(exc), pos_err=nan,
+        return FrameRow(run, len(msgs), faulty, excluded=(), aligned=False, stopped=str(exc), pos_err=nan,
                         psi_err=nan, reason="")  # fmt: skip
     ids = [i for i in ff.ids if i != faulty and i in truth]
     est = {i: ff.positions[ff.ids.index(i)] for i in ids}
@@ -105,7 +148,7 @@ def judge_run(run: Path) -> FrameRow:
     pos_err = max(float(np.hypot(*(world[i] - np.array(truth[i][:2])))) for i in ids)
     # a robot faces +y (π/2) in its own fixed frame: its true heading is h + ψ
     psi_err = max(_wrap_deg(truth[i][2] - (h + ff.heading_of(i))) for i in ids)
-    return FrameRow(str(run), len(msgs), faulty, excluded=ff.excluded, aligned=ff.aligned, stopped="",
+    return FrameRow(run, len(msgs), faulty, excluded=ff.excluded, aligned=ff.aligned, stopped="",
                     pos_err=pos_err, psi_err=psi_err, reason=ff.reason)  # fmt: skip
 
 
@@ -144,40 +187,131 @@ def draw(rows: list[FrameRow], path: Path, psi_tol: float) -> None:
     plt.close(fig)
 
 
+#: The share of fault runs of the corpus in which today's estimator names the faulty
+#: robot (docs/results.md, "Frame and fault naming on the corpus"): the CI gate against a
+#: regression. The target is 0.98; a broken compass (rotate) is not nameable from the
+#: masks today (docs/design.md §9), which caps the share near two thirds.
+NAMED_FLOOR = 0.5
+
+
+def scores(rows: list[FrameRow], pos_tol: float, psi_tol: float) -> dict[str, int]:
+    """The counts the targets are stated in (docs/results.md, "Frame and fault naming")."""
+    clean = [r for r in rows if r.faulty < 0]
+    faulty = [r for r in rows if r.faulty >= 0]
+    planned = [r for r in rows if not r.stopped]
+    return {
+        "runs": len(rows),
+        "clean_runs": len(clean),
+        "fault_runs": len(faulty),
+        "sound_left_out": sum(r.sound_left_out for r in rows),
+        "refused": sum(bool(r.stopped) for r in clean),
+        "named": sum(r.named for r in faulty),
+        "fault_stopped": sum(bool(r.stopped) for r in faulty),
+        "planned": len(planned),
+        "accurate": sum(r.pos_err <= pos_tol and r.psi_err <= psi_tol for r in planned),
+    }
+
+
+def summary(rows: list[FrameRow], pos_tol: float, psi_tol: float) -> str:
+    """One line of :func:`scores`, with the named rate per fault kind."""
+    s = scores(rows, pos_tol, psi_tol)
+    kinds = sorted({r.fault.partition(":")[0] for r in rows if r.faulty >= 0 and r.fault})
+    per = ", ".join(
+        f"{k} {sum(r.named for r in rows if r.fault.startswith(k))}/"
+        f"{sum(r.fault.startswith(k) for r in rows)}"
+        for k in kinds
+    )
+    return (
+        f"{s['runs']} runs; without a fault: {s['sound_left_out']} with a sound robot left out, "
+        f"{s['refused']}/{s['clean_runs']} refused; with one: named {s['named']}/{s['fault_runs']}"
+        f"{f' ({per})' if per else ''}, {s['fault_stopped']} stopped; every planned start within "
+        f"{pos_tol} m and {psi_tol:g}° in {s['accurate']}/{s['planned']}"
+    )
+
+
+def _call(job: Callable[[], FrameRow]) -> FrameRow:
+    return job()
+
+
+def _jobs(args: argparse.Namespace) -> list[Callable[[], FrameRow]]:
+    """One judge per run: every run of ``--corpus``, or every run folder under the roots."""
+    if args.corpus is not None:
+        from tools.corpus import held_out, load_corpus
+
+        return [partial(judge_records, r.name, r.records, r.truth, r.victim, r.fault, held_out(r.seed))
+                for r in load_corpus(args.corpus)]  # fmt: skip
+    return [partial(judge_run, run) for run in find_runs(args.roots)]
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
         prog="python -m tools.eval_frames", description=(__doc__ or "").split("\n\n")[0]
     )
-    ap.add_argument("roots", nargs="+", type=Path, help="folders searched for run folders")
+    ap.add_argument("roots", nargs="*", type=Path, help="folders searched for run folders")
+    ap.add_argument(
+        "--corpus",
+        type=Path,
+        default=None,
+        help="a corpus of rendered records (python -m tools.corpus) instead",
+    )
     ap.add_argument("--psi-tol", type=float, default=10.0, help="start-heading error (°)")
     ap.add_argument("--pos-tol", type=float, default=0.15, help="start-position error (m)")
     ap.add_argument("--png", type=Path, default=Path("out/eval_frames.png"))
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
+                    help="runs judged in parallel processes (rows print in order)")  # fmt: skip
+    ap.add_argument(
+        "--min-named",
+        type=float,
+        default=0.0,
+        help="fail below this share of fault runs with the faulty robot named",
+    )
+    ap.add_argument(
+        "--max-refused",
+        type=float,
+        default=1.0,
+        help="fail above this share of fault-free runs where planning stops",
+    )
     args = ap.parse_args(argv)
-    runs = find_runs(args.roots)
-    if not runs:
+    jobs = _jobs(args)
+    if not jobs:
         print(f"no run folders (run.mcap + result.json) under {args.roots}", file=sys.stderr)
         return 2
     rows: list[FrameRow] = []
-    for k, run in enumerate(runs, 1):
-        row = judge_run(run)
+    pool = ProcessPoolExecutor(args.jobs) if args.jobs > 1 else None
+    done = pool.map(_call, jobs) if pool is not None else map(_call, jobs)
+    for k, row in enumerate(done, 1):
         rows.append(row)
         mark = "BAD" if row.bad(args.pos_tol, args.psi_tol) else "ok "
         what = (f"stop: {row.stopped[:70]}" if row.stopped else
                 f"left out {list(row.excluded)} pos {row.pos_err:.2f} m psi {row.psi_err:4.1f}°")  # fmt: skip
-        print(f"[{k}/{len(runs)}] {mark} {run}: N={row.robots} faulty {row.faulty:2d} {what}")
+        print(f"[{k}/{len(jobs)}] {mark} {row.run}: N={row.robots} faulty {row.faulty:2d} {what}")
     bad = [r for r in rows if r.bad(args.pos_tol, args.psi_tol)]
-    faulty = [r for r in rows if r.faulty >= 0]
-    named = sum(r.excluded == (r.faulty,) for r in faulty)
-    print(f"{len(rows)} runs: {len(bad)} bad; faulty robot named in {named}/{len(faulty)}; "
-          f"sound robots left out in {sum(bool(r.excluded) for r in rows if r.faulty < 0)}/"
-          f"{len(rows) - len(faulty)}")  # fmt: skip
+    failed = False
+    for part, sel in (("all", rows), ("tuned on", [r for r in rows if not r.held_out]),
+                      ("held out", [r for r in rows if r.held_out])):  # fmt: skip
+        if sel and (part == "all" or args.corpus is not None):
+            print(f"{part}: " + summary(sel, args.pos_tol, args.psi_tol))
+    s = scores(rows, args.pos_tol, args.psi_tol)
+    if s["sound_left_out"]:
+        print(f"FAIL: a sound robot left out in {s['sound_left_out']} runs")
+        failed = True
+    if s["fault_runs"] and s["named"] / s["fault_runs"] < args.min_named:
+        print(f"FAIL: faulty robot named in {s['named']}/{s['fault_runs']} < {args.min_named:.0%}")
+        failed = True
+    if s["clean_runs"] and s["refused"] / s["clean_runs"] > args.max_refused:
+        print(
+            f"FAIL: planning refused on {s['refused']}/{s['clean_runs']} fault-free runs > {args.max_refused:.0%}"
+        )
+        failed = True
+    if pool is not None:
+        pool.shutdown()
     draw(rows, args.png, args.psi_tol)
     print(f"figure: {args.png}")
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps({"rows": [asdict(r) for r in rows]}, indent=2))
-    return 1 if bad else 0
+    return 1 if failed or (bad and args.corpus is None) else 0
 
 
 if __name__ == "__main__":

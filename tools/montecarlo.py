@@ -57,6 +57,7 @@ from agent.core.formation.waves.execution import (
     wave_makespan,
 )
 from agent.core.formation.waves.safety import check_safety
+from agent.core.perception.sighting_noise import SightingNoise
 
 D_E = 2.0
 PHI_E = math.radians(30)
@@ -227,7 +228,10 @@ def one_run(
         frame_method=frame,
         epsilon=0.3 * D_E,
     )
-    plan = plan_from_records(recs, params)
+    # the fault test's noise model is this Monte Carlo's (a disc of radius dd_ij·d_e), not
+    # the rendered perception's
+    disc = SightingNoise.synthetic(floor=max(dd_ij * D_E / 2.0, 1e-3))
+    plan = plan_from_records(recs, params, noise=disc)
     true_c = pos - pos[plan.frame_robot]
     cf = build_common_frame(identify_neighbours(recs, params.epsilon), frame)
     frame_err = float(np.mean(np.hypot(*(cf.positions - true_c).T)))

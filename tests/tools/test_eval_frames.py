@@ -24,7 +24,7 @@ def _run(folder: Path, seed: int, faulty: int = -1, bend_truth: float = 0.0) -> 
     h = rng.uniform(-math.pi, math.pi, 6)
     recs = unaligned_records(ids, pos, h, rng, 0.02, math.radians(1))
     if faulty > 0:
-        recs[ids.index(faulty)] = fault(recs[ids.index(faulty)], "rotate")
+        recs[ids.index(faulty)] = fault(recs[ids.index(faulty)], "scale")
     folder.mkdir(parents=True)
     with (folder / "run.mcap").open("wb") as f:
         w = Writer(f)
@@ -43,20 +43,20 @@ def _run(folder: Path, seed: int, faulty: int = -1, bend_truth: float = 0.0) -> 
         w.finish()
     starts = {str(i): [float(pos[k, 0]), float(pos[k, 1]), float(h[k])] for k, i in enumerate(ids)}
     starts["2"][2] += bend_truth
-    args = [f"{faulty}:--sensor-fault=rotate:40"] if faulty > 0 else []
+    args = [f"{faulty}:--sensor-fault=scale:1.4"] if faulty > 0 else []
     (folder / "result.json").write_text(json.dumps({"starts": starts, "agent_args": args}))
 
 
 def test_sound_and_faulty_runs_are_judged_against_their_truth(tmp_path: Path) -> None:
     _run(tmp_path / "a" / "seed-001", 1)
-    _run(tmp_path / "a" / "seed-002", 2, faulty=3)
+    _run(tmp_path / "a" / "seed-003", 3, faulty=3)
     out = tmp_path / "rows.json"
     code = eval_frames.main([str(tmp_path), "--png", str(tmp_path / "f.png"), "--json", str(out)])
     rows = json.loads(out.read_text())["rows"]
     assert code == 0 and (tmp_path / "f.png").stat().st_size > 0
     assert [r["faulty"] for r in rows] == [-1, 3]
     assert rows[0]["excluded"] == [] and rows[0]["psi_err"] < 2.0 and rows[0]["pos_err"] < 0.1
-    assert rows[1]["excluded"] == [3] and "masks agree" in rows[1]["reason"]
+    assert rows[1]["excluded"] == [3] and "robot 3 named" in rows[1]["reason"]
 
 
 def test_a_frame_that_disagrees_with_the_truth_is_bad(tmp_path: Path) -> None:

@@ -1,6 +1,6 @@
 """A run's ground truth read as a user would read it: who moved, and the pyramid's shape
-(a tool's verdict comes from the ground truth, never from what the agents claim; NAO paper 5.1.1 for r_d and r_φ; AUV paper II eqs. 5-7
-for the pyramid's slots).
+(a tool's verdict comes from the ground truth, never from what the agents claim; NAO
+paper 5.1.1 for r_d and r_φ; AUV paper II eqs. 5-7 for the pyramid's slots).
 
 Who moved (:func:`excursions`, :data:`MOVED_M`): a robot moved when its true position got
 farther than :data:`MOVED_M` from where it stood when it published its last search record

@@ -53,6 +53,7 @@ from agent.core.formation.shape.pyramid import pyramid_frame
 from agent.core.formation.waves.choice import choose
 from agent.core.formation.waves.obstacles import plan_around_obstacles, plan_near_obstacles
 from agent.core.formation.waves.scheduled import Scheduled, scheduled_plan
+from agent.core.perception.sighting_noise import SightingNoise
 
 
 @dataclass(frozen=True)
@@ -330,6 +331,7 @@ def plan_from_records(
     params: PlanParams = PlanParams(),
     obstacles: np.ndarray | None = None,
     sightings: Mapping[int, np.ndarray] | None = None,
+    noise: SightingNoise | None = None,
 ) -> Plan:
     """The whole pipeline on a record set (any order): the same records -> the same plan.
 
@@ -340,8 +342,10 @@ def plan_from_records(
     positions in the common frame (the frame robot's fixed frame). ``sightings`` maps a
     robot id to the obstacles it saw, in its fixed frame: they are placed in the common
     frame (turned by its ψ) and merged (:mod:`obstacle_map`), then planned around with the
-    others. The digest of a plan with aligned starts and nobody left out is the papers'
-    plan's; otherwise it also covers every ψ, who is left out and why.
+    others. ``noise`` is the sighting noise the fault test rests on (default: the shipped
+    model of the rendered perception; synthetic records pass theirs). The digest of a plan
+    with aligned starts and nobody left out is the papers' plan's; otherwise it also
+    covers every ψ, who is left out and why.
 
     Raises ``ValueError`` for bad records, a fleet that is not connected through
     identified neighbours, sightings no single robot can be blamed for, or (with
@@ -352,7 +356,7 @@ def plan_from_records(
         cf = build_common_frame(graph, params.frame_method)
         ff = FleetFrame(cf.frame_robot, cf.ids, cf.positions, np.zeros(len(cf.ids)), True)
     else:
-        ff = fleet_frame(records, params.epsilon)
+        ff = fleet_frame(records, params.epsilon, noise)
     given = np.zeros((0, 2)) if obstacles is None else np.asarray(obstacles, dtype=np.float64)
     extra = [given.reshape(-1, 2)]
     if sightings:

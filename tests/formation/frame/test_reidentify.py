@@ -253,7 +253,7 @@ def test_merged_detections_in_a_dense_fleet_still_give_the_true_frame() -> None:
             nb = np.delete(nb, ib, axis=0)
         out.append(NeighborRecord(rec.robot_id, nb))
     ff = fleet_frame(out, 0.35)
-    assert "identified where it lands" in ff.reason
+    assert "identified where they land" in ff.reason
     assert ff.excluded == ()
     truth = pos - pos[ff.frame_robot - 1]
     assert np.allclose(ff.positions, truth[[i - 1 for i in ff.ids]], atol=0.1)

@@ -7,7 +7,7 @@ which robot (:mod:`~agent.core.formation.frame.neighbour_check`, eq. 9;
 ``reidentify`` without the papers' alignment), every start in one frame
 (:mod:`~agent.core.formation.frame.common_frame`, eq. 10; the pose fit of
 :mod:`~agent.core.formation.frame.poses` on ``robust_lm``), the consistency check that
-names a robot whose sightings do not fit (``pose_check``), the re-search decision
+names a robot whose sightings do not fit, or nobody (``fault_test``), the re-search decision
 (:mod:`~agent.core.formation.frame.research`, 4.1.3 rule 2) and the perceived obstacles
 in the common frame (:mod:`~agent.core.formation.frame.obstacle_map`, 5.1.2).
 

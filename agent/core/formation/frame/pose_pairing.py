@@ -9,7 +9,7 @@ not depend on it:
 * **distance agreement**: ``| |v_ij| − |v_ji| | ≤ ε + ρ·max(|v_ij|, |v_ji|)``
   (``ε`` the eq. 9 tolerance, ``ρ`` = :data:`PAIR_REL_TOL` for errors that grow with
   distance, and for a robot whose distances are wrong, so that the consistency check of
-  :mod:`pose_check` still sees it);
+  :mod:`fault_test` still sees it);
 * **relative heading** of a candidate, from the two bearings (:func:`relative_heading`):
   ``ψ_j − ψ_i = β_ij − β_ji + π``;
 * **mask orientation** (3.1.2): the matched mask's relative orientation θ (the observed

@@ -41,7 +41,7 @@ matches are common (up to 90° in the simulator's 10-NAO runs, where the fit's �
 to 2°). What masks do reveal is a robot whose estimated ψ is wrong as a whole (a record
 turned by a broken compass: its own positions fit, ψ absorbs the turn): the others' masks
 of it then agree on one offset (:func:`mask_offset`). The fleet is consistent when no pair
-scores above 1 and no robot is *turned* (:mod:`pose_check` names a faulty robot).
+scores above 1 and no robot is *turned*; :mod:`fault_test` names a faulty robot.
 """
 
 from __future__ import annotations
@@ -505,15 +505,22 @@ def build_poses(records: Sequence[NeighborRecord], epsilon: float = DEFAULT_EPSI
     return poses_from_graph(graph, records)
 
 
+def fit_from_graph(graph: NeighbourGraph) -> PoseFrame:
+    """The robust SE(2) fit of a pairing's sightings, with the one-way sightings attached
+    after a first fit (:func:`one_way_measurements`): never the aligned model.
+
+    Raises ``ValueError`` as :func:`fit_poses` (a fleet the mutual pairs do not connect)."""
+    meas = pair_measurements(graph)
+    pf = fit_poses(graph.ids, meas)
+    extra = one_way_measurements(graph, pf)
+    return fit_poses(graph.ids, [*meas, *extra]) if extra else pf
+
+
 def poses_from_graph(graph: NeighbourGraph, records: Sequence[NeighborRecord]) -> PoseFrame:
     """:func:`build_poses` after the pairing (``records`` for the aligned model)."""
     aligned = _aligned_model(records, graph.epsilon)
     try:
-        meas = pair_measurements(graph)
-        pf = fit_poses(graph.ids, meas)
-        extra = one_way_measurements(graph, pf)
-        if extra:
-            pf = fit_poses(graph.ids, [*meas, *extra])
+        pf = fit_from_graph(graph)
     except ValueError:
         if aligned is None:
             raise

@@ -20,7 +20,7 @@ would: where does it land? This module does that, in rounds (at most
    least :data:`RESEAT_SHARE` of them and :data:`RESEAT_GAIN` more than the fitted
    heading (ties: the candidate closest to the fitted heading, then the lower index).
    A robot whose distances are wrong (a sensor fault) lands few sightings under any
-   heading and keeps its fitted one, and its misfit keeps it named by :mod:`pose_check`.
+   heading and keeps its fitted one, and its misfit stays evidence for :mod:`fault_test`.
    **Positions re-seated first** (:func:`reseat_positions`, before the heading vote, on
    the fitted headings: on 50 NAOs seed 12's records the heading vote, run first on a
    distorted neighbourhood, turned robot 49 by 23°). A robot whose own sightings mostly
@@ -62,7 +62,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from agent.core.formation.frame.pose_pairing import wrap_angle
-from agent.core.formation.frame.poses import PoseFrame, PoseMeasurement, fit_poses, turn_offsets
+from agent.core.formation.frame.poses import PoseFrame, PoseMeasurement, fit_poses
 from agent.core.formation.frame.records import NeighborRecord
 
 #: Gate (m) within which a placed sighting lands on a robot, at distance 0 ...
@@ -382,42 +382,5 @@ def mostly_land(frame: PoseFrame, records: Sequence[NeighborRecord]) -> bool:
         dist = np.hypot(vecs[:, 0], vecs[:, 1])
         pts = _place(frame.positions[k], float(frame.headings[k]), vecs)
         if int(np.sum(landing(frame.positions, k, pts, dist) >= 0)) < LAND_SHARE * m or not seen[k]:
-            return False
-    return True
-
-
-def masks_outvoted(frame: PoseFrame, records: Sequence[NeighborRecord]) -> bool:
-    """Whether the robots the masks call turned (:func:`poses.turn_offsets`) are shown
-    unturned by their own sightings: each has at least :data:`MIN_SIGHTINGS`, lands at
-    least :data:`LAND_SHARE` of them from its fitted pose, and more than from that pose
-    turned by the masks' offset (either sign, and the offset + π: masks are modulo π).
-    True when the masks call nobody turned.
-
-    A mask is the body's orientation at the instant of the image, and in a concurrent
-    search the robots turn twice by 180° while the others look (30 NAOs, seed 7:
-    12 of robot 25's 13 masks agreed on −34°, taken while it turned through its search,
-    over 100 s of a loaded world; its 12 sightings all land at ψ = 0 and 2 of 12 at ±34°;
-    the fleet stopped, "inconsistent beyond one robot"). A robot truly turned by ψ ≥ 33°
-    (:data:`poses.TURN_MIN`) has its own sightings turned as well: they land from the
-    turned pose, not from the fitted one, and the masks stand."""
-    offsets = turn_offsets(frame.ids, frame.measurements, frame.headings)
-    if not offsets:
-        return True
-    index = {rid: k for k, rid in enumerate(frame.ids)}
-    own = {rec.robot_id: np.asarray(rec.neighbours, dtype=np.float64) for rec in records}
-    for rid, offset in offsets.items():
-        vecs = own.get(rid, np.zeros((0, 2))).reshape(-1, 2)
-        if vecs.shape[0] < MIN_SIGHTINGS:
-            return False
-        k = index[rid]
-        dist = np.hypot(vecs[:, 0], vecs[:, 1])
-
-        def lands(turn: float, k: int = k, vecs: np.ndarray = vecs, dist: np.ndarray = dist) -> int:
-            pts = _place(frame.positions[k], float(frame.headings[k]) + turn, vecs)
-            return int(np.sum(landing(frame.positions, k, pts, dist) >= 0))
-
-        here = lands(0.0)
-        turned = max(lands(t) for t in (offset, -offset, offset + math.pi, math.pi - offset))
-        if here < LAND_SHARE * vecs.shape[0] or here <= turned:
             return False
     return True

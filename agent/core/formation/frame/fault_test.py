@@ -1,0 +1,387 @@
+"""Which robot's sightings do not fit: one hypothesis test per robot, on the measured
+sighting noise (docs/design.md §9; the check the papers leave out: NAO paper 4.1.2 trusts
+every record).
+
+The model (:class:`agent.core.perception.sighting_noise.SightingNoise`, fitted on
+rendered records with their truth) gives each sighting ``v_ij`` of the pose fit a
+normalised residual ``χ²_ij`` (two degrees of freedom: along and across the line of
+sight, σ_r(d) and σ_t(d)). Then:
+
+1. **Rejected sightings.** A sighting is *rejected* when ``χ²_ij > q``, q the χ²₂
+   quantile at :data:`ALPHA_SIGHTING`. A pair of robots (an *edge*: its one or two
+   sightings) is rejected when one of its sightings is. A sound robot's edge is rejected
+   with probability ``p_e(d)``, the model's rate of rejected edges at distance d,
+   measured on fault-free rendered fleets with this very test (a wrong pairing, a merged
+   detection: gross errors happen).
+2. **Per robot, its position test.** Robot r has ``n_r`` edges, ``k_r`` of them rejected,
+   and ``u_r`` *stray* sightings of its own (sightings no pair of the fit uses: the
+   other robot did not see it back, or the pairing left it out), ``s_r`` of which land on
+   no robot within the χ² gate of the fitted frame. If r is sound, its edges are rejected
+   independently with probabilities ``p_reject(d)`` (a faulty neighbour explains its one
+   shared edge) and its strays miss with ``p_stray(d)``, both measured on fault-free
+   fleets, so ``k_r + s_r`` is Poisson-binomial and the p-value is ``P(K ≥ k_r + s_r)``.
+   A robot with wrong distances or a lying record has its own sightings off: those that
+   pair are rejected, those that do not pair land nowhere.
+3. **Per robot, its heading test.** A robot whose compass is broken has its own
+   sightings turned: its estimated ψ absorbs the turn, positions all fit, and only the
+   others' masks of it (modulo π) disagree, all by one offset Δ. With the mask model's
+   density f (the correct mask, the side/front confusion at ±90°, uniform otherwise),
+   the generalised likelihood ratio ``2·max_Δ Σ log f(δ_k − Δ)/f(δ_k)`` over the
+   others' masks δ_k of r is χ²₁ under "r is sound" (Wilks; Δ on a 1° grid) *if the
+   masks err independently*. They do not always: a sound robot is seen turned as a whole
+   with the measured probability ``rho`` (its body turned while the others looked), which
+   a broken compass cannot be told from. So the heading test's p-value is
+   ``max(p_Wilks, rho)``: masks name a robot only once they are better than that.
+4. **The verdict.** A robot is *rejected* when the smaller of its two p-values, doubled
+   (Bonferroni over the two tests), is below :data:`ALPHA` (the false-alarm rate per
+   robot and run). Nobody rejected: the fleet is consistent; its rejected edges are
+   wrong pairings, dropped, and the rest fitted again. Someone rejected: each rejected
+   robot r (smallest p first, tie: lowest id) is left out (its sightings and the
+   others' sightings of it) and the rest fitted again; r is a *candidate* when the rest
+   is connected and nobody in it is rejected. Exactly one candidate is *named*; none, or
+   more than one, and nobody can be trusted: the fleet stops (same reason on every
+   agent).
+
+One threshold with a meaning (:data:`ALPHA`) replaces the rules of thumb. Deterministic:
+measurements are taken in canonical order (owner, target) and ties broken by id, so every
+agent names the same robot from the same records, in any order.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.stats import chi2
+
+from agent.core.formation.frame.poses import PoseFrame, PoseMeasurement, fit_poses
+from agent.core.formation.frame.records import NeighborRecord
+from agent.core.perception.sighting_noise import SightingNoise
+
+#: The false-alarm rate of the per-robot test, per robot and run: a sound robot is
+#: rejected (and, if the rest then passes, left out) with at most this probability.
+ALPHA = 1e-4
+#: The false-alarm rate of one sighting's χ² test (step 1).
+ALPHA_SIGHTING = 1e-6
+#: Mask offsets tried by the heading test (step 3): every degree of the half circle.
+MASK_GRID = np.radians(np.arange(0.0, 180.0, 1.0))
+
+
+@dataclass(frozen=True)
+class RobotTest:
+    """One robot's two tests (module docstring, steps 2-3)."""
+
+    robot: int
+    edges: int
+    rejected_edges: int
+    strays: int  #: its own sightings no pair uses
+    lost: int  #: of which land on no robot
+    p_position: float
+    masks: int  #: the others' masks of it
+    mask_offset: float  #: rad, the offset Δ the masks agree on best (modulo π)
+    p_heading: float
+
+    @property
+    def p(self) -> float:
+        """Bonferroni over the two tests."""
+        return min(1.0, 2.0 * min(self.p_position, self.p_heading))
+
+    def describe(self) -> str:
+        return (
+            f"robot {self.robot}: {self.rejected_edges}/{self.edges} pairs rejected, "
+            f"{self.lost}/{self.strays} strays lost (p {self.p_position:.1e}), masks {math.degrees(self.mask_offset):+.0f}° over "
+            f"{self.masks} (p {self.p_heading:.1e})"
+        )
+
+
+@dataclass(frozen=True)
+class FaultVerdict:
+    """The outcome of the test: who is named, what to plan on, and why.
+
+    ``poses`` is the fit to plan on (rejected edges dropped, the named robot left out);
+    None when the fleet must stop (``ok`` False)."""
+
+    ok: bool
+    named: tuple[int, ...]
+    poses: PoseFrame | None
+    dropped: tuple[tuple[int, int], ...]
+    tests: tuple[RobotTest, ...]
+    reason: str
+
+
+def _edge(m: PoseMeasurement) -> tuple[int, int]:
+    return (min(m.owner, m.target), max(m.owner, m.target))
+
+
+def sighting_chi2(poses: PoseFrame, noise: SightingNoise) -> np.ndarray:
+    """χ² of every measurement of ``poses`` (in its order), in its owner's fixed frame."""
+    if not poses.measurements:
+        return np.zeros(0)
+    index = {rid: k for k, rid in enumerate(poses.ids)}
+    o = np.array([index[m.owner] for m in poses.measurements])
+    t = np.array([index[m.target] for m in poses.measurements])
+    v = np.array([m.vector for m in poses.measurements], dtype=np.float64).reshape(-1, 2)
+    psi = poses.headings[o]
+    c, s = np.cos(psi), np.sin(psi)
+    rel = poses.positions[t] - poses.positions[o]  # common frame
+    own = np.stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]], axis=1)
+    return noise.chi2(v, own - v)
+
+
+def tail_at_least(p: Sequence[float], k: int) -> float:
+    """``P(K ≥ k)`` for K the number of successes of independent trials with
+    probabilities ``p`` (Poisson-binomial, exact by dynamic programming)."""
+    if k <= 0:
+        return 1.0
+    dist = np.zeros(len(p) + 1)
+    dist[0] = 1.0
+    for q in p:
+        dist[1:] = dist[1:] * (1.0 - q) + dist[:-1] * q
+        dist[0] *= 1.0 - q
+    return float(min(1.0, max(0.0, dist[k:].sum())))
+
+
+def mask_test(deltas: Sequence[float], noise: SightingNoise) -> tuple[float, float]:
+    """(Δ, p-value) of the heading test of step 3 over mask misfits ``deltas`` (rad)."""
+    d = np.asarray(deltas, dtype=np.float64)
+    if d.size == 0:
+        return 0.0, 1.0
+    logf = np.log(noise.mask_density(d[None, :] - MASK_GRID[:, None])).sum(axis=1)
+    best = int(np.argmax(np.round(logf, 12)))  # the first (smallest Δ) of equal maxima
+    stat = max(0.0, 2.0 * float(logf[best] - logf[0]))
+    offset = float((MASK_GRID[best] + math.pi / 2) % math.pi - math.pi / 2)
+    return offset, float(chi2.sf(stat, 1))
+
+
+def mask_deltas(poses: PoseFrame, target: int) -> list[float]:
+    """δ = ψ_t − ψ_o − (β + θ − π/2) of the others' masks of ``target`` (by owner id)."""
+    index = {rid: k for k, rid in enumerate(poses.ids)}
+    out = []
+    for m in sorted(poses.measurements, key=lambda m: (m.owner, m.target)):
+        if m.target != target or not math.isfinite(m.orientation):
+            continue
+        ref = math.atan2(float(m.vector[1]), float(m.vector[0])) + m.orientation - math.pi / 2
+        out.append(float(poses.headings[index[target]] - poses.headings[index[m.owner]] - ref))
+    return out
+
+
+def rejected_edges(poses: PoseFrame, noise: SightingNoise) -> dict[tuple[int, int], bool]:
+    """Every edge of ``poses`` (ascending) and whether it is rejected (step 1)."""
+    q = float(chi2.isf(ALPHA_SIGHTING, 2))
+    x2 = sighting_chi2(poses, noise)
+    out: dict[tuple[int, int], bool] = {}
+    for k, m in enumerate(poses.measurements):
+        e = _edge(m)
+        out[e] = out.get(e, False) or bool(x2[k] > q)
+    return dict(sorted(out.items()))
+
+
+def strays(
+    poses: PoseFrame,
+    records: Sequence[NeighborRecord],
+    noise: SightingNoise,
+    elsewhere: np.ndarray | None = None,
+) -> dict[int, list[tuple[float, bool]]]:
+    """Each robot's stray sightings (step 2): (distance, lands on a robot) in record order.
+    ``elsewhere`` (k, 2): more places, common frame, where a robot stands that ``poses``
+    leaves out (a sighting of it lands)."""
+    q = float(chi2.isf(ALPHA_SIGHTING, 2))
+    used: dict[int, set[tuple[float, float]]] = {}
+    for m in poses.measurements:
+        used.setdefault(m.owner, set()).add((float(m.vector[0]), float(m.vector[1])))
+    index = {rid: k for k, rid in enumerate(poses.ids)}
+    out: dict[int, list[tuple[float, bool]]] = {}
+    for rec in sorted(records, key=lambda r: r.robot_id):
+        if rec.robot_id not in index:
+            continue
+        k = index[rec.robot_id]
+        mine = used.get(rec.robot_id, set())
+        vecs = np.asarray(rec.neighbours, dtype=np.float64).reshape(-1, 2)
+        keep = [v for v in vecs if (float(v[0]), float(v[1])) not in mine]
+        if not keep:
+            continue
+        v = np.array(keep)
+        c, s = math.cos(poses.headings[k]), math.sin(poses.headings[k])
+        others = np.delete(np.arange(len(poses.ids)), k)
+        places = poses.positions[others]
+        if elsewhere is not None and len(elsewhere):
+            places = np.vstack([places, np.asarray(elsewhere, dtype=np.float64).reshape(-1, 2)])
+        rel = places - poses.positions[k]  # common frame
+        own = np.stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]], axis=1)
+        row = []
+        for x in v:
+            e = own - x  # to every other robot, in this robot's fixed frame
+            lands = bool(len(e)) and float(noise.chi2(np.repeat(x[None], len(e), 0), e).min()) <= q
+            row.append((float(np.hypot(*x)), lands))
+        out[rec.robot_id] = row
+    return out
+
+
+def robot_tests(
+    poses: PoseFrame,
+    noise: SightingNoise,
+    records: Sequence[NeighborRecord] = (),
+    elsewhere: np.ndarray | None = None,
+) -> tuple[RobotTest, ...]:
+    """Steps 1-3 for every robot of ``poses`` (ascending id); ``records`` give the
+    strays (none without), ``elsewhere`` as :func:`strays`."""
+    edges = rejected_edges(poses, noise)
+    stray = strays(poses, records, noise, elsewhere)
+    dist: dict[tuple[int, int], list[float]] = {}
+    for m in poses.measurements:
+        dist.setdefault(_edge(m), []).append(float(np.hypot(*m.vector)))
+    out = []
+    for r in poses.ids:
+        mine = [e for e in edges if r in e]
+        own = stray.get(r, [])
+        probs = [float(noise.p_reject(float(np.mean(dist[e])))) for e in mine]
+        probs += [float(noise.p_stray(d)) for d, _ in own]
+        k = sum(edges[e] for e in mine)
+        lost = sum(not lands for _, lands in own)
+        deltas = mask_deltas(poses, r)
+        offset, p_h = mask_test(deltas, noise)
+        p_h = max(p_h, noise.rho) if deltas else p_h
+        p_pos = tail_at_least(probs, k + lost)
+        out.append(RobotTest(r, len(mine), k, len(own), lost, p_pos, len(deltas), offset, p_h))
+    return tuple(out)
+
+
+def _in_frame_of(
+    poses: PoseFrame, ids: tuple[int, ...], frame: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Poses of ``ids`` (ascending) re-expressed in ``frame``'s fixed frame: a start."""
+    k = poses.ids.index(frame)
+    c, s = math.cos(-poses.headings[k]), math.sin(-poses.headings[k])
+    rows = [poses.ids.index(i) for i in ids]
+    rel = poses.positions[rows] - poses.positions[k]
+    pos = np.stack([c * rel[:, 0] - s * rel[:, 1], s * rel[:, 0] + c * rel[:, 1]], axis=1)
+    psi = np.asarray((poses.headings[rows] - poses.headings[k] + math.pi) % (2 * math.pi) - math.pi)
+    return pos, psi
+
+
+def refit(
+    poses: PoseFrame, ids: Sequence[int], keep: Sequence[PoseMeasurement]
+) -> PoseFrame | None:
+    """The robust fit again over ``ids`` and the measurements ``keep``, started from the
+    current poses; None when they no longer connect at least two robots."""
+    rid = tuple(sorted(ids))
+    if len(rid) < 2:
+        return None
+    try:
+        first = fit_poses(rid, keep)  # validates, and picks the frame robot
+        start = _in_frame_of(poses, rid, first.frame_robot)
+        return fit_poses(rid, keep, first.frame_robot, start)
+    except ValueError:
+        return None
+
+
+def seen_by_others(poses: PoseFrame, rest: PoseFrame, robot: int) -> np.ndarray:
+    """Where ``rest`` (the fit without ``robot``) saw it: the mean of the others'
+    sightings of it in ``rest``'s frame (sorted by owner); with none, its own estimate
+    in ``poses`` mapped into ``rest``'s frame through the robots both share."""
+    seen = [
+        rest.to_common(m.owner, m.vector)[0]
+        for m in sorted(poses.measurements, key=lambda m: (m.owner, m.target))
+        if m.target == robot and m.owner in rest.ids
+    ]
+    if seen:
+        return np.asarray(np.mean(np.array(seen), axis=0))
+    common = [i for i in rest.ids if i in poses.ids]
+    a = np.array([poses.positions[poses.ids.index(i)] for i in common])
+    b = np.array([rest.positions[rest.ids.index(i)] for i in common])
+    ca, cb = a.mean(axis=0), b.mean(axis=0)
+    u, _, vt = np.linalg.svd((a - ca).T @ (b - cb))
+    r = vt.T @ u.T
+    if np.linalg.det(r) < 0:
+        vt[-1] *= -1
+        r = vt.T @ u.T
+    return np.asarray(cb + r @ (poses.positions[poses.ids.index(robot)] - ca))
+
+
+def _without(poses: PoseFrame, robot: int) -> PoseFrame | None:
+    rest = [i for i in poses.ids if i != robot]
+    keep = [m for m in poses.measurements if robot not in (m.owner, m.target)]
+    return refit(poses, rest, keep)
+
+
+def _clean(
+    poses: PoseFrame, noise: SightingNoise
+) -> tuple[PoseFrame | None, tuple[tuple[int, int], ...]]:
+    """``poses`` with its rejected edges dropped (wrong pairings) and fitted again; None
+    when the rest no longer connects every robot."""
+    edges = rejected_edges(poses, noise)
+    drop = tuple(e for e, bad in edges.items() if bad)
+    if not drop:
+        return poses, ()
+    keep = [m for m in poses.measurements if not edges[_edge(m)]]
+    again = refit(poses, poses.ids, keep)
+    if again is None or set(again.ids) != set(poses.ids):
+        return None, drop
+    return again, drop
+
+
+def _names(drop: Sequence[tuple[int, int]], most: int = 8) -> str:
+    """The pairs ``i-j`` (the first ``most``, and how many more)."""
+    shown = ", ".join(f"{i}-{j}" for i, j in drop[:most])
+    return shown + (f" and {len(drop) - most} more" if len(drop) > most else "")
+
+
+def fault_test(
+    poses: PoseFrame,
+    noise: SightingNoise,
+    records: Sequence[NeighborRecord] = (),
+    alpha: float = ALPHA,
+    search: bool = True,
+) -> FaultVerdict:
+    """The test of the module docstring on a fitted :class:`PoseFrame`; ``search``
+    False: a rejected robot is not sought to be named (no fit without it: a frame that may
+    not name anyone needs no search, and each fit costs ~1 CPU s at 100 NAOs).
+
+    Raises
+    ------
+    ValueError
+        ``alpha`` outside (0, 1).
+    """
+    if not 0.0 < alpha < 1.0:
+        raise ValueError(f"alpha must be in (0, 1), got {alpha}")
+    tests = robot_tests(poses, noise, records)
+    rejected = sorted((t for t in tests if t.p < alpha), key=lambda t: (t.p, t.robot))
+    if not rejected:
+        clean, drop = _clean(poses, noise)
+        if clean is None:
+            return FaultVerdict(False, (), None, drop, tests,
+                                f"the pairs {_names(drop)} do not fit and without them the fleet is "
+                                "not connected; nobody moves")  # fmt: skip
+        why = "every robot passes its test" + (
+            f"; pairs {_names(drop)} rejected (wrong pairings)" if drop else ""
+        )
+        return FaultVerdict(True, (), clean, drop, tests, why)
+    if not search:
+        why = f"{len(rejected)} robot(s) rejected ({rejected[0].describe()}); not searched"
+        return FaultVerdict(False, (), None, (), tests, why)
+    candidates: list[tuple[int, PoseFrame, tuple[tuple[int, int], ...]]] = []
+    for t in rejected:
+        rest = _without(poses, t.robot)
+        if rest is None or len(rest.ids) != len(poses.ids) - 1:
+            continue
+        at = seen_by_others(poses, rest, t.robot).reshape(1, 2)
+        if any(u.p < alpha for u in robot_tests(rest, noise, records, at)):
+            continue
+        clean, drop = _clean(rest, noise)
+        if clean is not None:
+            candidates.append((t.robot, clean, drop))
+    first = rejected[0].describe()
+    if len(candidates) == 1:
+        r, clean, drop = candidates[0]
+        extra = f"; pairs {_names(drop)} rejected (wrong pairings)" if drop else ""
+        why = (f"robot {r} named: its sightings do not fit at p < {alpha:g} and the others pass "
+               f"without it ({next(t for t in tests if t.robot == r).describe()}){extra}")  # fmt: skip
+        return FaultVerdict(True, (r,), clean, drop, tests, why)
+    if candidates:
+        names = sorted(c[0] for c in candidates)
+        why = f"ambiguous: leaving out any of {names} makes the rest pass ({first}); nobody moves"
+        return FaultVerdict(False, (), None, (), tests, why)
+    why = f"inconsistent beyond one robot: no single robot explains it ({first}); nobody moves"
+    return FaultVerdict(False, (), None, (), tests, why)

@@ -1,0 +1,195 @@
+"""The measured noise of a sighting: what a neighbour record's entries are worth
+(NAO paper 3.2, eqs. 6-8: distance from the D-base, bearing from the pixel and the
+compass; 3.1.2: the mask orientation of the M-base), as fitted on rendered records with
+their truth (``python -m tools.fit_noise``, from the corpus of ``python -m tools.corpus``).
+
+A sighting ``v_ij`` of robot i, in its fixed frame, at true distance d from j:
+
+* **distance error** (along the line of sight): Gaussian,
+  ``σ_r(d)² = r0² + (r_lin·d)² + (r1·d²)²`` (a floor, and the distance's own error: it
+  comes from the mask's size in the image, eq. 6, which shrinks as 1/d, so a pixel's
+  error costs ∝ d²; independent errors add in variance; ``r_lin``, a relative error, is
+  0 for the rendered perception and serves synthetic records, :meth:`SightingNoise.synthetic`);
+* **error across the line of sight** (in metres at the target): Gaussian,
+  ``σ_t(d)² = t0² + (t_lin·d)² + (t1·d²)²`` (the bearing of a pixel and the compass's
+  heading, and the fit's own spread, which grows with the lever arm);
+* **rejected pairs**: gross errors happen (two NAOs merged into one detection, a NAO
+  half hidden, a sighting paired with the wrong robot), and the heavy tail of the
+  errors above is not Gaussian: the rate at which the fleet's χ² test of its fitted
+  frame rejects a pair of *sound* robots at distance d is
+  ``p_reject(d) = clip(g0 + g1·d, P_MIN, P_MAX)``, measured with that very test on
+  fault-free fleets;
+* **stray sightings**: a sighting of a sound robot that no pair explains (the other robot
+  did not see it back, or the pairing left it out) lands on no robot within the χ² gate
+  of the fitted frame with probability ``p_stray(d) = clip(s0 + s1·d, P_MIN, P_MAX)``
+  (a ghost or merged detection), measured like ``p_reject``;
+* **mask orientation** θ_ij (the relative orientation of the matched mask, known modulo π):
+  its error modulo π is ``N(0, σ_m)`` with probability ``w0``, the side/front confusion
+  ``N(±π/2, σ_m)`` with ``w90``, otherwise uniform (front/back, 180°, is folded away by
+  the modulo);
+* **a robot seen turned as a whole**: with probability ``rho`` the others' masks of a
+  *sound* robot all agree on an offset that the per-mask model above cannot explain
+  (they saw its body turned: mid-turn in its own search, or a bias of the masks for that
+  robot's aspect). A broken compass looks exactly the same from outside (the robot's
+  own sightings turn, its fitted ψ with them, and the others' masks disagree with it by
+  one offset), so no mask evidence can call a robot faulty with a false-alarm rate below
+  ``rho``.
+
+The fault test of the common frame (:mod:`agent.core.formation.frame.fault_test`) uses
+it: a sighting's normalised residual is χ² with two degrees of freedom under this model,
+and ``p_reject`` is the base rate of its per-robot count of rejected pairs.
+
+The parameters ship in ``agent/core/perception/data/sighting_noise.json`` beside the
+M-base and D-base, with the corpus they were fitted on.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from agent.core.perception.mbase import DATA_DIR
+
+FORMAT = 1
+P_MIN = 1e-3  #: the smallest rejection rate the model admits (a pair can always be wrong)
+P_MAX = 0.5  #: the largest (beyond it a sighting carries no information)
+
+
+@dataclass(frozen=True)
+class SightingNoise:
+    """The fitted noise model (module docstring); lengths in metres, angles in radians."""
+
+    r0: float
+    r1: float
+    t0: float
+    t1: float
+    g0: float
+    g1: float
+    sigma_mask: float
+    w0: float
+    w90: float
+    rho: float = 0.0  #: rate of sound robots seen turned as a whole (module docstring)
+    s0: float = 0.0
+    s1: float = 0.0
+    r_lin: float = 0.0
+    t_lin: float = 0.0
+    sightings: int = 0  #: how many matched sightings it was fitted on
+    corpus: str = ""  #: which corpus (and split) it was fitted on
+
+    def __post_init__(self) -> None:
+        for name in (
+            "r0",
+            "r1",
+            "t0",
+            "t1",
+            "g0",
+            "g1",
+            "sigma_mask",
+            "w0",
+            "w90",
+            "rho",
+            "s0",
+            "s1",
+        ):
+            v = getattr(self, name)
+            if not math.isfinite(v):
+                raise ValueError(f"sighting noise {name} must be finite, got {v}")
+        if self.r0 <= 0 or self.t0 <= 0 or min(self.r1, self.t1, self.r_lin, self.t_lin) < 0:
+            raise ValueError("sighting noise: r0, t0 must be > 0 and r1, t1, r_lin, t_lin >= 0")
+        if not 0 < self.sigma_mask < math.pi / 4:
+            raise ValueError(f"sigma_mask must be in (0, π/4), got {self.sigma_mask}")
+        if not 0.0 <= self.rho <= 1.0:
+            raise ValueError(f"rho must be in [0, 1], got {self.rho}")
+        if not (0 <= self.w0 <= 1 and 0 <= self.w90 <= 1 and self.w0 + self.w90 <= 1):
+            raise ValueError(f"mask weights w0={self.w0}, w90={self.w90} must be a distribution")
+
+    def sigma_radial(self, d: np.ndarray | float) -> np.ndarray:
+        """σ of the distance (m) at true distance ``d``."""
+        x = np.asarray(d, dtype=np.float64)
+        return np.asarray(np.sqrt(self.r0**2 + (self.r_lin * x) ** 2 + (self.r1 * x**2) ** 2))
+
+    def sigma_tangential(self, d: np.ndarray | float) -> np.ndarray:
+        """σ across the line of sight (m) at distance ``d``."""
+        x = np.asarray(d, dtype=np.float64)
+        return np.asarray(np.sqrt(self.t0**2 + (self.t_lin * x) ** 2 + (self.t1 * x**2) ** 2))
+
+    def p_reject(self, d: np.ndarray | float) -> np.ndarray:
+        """Probability that the χ² test rejects a pair of sound robots at distance ``d``."""
+        p = self.g0 + self.g1 * np.asarray(d, dtype=np.float64)
+        return np.asarray(np.clip(p, P_MIN, P_MAX))
+
+    def p_stray(self, d: np.ndarray | float) -> np.ndarray:
+        """Probability that a sound robot's unpaired sighting at ``d`` lands on no robot."""
+        p = self.s0 + self.s1 * np.asarray(d, dtype=np.float64)
+        return np.asarray(np.clip(p, P_MIN, P_MAX))
+
+    def chi2(self, vector: np.ndarray, error: np.ndarray) -> np.ndarray:
+        """Normalised squared residual (χ², 2 degrees of freedom) of ``error`` (k, 2), the
+        misfit of sightings ``vector`` (k, 2), both in the owner's fixed frame: split along
+        and across each line of sight and divided by σ_r, σ_t at the sighting's distance."""
+        v = np.asarray(vector, dtype=np.float64).reshape(-1, 2)
+        e = np.asarray(error, dtype=np.float64).reshape(-1, 2)
+        d = np.hypot(v[:, 0], v[:, 1])
+        u = v / np.maximum(d, 1e-9)[:, None]
+        along = np.einsum("ij,ij->i", e, u)
+        across = e[:, 1] * u[:, 0] - e[:, 0] * u[:, 1]
+        return np.asarray(
+            (along / self.sigma_radial(d)) ** 2 + (across / self.sigma_tangential(d)) ** 2
+        )
+
+    def mask_density(self, delta: np.ndarray | float) -> np.ndarray:
+        """Density (per radian, over a period of π) of a mask error ``delta`` modulo π."""
+        x = np.asarray(delta, dtype=np.float64)
+        x = (x + math.pi / 2) % math.pi - math.pi / 2
+        s = self.sigma_mask
+        norm = 1.0 / (s * math.sqrt(2 * math.pi))
+
+        def bump(c: float) -> np.ndarray:  # wrapped: the nearest copy of c modulo π
+            y = (x - c + math.pi / 2) % math.pi - math.pi / 2
+            return np.asarray(norm * np.exp(-0.5 * (y / s) ** 2))
+
+        uniform = (1.0 - self.w0 - self.w90) / math.pi
+        return np.asarray(self.w0 * bump(0.0) + self.w90 * bump(math.pi / 2) + uniform)
+
+    @classmethod
+    def synthetic(cls, floor: float, relative: float = 0.0, bearing: float = 0.0) -> SightingNoise:
+        """The model of synthetic records whose sightings carry uniform noise: ±``relative``
+        of the distance, ±``bearing`` (rad) across, and a disc of radius 2·``floor`` (σ of
+        each: the bound / √3, and floor = R/2 for the disc); no gross errors, and masks as
+        the shipped model's. For tests and the papers' Monte Carlo, whose noise is not the
+        rendered perception's."""
+        shipped = shipped_noise()
+        third = 1.0 / math.sqrt(3.0)
+        return cls(r0=floor, r1=0.0, t0=floor, t1=0.0, g0=0.0, g1=0.0,
+                   sigma_mask=shipped.sigma_mask, w0=shipped.w0, w90=shipped.w90, rho=shipped.rho,
+                   r_lin=relative * third, t_lin=bearing * third, corpus="synthetic")  # fmt: skip
+
+    def save(self, directory: Path = DATA_DIR, stem: str = "sighting_noise") -> Path:
+        path = Path(directory) / f"{stem}.json"
+        doc = {"format": FORMAT, **asdict(self)}
+        path.write_text(json.dumps(doc, indent=1, sort_keys=True) + "\n")
+        return path
+
+    @classmethod
+    def load(cls, directory: Path | None = None, stem: str = "sighting_noise") -> SightingNoise:
+        """The model in ``directory`` (default: the shipped one); ``ValueError`` when the
+        file is of another format or a parameter is out of range."""
+        path = (DATA_DIR if directory is None else Path(directory)) / f"{stem}.json"
+        doc = json.loads(path.read_text())
+        if doc.get("format") != FORMAT:
+            raise ValueError(
+                f"{path}: sighting noise format {doc.get('format')!r}, expected {FORMAT}"
+            )
+        doc.pop("format")
+        return cls(**doc)
+
+
+@lru_cache(maxsize=1)
+def shipped_noise() -> SightingNoise:
+    """The model that ships with the agent (loaded once per process)."""
+    return SightingNoise.load()

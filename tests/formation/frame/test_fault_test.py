@@ -1,0 +1,146 @@
+"""The per-robot fault test of the common frame (agent/core/formation/frame/fault_test.py) and
+the sighting noise model it rests on (agent/core/perception/sighting_noise.py)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.stats import binom
+
+from agent.core.formation.frame import fault_test as ft
+from agent.core.formation.frame.poses import build_poses
+from agent.core.perception.sighting_noise import SightingNoise
+from tests.formation.pose_fleets import fault, sim_layout, unaligned_records
+
+#: A model matching the synthetic records below (±2 % distance, ±1° bearing, uniform).
+NOISE = SightingNoise(
+    r0=0.01, r1=0.015, t0=0.01, t1=0.012, g0=0.02, g1=0.0,
+    sigma_mask=math.radians(4.0), w0=0.9, w90=0.05,
+)  # fmt: skip
+
+
+def fleet(seed: int, n: int = 8, kind: str = "", victim: int = 3) -> list:
+    rng = np.random.default_rng(seed)
+    pos = sim_layout(rng, n)
+    heads = rng.uniform(-math.pi, math.pi, n)
+    recs = unaligned_records(list(range(1, n + 1)), pos, heads, rng, 0.02, math.radians(1.0))
+    if kind:
+        recs = [fault(r, kind) if r.robot_id == victim else r for r in recs]
+    return recs
+
+
+# ------------------------------------------------------------------ the noise model
+def test_chi2_splits_along_and_across_the_line_of_sight() -> None:
+    m = SightingNoise(
+        r0=0.1, r1=0.0, t0=0.05, t1=0.0, g0=0.0, g1=0.0, sigma_mask=0.1, w0=1.0, w90=0.0
+    )
+    v = np.array([[2.0, 0.0], [0.0, 1.0]])
+    e = np.array([[0.1, 0.05], [0.05, 0.0]])  # 1σ along + 1σ across; 1σ across only
+    assert m.chi2(v, e) == pytest.approx([2.0, 1.0])
+
+
+def test_mask_density_is_a_density_over_half_a_turn() -> None:
+    x = np.linspace(-math.pi / 2, math.pi / 2, 20001)
+    f = NOISE.mask_density(x)
+    assert float(np.trapezoid(f, x)) == pytest.approx(1.0, abs=1e-3)
+    assert NOISE.mask_density(0.3) == pytest.approx(NOISE.mask_density(0.3 + math.pi))
+
+
+def test_rejection_rate_is_clipped() -> None:
+    m = SightingNoise(
+        r0=0.1, r1=0.0, t0=0.1, t1=0.0, g0=-1.0, g1=10.0, sigma_mask=0.1, w0=1.0, w90=0.0
+    )
+    assert m.p_reject(0.0) == pytest.approx(1e-3) and m.p_reject(3.0) == pytest.approx(0.5)
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [("r0", 0.0), ("t0", -1.0), ("r1", -0.1), ("sigma_mask", 0.0), ("sigma_mask", 1.0),
+     ("w0", 1.2), ("w90", -0.1), ("g0", math.nan)],
+)  # fmt: skip
+def test_model_refuses_each_bad_field(field: str, value: float) -> None:
+    good = dict(r0=0.1, r1=0.0, t0=0.1, t1=0.0, g0=0.0, g1=0.0, sigma_mask=0.1, w0=0.5, w90=0.2)
+    with pytest.raises(ValueError):
+        SightingNoise(**{**good, field: value})
+
+
+def test_model_round_trip_and_format(tmp_path: Path) -> None:
+    NOISE.save(tmp_path)
+    assert SightingNoise.load(tmp_path) == NOISE
+    (tmp_path / "sighting_noise.json").write_text('{"format": 99}')
+    with pytest.raises(ValueError, match="format"):
+        SightingNoise.load(tmp_path)
+
+
+def test_the_shipped_model_loads() -> None:
+    m = SightingNoise.load()
+    assert m.sightings > 1000 and 0.0 < m.sigma_radial(1.0) < 0.2
+
+
+# ------------------------------------------------------------------ the statistics
+def test_tail_known_answers() -> None:
+    assert ft.tail_at_least([0.5, 0.5], 0) == 1.0
+    assert ft.tail_at_least([0.5, 0.5], 1) == pytest.approx(0.75)
+    assert ft.tail_at_least([0.5, 0.5], 2) == pytest.approx(0.25)
+    assert ft.tail_at_least([0.1, 0.2], 2) == pytest.approx(0.02)
+    assert ft.tail_at_least([], 1) == 0.0
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(1, 30), p=st.floats(0.001, 0.5), k=st.integers(0, 31))
+def test_tail_is_the_binomial_for_equal_rates(n: int, p: float, k: int) -> None:
+    assert ft.tail_at_least([p] * n, k) == pytest.approx(float(binom.sf(k - 1, n, p)), abs=1e-12)
+
+
+def test_mask_test_finds_a_common_offset() -> None:
+    assert ft.mask_test([], NOISE) == (0.0, 1.0)
+    off, p = ft.mask_test([math.radians(a) for a in (39, 41, 40, 42)], NOISE)
+    assert math.degrees(off) == pytest.approx(40.0, abs=2.0) and p < 1e-6
+    off, p = ft.mask_test([math.radians(a) for a in (1, -2, 3, 88)], NOISE)
+    assert p > 0.05  # one side/front confusion among correct masks: nothing
+
+
+# ------------------------------------------------------------------ the verdict
+def test_a_sound_fleet_passes() -> None:
+    for seed in range(3):
+        v = ft.fault_test(build_poses(fleet(seed)), NOISE)
+        assert v.ok and v.named == () and v.poses is not None, v.reason
+
+
+@pytest.mark.parametrize("kind", ["rotate", "scale", "shift"])
+def test_the_faulty_robot_is_named(kind: str) -> None:
+    v = ft.fault_test(build_poses(fleet(1, kind=kind, victim=3)), NOISE)
+    assert v.ok and v.named == (3,), v.reason
+    assert v.poses is not None and 3 not in v.poses.ids
+
+
+def test_same_verdict_for_shuffled_records() -> None:
+    recs = fleet(2, kind="scale", victim=5)
+    a = ft.fault_test(build_poses(recs), NOISE)
+    order = np.random.default_rng(7).permutation(len(recs))
+    b = ft.fault_test(build_poses([recs[k] for k in order]), NOISE)
+    assert a.named == b.named == (5,) and a.reason == b.reason
+    assert a.poses is not None and b.poses is not None
+    assert np.array_equal(a.poses.positions, b.poses.positions)
+
+
+def test_alpha_out_of_range_is_refused() -> None:
+    poses = build_poses(fleet(0))
+    for alpha in (0.0, 1.0, -0.1):
+        with pytest.raises(ValueError, match="alpha"):
+            ft.fault_test(poses, NOISE, alpha=alpha)
+
+
+def test_a_wrong_pairing_is_a_rejected_pair_not_a_faulty_robot() -> None:
+    recs = fleet(3)
+    bad = recs[0]
+    nb = bad.neighbours.copy()
+    nb[0] = nb[0] * 1.6  # one sighting far off: that pair is rejected, robot 1 is sound
+    recs[0] = type(bad)(bad.robot_id, nb, bad.orientations, bad.confidences)
+    v = ft.fault_test(build_poses(recs), NOISE)
+    assert v.ok and v.named == (), v.reason

@@ -1,0 +1,115 @@
+"""The corpus of rendered records (tools/corpus.py), the noise fit (tools/fit_noise.py)
+and the corpus evaluation's gate (tools/eval_frames.py --corpus), which CI runs."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from agent.core.perception.sensor_fault import SensorFault
+from agent.wire import NeighborRecordMsg
+from tools import corpus, eval_frames, fit_noise
+
+CORPUS = Path(__file__).resolve().parents[1] / "data" / "frames"
+
+
+def test_fleet_cases_are_a_fixed_list() -> None:
+    a = corpus.fleet_cases(25)
+    assert a == corpus.fleet_cases(25) and a[3:5] == corpus.fleet_cases(2, first=3)
+    assert [c.robots for c in a[:3]] == list(corpus.SIZES[:3])
+    assert [c.headings for c in a[:3]] == list(corpus.HEADINGS)
+    assert a[0].seed == corpus.FIRST_SEED and a[0].name == "n04_random_s1000"
+    with pytest.raises(ValueError, match=">= 0"):
+        corpus.fleet_cases(-1)
+
+
+def test_held_out_is_a_quarter_by_seed() -> None:
+    seeds = range(corpus.FIRST_SEED, corpus.FIRST_SEED + 400)
+    assert sum(corpus.held_out(s) for s in seeds) == 100
+
+
+def _fleet_file(tmp_path: Path) -> Path:
+    recs = [
+        {"sender": i, "round": 0, "neighbours": [[1.0, 0.0], [0.0, 2.0]], "orientations": [0.1, 0.2],
+         "confidences": [0.9, 0.8]}
+        for i in (1, 2, 3)
+    ]  # fmt: skip
+    doc = {"format": corpus.FORMAT, "robots": 3, "seed": 1003, "headings": "random", "commit": "",
+           "truth": {"1": [0, 0, 1.0], "2": [1, 0, 2.0], "3": [0, 1, 3.0]}, "records": recs}  # fmt: skip
+    path = tmp_path / "n03_random_s1003.json"
+    path.write_text(json.dumps(doc))
+    return path
+
+
+def test_runs_of_a_fleet_apply_the_agents_own_fault(tmp_path: Path) -> None:
+    runs = corpus.runs_of(_fleet_file(tmp_path))
+    assert [r.fault for r in runs] == ["", *corpus.FAULTS]
+    assert runs[0].victim == -1 and all(r.victim in (1, 2, 3) for r in runs[1:])
+    assert runs == corpus.runs_of(_fleet_file(tmp_path))  # victims are seeded
+    for r in runs[1:]:
+        bad = next(m for m in r.records if m.sender == r.victim)
+        good = next(m for m in runs[0].records if m.sender == r.victim)
+        pts, ori = SensorFault.parse(r.fault).apply(
+            np.array(good.neighbours), np.array(good.orientations)
+        )
+        assert np.allclose(bad.neighbours, pts) and np.allclose(bad.orientations, ori)
+        assert all(
+            m == o for m, o in zip(r.records, runs[0].records, strict=True) if m.sender != r.victim
+        )
+
+
+def test_corpus_errors(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="no corpus fleet files"):
+        corpus.load_corpus(tmp_path)
+    path = _fleet_file(tmp_path)
+    path.write_text(json.dumps({**json.loads(path.read_text()), "format": 99}))
+    with pytest.raises(ValueError, match="corpus format"):
+        corpus.runs_of(path)
+
+
+def test_corrupt_keeps_the_confidences() -> None:
+    rec = NeighborRecordMsg(sender=2, round=0, neighbours=((1.0, 0.0),), orientations=(0.5,),
+                            confidences=(0.7,))  # fmt: skip
+    out = corpus.corrupt(rec, SensorFault("scale", 1.4))
+    assert out.neighbours == ((1.4, 0.0),) and out.confidences == (0.7,) and out.sender == 2
+
+
+def test_quadrature_fit_recovers_a_known_model() -> None:
+    d = np.linspace(0.6, 3.0, 8)
+    sigma = np.hypot(0.01, 0.006 * d**2)
+    a, b = fit_noise._quadrature(d, sigma, np.ones_like(d))
+    assert a == pytest.approx(0.01, rel=1e-3) and b == pytest.approx(0.006, rel=1e-3)
+
+
+def test_binned_and_line() -> None:
+    x = np.array([0.5] * 10 + [1.1] * 10 + [3.4] * 3)
+    y = np.arange(23.0)
+    c, m, n = fit_noise.binned(x, y, np.mean)
+    assert list(n) == [10, 10] and list(c) == [0.5, 1.1] and list(m) == [4.5, 14.5]
+    a, b = fit_noise._line(np.array([1.0, 2.0, 3.0]), np.array([3.0, 5.0, 7.0]), np.ones(3))
+    assert (a, b) == (pytest.approx(1.0), pytest.approx(2.0))
+    a, b = fit_noise._line(np.array([1.0, 2.0]), np.array([3.0, 1.0]), np.ones(2))
+    assert b == 0.0 and a == pytest.approx(2.0)  # a rate never falls with distance
+
+
+def test_the_shipped_model_was_fitted_on_the_corpus() -> None:
+    from agent.core.perception.sighting_noise import SightingNoise
+
+    m = SightingNoise.load()
+    assert "held-out fleets excluded" in m.corpus and m.sightings > 1000
+    assert 0.0 < m.rho < 0.2 and math.isfinite(m.r1)
+
+
+@pytest.mark.slow
+def test_the_corpus_gate(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """No sound robot left out, the faulty robot named in at least the share the
+    estimator holds today, planning refused on at most 1 % of fault-free runs."""
+    rc = eval_frames.main(["--corpus", str(CORPUS), "--png", str(tmp_path / "f.png"),
+                           "--min-named", str(eval_frames.NAMED_FLOOR), "--max-refused", "0.01"])  # fmt: skip
+    out = capsys.readouterr().out
+    assert rc == 0, out
+    assert "without a fault: 0 with a sound robot left out" in out

@@ -1,0 +1,361 @@
+"""``python -m tools.fit_noise [--corpus DIR]``: fit the sighting noise model
+(:mod:`agent.core.perception.sighting_noise`) on the corpus of rendered records
+(``python -m tools.corpus``), and draw it.
+
+Only the fleets without a fault and not held out (:func:`tools.corpus.held_out`) are
+used.
+
+* Masks: each sighting is placed in the world through its owner's *true* start pose (a
+  robot's fixed frame is its start pose, facing +y) and matched to the nearest other
+  robot (within ``GATE0 + GATE1·d``); the mask errors (modulo π) of the matched ones give
+  ``σ_m`` (robust, of those within 20° of 0), ``w0`` (share within 3σ_m of 0) and
+  ``w90`` (share within 3σ_m of ±90°).
+* Each fleet is fitted as the agents' general candidate fits it
+  (:func:`agent.core.formation.frame.poses.fit_from_graph`), and only the fits that are
+  right (every start within 0.15 m and 10° of the truth) are kept: the test's null model
+  is that of a correct frame. Their residuals, along and across each sighting's line of
+  sight, are binned by distance; each bin's σ is the one of a Gaussian with the same
+  median |residual| (robust: the gross errors are what ``p_reject`` counts);
+  ``σ(d)² = a² + (b·d²)²`` is fitted to them in relative terms (least squares on log σ,
+  weighted by the bin's count): ``σ_r(d)``, ``σ_t(d)``.
+* The χ² test of :mod:`agent.core.formation.frame.fault_test` is run on those fits with
+  that σ: the share of their pairs rejected, binned by distance and fitted by a line in
+  d, is ``p_reject``; the share of stray sightings lost, ``p_stray`` (no fault was
+  injected, so every rejection is a false one).
+* ``rho``, the rate of sound robots seen turned as a whole: the share (counted as
+  ``(k + 1) / (n + 1)``) of sound robots whose masks fail the heading test's Wilks
+  statistic at ``TURNED_P``.
+
+Prints the model with its figures, writes it (``--write``: into the shipped data folder)
+and draws ``--png``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import math
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agent.core.formation.frame.poses import PoseFrame
+from agent.core.perception.sighting_noise import SightingNoise
+from agent.wire import NeighborRecordMsg
+from tools.corpus import Run, held_out, load_corpus
+
+GATE0, GATE1 = 0.3, 0.2  #: a sighting is matched when within GATE0 + GATE1·d of a robot
+#: A fit is a correct frame, whose residuals the null model describes, within these
+#: (the frame accuracy the fleet is judged by: docs/results.md)
+FRAME_POS, FRAME_PSI = 0.15, math.radians(10.0)
+TURNED_P = 1e-3  #: a sound robot's masks agree on an offset: Wilks' p below this
+BINS = np.array([0.0, 0.75, 1.0, 1.25, 1.5, 2.0, 2.5, 3.5])
+
+
+@dataclass(frozen=True)
+class Matched:
+    """Every sighting of a set of runs against the truth."""
+
+    distance: np.ndarray  # true distance of the matched robot (nan: not matched)
+    measured: np.ndarray  # |v|
+    radial: np.ndarray  # |v| - d
+    tangential: np.ndarray  # d · bearing error
+    mask: np.ndarray  # mask error modulo π (nan: no mask)
+
+
+def _wrap(a: np.ndarray) -> np.ndarray:
+    return np.asarray((a + math.pi) % (2 * math.pi) - math.pi)
+
+
+def _wrap_half(a: np.ndarray) -> np.ndarray:
+    return np.asarray((a + math.pi / 2) % math.pi - math.pi / 2)
+
+
+def match(runs: list[Run]) -> Matched:
+    """Match every sighting of ``runs`` to the truth (module docstring)."""
+    cols: list[list[float]] = [[], [], [], [], []]
+    for run in runs:
+        ids = sorted(run.truth)
+        pos = np.array([run.truth[i][:2] for i in ids])
+        for rec in run.records:
+            if rec.sender not in run.truth or not rec.neighbours:
+                continue
+            x, y, h = run.truth[rec.sender]
+            v = np.array(rec.neighbours, dtype=np.float64).reshape(-1, 2)
+            c, s = math.cos(h - math.pi / 2), math.sin(h - math.pi / 2)
+            world = np.array([x, y]) + v @ np.array([[c, s], [-s, c]])
+            others = [k for k, i in enumerate(ids) if i != rec.sender]
+            for n, q in enumerate(world):
+                dist = np.hypot(*(pos[others] - q).T)
+                k = others[int(np.argmin(dist))]
+                true_v = pos[k] - np.array([x, y])
+                d = float(np.hypot(*true_v))
+                meas = float(np.hypot(*v[n]))
+                if float(dist.min()) > GATE0 + GATE1 * d:
+                    cols[0].append(math.nan)
+                    cols[1].append(meas)
+                    cols[2].append(math.nan)
+                    cols[3].append(math.nan)
+                    cols[4].append(math.nan)
+                    continue
+                beta_true = math.atan2(true_v[1], true_v[0]) - (
+                    h - math.pi / 2
+                )  # in i's fixed frame
+                beta = math.atan2(v[n, 1], v[n, 0])
+                cols[0].append(d)
+                cols[1].append(meas)
+                cols[2].append(meas - d)
+                cols[3].append(d * float(_wrap(np.array(beta - beta_true))))
+                if len(rec.orientations) == len(rec.neighbours):
+                    hj = run.truth[ids[k]][2]
+                    # h_j - h_i = β_ij + θ_ij - π/2 (modulo π) in the fixed frame of i
+                    want = (hj - h) - beta_true + math.pi / 2
+                    cols[4].append(float(_wrap_half(np.array(rec.orientations[n] - want))))
+                else:
+                    cols[4].append(math.nan)
+    a = [np.array(c) for c in cols]
+    return Matched(*a)
+
+
+def _robust_sigma(e: np.ndarray) -> float:
+    return float(1.4826 * np.median(np.abs(e - np.median(e)))) if e.size else math.nan
+
+
+def _abs_sigma(e: np.ndarray) -> float:
+    """σ of the Gaussian whose |error| has the same median (robust to gross errors up to
+    half of them: those are what ``p_reject`` counts)."""
+    return float(np.median(np.abs(e)) / 0.6745) if e.size else math.nan
+
+
+def binned(
+    x: np.ndarray, y: np.ndarray, stat: Callable[[np.ndarray], Any], least: int = 10
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per distance bin of :data:`BINS` with at least ``least`` samples: the mean x, the
+    statistic of y, and the count."""
+    out: list[tuple[float, float, float]] = []
+    for lo, hi in itertools.pairwise(BINS):
+        inb = (x >= lo) & (x < hi)
+        if inb.sum() >= least:
+            out.append((float(np.mean(x[inb])), float(stat(y[inb])), float(inb.sum())))
+    a = np.array(out, dtype=np.float64).reshape(-1, 3)
+    return a[:, 0], a[:, 1], a[:, 2]
+
+
+def _quadrature(x: np.ndarray, sigma: np.ndarray, w: np.ndarray) -> tuple[float, float]:
+    """``(a, b)`` of ``σ(d)² = a² + (b·d²)²`` fitted to per-bin σ in relative terms (least
+    squares on log σ, weighted by the bins' counts; scipy's ``least_squares``)."""
+    from scipy.optimize import least_squares
+
+    def res(p: np.ndarray) -> np.ndarray:
+        model = np.hypot(p[0], p[1] * x**2)
+        return np.asarray(np.sqrt(w) * (np.log(model) - np.log(sigma)))
+
+    fit = least_squares(res, x0=[float(sigma.min()), 0.01], bounds=([1e-4, 0.0], [1.0, 1.0]))
+    return float(fit.x[0]), float(fit.x[1])
+
+
+def _line(x: np.ndarray, y: np.ndarray, w: np.ndarray) -> tuple[float, float]:
+    """Weighted least-squares line y = a + b·x with a, b >= 0 (scipy's NNLS: a σ or a
+    rate neither goes below zero nor falls with distance)."""
+    from scipy.optimize import nnls
+
+    a_mat = np.stack([np.ones_like(x), x], axis=1) * np.sqrt(w)[:, None]
+    sol, _ = nnls(a_mat, y * np.sqrt(w))
+    return float(sol[0]), float(sol[1])
+
+
+def fit(m: Matched, runs: list[Run], corpus: str) -> tuple[SightingNoise, dict[str, np.ndarray]]:
+    """The model of the module docstring, and its per-bin figures (for the plot)."""
+    mk = m.mask[np.isfinite(m.mask)]
+    sm = _robust_sigma(mk[np.abs(mk) < math.radians(20)])
+    w0 = float(np.mean(np.abs(mk) <= 3 * sm))
+    w90 = float(np.mean(np.abs(mk) >= math.pi / 2 - 3 * sm))
+    fits, runs_kept = fitted(runs)
+    dist, along, across = residuals(fits)
+    x, sr, w = binned(dist, along, _abs_sigma)
+    _, st, _ = binned(dist, across, _abs_sigma)
+    r0, r1 = _quadrature(x, sr, w)
+    t0, t1 = _quadrature(x, st, w)
+    base = SightingNoise(
+        r0=max(r0, 1e-3), r1=r1, t0=max(t0, 1e-3), t1=t1,
+        g0=0.0, g1=0.0, sigma_mask=sm, w0=w0, w90=w90, sightings=int(dist.size), corpus=corpus,
+    )  # fmt: skip
+    ed, bad, wilks, sd, slost = pair_rejections(fits, base, [r.records for r in runs_kept])
+    # the rate at which sound robots' masks agree on an offset the per-mask model cannot
+    # explain (Wilks' p below TURNED_P), counted conservatively ((k + 1) / (n + 1))
+    rho = (float((wilks < TURNED_P).sum()) + 1.0) / (len(wilks) + 1.0)
+    gc, gr, gn = binned(ed, bad, np.mean)
+    g0, g1 = _line(gc, gr, gn)
+    sc, sr_, sn = binned(sd, slost, np.mean)
+    s0, s1 = _line(sc, sr_, sn) if sc.size >= 2 else (0.0, 0.0)
+    model = replace(base, g0=g0, g1=g1, rho=rho, s0=s0, s1=s1)
+    bins = {"d": x, "sr": np.array(sr), "st": np.array(st), "n": w, "dist": dist, "along": along,
+            "across": across, "gd": gc, "gross": gr, "gn": gn, "sd": sc, "stray": sr_, "sn": sn}  # fmt: skip
+    return model, bins
+
+
+def fitted(runs: list[Run]) -> tuple[list[PoseFrame], list[Run]]:
+    """Each run's records fitted as the agents fit them (runs that do not connect left
+    out), and the runs kept."""
+    from agent.adapters import FormationAdapter
+    from agent.core.formation.frame.neighbour_check import DEFAULT_EPSILON
+    from agent.core.formation.frame.pose_pairing import identify_pairs
+    from agent.core.formation.frame.poses import fit_from_graph
+
+    out, kept = [], []
+    for run in runs:
+        try:
+            recs = FormationAdapter.records(run.records)
+            poses = fit_from_graph(identify_pairs(recs, DEFAULT_EPSILON))
+        except ValueError:
+            continue
+        if frame_error(poses, run.truth) <= (FRAME_POS, FRAME_PSI):
+            out.append(poses)
+            kept.append(run)
+    return out, kept
+
+
+def frame_error(
+    poses: PoseFrame, truth: dict[int, tuple[float, float, float]]
+) -> tuple[float, float]:
+    """Worst position (m) and start-heading (rad) error of a fit against the truth, after
+    the rigid motion that maps the common frame onto the world."""
+    from tools.harness.frame_fit import common_frame_pose
+
+    ids = [i for i in poses.ids if i in truth]
+    est = {i: poses.positions[poses.ids.index(i)] for i in ids}
+    x, y, h = common_frame_pose(est, truth)
+    c, s = math.cos(h - math.pi / 2), math.sin(h - math.pi / 2)
+    pos = max(float(np.hypot(*(np.array([x, y]) + np.array([[c, -s], [s, c]]) @ est[i] - truth[i][:2])))
+              for i in ids)  # fmt: skip
+    psi = max(abs(math.remainder(truth[i][2] - (h + poses.headings[poses.ids.index(i)]), 2 * math.pi))
+              for i in ids)  # fmt: skip
+    return pos, psi
+
+
+def residuals(fits: list[PoseFrame]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every sighting's measured distance and its fit residual along and across its line
+    of sight (owner's fixed frame)."""
+    cols: list[list[float]] = [[], [], []]
+    for poses in fits:
+        index = {rid: k for k, rid in enumerate(poses.ids)}
+        for mm in poses.measurements:
+            o, t = index[mm.owner], index[mm.target]
+            c, s = math.cos(poses.headings[o]), math.sin(poses.headings[o])
+            rel = poses.positions[t] - poses.positions[o]
+            own = np.array([c * rel[0] + s * rel[1], -s * rel[0] + c * rel[1]])
+            d = float(np.hypot(*mm.vector))
+            u = mm.vector / max(d, 1e-9)
+            e = own - mm.vector
+            cols[0].append(d)
+            cols[1].append(float(e @ u))
+            cols[2].append(float(e[1] * u[0] - e[0] * u[1]))
+    return np.array(cols[0]), np.array(cols[1]), np.array(cols[2])
+
+
+def pair_rejections(
+    fits: list[PoseFrame], noise: SightingNoise, records: list[tuple[NeighborRecordMsg, ...]]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Every pair of every fit: its mean sighting distance and whether the χ² test rejects
+    it under ``noise``; every robot's heading-test p-value (Wilks'); every stray sighting's
+    distance and whether it is lost (lands on no robot)."""
+    from agent.adapters import FormationAdapter
+    from agent.core.formation.frame.fault_test import mask_deltas, mask_test, rejected_edges, strays
+
+    dist, bad, wilks, sd, slost = [], [], [], [], []
+    for poses, recs in zip(fits, records, strict=True):
+        for row in strays(poses, FormationAdapter.records(recs), noise).values():
+            for d_s, lands in row:
+                sd.append(d_s)
+                slost.append(float(not lands))
+        d: dict[tuple[int, int], list[float]] = {}
+        for mm in poses.measurements:
+            d.setdefault((min(mm.owner, mm.target), max(mm.owner, mm.target)), []).append(
+                float(np.hypot(*mm.vector))
+            )
+        for e, rejected in rejected_edges(poses, noise).items():
+            dist.append(float(np.mean(d[e])))
+            bad.append(float(rejected))
+        for rid in poses.ids:
+            deltas = mask_deltas(poses, rid)
+            if deltas:
+                wilks.append(mask_test(deltas, noise)[1])
+    return np.array(dist), np.array(bad), np.array(wilks), np.array(sd), np.array(slost)
+
+
+def draw(m: Matched, model: SightingNoise, bins: dict[str, np.ndarray], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(1, 4, figsize=(17, 4))
+    d = np.linspace(0.4, 3.2, 50)
+    ax[0].scatter(bins["dist"], bins["along"], s=3, alpha=0.3)
+    for k in (-2, 2):
+        ax[0].plot(d, k * model.sigma_radial(d), "k--", lw=0.8)
+    ax[0].set(xlabel="distance (m)", ylabel="fit residual along the sight (m)", ylim=(-0.6, 0.6),
+              title=f"σ_r² = {model.r0:.3f}² + ({model.r1:.4f}·d²)² (±2σ)")  # fmt: skip
+    ax[1].scatter(bins["dist"], bins["across"], s=3, alpha=0.3)
+    for k in (-2, 2):
+        ax[1].plot(d, k * model.sigma_tangential(d), "k--", lw=0.8)
+    ax[1].set(xlabel="distance (m)", ylabel="fit residual across it (m)", ylim=(-0.6, 0.6),
+              title=f"σ_t² = {model.t0:.3f}² + ({model.t1:.4f}·d²)²")  # fmt: skip
+    ax[2].bar(bins["gd"], bins["gross"], width=0.15)
+    ax[2].plot(d, model.p_reject(d), "k--")
+    ax[2].set(
+        xlabel="pair distance (m)",
+        ylabel="rejected share",
+        title="sound pairs rejected by the χ² test",
+    )
+    mk = m.mask[np.isfinite(m.mask)]
+    ax[3].hist(np.degrees(mk), bins=np.arange(-90, 91, 5), density=True, alpha=0.6)
+    xs = np.linspace(-math.pi / 2, math.pi / 2, 361)
+    ax[3].plot(np.degrees(xs), model.mask_density(xs) * math.pi / 180, "k-")
+    ax[3].set(xlabel="mask error mod 180° (°)", ylabel="density (1/°)",
+              title=f"σ_m {math.degrees(model.sigma_mask):.1f}°, w0 {model.w0:.2f}, w90 {model.w90:.2f}")  # fmt: skip
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(
+        prog="python -m tools.fit_noise", description=(__doc__ or "").split("\n\n")[0]
+    )
+    ap.add_argument("--corpus", type=Path, default=Path("tests/data/frames"))
+    ap.add_argument("--png", type=Path, default=Path("out/sighting_noise.png"))
+    ap.add_argument("--write", action="store_true", help="write the shipped model file")
+    a = ap.parse_args(argv)
+    runs = [r for r in load_corpus(a.corpus) if not r.fault and not held_out(r.seed)]
+    m = match(runs)
+    model, bins = fit(m, runs, f"{a.corpus} ({len(runs)} fleets, held-out fleets excluded)")
+    n = len(m.distance)
+    print(f"{len(runs)} fleets, {n} sightings, {int(np.isfinite(m.distance).sum())} matched")
+    for k in range(len(bins["d"])):
+        print(
+            f"  d {bins['d'][k]:.2f} m: σ_r {bins['sr'][k]:.3f} σ_t {bins['st'][k]:.3f} (n {int(bins['n'][k])})"
+        )
+    for k in range(len(bins["sd"])):
+        print(
+            f"  strays at {bins['sd'][k]:.2f} m: {bins['stray'][k]:.3f} lost (n {int(bins['sn'][k])})"
+        )
+    for k in range(len(bins["gd"])):
+        print(
+            f"  pairs at {bins['gd'][k]:.2f} m: {bins['gross'][k]:.3f} rejected (n {int(bins['gn'][k])})"
+        )
+    print(model)
+    draw(m, model, bins, a.png)
+    print(f"figure: {a.png}")
+    if a.write:
+        print(f"written: {model.save()}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
