@@ -41,7 +41,7 @@ def no_pose_pairing(monkeypatch: pytest.MonkeyPatch) -> None:
     def fail(*args: Any) -> Any:
         raise AssertionError("the pose pairing ran")
 
-    monkeypatch.setattr(ff_mod, "build_poses", fail)
+    monkeypatch.setattr(ff_mod, "identify_pairs", fail)
 
 
 def _recorded() -> tuple[np.ndarray, list[NeighborRecord]]:
