@@ -20,8 +20,8 @@ used.
   weighted by the bin's count): ``σ_r(d)``, ``σ_t(d)``.
 * The χ² test of :mod:`agent.core.formation.frame.fault_test` is run on those fits with
   that σ: the share of their pairs rejected, binned by distance and fitted by a line in
-  d, is ``p_reject``; the share of stray sightings lost, ``p_stray`` (no fault was
-  injected, so every rejection is a false one).
+  d, is ``p_reject``; lost strays per sighting, ``p_stray`` (no fault was injected, so
+  every rejection is a false one).
 * ``rho``, the rate of sound robots seen turned as a whole: the share (counted as
   ``(k + 1) / (n + 1)``) of sound robots whose masks fail the heading test's Wilks
   statistic at ``TURNED_P``.
@@ -185,13 +185,16 @@ def fit(m: Matched, runs: list[Run], corpus: str) -> tuple[SightingNoise, dict[s
         g0=0.0, g1=0.0, sigma_mask=sm, w0=w0, w90=w90, sightings=int(dist.size), corpus=corpus,
     )  # fmt: skip
     ed, bad, wilks, sd, slost = pair_rejections(fits, base, [r.records for r in runs_kept])
+    sightings = sum(len(m.neighbours) for r in runs_kept for m in r.records)
     # the rate at which sound robots' masks agree on an offset the per-mask model cannot
     # explain (Wilks' p below TURNED_P), counted conservatively ((k + 1) / (n + 1))
     rho = (float((wilks < TURNED_P).sum()) + 1.0) / (len(wilks) + 1.0)
     gc, gr, gn = binned(ed, bad, np.mean)
     g0, g1 = _line(gc, gr, gn)
+    # lost strays per sighting of a sound robot: too few to bin by distance, one rate
+    # (counted conservatively, (k + 1) / (n + 2))
     sc, sr_, sn = binned(sd, slost, np.mean)
-    s0, s1 = _line(sc, sr_, sn) if sc.size >= 2 else (0.0, 0.0)
+    s0, s1 = (float(slost.sum()) + 1.0) / (float(sightings) + 2.0), 0.0
     model = replace(base, g0=g0, g1=g1, rho=rho, s0=s0, s1=s1)
     bins = {"d": x, "sr": np.array(sr), "st": np.array(st), "n": w, "dist": dist, "along": along,
             "across": across, "gd": gc, "gross": gr, "gn": gn, "sd": sc, "stray": sr_, "sn": sn}  # fmt: skip

@@ -19,10 +19,10 @@ A sighting ``v_ij`` of robot i, in its fixed frame, at true distance d from j:
   frame rejects a pair of *sound* robots at distance d is
   ``p_reject(d) = clip(g0 + g1·d, P_MIN, P_MAX)``, measured with that very test on
   fault-free fleets;
-* **stray sightings**: a sighting of a sound robot that no pair explains (the other robot
-  did not see it back, or the pairing left it out) lands on no robot within the χ² gate
-  of the fitted frame with probability ``p_stray(d) = clip(s0 + s1·d, P_MIN, P_MAX)``
-  (a ghost or merged detection), measured like ``p_reject``;
+* **lost strays**: a sighting of a sound robot ends up one that no pair explains and
+  that lands on no robot within the χ² gate of the fitted frame (a ghost or merged
+  detection) with probability ``p_stray(d) = clip(s0 + s1·d, P_MIN, P_MAX)`` per
+  sighting, measured like ``p_reject``;
 * **mask orientation** θ_ij (the relative orientation of the matched mask, known modulo π):
   its error modulo π is ``N(0, σ_m)`` with probability ``w0``, the side/front confusion
   ``N(±π/2, σ_m)`` with ``w90``, otherwise uniform (front/back, 180°, is folded away by
@@ -124,7 +124,7 @@ class SightingNoise:
         return np.asarray(np.clip(p, P_MIN, P_MAX))
 
     def p_stray(self, d: np.ndarray | float) -> np.ndarray:
-        """Probability that a sound robot's unpaired sighting at ``d`` lands on no robot."""
+        """Probability that a sound robot's sighting at ``d`` ends up a lost stray."""
         p = self.s0 + self.s1 * np.asarray(d, dtype=np.float64)
         return np.asarray(np.clip(p, P_MIN, P_MAX))
 

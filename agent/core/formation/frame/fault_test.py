@@ -10,16 +10,17 @@ sight, σ_r(d) and σ_t(d)). Then:
 1. **Rejected sightings.** A sighting is *rejected* when ``χ²_ij > q``, q the χ²₂
    quantile at :data:`ALPHA_SIGHTING`. A pair of robots (an *edge*: its one or two
    sightings) is rejected when one of its sightings is. A sound robot's edge is rejected
-   with probability ``p_e(d)``, the model's rate of rejected edges at distance d,
+   with probability ``p_reject(d)``, the model's rate of rejected edges at distance d,
    measured on fault-free rendered fleets with this very test (a wrong pairing, a merged
    detection: gross errors happen).
 2. **Per robot, its position test.** Robot r has ``n_r`` edges, ``k_r`` of them rejected,
-   and ``u_r`` *stray* sightings of its own (sightings no pair of the fit uses: the
-   other robot did not see it back, or the pairing left it out), ``s_r`` of which land on
-   no robot within the χ² gate of the fitted frame. If r is sound, its edges are rejected
-   independently with probabilities ``p_reject(d)`` (a faulty neighbour explains its one
-   shared edge) and its strays miss with ``p_stray(d)``, both measured on fault-free
-   fleets, so ``k_r + s_r`` is Poisson-binomial and the p-value is ``P(K ≥ k_r + s_r)``.
+   and ``s_r`` *lost strays* among its ``m_r`` own sightings (a sighting no pair of the
+   fit uses that lands on no robot within the χ² gate of the fitted frame). If r is
+   sound, its edges are rejected independently with probabilities ``p_reject(d)`` (a
+   faulty neighbour explains its one shared edge) and each of its sightings ends up a
+   lost stray with ``p_stray(d)`` (a ghost or merged detection), both measured on
+   fault-free fleets, so ``k_r + s_r`` is Poisson-binomial over ``n_r + m_r`` trials
+   and the p-value is ``P(K ≥ k_r + s_r)``.
    A robot with wrong distances or a lying record has its own sightings off: those that
    pair are rejected, those that do not pair land nowhere.
 3. **Per robot, its heading test.** A robot whose compass is broken has its own
@@ -63,7 +64,10 @@ from agent.core.perception.sighting_noise import SightingNoise
 #: The false-alarm rate of the per-robot test, per robot and run: a sound robot is
 #: rejected (and, if the rest then passes, left out) with at most this probability.
 ALPHA = 1e-4
-#: The false-alarm rate of one sighting's χ² test (step 1).
+#: The level of one sighting's χ² test (step 1). Any level is sound, since ``p_reject``
+#: is measured at this same level; a small one rejects few sound pairs (the residuals'
+#: tail is heavier than a Gaussian's) while a faulty robot's misfits, tens of σ, are
+#: rejected anyway.
 ALPHA_SIGHTING = 1e-6
 #: Mask offsets tried by the heading test (step 3): every degree of the half circle.
 MASK_GRID = np.radians(np.arange(0.0, 180.0, 1.0))
@@ -229,6 +233,10 @@ def robot_tests(
     strays (none without), ``elsewhere`` as :func:`strays`."""
     edges = rejected_edges(poses, noise)
     stray = strays(poses, records, noise, elsewhere)
+    sighted = {
+        rec.robot_id: [float(d) for d in np.hypot(*np.asarray(rec.neighbours).reshape(-1, 2).T)]
+        for rec in records
+    }
     dist: dict[tuple[int, int], list[float]] = {}
     for m in poses.measurements:
         dist.setdefault(_edge(m), []).append(float(np.hypot(*m.vector)))
@@ -237,7 +245,8 @@ def robot_tests(
         mine = [e for e in edges if r in e]
         own = stray.get(r, [])
         probs = [float(noise.p_reject(float(np.mean(dist[e])))) for e in mine]
-        probs += [float(noise.p_stray(d)) for d, _ in own]
+        # every sighting of r's own could have ended up a lost stray (step 2)
+        probs += [float(noise.p_stray(d)) for d in sighted.get(r, [])]
         k = sum(edges[e] for e in mine)
         lost = sum(not lands for _, lands in own)
         deltas = mask_deltas(poses, r)
