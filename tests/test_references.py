@@ -132,13 +132,23 @@ _HASH = re.compile(r"\((?:#\d+(?:,\s*)?)+\)|#\d{1,2}(?![\w-])")  # (#9), (#9, #2
 #: Characters before a ``#`` that make it no reference: a heading's ``##``, a string
 #: literal's ``"#0 1.00 m``, an HTML entity, a link's ``(#1-phases`` is kept out by the
 #: ``-`` after the number, and 3-digit hex colours (``#888``) by the digit count.
+#: History that belongs in git: "try 7", "tries 9 and 10", "the tenth session" (not
+#: "a second session": zenoh sessions are one of the project's words).
+_HISTORY = re.compile(
+    r"\btr(?:y|ies)[ \t]+\d+\b|\b(?:third|fourth|fifth|sixth|seventh|eighth|ninth|tenth"
+    r"|eleventh|twelfth)[ \t]+session\b",
+    re.I,
+)
 _NOT_BEFORE_HASH = set("&/#\"'`]") | {"_"}
 
 
 def tracker_refs(text: str) -> list[Finding]:
-    """Issue-tracker references: ``issue N``, ``issue #N``, ``(#N)``, ``#N``."""
+    """Issue-tracker references: ``issue N``, ``issue #N``, ``(#N)``, ``#N``; and the
+    history of how work went (``try N``, ``the tenth session``): git keeps that."""
     lines: dict[int, str] = {}
     for m in _at(_ISSUE, text, "issue"):
+        lines.setdefault(_line(text, m.start()), m.group(0))
+    for m in _HISTORY.finditer(text):
         lines.setdefault(_line(text, m.start()), m.group(0))
     pos = text.find("#")
     while pos >= 0:
@@ -351,6 +361,14 @@ def test_tracker_references_are_caught() -> None:
     )
     lines = [line for line, _ in tracker_refs(text)]
     assert lines == [2, 3, 4, 5, 6, 8]
+
+
+def test_history_in_the_text_is_caught() -> None:
+    text = (
+        "a 100-NAO run (try 8)\nIn tries 9 and 10 the pair\nthe lookahead (eighth session)\n"
+        "a second session of a claimed key\nthe zenoh session opens\nthe agent tries each key\n"
+    )
+    assert [line for line, _ in tracker_refs(text)] == [1, 2, 3]
 
 
 def test_paper_references_not_in_the_bibliography_are_caught() -> None:

@@ -151,7 +151,7 @@ def test_a_silent_channel_is_asked_again_and_the_page_lives_on(
     Every silent topic is asked again, not only the latched ones: a subscription to
     ``/scene`` that the server refused ("attempted to subscribe to unknown channel", a
     race in foxglove-sdk) left a page that drew nothing for a whole run (a full suite's
-    run of the test below, tenth session). Before the fix
+    run of the test below). Before the fix
     the retry iterated the Map it was adding to and never ended: no re-subscription ever
     reached the server, and the tab died of a 3 GB heap (in 2 of 10 runs of the test above,
     and in CI: "V8 javascript OOM" in chromium's output, then "Target crashed")."""

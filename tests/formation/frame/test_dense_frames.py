@@ -72,7 +72,7 @@ def test_a_dense_aligned_room_is_planned_from_its_firm_pairs(no_pose_pairing: No
 
 
 def test_the_recorded_hundred_nao_room_is_planned_at_once(no_pose_pairing: None) -> None:
-    """Known answer from a real run: try 7's records (all robots set down facing north)."""
+    """Known answer from a real 100-NAO run's records (all robots set down facing north)."""
     truth, recs = _recorded()
     assert len(recs) == 100
     frame = fleet_frame(recs, DEFAULT_EPSILON)

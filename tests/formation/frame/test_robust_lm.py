@@ -122,7 +122,7 @@ print(hashlib.sha256(x.tobytes()).hexdigest())
 def test_the_result_does_not_depend_on_the_blas_threads() -> None:
     """Identical agents must plan bit-identical plans on any host (docs/design.md §9): with a
     dense LAPACK solve, one and two OpenBLAS threads gave different last bits, and the
-    50-NAO harness's evaluator a different plan digest than the agents (tenth session)."""
+    50-NAO harness's evaluator a different plan digest than the agents."""
     out = []
     for threads in ("1", "2"):
         env = dict(os.environ, OPENBLAS_NUM_THREADS=threads, OMP_NUM_THREADS=threads)

@@ -19,8 +19,8 @@ inputs give bit-identical outputs on one platform, whatever its BLAS threads: ea
 is solved by SuperLU (``scipy.sparse.linalg.splu`` on the sparse damped system), which
 calls no threaded BLAS. A dense LAPACK solve (``numpy.linalg.solve``) gave other last
 bits with one OpenBLAS thread than with two, and at 50 NAOs the agents (one thread each)
-and the harness's evaluator (two) planned different digests from the same records
-(tenth session); agents on hosts with other thread settings would have too.
+and the harness's evaluator (two) planned different digests from the same records;
+agents on hosts with other thread settings would have too.
 """
 
 from __future__ import annotations
