@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 
 from agent.core.formation.frame.poses import PoseFrame
-from agent.core.perception.sighting_noise import SightingNoise
+from agent.core.perception.sighting_noise import SightingNoise, split
 from agent.wire import NeighborRecordMsg
 from tools.corpus import Run, held_out, load_corpus
 
@@ -243,21 +243,13 @@ def frame_error(
 def residuals(fits: list[PoseFrame]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Every sighting's measured distance and its fit residual along and across its line
     of sight (owner's fixed frame)."""
-    cols: list[list[float]] = [[], [], []]
-    for poses in fits:
-        index = {rid: k for k, rid in enumerate(poses.ids)}
-        for mm in poses.measurements:
-            o, t = index[mm.owner], index[mm.target]
-            c, s = math.cos(poses.headings[o]), math.sin(poses.headings[o])
-            rel = poses.positions[t] - poses.positions[o]
-            own = np.array([c * rel[0] + s * rel[1], -s * rel[0] + c * rel[1]])
-            d = float(np.hypot(*mm.vector))
-            u = mm.vector / max(d, 1e-9)
-            e = own - mm.vector
-            cols[0].append(d)
-            cols[1].append(float(e @ u))
-            cols[2].append(float(e[1] * u[0] - e[0] * u[1]))
-    return np.array(cols[0]), np.array(cols[1]), np.array(cols[2])
+    from agent.core.formation.frame.fault_test import misfits
+
+    parts = [split(*misfits(poses)) for poses in fits]
+    d, along, across = (
+        np.concatenate([p[k] for p in parts]) if parts else np.zeros(0) for k in range(3)
+    )
+    return d, along, across
 
 
 def pair_rejections(

@@ -132,12 +132,7 @@ class SightingNoise:
         """Normalised squared residual (χ², 2 degrees of freedom) of ``error`` (k, 2), the
         misfit of sightings ``vector`` (k, 2), both in the owner's fixed frame: split along
         and across each line of sight and divided by σ_r, σ_t at the sighting's distance."""
-        v = np.asarray(vector, dtype=np.float64).reshape(-1, 2)
-        e = np.asarray(error, dtype=np.float64).reshape(-1, 2)
-        d = np.hypot(v[:, 0], v[:, 1])
-        u = v / np.maximum(d, 1e-9)[:, None]
-        along = np.einsum("ij,ij->i", e, u)
-        across = e[:, 1] * u[:, 0] - e[:, 0] * u[:, 1]
+        d, along, across = split(vector, error)
         return np.asarray(
             (along / self.sigma_radial(d)) ** 2 + (across / self.sigma_tangential(d)) ** 2
         )
@@ -187,6 +182,18 @@ class SightingNoise:
             )
         doc.pop("format")
         return cls(**doc)
+
+
+def split(vector: np.ndarray, error: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(distance, error along, error across) of misfits ``error`` (k, 2) of sightings
+    ``vector`` (k, 2), both in the owner's fixed frame."""
+    v = np.asarray(vector, dtype=np.float64).reshape(-1, 2)
+    e = np.asarray(error, dtype=np.float64).reshape(-1, 2)
+    d = np.hypot(v[:, 0], v[:, 1])
+    u = v / np.maximum(d, 1e-9)[:, None]
+    along = np.einsum("ij,ij->i", e, u)
+    across = e[:, 1] * u[:, 0] - e[:, 0] * u[:, 1]
+    return d, np.asarray(along), np.asarray(across)
 
 
 @lru_cache(maxsize=1)

@@ -121,8 +121,14 @@ def _edge(m: PoseMeasurement) -> tuple[int, int]:
 
 def sighting_chi2(poses: PoseFrame, noise: SightingNoise) -> np.ndarray:
     """χ² of every measurement of ``poses`` (in its order), in its owner's fixed frame."""
+    return noise.chi2(*misfits(poses))
+
+
+def misfits(poses: PoseFrame) -> tuple[np.ndarray, np.ndarray]:
+    """Every measurement's vector and its misfit at the fitted poses, (k, 2) each, in
+    its owner's fixed frame (in the measurements' order)."""
     if not poses.measurements:
-        return np.zeros(0)
+        return np.zeros((0, 2)), np.zeros((0, 2))
     index = {rid: k for k, rid in enumerate(poses.ids)}
     o = np.array([index[m.owner] for m in poses.measurements])
     t = np.array([index[m.target] for m in poses.measurements])
@@ -131,7 +137,7 @@ def sighting_chi2(poses: PoseFrame, noise: SightingNoise) -> np.ndarray:
     c, s = np.cos(psi), np.sin(psi)
     rel = poses.positions[t] - poses.positions[o]  # common frame
     own = np.stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]], axis=1)
-    return noise.chi2(v, own - v)
+    return v, own - v
 
 
 def tail_at_least(p: Sequence[float], k: int) -> float:
