@@ -47,7 +47,7 @@ from agent.adapters import FormationAdapter
 from agent.core.formation.frame.fleet_frame import fleet_frame
 from agent.core.formation.frame.neighbour_check import DEFAULT_EPSILON
 from agent.wire import NeighborRecordMsg, decode
-from tools.harness.frame_fit import common_frame_pose
+from tools.harness.frame_fit import frame_error
 from tools.harness.judge import injected_faults
 
 
@@ -104,10 +104,6 @@ def faulty_robot(result: dict[str, object]) -> int:
     return min(injected_faults(dict(result)), default=-1)
 
 
-def _wrap_deg(a: float) -> float:
-    return abs(math.degrees(math.remainder(a, 2 * math.pi)))
-
-
 def judge_run(run: Path) -> FrameRow:
     """Re-estimate the frame of one run folder (``run.mcap`` + ``result.json``)."""
     result = json.loads((run / "result.json").read_text())
@@ -140,14 +136,9 @@ def _judge(
         nan = math.nan
         return FrameRow(run, len(msgs), faulty, excluded=(), aligned=False, stopped=str(exc), pos_err=nan,
                         psi_err=nan, reason="")  # fmt: skip
-    ids = [i for i in ff.ids if i != faulty and i in truth]
-    est = {i: ff.positions[ff.ids.index(i)] for i in ids}
-    x, y, h = common_frame_pose(est, truth)
-    c, s = math.cos(h - math.pi / 2), math.sin(h - math.pi / 2)
-    world = {i: np.array([x, y]) + np.array([[c, -s], [s, c]]) @ est[i] for i in ids}
-    pos_err = max(float(np.hypot(*(world[i] - np.array(truth[i][:2])))) for i in ids)
-    # a robot faces +y (π/2) in its own fixed frame: its true heading is h + ψ
-    psi_err = max(_wrap_deg(truth[i][2] - (h + ff.heading_of(i))) for i in ids)
+    est = {i: (ff.positions[ff.ids.index(i)], ff.heading_of(i)) for i in ff.ids if i != faulty}
+    pos_err, psi = frame_error(est, truth)
+    psi_err = math.degrees(psi)
     return FrameRow(run, len(msgs), faulty, excluded=ff.excluded, aligned=ff.aligned, stopped="",
                     pos_err=pos_err, psi_err=psi_err, reason=ff.reason)  # fmt: skip
 

@@ -47,6 +47,7 @@ from agent.core.formation.frame.poses import PoseFrame
 from agent.core.perception.sighting_noise import SightingNoise, split
 from agent.wire import NeighborRecordMsg
 from tools.corpus import Run, held_out, load_corpus
+from tools.harness.frame_fit import frame_error
 
 GATE0, GATE1 = 0.3, 0.2  #: a sighting is matched when within GATE0 + GATE1·d of a robot
 #: A fit is a correct frame, whose residuals the null model describes, within these
@@ -216,28 +217,11 @@ def fitted(runs: list[Run]) -> tuple[list[PoseFrame], list[Run]]:
             poses = fit_from_graph(identify_pairs(recs, DEFAULT_EPSILON))
         except ValueError:
             continue
-        if frame_error(poses, run.truth) <= (FRAME_POS, FRAME_PSI):
+        est = {i: (poses.positions[k], float(poses.headings[k])) for k, i in enumerate(poses.ids)}
+        if frame_error(est, run.truth) <= (FRAME_POS, FRAME_PSI):
             out.append(poses)
             kept.append(run)
     return out, kept
-
-
-def frame_error(
-    poses: PoseFrame, truth: dict[int, tuple[float, float, float]]
-) -> tuple[float, float]:
-    """Worst position (m) and start-heading (rad) error of a fit against the truth, after
-    the rigid motion that maps the common frame onto the world."""
-    from tools.harness.frame_fit import common_frame_pose
-
-    ids = [i for i in poses.ids if i in truth]
-    est = {i: poses.positions[poses.ids.index(i)] for i in ids}
-    x, y, h = common_frame_pose(est, truth)
-    c, s = math.cos(h - math.pi / 2), math.sin(h - math.pi / 2)
-    pos = max(float(np.hypot(*(np.array([x, y]) + np.array([[c, -s], [s, c]]) @ est[i] - truth[i][:2])))
-              for i in ids)  # fmt: skip
-    psi = max(abs(math.remainder(truth[i][2] - (h + poses.headings[poses.ids.index(i)]), 2 * math.pi))
-              for i in ids)  # fmt: skip
-    return pos, psi
 
 
 def residuals(fits: list[PoseFrame]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

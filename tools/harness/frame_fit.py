@@ -39,3 +39,25 @@ def common_frame_pose(
     c, s = math.cos(turn), math.sin(turn)
     offset = b.mean(axis=0) - a.mean(axis=0) @ np.array([[c, s], [-s, c]])
     return float(offset[0]), float(offset[1]), turn + math.pi / 2
+
+
+def frame_error(
+    estimated: Mapping[int, tuple[np.ndarray, float]],
+    true_starts: Mapping[int, tuple[float, float, float]],
+) -> tuple[float, float]:
+    """Worst position (m) and start-heading (rad) error of estimated starts (robot id ->
+    (position in the common frame, ψ)) against the truth, after the rigid motion of
+    :func:`common_frame_pose`. A robot faces +y (π/2) in its own fixed frame, so its true
+    heading is h + ψ. Robots without a true start are ignored."""
+    ids = sorted(i for i in estimated if i in true_starts)
+    x, y, h = common_frame_pose({i: estimated[i][0] for i in ids}, true_starts)
+    c, s = math.cos(h - math.pi / 2), math.sin(h - math.pi / 2)
+    turn = np.array([[c, -s], [s, c]])
+    pos = max(
+        float(np.hypot(*(np.array([x, y]) + turn @ estimated[i][0] - np.array(true_starts[i][:2]))))
+        for i in ids
+    )
+    psi = max(
+        abs(math.remainder(true_starts[i][2] - (h + estimated[i][1]), 2 * math.pi)) for i in ids
+    )
+    return pos, psi
