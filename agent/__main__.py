@@ -382,7 +382,7 @@ def main(argv: list[str] | None = None) -> int:
                 formation,
             )
             if args.state_dir:
-                from agent.phases.journal import Journal
+                from agent.recovery.journal import Journal
 
                 try:
                     runner.ctx.journal = Journal(args.state_dir, rid)

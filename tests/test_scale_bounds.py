@@ -16,7 +16,7 @@ import pytest
 
 from agent import wire as w
 from agent.core import nao
-from agent.phases.journal import JournalState, decode_state, encode_state
+from agent.recovery.journal import JournalState, decode_state, encode_state
 from sim import scenarios
 from tools.demo import MAX_ROBOTS, parse_args
 

@@ -43,7 +43,7 @@ from agent.core.agreement import HEARD_PER_S
 from agent.core.formation.plan import Plan
 from agent.core.formation.shape.verdict import PairCheck
 from agent.net.bus import Bus
-from agent.phases.journal import Journal
+from agent.recovery.journal import Journal
 from agent.seams import Formation, Perception
 from agent.wire import MAX_SHIFT, MAX_WALKED, NeighborRecordMsg, StatusMsg, key_status
 
@@ -140,11 +140,11 @@ class Context:
     timeline: Timeline = field(default_factory=Timeline)
     # the durable journal (None: not kept); the hook writes it before each
     # command (with its motion request id) and at each phase change
-    # (agent/phases/journaling.py)
+    # (agent/recovery/journaling.py)
     journal: Journal | None = None
     journal_hook: Callable[[str, float, int], None] = _no_journal
     # when this robot's first process of the current run started (ms since the
-    # Unix epoch; journaled, kept across resumptions; agent/phases/runs.py)
+    # Unix epoch; journaled, kept across resumptions; agent/recovery/runs.py)
     run_epoch: int = 0
     last_status: float = -math.inf  # when the last status was published
     # what the last status published said (but its sim time and byte count), and whether

@@ -28,7 +28,7 @@ what it knows of each member (:class:`Peer`):
 
 It also serves the agreed record set (agent/phases/record_sets.py), and hands every
 record, digest and status it accepts to its :attr:`Membership.observers` (the check of
-agent/phases/runs.py: is a journal's run still going?).
+agent/recovery/runs.py: is a journal's run still going?).
 """
 
 from __future__ import annotations

@@ -48,15 +48,15 @@ from agent.phases.agreeing import Agreeing
 from agent.phases.camera_feed import CameraFeed
 from agent.phases.context import AgentFailure, Context
 from agent.phases.hold import Hold
-from agent.phases.journaling import Journaling
 from agent.phases.march import MarchHalt
 from agent.phases.membership import Membership
 from agent.phases.motion import Motion
 from agent.phases.research import Research
-from agent.phases.resume import Resumption
 from agent.phases.safe_steps import SafeSteps
 from agent.phases.search import Search
 from agent.phases.waves import Waves
+from agent.recovery.journaling import Journaling
+from agent.recovery.resume import Resumption
 from agent.seams import Formation, Perception
 from agent.wire import NeighborRecordMsg, StatusMsg, key_alive, key_status, reason
 

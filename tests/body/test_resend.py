@@ -18,9 +18,9 @@ from agent.adapters import FormationAdapter, PerceptionAdapter
 from agent.body.zenoh_world import ZenohBody
 from agent.config import AgentConfig
 from agent.phases.context import NORTH
-from agent.phases.journal import JournalState
 from agent.phases.runner import Runner
-from agent.phases.runs import Verdict
+from agent.recovery.journal import JournalState
+from agent.recovery.runs import Verdict
 from tests.body.conftest import FACING, Rig, rig
 
 

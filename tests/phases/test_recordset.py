@@ -1,7 +1,7 @@
 """The agreed record set by digest (for agents restarted after a crash): served by every agent,
 checked by the asker.
 
-Pure checks (agent/phases/resume.py), the restored agreement (agent/core/agreement.py), the runner's
+Pure checks (agent/recovery/resume.py), the restored agreement (agent/core/agreement.py), the runner's
 acceptance of a restarted member's new session, and the query over real zenoh sessions:
 plain, and through a TLS router with the fleet's access control.
 """
@@ -22,7 +22,7 @@ from agent.core.agreement import Agreement
 from agent.net.bus import Bus, BusConfig, BusError, Event
 from agent.phases.record_sets import answer, record_set, records_of
 from agent.phases.runner import Runner
-from agent.phases.runs import agreed_by_others
+from agent.recovery.runs import agreed_by_others
 from agent.wire import (
     KEY_RECORDS_ALL,
     DigestMsg,

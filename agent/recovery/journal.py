@@ -3,7 +3,7 @@
 The papers assume robots never crash. An agent started with ``--state-dir DIR`` writes
 its state to ``DIR/robot-{id}.journal`` at every phase change and before every motion;
 restarted after a crash with the same ``--state-dir`` it resumes from it
-(:mod:`agent.phases.resume`). What is kept (:class:`JournalState`):
+(:mod:`agent.recovery.resume`). What is kept (:class:`JournalState`):
 
 * the phase, the heading and position beliefs (fixed frame, eq. 2), the compass gain;
 * its own neighbour record (4.1.2) once localised;
@@ -16,7 +16,7 @@ restarted after a crash with the same ``--state-dir`` it resumes from it
   when this robot's first process of the run started (ms since the Unix epoch, kept across
   resumptions), and ``written_ms``, when it was written; with the record's round before agreement,
   and the agreed digest and members after, they name the run (the rule that decides whether it
-  is still going is in :mod:`agent.phases.runs`);
+  is still going is in :mod:`agent.recovery.runs`);
 * ``final``: ``done``, ``failed`` or ``stopped`` once the run is over for this robot
   (the last record written); a final journal is never resumed, only archived;
 * separately, once per search, the fixed-frame **reference view**: the head-yaw-0 image

@@ -1,4 +1,4 @@
-"""agent/phases/resume.py, agent/phases/runs.py and the runner's journal hooks, without
+"""agent/recovery/resume.py, agent/recovery/runs.py and the runner's journal hooks, without
 the world (crashed agents and stale journals).
 
 The runner of tests/phases/test_runner.py (robot 3, an unconnected zenoh session): what is
@@ -21,10 +21,10 @@ import pytest
 from agent.body.base import MotionResult
 from agent.core.control import wrap_pi
 from agent.net.bus import Event, QueryTimeout
-from agent.phases import resume, runs
 from agent.phases.context import NORTH, AgentFailure
-from agent.phases.journal import Journal, JournalState
 from agent.phases.runner import Runner
+from agent.recovery import resume, runs
+from agent.recovery.journal import Journal, JournalState
 from agent.wire import (
     DigestMsg,
     Message,

@@ -2,9 +2,9 @@
 paper 4.1–5.2).
 
 The papers assume no robot ever crashes. An agent started with ``--state-dir`` journals
-its state (:mod:`agent.phases.journal`, written by :mod:`agent.phases.journaling`).
+its state (:mod:`agent.recovery.journal`, written by :mod:`agent.recovery.journaling`).
 Restarted, it first asks the bus whether the journal's run is still going
-(:mod:`agent.phases.runs`): a final journal, or one of a run that ended, is archived and
+(:mod:`agent.recovery.runs`): a final journal, or one of a run that ended, is archived and
 the robot starts afresh. A journal of a run still going is resumed (:class:`Resumption`):
 
 * **The command in flight** at the crash is sent again with its journaled request id:
@@ -52,12 +52,12 @@ from agent.core.agreed_params import params_digest
 from agent.core.agreement import Agreement
 from agent.core.control import PAPER_GAINS, advance, wrap_pi
 from agent.phases.context import NORTH, AgentFailure, Context
-from agent.phases.journal import Journal, JournalError, JournalState
 from agent.phases.roles import Fleet, Mover, Planner
-from agent.phases.runs import RunCheck, Verdict, agreed_by_others, fetch_records
+from agent.recovery.journal import Journal, JournalError, JournalState
+from agent.recovery.runs import RunCheck, Verdict, agreed_by_others, fetch_records
 from agent.wire import NeighborRecordMsg, canonical_digest
 
-log = logging.getLogger("agent.phases.resume")
+log = logging.getLogger("agent.recovery.resume")
 
 #: The compass's re-measured heading replaces the estimate only within this of it.
 REMEASURE_LIMIT = math.radians(20.0)

@@ -1,4 +1,4 @@
-"""agent/phases/journal.py: round trips, corruption and every error branch."""
+"""agent/recovery/journal.py: round trips, corruption and every error branch."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent.phases.journal import (
+from agent.recovery.journal import (
     ARCHIVES_KEPT,
     MAGIC_STATE,
     MAX_STATE_BYTES,
@@ -207,7 +207,7 @@ def test_corrupt_reference_views(tmp_path: Path) -> None:
     body = (4).to_bytes(2, "big") + (5).to_bytes(2, "big") + b"\0" * 10
     import hashlib
 
-    from agent.phases.journal import MAGIC_REFERENCE
+    from agent.recovery.journal import MAGIC_REFERENCE
 
     short = MAGIC_REFERENCE + len(body).to_bytes(4, "big") + hashlib.sha256(body).digest() + body
     with pytest.raises(JournalError, match="pixel bytes"):

@@ -1,6 +1,6 @@
 """Writing the journal (crashed agents resume; docs/design.md §8 "Faults"): before every command
 sent to the body and at every phase change, so that a restarted agent knows where it was and what it
-may have been doing (agent/phases/journal.py holds the format, agent/phases/resume.py
+may have been doing (agent/recovery/journal.py holds the format, agent/recovery/resume.py
 reads it back). Each command is journaled with its motion request id (so that a resume never walks
 twice), and the run's identity with every write; once the run is over for this robot (``done``,
 ``failed``, or stopped by the operator) a final record says so (:meth:`Journaling.finish`).
@@ -15,11 +15,11 @@ import logging
 from agent.core.agreement import Agreement
 from agent.core.control import wrap_pi
 from agent.phases.context import Context
-from agent.phases.journal import JournalState
 from agent.phases.roles import Fleet
+from agent.recovery.journal import JournalState
 from agent.wire import NeighborRecordMsg, reason
 
-log = logging.getLogger("agent.phases.journaling")
+log = logging.getLogger("agent.recovery.journaling")
 
 
 def journal_state(

@@ -2,7 +2,7 @@
 (a finished run's journal must not derail the next run; docs/design.md §8 "Faults"; docs/faults.md
 "Crashed agents and restarted routers").
 
-A journal (:mod:`agent.phases.journal`) belongs to one run of the fleet. Its identity:
+A journal (:mod:`agent.recovery.journal`) belongs to one run of the fleet. Its identity:
 
 * **before agreement**: this robot's record round (0 before its first record) and the
   run's start, ``run_epoch`` (when this robot's first process of the run started, ms
@@ -42,9 +42,9 @@ from dataclasses import dataclass
 from agent.body.zenoh_world import retry_no_route
 from agent.net.bus import Bus, BusError, Event
 from agent.phases.context import Context
-from agent.phases.journal import JournalState
 from agent.phases.record_sets import records_of
 from agent.phases.roles import Hearing, Listening
+from agent.recovery.journal import JournalState
 from agent.wire import (
     KEY_RECORDS_ALL,
     DigestMsg,
@@ -56,7 +56,7 @@ from agent.wire import (
     decode,
 )
 
-log = logging.getLogger("agent.phases.runs")
+log = logging.getLogger("agent.recovery.runs")
 
 #: s a restarted agent keeps asking the fleet for its agreed records while resuming.
 FETCH_TIMEOUT = 60.0
