@@ -53,6 +53,7 @@ from typing import Any
 import msgpack
 import numpy as np
 
+from agent.phases.reporting import Phase
 from agent.wire import (
     MAX_MEMBERS,
     PHASES,
@@ -78,7 +79,7 @@ COMMANDS = ("", "turn", "walk", "side")
 FINALS = ("", "done", "failed", "stopped")
 #: Journaled phases that end the run for this robot even without a final record (a
 #: crash while lingering in ``done``, or after publishing ``failed``).
-FINAL_PHASES = ("done", "failed")
+FINAL_PHASES = (Phase.DONE, Phase.FAILED)
 #: Archived journals (and reference views) kept per robot, newest first.
 ARCHIVES_KEPT = 3
 #: Largest motion request id (the wire's bound, 2^53 - 1).
@@ -95,7 +96,8 @@ class JournalState:
     """One agent's state at one instant (see the module docstring)."""
 
     robot_id: int
-    phase: str = "start"
+    #: the phase (given as a :class:`Phase` or its string; kept as the :class:`Phase`)
+    phase: Phase = Phase.START
     heading: float = math.pi / 2
     position: tuple[float, float] = (0.0, 0.0)
     compass_gain: float = 1.0
@@ -119,6 +121,7 @@ class JournalState:
 
     def __post_init__(self) -> None:
         _check_state(self)
+        object.__setattr__(self, "phase", Phase(self.phase))
 
     @property
     def is_final(self) -> bool:
@@ -250,7 +253,7 @@ def encode_state(s: JournalState) -> bytes:
     body = {
         "v": JOURNAL_VERSION,
         "robot_id": s.robot_id,
-        "phase": s.phase,
+        "phase": s.phase.value,
         "heading": s.heading,
         "position": list(s.position),
         "compass_gain": s.compass_gain,

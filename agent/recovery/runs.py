@@ -43,6 +43,7 @@ from agent.body.zenoh_world import retry_no_route
 from agent.net.bus import Bus, BusError, Event
 from agent.phases.context import Context
 from agent.phases.record_sets import records_of
+from agent.phases.reporting import Phase
 from agent.phases.roles import Hearing, Listening
 from agent.recovery.journal import JournalState
 from agent.wire import (
@@ -68,7 +69,14 @@ SERVED_WAIT = 20.0
 #: (statuses are repeated at least every 3 s, records and digests every 16 s at most).
 PEERS_WAIT = 15.0
 #: A peer's status in one of these phases shows a run before agreement.
-EXCHANGING = ("start", "search", "localise", "exchange", "agree", "explore")
+EXCHANGING = (
+    Phase.START,
+    Phase.SEARCH,
+    Phase.LOCALISE,
+    Phase.EXCHANGE,
+    Phase.AGREE,
+    Phase.EXPLORE,
+)
 
 
 # --------------------------------------------------------------------------- asking the fleet
