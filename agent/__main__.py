@@ -47,6 +47,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse
 import contextlib
 import dataclasses
+import functools
 import json
 import logging
 import math
@@ -60,7 +61,10 @@ from agent.core.perception.sensor_fault import SensorFault
 from agent.wire import MAX_ROBOT_ID, NetworkSpec, add_network_arguments, network_spec
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     from agent.net.bus import Bus
+    from agent.phases.roles import Crew, Recovery
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -351,6 +355,15 @@ def main(argv: list[str] | None = None) -> int:
         else:
             attempt, total = camera_waits(args.fleet_size)  # the world's queue (large fleets)
             body = ZenohBody(world_bus, rid, camera_timeout=total, camera_attempt=attempt)
+        recovery: Callable[[Crew], Recovery] | None = None
+        if args.state_dir:
+            from agent.recovery.crash_recovery import CrashRecovery
+            from agent.recovery.journal import Journal
+
+            try:
+                recovery = functools.partial(CrashRecovery, Journal(args.state_dir, rid))
+            except (OSError, ValueError) as exc:
+                log.error("no journal in %s: %s", args.state_dir, exc)
         try:
             runner = Runner(
                 bus,
@@ -380,14 +393,8 @@ def main(argv: list[str] | None = None) -> int:
                 ),
                 perception,
                 formation,
+                recovery=recovery,
             )
-            if args.state_dir:
-                from agent.phases.journal import Journal
-
-                try:
-                    runner.ctx.journal = Journal(args.state_dir, rid)
-                except (OSError, ValueError) as exc:
-                    log.error("no journal in %s: %s", args.state_dir, exc)
             code = runner.run()
         finally:
             body.close()
@@ -408,7 +415,7 @@ def main(argv: list[str] | None = None) -> int:
             st.untrusted,
             st.dropped,
         )
-        log.info("robot %d phases (wall/CPU s): %s", rid, runner.ctx.timeline.costs())
+        log.info("robot %d phases (wall/CPU s): %s", rid, runner.ctx.report.timeline.costs())
         return code
 
 

@@ -3,7 +3,7 @@
 The papers assume robots never crash. An agent started with ``--state-dir DIR`` writes
 its state to ``DIR/robot-{id}.journal`` at every phase change and before every motion;
 restarted after a crash with the same ``--state-dir`` it resumes from it
-(:mod:`agent.phases.resume`). What is kept (:class:`JournalState`):
+(:mod:`agent.recovery.resume`). What is kept (:class:`JournalState`):
 
 * the phase, the heading and position beliefs (fixed frame, eq. 2), the compass gain;
 * its own neighbour record (4.1.2) once localised;
@@ -16,7 +16,7 @@ restarted after a crash with the same ``--state-dir`` it resumes from it
   when this robot's first process of the run started (ms since the Unix epoch, kept across
   resumptions), and ``written_ms``, when it was written; with the record's round before agreement,
   and the agreed digest and members after, they name the run (the rule that decides whether it
-  is still going is in :mod:`agent.phases.runs`);
+  is still going is in :mod:`agent.recovery.runs`);
 * ``final``: ``done``, ``failed`` or ``stopped`` once the run is over for this robot
   (the last record written); a final journal is never resumed, only archived;
 * separately, once per search, the fixed-frame **reference view**: the head-yaw-0 image
@@ -53,6 +53,7 @@ from typing import Any
 import msgpack
 import numpy as np
 
+from agent.phases.reporting import Phase
 from agent.wire import (
     MAX_MEMBERS,
     PHASES,
@@ -78,7 +79,7 @@ COMMANDS = ("", "turn", "walk", "side")
 FINALS = ("", "done", "failed", "stopped")
 #: Journaled phases that end the run for this robot even without a final record (a
 #: crash while lingering in ``done``, or after publishing ``failed``).
-FINAL_PHASES = ("done", "failed")
+FINAL_PHASES = (Phase.DONE, Phase.FAILED)
 #: Archived journals (and reference views) kept per robot, newest first.
 ARCHIVES_KEPT = 3
 #: Largest motion request id (the wire's bound, 2^53 - 1).
@@ -95,7 +96,8 @@ class JournalState:
     """One agent's state at one instant (see the module docstring)."""
 
     robot_id: int
-    phase: str = "start"
+    #: the phase (given as a :class:`Phase` or its string; kept as the :class:`Phase`)
+    phase: Phase = Phase.START
     heading: float = math.pi / 2
     position: tuple[float, float] = (0.0, 0.0)
     compass_gain: float = 1.0
@@ -119,6 +121,7 @@ class JournalState:
 
     def __post_init__(self) -> None:
         _check_state(self)
+        object.__setattr__(self, "phase", Phase(self.phase))
 
     @property
     def is_final(self) -> bool:
@@ -250,7 +253,7 @@ def encode_state(s: JournalState) -> bytes:
     body = {
         "v": JOURNAL_VERSION,
         "robot_id": s.robot_id,
-        "phase": s.phase,
+        "phase": s.phase.value,
         "heading": s.heading,
         "position": list(s.position),
         "compass_gain": s.compass_gain,

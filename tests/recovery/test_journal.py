@@ -1,4 +1,4 @@
-"""agent/phases/journal.py: round trips, corruption and every error branch."""
+"""agent/recovery/journal.py: round trips, corruption and every error branch."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent.phases.journal import (
+from agent.recovery.journal import (
     ARCHIVES_KEPT,
     MAGIC_STATE,
     MAX_STATE_BYTES,
@@ -207,7 +207,7 @@ def test_corrupt_reference_views(tmp_path: Path) -> None:
     body = (4).to_bytes(2, "big") + (5).to_bytes(2, "big") + b"\0" * 10
     import hashlib
 
-    from agent.phases.journal import MAGIC_REFERENCE
+    from agent.recovery.journal import MAGIC_REFERENCE
 
     short = MAGIC_REFERENCE + len(body).to_bytes(4, "big") + hashlib.sha256(body).digest() + body
     with pytest.raises(JournalError, match="pixel bytes"):
@@ -296,3 +296,28 @@ def test_archive_renames_with_a_timestamp_and_keeps_a_few(tmp_path: Path) -> Non
     newest = decode_state(kept[0].read_bytes())
     assert newest.run_epoch == ARCHIVES_KEPT + 1  # the newest kept, the oldest dropped
     assert Journal(tmp_path, 4).load() is None  # the next start is a fresh run
+
+
+def test_the_phase_is_journaled_as_the_same_string_as_before_the_enum() -> None:
+    """Journals stay compatible: a phase is written as its string (the bytes a journal of
+    plain strings holds) and read back as the :class:`Phase`."""
+    import hashlib
+
+    from agent.phases.reporting import Phase
+
+    st = JournalState(robot_id=3, phase=Phase.MOVE, leg=2, seq=4)
+    assert st == JournalState(robot_id=3, phase="move", leg=2, seq=4)
+    assert JournalState(robot_id=3, phase="move").phase is Phase.MOVE
+    body = {
+        "v": 2, "robot_id": 3, "phase": "move", "heading": math.pi / 2,
+        "position": [0.0, 0.0], "compass_gain": 1.0, "record": None, "agreed_digest": "",
+        "agreed_members": [], "plan_digest": "", "leg": 2, "command": "",
+        "command_value": 0.0, "request_id": 0, "run_epoch": 0, "written_ms": 0, "final": "",
+        "seq": 4,
+    }  # fmt: skip
+    raw = msgpack.packb(body, use_bin_type=True)
+    plain = MAGIC_STATE + len(raw).to_bytes(4, "big") + hashlib.sha256(raw).digest() + raw
+    assert encode_state(st) == plain
+    back = decode_state(plain)
+    assert back == st and back.phase is Phase.MOVE and back.is_final is False
+    assert JournalState(robot_id=3, phase="done").is_final  # a final phase, by its string

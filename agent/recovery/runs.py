@@ -2,7 +2,7 @@
 (a finished run's journal must not derail the next run; docs/design.md §8 "Faults"; docs/faults.md
 "Crashed agents and restarted routers").
 
-A journal (:mod:`agent.phases.journal`) belongs to one run of the fleet. Its identity:
+A journal (:mod:`agent.recovery.journal`) belongs to one run of the fleet. Its identity:
 
 * **before agreement**: this robot's record round (0 before its first record) and the
   run's start, ``run_epoch`` (when this robot's first process of the run started, ms
@@ -42,9 +42,10 @@ from dataclasses import dataclass
 from agent.body.zenoh_world import retry_no_route
 from agent.net.bus import Bus, BusError, Event
 from agent.phases.context import Context
-from agent.phases.journal import JournalState
 from agent.phases.record_sets import records_of
+from agent.phases.reporting import Phase
 from agent.phases.roles import Hearing, Listening
+from agent.recovery.journal import JournalState
 from agent.wire import (
     KEY_RECORDS_ALL,
     DigestMsg,
@@ -56,7 +57,7 @@ from agent.wire import (
     decode,
 )
 
-log = logging.getLogger("agent.phases.runs")
+log = logging.getLogger("agent.recovery.runs")
 
 #: s a restarted agent keeps asking the fleet for its agreed records while resuming.
 FETCH_TIMEOUT = 60.0
@@ -68,7 +69,14 @@ SERVED_WAIT = 20.0
 #: (statuses are repeated at least every 3 s, records and digests every 16 s at most).
 PEERS_WAIT = 15.0
 #: A peer's status in one of these phases shows a run before agreement.
-EXCHANGING = ("start", "search", "localise", "exchange", "agree", "explore")
+EXCHANGING = (
+    Phase.START,
+    Phase.SEARCH,
+    Phase.LOCALISE,
+    Phase.EXCHANGE,
+    Phase.AGREE,
+    Phase.EXPLORE,
+)
 
 
 # --------------------------------------------------------------------------- asking the fleet

@@ -2,9 +2,9 @@
 paper 4.1–5.2).
 
 The papers assume no robot ever crashes. An agent started with ``--state-dir`` journals
-its state (:mod:`agent.phases.journal`, written by :mod:`agent.phases.journaling`).
+its state (:mod:`agent.recovery.journal`, written by :mod:`agent.recovery.journaling`).
 Restarted, it first asks the bus whether the journal's run is still going
-(:mod:`agent.phases.runs`): a final journal, or one of a run that ended, is archived and
+(:mod:`agent.recovery.runs`): a final journal, or one of a run that ended, is archived and
 the robot starts afresh. A journal of a run still going is resumed (:class:`Resumption`):
 
 * **The command in flight** at the crash is sent again with its journaled request id:
@@ -34,7 +34,8 @@ the robot starts afresh. A journal of a run still going is resumed (:class:`Resu
 While resuming, the journal keeps the journaled phase, record and agreement, and follows
 the body: the beliefs once the command in flight is answered, and each turn of the
 resumption (re-measuring the heading, turning back to the axis at hold) with its request
-id (:class:`MotionJournal`): a second crash during the resumption resumes from there.
+id (:meth:`~agent.recovery.journaling.Journaling.resuming`): a second crash during the
+resumption resumes from there.
 
 Tie-break: the compass's re-measurement overrides the estimate when it is within 20° of it.
 """
@@ -43,7 +44,6 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import replace
 
 import numpy as np
 
@@ -51,20 +51,31 @@ from agent.body.base import MotionResult
 from agent.core.agreed_params import params_digest
 from agent.core.agreement import Agreement
 from agent.core.control import PAPER_GAINS, advance, wrap_pi
-from agent.phases.context import NORTH, AgentFailure, Context
-from agent.phases.journal import Journal, JournalError, JournalState
-from agent.phases.roles import Fleet, Mover, Planner
-from agent.phases.runs import RunCheck, Verdict, agreed_by_others, fetch_records
+from agent.phases.context import NORTH, AgentFailure
+from agent.phases.reporting import Phase
+from agent.phases.roles import Crew
+from agent.recovery.journal import Journal, JournalError, JournalState
+from agent.recovery.journaling import Journaling
+from agent.recovery.runs import RunCheck, Verdict, agreed_by_others, fetch_records
 from agent.wire import NeighborRecordMsg, canonical_digest
 
-log = logging.getLogger("agent.phases.resume")
+log = logging.getLogger("agent.recovery.resume")
 
 #: The compass's re-measured heading replaces the estimate only within this of it.
 REMEASURE_LIMIT = math.radians(20.0)
 #: Below this the robot does not turn back to θ = 0 to re-measure (compass overlap).
 REORIENT_MIN = math.radians(5.0)
 #: Where a resumed agent starts, by journaled phase (after agreement).
-AGREED_STAGES = {"plan": "wait", "wait": "wait", "move": "move", "hold": "hold"}
+AGREED_STAGES = {
+    Phase.PLAN: Phase.WAIT,
+    Phase.WAIT: Phase.WAIT,
+    Phase.MOVE: Phase.MOVE,
+    Phase.HOLD: Phase.HOLD,
+}
+#: Journaled phases never resumed: a run over for this robot; the march (by design); an
+#: exploration move of a re-search round (4.1.3 rule 2), whose record and origin were
+#: being replaced.
+NOT_RESUMED = (Phase.FAILED, Phase.DONE, Phase.MARCH, Phase.EXPLORE)
 
 
 def archive(journal: Journal, why: str) -> None:
@@ -99,73 +110,45 @@ def load(journal: Journal) -> JournalState | None:
     return st
 
 
-class MotionJournal:
-    """The journal hook while resuming: the journaled state ``st`` with the beliefs as
-    they are and the command about to be sent (statuses write nothing: the journaled
-    phase stands until the resumption is over). A failing disk gives it up (logged)."""
-
-    def __init__(self, ctx: Context, journal: Journal | None, st: JournalState) -> None:
-        self.ctx, self.journal, self.st = ctx, journal, st
-
-    def hook(self, command: str = "", value: float = 0.0, request_id: int = 0) -> None:
-        """``Context.journal_hook``: a command about to be sent is journaled."""
-        if command:
-            self.save(command, value, request_id)
-
-    def save(self, command: str = "", value: float = 0.0, request_id: int = 0) -> None:
-        """Journal ``st`` with the beliefs now and ``command`` (none: nothing in flight)."""
-        if self.journal is None:
-            return
-        b = self.ctx.beliefs
-        state = replace(
-            self.st,
-            heading=float(wrap_pi(b.heading)),
-            position=(float(b.position[0]), float(b.position[1])),
-            command=command,
-            command_value=float(value),
-            request_id=request_id,
-        )
-        try:
-            self.journal.save(state)
-        except (OSError, ValueError) as exc:
-            log.error("journal write failed while resuming, given up: %s", exc)
-            self.journal = None
-
-
 class Resumption:
-    """Where a (restarted) agent starts, and its state restored from the journal."""
+    """Where a (restarted) agent starts, and its state restored from the journal that
+    ``journaling`` writes: the beliefs, the record (the crew's survey), the agreement (its
+    fleet), the plan (its planner, into its course) and the leg."""
 
-    def __init__(self, ctx: Context, fleet: Fleet, motion: Mover, planner: Planner) -> None:
-        self.ctx = ctx
-        self.fleet = fleet
-        self.motion = motion
-        self.planner = planner
-        self.runs = RunCheck(ctx, fleet)
+    def __init__(self, journaling: Journaling, crew: Crew) -> None:
+        self.journaling = journaling
+        self.ctx = crew.ctx
+        self.fleet = crew.fleet
+        self.motion = crew.motion
+        self.planner = crew.planner
+        self.course = crew.course
+        self.survey = crew.survey
+        self.runs = RunCheck(crew.ctx, crew.fleet)
 
-    def start(self) -> tuple[str, NeighborRecordMsg | None]:
+    def start(self) -> tuple[Phase, NeighborRecordMsg | None]:
         """Where to start: ``search`` afresh (no journal, or one of a run that is over:
         archived), or where the journal of a run still going says."""
-        journal = self.ctx.journal
+        journal = self.journaling.journal
         if journal is None:
-            return "search", None
-        self.ctx.run_epoch = journal.opened_ms  # a new run, unless resumed below
+            return Phase.SEARCH, None
+        self.journaling.join_run(journal.opened_ms)  # a new run, unless resumed below
         st = load(journal)
         if st is None:
-            return "search", None
+            return Phase.SEARCH, None
         verdict = self.runs.check(st)
         if not verdict.going:
             log.info("robot %d starts a new run: %s", self.ctx.me, verdict.why)
             archive(journal, verdict.why)
-            return "search", None
+            return Phase.SEARCH, None
         log.info("robot %d: its run is still going: %s", self.ctx.me, verdict.why)
-        self.ctx.run_epoch = st.run_epoch or journal.opened_ms
+        self.journaling.join_run(st.run_epoch or journal.opened_ms)
         stage, record = self.resume(st, verdict)
         log.info("robot %d resumes at %s (journaled phase %s)", self.ctx.me, stage, st.phase)
         return stage, record
 
     def resume(
         self, st: JournalState, verdict: Verdict | None = None
-    ) -> tuple[str, NeighborRecordMsg | None]:
+    ) -> tuple[Phase, NeighborRecordMsg | None]:
         """Restore the agent from ``st`` (of a run still going: ``verdict``, with what
         the run check learnt; None: ask the fleet here); the stage to go on with
         (``search``, ``agree``, ``wait``, ``move``, ``hold``) and the record to agree
@@ -173,59 +156,51 @@ class Resumption:
 
         While resuming, the journal keeps ``st`` (its phase, record, agreement, leg):
         a crash during the resumption resumes from it again. Only the body's motion is
-        journaled meanwhile (:class:`MotionJournal`): the heading and position once the
-        command in flight is answered, and each turn of the resumption (the heading
-        re-measurement, the turn back to the axis) with its request id, so that a second
-        crash neither replays a command nor forgets a turn."""
-        journal, self.ctx.journal = self.ctx.journal, None
-        hook = self.ctx.journal_hook
-        motions = MotionJournal(self.ctx, journal, st)
-        self.ctx.journal_hook = motions.hook
-        try:
-            return self._resume(st, journal, verdict, motions)
-        finally:
-            self.ctx.journal = journal
-            self.ctx.journal_hook = hook
+        journaled meanwhile (:meth:`~agent.recovery.journaling.Journaling.resuming`): the
+        heading and position once the command in flight is answered, and each turn of the
+        resumption (the heading re-measurement, the turn back to the axis) with its request
+        id, so that a second crash neither replays a command nor forgets a turn."""
+        journal = self.journaling.journal
+        with self.journaling.resuming(st) as motions:
+            b = self.ctx.beliefs
+            if st.phase in NOT_RESUMED or st.final:
+                raise AgentFailure(
+                    f"journal says phase {st.phase}{f' ({st.final})' if st.final else ''} "
+                    "at the crash: not resumed"
+                )
+            b.compass_gain = st.compass_gain
+            b.heading = st.heading
+            b.position = np.array(st.position, dtype=np.float64)
+            self.command_in_flight(st)
+            if st.command:
+                motions.save()  # answered: the beliefs as they are now, nothing in flight
+            moved = st.command != "" or abs(wrap_pi(b.heading - NORTH)) > REORIENT_MIN
+            if st.record is None:
+                if moved:
+                    self.remeasure_heading(journal)
+                b.heading = NORTH  # the new search defines the fixed frame again from here
+                return Phase.SEARCH, None
+            self.survey.restore(st.record)
+            return self.rejoin(st, journal, verdict, moved)
 
-    def _resume(
-        self,
-        st: JournalState,
-        journal: Journal | None,
-        verdict: Verdict | None,
-        motions: MotionJournal,
-    ) -> tuple[str, NeighborRecordMsg | None]:
+    def rejoin(
+        self, st: JournalState, journal: Journal | None, verdict: Verdict | None, moved: bool
+    ) -> tuple[Phase, NeighborRecordMsg]:
+        """With its record (restored): back into the exchange, or, agreed (by the
+        journal, or by the others meanwhile), the agreed records fetched, the plan made
+        again and checked against the journal, the heading re-measured before a move or
+        a hold; the stage to go on with."""
         ctx, b = self.ctx, self.ctx.beliefs
-        # not resumed: a run over for this robot; the march (by design); an exploration
-        # move of a re-search round (4.1.3 rule 2), whose record and origin were being
-        # replaced
-        if st.phase in ("failed", "done", "march", "explore") or st.final:
-            raise AgentFailure(
-                f"journal says phase {st.phase}{f' ({st.final})' if st.final else ''} "
-                "at the crash: not resumed"
-            )
-        b.compass_gain = st.compass_gain
-        b.heading = st.heading
-        b.position = np.array(st.position, dtype=np.float64)
-        self.command_in_flight(st)
-        if st.command:
-            motions.save()  # answered: the beliefs as they are now, nothing in flight
-        moved = st.command != "" or abs(wrap_pi(b.heading - NORTH)) > REORIENT_MIN
-        if st.record is None:
-            if moved:
-                self.remeasure_heading(journal)
-            b.heading = NORTH  # the new search defines the fixed frame again from here
-            return "search", None
-        ctx.record_round = st.record.round
-        ctx.own_record = st.record
+        assert st.record is not None
         digest, members, phase = st.agreed_digest, st.agreed_members, st.phase
         if not digest:
             found = verdict.agreed if verdict is not None else agreed_by_others(ctx.bus, st.record)
             if found is None:
-                return "agree", st.record
+                return Phase.AGREE, st.record
             digest, members = found
-            phase = "plan"
+            phase = Phase.PLAN
             log.info("the others agreed on %s with this robot's record: adopted", digest[:12])
-        ctx.status("plan", 0.0, "resumed: fetching the agreed records", force=True)
+        ctx.report.status(Phase.PLAN, 0.0, "resumed: fetching the agreed records", force=True)
         if verdict is not None and verdict.records and verdict.agreed == (digest, members):
             records = verdict.records
         else:
@@ -241,22 +216,23 @@ class Resumption:
         self.fleet.agreement = agr
         decision = agr.decide(ctx.clock())
         self.planner.make_plan(decision)
-        if st.plan_digest and ctx.plan_digest != st.plan_digest:
+        course = self.course
+        if st.plan_digest and course.digest != st.plan_digest:
             raise AgentFailure(
-                f"recomputed plan {ctx.plan_digest[:12]} differs from the journaled "
+                f"recomputed plan {course.digest[:12]} differs from the journaled "
                 f"{st.plan_digest[:12]}: not moving"
             )
-        stage = AGREED_STAGES.get(phase, "wait")
-        if stage in ("move", "hold"):
+        stage = AGREED_STAGES.get(phase, Phase.WAIT)
+        if stage in (Phase.MOVE, Phase.HOLD):
             # the pyramid axis (set by the move, which a robot resumed at hold skips): the
             # hold's own check judges the pair against it
-            _, ctx.final_heading = ctx.formation.goals(ctx.plan, ctx.me)
-        if stage in ("move", "hold") and moved:
+            course.face(ctx.formation.goals(course.plan, ctx.me)[1])
+        if stage in (Phase.MOVE, Phase.HOLD) and moved:
             self.remeasure_heading(journal)
-            turn = wrap_pi(ctx.final_heading - b.heading)
-            if stage == "hold" and abs(turn) > REORIENT_MIN:  # face the axis again, as arrived
+            turn = wrap_pi(course.final_heading - b.heading)
+            if stage == Phase.HOLD and abs(turn) > REORIENT_MIN:  # face the axis again, as arrived
                 self.motion.rotate(turn, PAPER_GAINS, "resumed: turn back to the pyramid axis")
-        ctx.leg = st.leg
+        course.at_leg(st.leg)
         return stage, st.record
 
     def command_in_flight(self, st: JournalState) -> MotionResult | None:
