@@ -227,6 +227,7 @@ class Context:
             walked=min(MAX_WALKED, max(0.0, self.walked)),
             shift_x=min(MAX_SHIFT, max(-MAX_SHIFT, self.shift[0])),
             shift_y=min(MAX_SHIFT, max(-MAX_SHIFT, self.shift[1])),
+            calibration=self.cfg.calibration,
         )
         said = replace(msg, t_sim=0.0, bytes_sent=0)
         fresh = said != self.status_sent
