@@ -88,6 +88,12 @@ class ShotRecord:
         )
 
 
+def plan_order(shot_id: str) -> tuple[int, str]:
+    """A view's place in its plan: ids are a set's letter and the plan's running number."""
+    digits = shot_id[1:]
+    return (int(digits), shot_id) if digits.isdigit() else (-1, shot_id)
+
+
 def _write_atomic(path: Path, text: str) -> None:
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(text)
@@ -179,14 +185,14 @@ class CaptureFolder:
         self.records[record.shot.id] = record
 
     def write_manifest(self) -> None:
-        """The manifest with every shot taken so far (order of the plan's ids)."""
+        """The manifest with every shot taken so far (in the plan's order)."""
         doc = dict(self.header)
-        doc["shots"] = [self.records[k].to_dict() for k in sorted(self.records)]
+        doc["shots"] = [r.to_dict() for r in self.taken()]
         _write_atomic(self.path / MANIFEST, json.dumps(doc, indent=1, sort_keys=True) + "\n")
 
     def taken(self, set_: str | None = None) -> list[ShotRecord]:
-        """The views taken, in id order (of one set)."""
-        recs = [self.records[k] for k in sorted(self.records)]
+        """The views taken, in the plan's order (of one set)."""
+        recs = sorted(self.records.values(), key=lambda r: plan_order(r.shot.id))
         return [r for r in recs if set_ is None or r.shot.set == set_]
 
     def image(self, record: ShotRecord) -> np.ndarray:
