@@ -175,6 +175,14 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="publish thumbnails of the analysed camera frames with their detections on "
         "nao/ID/camera for viewers (at most 2 frames/s; off by default)",
     )
+    p.add_argument(
+        "--calibration",
+        metavar="DIR",
+        default=None,
+        help="the recogniser's calibration folder (M-base, D-base, orange range), built from "
+        "your own robots by python -m tools.calibrate (docs/real-naos.md); default: the "
+        "built-in one, rendered from the simulated NAOs",
+    )
     p.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
     args = p.parse_args(argv)
     if args.id != "auto":
@@ -319,6 +327,15 @@ def main(argv: list[str] | None = None) -> int:
     from agent.net.bus import BusError
     from agent.phases.runner import Runner, report_unavailable
 
+    calibration = None
+    if args.calibration is not None:  # a bad folder is a usage error: before any session
+        from agent.core.perception.calibration import CalibrationError, load
+
+        try:
+            calibration = load(args.calibration)
+        except CalibrationError as exc:
+            print(f"python -m agent: --calibration: {exc}", file=sys.stderr)
+            return 2
     try:
         opened = open_bus(args, log)
     except ValueError as exc:  # usage: bad flags, no credentials (TrustError is one too)
@@ -340,10 +357,12 @@ def main(argv: list[str] | None = None) -> int:
         try:
             from agent.adapters import FormationAdapter, PerceptionAdapter
 
-            perception = PerceptionAdapter()
+            perception = PerceptionAdapter(calibration)
             formation = FormationAdapter()
         except (ValueError, OSError, ImportError) as exc:
             return report_unavailable(bus, rid, f"perception or formation unavailable: {exc}")
+        cal = perception.calibration
+        log.info("calibration %s (%s)", cal.digest[:16], cal.source)
         body: Body
         if args.body == "naoqi":
             from agent.body.naoqi import NaoqiBody
@@ -382,6 +401,7 @@ def main(argv: list[str] | None = None) -> int:
                     march=args.route,
                     sensor_fault=args.sensor_fault,
                     publish_camera=args.publish_camera,
+                    calibration=cal.digest,
                     **{
                         k: v
                         for k, v in (

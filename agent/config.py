@@ -84,6 +84,9 @@ class AgentConfig:
     # publish thumbnails of the analysed frames for viewers on nao/{id}/camera
     # (agent/phases/camera_feed.py); off by default, opt-in on real fleets
     publish_camera: bool = False
+    # the digest of the recogniser's calibration (agent/core/perception/calibration.py),
+    # reported in this robot's status and record; "" when not told
+    calibration: str = ""
 
     @property
     def radius(self) -> float:
@@ -133,6 +136,11 @@ class AgentConfig:
             raise ValueError(f"explore_step must be in [0.2, 5] m, got {self.explore_step}")
         if not (math.isfinite(self.research_timeout) and self.research_timeout > 0.0):
             raise ValueError(f"research_timeout must be > 0 s, got {self.research_timeout}")
+        if self.calibration and (
+            len(self.calibration) != 64
+            or any(c not in "0123456789abcdef" for c in self.calibration)
+        ):
+            raise ValueError(f"calibration must be a SHA-256 hex digest, got {self.calibration!r}")
         if self.lost_rounds < 1:
             raise ValueError(f"lost_rounds must be >= 1, got {self.lost_rounds}")
         for y in self.search_yaws:

@@ -31,6 +31,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from agent.core.perception.calibration import builtin, load
 from agent.core.perception.compass import VisualCompass
 from agent.core.perception.detector import Detection, Detector
 from sim.renderer import RENDERERS, choose
@@ -371,6 +372,13 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument("--png", type=Path, default=Path("out/perception/eval.png"))
     ap.add_argument("--view-png", type=Path, default=None, help="also save one annotated view here")
+    ap.add_argument(
+        "--calibration",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="a calibration folder (python -m tools.calibrate build); default: the built-in one",
+    )
     args = ap.parse_args(argv)
     if args.views < 1 or args.compass_samples < 0:
         print("error: --views must be >= 1 and --compass-samples >= 0", file=sys.stderr)
@@ -379,7 +387,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: --max-distance must be in ({RANGE[0]}, 4.0]", file=sys.stderr)
         return 2
     try:
-        det = Detector()
+        cal = builtin() if args.calibration is None else load(args.calibration)
+        det = Detector(cal.mbase, cal.dbase, orange=cal.orange)
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -398,6 +407,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     summary: dict[str, Any] = {
         "seed": args.seed,
+        "calibration": cal.digest,
         "renderer": drawn.name,
         "clutter": args.clutter,
         "neighbour_heads": args.neighbour_heads,
@@ -430,6 +440,7 @@ def main(argv: list[str] | None = None) -> int:
     print(
         f"views {summary['views']} (seed {args.seed}, clutter {args.clutter}); robots counted {summary['robots_counted']}"
     )
+    print(f"calibration {cal.digest[:16]} ({cal.source})")
     print(f"recall    {summary['recall']:.4f}   (target >= 0.95)")
     cb, lo = summary["clutter_behind"], summary["left_out_robot_behind"]
     print(

@@ -261,6 +261,7 @@ class Reporter:
             walked=min(MAX_WALKED, max(0.0, f.walked)),
             shift_x=min(MAX_SHIFT, max(-MAX_SHIFT, f.shift[0])),
             shift_y=min(MAX_SHIFT, max(-MAX_SHIFT, f.shift[1])),
+            calibration=self._cfg.calibration,
         )
         said = replace(msg, t_sim=0.0, bytes_sent=0)
         fresh = said != self._said

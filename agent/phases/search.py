@@ -204,6 +204,7 @@ class Search:
             orientations=tuple(float(o) for o in ori),
             confidences=tuple(float(c) for c in conf),
             obstacles=tuple((float(x), float(y)) for x, y in obstacles),
+            calibration=ctx.cfg.calibration,
         )
         self._record = rec
         ctx.report.status(Phase.LOCALISE, 1.0, f"{len(pts)} neighbours, {len(obstacles)} obstacles")
