@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agent.__main__ import agent_config, parse_args
@@ -66,6 +66,7 @@ configs = st.builds(
 )
 
 
+@settings(deadline=None)  # argparse on a loaded machine: no timing to hold
 @given(configs)
 def test_the_command_line_gives_the_config_back(cfg: AgentConfig) -> None:
     assert parsed(cfg) == cfg
