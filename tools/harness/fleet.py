@@ -33,6 +33,7 @@ from types import TracebackType
 from typing import Any
 
 from agent.config import AgentConfig
+from agent.net.bus import Bus
 from sim import scenarios
 from sim.locomotion import MAX_NOISE_SCALE
 from tools.harness.judge import summarise
@@ -227,7 +228,7 @@ class Fleet:
         self._nao_urls: dict[int, str] = {}
         self._rec: Recorder | None = None
         self._live: LiveView | None = None
-        self._bus: Any = None
+        self._bus: Bus | None = None
         self._closed = False
 
     # ------------------------------------------------------------------ start and stop
@@ -254,7 +255,14 @@ class Fleet:
         assert self.net is not None, "the fleet has not started"
         return self.net.endpoint
 
+    @property
+    def truth(self) -> list[tuple[float, dict[int, tuple[float, float, float]]]]:
+        """The ground truth so far: (sim time, pose of every robot) samples, as the world
+        published them (``world/truth/**``; the judge's, never the agents')."""
+        return self.obs.truth
+
     def elapsed(self) -> float:
+        """Seconds since the run began."""
         return time.monotonic() - self.t0
 
     def _start(self) -> None:
@@ -334,6 +342,7 @@ class Fleet:
     # ------------------------------------------------------------------ observe
 
     def _take(self) -> None:
+        assert self._bus is not None, "the fleet has not started"
         for ev in self._bus.drain(0.1):
             self.obs.take_event(ev, self._rec)
 
@@ -348,6 +357,7 @@ class Fleet:
         the seconds since the start: a caller's injector) has nothing pending, or the
         spec's ``timeout`` (``result["timeout"]``); then 1.5 s more for the last truth
         after the motions, and the rogues' end."""
+        assert self._bus is not None, "the fleet has not started"
         deadline = time.monotonic() + self.spec.timeout
         while True:
             self.step()
