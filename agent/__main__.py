@@ -2,7 +2,7 @@
 
     python -m agent --id N|auto [--fleet-size N] [--connect EP]... [--listen EP]...
                     [--world-connect EP]...
-                    [--no-multicast-scouting] [--mode peer|client] [--d-e 0.8]
+                    [--no-multicast-scouting] [--mode peer|client] [--d-e M]
                     [--phi-e-deg 30] [--orientation pca|cp] [--strategy S]
                     [--timeout S] [--member-grace S] [--join-timeout S]
                     [--research-rounds K] [--explore-step M]
@@ -54,7 +54,8 @@ import math
 import sys
 from typing import TYPE_CHECKING
 
-from agent.config import add_plan_arguments
+from agent.config import AgentConfig, add_plan_arguments
+from agent.core.formation.params import D_E, PHI_E_DEG
 from agent.core.nao import NAOQI_PORT
 from agent.core.perception.sensor_fault import HELP as SENSOR_FAULT_HELP
 from agent.core.perception.sensor_fault import SensorFault
@@ -79,25 +80,28 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         metavar="EP",
         help="a second session for the world (body) connects here (the router's world port)",
     )
-    p.add_argument("--d-e", type=float, default=0.8, help="expected parent-child distance (m)")
+    p.add_argument("--d-e", type=float, default=D_E, help="expected parent-child distance (m)")
     p.add_argument(
-        "--phi-e-deg", type=float, default=30.0, help="expected parent-child angle (deg)"
+        "--phi-e-deg", type=float, default=PHI_E_DEG, help="expected parent-child angle (deg)"
     )
     add_plan_arguments(p)
     p.add_argument(
         "--timeout",
         type=float,
-        default=120.0,
+        default=AgentConfig.timeout,
         help="agreement timeout: seconds without news from the fleet (s)",
     )
     p.add_argument(
         "--member-grace",
         type=float,
-        default=20.0,
+        default=AgentConfig.member_grace,
         help="s a member whose liveliness token vanished still counts (lossy links)",
     )
     p.add_argument(
-        "--wave-timeout", type=float, default=600.0, help="wait limit for earlier waves (s)"
+        "--wave-timeout",
+        type=float,
+        default=AgentConfig.wave_timeout,
+        help="wait limit for earlier waves (s)",
     )
     p.add_argument(
         "--join-timeout",
@@ -235,6 +239,28 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return args
 
 
+def agent_config(args: argparse.Namespace, rid: int) -> AgentConfig:
+    """The agent's settings from its flags (:meth:`AgentConfig.to_argv` writes them back);
+    ``rid``: the robot it drives (``--id``, or the one it claimed)."""
+    optional = {"research_rounds": args.research_rounds, "explore_step": args.explore_step}
+    return AgentConfig(
+        robot_id=rid,
+        fleet_size=args.fleet_size,
+        d_e=args.d_e,
+        phi_e=math.radians(args.phi_e_deg),
+        orientation=args.orientation,
+        strategy=args.strategy,
+        timeout=args.timeout,
+        wave_timeout=args.wave_timeout,
+        member_grace=args.member_grace,
+        correct=not args.no_correct,
+        march=args.route,
+        sensor_fault=args.sensor_fault,
+        publish_camera=args.publish_camera,
+        **{k: v for k, v in optional.items() if v is not None},
+    )
+
+
 def open_bus(args: argparse.Namespace, log: logging.Logger) -> tuple[Bus, Bus, int]:
     """The agent's bus, its world (body) bus and its robot id.
 
@@ -323,7 +349,6 @@ def main(argv: list[str] | None = None) -> int:
     # Imported here so that `--help` and usage errors need no zenoh session.
     from agent.body.base import Body, BodyError
     from agent.body.zenoh_world import ZenohBody, camera_waits
-    from agent.config import AgentConfig
     from agent.net.bus import BusError
     from agent.phases.runner import Runner, report_unavailable
 
@@ -387,30 +412,7 @@ def main(argv: list[str] | None = None) -> int:
             runner = Runner(
                 bus,
                 body,
-                AgentConfig(
-                    robot_id=rid,
-                    fleet_size=args.fleet_size,
-                    d_e=args.d_e,
-                    phi_e=math.radians(args.phi_e_deg),
-                    orientation=args.orientation,
-                    strategy=args.strategy,
-                    timeout=args.timeout,
-                    wave_timeout=args.wave_timeout,
-                    member_grace=args.member_grace,
-                    correct=not args.no_correct,
-                    march=args.route,
-                    sensor_fault=args.sensor_fault,
-                    publish_camera=args.publish_camera,
-                    calibration=cal.digest,
-                    **{
-                        k: v
-                        for k, v in (
-                            ("research_rounds", args.research_rounds),
-                            ("explore_step", args.explore_step),
-                        )
-                        if v is not None
-                    },
-                ),
+                dataclasses.replace(agent_config(args, rid), calibration=cal.digest),
                 perception,
                 formation,
                 recovery=recovery,

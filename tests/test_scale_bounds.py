@@ -18,7 +18,8 @@ from agent import wire as w
 from agent.core import nao
 from agent.recovery.journal import JournalState, decode_state, encode_state
 from sim import scenarios
-from tools.demo import MAX_ROBOTS, parse_args
+from tools.demo import parse_args
+from tools.harness.fleet import MAX_ROBOTS
 
 
 def largest_record(k: int = w.MAX_NEIGHBOURS) -> w.NeighborRecordMsg:

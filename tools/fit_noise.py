@@ -49,7 +49,7 @@ from agent.core.formation.frame.poses import PoseFrame
 from agent.core.perception.sighting_noise import SightingNoise, split
 from agent.wire import NeighborRecordMsg
 from tools.corpus import Run, held_out, load_corpus
-from tools.harness.frame_fit import frame_error
+from tools.lib.frame_fit import frame_error
 
 GATE0, GATE1 = 0.3, 0.2  #: a sighting is matched when within GATE0 + GATE1·d of a robot
 #: A fit is a correct frame, whose residuals the null model describes, within these

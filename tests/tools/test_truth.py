@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+from agent.core.formation.params import D_E, PHI_E_DEG
 from agent.core.formation.shape.pyramid import slot_positions
 from tools.harness.judge import evaluate
 from tools.harness.truth import (
@@ -20,7 +21,7 @@ from tools.harness.truth import (
     slot_tree,
 )
 
-D, PHI = 0.8, math.radians(30)
+D, PHI = D_E, math.radians(PHI_E_DEG)
 
 
 def pyramid(n: int, facing: float, origin: tuple[float, float] = (0.0, 0.0)) -> dict[int, tuple]:
