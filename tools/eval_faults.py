@@ -8,7 +8,7 @@ the fault, and judges the run from ground truth:
 * ``kill-agent@P`` (P = search, agree, wait, move, hold): the first agent seen in phase
   P (search: while turning; move: as it starts, turning or walking) is killed (SIGKILL, no goodbye)
   and started again, same id, same state folder, ``--restart-after`` s later; it
-  resumes from its journal (agent/phases/resume.py).
+  resumes from its journal (agent/recovery/resume.py).
 * ``kill-router@P`` (P = agree, move): the router is killed when the first agent is in
   P and started again on the same endpoint ``--restart-after`` s later; the clients
   reconnect and declare their tokens again, the membership grace period covers the gap.
