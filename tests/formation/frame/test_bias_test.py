@@ -4,6 +4,7 @@ fleets, and a test per error branch."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -84,7 +85,7 @@ def test_errors() -> None:
     with pytest.raises(ValueError, match="bias_scale"):
         bias_fit(poses, 1, NOISE, 0.0)
     with pytest.raises(ValueError, match="bias_scale"):
-        SightingNoise.synthetic(0.01).__class__(**{**NOISE.__dict__, "bias_scale": -1.0})
+        dataclasses.replace(NOISE, bias_scale=-1.0)
 
 
 def test_a_sound_fleet_passes_the_global_test() -> None:

@@ -246,11 +246,11 @@ def strays(
 @dataclass(frozen=True)
 class _Evidence:
     """What the tests count, gathered once per fitted frame: each edge and whether it is
-    rejected, each edge's sighting distances, each robot's strays (distance, lands) and
+    rejected, each edge's base rate of rejection, each robot's strays (distance, lands) and
     the distances of every sighting of each record."""
 
     edges: dict[tuple[int, int], bool]
-    dist: dict[tuple[int, int], list[float]]
+    p_edge: dict[tuple[int, int], float]  #: p_reject at the edge's mean sighting distance
     stray: dict[int, list[tuple[float, bool]]]
     sighted: dict[int, list[float]]
 
@@ -269,7 +269,8 @@ def _evidence(
         for rec in records
         if rec.robot_id in poses.ids
     }
-    return _Evidence(rejected_edges(poses, noise), dist,
+    p_edge = {e: float(noise.p_reject(float(np.mean(d)))) for e, d in sorted(dist.items())}
+    return _Evidence(rejected_edges(poses, noise), p_edge,
                      strays(poses, records, noise, elsewhere), sighted)  # fmt: skip
 
 
@@ -293,7 +294,7 @@ def _robot_tests(
     for r in poses.ids:
         mine = [e for e in ev.edges if r in e]
         own = ev.stray.get(r, [])
-        probs = [float(noise.p_reject(float(np.mean(ev.dist[e])))) for e in mine]
+        probs = [ev.p_edge[e] for e in mine]
         # every sighting of r's own could have ended up a lost stray (step 2)
         probs += [float(noise.p_stray(d)) for d in ev.sighted.get(r, [])]
         k = sum(ev.edges[e] for e in mine)
@@ -324,7 +325,7 @@ class FleetCount:
 
 
 def _fleet_count(noise: SightingNoise, ev: _Evidence) -> FleetCount:
-    probs = [float(noise.p_reject(float(np.mean(ev.dist[e])))) for e in ev.edges]
+    probs = [ev.p_edge[e] for e in ev.edges]
     probs += [float(noise.p_stray(d)) for r in sorted(ev.sighted) for d in ev.sighted[r]]
     k = sum(ev.edges.values()) + sum(not lands for r in ev.stray for _, lands in ev.stray[r])
     return FleetCount(k, len(probs), tail_at_least(probs, k))
