@@ -28,7 +28,7 @@ import numpy as np
 
 from agent.core.control import PAPER_GAINS, wrap_pi
 from agent.core.control.alignment import look_yaws, match_parent
-from agent.core.formation.shape.verdict import FACING_TOL, check_pair, facing_misfit
+from agent.core.formation.shape.verdict import FACING_TOL, check_edge, facing_misfit
 from agent.core.formation.view.passers_by import passers_by
 from agent.core.formation.view.route import Route
 from agent.core.nao import CAMERA_HFOV, HEAD_YAW_LIMIT
@@ -265,8 +265,8 @@ class Hold:
         The child looks where the plan puts its parent (:meth:`_find_parent`; or takes
         the correction's last look, when it did not move after it) and judges
         the measured offset with the formula the evaluation uses
-        (:func:`agent.core.formation.shape.verdict.check_pair`: r_d, r_φ against the pyramid
-        axis). The figures travel in every later status. A parent not found within
+        (:func:`agent.core.formation.shape.verdict.check_edge`: r_d, r_φ against its slot's
+        distance and angle from its parent in the shape's tree). The figures travel in every later status. A parent not found within
         ``max_correction`` of its planned place, a pair out of tolerance, or a parent whose
         mask says it faces more than ``FACING_TOL`` from the axis this robot believes in
         (its own start heading misjudged), stops this robot with the figure: the fleet
@@ -294,8 +294,9 @@ class Hold:
                 f"formation off: parent {parent} not within {ctx.cfg.max_correction:.2f} m "
                 "of its planned place"
             )
-        params = ctx.cfg.plan_params()
-        ctx.check = check_pair(ctx.me, parent, seen, ctx.final_heading, params.d_e, params.phi_e)
+        params = ctx.cfg.plan_params()  # the tree's distance and angle of this child's slot
+        _, dist, ang = params.shape.slots(len(plan.robots), params.d_e, params.phi_e).edge(rp.order)
+        ctx.check = check_edge(ctx.me, parent, seen, ctx.final_heading, dist, ang, params.phi_e)
         log.info("own check: %s", ctx.check.text())
         if not ctx.check.sure:  # with a margin for the camera's own error
             raise AgentFailure(f"formation off: {ctx.check.text()}")
