@@ -113,3 +113,31 @@ def test_render_service_workers_and_what_they_served(tmp_path: Path) -> None:
     (tmp_path / "render-2.log").write_text("render ready robots=2 shard=2/2 seed=1\n")
     assert served(tmp_path / "render-1.log") == 207
     assert served_by(tmp_path, 3) == {"render-1": 207, "render-2": None, "render-3": None}
+
+
+def test_the_shape_goes_to_every_agent_and_into_the_result(tmp_path: Path) -> None:
+    import argparse
+    import json
+
+    from agent.core.formation.shape.spec import BUILTIN, PYRAMID
+    from tools.harness.procs import agent_command
+
+    def cmd(a: argparse.Namespace) -> list[str]:
+        return agent_command(1, 3, "tcp/127.0.0.1:9", a)
+
+    assert parse_args([]).shape is PYRAMID
+    assert "--shape" not in cmd(parse_args([]))  # the default: the agents' own
+    argv = cmd(parse_args(["--shape", "line"]))
+    assert argv[argv.index("--shape") + 1] == "line"
+    f = tmp_path / "pair.json"
+    f.write_text(json.dumps({"name": "p", "slots": [{"parent": 0, "distance": 1, "angle_deg": 0}]}))
+    a = parse_args(["--shape", str(f)])
+    assert a.shape.name == "p"
+    argv = cmd(a)
+    assert argv[argv.index("--shape") + 1] == str(f.resolve())  # whatever the agents' cwd
+    # a name or path on another tool's namespace passes as it is
+    bare = argparse.Namespace(d_e=0.8, phi_e_deg=30.0, agree_timeout=60.0, agent_log_level="INFO")
+    assert "--shape" not in cmd(bare)
+    bare.shape = "grid"
+    assert cmd(bare)[cmd(bare).index("--shape") + 1] == "grid"
+    assert BUILTIN["grid"].source == "grid"

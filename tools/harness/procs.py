@@ -132,6 +132,14 @@ def wait_ready(world: Proc, timeout: float, idle: Callable[[], object] | None = 
     return next(ln for ln in world.lines if "ready" in ln.lower())
 
 
+def shape_argv(args: argparse.Namespace) -> list[str]:
+    """``--shape`` for the agents: the built-in's name or the formation file's path that
+    ``args.shape`` (a Shape, or that name or path) came from; nothing for the pyramid."""
+    shape = getattr(args, "shape", None)
+    src = str(getattr(shape, "source", shape) or "pyramid")
+    return [] if src == "pyramid" else ["--shape", src]
+
+
 def agent_command(
     rid: int,
     robots: int,
@@ -150,6 +158,7 @@ def agent_command(
         *net,
         "--d-e", str(args.d_e), "--phi-e-deg", str(args.phi_e_deg), "--timeout", str(args.agree_timeout),
         "--orientation", getattr(args, "orientation", "pca"), "--strategy", getattr(args, "strategy", "default"),
+        *shape_argv(args),
         *(["--march", str(args.march)] if getattr(args, "march", None) is not None else []),
         *([f"--march-to={args.march_to}"] if getattr(args, "march_to", None) is not None else []),
         "--log-level", args.agent_log_level,

@@ -90,6 +90,9 @@ def run_once(args: argparse.Namespace, seed: int, out: Path, quiet: bool = False
     result["noise_scale"] = float(getattr(args, "noise_scale", 1.0))
     result["orientation"] = getattr(args, "orientation", "pca")
     result["strategy"] = getattr(args, "strategy", "default")
+    shape = getattr(args, "shape", None)
+    result["shape_spec"] = str(getattr(shape, "source", shape) or "pyramid")
+    result["shape_digest"] = getattr(shape, "digest", "")
     if getattr(args, "scenario", None) is not None:
         result["scenario"] = str(args.scenario)
     if getattr(args, "isolated", False):
