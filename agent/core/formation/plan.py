@@ -1,7 +1,9 @@
-"""The plan: from neighbour records to one safe pyramid plan (NAO paper 4.1-4.2, 5.2.2 (iii)).
+"""The plan: from neighbour records to one safe plan of the formation's shape, the pyramid
+by default (NAO paper 4.1-4.2, 5.2.2 (iii)).
 
 Pipeline: neighbour check (Algorithm 2, eq. 9) -> common frame (eq. 10 or least
-squares) -> pyramid frame (PCA eq. 12-13, or CP) -> slots (AUV eqs. 5-7) ->
+squares) -> pyramid frame (PCA eq. 12-13, or CP; a shape's frame, :mod:`layout`) ->
+slots (AUV eqs. 5-7, or the shape's tree, ``PlanParams.shape``) ->
 assignment (combined sub-groups + Lemma 1, exact, or bottleneck-bounded; compared by
 :mod:`choice`) -> safe schedule (:mod:`scheduled`, :mod:`scheduler`: slot swaps and via
 points until every close pair has a safe order under the rule of :mod:`safety`) ->
@@ -30,7 +32,8 @@ leg (to the first via point, or to the target); a robot already on its slot has
 ``distance == 0`` and ``heading == axis``.
 
 The digest is sha256 over a canonical binary encoding (ids ascending, float64 bits),
-so two agents holding the same record set compute bit-identical plans and digests.
+so two agents holding the same record set compute bit-identical plans and digests; it
+covers the shape's own digest, so agents planning different shapes never agree.
 """
 
 from __future__ import annotations
@@ -205,7 +208,8 @@ def plan_from_positions(
     obstacles: np.ndarray | None = None,
     frame_robot: int = -1,
 ) -> Plan:
-    """Plan a pyramid for robots at known positions (caller's frame).
+    """Plan the shape of ``params`` (the pyramid by default) for robots at known
+    positions (caller's frame).
 
     Wave 0 is the leader alone, unless the leader's slot lies within 2·radius of another
     robot's start: then the robots that must clear it go first (see :mod:`scheduler`).

@@ -17,6 +17,10 @@ The paper's procedure, as we implement it:
    to obstacles), deepest vacancy first taken by the deepest robot; the final target is
    the vacant slot moved by the shift. Robots already on a slot of order < N stay.
 
+Any shape whose first N slots of N + M are its slots for N (every shape but ``circle`` and
+``grid``, :attr:`agent.core.formation.shape.spec.Shape.nested`) takes the pyramid's place
+in it; the ``near`` placement below works for every shape.
+
 The path of each robot is thus start -> slot -> shifted slot -> final slot (via points
 that coincide with the previous point are dropped). The safety scheduler treats the
 obstacles as robots that stand still in every wave, and may replace such a path by a
