@@ -32,8 +32,10 @@ leg (to the first via point, or to the target); a robot already on its slot has
 ``distance == 0`` and ``heading == axis``.
 
 The digest is sha256 over a canonical binary encoding (ids ascending, float64 bits),
-so two agents holding the same record set compute bit-identical plans and digests; it
-covers the shape's own digest, so agents planning different shapes never agree.
+so two agents holding the same record set compute bit-identical plans and digests. The
+digest of a plan of any shape but the pyramid also covers the shape's own digest (the
+pyramid's is the papers' plan's, as before shapes were data), so agents planning
+different shapes never agree.
 """
 
 from __future__ import annotations
@@ -53,6 +55,7 @@ from agent.core.formation.frame.records import NeighborRecord
 from agent.core.formation.params import PlanParams
 from agent.core.formation.paths.fallback import banded_plan
 from agent.core.formation.shape.layout import shape_frame
+from agent.core.formation.shape.spec import PYRAMID
 from agent.core.formation.waves.choice import choose
 from agent.core.formation.waves.obstacles import plan_around_obstacles, plan_near_obstacles
 from agent.core.formation.waves.scheduled import Scheduled, scheduled_plan
@@ -303,8 +306,9 @@ def plan_from_positions(
         "strategy": strategy,
         "obstacles": obs,
         "params": repr((params.d_e, params.phi_e, params.radius, params.orientation)),
-        "shape": params.shape.digest,
     }
+    if params.shape.digest != PYRAMID.digest:  # the pyramid's plan digest is as it was
+        fields_["shape"] = params.shape.digest
     return Plan(
         frame_robot=int(frame_robot),
         leader=leader,
