@@ -3,12 +3,13 @@ candidate assignments, or the attempts of :meth:`params.PlanParams.attempts` in 
 
 Candidates (n <= ``CANDIDATES_MAX_N``): the min-sum assignment (``optimal``), min-sum
 under bounds on the longest path between B* and min-sum's own (the CAT-ORA idea), and
-CAPT, all on the centred slots of the shape (the pyramid: AUV eqs. 5-7). Each is made safe and packed
-(:mod:`scheduled`); of those whose total path stays within ``PATH_SLACK`` of the
-optimum, the best by dependency makespan get detours on their critical chain, a copy
-with start sidesteps (:mod:`kinks`) and two copies with bundle lanes (:mod:`lanes`: the
-slots of each bundle re-paired per side and jointly, from the detoured plan's
-assignment), and the smallest makespan wins; a lane plan only when its makespan is
+CAPT, all on the centred slots of the shape (the pyramid: AUV eqs. 5-7). Each is made
+safe and packed (:mod:`scheduled`); of those whose total path stays within
+``PATH_SLACK`` of the optimum, the best by dependency makespan get detours on their
+critical chain, a copy with start sidesteps (:mod:`kinks`) and two copies with bundle
+lanes (:mod:`lanes`: the slots of each bundle re-paired per side and jointly, from the
+detoured plan's assignment; a shape with a single slot column has none), and the
+smallest makespan wins; a lane plan only when its makespan is
 strictly smaller than every other. Otherwise the paper's matching (NAO paper 4.2, Lemma 1) or the
 explicit strategy is tried per placement until one schedules safely.
 """
