@@ -2,7 +2,7 @@
 
     python -m agent --id N|auto [--fleet-size N] [--connect EP]... [--listen EP]...
                     [--world-connect EP]...
-                    [--no-multicast-scouting] [--mode peer|client] [--d-e 0.8]
+                    [--no-multicast-scouting] [--mode peer|client] [--d-e M]
                     [--phi-e-deg 30] [--orientation pca|cp] [--strategy S]
                     [--shape NAME|FILE]
                     [--timeout S] [--member-grace S] [--join-timeout S]
@@ -51,20 +51,25 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse
 import contextlib
 import dataclasses
+import functools
 import json
 import logging
 import math
 import sys
 from typing import TYPE_CHECKING
 
-from agent.config import add_plan_arguments
+from agent.config import AgentConfig, add_plan_arguments
+from agent.core.formation.params import D_E, PHI_E_DEG
 from agent.core.nao import NAOQI_PORT
 from agent.core.perception.sensor_fault import HELP as SENSOR_FAULT_HELP
 from agent.core.perception.sensor_fault import SensorFault
 from agent.wire import MAX_ROBOT_ID, NetworkSpec, add_network_arguments, network_spec
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     from agent.net.bus import Bus
+    from agent.phases.roles import Crew, Recovery
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -79,25 +84,28 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         metavar="EP",
         help="a second session for the world (body) connects here (the router's world port)",
     )
-    p.add_argument("--d-e", type=float, default=0.8, help="expected parent-child distance (m)")
+    p.add_argument("--d-e", type=float, default=D_E, help="expected parent-child distance (m)")
     p.add_argument(
-        "--phi-e-deg", type=float, default=30.0, help="expected parent-child angle (deg)"
+        "--phi-e-deg", type=float, default=PHI_E_DEG, help="expected parent-child angle (deg)"
     )
     add_plan_arguments(p)
     p.add_argument(
         "--timeout",
         type=float,
-        default=120.0,
+        default=AgentConfig.timeout,
         help="agreement timeout: seconds without news from the fleet (s)",
     )
     p.add_argument(
         "--member-grace",
         type=float,
-        default=20.0,
+        default=AgentConfig.member_grace,
         help="s a member whose liveliness token vanished still counts (lossy links)",
     )
     p.add_argument(
-        "--wave-timeout", type=float, default=600.0, help="wait limit for earlier waves (s)"
+        "--wave-timeout",
+        type=float,
+        default=AgentConfig.wave_timeout,
+        help="wait limit for earlier waves (s)",
     )
     p.add_argument(
         "--join-timeout",
@@ -175,6 +183,14 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="publish thumbnails of the analysed camera frames with their detections on "
         "nao/ID/camera for viewers (at most 2 frames/s; off by default)",
     )
+    p.add_argument(
+        "--calibration",
+        metavar="DIR",
+        default=None,
+        help="the recogniser's calibration folder (M-base, D-base, orange range), built from "
+        "your own robots by python -m tools.calibrate (docs/real-naos.md); default: the "
+        "built-in one, rendered from the simulated NAOs",
+    )
     p.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
     args = p.parse_args(argv)
     if args.id != "auto":
@@ -225,6 +241,29 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     except ValueError as exc:
         p.error(str(exc))
     return args
+
+
+def agent_config(args: argparse.Namespace, rid: int) -> AgentConfig:
+    """The agent's settings from its flags (:meth:`AgentConfig.to_argv` writes them back);
+    ``rid``: the robot it drives (``--id``, or the one it claimed)."""
+    optional = {"research_rounds": args.research_rounds, "explore_step": args.explore_step}
+    return AgentConfig(
+        robot_id=rid,
+        fleet_size=args.fleet_size,
+        d_e=args.d_e,
+        phi_e=math.radians(args.phi_e_deg),
+        orientation=args.orientation,
+        strategy=args.strategy,
+        shape=args.shape,
+        timeout=args.timeout,
+        wave_timeout=args.wave_timeout,
+        member_grace=args.member_grace,
+        correct=not args.no_correct,
+        march=args.route,
+        sensor_fault=args.sensor_fault,
+        publish_camera=args.publish_camera,
+        **{k: v for k, v in optional.items() if v is not None},
+    )
 
 
 def open_bus(args: argparse.Namespace, log: logging.Logger) -> tuple[Bus, Bus, int]:
@@ -315,10 +354,18 @@ def main(argv: list[str] | None = None) -> int:
     # Imported here so that `--help` and usage errors need no zenoh session.
     from agent.body.base import Body, BodyError
     from agent.body.zenoh_world import ZenohBody, camera_waits
-    from agent.config import AgentConfig
     from agent.net.bus import BusError
     from agent.phases.runner import Runner, report_unavailable
 
+    calibration = None
+    if args.calibration is not None:  # a bad folder is a usage error: before any session
+        from agent.core.perception.calibration import CalibrationError, load
+
+        try:
+            calibration = load(args.calibration)
+        except CalibrationError as exc:
+            print(f"python -m agent: --calibration: {exc}", file=sys.stderr)
+            return 2
     try:
         opened = open_bus(args, log)
     except ValueError as exc:  # usage: bad flags, no credentials (TrustError is one too)
@@ -340,10 +387,12 @@ def main(argv: list[str] | None = None) -> int:
         try:
             from agent.adapters import FormationAdapter, PerceptionAdapter
 
-            perception = PerceptionAdapter()
+            perception = PerceptionAdapter(calibration)
             formation = FormationAdapter()
         except (ValueError, OSError, ImportError) as exc:
             return report_unavailable(bus, rid, f"perception or formation unavailable: {exc}")
+        cal = perception.calibration
+        log.info("calibration %s (%s)", cal.digest[:16], cal.source)
         body: Body
         if args.body == "naoqi":
             from agent.body.naoqi import NaoqiBody
@@ -355,44 +404,24 @@ def main(argv: list[str] | None = None) -> int:
         else:
             attempt, total = camera_waits(args.fleet_size)  # the world's queue (large fleets)
             body = ZenohBody(world_bus, rid, camera_timeout=total, camera_attempt=attempt)
+        recovery: Callable[[Crew], Recovery] | None = None
+        if args.state_dir:
+            from agent.recovery.crash_recovery import CrashRecovery
+            from agent.recovery.journal import Journal
+
+            try:
+                recovery = functools.partial(CrashRecovery, Journal(args.state_dir, rid))
+            except (OSError, ValueError) as exc:
+                log.error("no journal in %s: %s", args.state_dir, exc)
         try:
             runner = Runner(
                 bus,
                 body,
-                AgentConfig(
-                    robot_id=rid,
-                    fleet_size=args.fleet_size,
-                    d_e=args.d_e,
-                    phi_e=math.radians(args.phi_e_deg),
-                    orientation=args.orientation,
-                    strategy=args.strategy,
-                    shape=args.shape,
-                    timeout=args.timeout,
-                    wave_timeout=args.wave_timeout,
-                    member_grace=args.member_grace,
-                    correct=not args.no_correct,
-                    march=args.route,
-                    sensor_fault=args.sensor_fault,
-                    publish_camera=args.publish_camera,
-                    **{
-                        k: v
-                        for k, v in (
-                            ("research_rounds", args.research_rounds),
-                            ("explore_step", args.explore_step),
-                        )
-                        if v is not None
-                    },
-                ),
+                dataclasses.replace(agent_config(args, rid), calibration=cal.digest),
                 perception,
                 formation,
+                recovery=recovery,
             )
-            if args.state_dir:
-                from agent.phases.journal import Journal
-
-                try:
-                    runner.ctx.journal = Journal(args.state_dir, rid)
-                except (OSError, ValueError) as exc:
-                    log.error("no journal in %s: %s", args.state_dir, exc)
             log.info("robot %d builds the shape %s", rid, args.shape.text())
             code = runner.run()
         finally:
@@ -414,7 +443,7 @@ def main(argv: list[str] | None = None) -> int:
             st.untrusted,
             st.dropped,
         )
-        log.info("robot %d phases (wall/CPU s): %s", rid, runner.ctx.timeline.costs())
+        log.info("robot %d phases (wall/CPU s): %s", rid, runner.ctx.report.timeline.costs())
         return code
 
 

@@ -18,6 +18,7 @@ from agent.core.formation.frame.records import NeighborRecord
 from agent.core.formation.frame.research import Research, decide_research
 from agent.core.formation.params import PlanParams
 from agent.core.formation.plan import Plan, plan_from_records
+from agent.core.perception.calibration import Calibration, builtin
 from agent.core.perception.compass import CompassResult, VisualCompass
 from agent.core.perception.detector import Detection, Detector
 from agent.core.perception.localise import cluster_sightings, merge_sightings, to_fixed_frame
@@ -27,12 +28,15 @@ from agent.wire import MAX_OBSTACLES, NeighborRecordMsg
 
 
 class PerceptionAdapter:
-    """Detector, fixed-frame conversion, merging and visual compass (agent/core/perception)."""
+    """Detector, fixed-frame conversion, merging and visual compass (agent/core/perception);
+    the detector with ``calibration`` (default: the built-in one)."""
 
     WALK_BANDS = (120, 200)  # half-widths tried in turn when a band has too few matches
 
-    def __init__(self) -> None:
-        self.detector = Detector()
+    def __init__(self, calibration: Calibration | None = None) -> None:
+        self.calibration = builtin() if calibration is None else calibration
+        cal = self.calibration
+        self.detector = Detector(cal.mbase, cal.dbase, orange=cal.orange)
         self.compass = VisualCompass()
         # For heading drift over a 20 cm step: forward motion spreads the horizontal
         # shifts of the image's sides (radial expansion), so the default compass rejects

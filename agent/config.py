@@ -1,7 +1,9 @@
 """The agent's settings (docs/design.md §1; NAO paper 5.2.2): one immutable, validated value.
 
 The runner (:mod:`agent.phases.runner`) takes an :class:`AgentConfig`; ``python -m agent``
-builds it from the command line.
+builds it from the command line (``agent.__main__.agent_config``), and
+:meth:`AgentConfig.to_argv` writes that command line back: the one place where a tool
+that starts agents writes their flags (``tools.harness.procs.agent_command``).
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ from pathlib import Path
 
 from agent.core.agreed_params import ParamValue
 from agent.core.formation.frame.research import DEFAULT_STEP
-from agent.core.formation.params import PLAN_STRATEGIES, PlanParams
+from agent.core.formation.params import D_E, PHI_E_DEG, PLAN_STRATEGIES, PlanParams
 from agent.core.formation.shape.pyramid import ORIENTATIONS
 from agent.core.formation.shape.schema import parse_shape
 from agent.core.formation.shape.spec import BUILTIN, PYRAMID, Shape
@@ -94,8 +96,8 @@ class AgentConfig:
 
     robot_id: int
     fleet_size: int | None = None
-    d_e: float = 0.8
-    phi_e: float = math.radians(30.0)
+    d_e: float = D_E
+    phi_e: float = math.radians(PHI_E_DEG)
     orientation: str = "pca"  # pyramid orientation: "pca" (NAO eq. 12) | "cp" (AUV III.B)
     strategy: str = "default"  # assignment strategy, one of formation.params.PLAN_STRATEGIES
     shape: Shape = PYRAMID  # the formation's shape (agent/core/formation/shape/spec.py)
@@ -128,6 +130,54 @@ class AgentConfig:
     # publish thumbnails of the analysed frames for viewers on nao/{id}/camera
     # (agent/phases/camera_feed.py); off by default, opt-in on real fleets
     publish_camera: bool = False
+    # the digest of the recogniser's calibration (agent/core/perception/calibration.py),
+    # reported in this robot's status and record; "" when not told
+    calibration: str = ""
+
+    @property
+    def phi_e_deg(self) -> float:
+        """φ_e in degrees as ``--phi-e-deg`` gives it: the shortest decimal whose radians are
+        exactly :attr:`phi_e` (30.0 for the default)."""
+        return float(_degrees_text(self.phi_e))
+
+    def to_argv(self, *, claim_id: bool = False) -> list[str]:
+        """The ``python -m agent`` flags that give this config, the inverse of its parser:
+        ``agent_config(parse_args(c.to_argv()), c.robot_id) == c``. Only the settings that
+        differ from the defaults are written (the agent's defaults have their one home
+        here); a shape other than the pyramid as ``--shape NAME|FILE``, from its
+        ``source``. ``claim_id``: ``--id auto`` (the agent claims a robot from the world).
+        ``ValueError`` for a setting that no flag carries (:data:`NO_FLAG`) when it is not
+        its default, and for a shape with no source (built in code, not loaded)."""
+        fixed = [f for f in NO_FLAG if getattr(self, f) != _DEFAULTS[f]]
+        if fixed:
+            raise ValueError(f"no python -m agent flag sets {', '.join(fixed)}")
+        argv = ["--id", "auto" if claim_id else str(self.robot_id)]
+        if self.fleet_size is not None:
+            argv += ["--fleet-size", str(self.fleet_size)]
+        if self.phi_e != _DEFAULTS["phi_e"]:
+            argv += ["--phi-e-deg", _degrees_text(self.phi_e)]
+        for name, flag in FLAGS.items():
+            value = getattr(self, name)
+            if value != _DEFAULTS[name]:
+                argv.append(f"{flag}={value!r}" if isinstance(value, float) else f"{flag}={value}")
+        if self.shape != PYRAMID:  # a built-in's name or a formation file's path
+            if not self.shape.source:
+                raise ValueError(
+                    f"no python -m agent flag sets the shape {self.shape.name!r}: it came "
+                    "from no formation file (its source)"
+                )
+            argv += ["--shape", self.shape.source]
+        if not self.correct:
+            argv.append("--no-correct")
+        if self.march is not None and self.march.distance is not None:
+            argv.append(f"--march={self.march.distance!r}")
+        elif self.march is not None and self.march.to is not None:
+            argv.append(f"--march-to={self.march.to[0]!r},{self.march.to[1]!r}")
+        if self.sensor_fault is not None:
+            argv.append(f"--sensor-fault={self.sensor_fault.kind}:{self.sensor_fault.amount!r}")
+        if self.publish_camera:
+            argv.append("--publish-camera")
+        return argv
 
     @property
     def radius(self) -> float:
@@ -182,6 +232,11 @@ class AgentConfig:
             raise ValueError(f"explore_step must be in [0.2, 5] m, got {self.explore_step}")
         if not (math.isfinite(self.research_timeout) and self.research_timeout > 0.0):
             raise ValueError(f"research_timeout must be > 0 s, got {self.research_timeout}")
+        if self.calibration and (
+            len(self.calibration) != 64
+            or any(c not in "0123456789abcdef" for c in self.calibration)
+        ):
+            raise ValueError(f"calibration must be a SHA-256 hex digest, got {self.calibration!r}")
         if self.lost_rounds < 1:
             raise ValueError(f"lost_rounds must be >= 1, got {self.lost_rounds}")
         for y in self.search_yaws:
@@ -190,3 +245,50 @@ class AgentConfig:
                     f"search yaw {math.degrees(y):.1f}° outside "
                     f"±{math.degrees(HEAD_YAW_LIMIT):.1f}°"
                 )
+
+
+#: The settings written as ``FLAG=VALUE`` by :meth:`AgentConfig.to_argv` (the others:
+#: ``--id``, ``--fleet-size``, ``--phi-e-deg``, ``--shape``, ``--no-correct``, the route,
+#: the sensor fault and ``--publish-camera``).
+FLAGS = {
+    "d_e": "--d-e",
+    "orientation": "--orientation",
+    "strategy": "--strategy",
+    "timeout": "--timeout",
+    "wave_timeout": "--wave-timeout",
+    "member_grace": "--member-grace",
+    "research_rounds": "--research-rounds",
+    "explore_step": "--explore-step",
+}
+#: The settings that no ``python -m agent`` flag carries (tests and the runner set them).
+NO_FLAG = (
+    "settle",
+    "search_yaws",
+    "rotation_tolerance",
+    "backoff_max",
+    "max_correction",
+    "march_step",
+    "march_pause",
+    "lost_rounds",
+    "research_timeout",
+)
+_DEFAULTS = {f.name: f.default for f in dataclasses.fields(AgentConfig)}
+
+
+def _degrees_text(rad: float) -> str:
+    """The shortest decimal text of degrees whose ``math.radians`` is exactly ``rad``
+    (``--phi-e-deg`` takes degrees; the config keeps radians)."""
+    deg = math.degrees(rad)
+    candidates = [repr(round(deg, k)) for k in range(16)] + [repr(deg)]
+    near = deg
+    for _ in range(8):  # the degrees one rounding away, both sides
+        near = math.nextafter(near, math.inf)
+        candidates.append(repr(near))
+    near = deg
+    for _ in range(8):
+        near = math.nextafter(near, -math.inf)
+        candidates.append(repr(near))
+    for text in candidates:
+        if math.radians(float(text)) == rad:
+            return text
+    raise ValueError(f"phi_e {rad!r} rad is no value of --phi-e-deg")

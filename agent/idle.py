@@ -4,7 +4,7 @@
 
 The real phase machine (:class:`agent.phases.runner.Runner`, docs/design.md §1) on a
 real zenoh session (insecure, ``--connect EP``, no multicast), entered at the agreement
-(``Runner.phases("agree", ...)``) with an empty record of its own, as a robot whose
+(``Runner.phases(Phase.AGREE, ...)``) with an empty record of its own, as a robot whose
 search is over. It has no world: its body answers its id and sim time and never moves,
 its perception is never called. Given a fleet size larger than the agents started, its
 agreement can never complete, and it waits there (the agreement timeout is set beyond
@@ -22,6 +22,7 @@ from agent.adapters import FormationAdapter
 from agent.body.base import Body
 from agent.config import AgentConfig
 from agent.net.bus import Bus, BusConfig
+from agent.phases.reporting import Phase
 from agent.phases.runner import Runner
 from agent.seams import Perception
 from agent.wire import NeighborRecordMsg
@@ -53,8 +54,8 @@ def main(argv: list[str] | None = None) -> int:
         body, blind = cast(Body, Still(a.id)), cast(Perception, None)
         runner = Runner(bus, body, cfg, blind, FormationAdapter())
         runner.membership.start()
-        runner.ctx.status("start", 0.0, "joined", force=True)
-        runner.phases("agree", NeighborRecordMsg(sender=a.id, round=0, neighbours=()))
+        runner.ctx.report.status(Phase.START, 0.0, "joined", force=True)
+        runner.phases(Phase.AGREE, NeighborRecordMsg(sender=a.id, round=0, neighbours=()))
     except KeyboardInterrupt:
         pass
     finally:

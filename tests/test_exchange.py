@@ -9,6 +9,7 @@ import pytest
 
 from agent.core.agreed_params import odd_params, params_digest
 from agent.core.agreement import HEARD_PER_S, Agreement
+from agent.core.formation.params import D_E, PlanParams
 from agent.wire import DigestMsg, NeighborRecordMsg, canonical_digest
 
 Drop = Callable[[str, int, int, float], bool]
@@ -337,8 +338,8 @@ def test_record_goes_out_once_then_only_on_request() -> None:
 
 # ----------------------------------------------------------------- agreed parameters
 
-P_A = params_digest({"d_e": 0.8, "phi_e": 0.5235987755982988, "route": ("axis", 3.0)})
-P_B = params_digest({"d_e": 0.8, "phi_e": 0.5235987755982988, "route": ("axis", 2.0)})
+P_A = params_digest({"d_e": D_E, "phi_e": PlanParams.phi_e, "route": ("axis", 3.0)})
+P_B = params_digest({"d_e": D_E, "phi_e": PlanParams.phi_e, "route": ("axis", 2.0)})
 
 
 def test_params_digest_is_canonical_and_sensitive() -> None:

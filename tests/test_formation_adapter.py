@@ -9,7 +9,7 @@ import pytest
 from agent.adapters import FormationAdapter
 from agent.core.formation.params import PlanParams
 from agent.wire import NeighborRecordMsg
-from tests.phases.test_runner import records
+from tests.phases.fakes import records
 
 
 def test_formation_adapter_keeps_its_last_plan(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -16,9 +16,10 @@ import pytest
 
 from agent import wire as w
 from agent.core import nao
-from agent.phases.journal import JournalState, decode_state, encode_state
+from agent.recovery.journal import JournalState, decode_state, encode_state
 from sim import scenarios
-from tools.demo import MAX_ROBOTS, parse_args
+from tools.demo import parse_args
+from tools.harness.fleet import MAX_ROBOTS
 
 
 def largest_record(k: int = w.MAX_NEIGHBOURS) -> w.NeighborRecordMsg:
@@ -83,7 +84,7 @@ def test_a_generated_fleet_of_100_fits_the_room_and_the_records() -> None:
 def test_status_cadence_is_bounded_by_what_a_member_hears() -> None:
     """Known answers: 3 s up to 30 NAOs, then fleet / 10 statuses a second (so that 100 NAOs do not
     flood each other)."""
-    from agent.phases.context import STATUS_MIN_INTERVAL, status_interval
+    from agent.phases.reporting import STATUS_MIN_INTERVAL, status_interval
 
     assert status_interval(None) == STATUS_MIN_INTERVAL == 3.0
     assert status_interval(3) == status_interval(30) == 3.0

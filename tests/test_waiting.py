@@ -21,8 +21,9 @@ from agent.config import AgentConfig
 from agent.core.agreement import Agreement
 from agent.core.grace import Grace
 from agent.net.bus import Bus, BusConfig, Event
-from agent.phases.context import Context, heartbeat_interval, status_interval
+from agent.phases.context import Context
 from agent.phases.membership import MAX_WAIT, Membership
+from agent.phases.reporting import Phase, heartbeat_interval, status_interval
 from agent.seams import Perception
 from agent.wire import NeighborRecordMsg, StatusMsg, canonical_digest, encode
 
@@ -39,7 +40,7 @@ class _Still:
 
 def _context(bus: Bus, clock: object = time.monotonic, **kw: object) -> Context:
     cfg = AgentConfig(robot_id=3, fleet_size=3, **kw)  # type: ignore[arg-type]
-    return Context(
+    return Context.of(
         bus, cast(Body, _Still()), cfg, cast(Perception, None), FormationAdapter(), clock
     )  # type: ignore[arg-type]
 
@@ -122,24 +123,25 @@ def test_a_searching_members_status_is_news_for_the_agreement(bus: Bus) -> None:
 def test_statuses_go_out_on_change_with_a_slow_heartbeat(bus: Bus) -> None:
     t = [0.0]
     ctx = _context(bus, clock=lambda: t[0], member_grace=20.0)
-    assert ctx.status_interval == status_interval(3) == 3.0
-    assert ctx.heartbeat == heartbeat_interval(3, 20.0) == pytest.approx(20.0 / 3)
+    report = ctx.report
+    assert report.interval == status_interval(3) == 3.0
+    assert report.heartbeat == heartbeat_interval(3, 20.0) == pytest.approx(20.0 / 3)
     assert heartbeat_interval(100, 20.0) == 10.0  # never more often than the fleet's budget
     sent = bus.stats.published_count
 
-    def at(when: float, detail: str, phase: str = "agree") -> int:
+    def at(when: float, detail: str, phase: Phase = Phase.AGREE) -> int:
         t[0] = when
-        ctx.status(phase, 0.5, detail)
+        report.status(phase, 0.5, detail)
         return sent["status"]
 
     assert at(0.0, "a") == 1  # a new phase: at once
-    assert at(1.0, "a") == 1 and ctx.status_due() == pytest.approx(20.0 / 3)  # unchanged
-    assert at(2.0, "b") == 1 and ctx.status_due() == 3.0  # changed: held back to 3 s
+    assert at(1.0, "a") == 1 and report.due() == pytest.approx(20.0 / 3)  # unchanged
+    assert at(2.0, "b") == 1 and report.due() == 3.0  # changed: held back to 3 s
     assert at(3.0, "b") == 2  # ... and out then
     assert at(6.0, "b") == 2 and at(9.6, "b") == 2  # unchanged: no sooner than 6.67 s
     assert at(9.7, "b") == 3  # the heartbeat
-    assert at(10.0, "c", "wait") == 4  # a new phase: at once again
-    assert at(10.5, "d", "wait") == 4 and at(13.0, "d", "wait") == 5
+    assert at(10.0, "c", Phase.WAIT) == 4  # a new phase: at once again
+    assert at(10.5, "d", Phase.WAIT) == 4 and at(13.0, "d", Phase.WAIT) == 5
 
 
 def test_grace_names_its_next_expiry() -> None:

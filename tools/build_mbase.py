@@ -11,7 +11,9 @@ NAO's head turned by ±45° and ±90° ("head"; an addition to the paper).
 
 The result (``mbase.npz`` + ``mbase.json`` with the parameters and a content digest) is
 written to ``agent/core/perception/data`` unless ``--out`` says otherwise; the renderer is
-deterministic, so regenerating gives the same digest.
+deterministic, so regenerating gives the same digest. The masks are cut from the renders
+by :class:`tools.calibrate.masks.MBaseBuilder`, as ``python -m tools.calibrate build`` cuts
+them from a lab's captures.
 """
 
 from __future__ import annotations
@@ -21,20 +23,18 @@ import math
 import sys
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from agent.core.perception.camera import CameraModel
-from agent.core.perception.mbase import CANON_H, CANON_W, DATA_DIR, MBase, cut_mask
-from agent.core.perception.segmentation import HSV_HIGH, HSV_LOW, extract_tuples, orange_mask
+from agent.core.perception.mbase import DATA_DIR, MBase
 from sim import nao_model
 from sim.scenarios import RobotSpec, Scenario
 from sim.world import World
+from tools.calibrate.masks import MaskView, MBaseBuilder
 
 NORTH = math.pi / 2
-SLIVER = 0.12
 HEAD_YAWS_DEG = (-90.0, -45.0, 45.0, 90.0)  # the observed NAO's head, for "head" masks
-HEAD_EVERY = 6  # every 6th orientation (30°) gets the turned-head masks  # a tuple below this share of the mask's area may vanish with distance
+HEAD_EVERY = 6  # every 6th orientation (30°) gets the turned-head masks
 
 
 def render_target(w: World, cam: CameraModel, dist: float, rel: float, yaw: float) -> np.ndarray:
@@ -45,36 +45,10 @@ def render_target(w: World, cam: CameraModel, dist: float, rel: float, yaw: floa
     return w.render(1, yaw)
 
 
-def cylindrical(cam: CameraModel, mask: np.ndarray) -> np.ndarray:
-    mx, my = cam.cylindrical_maps()
-    return cv2.remap(mask, mx, my, cv2.INTER_NEAREST)
-
-
 def build(step_deg: float = 5.0, distance: float = 0.6, seed: int = 0) -> MBase:
+    """Render the views and cut them with :class:`tools.calibrate.masks.MBaseBuilder`."""
     cam = CameraModel()
-    horizon = cam.cy + cam.fy * math.tan(cam.pitch)
-    masks: list[np.ndarray] = []
-    orient: list[float] = []
-    side: list[bool] = []
-    ntup: list[int] = []
-    tops: list[float] = []
-    cents: list[float] = []
-    kinds: list[str] = []
-    poses: list[tuple[float, float]] = []  # per mask: (observer head yaw, observed head yaw)
-
-    def add(
-        cyl: np.ndarray, rel: float, kind: str, drop: bool = False, pose: tuple = (0.0, 0.0)
-    ) -> None:
-        cut = cut_mask(cyl, horizon, cam.cx, drop_smallest=drop)
-        masks.append(cut.crop)
-        orient.append(rel % (2 * math.pi))
-        ntup.append(cut.n_tuples)
-        side.append(kind == "side" or (kind == "main" and cut.n_tuples == 2))
-        tops.append(cut.top_offset)
-        cents.append(cut.centre_offset)
-        kinds.append(kind)
-        poses.append(pose)
-
+    mb = MBaseBuilder(cam, distance=distance)
     n = round(360.0 / step_deg)
     sc = Scenario(
         robots=(RobotSpec(1, 0.0, 0.0, NORTH), RobotSpec(2, 0.0, distance, NORTH)), seed=seed
@@ -82,69 +56,39 @@ def build(step_deg: float = 5.0, distance: float = 0.6, seed: int = 0) -> MBase:
     with World(sc, noise=False) as w:
         for i in range(n):
             rel = math.radians(i * step_deg)
-            cyl = cylindrical(cam, orange_mask(render_target(w, cam, distance, rel, 0.0)))
-            add(cyl, rel, "main")
-            _, tuples = extract_tuples(cyl)
-            areas = sorted(t.area for t in tuples)
-            if len(areas) >= 3 and areas[0] < SLIVER * sum(areas):
-                add(cyl, rel, "reduced", drop=True)
+            mb.add(MaskView(render_target(w, cam, distance, rel, 0.0), rel, "main"))
             print(f"\rmask {i + 1}/{n}", end="", file=sys.stderr)
         # neighbours sweep their heads too: masks of NAOs with the head turned
         for i in range(0, n, HEAD_EVERY):
             rel = math.radians(i * step_deg)
             for hy in HEAD_YAWS_DEG:
                 w.set_head_yaw(2, math.radians(hy))
-                cyl = cylindrical(cam, orange_mask(render_target(w, cam, distance, rel, 0.0)))
-                add(cyl, rel, "head", pose=(0.0, hy))
+                img = render_target(w, cam, distance, rel, 0.0)
+                mb.add(MaskView(img, rel, "head", 0.0, hy))
             w.set_head_yaw(2, 0.0)
         for yaw_deg in (90.0, -90.0):
             for rel_deg in (90.0, 270.0):
                 rel = math.radians(rel_deg)
                 img = render_target(w, cam, distance, rel, math.radians(yaw_deg))
-                add(cylindrical(cam, orange_mask(img)), rel, "side", pose=(yaw_deg, 0.0))
+                mb.add(MaskView(img, rel, "side", yaw_deg, 0.0))
     print(file=sys.stderr)
-    meta = {
-        "paper": "Wang et al. 2019, 3.1.2 and 5.2.2 (i)",
-        "distance_m": distance,
-        "step_deg": step_deg,
-        "head_yaw_deg": 0.0,
-        "side_head_yaw_deg": [90.0, -90.0],
-        "side_orientations_deg": [90.0, 270.0],
-        "sliver_share": SLIVER,
-        "head_masks": {
-            "observed_head_yaw_deg": list(HEAD_YAWS_DEG),
-            "every_deg": HEAD_EVERY * step_deg,
-        },
-        "seed": seed,
-        "hsv_low": list(HSV_LOW),
-        "hsv_high": list(HSV_HIGH),
-        "canonical_size": [CANON_W, CANON_H],
-        "image": "cylindrical resampling of the 640x480 forehead camera (camera.py)",
-        "camera": {
-            "hfov_deg": math.degrees(cam.hfov),
-            "height_m": cam.height_m,
-            "pitch_deg": math.degrees(cam.pitch),
-        },
-        "renderer": "sim.world.World (PyBullet TinyRenderer), noise off",
-        "nao_model": {
-            "height": nao_model.HEIGHT,
-            "width": nao_model.WIDTH,
-            "camera_forward": nao_model.CAMERA_FORWARD,
-        },
-        "kinds": kinds,
-        # per mask, for the D-base calibration: the observer's and the observed NAO's
-        # head yaw (deg) when it was rendered
-        "observer_head_yaw_deg": [p[0] for p in poses],
-        "observed_head_yaw_deg": [p[1] for p in poses],
-    }
-    return MBase(
-        masks,
-        np.asarray(orient),
-        np.asarray(side),
-        np.asarray(ntup),
-        np.asarray(tops),
-        np.asarray(cents),
-        meta,
+    return mb.build(
+        {
+            "step_deg": step_deg,
+            "side_head_yaw_deg": [90.0, -90.0],
+            "side_orientations_deg": [90.0, 270.0],
+            "head_masks": {
+                "observed_head_yaw_deg": list(HEAD_YAWS_DEG),
+                "every_deg": HEAD_EVERY * step_deg,
+            },
+            "seed": seed,
+            "renderer": "sim.world.World (PyBullet TinyRenderer), noise off",
+            "nao_model": {
+                "height": nao_model.HEIGHT,
+                "width": nao_model.WIDTH,
+                "camera_forward": nao_model.CAMERA_FORWARD,
+            },
+        }
     )
 
 

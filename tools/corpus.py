@@ -176,13 +176,11 @@ def _commit() -> str:
 def _agent_argv(rid: int, n: int, endpoint: str) -> list[str]:
     """The agent as a fleet runs it (defaults), insecure: the corpus is about what robots
     see, not how they talk."""
-    from tools.demo import parse_args
+    from agent.config import AgentConfig
     from tools.harness.procs import agent_command
 
-    args = parse_args(
-        ["--robots", str(n), "--insecure", "--agent-log-level", "WARNING", "--no-publish-camera"]
-    )
-    return agent_command(rid, n, endpoint, args)
+    net = ["--connect", endpoint, "--no-multicast-scouting", "--insecure"]
+    return agent_command(AgentConfig(robot_id=rid, fleet_size=n), net, log_level="WARNING")
 
 
 def render_fleet(case: FleetCase, log_dir: Path, timeout: float) -> dict[str, Any]:

@@ -58,150 +58,29 @@ import json
 import math
 import os
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from agent.config import add_plan_arguments
 from agent.wire import INSECURE_WARNING
-from sim import scenarios
-from sim.locomotion import MAX_NOISE_SCALE
-from sim.renderer import RENDERERS
-from tools.harness.live import DEFAULT_LIVE, add_live_arguments, check_live_argument, serve
+from tools.harness.fleet import FleetSpec, run_fleet
+from tools.harness.fleet_flags import add_fleet_arguments, fleet_spec
+from tools.harness.live import DEFAULT_LIVE, serve
 from tools.harness.progress import Progress
-from tools.harness.run import run_once
 from tools.harness.webpage import DEFAULT_WEB, serve_page
-
-#: The most robots a demo runs. Each robot is an agent process (~100 MB of its own memory
-#: and a TLS session at the router): 128 robots need ~13 GB. The wire's records carry at
-#: most ``agent.wire.MAX_NEIGHBOURS`` (128) neighbours, so even a robot that sees every
-#: other one of 128 fits; the scenario generator places up to 200.
-MAX_ROBOTS = 128
 
 # ===================================================================== CLI
 
 
-def agent_arg(text: str) -> tuple[int, str]:
-    """``ID:ARG`` of ``--agent-arg``: (robot id, one argument of its agent)."""
-    rid, sep, arg = text.partition(":")
-    if not sep or not rid.isdigit() or not arg.startswith("--"):
-        raise argparse.ArgumentTypeError(f"expected ID:--flag[=value], got {text!r}")
-    return int(rid), arg
-
-
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    """The demo's flags; ``.spec`` is the run they describe (:class:`FleetSpec`)."""
     p = argparse.ArgumentParser(prog="python -m tools.demo", description=__doc__.split("\n\n")[0])
-    p.add_argument("--robots", type=int, default=3)
-    p.add_argument("--seed", type=int, default=1)
     p.add_argument("--out", type=Path, default=Path("out/demo"))
     p.add_argument("--json", type=Path, default=None, help="also write the result JSON here")
     p.add_argument("--batch", type=int, default=0, help="run seeds seed..seed+K-1, print totals")
-    p.add_argument(
-        "--obstacles", type=int, default=0,
-        help="K obstacles on the straight paths of the fleet's plan (tools.obstacle_scenario)",
-    )  # fmt: skip
-    p.add_argument("--d-e", type=float, default=0.8)
-    p.add_argument("--phi-e-deg", type=float, default=30.0)
-    add_plan_arguments(p)  # given to every agent
-    where = p.add_mutually_exclusive_group()
-    where.add_argument(
-        "--scenario",
-        type=Path,
-        default=None,
-        metavar="FILE",
-        help="world scenario JSON (sim/scenarios): robot count and ids from the file",
-    )
-    where.add_argument(
-        "--isolated",
-        action="store_true",
-        help="generated scenario with one robot 2-3 m from every other",
-    )
-    p.add_argument(
-        "--headings",
-        type=scenarios.Headings.parse,
-        default=scenarios.Headings(),
-        metavar="KIND",
-        help=scenarios.HEADINGS_HELP + " (a generated scenario; the world gets its file)",
-    )
-    p.add_argument("--timeout", type=float, default=600.0, help="wall limit for the agents (s)")
-    p.add_argument("--agree-timeout", type=float, default=120.0)
-    p.add_argument("--auto-ids", action="store_true", help="agents claim robots (--id auto)")
-    p.add_argument("--no-correct", action="store_true", help="agents skip the final alignment")
-    p.add_argument(
-        "--research-rounds", type=int, default=None, metavar="K",
-        help="re-search rounds (NAO paper 4.1.3 rule 2) before the agents stop (agent default 2)",
-    )  # fmt: skip
-    march = p.add_mutually_exclusive_group()
-    march.add_argument(
-        "--march", type=float, default=None, metavar="D",
-        help="after hold, the fleet marches D m along the pyramid's axis",
-    )  # fmt: skip
-    march.add_argument(
-        "--march-to", default=None, metavar="X,Y",
-        help="after hold, the leader marches to (X, Y) m in the common frame",
-    )  # fmt: skip
-    p.add_argument(
-        "--publish-camera", action=argparse.BooleanOptionalAction, default=True,
-        help="agents publish thumbnails of their camera frames with detections for viewers "
-        "(run.mcap's /nao/ID/camera channels); on in the demo, off on real fleets",
-    )  # fmt: skip
-    p.add_argument("--agent-log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING"))
-    p.add_argument("--world-timeout", type=float, default=120.0)
-    p.add_argument(
-        "--noise-scale", type=float, default=1.0, metavar="K",
-        help="the world multiplies its walking and turning noise by K (python -m sim)",
-    )  # fmt: skip
-    p.add_argument(
-        "--body",
-        choices=("zenoh", "naoqi"),
-        default="zenoh",
-        help="agents drive the world over zenoh, or its virtual NAOs over qi (sim --naoqi)",
-    )
-    p.add_argument(
-        "--world-arg", action="append", default=[], help="extra argument for python -m sim"
-    )
-    p.add_argument(
-        "--renderer", choices=RENDERERS, default=None,
-        help="python -m sim's and the render workers' --renderer (default: theirs, auto)",
-    )  # fmt: skip
-    p.add_argument(
-        "--render-service", type=int, default=0, metavar="K",
-        help="K render workers (python -m sim.render_worker --shard i/K) draw the cameras "
-        "instead of the world (for large fleets; default 0: the world draws them)",
-    )  # fmt: skip
-    p.add_argument(
-        "--agent-arg",
-        action="append",
-        default=[],
-        type=agent_arg,
-        metavar="ID:ARG",
-        help="extra argument for robot ID's agent only, e.g. 3:--orientation=cp (an odd agent)",
-    )
-    p.add_argument(
-        "--credentials",
-        type=Path,
-        default=None,
-        help="fleet credentials folder (default: a throwaway fleet in OUT/fleet)",
-    )
-    p.add_argument(
-        "--insecure", action="store_true", help="no TLS, access control or signatures (dev only)"
-    )
-    p.add_argument(
-        "--rogue",
-        type=float,
-        default=0.0,
-        metavar="S",
-        help="attack the fleet with tools.rogue for S seconds while it works (docs/security.md)",
-    )
-    p.add_argument(
-        "--rogue-replay",
-        type=Path,
-        default=None,
-        metavar="FILE",
-        help="the rogue also replays this capture of an earlier run (rogue-*.capture)",
-    )
-    add_live_arguments(p)
+    add_fleet_arguments(p)
     p.add_argument(
         "--view",
         nargs="?",
@@ -213,51 +92,14 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
             f"server (--live, default {DEFAULT_LIVE})"
         ),
     )
-    p.add_argument(
-        "--plain-links",
-        action="store_true",
-        help="tests: signatures over plain TCP links (no TLS/ACL), as behind a bad router",
-    )
     a = p.parse_args(argv)
     if a.view is not None and a.live is None:
         a.live = DEFAULT_LIVE
-    check_live_argument(p, a.live)
-    a.scenario_ids = None
-    if a.scenario is not None:
-        try:
-            sc = scenarios.load(a.scenario)
-        except (OSError, ValueError) as exc:
-            p.error(f"--scenario {a.scenario}: {exc}")
-        if a.batch:
-            p.error("--scenario fixes the robots and the seed: no --batch")
-        a.scenario_ids = sorted(r.id for r in sc.robots)
-        a.robots, a.seed = len(a.scenario_ids), sc.seed
-    if not 1 <= a.robots <= MAX_ROBOTS:
-        p.error(f"--robots must be in [1, {MAX_ROBOTS}]")
-    if a.isolated and a.robots < 2:
-        p.error("--isolated needs at least 2 robots")
+    if a.scenario is not None and a.batch:
+        p.error("--scenario fixes the robots and the seed: no --batch")
     if a.batch < 0:
         p.error("--batch must be >= 0")
-    if not 0 <= a.render_service <= 8 or (a.render_service and a.body == "naoqi"):
-        p.error("--render-service must be in [0, 8], and needs --body zenoh")
-    if not (math.isfinite(a.noise_scale) and 0.0 <= a.noise_scale <= MAX_NOISE_SCALE):
-        p.error(f"--noise-scale must be in [0, {MAX_NOISE_SCALE:g}]")
-    if a.body == "naoqi" and a.auto_ids:
-        p.error("--body naoqi drives the robot at a fixed URL: no --auto-ids")
-    if not (math.isfinite(a.d_e) and a.d_e > 0) or not 0 < a.phi_e_deg < 90:
-        p.error("--d-e must be > 0 and --phi-e-deg in (0, 90)")
-    from agent.core.formation.view.route import Route
-
-    try:
-        if a.march is not None:
-            Route(distance=a.march)
-        if a.march_to is not None:
-            xy = a.march_to.split(",")
-            if len(xy) != 2:
-                raise ValueError(f"--march-to wants X,Y, got {a.march_to!r}")
-            Route(to=(float(xy[0]), float(xy[1])))
-    except ValueError as exc:
-        p.error(str(exc))
+    a.spec = fleet_spec(p, a)
     return a
 
 
@@ -274,7 +116,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.batch:
             return batch(args)
         try:
-            result = run_once(args, args.seed, args.out)
+            result = run_fleet(args.spec, args.out, quiet=False)
         except RuntimeError as exc:
             print(f"demo failed: {exc}", file=sys.stderr)
             return 1
@@ -303,10 +145,11 @@ def open_browser(url: str) -> None:
 def batch(args: argparse.Namespace) -> int:
     results = []
     bar = Progress(args.batch, "batch")
+    spec: FleetSpec = args.spec
     for k in range(args.batch):
         seed = args.seed + k
         try:
-            r = run_once(args, seed, args.out / f"seed-{seed:03d}", quiet=True)
+            r = run_fleet(replace(spec, seed=seed), args.out / f"seed-{seed:03d}")
         except RuntimeError as exc:
             r = {"seed": seed, "success": False, "error": str(exc), "contacts": -1,
                  "identical_digests": False, "pairs": []}  # fmt: skip

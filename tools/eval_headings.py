@@ -34,15 +34,16 @@ from __future__ import annotations
 import argparse
 import sys
 from collections import Counter
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from sim.scenarios import Headings
 from tools.harness import report
-from tools.harness.judge import FAILURES, outcome
+from tools.harness.fleet import FleetSpec, run_fleet
+from tools.harness.fleet_flags import parse_fleet_spec
+from tools.harness.judge import outcome
 from tools.harness.live import add_live_arguments, check_live_argument
-from tools.harness.progress import Progress
 
 
 @dataclass
@@ -81,20 +82,14 @@ class Case:
 
 def run_one(args: argparse.Namespace, case: Case, seed: int, out: Path) -> Run:
     """One run of ``case`` at ``seed`` (module docstring)."""
-    from tools.demo import parse_args
-    from tools.harness.run import run_once
-
-    argv = ["--robots", str(case.robots), "--seed", str(seed), "--headings", str(case.headings)]
-    # no camera frames for viewers unless asked (--demo-arg=--publish-camera)
-    argv += ["--out", str(out), "--timeout", str(args.timeout), "--no-publish-camera"]
-    argv += args.demo_arg
-    if args.live is not None:  # every run of the matrix on one live server
-        argv += ["--live", args.live]
+    base: FleetSpec = args.fleet
     victim = case.victim(seed)
-    if case.fault:
-        argv += ["--agent-arg", f"{victim}:--sensor-fault={case.fault}"]
+    fault = ((victim, f"--sensor-fault={case.fault}"),) if case.fault else ()
+    spec = replace(base, robots=case.robots, seed=seed, headings=case.headings,
+                   timeout=args.timeout, live=args.live or base.live,
+                   agent_args=(*base.agent_args, *fault))  # fmt: skip
     try:
-        r = run_once(parse_args(argv), seed, out, quiet=True)
+        r = run_fleet(spec, out)
     except RuntimeError as exc:
         r = {"no_result": f"demo: {exc}"}
     got, detail = outcome(r)
@@ -192,6 +187,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
             SensorFault.parse(f)
         except ValueError as exc:
             p.error(str(exc))
+    # every run's fleet: no camera frames for viewers unless asked (--demo-arg=--publish-camera)
+    a.fleet = parse_fleet_spec(["--no-publish-camera", *a.demo_arg], "--demo-arg")
     faults = a.sensor_fault or [""]
     a.cases = [Case(h, n, f) for h in a.headings for n in a.robots for f in faults]
     return a
@@ -199,24 +196,28 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    runs: list[Run] = []
-    if args.report:
-        runs = [Run(**r) for r in report.read_runs(args.report)]
-        write(args, runs)
-        print_table(runs)
-        return 0
-    seeds = range(args.seed_start, args.seed_start + args.seeds)
-    bar = Progress(len(args.cases) * len(seeds), "eval_headings")
-    for case in args.cases:
-        for seed in seeds:
-            slug = case.name.replace(" ", "_").replace(":", "-").replace("=", "")
-            r = run_one(args, case, seed, args.out / slug / f"seed-{seed:03d}")
-            runs.append(r)
-            write(args, runs)
-            bar.step(f"{case.name} seed {seed}: {r.outcome} ({r.detail[:70]})")
+    cases = [
+        (c, s) for c in args.cases for s in range(args.seed_start, args.seed_start + args.seeds)
+    ]
+
+    def one(c: tuple[Case, int]) -> Run:
+        slug = c[0].name.replace(" ", "_").replace(":", "-").replace("=", "")
+        return run_one(args, c[0], c[1], args.out / slug / f"seed-{c[1]:03d}")
+
+    runs = report.run_matrix(
+        cases,
+        one,
+        report=lambda runs: write(args, runs),
+        progress="eval_headings",
+        label=lambda c, r: f"{c[0].name} seed {c[1]}: {r.outcome} ({r.detail[:70]})",
+        earlier=args.report,
+        row=Run,
+    )
     print_table(runs)
+    if args.report:
+        return 0
     print(f"figure: {args.out / 'headings.png'}", file=sys.stderr)
-    return 0 if all(r.outcome not in FAILURES for r in runs) else 1
+    return report.exit_status(runs)
 
 
 if __name__ == "__main__":

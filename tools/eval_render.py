@@ -25,6 +25,8 @@ from pathlib import Path
 from typing import Any
 
 from tools import netns
+from tools.harness.fleet import FleetSpec
+from tools.harness.fleet_flags import add_agent_arguments, agent_settings
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -38,12 +40,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--out", type=Path, default=Path("out/render_hosts"))
     p.add_argument("--prefix", default="nr", help="name prefix of the test hosts")
     p.add_argument("--insecure", action="store_true", help="plain TCP, no signatures")
-    p.add_argument("--d-e", type=float, default=0.8)
-    p.add_argument("--phi-e-deg", type=float, default=30.0)
-    p.add_argument("--agree-timeout", type=float, default=120.0)
-    p.add_argument("--agent-log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING"))
+    add_agent_arguments(p)
     a = p.parse_args(argv)
-    a.tcp_rto_max_ms = 0
+    a.agent = agent_settings(p, a, timeout=a.agree_timeout)
     if not 1 <= a.robots <= 20 or not 0 <= a.workers <= 4:
         p.error("--robots must be in [1, 20] and --workers in [0, 4]")
     return a
@@ -56,24 +55,20 @@ def world_cameras(log: Path) -> int:
 
 
 def run(a: argparse.Namespace) -> dict[str, Any]:
-    from tools.harness.hosts import HostFleet, host_fleet_credentials
+    from tools.harness.hosts import HostFleet, Hosts, host_fleet_credentials
 
     a.out.mkdir(parents=True, exist_ok=True)
     creds = "" if a.insecure else host_fleet_credentials(a.out, a.robots)
+    spec = FleetSpec(robots=a.robots, seed=a.seed, agent=a.agent,
+                     agent_log_level=a.agent_log_level, journal=True, render_workers=a.workers,
+                     insecure=a.insecure, credentials=Path(creds) if creds else None,
+                     timeout=a.timeout)  # fmt: skip
     t0 = time.monotonic()
-    cut: str | None = None
-    fleet = HostFleet(a, a.robots, a.seed, a.out, a.prefix, creds, render_workers=a.workers)
-    with fleet:
-        t_ready = time.monotonic() - t0
-        for rid in fleet.ids:
-            fleet.start_agent(rid)
-        deadline = time.monotonic() + a.timeout
-        while not fleet.all_exited():
-            if time.monotonic() > deadline:
-                cut = f"agents still running after {a.timeout:g} s"
-                break
-            time.sleep(0.5)  # polling the agents' exits, bounded by --timeout
-        res = fleet.judge(cut)
+    with HostFleet(spec, a.out, Hosts(a.prefix)) as fleet:
+        t_ready = fleet.t_agents - t0
+        fleet.wait()
+        res = fleet.judge()
+    cut = fleet.cut
     served = fleet.render_served()
     return {
         "robots": a.robots,

@@ -3,8 +3,8 @@
     python -m tools.eval_research [--scenario sim/scenarios/research_found.json]
                                   [--seeds 1,2,3] [--research-rounds K] [--out DIR]
 
-Runs the demo (``tools.harness.run``: world + one agent process per robot) on a scenario file once per
-seed, with the scenario's ``seed`` (textures and the world's motion noise) replaced.
+Runs the fleet (:class:`tools.harness.fleet.Fleet`: world + one agent process per robot) on
+a scenario file once per seed, with the scenario's ``seed`` (textures and the world's motion noise) replaced.
 Prints per seed the outcome, the (re-)search round of the agreed records, the robots'
 exit codes, the wall time in total and in the ``explore`` phase, and the stop reason;
 writes ``DIR/research.json``, each run's ``DIR/seed-N/formation.png`` and
@@ -16,13 +16,14 @@ from __future__ import annotations
 import argparse
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from agent.config import AgentConfig
 from sim import scenarios
-from tools.demo import parse_args
+from tools.harness.fleet import FleetSpec, run_fleet
 from tools.harness.live import add_live_arguments, check_live_argument
-from tools.harness.run import run_once
 
 
 def run(
@@ -35,15 +36,19 @@ def run(
         d.mkdir(parents=True, exist_ok=True)
         sc = scenarios.from_dict({**scenarios.to_dict(base), "seed": seed})
         scenarios.dump(sc, d / "scenario.json")
-        argv = ["--robots", str(len(sc.robots)), f"--world-arg=--scenario={d / 'scenario.json'}"]
-        argv += ["--no-publish-camera"]  # evaluation: the fleet's own traffic only
-        argv += ["--out", str(d), "--timeout", "600", "--seed", str(seed)]
+        # evaluation: the fleet's own traffic only (no camera frames for viewers)
+        agent = AgentConfig(robot_id=0)
         if rounds is not None:
-            argv += ["--research-rounds", str(rounds)]
-        if live is not None:  # every run on one live server
-            argv += ["--live", live]
+            agent = replace(agent, research_rounds=rounds)
+        spec = FleetSpec(
+            robots=len(sc.robots),
+            seed=seed,
+            agent=agent,
+            world_args=(f"--scenario={d / 'scenario.json'}",),
+            live=live,  # every run on one live server
+        )
         try:
-            r = run_once(parse_args(argv), seed, d, quiet=True)
+            r = run_fleet(spec, d)
         except RuntimeError as exc:
             r = {"success": False, "errors": {"demo": str(exc)}}
         rows.append(

@@ -22,6 +22,8 @@ used.
   that σ: the share of their pairs rejected, binned by distance and fitted by a line in
   d, is ``p_reject``; lost strays per sighting, ``p_stray`` (no fault was injected, so
   every rejection is a false one).
+* ``bias_scale``, the bias test's null scale (:func:`bias_scale`: its statistic over sound
+  robots against χ²₃, at the 90th and 99th percentiles);
 * ``rho``, the rate of sound robots seen turned as a whole: the share (counted as
   ``(k + 1) / (n + 1)``) of sound robots whose masks fail the heading test's Wilks
   statistic at ``TURNED_P``.
@@ -47,7 +49,7 @@ from agent.core.formation.frame.poses import PoseFrame
 from agent.core.perception.sighting_noise import SightingNoise, split
 from agent.wire import NeighborRecordMsg
 from tools.corpus import Run, held_out, load_corpus
-from tools.harness.frame_fit import frame_error
+from tools.lib.frame_fit import frame_error
 
 GATE0, GATE1 = 0.3, 0.2  #: a sighting is matched when within GATE0 + GATE1·d of a robot
 #: A fit is a correct frame, whose residuals the null model describes, within these
@@ -196,10 +198,30 @@ def fit(m: Matched, runs: list[Run], corpus: str) -> tuple[SightingNoise, dict[s
     # (counted conservatively, (k + 1) / (n + 2))
     sc, sr_, sn = binned(sd, slost, np.mean)
     s0, s1 = (float(slost.sum()) + 1.0) / (float(sightings) + 2.0), 0.0
-    model = replace(base, g0=g0, g1=g1, rho=rho, s0=s0, s1=s1)
+    model = replace(base, g0=g0, g1=g1, rho=rho, s0=s0, s1=s1,
+                    bias_scale=bias_scale(fits, replace(base, g0=g0, g1=g1)))  # fmt: skip
     bins = {"d": x, "sr": np.array(sr), "st": np.array(st), "n": w, "dist": dist, "along": along,
             "across": across, "gd": gc, "gross": gr, "gn": gn, "sd": sc, "stray": sr_, "sn": sn}  # fmt: skip
     return model, bins
+
+
+#: The tail quantiles at which the bias test's null is compared with χ²₃.
+BIAS_QUANTILES = (0.9, 0.99)
+
+
+def bias_scale(fits: list[PoseFrame], model: SightingNoise) -> float:
+    """The bias test's null scale: the largest ratio, at :data:`BIAS_QUANTILES`, of the
+    sound robots' statistic Λ (every robot of fault-free fleets) to χ²₃'s quantile, and
+    never below 1 (a test on a lighter tail than χ²₃ keeps χ²₃)."""
+    from scipy.stats import chi2
+
+    from agent.core.formation.frame.bias_test import bias_fit
+
+    stats = np.array([bias_fit(f, r, model, 1.0).statistic for f in fits for r in f.ids])
+    if stats.size == 0:
+        return 1.0
+    ratios = [float(np.quantile(stats, q)) / float(chi2.isf(1.0 - q, 3)) for q in BIAS_QUANTILES]
+    return max(1.0, *ratios)
 
 
 def fitted(runs: list[Run]) -> tuple[list[PoseFrame], list[Run]]:

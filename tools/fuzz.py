@@ -22,7 +22,7 @@ Three measurements:
    request on an idle world. Target: delayed by under 1 s.
 
 Exit status 0 when every target is met, 1 otherwise, 2 on bad arguments.
-The payloads come from :mod:`tools.fuzz_payloads`, whose generators tests/wire/test_fuzz.py
+The payloads come from :mod:`tools.lib.fuzz_payloads`, whose generators tests/wire/test_fuzz.py
 shares for a shorter fuzz in CI; this module runs them and reports.
 """
 
@@ -44,8 +44,8 @@ from pathlib import Path
 from typing import Any
 
 from agent import wire as P
-from tools.fuzz_payloads import TAGS, malformed_requests, payloads, worst_payloads
 from tools.harness.procs import free_port, start_world, stop, wait_ready
+from tools.lib.fuzz_payloads import TAGS, malformed_requests, payloads, worst_payloads
 
 MEMORY_TARGET = 50 * 1024 * 1024
 FLOOD_TARGET_S = 1.0

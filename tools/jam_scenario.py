@@ -27,14 +27,14 @@ from pathlib import Path
 
 import numpy as np
 
-from agent.core.formation.params import PlanParams
+from agent.core.formation.params import D_E, PHI_E_DEG, PlanParams
 from agent.core.formation.plan import plan_from_positions
 from sim.scenarios import RobotSpec, Scenario, dump, generate
 
 #: m from the bystander to every start: the searching robots see it whole (0.5 m is the
 #: detector's near limit) and the plan's paths have room to pass it
 START_GAP = 0.6
-SEED_STRIDE = 7919  # derived seeds, as tools/obstacle_scenario.py
+SEED_STRIDE = 7919  # derived seeds, as tools/lib/obstacle_scenario.py
 MAX_TRIES = 50
 
 
@@ -56,7 +56,7 @@ def bystander_spot(
 
 
 def jam_scenario(
-    n: int, seed: int, d_e: float = 0.8, phi_e: float = math.radians(30.0)
+    n: int, seed: int, d_e: float = D_E, phi_e: float = math.radians(PHI_E_DEG)
 ) -> tuple[Scenario, int]:
     """(the scenario, the id of the robot whose slot the bystander takes); the bystander's
     id is ``n + 1``. The scenario keeps ``seed`` for its textures and noise; ``ValueError``
@@ -89,8 +89,8 @@ def main(argv: list[str] | None = None) -> int:
         "--robots", type=int, default=4, help="fleet members (the bystander is one more)"
     )
     p.add_argument("--seed", type=int, default=3)
-    p.add_argument("--d-e", type=float, default=0.8)
-    p.add_argument("--phi-e-deg", type=float, default=30.0)
+    p.add_argument("--d-e", type=float, default=D_E)
+    p.add_argument("--phi-e-deg", type=float, default=PHI_E_DEG)
     p.add_argument("--out", type=Path, required=True)
     a = p.parse_args(argv)
     sc, victim = jam_scenario(a.robots, a.seed, a.d_e, math.radians(a.phi_e_deg))

@@ -81,7 +81,7 @@ def parse_scenario(
         raise InputError(f"duplicate robot ids {dup}")
     d_e = _num(doc, "d_e", "scenario")
     phi = (
-        math.radians(_num(doc, "phi_e_deg", "scenario")) if "phi_e_deg" in doc else math.radians(30)
+        math.radians(_num(doc, "phi_e_deg", "scenario")) if "phi_e_deg" in doc else PlanParams.phi_e
     )
     radius = _num(doc, "radius", "scenario") if "radius" in doc else 0.2
     strategy = doc.get("strategy", "default")

@@ -18,8 +18,9 @@ import logging
 from agent.core.agreed_params import params_digest
 from agent.core.agreement import Agreement, Decision
 from agent.phases.context import Context
-from agent.phases.pumping import plan_pumping
+from agent.phases.reporting import Phase
 from agent.phases.roles import Fleet
+from agent.phases.waves import plan_pumping
 from agent.wire import NeighborRecordMsg, canonical_digest
 
 log = logging.getLogger("agent.phases.agreeing")
@@ -54,7 +55,7 @@ class Agreeing:
             params=params_digest(cfg.agreed_params()),
         )
         self.fleet.open_round(agr)
-        ctx.status("exchange", 0.0, "publishing record")
+        ctx.report.status(Phase.EXCHANGE, 0.0, "publishing record")
         log.info(
             "exchange: record of round %d, %d neighbour(s)", record.round, len(record.neighbours)
         )
@@ -77,11 +78,11 @@ class Agreeing:
             n = max(1, len(agr.live))
             held = len(agr.held_members())
             agreeing = n - len(agr.disagreeing())
-            phase = "exchange" if agr.missing_records() else "agree"
-            ctx.status(phase, (held + agreeing) / (2 * n), d.reason)
+            phase = Phase.EXCHANGE if agr.missing_records() else Phase.AGREE
+            ctx.report.status(phase, (held + agreeing) / (2 * n), d.reason)
             # asleep until news, our next status, or the adoption check is due (the
             # agreement's own re-sends and timeout are the membership's deadlines)
-            until = ctx.status_due()
+            until = ctx.report.due()
             if complete_at is not None and now < complete_at + ADOPT_AFTER:
                 until = min(until, complete_at + ADOPT_AFTER)
             self.fleet.wait_until(until)

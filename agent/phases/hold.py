@@ -34,7 +34,8 @@ from agent.core.formation.view.route import Route
 from agent.core.nao import CAMERA_HFOV, HEAD_YAW_LIMIT
 from agent.phases.context import AgentFailure, Context
 from agent.phases.march import Marcher
-from agent.phases.roles import Fleet, Mover, Stepper
+from agent.phases.reporting import Phase
+from agent.phases.roles import Course, Fleet, Mover, Stepper
 
 log = logging.getLogger("agent.phases.hold")
 
@@ -53,7 +54,9 @@ SIDE_MIN = 0.005
 class Hold:
     """The arrived robot's phases (module docstring)."""
 
-    def __init__(self, ctx: Context, fleet: Fleet, motion: Mover, steps: Stepper) -> None:
+    def __init__(
+        self, ctx: Context, fleet: Fleet, motion: Mover, steps: Stepper, course: Course
+    ) -> None:
         #: the mask orientation of the parent last found (:meth:`_find_parent`); nan: none
         self.parent_facing = math.nan
         #: why :meth:`_wait_for_parent` gave up, once it has
@@ -69,30 +72,33 @@ class Hold:
         self.fleet = fleet
         self.motion = motion
         self.steps = steps
+        self.course = course
 
     def run(self) -> None:
         """Arrived: correct against the parent, march if there is a route, report
         ``done`` and stay until all are."""
-        ctx = self.ctx
+        ctx, report, course = self.ctx, self.ctx.report, self.course
         where = ctx.beliefs.position.round(2).tolist()
         self._arrived_at = ctx.beliefs.position.copy()
-        ctx.status("hold", 0.5, f"arrived at believed {where}", force=True)
+        report.status(Phase.HOLD, 0.5, f"arrived at believed {where}", force=True)
         self.correct()
         self.verify()
         if ctx.cfg.march is not None:
-            ctx.status("march", 0.0, "formation held; waiting for the fleet", force=True)
-            self.wait_all(("march", "done", "failed"), "march", "waiting for")
-            failed = [i for i, p in self.fleet.peers.items() if p.phase == "failed"]
+            report.status(Phase.MARCH, 0.0, "formation held; waiting for the fleet", force=True)
+            self.wait_all((Phase.MARCH, Phase.DONE, Phase.FAILED), Phase.MARCH, "waiting for")
+            failed = [i for i, p in self.fleet.peers.items() if p.phase == Phase.FAILED]
             if failed:
                 raise AgentFailure(f"not marching: robot(s) {sorted(failed)} failed")
-            ctx.status("march", 0.01, "marching", force=True)
+            report.status(Phase.MARCH, 0.01, "marching", force=True)
             route = ctx.cfg.march
             if route.to is not None:  # a point of the common frame, into this robot's
-                psi = ctx.plan.psi_of(ctx.me) if ctx.planned is not None else 0.0
+                psi = course.plan.psi_of(ctx.me) if course.planned is not None else 0.0
                 c, s = math.cos(psi), math.sin(psi)
                 x, y = route.to
                 route = Route(to=(c * x + s * y, -s * x + c * y))
-            marcher = Marcher(ctx, self.fleet, self.motion, route, ctx.final_heading)
+            marcher = Marcher(
+                ctx, self.fleet, self.motion, course.plan, route, course.final_heading
+            )
             marcher.run()
             log.info(
                 "march done at believed %s; worst seen |e_d| %.1f %%, |e_phi| %.1f°",
@@ -117,7 +123,7 @@ class Hold:
         off is another robot or a wrong match, and corrections below 3 cm are not walked.
         """
         ctx = self.ctx
-        plan = ctx.plan
+        plan = self.course.plan
         rp = plan.robot(ctx.me)
         parent = int(rp.parent)
         if parent < 0 or not ctx.cfg.correct:
@@ -142,7 +148,7 @@ class Hold:
             if size < 0.03:  # not walked: this look is already the final state's
                 self._still_seen = seen
                 break
-            ctx.status("hold", 0.75, f"correcting {size:.2f} m towards parent {parent}")
+            ctx.report.status(Phase.HOLD, 0.75, f"correcting {size:.2f} m towards parent {parent}")
             self._step(err)
 
     def _step(self, by: np.ndarray) -> None:
@@ -170,16 +176,17 @@ class Hold:
                 self.steps.walk_to(goal, lambda p: None, backward_within=0.5)
         else:
             self.steps.walk_to(b.position + by, lambda p: None, backward_within=0.5)
-        turn = wrap_pi(ctx.final_heading - b.heading)
+        turn = wrap_pi(self.course.final_heading - b.heading)
         if abs(turn) > ctx.cfg.rotation_tolerance:
             self.motion.rotate(turn, PAPER_GAINS)
         moved = ctx.beliefs.position - self._arrived_at
-        psi = ctx.plan.psi_of(ctx.me)
+        psi = self.course.plan.psi_of(ctx.me)
         c, s = math.cos(psi), math.sin(psi)  # own frame -> common frame
-        ctx.shift = (c * moved[0] - s * moved[1], s * moved[0] + c * moved[1])
-        ctx.status(
-            ctx.phase, 0.75, f"stepped {np.round(ctx.shift, 3).tolist()} since arrival", force=True
-        )
+        shift = (c * moved[0] - s * moved[1], s * moved[0] + c * moved[1])
+        report = ctx.report
+        report.show_shift(shift)
+        text = f"stepped {np.round(shift, 3).tolist()} since arrival"
+        report.status(report.phase, 0.75, text, force=True)
 
     def _follow(self, parent: int) -> None:
         """Step as far as ``parent`` has stepped since it arrived, not yet followed (its
@@ -191,9 +198,9 @@ class Hold:
         measures the parent afterwards."""
         ctx = self.ctx
         peer = self.fleet.peer(parent)
-        if peer.phase != "hold" or peer.plan_digest != ctx.plan_digest:
+        if peer.phase != Phase.HOLD or peer.plan_digest != self.course.digest:
             return
-        psi = ctx.plan.psi_of(ctx.me)
+        psi = self.course.plan.psi_of(ctx.me)
         c, s = math.cos(psi), math.sin(psi)  # common frame -> own frame: turned by -psi
         sx, sy = peer.shift
         want = np.array([c * sx + s * sy, -s * sx + c * sy])
@@ -229,32 +236,33 @@ class Hold:
         # who may still walk near this robot's sight line to its parent (every agent
         # computes the same from the same plan)
         margin = 2.0 * ctx.cfg.plan_params().radius + ctx.cfg.max_correction
-        passing = passers_by(ctx.plan, ctx.me, margin)
+        passing = passers_by(self.course.plan, ctx.me, margin)
         why = ""
         self.fleet.pump()
         while True:
-            stop = self.fleet.fleet_stop()
+            stop = self.fleet.fleet_stop(self.course.planned)
             if stop:
                 raise AgentFailure(stop)
             peer = self.fleet.peer(parent)
-            if peer.phase == "failed":
+            if peer.phase == Phase.FAILED:
                 why = f"parent {parent} failed"
                 break
             clear = self.fleet.arrived(passing)
-            if peer.phase in ("done", "march") and clear:
+            if peer.phase in (Phase.DONE, Phase.MARCH) and clear:
                 break
             if clear and ctx.cfg.correct:
                 self._follow(parent)
             gone = peer.seen_alive and not peer.alive
             if ctx.clock() > deadline:
-                if peer.phase in ("done", "march"):
+                if peer.phase in (Phase.DONE, Phase.MARCH):
                     why = f"robot(s) passing near did not arrive in time ({list(passing)})"
                 else:
                     why = f"parent {parent} {'out of reach' if gone else 'did not finish'} in time"
                 break
             state = "out of reach" if gone else "not done"
-            ctx.status(ctx.phase, 0.5, f"arrived; waiting for parent {parent} ({state})")
-            self.fleet.wait_until(min(deadline, ctx.status_due()))  # or news
+            text = f"arrived; waiting for parent {parent} ({state})"
+            ctx.report.status(ctx.report.phase, 0.5, text)
+            self.fleet.wait_until(min(deadline, ctx.report.due()))  # or news
         if why:
             self._parent_wait = why
         return why
@@ -266,15 +274,16 @@ class Hold:
         the correction's last look, when it did not move after it) and judges
         the measured offset with the formula the evaluation uses
         (:func:`agent.core.formation.shape.verdict.check_edge`: r_d, r_φ against its slot's
-        distance and angle from its parent in the shape's tree). The figures travel in every later status. A parent not found within
-        ``max_correction`` of its planned place, a pair out of tolerance, or a parent whose
-        mask says it faces more than ``FACING_TOL`` from the axis this robot believes in
-        (its own start heading misjudged), stops this robot with the figure: the fleet
-        never reports "formation held" on a formation its own camera says is wrong. The
-        leader has no parent to check.
+        distance and angle from its parent in the shape's tree). The figures travel in
+        every later status. A parent not found within ``max_correction`` of its planned
+        place, a pair out of tolerance, or a parent whose mask says it faces more than
+        ``FACING_TOL`` from the axis this robot believes in (its own start heading
+        misjudged), stops this robot with the figure: the fleet never reports "formation
+        held" on a formation its own camera says is wrong. The leader has no parent to
+        check.
         """
-        ctx = self.ctx
-        plan = ctx.plan
+        ctx, report = self.ctx, self.ctx.report
+        plan = self.course.plan
         rp = plan.robot(ctx.me)
         parent = int(rp.parent)
         if parent < 0:
@@ -294,14 +303,18 @@ class Hold:
                 f"formation off: parent {parent} not within {ctx.cfg.max_correction:.2f} m "
                 "of its planned place"
             )
-        params = ctx.cfg.plan_params()  # the tree's distance and angle of this child's slot
-        _, dist, ang = params.shape.slots(len(plan.robots), params.d_e, params.phi_e).edge(rp.order)
-        ctx.check = check_edge(ctx.me, parent, seen, ctx.final_heading, dist, ang, params.phi_e)
-        log.info("own check: %s", ctx.check.text())
-        if not ctx.check.sure:  # with a margin for the camera's own error
-            raise AgentFailure(f"formation off: {ctx.check.text()}")
+        params = ctx.cfg.plan_params()
+        axis = self.course.final_heading
+        # this child's slot in the shape's tree: its distance and angle from its parent
+        slots = params.shape.slots(len(plan.robots), params.d_e, params.phi_e)
+        _, dist, ang = slots.edge(rp.order)
+        check = check_edge(ctx.me, parent, seen, axis, dist, ang, params.phi_e)
+        report.show_check(check)
+        log.info("own check: %s", check.text())
+        if not check.sure:  # with a margin for the camera's own error
+            raise AgentFailure(f"formation off: {check.text()}")
         if math.isfinite(self.parent_facing):  # the parent's mask, independent of our frame
-            off = facing_misfit(seen, self.parent_facing, ctx.final_heading)
+            off = facing_misfit(seen, self.parent_facing, axis)
             log.info(
                 "own check: parent %d faces %.0f° off the axis (mask)", parent, math.degrees(off)
             )
@@ -310,7 +323,7 @@ class Hold:
                     f"formation off: parent {parent} faces {math.degrees(off):+.0f}° from the "
                     "pyramid axis this robot believes in (its mask): a start heading misjudged"
                 )
-        ctx.status(ctx.phase, 0.9, f"own check: {ctx.check.text()}", force=True)
+        report.status(report.phase, 0.9, f"own check: {check.text()}", force=True)
 
     def _find_parent(self, expected: np.ndarray, parent: int) -> np.ndarray | None:
         """The parent's measured offset (fixed frame), or None: the head looks at the
@@ -344,15 +357,20 @@ class Hold:
     def finish(self) -> None:
         """``done``, and stay until every member is; a member that failed meanwhile
         leaves a hole: stop with the fleet's reason (module docstring)."""
-        self.ctx.status("done", 1.0, "formation held", force=True)
+        self.ctx.report.status(Phase.DONE, 1.0, "formation held", force=True)
         self.wait_all(
-            ("done", "failed"), "done", "formation held; waiting for", self.ctx.cfg.member_grace
+            (Phase.DONE, Phase.FAILED),
+            Phase.DONE,
+            "formation held; waiting for",
+            self.ctx.cfg.member_grace,
         )
-        stop = self.fleet.fleet_stop()
+        stop = self.fleet.fleet_stop(self.course.planned)
         if stop:
             raise AgentFailure(stop)
 
-    def wait_all(self, phases: tuple[str, ...], mine: str, text: str, linger: float = 0.0) -> None:
+    def wait_all(
+        self, phases: tuple[Phase, ...], mine: Phase, text: str, linger: float = 0.0
+    ) -> None:
         """Stay (heartbeats) until every live member is in ``phases`` (bounded).
 
         ``linger``: a member out of reach (its token gone) not yet seen in ``phases`` is
@@ -362,7 +380,7 @@ class Hold:
         """
         ctx, fleet = self.ctx, self.fleet
         # the plan's members (a member out of reach has left the live set since)
-        plan = ctx.planned
+        plan = self.course.planned
         members = tuple(ctx.formation.members(plan)) if plan is not None else ()
         start = ctx.clock()
         deadline = start + ctx.cfg.wave_timeout
@@ -379,12 +397,12 @@ class Hold:
             agr = fleet.agreement
             if not waiting and (agr is None or not agr.due(ctx.clock())):
                 return
-            progress = 1.0 if mine == "done" else 0.0
-            ctx.status(mine, progress, f"{text} {waiting}")  # on change, or a heartbeat
+            progress = 1.0 if mine == Phase.DONE else 0.0
+            ctx.report.status(mine, progress, f"{text} {waiting}")  # on change, or a heartbeat
             # asleep until news, the next status, the linger's end or the deadline
-            until = min(deadline, ctx.status_due())
+            until = min(deadline, ctx.report.due())
             if patient:
                 until = min(until, start + linger)
             fleet.wait_until(until)
-        if mine == "march":
+        if mine == Phase.MARCH:
             raise AgentFailure("the fleet did not get ready to march in time")

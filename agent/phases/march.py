@@ -60,9 +60,11 @@ from agent.core.formation.params import PlanParams
 from agent.core.formation.view.route import route_vector, station_offset
 from agent.core.nao import HEAD_YAW_LIMIT
 from agent.phases.context import Context
+from agent.phases.reporting import Phase
 from agent.phases.roles import Fleet, Mover
 
 if TYPE_CHECKING:
+    from agent.core.formation.plan import Plan
     from agent.core.formation.view.route import Route
 
 log = logging.getLogger("agent.phases.march")
@@ -88,12 +90,12 @@ class Marcher:
     """One agent's march; :meth:`run` returns when it is over or raises MarchHalt."""
 
     def __init__(
-        self, ctx: Context, fleet: Fleet, motion: Mover, route: Route, axis: float
+        self, ctx: Context, fleet: Fleet, motion: Mover, plan: Plan, route: Route, axis: float
     ) -> None:
         self.ctx = ctx
         self.fleet = fleet
         self.motion = motion
-        self.plan = ctx.plan
+        self.plan = plan
         self.route = route
         self.axis = axis
         self.v = route_vector(self.plan, route, axis)
@@ -112,7 +114,7 @@ class Marcher:
             peer = self.fleet.peers.get(i)
             if peer is None:
                 continue
-            if peer.phase == "failed":
+            if peer.phase == Phase.FAILED:
                 raise MarchHalt(f"halted: robot {i} failed on the march")
             if peer.seen_alive and not peer.alive:
                 raise MarchHalt(f"halted: robot {i} left on the march")
@@ -122,7 +124,7 @@ class Marcher:
             i
             for i in self.members
             if (p := self.fleet.peers.get(i)) is not None
-            and p.phase == "march"
+            and p.phase == Phase.MARCH
             and p.detail.startswith(LOST)
         ]
 
@@ -134,7 +136,7 @@ class Marcher:
             self.lead()
         else:
             self.follow(int(rp.parent))
-        turn = wrap_pi(self.ctx.final_heading - self.ctx.beliefs.heading)
+        turn = wrap_pi(self.axis - self.ctx.beliefs.heading)
         self.motion.rotate(turn, PAPER_GAINS, "turn to axis")
 
     # ------------------------------------------------------------ leader
@@ -150,7 +152,8 @@ class Marcher:
             self.check_fleet()
             lost = self.lost_followers()
             if lost:
-                ctx.status("march", self._progress(origin), f"waiting: {lost} lost their parent")
+                text = f"waiting: {lost} lost their parent"
+                ctx.report.status(Phase.MARCH, self._progress(origin), text)
                 self.fleet.pump(0.2)
                 continue
             leg = next_leg(b.position, b.heading, goal, step=ctx.cfg.march_step, tolerance=0.05)
@@ -161,12 +164,13 @@ class Marcher:
                 self.motion.rotate(leg.turn, PAPER_GAINS if big else STEP_GAINS)
             walk = safe_walk(leg.walk, b.heading, self._others_ahead(), CLEARANCE)
             if walk == 0.0:
-                ctx.status("march", self._progress(origin), "a robot ahead: waiting")
+                ctx.report.status(Phase.MARCH, self._progress(origin), "a robot ahead: waiting")
                 self.fleet.pump(0.5)
                 continue
             t0 = ctx.clock()
             self.motion.walk_step(walk)
-            ctx.status("march", self._progress(origin), f"leading: {leg.remaining:.2f} m to go")
+            text = f"leading: {leg.remaining:.2f} m to go"
+            ctx.report.status(Phase.MARCH, self._progress(origin), text)
             rest = ctx.clock() + ctx.cfg.march_pause * (ctx.clock() - t0)
             while ctx.clock() < rest:
                 self.fleet.pump(min(0.2, max(0.0, rest - ctx.clock())))
@@ -218,14 +222,14 @@ class Marcher:
             self.worst_range = max(self.worst_range, abs(cmd.e_range) / keeper.d_ref)
             self.worst_bearing = max(self.worst_bearing, abs(cmd.e_bearing))
             travelled = self._progress(origin) * self.length
-            ctx.status(
-                "march", self._progress(origin),
+            ctx.report.status(
+                Phase.MARCH, self._progress(origin),
                 f"parent {parent} at {rho:.2f} m, {math.degrees(beta):+.0f}°",
             )  # fmt: skip
             still = still + 1 if cmd.size == 0.0 else 0
             if still <= 1:
                 still_since = ctx.clock()
-            parent_done = self.fleet.peer(parent).phase == "done"
+            parent_done = self.fleet.peer(parent).phase == Phase.DONE
             quiet = ctx.clock() - still_since >= QUIET and travelled >= self.length - margin
             if still >= 2 and (parent_done or quiet):
                 log.info("march over: travelled %.2f m, parent at %.2f m %+.1f°", travelled,
@@ -306,14 +310,14 @@ class Marcher:
         """Lost: stop, say so, search with the head (never the body); halt if not found."""
         ctx, b = self.ctx, self.ctx.beliefs
         for k in range(ctx.cfg.lost_rounds):
-            ctx.status("march", 0.0, f"{LOST} {parent}: head search {k + 1}", force=True)
+            ctx.report.status(Phase.MARCH, 0.0, f"{LOST} {parent}: head search {k + 1}", force=True)
             log.warning("lost parent %d (predicted at %s, heading %.1f°; last seen %s): "
                         "head search %d", parent, predicted.round(2).tolist(),
                         math.degrees(b.heading), self.seen_last.round(2).tolist(),
                         k + 1)  # fmt: skip
             seen = self.sight((predicted, offset), SEARCH_GATE, SEARCH_OFFSETS, search=True)
             if seen is not None:
-                ctx.status("march", 0.0, f"reacquired parent {parent}", force=True)
+                ctx.report.status(Phase.MARCH, 0.0, f"reacquired parent {parent}", force=True)
                 return seen
             self.fleet.pump(1.0)  # the fleet stops for us meanwhile
             self.check_fleet()

@@ -28,7 +28,7 @@ what it knows of each member (:class:`Peer`):
 
 It also serves the agreed record set (agent/phases/record_sets.py), and hands every
 record, digest and status it accepts to its :attr:`Membership.observers` (the check of
-agent/phases/runs.py: is a journal's run still going?).
+agent/recovery/runs.py: is a journal's run still going?).
 """
 
 from __future__ import annotations
@@ -39,11 +39,13 @@ from dataclasses import asdict, dataclass
 from typing import TypeVar
 
 from agent.core.agreement import Agreement
+from agent.core.formation.plan import Plan
 from agent.core.formation.waves.jam import stop_reason
 from agent.core.grace import Grace
 from agent.net.bus import Event
 from agent.phases.context import Context
 from agent.phases.record_sets import answer
+from agent.phases.reporting import Phase
 from agent.wire import (
     KEY_ALIVE_ALL,
     KEY_DIGEST_ALL,
@@ -62,7 +64,8 @@ from agent.wire import (
 
 log = logging.getLogger("agent.phases.membership")
 
-ARRIVED = ("hold", "march", "done", "failed")  # phases of a member that has arrived
+#: phases of a member that has arrived
+ARRIVED = (Phase.HOLD, Phase.MARCH, Phase.DONE, Phase.FAILED)
 #: The longest sleep of :meth:`Membership.wait_until` (s): a safety net, so that a
 #: condition no deadline names is still looked at (one wake-up in 2 s costs ~0.005 % of
 #: a core).
@@ -86,7 +89,7 @@ class Peer:
     """What this agent knows of one member: its token, and its last status."""
 
     alive: bool = False
-    phase: str = ""
+    phase: str = ""  # of its last status (a Phase value; "": none heard yet)
     detail: str = ""
     wave: int = -1
     plan_digest: str = ""
@@ -111,6 +114,7 @@ class Membership:
         self.early_digests: dict[int, DigestMsg] = {}
         self.epochs: dict[int, int] = {}  # newest session (epoch) heard per sender
         self.agreed_epochs: dict[int, int] = {}  # the sessions the agreement was made with
+        self.agreed_plan = ""  # the digest of the plan of that agreement ("" before one)
         self.agreement: Agreement[NeighborRecordMsg] | None = None
         self.retired: list[Agreement[NeighborRecordMsg]] = []  # agreed earlier rounds
         self.served: RecordSetReply | None = None  # the agreed record set we serve
@@ -255,7 +259,7 @@ class Membership:
         if isinstance(msg, DigestMsg):
             members, digest = agr.digest()
             return msg.digest == digest and msg.members == members and msg.params == agr.params
-        plan_digest = self.ctx.plan_digest
+        plan_digest = self.agreed_plan
         return isinstance(msg, StatusMsg) and bool(plan_digest) and msg.plan_digest == plan_digest
 
     def member(self, rid: int) -> bool:
@@ -316,16 +320,17 @@ class Membership:
             self.retired.append(self.agreement)
         self.agreement = None
 
-    def pin_sessions(self, members: set[int]) -> None:
-        """From the plan on, only the sessions the agreement was made with count."""
+    def pin_sessions(self, members: set[int], plan_digest: str) -> None:
+        """From the plan on (its digest ``plan_digest``), only the sessions the agreement
+        was made with count, or a new one of a member that shows the agreed digest."""
         self.agreed_epochs = {r: e for r, e in self.epochs.items() if r in members}
+        self.agreed_plan = plan_digest
 
-    def fleet_stop(self) -> str:
-        """Why this robot must stop because a member of the plan failed ("" if none): the
-        one reason of agent/core/formation/waves/jam.py rule 4, so that no agent reports a
-        formation with a hole as held. Robots the plan left out (they stop by design)
-        and members that only left do not count."""
-        plan = self.ctx.planned
+    def fleet_stop(self, plan: Plan | None) -> str:
+        """Why this robot must stop because a member of ``plan`` (None: no plan yet)
+        failed ("" if none): the one reason of agent/core/formation/waves/jam.py rule 4,
+        so that no agent reports a formation with a hole as held. Robots the plan left
+        out (they stop by design) and members that only left do not count."""
         if plan is None:
             return ""
         counted = set(self.ctx.formation.members(plan)) - set(plan.excluded) - {self.ctx.me}
@@ -333,7 +338,7 @@ class Membership:
             {
                 i: p.error
                 for i, p in sorted(self.peers.items())
-                if i in counted and p.phase == "failed"
+                if i in counted and p.phase == Phase.FAILED
             }
         )
 

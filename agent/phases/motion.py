@@ -11,7 +11,7 @@ eq. 2; 5.2.2 (1) rotation control; §3.2.1 visual compass).
   :meth:`Motion._confirm_drift`).
 
 Every command is journaled before it is sent, with the motion request id it is sent with
-(crashed agents resume, and survive a second crash: ``Context.journal_hook``,
+(crashed agents resume, and survive a second crash: ``Reporter.journal``,
 ``Body.new_request_id``), so a restarted agent can ask for it again without the robot moving twice;
 the last head-yaw-0 image is kept as the next compass reference (:attr:`Motion.last_frame`).
 """
@@ -88,9 +88,8 @@ class Motion:
             )  # fmt: skip
             before = after
             if label:
-                self.ctx.status(
-                    self.ctx.phase, detail=f"{label}: {math.degrees(rc.error):+.1f}° to go"
-                )
+                report = self.ctx.report
+                report.status(report.phase, detail=f"{label}: {math.degrees(rc.error):+.1f}° to go")
             if rep.status == "contact":
                 log.warning("contact while turning")
         self.last_frame = before
@@ -100,7 +99,7 @@ class Motion:
         """One turn command, journaled with its request id before it is sent."""
         body = self.ctx.body
         rid = body.new_request_id()
-        self.ctx.journal_hook("turn", angle, rid)
+        self.ctx.report.journal.save("turn", angle, rid)
         return body.turn(angle, rid)
 
     def _compass(
@@ -188,7 +187,7 @@ class Motion:
         result, drift, suspect)."""
         before = self.reference()
         rid = self.ctx.body.new_request_id()
-        self.ctx.journal_hook(command, distance, rid)
+        self.ctx.report.journal.save(command, distance, rid)
         rep = send(distance, rid)
         self.steps += 1
         self.fleet.pump()

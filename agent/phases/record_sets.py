@@ -3,7 +3,7 @@ docs/design.md §8 "Faults"; NAO paper 4.1.2).
 
 Once agreed, every agent serves the records it agreed on at ``nao/{id}/records``
 (:func:`record_set`, :func:`answer`), so that an agent restarted after a crash can fetch
-them by their digest (agent/phases/resume.py) instead of searching again. The asker
+them by their digest (agent/recovery/resume.py) instead of searching again. The asker
 trusts no server: :func:`records_of` checks that a reply is the set asked for, decodes,
 holds one record per member sorted by sender, and hashes to the agreed digest.
 """

@@ -20,6 +20,7 @@ from agent.core.agreement import Decision
 from agent.core.control import PAPER_GAINS, next_leg
 from agent.core.formation.frame.research import step_blocked
 from agent.phases.context import AgentFailure, Context
+from agent.phases.reporting import Phase
 from agent.phases.roles import Fleet, Mover, Surveyor
 from agent.wire import NeighborRecordMsg
 
@@ -50,7 +51,7 @@ class Research:
         stops: the reason names who is still outside.
         """
         ctx = self.ctx
-        k = ctx.record_round + 1
+        k = self.search.round + 1
         verdict = ctx.formation.research(decision.records, k, ctx.cfg.explore_step)
         if verdict.connected:
             return None
@@ -60,10 +61,10 @@ class Research:
                 "stopping (4.1.3 rule 2)"
             )
         log.info("re-search round %d: %s", k, verdict.reason)
-        ctx.record_round = k
+        self.search.begin_round(k)
         self.fleet.retire()
         if ctx.me in verdict.searchers:
-            ctx.status("explore", 0.0, f"round {k}: {verdict.reason}", force=True)
+            ctx.report.status(Phase.EXPLORE, 0.0, f"round {k}: {verdict.reason}", force=True)
             self.explore(verdict.move(ctx.me))
         else:
             self.wait_for_searchers(verdict.searchers)
@@ -97,20 +98,20 @@ class Research:
                     "explore: a NAO at %s blocks the next step: move ends at believed %s",
                     pts[hit].round(2).tolist(), b.position.round(2).tolist(),
                 )  # fmt: skip
-                ctx.status("explore", 1.0, "a NAO ahead: move ended", force=True)
+                ctx.report.status(Phase.EXPLORE, 1.0, "a NAO ahead: move ended", force=True)
                 return
             motion.walk_step(leg.walk)
             done = 1.0 - max(0.0, leg.remaining - abs(leg.walk)) / total
-            ctx.status("explore", done, f"round {ctx.record_round}: exploring")
+            ctx.report.status(Phase.EXPLORE, done, f"round {self.search.round}: exploring")
         raise AgentFailure("exploration move did not converge in 200 steps")
 
     def wait_for_searchers(self, searchers: tuple[int, ...]) -> None:
         """Stand still until every searcher published a record or digest of this round."""
         ctx, fleet = self.ctx, self.fleet
-        k = ctx.record_round
+        k = self.search.round
         deadline = ctx.clock() + ctx.cfg.research_timeout
         text = f"round {k}: waiting for robots {list(searchers)} to explore and search"
-        ctx.status("explore", 0.0, text, force=True)
+        ctx.report.status(Phase.EXPLORE, 0.0, text, force=True)
         fleet.pump()
         while True:
             pending = []
@@ -119,7 +120,7 @@ class Research:
                 if (rec is not None and rec.round >= k) or (dig is not None and dig.round >= k):
                     continue
                 peer = fleet.peer(i)
-                if peer.phase == "failed":
+                if peer.phase == Phase.FAILED:
                     raise AgentFailure(f"robot {i} failed in re-search round {k}")
                 if peer.seen_alive and not peer.alive:
                     raise AgentFailure(f"robot {i} left in re-search round {k}")
@@ -131,5 +132,5 @@ class Research:
                     f"robots {pending} did not search again within "
                     f"{ctx.cfg.research_timeout:g} s (re-search round {k})"
                 )
-            ctx.status("explore", 0.0, text)
-            fleet.wait_until(min(deadline, ctx.status_due()))  # or news
+            ctx.report.status(Phase.EXPLORE, 0.0, text)
+            fleet.wait_until(min(deadline, ctx.report.due()))  # or news

@@ -13,16 +13,22 @@ own :class:`~agent.phases.march.Marcher`):
   (:class:`~agent.phases.membership.Membership`);
 - :class:`Mover`: look, turn and step, measured by the visual compass
   (:class:`~agent.phases.motion.Motion`);
-- :class:`Surveyor`: search where the robot stands and make its record
-  (:class:`~agent.phases.search.Search`);
+- :class:`Surveyor`: search where the robot stands and make its record, of the current
+  re-search round (:class:`~agent.phases.search.Search`);
 - :class:`Stepper`: walk to a goal, every step checked first
   (:class:`~agent.phases.safe_steps.SafeSteps`);
-- :class:`Planner`: the plan of an agreed record set (:class:`~agent.phases.waves.Waves`).
+- :class:`Planner`: the plan of an agreed record set (:class:`~agent.phases.waves.Waves`);
+- :class:`Course`: the agreed plan and this robot's way through it
+  (:class:`~agent.phases.waves.Itinerary`);
+- :class:`Recovery`: crash recovery (agent/recovery/, which builds on the phases and is
+  handed the runner's :class:`Crew`; the phases never import it): where a restarted
+  agent starts, the journal written meanwhile, and how the run ended.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Collection
+from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
@@ -32,7 +38,9 @@ from agent.core.agreement import Agreement, Decision
 from agent.core.control import PidGains
 from agent.core.formation.plan import Plan
 from agent.net.bus import Event
+from agent.phases.context import Context
 from agent.phases.membership import Peer
+from agent.phases.reporting import Phase, Recorder
 from agent.seams import Sightings
 from agent.wire import DigestMsg, NeighborRecordMsg, RecordSetReply
 
@@ -67,11 +75,11 @@ class Fleet(Listening, Protocol):
 
     def retire(self) -> None: ...
 
-    def pin_sessions(self, members: set[int]) -> None: ...
+    def pin_sessions(self, members: set[int], plan_digest: str) -> None: ...
 
     def arrived(self, among: Collection[int] | None = None) -> bool: ...
 
-    def fleet_stop(self) -> str: ...
+    def fleet_stop(self, plan: Plan | None) -> str: ...
 
 
 class Mover(Protocol):
@@ -92,11 +100,22 @@ class Mover(Protocol):
 
 
 class Surveyor(Protocol):
-    """Search and localise (NAO paper 5.2.2 (iii), 3.1–3.2, 4.1.2)."""
+    """Search and localise (NAO paper 5.2.2 (iii), 3.1–3.2, 4.1.2); the record of the
+    current re-search round (4.1.3 rule 2)."""
+
+    @property
+    def round(self) -> int: ...
+
+    @property
+    def record(self) -> NeighborRecordMsg | None: ...
 
     def sweep(self) -> list[Sightings]: ...
 
     def localise(self, sightings: list[Sightings]) -> NeighborRecordMsg: ...
+
+    def begin_round(self, round_: int) -> None: ...
+
+    def restore(self, record: NeighborRecordMsg) -> None: ...
 
 
 class Stepper(Protocol):
@@ -114,3 +133,52 @@ class Planner(Protocol):
     """The plan of the agreed records (NAO paper 4.1.2–4.2, AUV III)."""
 
     def make_plan(self, decision: Decision[NeighborRecordMsg]) -> Plan: ...
+
+
+class Course(Protocol):
+    """The agreed plan and this robot's way through it (NAO paper 4.1.2–4.2)."""
+
+    @property
+    def planned(self) -> Plan | None: ...
+
+    @property
+    def plan(self) -> Plan: ...
+
+    @property
+    def digest(self) -> str: ...
+
+    @property
+    def leg(self) -> int: ...
+
+    @property
+    def final_heading(self) -> float: ...
+
+    def follow(self, plan: Plan) -> None: ...
+
+    def at_leg(self, leg: int) -> None: ...
+
+    def face(self, final_heading: float) -> None: ...
+
+
+class Recovery(Recorder, Protocol):
+    """Crash recovery as the runner uses it (docs/design.md §8 "Faults"): the journal
+    (:class:`~agent.phases.reporting.Recorder`), where to start, how the run ended."""
+
+    def start(self) -> tuple[Phase, NeighborRecordMsg | None]:
+        """The phase to enter (``search`` afresh) and the record to agree on."""
+        ...
+
+    def finish(self, end: str) -> None:
+        """The run is over for this robot: ``done``, ``failed`` or ``stopped``."""
+
+
+@dataclass(frozen=True)
+class Crew:
+    """The runner's collaborators that crash recovery works with (agent/recovery/)."""
+
+    ctx: Context
+    fleet: Fleet
+    motion: Mover
+    planner: Planner
+    course: Course
+    survey: Surveyor

@@ -8,6 +8,9 @@
     RESUME: a restarted agent enters where its journal says (its run still going);
     FAIL: any phase stops safely. The journal's last record says how the run ended.
 
+(Phases are :class:`~agent.phases.reporting.Phase` members, written as the strings
+statuses and journals carry.)
+
 SEARCH/LOCALISE  head sweeps at θ = 0 and θ = 180°, the compass calibrated by the sweeps'
                  overlapping views (the full circle as a fallback); detections into the
                  fixed frame, merged into this robot's record (agent/phases/search.py).
@@ -29,7 +32,10 @@ agent/phases/camera_feed.py, which publishes thumbnails of the analysed frames f
 The :class:`Runner` only composes the collaborators around one shared
 :class:`~agent.phases.context.Context` (the typed roles between them are in
 agent/phases/roles.py) and walks the phases in order; every wait in every phase hears
-the fleet (agent/phases/membership.py).
+the fleet (agent/phases/membership.py). Crash recovery (RESUME, and the journal written
+meanwhile) is handed in as a :class:`~agent.phases.roles.Recovery` built on the runner's
+:class:`~agent.phases.roles.Crew` (agent/recovery/, wired by ``python -m agent
+--state-dir``); without it every start is a fresh one (:class:`Fresh`).
 """
 
 from __future__ import annotations
@@ -48,19 +54,29 @@ from agent.phases.agreeing import Agreeing
 from agent.phases.camera_feed import CameraFeed
 from agent.phases.context import AgentFailure, Context
 from agent.phases.hold import Hold
-from agent.phases.journaling import Journaling
 from agent.phases.march import MarchHalt
 from agent.phases.membership import Membership
 from agent.phases.motion import Motion
+from agent.phases.reporting import NoJournal, Phase
 from agent.phases.research import Research
-from agent.phases.resume import Resumption
+from agent.phases.roles import Crew, Recovery
 from agent.phases.safe_steps import SafeSteps
 from agent.phases.search import Search
-from agent.phases.waves import Waves
+from agent.phases.waves import Itinerary, Waves
 from agent.seams import Formation, Perception
 from agent.wire import NeighborRecordMsg, StatusMsg, key_alive, key_status, reason
 
 log = logging.getLogger("agent.phases.runner")
+
+
+class Fresh(NoJournal):
+    """No crash recovery: every start is a fresh search, and no journal is kept."""
+
+    def start(self) -> tuple[Phase, NeighborRecordMsg | None]:
+        return Phase.SEARCH, None
+
+    def finish(self, end: str) -> None:
+        """Nothing is kept."""
 
 
 class Runner:
@@ -69,6 +85,7 @@ class Runner:
     It depends only on the seams of :mod:`agent.seams`: a :class:`~agent.body.base.Body`
     (zenoh world, NAOqi or in-process world), a :class:`~agent.seams.Perception` and a
     :class:`~agent.seams.Formation`; the bus carries the exchange between agents.
+    ``recovery`` builds its crash recovery from its crew (None: none, :class:`Fresh`).
     """
 
     def __init__(
@@ -79,34 +96,36 @@ class Runner:
         perception: Perception,
         formation: Formation,
         clock: Callable[[], float] = time.monotonic,
+        recovery: Callable[[Crew], Recovery] | None = None,
     ) -> None:
         if body.robot_id != config.robot_id:
             raise ValueError(f"robot {body.robot_id} driven with config for {config.robot_id}")
         if config.publish_camera:  # every analysed frame offered to viewers
             perception = CameraFeed(perception, bus, config.robot_id, lambda: body.t_sim, clock)
-        self.ctx = ctx = Context(bus, body, config, perception, formation, clock)
+        self.ctx = ctx = Context.of(bus, body, config, perception, formation, clock)
+        self.course = course = Itinerary()
         self.membership = fleet = Membership(ctx)
-        self.journaling = Journaling(ctx, fleet)
-        ctx.journal_hook = self.journaling.save
         self.motion = Motion(ctx, fleet)
-        self.safe_steps = SafeSteps(ctx, fleet, self.motion)
+        self.safe_steps = SafeSteps(ctx, fleet, self.motion, course)
         self.search = Search(ctx, self.motion)
         self.agreeing = Agreeing(ctx, fleet)
         self.research = Research(ctx, fleet, self.motion, self.search)
-        self.waves = Waves(ctx, fleet, self.motion, self.safe_steps)
-        self.hold = Hold(ctx, fleet, self.motion, self.safe_steps)
-        self.resumption = Resumption(ctx, fleet, self.motion, self.waves)
+        self.waves = Waves(ctx, fleet, self.motion, self.safe_steps, course)
+        self.hold = Hold(ctx, fleet, self.motion, self.safe_steps, course)
+        crew = Crew(ctx, fleet, self.motion, self.waves, course, self.search)
+        self.recovery: Recovery = Fresh() if recovery is None else recovery(crew)
+        ctx.report.journal = self.recovery
 
     def run(self) -> int:
         """Join, resume or start afresh, walk the phases; 0 once ``done``, 1 on a safe stop."""
         try:
             self.membership.start()
-            stage, record = self.resumption.start()
+            stage, record = self.recovery.start()
             self.phases(stage, record)
-            self.journaling.finish("done")
+            self.recovery.finish("done")
             return 0
         except KeyboardInterrupt:  # stopped by the operator: the run is over for this robot
-            self.journaling.finish("stopped")
+            self.recovery.finish("stopped")
             raise
         except (AgentFailure, MarchHalt, BodyError, ValueError) as exc:
             return self.fail(reason(exc))
@@ -126,18 +145,18 @@ class Runner:
             with contextlib.suppress(BodyError):
                 self.ctx.body.stop()
 
-    def phases(self, stage: str, record: NeighborRecordMsg | None) -> None:
+    def phases(self, stage: Phase, record: NeighborRecordMsg | None) -> None:
         """The phases in order, entered at ``stage`` (``search`` afresh, or where the
         journal says: ``agree``, ``wait``, ``move``, ``hold``)."""
-        if stage == "search":
-            self.ctx.status("start", 0.0, "joined", force=True)
+        if stage == Phase.SEARCH:
+            self.ctx.report.status(Phase.START, 0.0, "joined", force=True)
             record = self.search.localise(self.search.sweep())  # SEARCH, LOCALISE
-        if stage in ("search", "agree"):
+        if stage in (Phase.SEARCH, Phase.AGREE):
             assert record is not None
             self.waves.make_plan(self.agree(record))  # EXCHANGE/AGREE (→ re-search), PLAN
-        if stage in ("search", "agree", "wait"):
+        if stage in (Phase.SEARCH, Phase.AGREE, Phase.WAIT):
             self.waves.wait_for_earlier_waves()  # WAIT
-        if stage in ("search", "agree", "wait", "move"):
+        if stage in (Phase.SEARCH, Phase.AGREE, Phase.WAIT, Phase.MOVE):
             self.waves.move()  # MOVE
         self.hold.run()  # HOLD, CORRECT, (MARCH), DONE
 
@@ -156,8 +175,8 @@ class Runner:
     def fail(self, reason: str) -> int:
         """Stop safely: publish ``failed`` with ``reason``, let it reach the others; 1."""
         log.error("robot %d failed: %s", self.ctx.me, reason)
-        self.ctx.status("failed", 0.0, error=reason, force=True)
-        self.journaling.finish("failed")
+        self.ctx.report.status(Phase.FAILED, 0.0, error=reason, force=True)
+        self.recovery.finish("failed")
         # let the failure status and any pending digest reach the others
         end = self.ctx.clock() + 1.0
         while self.ctx.clock() < end:
@@ -170,7 +189,7 @@ def report_unavailable(bus: Bus, robot_id: int, reason: str) -> int:
     ``failed`` with ``reason`` so the fleet stops safely, and returns exit code 1."""
     log.error("robot %d cannot run: %s", robot_id, reason)
     bus.declare_alive(key_alive(robot_id))
-    msg = StatusMsg(sender=robot_id, phase="failed", error=reason[:500])
+    msg = StatusMsg(sender=robot_id, phase=Phase.FAILED.value, error=reason[:500])
     bus.publish(key_status(robot_id), msg, "status")
     bus.drain(1.0)
     return 1

@@ -63,7 +63,7 @@ from agent.core.formation.waves.jam import (
 )
 from agent.core.nao import CAMERA_HFOV, HEAD_YAW_LIMIT
 from agent.phases.context import AgentFailure, Context
-from agent.phases.roles import Fleet, Mover
+from agent.phases.roles import Course, Fleet, Mover
 
 log = logging.getLogger("agent.phases.safe_steps")
 
@@ -75,10 +75,11 @@ BLOCKER_MATCH = 0.3
 class SafeSteps:
     """The distance control whose every step is checked first (module docstring)."""
 
-    def __init__(self, ctx: Context, fleet: Fleet, motion: Mover) -> None:
+    def __init__(self, ctx: Context, fleet: Fleet, motion: Mover, course: Course) -> None:
         self.ctx = ctx
         self.fleet = fleet
         self.motion = motion
+        self.course = course  # the plan, once agreed: the ranks, and who a blocker is
         self.corridor = CorridorParams()  # the safe-step check before each step
         self.waits = 0  # polls spent waiting for a clear corridor
         self.vias = 0  # via (tangent) steps taken round a blocking NAO
@@ -116,7 +117,7 @@ class SafeSteps:
                 if v.action == VIA and self._via_step(v):
                     continue
                 side = 0
-            why = self.fleet.fleet_stop()
+            why = self.fleet.fleet_stop(self.course.planned)
             if why:
                 raise AgentFailure(why)
             if abs(leg.turn) > self.ctx.cfg.rotation_tolerance:
@@ -195,7 +196,7 @@ class SafeSteps:
                 self._claim(-1)
                 return v
             where = (b.position + v.blockers[0]).round(2).tolist()
-            why = self.fleet.fleet_stop()
+            why = self.fleet.fleet_stop(self.course.planned)
             if why:
                 raise AgentFailure(why)
             by = ""
@@ -221,8 +222,9 @@ class SafeSteps:
                     "corridor: via step blocked after %d poll(s): detour planned again", waited
                 )
                 return v
-            self.ctx.status(
-                self.ctx.phase, detail=f"waiting: NAO ahead at {where}{by}", force=waited == 0
+            report = self.ctx.report
+            report.status(
+                report.phase, detail=f"waiting: NAO ahead at {where}{by}", force=waited == 0
             )
             self.waits += 1
             waited += 1
@@ -243,7 +245,7 @@ class SafeSteps:
         """The member taken for the NAO at ``rel`` (relative, fixed frame): the one whose
         expected place, by the plan and the phases heard, is nearest (jam.py rule 1);
         -1 without a plan or a match. A robot the plan left out stands at its start."""
-        plan = self.ctx.planned
+        plan = self.course.planned
         if plan is None:
             return -1
         me = self.ctx.me
@@ -263,7 +265,7 @@ class SafeSteps:
         through the plan's ``after`` lists, for this robot (it moves only once this robot
         is past it, or yields once claimed: jam.py rule 2); False for -1 (no member
         named)."""
-        plan = self.ctx.planned
+        plan = self.course.planned
         if blocker < 0 or plan is None:
             return False
         phase = self.fleet.peer(blocker).phase
@@ -274,12 +276,13 @@ class SafeSteps:
 
     def _claim(self, blocker: int) -> None:
         """Publish that this robot's way is blocked by ``blocker`` (-1: no longer)."""
-        if blocker == self.ctx.blocked_by:
+        report = self.ctx.report
+        if blocker == report.figures.blocked_by:
             return
         if blocker >= 0:
             log.info("corridor: blocked by robot %d beyond patience: claimed", blocker)
-        self.ctx.blocked_by = blocker
-        self.ctx.status(self.ctx.phase, detail=self._claim_text(blocker), force=True)
+        report.show_blocked_by(blocker)
+        report.status(report.phase, detail=self._claim_text(blocker), force=True)
 
     @staticmethod
     def _claim_text(blocker: int) -> str:
@@ -318,8 +321,7 @@ class SafeSteps:
 
     def _rank(self) -> int:
         """This robot's rank in the shared plan, (wave, id) order (0 without a plan)."""
-        if self.ctx.planned is None:
+        plan = self.course.planned
+        if plan is None:
             return 0
-        return plan_rank(
-            [(int(rp.wave), int(rp.robot_id)) for rp in self.ctx.planned.robots], self.ctx.me
-        )
+        return plan_rank([(int(rp.wave), int(rp.robot_id)) for rp in plan.robots], self.ctx.me)

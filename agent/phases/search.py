@@ -12,6 +12,10 @@ LOCALISE the detections into the fixed frame (eqs. 7–8) with the compass-estim
 
 The head-yaw-0 image taken first *defines* the fixed frame; it is journaled as the
 reference view a restarted agent re-measures its heading against after a crash.
+
+The search owns this robot's record and the re-search round it belongs to (4.1.3 rule 2:
+:meth:`Search.begin_round`, by agent/phases/research.py); a restarted agent restores
+them from its journal (:meth:`Search.restore`, agent/recovery/resume.py).
 """
 
 from __future__ import annotations
@@ -27,9 +31,10 @@ from agent.core.perception.detector import Detection
 from agent.core.perception.half_turn import half_turn, overlap_pairs
 from agent.core.perception.obstacles import ObstacleDetection
 from agent.phases.context import NORTH, Context
+from agent.phases.reporting import Phase
 from agent.phases.roles import Mover
 from agent.seams import Sightings
-from agent.wire import NeighborRecordMsg, reason
+from agent.wire import NeighborRecordMsg
 
 log = logging.getLogger("agent.phases.search")
 
@@ -41,6 +46,26 @@ class Search:
         self.ctx = ctx
         self.motion = motion
         self.obstacle_sightings: list[np.ndarray] = []  # fixed frame, one array per image
+        self._round = 0  # the re-search round of the current record (4.1.3 rule 2)
+        self._record: NeighborRecordMsg | None = None
+
+    @property
+    def round(self) -> int:
+        """The re-search round this robot searches in (0: the first search)."""
+        return self._round
+
+    @property
+    def record(self) -> NeighborRecordMsg | None:
+        """This robot's record of the current round, once localised (or restored)."""
+        return self._record
+
+    def begin_round(self, round_: int) -> None:
+        """A re-search round begins: the next record is of round ``round_``."""
+        self._round = round_
+
+    def restore(self, record: NeighborRecordMsg) -> None:
+        """The record journaled before a crash, and its round, as this robot's."""
+        self._round, self._record = record.round, record
 
     def sweep(self) -> list[Sightings]:
         """Sweeps at θ = 0 and θ = 180° (5.2.2 (iii)); returns fixed-frame sightings.
@@ -56,7 +81,7 @@ class Search:
         and the last one gives the residual r over 2π (:meth:`_calibrate`).
         """
         ctx, b, motion = self.ctx, self.ctx.beliefs, self.motion
-        ctx.status("search", 0.0, "sweep at θ = 0°")
+        ctx.report.status(Phase.SEARCH, 0.0, "sweep at θ = 0°")
         h0 = b.heading  # north at the start; kept from the compass in re-search rounds
         yaws = ctx.cfg.search_yaws
         n = 2 * len(yaws)
@@ -85,18 +110,15 @@ class Search:
                 raw.append((sweep, ctx.perception.detect(frame.image, yaw)))
                 obst.append((sweep, ctx.perception.detect_obstacles(frame.image, yaw)))
                 done += 1
-                ctx.status(
-                    "search", done / n, f"θ = {180 * sweep}°, head {math.degrees(yaw):+.0f}°"
+                ctx.report.status(
+                    Phase.SEARCH, done / n, f"θ = {180 * sweep}°, head {math.degrees(yaw):+.0f}°"
                 )
             # the last image of the sweep was not at yaw 0: refresh the compass reference
             motion.last_frame = motion.look(0.0)
             if origin is None:
                 origin = motion.last_frame
-            if sweep == 0 and ctx.journal is not None:  # the view that defines the fixed frame
-                try:
-                    ctx.journal.save_reference(origin.image)
-                except (OSError, ValueError) as exc:
-                    log.error("reference view not journaled: %s", reason(exc))
+            if sweep == 0:  # the view that defines the fixed frame
+                ctx.report.journal.reference(origin.image)
         before_views.clear()
         heading_180 = b.heading
         turn = half_turn(overlaps, turned[0])
@@ -168,7 +190,7 @@ class Search:
         """This robot's record of the current round: the merged neighbours (4.1.2) and
         obstacles (5.1.2) in its fixed frame."""
         ctx = self.ctx
-        ctx.status("localise", 0.0)
+        ctx.report.status(Phase.LOCALISE, 0.0)
         pts, ori, conf = ctx.perception.merge(sightings)
         obstacles = ctx.perception.merge_obstacles(self.obstacle_sightings)
         fault = ctx.cfg.sensor_fault
@@ -177,12 +199,13 @@ class Search:
             pts, ori = fault.apply(pts, ori)
         rec = NeighborRecordMsg(
             sender=ctx.me,
-            round=ctx.record_round,
+            round=self._round,
             neighbours=tuple((float(x), float(y)) for x, y in pts),
             orientations=tuple(float(o) for o in ori),
             confidences=tuple(float(c) for c in conf),
             obstacles=tuple((float(x), float(y)) for x, y in obstacles),
+            calibration=ctx.cfg.calibration,
         )
-        ctx.own_record = rec
-        ctx.status("localise", 1.0, f"{len(pts)} neighbours, {len(obstacles)} obstacles")
+        self._record = rec
+        ctx.report.status(Phase.LOCALISE, 1.0, f"{len(pts)} neighbours, {len(obstacles)} obstacles")
         return rec

@@ -3,7 +3,7 @@
 
 PLAN  the formation core on the agreed records (identical on every agent): this
       robot's slot, wave and parent (:meth:`Waves.make_plan`; computed in a worker
-      thread while this one keeps pumping the bus, agent/phases/pumping.py), turned to
+      thread while this one keeps pumping the bus, :func:`while_pumping`), turned to
       its own fixed frame by its estimated start heading (docs/design.md §9); a robot the
       fleet's check left out stands still and stops with the reason. From then on the agreed
       record set is served (agent/phases/record_sets.py) and only the agreed sessions
@@ -21,12 +21,30 @@ MOVE  rotation control to face each leg's goal, distance control in 20 cm steps 
       mid-move (a crash) goes on from its journaled leg. While it walks it publishes
       how far along its planned path it is (``walked``, :func:`~agent.core.formation.waves.release.walked_along`), at once
       when it passes a release point that a robot waits for.
+
+The agreed plan and this robot's way through it (the leg it is on, the pyramid axis it
+faces at the end) are the :class:`Itinerary`'s, which the waves write and the hold, the
+safe steps and crash recovery read (the :class:`~agent.phases.roles.Course` role).
+
+Long computations while the bus is pumped (so that agreement scales to 50 NAOs and
+more: an agent keeps hearing the fleet while it plans): an agent that agreed must go on
+answering the agreement while it plans, repeating its digest until every member has
+moved on (:mod:`agent.core.agreement`, NAO paper 4.1.2's exchange made loss-tolerant).
+At 100 NAOs on 2 cores a plan took minutes; robot 77, planning, repeated nothing
+meanwhile, and three members whose copy of its last digest had been dropped stopped on
+"no news for 300 s". The plan is the same whatever thread computes it: it reads only the
+agreed records and parameters (:func:`plan_pumping`, also for the candidate plan of
+agent/phases/agreeing.py).
 """
 
 from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import TimeoutError as Pending
+from typing import TypeVar
 
 from agent.core.agreement import Decision
 from agent.core.control import PAPER_GAINS, wrap_pi
@@ -34,13 +52,95 @@ from agent.core.formation.plan import Plan
 from agent.core.formation.view.own_frame import in_own_frame
 from agent.core.formation.waves.jam import yields
 from agent.core.formation.waves.release import walked_along
-from agent.phases.context import AgentFailure, Context
-from agent.phases.pumping import plan_pumping
+from agent.phases.context import NORTH, AgentFailure, Context
 from agent.phases.record_sets import record_set
-from agent.phases.roles import Fleet, Mover, Stepper
+from agent.phases.reporting import Phase
+from agent.phases.roles import Course, Fleet, Hearing, Mover, Stepper
 from agent.wire import NeighborRecordMsg
 
 log = logging.getLogger("agent.phases.waves")
+
+#: Seconds between two pumps of the bus while the plan is computed.
+PLAN_PUMP_S = 0.1
+
+T = TypeVar("T")
+
+
+def while_pumping(compute: Callable[[], T], pump: Callable[[], None], every: float) -> T:
+    """``compute()`` in a worker thread, ``pump()`` here every ``every`` seconds until it
+    is done; its result, or its exception raised here (module docstring). A pump that
+    raises waits for the computation (the worker is never left running) and raises."""
+    if not every > 0:
+        raise ValueError(f"every must be > 0 s, got {every}")
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="plan") as pool:
+        job = pool.submit(compute)
+        while True:
+            try:
+                return job.result(timeout=every)
+            except Pending:
+                if job.done():  # compute itself raised a TimeoutError
+                    raise
+                pump()
+
+
+def plan_pumping(ctx: Context, fleet: Hearing, records: tuple[NeighborRecordMsg, ...]) -> Plan:
+    """The formation core's plan of ``records`` with this agent's parameters, computed
+    while ``fleet`` is pumped (:func:`while_pumping`); ``ValueError`` if it refuses."""
+    params = ctx.cfg.plan_params()
+    return while_pumping(
+        lambda: ctx.formation.plan(records, params), lambda: fleet.pump(0.0), PLAN_PUMP_S
+    )
+
+
+class Itinerary:
+    """The agreed plan and this robot's way through it (module docstring): the plan (in
+    this robot's fixed frame; left in the common frame for a robot the plan left out)
+    and its digest, the leg of the move the robot is on, the pyramid axis it faces at
+    the end (north until the goals are known)."""
+
+    def __init__(self) -> None:
+        self._plan: Plan | None = None
+        self._leg = 0
+        self._final_heading = NORTH
+
+    @property
+    def planned(self) -> Plan | None:
+        """The agreed plan, None before one."""
+        return self._plan
+
+    @property
+    def plan(self) -> Plan:
+        """The agreed plan (after :meth:`Waves.make_plan`); AgentFailure before one."""
+        if self._plan is None:
+            raise AgentFailure("no plan yet")
+        return self._plan
+
+    @property
+    def digest(self) -> str:
+        """The agreed plan's digest ("" before one): the common plan's, on every agent."""
+        return "" if self._plan is None else str(self._plan.digest)
+
+    @property
+    def leg(self) -> int:
+        """The leg of the move this robot is on (0 before the move)."""
+        return self._leg
+
+    @property
+    def final_heading(self) -> float:
+        """The pyramid axis, once the goals are known (north before)."""
+        return self._final_heading
+
+    def follow(self, plan: Plan) -> None:
+        """``plan`` is the agreed one."""
+        self._plan = plan
+
+    def at_leg(self, leg: int) -> None:
+        """The robot is on leg ``leg`` of its move (or resumes there after a crash)."""
+        self._leg = leg
+
+    def face(self, final_heading: float) -> None:
+        """The pyramid axis this robot faces once it has arrived."""
+        self._final_heading = final_heading
 
 
 def _released(peer_walked: float, at: float, same_plan: bool) -> bool:
@@ -51,40 +151,46 @@ def _released(peer_walked: float, at: float, same_plan: bool) -> bool:
 class Waves:
     """This robot's part of the plan (module docstring)."""
 
-    def __init__(self, ctx: Context, fleet: Fleet, motion: Mover, steps: Stepper) -> None:
+    def __init__(
+        self, ctx: Context, fleet: Fleet, motion: Mover, steps: Stepper, course: Course
+    ) -> None:
         self.ctx = ctx
         self.fleet = fleet
         self.motion = motion
         self.steps = steps
+        self.course = course
 
     def make_plan(self, decision: Decision[NeighborRecordMsg]) -> Plan:
         """The plan of the agreed ``decision``; AgentFailure if the core refuses it."""
-        ctx = self.ctx
-        ctx.status("plan", 0.0, decision.reason)
+        ctx, report = self.ctx, self.ctx.report
+        report.status(Phase.PLAN, 0.0, decision.reason)
         try:
             plan = plan_pumping(ctx, self.fleet, decision.records)
         except ValueError as exc:
             raise AgentFailure(f"planning failed on the agreed records: {exc}") from None
-        ctx.plan_digest = str(plan.digest)
+        digest = str(plan.digest)
+        report.show_plan(digest, -1)
         if ctx.me in plan.excluded:  # the fleet's check named this robot (docs/design.md §9)
-            ctx.plan = plan
+            self.course.follow(plan)
             raise AgentFailure(
                 f"left out of the plan, standing still: {plan.verdict or 'sightings do not fit'}"
             )
         # the common frame turned to this robot's fixed frame by its start heading ψ
-        ctx.plan = plan = in_own_frame(plan, plan.psi_of(ctx.me))
+        plan = in_own_frame(plan, plan.psi_of(ctx.me))
+        self.course.follow(plan)
         self.fleet.served = record_set(ctx.me, decision)
-        self.fleet.pin_sessions({int(r) for r in ctx.formation.members(plan)})
-        ctx.wave = int(plan.robot(ctx.me).wave)
-        ctx.status("plan", 1.0, f"wave {ctx.wave}, leader {plan.leader}", force=True)
+        self.fleet.pin_sessions({int(r) for r in ctx.formation.members(plan)}, digest)
+        wave = int(plan.robot(ctx.me).wave)
+        report.show_plan(digest, wave)
+        report.status(Phase.PLAN, 1.0, f"wave {wave}, leader {plan.leader}", force=True)
         return plan
 
     def wait_for_earlier_waves(self) -> None:
         """Start once every robot of this robot's ``after`` list holds its slot (the plan's
         execution rule, ``agent/core/formation/waves/execution.py``; the leader's list is empty),
         or once the robots still pending are jammed on this one (module docstring)."""
-        ctx = self.ctx
-        plan = ctx.plan
+        ctx, report = self.ctx, self.ctx.report
+        plan = self.course.plan
         members = set(ctx.formation.members(plan))
         mine = plan.robot(ctx.me)
         earlier = sorted(int(i) for i in mine.after if int(i) in members and int(i) != ctx.me)
@@ -98,22 +204,23 @@ class Waves:
         deadline = ctx.clock() + ctx.cfg.wave_timeout
         self.fleet.pump()
         while True:
-            why = self.fleet.fleet_stop()
+            why = self.fleet.fleet_stop(plan)
             if why:
                 raise AgentFailure(why)
             pending = []
             for i in earlier:
                 peer = self.fleet.peer(i)
-                if peer.phase in ("hold", "march", "done"):
+                if peer.phase in (Phase.HOLD, Phase.MARCH, Phase.DONE):
                     continue
-                same_plan = peer.plan_digest == ctx.plan_digest
-                if peer.phase == "move" and i in at and _released(peer.walked, at[i], same_plan):
+                same_plan = peer.plan_digest == self.course.digest
+                released = i in at and _released(peer.walked, at[i], same_plan)
+                if peer.phase == Phase.MOVE and released:
                     continue
                 if peer.seen_alive and not peer.alive:
                     raise AgentFailure(
                         f"robot {i} of wave {plan.robot(i).wave} left before holding"
                     )
-                if peer.phase == "failed":
+                if peer.phase == Phase.FAILED:
                     raise AgentFailure(f"robot {i} of wave {plan.robot(i).wave} failed")
                 pending.append(i)
             if not pending:
@@ -122,21 +229,21 @@ class Waves:
             to = yields(after, ctx.me, pending, claims)
             if to:
                 log.info("yielding to robot(s) %s, blocked by this robot: starting now", to)
-                ctx.status("wait", 1.0, f"yielding to robot(s) {to}", force=True)
+                report.status(Phase.WAIT, 1.0, f"yielding to robot(s) {to}", force=True)
                 return
             if ctx.clock() > deadline:
                 raise AgentFailure(f"robots {pending} of earlier waves did not hold in time")
-            ctx.status("wait", 0.0, f"waiting for wave(s) of {pending}")
-            self.fleet.wait_until(min(deadline, ctx.status_due()))  # or news
+            report.status(Phase.WAIT, 0.0, f"waiting for wave(s) of {pending}")
+            self.fleet.wait_until(min(deadline, report.due()))  # or news
 
     def move(self) -> None:
         """Walk the plan's legs from the journaled one on, then face the pyramid axis."""
-        ctx = self.ctx
-        plan = ctx.plan
+        ctx, report, course = self.ctx, self.ctx.report, self.course
+        plan = course.plan
         self.motion.last_frame = None  # others moved meanwhile: a fresh compass reference
         self.steps.forget()  # and the NAOs seen before are elsewhere now
         goals, final_heading = ctx.formation.goals(plan, ctx.me)
-        ctx.final_heading = final_heading
+        course.face(final_heading)
         # the release points others wait for on this robot's path: passing one is news
         releases = sorted(
             x
@@ -145,19 +252,20 @@ class Waves:
             for i, x in zip(r.after, r.after_at, strict=True)
             if int(i) == ctx.me
         )
-        ctx.walked = walked_along(goals, ctx.leg, ctx.beliefs.position)
-        ctx.status("move", 0.0, f"{len(goals)} leg(s)")
+        report.show_walked(walked_along(goals, course.leg, ctx.beliefs.position))
+        report.status(Phase.MOVE, 0.0, f"{len(goals)} leg(s)")
         n = len(goals)
         for k, goal in enumerate(goals):
-            if k < ctx.leg:
+            if k < course.leg:
                 continue  # walked before a restart (a crash mid-move)
-            ctx.leg = k
+            course.at_leg(k)
 
             def progress(p: float, k: int = k) -> None:
-                before = ctx.walked
-                ctx.walked = max(before, walked_along(goals, k, ctx.beliefs.position))
-                news = any(before < x <= ctx.walked for x in releases)
-                ctx.status("move", (k + p) / n, f"leg {k + 1}/{n}", force=news)
+                before = report.figures.walked
+                walked = max(before, walked_along(goals, k, ctx.beliefs.position))
+                report.show_walked(walked)
+                news = any(before < x <= walked for x in releases)
+                report.status(Phase.MOVE, (k + p) / n, f"leg {k + 1}/{n}", force=news)
 
             self.steps.walk_to(goal, progress)
         turn = wrap_pi(final_heading - ctx.beliefs.heading)

@@ -109,6 +109,9 @@ class NeighborRecordMsg(Message):
     ``round`` counts search rounds (a robot that found nobody searches again).
     ``obstacles`` (x, y) in metres are the static obstacles it saw (5.1.2), in the same
     fixed frame; empty from a sender that saw none or predates them.
+    ``calibration``: the digest of the recogniser's calibration the detections were
+    made with (:mod:`agent.core.perception.calibration`); empty from a sender that
+    predates it.
     """
 
     TAG: ClassVar[str] = "record"
@@ -118,6 +121,7 @@ class NeighborRecordMsg(Message):
     orientations: tuple[float, ...] = ()
     confidences: tuple[float, ...] = ()
     obstacles: tuple[tuple[float, float], ...] = ()
+    calibration: str = ""
     SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {
         "sender": _ID,
         "round": _int("round", 0, 1_000_000),
@@ -125,6 +129,7 @@ class NeighborRecordMsg(Message):
         "orientations": _seq("orientations", _float("orientation", -10.0, 10.0), MAX_NEIGHBOURS),
         "confidences": _seq("confidences", _float("confidence", 0.0, 1.0), MAX_NEIGHBOURS),
         "obstacles": _seq("obstacles", _XY, MAX_OBSTACLES),
+        "calibration": _hex("calibration", allow_empty=True),
     }
 
     def __post_init__(self) -> None:
@@ -178,6 +183,10 @@ class StatusMsg(Message):
     ``shift_x``, ``shift_y``: how far the robot has stepped since it arrived (m, the
     common frame of ``plan_digest``): its alignment to its own parent, which its children
     follow at once instead of one level after another (``agent.phases.hold``).
+
+    ``calibration``: the digest of the recogniser's calibration the robot uses (the
+    built-in one or a lab's, :mod:`agent.core.perception.calibration`); empty from a
+    sender that predates it.
     """
 
     TAG: ClassVar[str] = "status"
@@ -197,6 +206,7 @@ class StatusMsg(Message):
     walked: float = 0.0
     shift_x: float = 0.0
     shift_y: float = 0.0
+    calibration: str = ""
     SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {
         "sender": _ID,
         "phase": _str("phase", 16, PHASES),
@@ -214,6 +224,7 @@ class StatusMsg(Message):
         "walked": _float("walked", 0.0, MAX_WALKED),
         "shift_x": _float("shift_x", -MAX_SHIFT, MAX_SHIFT),
         "shift_y": _float("shift_y", -MAX_SHIFT, MAX_SHIFT),
+        "calibration": _hex("calibration", allow_empty=True),
     }
 
 

@@ -21,9 +21,19 @@ from typing import Any
 
 import pytest
 
-from agent.adapters import PerceptionAdapter
+from agent.adapters import FormationAdapter, PerceptionAdapter
 from agent.body.base import Body
+from agent.config import AgentConfig
 from agent.net.bus import Bus, BusConfig
+from agent.phases.context import Context
+from agent.phases.hold import Hold
+from agent.phases.membership import Membership
+from agent.phases.motion import Motion
+from agent.phases.research import Research
+from agent.phases.safe_steps import SafeSteps
+from agent.phases.search import Search
+from agent.phases.waves import Itinerary
+from agent.seams import Perception
 from sim import scenarios
 from sim.scenarios import RobotSpec, Scenario
 from sim.world import World
@@ -121,6 +131,33 @@ RUNNER_SEED = 4
 @pytest.fixture(scope="module")
 def perception() -> PerceptionAdapter:
     return PerceptionAdapter()
+
+
+@dataclass
+class Robot:
+    """One robot's collaborators on a body, composed without the runner (each test uses
+    one of them): the fleet as heard on a bus (a real membership), motion, the plan it
+    follows, safe steps, search, re-search and hold."""
+
+    ctx: Context
+    membership: Membership
+    motion: Motion
+    course: Itinerary
+    safe_steps: SafeSteps
+    search: Search
+    research: Research
+    hold: Hold
+
+
+def parts(body: Body, cfg: AgentConfig, perception: Perception, bus: Bus) -> Robot:
+    """The collaborators of robot ``cfg.robot_id`` on ``body`` (see :class:`Robot`)."""
+    ctx = Context.of(bus, body, cfg, perception, FormationAdapter())
+    fleet, course = Membership(ctx), Itinerary()
+    motion = Motion(ctx, fleet)
+    steps, search = SafeSteps(ctx, fleet, motion, course), Search(ctx, motion)
+    research = Research(ctx, fleet, motion, search)
+    hold = Hold(ctx, fleet, motion, steps, course)
+    return Robot(ctx, fleet, motion, course, steps, search, research, hold)
 
 
 @pytest.fixture()

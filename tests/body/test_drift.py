@@ -16,7 +16,7 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from agent.adapters import FormationAdapter, PerceptionAdapter
+from agent.adapters import PerceptionAdapter
 from agent.body.in_process import WorldBody
 from agent.config import AgentConfig
 from agent.core.control import wrap_pi
@@ -24,10 +24,10 @@ from agent.core.perception.compass import CompassResult
 from agent.net.bus import Bus
 from agent.phases.context import NORTH
 from agent.phases.motion import _plausible
-from agent.phases.runner import Runner
 from sim.locomotion import NoiseModel
 from sim.scenarios import RobotSpec, Scenario
 from sim.world import World
+from tests.body.conftest import Robot, parts
 
 #: one robot at the origin facing north, in the textured room
 ALONE = Scenario(robots=(RobotSpec(1, 0.0, -0.6, math.pi / 2),), seed=7, room=3.0)
@@ -41,8 +41,8 @@ def alone() -> Iterator[World]:
         yield w
 
 
-def _runner(world: World, bus: Bus, perception: PerceptionAdapter) -> Runner:
-    return Runner(bus, WorldBody(world, 1), AgentConfig(robot_id=1), perception, FormationAdapter())
+def _robot(world: World, bus: Bus, perception: PerceptionAdapter) -> Robot:
+    return parts(WorldBody(world, 1), AgentConfig(robot_id=1), perception, bus)
 
 
 def _true_heading_change(world: World, h0: float) -> float:
@@ -71,7 +71,7 @@ def test_a_real_large_drift_is_confirmed_and_believed(
 ) -> None:
     # 2.0 rad/m: about -23° in every 20 cm step, beyond the 20° plausibility limit
     alone.locomotion.drift[1] = -2.0
-    r = _runner(alone, bus, perception)
+    r = _robot(alone, bus, perception)
     h0 = alone.pose(1)[2]
     r.motion.walk_step(0.2)
     true = _true_heading_change(alone, h0)
@@ -85,7 +85,7 @@ def test_walking_to_a_goal_with_large_drifts_keeps_the_heading(
     alone: World, bus: Bus, perception: PerceptionAdapter
 ) -> None:
     alone.locomotion.drift[1] = 2.2
-    r = _runner(alone, bus, perception)
+    r = _robot(alone, bus, perception)
     x0, y0, h0 = alone.pose(1)
     goal = np.array([0.0, 0.8])  # four steps north
     r.safe_steps.walk_to(goal, lambda p: None)
@@ -113,10 +113,7 @@ class _OneMismatch(PerceptionAdapter):
 def test_a_wrong_match_is_found_out_by_the_re_measurement(
     alone: World, bus: Bus, perception: PerceptionAdapter
 ) -> None:
-    r = Runner(
-        bus, WorldBody(alone, 1), AgentConfig(robot_id=1), _OneMismatch(perception),
-        FormationAdapter(),
-    )  # fmt: skip
+    r = parts(WorldBody(alone, 1), AgentConfig(robot_id=1), _OneMismatch(perception), bus)
     h0 = alone.pose(1)[2]
     r.motion.walk_step(0.2)
     # no drift at all: the re-measuring turn of +30° is all the robot turned, and the
@@ -148,10 +145,7 @@ class _Unconfirmed(PerceptionAdapter):
 def test_an_unconfirmed_drift_counts_as_none(
     alone: World, bus: Bus, perception: PerceptionAdapter, second: CompassResult
 ) -> None:
-    r = Runner(
-        bus, WorldBody(alone, 1), AgentConfig(robot_id=1), _Unconfirmed(perception, second),
-        FormationAdapter(),
-    )  # fmt: skip
+    r = parts(WorldBody(alone, 1), AgentConfig(robot_id=1), _Unconfirmed(perception, second), bus)
     r.motion.walk_step(0.2)
     # the behaviour without the re-measurement: no drift, and the turn as commanded
     assert r.ctx.beliefs.heading == pytest.approx(NORTH + math.radians(30.0), abs=1e-9)

@@ -12,13 +12,13 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from agent.adapters import FormationAdapter, PerceptionAdapter
+from agent.adapters import PerceptionAdapter
 from agent.body.in_process import WorldBody
 from agent.config import AgentConfig
 from agent.net.bus import Bus
-from agent.phases.runner import Runner
 from sim.scenarios import RobotSpec, Scenario
 from sim.world import World
+from tests.body.conftest import Robot, parts
 
 NORTH = math.pi / 2
 
@@ -40,15 +40,15 @@ def ahead() -> Iterator[World]:
         yield w
 
 
-def runner(rid: int, world: World, bus: Bus, perception: PerceptionAdapter) -> Runner:
+def explorer(rid: int, world: World, bus: Bus, perception: PerceptionAdapter) -> Robot:
     cfg = AgentConfig(robot_id=rid, fleet_size=3)
-    return Runner(bus, WorldBody(world, rid), cfg, perception, FormationAdapter())
+    return parts(WorldBody(world, rid), cfg, perception, bus)
 
 
 def test_explore_stops_before_a_nao_seen_ahead(
     ahead: World, bus: Bus, perception: PerceptionAdapter
 ) -> None:
-    r = runner(1, ahead, bus, perception)
+    r = explorer(1, ahead, bus, perception)
     r.research.explore(np.array([0.0, 2.0]))  # straight through robot 2
     x, y, _ = ahead.pose(1)
     gap = math.dist((x, y), ahead.pose(2)[:2])
@@ -62,7 +62,7 @@ def test_explore_stops_before_a_nao_seen_ahead(
 def test_explore_walks_the_move_when_the_way_is_clear(
     ahead: World, bus: Bus, perception: PerceptionAdapter
 ) -> None:
-    r = runner(3, ahead, bus, perception)
+    r = explorer(3, ahead, bus, perception)
     r.research.explore(np.array([0.0, -0.8]))  # south: nobody there (turns round first)
     x, y, _ = ahead.pose(3)
     assert math.hypot(x - 2.0, y + 1.8) < 0.1

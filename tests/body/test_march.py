@@ -25,9 +25,9 @@ from agent.core.formation.view.route import Route, route_vector, station_offset
 from agent.net.bus import Bus
 from agent.phases.march import LOST, Marcher, MarchHalt
 from agent.phases.membership import Peer
-from agent.phases.runner import Runner
 from agent.wire import NeighborRecordMsg
 from sim.world import World
+from tests.body.conftest import Robot, parts
 
 
 def formed(world: World) -> tuple[Plan, float]:
@@ -74,17 +74,16 @@ class MovingParent(WorldBody):
 def child_runner(
     world: World, bus: Bus, perception: PerceptionAdapter, body: WorldBody, plan: Plan,
     axis: float, **cfg: object,
-) -> Runner:  # fmt: skip
+) -> Robot:  # fmt: skip
     settings: dict[str, object] = {"wave_timeout": 5.0, **cfg}
     config = AgentConfig(
         robot_id=body.robot_id, fleet_size=3,
         march=Route(distance=0.6), **settings,  # type: ignore[arg-type]
     )  # fmt: skip
-    r = Runner(bus, body, config, perception, FormationAdapter())
-    r.ctx.plan = plan
-    r.ctx.beliefs.heading = r.ctx.final_heading = wrap_pi(
-        axis
-    )  # fixed frames are world-parallel here
+    r = parts(body, config, perception, bus)
+    r.course.follow(plan)
+    r.course.face(wrap_pi(axis))
+    r.ctx.beliefs.heading = wrap_pi(axis)  # fixed frames are world-parallel here
     for rp in plan.robots:
         if rp.robot_id != body.robot_id:
             r.membership.peers[rp.robot_id] = Peer(alive=True, phase="march", seen_alive=True)
@@ -119,7 +118,7 @@ def test_follower_keeps_station_on_a_marching_parent(
     body.on_arrival.append(r.membership.peers[child.parent])
     want = station_offset(plan, child.robot_id)
     start = np.asarray(world.pose(child.robot_id)[:2])
-    m = Marcher(r.ctx, r.membership, r.motion, Route(distance=0.6), axis)
+    m = Marcher(r.ctx, r.membership, r.motion, plan, Route(distance=0.6), axis)
     m.run()
     now = np.asarray(world.pose(child.robot_id)[:2])
     err = np.subtract(world.pose(child.parent)[:2], now) - want
@@ -141,9 +140,9 @@ def test_lost_parent_halts_with_the_reason_after_a_head_search(
     world.set_pose(child.parent, x + 3.0 * math.cos(axis), y + 3.0 * math.sin(axis), h)
     h0 = world.pose(child.robot_id)[2]
     with pytest.raises(MarchHalt, match=f"lost sight of parent {child.parent}"):
-        Marcher(r.ctx, r.membership, r.motion, Route(distance=0.6), axis).run()
+        Marcher(r.ctx, r.membership, r.motion, plan, Route(distance=0.6), axis).run()
     assert world.pose(child.robot_id)[2] == pytest.approx(h0)  # searched with the head only
-    assert r.ctx.phase == "march"
+    assert r.ctx.report.phase == "march"
 
 
 def test_a_failed_member_halts_the_march(
@@ -155,10 +154,10 @@ def test_a_failed_member_halts_the_march(
     other = next(i for i in plan.ids if i != child.robot_id)
     r.membership.peers[other].phase = "failed"
     with pytest.raises(MarchHalt, match=f"robot {other} failed"):
-        Marcher(r.ctx, r.membership, r.motion, Route(distance=0.6), axis).run()
+        Marcher(r.ctx, r.membership, r.motion, plan, Route(distance=0.6), axis).run()
     r.membership.peers[other] = Peer(alive=False, phase="march", seen_alive=True)
     with pytest.raises(MarchHalt, match=f"robot {other} left"):
-        Marcher(r.ctx, r.membership, r.motion, Route(distance=0.6), axis).check_fleet()
+        Marcher(r.ctx, r.membership, r.motion, plan, Route(distance=0.6), axis).check_fleet()
 
 
 def test_the_leader_sees_who_lost_its_parent(
@@ -167,7 +166,7 @@ def test_the_leader_sees_who_lost_its_parent(
     plan, axis = formed(world)
     lead = plan.leader
     r = child_runner(world, bus, perception, WorldBody(world, lead), plan, axis)
-    m = Marcher(r.ctx, r.membership, r.motion, Route(distance=0.6), axis)
+    m = Marcher(r.ctx, r.membership, r.motion, plan, Route(distance=0.6), axis)
     assert m.lost_followers() == []
     lost = next(i for i in plan.ids if i != lead)
     r.membership.peers[lost].detail = f"{LOST} {lead}: head search 1"

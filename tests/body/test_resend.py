@@ -14,14 +14,17 @@ from collections.abc import Iterator
 
 import pytest
 
-from agent.adapters import FormationAdapter, PerceptionAdapter
+from agent.adapters import PerceptionAdapter
 from agent.body.zenoh_world import ZenohBody
 from agent.config import AgentConfig
 from agent.phases.context import NORTH
-from agent.phases.journal import JournalState
-from agent.phases.runner import Runner
-from agent.phases.runs import Verdict
-from tests.body.conftest import FACING, Rig, rig
+from agent.phases.roles import Crew
+from agent.recovery.journal import JournalState
+from agent.recovery.journaling import Journaling
+from agent.recovery.resume import Resumption
+from agent.recovery.runs import Verdict
+from tests.body.conftest import FACING, Rig, parts, rig
+from tests.phases.fakes import FakePlanner
 
 
 @pytest.fixture(scope="module")
@@ -71,16 +74,16 @@ def test_a_resumed_agent_sends_the_motion_in_flight_again_and_moves_once(
     send = crashed.walk if command == "walk" else crashed.side
     assert send(0.1, rid).status == "done"
     body = restarted(zenoh)
-    runner = Runner(
-        body.bus, body, AgentConfig(robot_id=1, fleet_size=2), perception, FormationAdapter()
-    )
+    r = parts(body, AgentConfig(robot_id=1, fleet_size=2), perception, body.bus)
+    crew = Crew(r.ctx, r.membership, r.motion, FakePlanner(r.ctx, r.course), r.course, r.search)
+    resumption = Resumption(Journaling(None, r.ctx, r.membership, r.course, r.search), crew)
     repeats = zenoh.server.motions.repeats
-    assert runner.resumption.resume(st, Verdict(True, "peers searching")) == ("search", None)
+    assert resumption.resume(st, Verdict(True, "peers searching")) == ("search", None)
     assert zenoh.server.motions.repeats == repeats + 1  # answered from the cache
     want = (x0 + moved[0], y0 + moved[1], h0)
     assert zenoh.world.pose(1) == pytest.approx(want, abs=1e-6)  # once
-    assert runner.ctx.beliefs.heading == pytest.approx(NORTH)
+    assert r.ctx.beliefs.heading == pytest.approx(NORTH)
     # the belief followed the motion once (before the new search resets the frame)
-    assert runner.ctx.beliefs.position == pytest.approx(moved, abs=1e-9)
+    assert r.ctx.beliefs.position == pytest.approx(moved, abs=1e-9)
     back = body.walk if command == "walk" else body.side
     assert back(-0.1).status == "done"

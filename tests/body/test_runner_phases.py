@@ -10,6 +10,7 @@ the world frame moved to the robot's start.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -24,22 +25,22 @@ from agent.core.formation.shape.spec import BUILTIN, PYRAMID, Shape
 from agent.net.bus import Bus
 from agent.phases.context import NORTH
 from agent.phases.membership import Peer
-from agent.phases.runner import Runner
 from agent.wire import NeighborRecordMsg
 from sim.world import World
+from tests.body.conftest import Robot, parts
 
 
-def runner_for(
+def robot_for(
     rid: int, world: World, bus: Bus, perception: PerceptionAdapter, shape: Shape = PYRAMID
-) -> Runner:
+) -> Robot:
     cfg = AgentConfig(robot_id=rid, fleet_size=3, wave_timeout=5.0, shape=shape)
-    return Runner(bus, WorldBody(world, rid), cfg, perception, FormationAdapter())
+    return parts(WorldBody(world, rid), cfg, perception, bus)
 
 
 def test_search_sees_every_neighbour_where_it_stands(
     world: World, bus: Bus, perception: PerceptionAdapter
 ) -> None:
-    r = runner_for(1, world, bus, perception)
+    r = robot_for(1, world, bus, perception)
     x0, y0, h0 = world.pose(1)
     rec = r.search.localise(r.search.sweep())
     truth = {j: np.subtract(world.pose(j)[:2], (x0, y0)) for j in (2, 3)}
@@ -62,7 +63,7 @@ def test_without_overlapping_views_the_search_completes_the_circle(
     cfg = AgentConfig(
         robot_id=2, fleet_size=3, wave_timeout=5.0, search_yaws=tuple(np.radians([-40, 0, 40]))
     )
-    r = Runner(bus, WorldBody(world, 2), cfg, perception, FormationAdapter())
+    r = parts(WorldBody(world, 2), cfg, perception, bus)
     h0 = world.pose(2)[2]
     r.search.sweep()
     h = world.pose(2)[2]
@@ -72,7 +73,7 @@ def test_without_overlapping_views_the_search_completes_the_circle(
 
 
 def test_rotate_turns_by_the_compass(world: World, bus: Bus, perception: PerceptionAdapter) -> None:
-    r = runner_for(2, world, bus, perception)
+    r = robot_for(2, world, bus, perception)
     h0 = world.pose(2)[2]
     done = r.motion.rotate(math.pi / 2)
     turned = wrap_pi(world.pose(2)[2] - h0)
@@ -85,7 +86,7 @@ def test_rotate_turns_by_the_compass(world: World, bus: Bus, perception: Percept
 def test_walk_to_reaches_the_goal_in_steps(
     world: World, bus: Bus, perception: PerceptionAdapter
 ) -> None:
-    r = runner_for(3, world, bus, perception)
+    r = robot_for(3, world, bus, perception)
     x0, y0, _ = world.pose(3)
     seen: list[float] = []
     goal = np.array([0.0, -0.5])  # behind: turn round, then about three 20 cm steps
@@ -129,11 +130,10 @@ def test_correct_steps_towards_the_planned_offset_to_the_parent(
     off = 0.15 * np.array([-math.sin(axis), math.cos(axis)])
     world.set_pose(child.robot_id, x + off[0], y + off[1], h)
 
-    r = runner_for(child.robot_id, world, bus, perception)
-    r.ctx.plan = plan
-    r.ctx.beliefs.heading = r.ctx.final_heading = wrap_pi(
-        axis
-    )  # fixed frames are world-parallel here
+    r = robot_for(child.robot_id, world, bus, perception)
+    r.course.follow(plan)
+    r.course.face(wrap_pi(axis))
+    r.ctx.beliefs.heading = wrap_pi(axis)  # fixed frames are world-parallel here
     r.membership.peers[parent.robot_id] = Peer(alive=True, phase="done", seen_alive=True)
 
     def offset_error() -> float:
@@ -185,9 +185,10 @@ def _holding(world: World, bus: Bus, perception: PerceptionAdapter, shape: Shape
         x, y = origin + np.asarray(rp.target)
         world.set_pose(rp.robot_id, float(x), float(y), axis)
     child = next(rp for rp in plan.robots if rp.parent >= 0)
-    r = runner_for(child.robot_id, world, bus, perception, shape)
-    r.ctx.plan = plan
-    r.ctx.beliefs.heading = r.ctx.final_heading = wrap_pi(axis)
+    r = robot_for(child.robot_id, world, bus, perception, shape)
+    r.course.follow(plan)
+    r.course.face(wrap_pi(axis))
+    r.ctx.beliefs.heading = wrap_pi(axis)
     r.membership.peers[int(child.parent)] = Peer(alive=True, phase="done", seen_alive=True)
     return r, plan, child, axis
 
@@ -197,7 +198,7 @@ def test_verify_measures_the_pair_and_says_so_in_the_status(
 ) -> None:
     r, _, child, _ = _holding(world, bus, perception)
     r.hold.verify()
-    check = r.ctx.check
+    check = r.ctx.report.figures.check
     assert check is not None and check.parent == child.parent and check.ok
     assert abs(check.r_d) < 0.06 and abs(check.r_phi) < 0.15
 
@@ -209,7 +210,7 @@ def test_verify_measures_a_line_s_child_beside_its_parent(
     # is judged against that edge of the line's tree; as a pyramid pair it would be wrong
     r, _, child, _ = _holding(world, bus, perception, BUILTIN["line"])
     r.hold.verify()
-    check = r.ctx.check
+    check = r.ctx.report.figures.check
     assert check is not None and check.parent == child.parent and check.ok
     assert abs(check.r_d) < 0.06 and abs(check.r_phi) < 0.15
     assert abs(abs(math.degrees(check.angle)) - 90.0) < 5.0
@@ -227,7 +228,8 @@ def test_verify_stops_a_robot_whose_parent_is_not_where_the_plan_says(
     world.set_pose(child.robot_id, x - 0.25 * math.cos(axis), y - 0.25 * math.sin(axis), h)
     with pytest.raises(AgentFailure, match="formation off: r_d"):
         r.hold.verify()
-    assert r.ctx.check is not None and not r.ctx.check.ok
+    check = r.ctx.report.figures.check
+    assert check is not None and not check.ok
 
 
 def test_verify_of_a_failed_parent_is_no_verdict(
@@ -286,7 +288,8 @@ def test_verify_measures_a_parent_out_of_reach_that_reported_done(
     r, _, child, _ = _holding(world, bus, perception)
     r.membership.peers[int(child.parent)] = Peer(alive=False, phase="done", seen_alive=True)
     r.hold.verify()
-    assert r.ctx.check is not None and r.ctx.check.ok
+    check = r.ctx.report.figures.check
+    assert check is not None and check.ok
 
 
 def test_a_child_waits_for_the_robots_passing_its_sight_line_only(
@@ -303,8 +306,8 @@ def test_a_child_waits_for_the_robots_passing_its_sight_line_only(
         robot(4, (5.0, 5.0), (6.0, 5.0), 1),  # far away
     )
     cfg = AgentConfig(robot_id=2, fleet_size=4, wave_timeout=0.5)
-    r = Runner(bus, WorldBody(world, 2), cfg, perception, FormationAdapter())
-    r.ctx.plan = plan
+    r = parts(WorldBody(world, 2), cfg, perception, bus)
+    r.course.follow(plan)
     peers = r.membership.peers
     peers[1] = Peer(alive=True, phase="done", seen_alive=True)
     peers[3] = Peer(alive=True, phase="move", seen_alive=True)
@@ -334,7 +337,7 @@ def test_verify_judges_the_last_look_of_a_correction_that_did_not_walk(
     assert looked >= 1 and world.locomotion.contacts == 0
     r.hold.verify()
     assert len(pictures) == looked  # no new picture
-    check = r.ctx.check
+    check = r.ctx.report.figures.check
     assert check is not None and check.parent == child.parent and check.ok
     r.hold.verify()  # a second verify (after a march) looks again
     assert len(pictures) > looked
@@ -346,8 +349,8 @@ def test_a_child_follows_the_steps_its_parent_announces(
     """While the parent aligns to its own parent, the child steps with it (the
     parent's ``shift``), so a correction near the top of the pyramid does not pass down
     it one level at a time; the child then announces its own shift for its children."""
-    r, _, child, axis = _holding(world, bus, perception)
-    r.ctx.plan_digest = "ab" * 32
+    r, plan, child, axis = _holding(world, bus, perception)
+    r.course.follow(dataclasses.replace(plan, digest="ab" * 32))
     parent = int(child.parent)
     # the parent has stepped 0.15 m back along the axis (common frame = world here)
     back = -0.15 * np.array([math.cos(axis), math.sin(axis)])
@@ -359,7 +362,7 @@ def test_a_child_follows_the_steps_its_parent_announces(
     r.hold._follow(parent)
     moved = np.asarray(world.pose(child.robot_id)[:2]) - start
     assert float(np.hypot(*(moved - back))) < 0.06  # it stepped with its parent
-    assert float(np.hypot(*(np.asarray(r.ctx.shift) - back))) < 0.06  # and says so
+    assert float(np.hypot(*(np.asarray(r.ctx.report.figures.shift) - back))) < 0.06  # and says so
     assert world.locomotion.contacts == 0
     r.hold._follow(parent)  # nothing more to follow: no step
     assert float(np.hypot(*(np.asarray(world.pose(child.robot_id)[:2]) - start - moved))) < 1e-9

@@ -15,7 +15,7 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from agent.adapters import FormationAdapter, PerceptionAdapter
+from agent.adapters import PerceptionAdapter
 from agent.body.in_process import WorldBody
 from agent.config import AgentConfig
 from agent.core.control.corridor import CorridorParams
@@ -23,10 +23,11 @@ from agent.core.formation.plan import Plan, RobotPlan
 from agent.net.bus import Bus
 from agent.phases.context import AgentFailure
 from agent.phases.membership import Peer
-from agent.phases.runner import Runner
+from agent.phases.reporting import Phase
 from sim.nao_model import FOOTPRINT_RADIUS
 from sim.scenarios import RobotSpec, Scenario
 from sim.world import World
+from tests.body.conftest import Robot, parts
 
 #: robot 1 facing north, robot 2 standing 0.8 m ahead of it, facing it
 BLOCKED = Scenario(
@@ -45,8 +46,8 @@ def blocked() -> Iterator[World]:
         yield w
 
 
-def _runner(world: World, bus: Bus, perception: PerceptionAdapter) -> Runner:
-    r = Runner(bus, WorldBody(world, 1), AgentConfig(robot_id=1), perception, FormationAdapter())
+def _runner(world: World, bus: Bus, perception: PerceptionAdapter) -> Robot:
+    r = parts(WorldBody(world, 1), AgentConfig(robot_id=1), perception, bus)
     r.safe_steps.corridor = CorridorParams(poll=0.05)
     return r
 
@@ -55,7 +56,7 @@ def _separation(world: World) -> float:
     return float(np.hypot(*np.subtract(world.pose(1)[:2], world.pose(2)[:2])))
 
 
-def _separations(r: Runner, world: World) -> list[float]:
+def _separations(r: Robot, world: World) -> list[float]:
     """Robot 1's separation from robot 2 after each of its steps (filled as it walks)."""
     seps: list[float] = []
     walk_step = r.motion.walk_step
@@ -74,13 +75,13 @@ def test_a_nao_in_the_corridor_is_waited_for_then_walked_round(
 ) -> None:
     r = _runner(blocked, bus, perception)
     details: list[str] = []
-    status = r.ctx.status
+    status = r.ctx.report.status
 
-    def record(phase: str, progress: float = 0.0, detail: str = "", **kw: object) -> None:
+    def record(phase: Phase, progress: float = 0.0, detail: str = "", **kw: object) -> None:
         details.append(detail)
         status(phase, progress, detail, **kw)  # type: ignore[arg-type]
 
-    r.ctx.status = record  # type: ignore[method-assign]
+    r.ctx.report.status = record  # type: ignore[method-assign]
     seps = _separations(r, blocked)
     goal = np.array([0.0, 1.6])  # 0.8 m beyond the NAO, straight through it
     r.safe_steps.walk_to(goal, lambda p: None)
@@ -127,11 +128,11 @@ def _plan_with_robot_2_on_the_goal() -> Plan:
     )  # fmt: skip
 
 
-def _jammed(world: World, bus: Bus, perception: PerceptionAdapter, phase: str) -> Runner:
+def _jammed(world: World, bus: Bus, perception: PerceptionAdapter, phase: str) -> Robot:
     cfg = AgentConfig(robot_id=1, wave_timeout=1.0)  # 10 polls for a robot not moved yet
-    r = Runner(bus, WorldBody(world, 1), cfg, perception, FormationAdapter())
+    r = parts(WorldBody(world, 1), cfg, perception, bus)
     r.safe_steps.corridor = CorridorParams(poll=0.01, max_polls=3)
-    r.ctx.plan = _plan_with_robot_2_on_the_goal()
+    r.course.follow(_plan_with_robot_2_on_the_goal())
     r.membership.peers[2] = Peer(alive=True, phase=phase, seen_alive=True)
     return r
 
@@ -144,17 +145,18 @@ def test_a_jammed_robot_names_its_blocker_and_goes_on_once_it_yields(
     its own agent would walk away), and robot 1 reaches its goal."""
     r = _jammed(blocked, bus, perception, "wait")
     claims: list[int] = []
-    status = r.ctx.status
+    report = r.ctx.report
+    status = report.status
 
-    def record(phase: str, progress: float = 0.0, detail: str = "", **kw: object) -> None:
-        claims.append(r.ctx.blocked_by)
-        if r.ctx.blocked_by == 2 and blocked.pose(2)[:2] == (0.0, 0.0):
+    def record(phase: Phase, progress: float = 0.0, detail: str = "", **kw: object) -> None:
+        claims.append(report.figures.blocked_by)
+        if report.figures.blocked_by == 2 and blocked.pose(2)[:2] == (0.0, 0.0):
             blocked.set_pose(2, 1.5, 0.0, -math.pi / 2)  # robot 2 yields
         status(phase, progress, detail, **kw)  # type: ignore[arg-type]
 
-    r.ctx.status = record  # type: ignore[method-assign]
+    report.status = record  # type: ignore[method-assign]
     r.safe_steps.walk_to(np.array([0.0, 0.75]), lambda p: None)
-    assert 2 in claims and r.ctx.blocked_by == -1  # claimed, then cleared
+    assert 2 in claims and report.figures.blocked_by == -1  # claimed, then cleared
     x, y, _ = blocked.pose(1)
     assert math.hypot(x, y + 0.05) < 0.15
     assert blocked.locomotion.contacts == 0
@@ -252,7 +254,7 @@ def test_a_nao_that_holds_its_slot_is_walked_round_without_waiting_out_the_rank(
     walking robots)."""
     r = _runner(blocked, bus, perception)
     r.safe_steps.corridor = CorridorParams(poll=0.01)
-    r.ctx.plan = _ranked_plan_with_robot_2_in_the_way(unmoved)
+    r.course.follow(_ranked_plan_with_robot_2_in_the_way(unmoved))
     r.membership.peers[2] = Peer(alive=True, phase=phase, seen_alive=True)
     assert r.safe_steps._rank() >= 20  # a patience of 21 polls or more
     r.safe_steps.walk_to(np.array([0.0, 2.4]), lambda p: None)  # its slot, fixed frame

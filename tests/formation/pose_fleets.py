@@ -14,6 +14,7 @@ import math
 import numpy as np
 
 from agent.core.formation.frame.records import NeighborRecord
+from agent.core.perception.sighting_noise import SightingNoise
 from tests.formation.conftest import random_fleet
 
 MASK_STEP = math.radians(5.0)
@@ -101,6 +102,11 @@ def fault(rec: NeighborRecord, kind: str) -> NeighborRecord:
 #: 0.8·√n m, robots ≥ 0.6 m apart (median nearest neighbour ~0.7 m, as the 50- and
 #: 100-NAO runs).
 DENSE_SPREAD = 0.8 / 0.6
+
+
+#: The noise model of :func:`dense_records` (4 % of the distance, 2° across; the fleet's
+#: fault test must be told the noise of the records it judges, not the rendered one's).
+DENSE_NOISE = SightingNoise.synthetic(0.005, 0.04, math.radians(2.0))
 
 
 def dense_records(

@@ -9,7 +9,7 @@ import pytest
 
 from agent.core.formation import plan as plan_module
 from agent.core.formation.frame.records import NeighborRecord
-from agent.core.formation.params import PlanParams
+from agent.core.formation.params import D_E, PlanParams
 from agent.core.formation.plan import Plan, plan_from_positions, plan_from_records
 from agent.core.formation.shape.pyramid import parent_of
 from agent.core.formation.waves.obstacles import SLOT_CLEARANCE
@@ -44,7 +44,7 @@ def test_random_fleets_are_safe_and_consistent(strategy: str) -> None:
     for n in (1, 2, 3, 5, 8, 12, 15):
         pos = random_fleet(rng, n, spacing=0.6)
         ids = [int(i) for i in rng.permutation(100)[:n]]
-        plan = plan_from_positions(ids, pos, PlanParams(d_e=0.8, strategy=strategy))
+        plan = plan_from_positions(ids, pos, PlanParams(d_e=D_E, strategy=strategy))
         assert [r.robot_id for r in plan.robots] == sorted(ids)
         assert sorted(r.order for r in plan.robots) == list(range(n))
         assert check_safety(plan.paths(), plan.wave_of(), 0.2) == []
@@ -55,7 +55,7 @@ def test_random_fleets_are_safe_and_consistent(strategy: str) -> None:
             else:
                 par = by_order[parent_of(r.order)]
                 assert r.parent == par.robot_id
-                assert math.hypot(*(r.target - par.target)) == pytest.approx(0.8)
+                assert math.hypot(*(r.target - par.target)) == pytest.approx(D_E)
             first = r.waypoints()[0]
             assert math.hypot(*(first - r.start)) == pytest.approx(r.distance)
         assert sorted(i for w in plan.waves for i in w) == sorted(ids)
@@ -111,7 +111,7 @@ def test_obstacles_take_part_and_the_pyramid_moves_out() -> None:
     rng = np.random.default_rng(2)
     pts = random_fleet(rng, 11, spacing=0.8)
     robots, obstacles = pts[:8], pts[8:]
-    params = PlanParams(d_e=0.8, obstacle_method="paper")
+    params = PlanParams(d_e=D_E, obstacle_method="paper")
     plan = plan_from_positions(list(range(8)), robots, params, obstacles=obstacles)
     assert _safe_with(plan, obstacles)
     t = plan.targets()
@@ -156,8 +156,8 @@ def test_near_moves_the_pattern_by_the_smallest_clear_ring() -> None:
     rng = np.random.default_rng(2)
     pts = random_fleet(rng, 11, spacing=0.8)
     robots, obstacles = pts[:8], pts[8:]
-    params = PlanParams(d_e=0.8, obstacle_method="near")
-    free = plan_from_positions(list(range(8)), robots, PlanParams(d_e=0.8))
+    params = PlanParams(d_e=D_E, obstacle_method="near")
+    free = plan_from_positions(list(range(8)), robots, PlanParams(d_e=D_E))
     plan = plan_from_positions(list(range(8)), robots, params, obstacles=obstacles)
     assert _safe_with(plan, obstacles)
     t = plan.targets()

@@ -14,14 +14,14 @@ import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from agent.core.formation.params import PlanParams
+from agent.core.formation.params import D_E, PHI_E_DEG, PlanParams
 from agent.core.formation.plan import Plan, plan_from_records
 from agent.core.formation.view.own_frame import in_own_frame
 from agent.core.perception.sighting_noise import SightingNoise
 from tests.formation.pose_fleets import sim_layout, unaligned_records
 
 IDS = [1, 2, 3, 4, 5]
-PARAMS = PlanParams(d_e=0.8, phi_e=math.radians(30))
+PARAMS = PlanParams(d_e=D_E, phi_e=math.radians(PHI_E_DEG))
 
 
 def _to_world(plan: Plan, pos: np.ndarray, headings: np.ndarray) -> np.ndarray:
@@ -100,6 +100,6 @@ def test_aligned_starts_plan_exactly_as_the_papers() -> None:
     recs = unaligned_records(IDS, pos, np.full(len(IDS), math.pi / 2), rng, 0.05, 0.05)
     ours = plan_from_records(recs, PARAMS, noise=SightingNoise.synthetic(0.01, 0.05, 0.05))
     papers = plan_from_records(
-        recs, PlanParams(d_e=0.8, phi_e=math.radians(30), frame_method="lsq")
+        recs, PlanParams(d_e=D_E, phi_e=math.radians(PHI_E_DEG), frame_method="lsq")
     )
     assert ours.digest == papers.digest and len(ours.psi) == 0

@@ -7,6 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from agent.core.perception.calibration import builtin
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -38,6 +40,7 @@ def test_eval_perception_json(tmp_path: Path) -> None:
     assert out.returncode == 0, out.stderr
     summary = json.loads(out.stdout)
     assert summary["views"] == 4 and summary["seed"] == 3
+    assert summary["calibration"] == builtin().digest
     for key in ("recall", "precision", "distance_error_m", "bearing_error_deg", "compass"):
         assert key in summary
     assert summary["compass"]["featureless"]["ok"] is False
@@ -53,3 +56,14 @@ def test_eval_perception_rejects_bad_arguments() -> None:
         timeout=60,
     )
     assert out.returncode == 2 and "--views" in out.stderr
+
+
+def test_eval_perception_names_a_bad_calibration_folder(tmp_path: Path) -> None:
+    out = subprocess.run(
+        [sys.executable, "-m", "tools.eval_perception", "--calibration", str(tmp_path)],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert out.returncode == 2 and f"{tmp_path / 'orange.json'}: missing" in out.stderr

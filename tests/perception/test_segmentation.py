@@ -1,7 +1,13 @@
 import numpy as np
 import pytest
 
-from agent.core.perception.segmentation import check_image, extract_tuples, orange_mask
+from agent.core.perception.segmentation import (
+    ORANGE,
+    OrangeRange,
+    check_image,
+    extract_tuples,
+    orange_mask,
+)
 from tests.perception.synth import canvas, draw_nao
 
 
@@ -61,3 +67,37 @@ def test_bad_parameters() -> None:
         extract_tuples(np.zeros((0,), np.uint8))
     with pytest.raises(ValueError, match="min_area"):
         extract_tuples(np.zeros((10, 10), np.uint8), min_area=0)
+
+
+def test_an_orange_range_of_its_own_and_one_that_wraps_through_red() -> None:
+    img = canvas()
+    img[10:60, 10:60] = (0, 60, 255)  # orange, H ≈ 7
+    img[100:150, 100:150] = (40, 0, 255)  # red-magenta, H ≈ 175
+    img[200:250, 200:250] = (0, 0, 255)  # pure red, H = 0
+    red = OrangeRange((170, 150, 50), (3, 255, 255))
+    assert red.wraps and not ORANGE.wraps
+    m = orange_mask(img, orange=red)
+    assert m[125, 125] == 255 and m[225, 225] == 255 and m[35, 35] == 0
+    assert OrangeRange.from_dict(red.to_dict()) == red
+    assert orange_mask(img, orange=ORANGE)[35, 35] == 255
+
+
+@pytest.mark.parametrize(
+    ("low", "high", "why"),
+    [
+        ((2, 170, 50), (10, 255), "three ints"),
+        ((2, 170, 50), (180, 255, 255), "hue"),
+        ((2, 200, 50), (10, 100, 255), "S and V"),
+        ((2.5, 170, 50), (10, 255, 255), "three ints"),
+    ],
+)
+def test_a_bad_orange_range_says_why(low: tuple, high: tuple, why: str) -> None:
+    with pytest.raises(ValueError, match=why):
+        OrangeRange(low, high)
+
+
+def test_an_orange_range_from_a_bad_document_says_what_it_expects() -> None:
+    with pytest.raises(ValueError, match="hsv_low"):
+        OrangeRange.from_dict({"low": [1, 2, 3]})
+    with pytest.raises(ValueError, match="lists"):
+        OrangeRange.from_dict({"hsv_low": "2,170,50", "hsv_high": [10, 255, 255]})

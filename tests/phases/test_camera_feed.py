@@ -24,6 +24,7 @@ from agent.phases.camera_feed import (
     thumbnail_detections,
     thumbnail_size,
 )
+from agent.phases.reporting import Phase
 from agent.phases.runner import Runner
 from agent.wire import MAX_CAMERA_DETECTIONS, CameraMsg, Message, decode, encode
 
@@ -171,7 +172,7 @@ def test_off_by_default_nothing_of_the_feed_is_on_the_bus(
     r = Runner(bus, ZenohBody(bus, 3), AgentConfig(robot_id=3), perception, FormationAdapter())
     assert r.ctx.perception is perception
     r.ctx.perception.detect(IMAGE, 0.0)
-    r.ctx.status("search", 0.0, force=True)
+    r.ctx.report.status(Phase.SEARCH, 0.0, force=True)
     assert set(bus.stats.published_count) == {"status"}
     assert not any(k.endswith("/camera") for k in bus._publishers)
 

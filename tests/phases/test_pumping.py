@@ -1,4 +1,5 @@
-"""Long computations while the bus is pumped (agent/phases/pumping.py: agreement that scales)."""
+"""Long computations while the bus is pumped (agent/phases/waves.py ``while_pumping``:
+agreement that scales)."""
 
 from __future__ import annotations
 
@@ -6,7 +7,7 @@ import threading
 
 import pytest
 
-from agent.phases.pumping import while_pumping
+from agent.phases.waves import while_pumping
 
 
 def test_the_bus_is_pumped_until_the_plan_is_done() -> None:

@@ -1,9 +1,10 @@
 """The agreed record set by digest (for agents restarted after a crash): served by every agent,
 checked by the asker.
 
-Pure checks (agent/phases/resume.py), the restored agreement (agent/core/agreement.py), the runner's
-acceptance of a restarted member's new session, and the query over real zenoh sessions:
-plain, and through a TLS router with the fleet's access control.
+Pure checks (agent/phases/record_sets.py, used by agent/recovery/runs.py), the restored
+agreement (agent/core/agreement.py), and the query over real zenoh sessions: plain, and
+through a TLS router with the fleet's access control. (The membership's acceptance of a
+restarted member's new session: tests/phases/test_membership.py.)
 """
 
 from __future__ import annotations
@@ -19,13 +20,11 @@ from types import SimpleNamespace
 import pytest
 
 from agent.core.agreement import Agreement
-from agent.net.bus import Bus, BusConfig, BusError, Event
+from agent.net.bus import Bus, BusConfig, BusError
 from agent.phases.record_sets import answer, record_set, records_of
-from agent.phases.runner import Runner
-from agent.phases.runs import agreed_by_others
+from agent.recovery.runs import agreed_by_others
 from agent.wire import (
     KEY_RECORDS_ALL,
-    DigestMsg,
     NeighborRecordMsg,
     RecordSetReply,
     RecordSetRequest,
@@ -36,7 +35,7 @@ from agent.wire import (
 )
 from agent.wire.trust import Identity, TrustError, create_fleet
 from tests.fakes import zb
-from tests.phases.test_runner import perception, records, runner  # noqa: F401  (fixtures)
+from tests.phases.fakes import records
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -110,33 +109,6 @@ def test_records_of_each_error_branch(case: str, match: str) -> None:
         rep = _reply((*wire[:2], encode(forged)), digest)
     with pytest.raises(ValueError, match=match):
         records_of(rep, digest, members)
-
-
-def test_a_restarted_member_counts_once_it_shows_the_agreed_digest(runner: Runner) -> None:  # noqa: F811
-    r = runner
-    r.membership.agreement = agreed()
-    r.ctx.plan_digest = "cd" * 32
-    r.membership.handle(Event("alive", "nao/alive/2", robot_id=2))
-    r.membership.agreed_epochs = {2: 100}
-    r.membership.epochs = {2: 100}
-    _, digest = r.membership.agreement.digest()
-    # a new session that does not show the agreed digest is ignored
-    wrong = DigestMsg(sender=2, round=0, digest="0" * 64, members=(1, 2, 3), params="ab" * 32)
-    r.membership.handle(Event("msg", "nao/2/digest", wrong, epoch=300))
-    r.membership.handle(Event("msg", "nao/2/status", StatusMsg(sender=2, phase="wait"), epoch=300))
-    assert r.membership.agreed_epochs[2] == 100 and r.membership.peers[2].phase != "wait"
-    # ... one that does is the same member from now on; the old session no longer counts
-    right = DigestMsg(sender=2, round=0, digest=digest, members=(1, 2, 3), params="ab" * 32)
-    r.membership.handle(Event("msg", "nao/2/digest", right, epoch=300))
-    assert r.membership.agreed_epochs[2] == 300
-    r.membership.handle(Event("msg", "nao/2/status", StatusMsg(sender=2, phase="move"), epoch=300))
-    assert r.membership.peers[2].phase == "move"
-    r.membership.handle(Event("msg", "nao/2/status", StatusMsg(sender=2, phase="done"), epoch=100))
-    assert r.membership.peers[2].phase == "move"
-    # a status with the agreed plan digest proves it too
-    st = StatusMsg(sender=2, phase="hold", plan_digest="cd" * 32)
-    r.membership.handle(Event("msg", "nao/2/status", st, epoch=400))
-    assert r.membership.agreed_epochs[2] == 400 and r.membership.peers[2].phase == "hold"
 
 
 def test_reply_signed_by_another_robot_than_the_key_names_is_refused(tmp_path: Path) -> None:

@@ -9,7 +9,6 @@ spot while searching).
 
 from __future__ import annotations
 
-import argparse
 import re
 import signal
 import time
@@ -17,17 +16,19 @@ from pathlib import Path
 
 import pytest
 
+from agent.config import AgentConfig
 from agent.wire import StatusMsg
-from tests.system.world import Watch, watched_world
-from tools.harness.procs import start_agent
+from tests.system.world import Watch, agent_on, watched_world
 
 pytestmark = [pytest.mark.system, pytest.mark.slow]
 
 
 def test_member_killed_during_search_stops_the_others_unmoved(tmp_path: Path) -> None:
-    args = argparse.Namespace(d_e=0.8, phi_e_deg=30.0, agree_timeout=20.0, agent_log_level="INFO")
     with watched_world(tmp_path, 3, 5) as (ep, bus, ids, procs):
-        agents = {i: start_agent(i, 3, ep, tmp_path, args) for i in ids}
+        agents = {
+            i: agent_on(ep, AgentConfig(robot_id=i, fleet_size=3, timeout=20.0), tmp_path)
+            for i in ids
+        }
         procs += list(agents.values())
         victim, survivors = ids[-1], ids[:-1]
         w = Watch()

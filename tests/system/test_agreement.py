@@ -20,7 +20,10 @@ from agent.body.zenoh_world import ZenohBody
 from agent.config import AgentConfig
 from agent.core.agreement import Decision
 from agent.net.bus import Bus, BusConfig
-from agent.phases.runner import Runner
+from agent.phases.agreeing import Agreeing
+from agent.phases.context import Context
+from agent.phases.membership import Membership
+from agent.phases.reporting import Phase
 from agent.wire import Message, NeighborRecordMsg, StatusMsg
 from tools.harness.procs import free_port
 
@@ -46,30 +49,28 @@ class Peer:
             else BusConfig(connect=(ep,), multicast_scouting=False)
         )
         self.bus = Bus(cfg)
-        self.runner = Runner(
-            self.bus,
-            ZenohBody(self.bus, rid),
-            AgentConfig(robot_id=rid, fleet_size=fleet, timeout=timeout),
-            _perception(),
-            FormationAdapter(),
-        )
-        self.runner.membership.start()
+        cfg = AgentConfig(robot_id=rid, fleet_size=fleet, timeout=timeout)
+        body = ZenohBody(self.bus, rid)
+        self.ctx = Context.of(self.bus, body, cfg, _perception(), FormationAdapter())
+        self.membership = Membership(self.ctx)
+        self.agreeing = Agreeing(self.ctx, self.membership)
+        self.membership.start()
         self.decision: Decision | None = None
         self.thread = threading.Thread(target=self._run, daemon=True)
 
     def _run(self) -> None:
-        d = self.runner.agreeing.agree(record(self.runner.ctx.me))
+        d = self.agreeing.agree(record(self.ctx.me))
         self.decision = d
         if d.kind == "agreed":
             # what the runner does next: a post-agreement status acknowledges the digest
-            self.runner.ctx.status("plan", 0.0, force=True)
-            end = self.runner.ctx.clock() + 3.0
+            self.ctx.report.status(Phase.PLAN, 0.0, force=True)
+            end = self.ctx.clock() + 3.0
             while (
-                self.runner.ctx.clock() < end
-                and self.runner.membership.agreement is not None
-                and (self.runner.membership.agreement.due(self.runner.ctx.clock() + 100.0))
+                self.ctx.clock() < end
+                and self.membership.agreement is not None
+                and (self.membership.agreement.due(self.ctx.clock() + 100.0))
             ):
-                self.runner.membership.pump(0.1)
+                self.membership.pump(0.1)
 
     def start(self) -> Peer:
         self.thread.start()
@@ -120,10 +121,7 @@ def test_late_joiner_is_waited_for(endpoint: str) -> None:
     try:
         early[0].thread.join(3.0)
         assert early[0].decision is None  # still waiting for the third member
-        assert (
-            "2 of 3"
-            in early[0].runner.membership.agreement.decide(early[0].runner.ctx.clock()).reason
-        )  # type: ignore[union-attr]
+        assert "2 of 3" in early[0].membership.agreement.decide(early[0].ctx.clock()).reason  # type: ignore[union-attr]
         late = Peer(3, endpoint, 3).start()
         ds = [p.join() for p in [*early, late]]
     finally:
@@ -169,9 +167,9 @@ def test_member_that_dies_stops_everyone_safely(endpoint: str) -> None:
         p.start()
     try:
         # ... and dies once the others know it is a member
-        end = peers[0].runner.ctx.clock() + 20
-        while peers[0].runner.ctx.clock() < end:
-            agr = peers[0].runner.membership.agreement
+        end = peers[0].ctx.clock() + 20
+        while peers[0].ctx.clock() < end:
+            agr = peers[0].membership.agreement
             if agr is not None and 3 in agr.live:
                 break
             peers[0].thread.join(0.1)
@@ -216,10 +214,10 @@ def test_status_is_valid_and_counts_bytes(endpoint: str) -> None:
     p = Peer(5, endpoint, 1)
     got: list[Any] = []
     try:
-        p.runner.ctx.status("search", 0.5, "sweep", force=True)
+        p.ctx.report.status(Phase.SEARCH, 0.5, "sweep", force=True)
         got = [
-            p.runner.ctx.bus.stats.published_count["status"],
-            p.runner.ctx.bus.stats.total_published,
+            p.ctx.bus.stats.published_count["status"],
+            p.ctx.bus.stats.total_published,
         ]
     finally:
         p.bus.close()

@@ -9,24 +9,23 @@ no contact).
 
 from __future__ import annotations
 
-import argparse
 import math
 import time
 from pathlib import Path
 
 import pytest
 
+from agent.config import AgentConfig
 from agent.core.formation.waves.jam import FLEET_STOP
 from agent.net.bus import Bus, BusConfig
 from agent.wire import KEY_STATUS_ALL, KEY_WORLD_TRUTH_ALL, ContactMsg, StatusMsg
 from sim.nao_model import FOOTPRINT_RADIUS
 from sim.scenarios import dump
-from tests.system.world import Watch
+from tests.system.world import Watch, agent_on
 from tools.harness.procs import (
     Proc,
     free_port,
     robot_ids,
-    start_agent,
     start_world,
     stop,
     wait_ready,
@@ -51,14 +50,16 @@ def test_a_slot_taken_by_a_bystander_stops_the_fleet_honestly(tmp_path: Path) ->
     bus.subscribe(KEY_WORLD_TRUTH_ALL)
     world = start_world(FLEET + 1, 1, ep, tmp_path, ["--scenario", str(path)])
     procs: list[Proc] = [world]
-    args = argparse.Namespace(d_e=0.8, phi_e_deg=30.0, agree_timeout=120.0, agent_log_level="INFO")
     w = Watch()
     contacts: list[ContactMsg] = []
     blocked = False
     try:
         wait_ready(world, 120, lambda: bus.drain(0.1))
         assert robot_ids(world.lines, FLEET + 1) == list(range(1, FLEET + 2))
-        agents = {i: start_agent(i, FLEET, ep, tmp_path, args) for i in range(1, FLEET + 1)}
+        agents = {
+            i: agent_on(ep, AgentConfig(robot_id=i, fleet_size=FLEET), tmp_path)
+            for i in range(1, FLEET + 1)
+        }
         procs += list(agents.values())
         deadline = time.monotonic() + LIMIT
         while time.monotonic() < deadline:

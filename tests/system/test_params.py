@@ -12,7 +12,6 @@
 
 from __future__ import annotations
 
-import argparse
 import json
 import subprocess
 import sys
@@ -22,27 +21,24 @@ from pathlib import Path
 
 import pytest
 
+from agent.config import AgentConfig
 from sim import scenarios
-from tests.system.world import Watch, watched_world
-from tools.harness.procs import start_agent
+from tests.system.world import Watch, agent_on, watched_world
 
 pytestmark = [pytest.mark.system, pytest.mark.slow]
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def agent_args(orientation: str) -> argparse.Namespace:
-    return argparse.Namespace(
-        d_e=0.8, phi_e_deg=30.0, agree_timeout=60.0, agent_log_level="INFO",
-        orientation=orientation, strategy="default",
-    )  # fmt: skip
+def agent_config(rid: int, orientation: str) -> AgentConfig:
+    return AgentConfig(robot_id=rid, fleet_size=3, timeout=60.0, orientation=orientation)
 
 
 def test_agent_with_other_parameters_is_named_and_nobody_walks(tmp_path: Path) -> None:
     with watched_world(tmp_path, 3, 1) as (ep, bus, ids, procs):
         odd = ids[1]
         agents = {
-            i: start_agent(i, 3, ep, tmp_path, agent_args("cp" if i == odd else "pca")) for i in ids
+            i: agent_on(ep, agent_config(i, "cp" if i == odd else "pca"), tmp_path) for i in ids
         }
         procs += list(agents.values())
         w = Watch()
@@ -83,7 +79,7 @@ def test_demo_on_a_scenario_file_plans_the_cp_pyramid(tmp_path: Path) -> None:
     assert r["identical_digests"] is True
     assert r["evaluator_plan_digest"] == r["plan_digests"]["2"]
     # CP: north of the common frame; the evaluator places that frame in the world by a
-    # rigid fit of the starts (tools/harness/frame_fit.py), good to a fraction of a degree
+    # rigid fit of the starts (tools/lib/frame_fit.py), good to a fraction of a degree
     assert r["axis_deg"] == pytest.approx(90.0, abs=2.0)
     assert len(r["pairs"]) == 2 and r["contacts"] == 0
     assert r["success"] is True and res.returncode == 0

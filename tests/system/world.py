@@ -12,9 +12,27 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from agent.config import AgentConfig
 from agent.net.bus import Bus, BusConfig
 from agent.wire import KEY_STATUS_ALL, KEY_WORLD_TRUTH_ALL, StatusMsg, TruthPosesMsg
-from tools.harness.procs import ROOT, Proc, free_port, robot_ids, start_world, stop, wait_ready
+from tools.harness.procs import (
+    ROOT,
+    Proc,
+    agent_command,
+    free_port,
+    robot_ids,
+    start_agent,
+    start_world,
+    stop,
+    wait_ready,
+)
+
+
+def agent_on(ep: str, cfg: AgentConfig, out: Path) -> Proc:
+    """Robot ``cfg.robot_id``'s agent (its flags: ``cfg.to_argv()``) joining the insecure world
+    at ``ep``; its log ``out/agent-ID.log``."""
+    net = ["--connect", ep, "--no-multicast-scouting", "--insecure"]
+    return start_agent(agent_command(cfg, net), out / f"agent-{cfg.robot_id}.log")
 
 
 def run_demo(tmp_path: Path, *args: str) -> tuple[subprocess.CompletedProcess[str], dict[str, Any]]:

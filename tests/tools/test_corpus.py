@@ -13,6 +13,7 @@ import pytest
 from agent.core.perception.sensor_fault import SensorFault
 from agent.wire import NeighborRecordMsg
 from tools import corpus, eval_frames, fit_noise
+from tools.lib.frames_report import NAMED_FLOOR
 
 CORPUS = Path(__file__).resolve().parents[1] / "data" / "frames"
 
@@ -109,7 +110,7 @@ def test_the_corpus_gate(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> 
     """No sound robot left out, the faulty robot named in at least the share the
     estimator holds today, planning refused on at most 1 % of fault-free runs."""
     rc = eval_frames.main(["--corpus", str(CORPUS), "--png", str(tmp_path / "f.png"),
-                           "--min-named", str(eval_frames.NAMED_FLOOR), "--max-refused", "0.01"])  # fmt: skip
+                           "--min-named", str(NAMED_FLOOR), "--max-refused", "0.01"])  # fmt: skip
     out = capsys.readouterr().out
     assert rc == 0, out
     assert "without a fault: 0 with a sound robot left out" in out

@@ -1,4 +1,5 @@
-"""tools/demo.py arguments: fleet parameters, scenario files and the isolated robot."""
+"""tools/demo.py arguments (tools.harness.fleet_flags): fleet parameters, scenario files and
+the isolated robot, read into the run's FleetSpec."""
 
 from __future__ import annotations
 
@@ -9,28 +10,35 @@ import pytest
 
 from sim import scenarios
 from tools.demo import parse_args
-from tools.harness.run import march_room
+from tools.harness.fleet import march_room
 
 
 def test_fleet_parameters_default_and_pass_through() -> None:
     a = parse_args([])
     assert (a.orientation, a.strategy, a.scenario, a.isolated) == ("pca", "default", None, False)
-    a = parse_args(["--orientation", "cp", "--strategy", "capt"])
-    assert (a.orientation, a.strategy) == ("cp", "capt")
+    assert a.spec.agent.to_argv() == ["--id", "0", "--publish-camera"]  # the agent's defaults
+    a = parse_args(["--orientation", "cp", "--strategy", "capt", "--d-e", "0.9",
+                    "--phi-e-deg", "25", "--agree-timeout", "60", "--march-to", "1,-2"])  # fmt: skip
+    cfg = a.spec.agent
+    assert (cfg.orientation, cfg.strategy, cfg.d_e, cfg.phi_e_deg) == ("cp", "capt", 0.9, 25.0)
+    assert cfg.timeout == 60.0 and cfg.march is not None and cfg.march.to == (1.0, -2.0)
+    assert a.spec.meta()["route"] == {"to": [1.0, -2.0]} and a.spec.meta()["phi_e_deg"] == 25.0
 
 
 def test_agent_arg_goes_to_that_agent_only(tmp_path: Path) -> None:
     from tools.harness.procs import start_agent
 
     a = parse_args(["--agent-arg", "3:--orientation=cp", "--agent-arg", "3:--d-e=0.9"])
-    assert a.agent_arg == [(3, "--orientation=cp"), (3, "--d-e=0.9")]
+    assert a.spec.agent_args == ((3, "--orientation=cp"), (3, "--d-e=0.9"))
     cmds: dict[int, list[str]] = {}
     for rid in (2, 3):
-        proc = start_agent(rid, 3, "tcp/127.0.0.1:9", tmp_path, a, ["--insecure", "--help"])
-        proc.popen.wait(60)
+        cmd = a.spec.agent_command(rid, ["--insecure", "--help"])
+        proc = start_agent(cmd, tmp_path / f"agent-{rid}.log")
+        assert proc.popen.wait(60) == 0  # the agent took every flag (--help: and stopped)
         proc.log.close()
         cmds[rid] = [str(c) for c in proc.popen.args]  # type: ignore[union-attr]
     assert cmds[3][-2:] == ["--orientation=cp", "--d-e=0.9"]
+    assert cmds[3][3:7] == ["--id", "3", "--fleet-size", "3"]
     assert not any(c.startswith("--orientation=") for c in cmds[2])
     for bad in ("x:--a", "3--a", "3:a"):
         with pytest.raises(SystemExit):
@@ -45,15 +53,15 @@ def test_scenario_file_gives_the_robots_and_the_seed(tmp_path: Path) -> None:
     a = parse_args(["--scenario", str(path), "--robots", "9"])
     assert (a.robots, a.seed, a.scenario_ids) == (3, 4, [2, 5, 7])
     # the world gets the file (copied to the run's folder)
-    flags = march_room(a, a.robots, a.seed, tmp_path)
+    flags = march_room(a.spec, tmp_path)
     assert flags[0] == "--scenario" and scenarios.load(flags[1]) == sc
 
 
 def test_isolated_scenario_is_written_for_the_world(tmp_path: Path) -> None:
-    a = parse_args(["--robots", "4", "--isolated"])
-    flags = march_room(a, 4, 3, tmp_path)
+    a = parse_args(["--robots", "4", "--isolated", "--seed", "3"])
+    flags = march_room(a.spec, tmp_path)
     assert scenarios.load(flags[1]) == scenarios.generate(4, 3, isolated=True)
-    assert march_room(parse_args([]), 4, 3, tmp_path) == []  # the world generates it
+    assert march_room(parse_args([]).spec, tmp_path) == []  # the world generates it
 
 
 @pytest.mark.parametrize(
@@ -65,6 +73,9 @@ def test_isolated_scenario_is_written_for_the_world(tmp_path: Path) -> None:
         (["--scenario", "{good}", "--isolated"], "not allowed with"),
         (["--robots", "1", "--isolated"], "at least 2 robots"),
         (["--orientation", "north"], "invalid choice"),
+        (["--d-e", "-1"], "d_e must be > 0"),
+        (["--march", "0"], "march distance"),
+        (["--march-to", "1"], "X,Y"),
     ],
 )
 def test_usage_errors(
@@ -79,21 +90,20 @@ def test_usage_errors(
 
 
 def test_the_demo_turns_the_camera_feed_on_and_other_tools_leave_it_off() -> None:
-    import argparse
+    from agent.config import AgentConfig
+    from tools.harness.fleet import FleetSpec
+    from tools.harness.fleet_flags import parse_fleet_spec
 
-    from tools.harness.procs import agent_command
-
-    def cmd(a: argparse.Namespace) -> list[str]:
-        return agent_command(1, 3, "tcp/127.0.0.1:9", a)
+    def cmd(spec: FleetSpec) -> list[str]:
+        return spec.agent_command(1, ["--connect", "tcp/127.0.0.1:9"])
 
     assert parse_args([]).publish_camera is True
-    assert "--publish-camera" in cmd(parse_args([]))
-    assert "--publish-camera" not in cmd(parse_args(["--no-publish-camera"]))
-    # the eval tools' own namespaces know no such setting: their agents publish none
-    bare = argparse.Namespace(d_e=0.8, phi_e_deg=30.0, agree_timeout=60.0, agent_log_level="INFO")
-    assert "--publish-camera" not in cmd(bare)
+    assert "--publish-camera" in cmd(parse_args([]).spec)
+    assert "--publish-camera" not in cmd(parse_args(["--no-publish-camera"]).spec)
+    # the eval tools' own specs: the agent's default, no camera frames
+    assert "--publish-camera" not in cmd(FleetSpec(agent=AgentConfig(robot_id=0)))
     # tools.eval_headings asks the demo for none unless its --demo-arg asks
-    assert parse_args(["--no-publish-camera", "--publish-camera"]).publish_camera is True
+    assert parse_fleet_spec(["--no-publish-camera", "--publish-camera"]).agent.publish_camera
 
 
 def test_render_service_workers_and_what_they_served(tmp_path: Path) -> None:
@@ -116,28 +126,25 @@ def test_render_service_workers_and_what_they_served(tmp_path: Path) -> None:
 
 
 def test_the_shape_goes_to_every_agent_and_into_the_result(tmp_path: Path) -> None:
-    import argparse
     import json
 
     from agent.core.formation.shape.spec import BUILTIN, PYRAMID
-    from tools.harness.procs import agent_command
 
-    def cmd(a: argparse.Namespace) -> list[str]:
-        return agent_command(1, 3, "tcp/127.0.0.1:9", a)
-
-    assert parse_args([]).shape is PYRAMID
-    assert "--shape" not in cmd(parse_args([]))  # the default: the agents' own
-    argv = cmd(parse_args(["--shape", "line"]))
-    assert argv[argv.index("--shape") + 1] == "line"
-    f = tmp_path / "pair.json"
-    f.write_text(json.dumps({"name": "p", "slots": [{"parent": 0, "distance": 1, "angle_deg": 0}]}))
-    a = parse_args(["--shape", str(f)])
-    assert a.shape.name == "p"
-    argv = cmd(a)
+    net = ["--connect", "tcp/127.0.0.1:9"]
+    a = parse_args([])
+    assert a.shape is PYRAMID and a.spec.agent.shape is PYRAMID
+    assert "--shape" not in a.spec.agent_command(1, net)  # the default: the agents' own
+    assert a.spec.meta()["shape_spec"] == "pyramid"
+    line = parse_args(["--shape", "line"]).spec
+    argv = line.agent_command(1, net)
+    assert argv[argv.index("--shape") + 1] == "line" and line.agent.shape is BUILTIN["line"]
+    assert line.meta()["shape_spec"] == "line"  # what the judge loads again
+    assert line.meta()["shape_digest"] == BUILTIN["line"].digest
+    f = tmp_path / "trio.json"
+    slot = {"parent": 0, "distance": 1, "angle_deg": 90}
+    f.write_text(json.dumps({"name": "p", "slots": [slot, {**slot, "angle_deg": -90}]}))
+    spec = parse_args(["--shape", str(f)]).spec
+    assert spec.agent.shape.name == "p"
+    argv = spec.agent_command(2, net)
     assert argv[argv.index("--shape") + 1] == str(f.resolve())  # whatever the agents' cwd
-    # a name or path on another tool's namespace passes as it is
-    bare = argparse.Namespace(d_e=0.8, phi_e_deg=30.0, agree_timeout=60.0, agent_log_level="INFO")
-    assert "--shape" not in cmd(bare)
-    bare.shape = "grid"
-    assert cmd(bare)[cmd(bare).index("--shape") + 1] == "grid"
-    assert BUILTIN["grid"].source == "grid"
+    assert spec.meta()["shape_spec"] == str(f.resolve())

@@ -7,13 +7,14 @@ from pathlib import Path
 
 import pytest
 
+from agent.core.formation.params import D_E, PHI_E_DEG
 from tools.harness.judge import evaluate, judge_march, min_separation, moved, plot, summarise
 from tools.harness.observe import AgentView, Observer
 from tools.harness.procs import robot_ids
 
 
 def test_evaluate_perfect_pyramid_facing_north() -> None:
-    d, phi = 0.8, math.radians(30)
+    d, phi = D_E, math.radians(PHI_E_DEG)
     # leader 1 at origin facing +y; children behind-left (2) and behind-right (3)
     final = {
         1: (0.0, 0.0, math.pi / 2),
@@ -22,7 +23,7 @@ def test_evaluate_perfect_pyramid_facing_north() -> None:
     }
     rows = evaluate(final, [(2, 1), (3, 1)], math.pi / 2, d, phi)
     for r in rows:
-        assert r["distance"] == pytest.approx(0.8)
+        assert r["distance"] == pytest.approx(d)
         assert r["angle_deg"] == pytest.approx(30.0)
         assert r["r_d"] == pytest.approx(0.0, abs=1e-12)
         assert r["r_phi"] == pytest.approx(0.0, abs=1e-9)
@@ -57,8 +58,8 @@ def test_robot_ids_from_ready_line() -> None:
 def test_summarise_failure_without_truth(tmp_path: Path) -> None:
     obs = Observer(0.0)
     obs.agents[1] = AgentView(phase="failed", error="no agreement", exit_code=1)
-    r = summarise(obs, {"robots": 1, "seed": 0, "d_e": 0.8, "phi_e_deg": 30.0}, tmp_path, [1],
-                  0.8, math.radians(30), quiet=True)  # fmt: skip
+    r = summarise(obs, {"robots": 1, "seed": 0, "d_e": D_E, "phi_e_deg": PHI_E_DEG}, tmp_path,
+                  [1], D_E, math.radians(PHI_E_DEG), quiet=True)  # fmt: skip
     assert r["success"] is False
     assert r["errors"] == {"1": "no agreement"}
     assert (tmp_path / "result.json").is_file()

@@ -1,5 +1,6 @@
-"""tools.eval_chaos and tools.chaos_schedule: the seeded schedule (deterministic, every
-fault kind over a range of seeds), the injector on a fake fleet, the command line, the
+"""tools.eval_chaos and its libraries (tools.lib.chaos_schedule, chaos_injector, chaos_report):
+the seeded schedule (deterministic, every fault kind over a range of seeds), the injector on
+a fake fleet, the command line, the
 report from a JSON, the figure. No processes: the soak itself needs root and minutes."""
 
 from __future__ import annotations
@@ -13,8 +14,9 @@ from typing import Any
 import pytest
 
 from tools import eval_chaos
-from tools.chaos_schedule import TAGS, Fault, Limits, Schedule, draw
-from tools.eval_chaos import Injector, Run
+from tools.lib.chaos_injector import Injector
+from tools.lib.chaos_report import Run, plot
+from tools.lib.chaos_schedule import TAGS, Fault, Limits, Schedule, draw
 
 SEEDS = range(1, 41)
 
@@ -251,5 +253,5 @@ def test_report_from_a_json_table_and_figure(
 def test_the_figure_of_a_run_without_an_end(tmp_path: Path) -> None:
     r = _run(3, "safe_abort", [None, None, None])
     r.end_s = None
-    eval_chaos.plot([r], tmp_path / "one.png")
+    plot([r], tmp_path / "one.png")
     assert (tmp_path / "one.png").stat().st_size > 0

@@ -1,4 +1,5 @@
-"""tools.eval_loss: the verdict of a run and the per-loss summary, on hand-made results."""
+"""tools.eval_loss (and its rows and report, tools.lib.loss_report): the verdict of a run and
+the per-loss summary, on hand-made results."""
 
 from __future__ import annotations
 
@@ -15,10 +16,13 @@ import pytest
 
 from agent import wire as P
 from tools import eval_loss
-from tools.eval_loss import RunResult, _fmt, _reason, summarise
 from tools.harness import report
+from tools.harness.hosts import cap_tcp_rto
 from tools.harness.procs import free_port, start_router
 from tools.harness.procs import stop as stop_proc
+from tools.lib.loss_report import RunResult, plot, run_row, summarise
+from tools.lib.loss_report import fmt as _fmt
+from tools.lib.loss_report import run_reason as _reason
 
 
 def _ok_result() -> dict[str, object]:
@@ -90,7 +94,7 @@ def test_summarise_known_answer() -> None:
 
 def test_plot_writes_png(tmp_path: Path) -> None:
     rows = summarise([_run(0.0, True, 1.0, [500]), _run(0.1, False, None, [900])])
-    eval_loss.plot(rows, tmp_path / "loss.png")
+    plot(rows, tmp_path / "loss.png")
     assert (tmp_path / "loss.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
@@ -193,7 +197,7 @@ def test_observer_stops_when_every_agent_is_gone(tmp_path: Path) -> None:
 
 
 def _outcome(res: dict[str, object]) -> str:
-    return str(eval_loss.run_row(_run(0.3, False, None, [500, 500]), res)["outcome"])
+    return str(run_row(_run(0.3, False, None, [500, 500]), res)["outcome"])
 
 
 def test_run_rows_take_the_outcome_of_the_one_rule() -> None:
@@ -211,12 +215,12 @@ def test_run_rows_take_the_outcome_of_the_one_rule() -> None:
 
 
 def test_run_rows_have_the_shared_schema_and_the_outcomes_plot(tmp_path: Path) -> None:
-    row = eval_loss.run_row(_run(0.3, True, 2.0, [500, 600]), _ok_result())
+    row = run_row(_run(0.3, True, 2.0, [500, 600]), _ok_result())
     assert row == {
         "seed": 1, "loss": 0.3, "outcome": "complete", "contacts": 0, "wall_s": 10.0,
         "detail": "done, pairs within tolerance",
     }  # fmt: skip
-    lost = eval_loss.run_row(_run(0.3, False, None, [500]), {})
+    lost = run_row(_run(0.3, False, None, [500]), {})
     assert lost["outcome"] == "no_result" and lost["detail"] == "x"  # the run's reason
     bad = dict(row, seed=2, outcome="safe_abort", detail="x")
     counts = report.count_outcomes([row, bad], "loss")
@@ -252,13 +256,13 @@ class _Hosts:
 
 def test_cap_tcp_rto_sets_the_sysctl_on_every_host() -> None:
     hosts = _Hosts(3)
-    eval_loss.cap_tcp_rto(hosts, 1000)  # type: ignore[arg-type]
+    cap_tcp_rto(hosts, 1000)  # type: ignore[arg-type]
     assert hosts.ran == [
         (i, ["sysctl", "-q", "-w", "net.ipv4.tcp_rto_max_ms=1000"]) for i in (1, 2, 3)
     ]
     for bad in (999, 120001):
         with pytest.raises(ValueError, match="tcp_rto_max_ms must be in"):
-            eval_loss.cap_tcp_rto(_Hosts(1), bad)  # type: ignore[arg-type]
+            cap_tcp_rto(_Hosts(1), bad)  # type: ignore[arg-type]
 
 
 def test_exit_records_give_the_processes_exit_codes(tmp_path: Path) -> None:

@@ -1,5 +1,6 @@
-"""tools.eval_scale without runs: a judged result as a row, the table, the phase chart and
-the report path, the load sampler, the arguments."""
+"""tools.eval_scale (and its rows and report, tools.lib.scale_report) without runs: a judged
+result as a row, the table, the phase chart and the report path, the load sampler, the
+arguments, the spec of a run."""
 
 from __future__ import annotations
 
@@ -11,20 +12,9 @@ from typing import Any
 
 import pytest
 
-from tools.demo import MAX_ROBOTS
-from tools.eval_scale import (
-    PHASES,
-    Run,
-    agree_timeout,
-    load_samples,
-    main,
-    markdown,
-    parse_args,
-    plot_phases,
-    row_of,
-    run_one,
-    wave_timeout,
-)
+from tools.eval_scale import agree_timeout, load_samples, main, parse_args, run_one, wave_timeout
+from tools.harness.fleet import MAX_ROBOTS, FleetSpec
+from tools.lib.scale_report import PHASES, Run, markdown, plot_phases, row_of
 
 PHASE_WALLS = {"start": 4.0, "search": 238.0, "localise": 2.0, "exchange": 46.0, "agree": 1.5,
                "plan": 0.5, "wait": 100.0, "move": 94.0, "hold": 124.0}  # fmt: skip
@@ -173,17 +163,19 @@ def test_bench_scale_is_the_same_tool(tmp_path: Path, capsys: pytest.CaptureFixt
 def test_a_run_gives_every_agent_the_timeouts(
     monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
-    import tools.harness.run as harness
+    import tools.eval_scale as tool
 
-    seen: dict[str, Any] = {}
+    seen: list[FleetSpec] = []
 
-    def fake_run_once(args: Any, seed: int, out: Path, quiet: bool = False) -> dict[str, Any]:
-        seen.update(robots=args.robots, seed=seed, agent_arg=args.agent_arg,
-                    agree=args.agree_timeout, camera=args.publish_camera)  # fmt: skip
+    def fake_run_fleet(spec: FleetSpec, out: Path, quiet: bool = True) -> dict[str, Any]:
+        seen.append(spec)
         return result()
 
-    monkeypatch.setattr(harness, "run_once", fake_run_once)
+    monkeypatch.setattr(tool, "run_fleet", fake_run_fleet)
     r = run_one(parse_args(["--timeout", "2000"]), 4, 7, tmp_path)
-    assert (seen["robots"], seen["seed"], seen["agree"], seen["camera"]) == (4, 7, 120.0, False)
-    assert seen["agent_arg"] == [(i, "--wave-timeout=2000") for i in range(1, 5)]
+    (spec,) = seen
+    assert (spec.robots, spec.seed, spec.timeout, spec.agent.publish_camera) == (4, 7, 2000, False)
+    assert (spec.agent.timeout, spec.agent.wave_timeout) == (120.0, 2000.0)
+    assert spec.agent_command(2, [])[3:] == ["--id", "2", "--fleet-size", "4",
+                                             "--wave-timeout=2000.0"]  # fmt: skip
     assert (r.outcome, r.agree_timeout_s, r.wave_timeout_s) == ("complete", 120.0, 2000.0)

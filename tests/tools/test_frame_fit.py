@@ -1,4 +1,4 @@
-"""The common frame placed in the world by a rigid fit (tools/harness/frame_fit.py)."""
+"""The common frame placed in the world by a rigid fit (tools/lib/frame_fit.py)."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from tools.harness.frame_fit import common_frame_pose
 from tools.harness.scene import to_world
+from tools.lib.frame_fit import common_frame_pose
 
 
 def test_a_turned_and_moved_frame_is_recovered() -> None:

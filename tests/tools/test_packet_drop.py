@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import subprocess
 
 import pytest
@@ -12,14 +11,22 @@ import pytest
 from tools import netns, packet_drop
 from tools.packet_drop import Dropper, PacketDropError
 
-needs_root = pytest.mark.skipif(
-    shutil.which("iptables") is None or netns.unavailable_reason() is not None,
-    reason=f"needs iptables and network namespaces: {netns.unavailable_reason()}",
-)
+#: root, iptables and network namespaces: skipped without them, failed under CI=1
+needs_root = pytest.mark.usefixtures("netns_hosts")
 PREFIX = f"pd{os.getpid() % 100000}"
 
 
 # ---------------------------------------------------------------- checks without root
+
+
+def test_missing_test_hosts_skip_here_and_fail_in_ci() -> None:
+    from tests.conftest import require_hosts
+
+    require_hosts(None, ci=True)  # available: the test runs
+    with pytest.raises(pytest.skip.Exception, match="no iptables"):
+        require_hosts("no iptables", ci=False)
+    with pytest.raises(pytest.fail.Exception, match=r"CI: .*no iptables"):
+        require_hosts("no iptables", ci=True)
 
 
 def test_current_namespace_needs_the_here_guard() -> None:

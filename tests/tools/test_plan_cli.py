@@ -10,6 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from agent.core.formation.params import D_E
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -32,7 +34,7 @@ def test_plan_roundtrip_and_png(tmp_path: Path) -> None:
             {"id": 3, "x": 1.0, "y": 1.2},
             {"id": 9, "x": -0.8, "y": 1.5},
         ],
-        "d_e": 0.8,
+        "d_e": D_E,
         "phi_e_deg": 30,
         "strategy": "paper",
     }
@@ -60,7 +62,7 @@ def test_plan_roundtrip_and_png(tmp_path: Path) -> None:
     for t in plan["targets"]:
         if t["parent"] >= 0:
             p = by_id[t["parent"]]
-            assert np.hypot(t["x"] - p["x"], t["y"] - p["y"]) == pytest.approx(0.8)
+            assert np.hypot(t["x"] - p["x"], t["y"] - p["y"]) == pytest.approx(D_E)
     for tr in plan["trajectories"]:
         start = next(r for r in doc["robots"] if r["id"] == tr["id"])
         end = tr["via"][0] if tr["via"] else [by_id[tr["id"]]["x"], by_id[tr["id"]]["y"]]

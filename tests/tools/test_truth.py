@@ -9,12 +9,13 @@ import math
 import numpy as np
 import pytest
 
+from agent.core.formation.params import D_E, PHI_E_DEG
 from agent.core.formation.shape.pyramid import slot_positions
 from agent.core.formation.shape.spec import BUILTIN, PYRAMID, Shape
 from tools.harness.pairs import evaluate
 from tools.harness.truth import Link, check_shape, excursions, judge_shape, slot_links
 
-D, PHI = 0.8, math.radians(30)
+D, PHI = D_E, math.radians(PHI_E_DEG)
 
 
 def placed(

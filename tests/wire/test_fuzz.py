@@ -2,7 +2,7 @@
 decode.
 
 Each hypothesis example draws a seed and runs a batch of ``BATCH`` mutants of one message
-type through :func:`agent.wire.decode` (generators of :mod:`tools.fuzz_payloads`, shared
+type through :func:`agent.wire.decode` (generators of :mod:`tools.lib.fuzz_payloads`, shared
 with ``python -m tools.fuzz``), so that CI sees ``EXAMPLES * BATCH`` = 20 000 hostile
 payloads per type in a few seconds; pure-hypothesis strategies add structures hypothesis
 can shrink.
@@ -19,7 +19,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from agent import wire as P
-from tools import fuzz, fuzz_payloads
+from tools import fuzz
+from tools.lib import fuzz_payloads
 
 BATCH = 500
 EXAMPLES = 40

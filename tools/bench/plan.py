@@ -42,6 +42,7 @@ from typing import Any
 
 import numpy as np
 
+from agent.core.formation.params import D_E as D_NAO  # the real NAOs' d_e (demo_wait)
 from agent.core.formation.params import PlanParams
 from agent.core.formation.plan import Plan, plan_from_positions
 from agent.core.formation.shape.pyramid import placed_slots, pyramid_frame
@@ -297,7 +298,7 @@ def demo_wait(n: int = 15, seed: int = 1) -> dict[str, float]:
     """Summed waiting over summed walking of a paper-like 15-robot fleet at d_e = 0.8 m
     (unit speed), under the wave rule and the dependency rule."""
     pos = nao_group(n, seed)
-    plan = plan_from_positions(list(range(1, n + 1)), pos, PlanParams(d_e=0.8))
+    plan = plan_from_positions(list(range(1, n + 1)), pos, PlanParams(d_e=D_NAO))
     lengths = path_lengths(plan.paths())
     waves = plan.wave_of()
     top = np.zeros(int(waves.max()) + 1)

@@ -16,38 +16,43 @@ then       one render worker each when ``render_workers`` K > 0 (the world sprea
            after the world; they draw every camera picture
 =========  ====================================================================
 
+The run is a :class:`~tools.harness.fleet.FleetSpec`, as on this machine
+(:class:`~tools.harness.fleet.Fleet`): the robots, the seed, every agent's settings (their
+flags written by :meth:`agent.config.AgentConfig.to_argv`), ``journal`` (``--state-dir``),
+``world_args`` (``--reply-delay``), ``render_workers``, ``timeout``; secure with
+``credentials`` made for the test hosts (:func:`host_fleet_credentials`), or ``insecure``.
+:class:`Hosts` says where: the hosts' name prefix, a cap of TCP's retransmission timeout,
+the agents' zenoh mode, and a packet loss installed before the agents start.
+
 The levers: :meth:`HostFleet.kill_agent` (SIGKILL, no goodbye) and
 :meth:`HostFleet.start_agent` (the same id and state folder, so it resumes from its
 journal), :meth:`HostFleet.kill_router` and :meth:`HostFleet.start_router` (the same
 endpoint), :meth:`HostFleet.set_loss` (every agent host drops packets with a probability,
-traffic on the world's port exempt: on a real NAO the camera and legs are on board) and
-:meth:`HostFleet.clear_loss`. :meth:`HostFleet.judge` hands the monitor the agents'
-exit codes and returns its ``result.json``. Needs root, iproute2 and iptables.
+traffic on the world's port exempt unless ``lossy_world``: on a real NAO the camera and
+legs are on board) and :meth:`HostFleet.clear_loss`. :meth:`HostFleet.wait` watches the
+agents until they have exited; :meth:`HostFleet.judge` hands the monitor the agents' exit
+codes and returns its ``result.json``. Needs root, iproute2 and iptables.
 """
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import json
 import os
 import signal
 import subprocess
 import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
 from typing import IO, Any
 
 from agent import wire as P
 from tools import netns
-from tools.harness.procs import (
-    ROOT,
-    Lines,
-    agent_command,
-    robot_ids,
-    router_command,
-    world_command,
-)
+from tools.harness.fleet import FleetSpec
+from tools.harness.procs import ROOT, Lines, robot_ids, router_command, world_command
 from tools.harness.render import render_command, served_by
 from tools.packet_drop import Dropper
 
@@ -65,36 +70,75 @@ def host_fleet_credentials(out: Path, robots: int) -> str:
     return str(root)
 
 
-class HostFleet:
-    """Router, world and monitor of one run on test hosts; agents started by the caller.
+#: Bounds of Linux's ``net.ipv4.tcp_rto_max_ms`` (kernel >= 6.15; ms).
+TCP_RTO_MAX_RANGE = (1000, 120000)
 
-    ``args`` holds the agents' settings as :func:`tools.harness.procs.agent_command` reads
-    them (``d_e``, ``phi_e_deg``, ``agree_timeout``, ``agent_log_level``) and
-    ``tcp_rto_max_ms``; ``credentials``: a fleet folder from
-    :func:`host_fleet_credentials` (empty: insecure); ``world_extra``: more world flags
-    (``--reply-delay``).
+
+def cap_tcp_rto(fab: netns.Fabric, ms: int) -> None:
+    """Cap TCP's retransmission timeout at ``ms`` on every host of ``fab`` (see
+    :class:`Hosts`)."""
+    lo, hi = TCP_RTO_MAX_RANGE
+    if not lo <= ms <= hi:
+        raise ValueError(f"tcp_rto_max_ms must be in [{lo}, {hi}], got {ms}")
+    for i in range(1, fab.n + 1):
+        fab.run(i, ["sysctl", "-q", "-w", f"net.ipv4.tcp_rto_max_ms={ms}"])
+
+
+@dataclass(frozen=True)
+class Hosts:
+    """Where a run lives on test hosts (module docstring).
+
+    ``prefix``: the hosts' name prefix (:mod:`tools.netns`). ``tcp_rto_max_ms`` > 0: every
+    host's kernel caps TCP's retransmission timeout there (``net.ipv4.tcp_rto_max_ms``).
+    TCP doubles its retransmission timeout after every lost retransmission, up to 120 s
+    by default: at 50 % loss per direction (a segment and its ACK both get through with
+    probability 1/4) six losses in a row, probability 0.75^6 ≈ 18 %, already stall a
+    zenoh session for about 25 s, longer than the membership grace; with a cap the
+    session keeps probing. The setting is per network namespace, so only the test hosts
+    change; on robots it is a deployment setting of their kernels. ``agent_mode``: the
+    agents' zenoh mode, ``client`` (of the router; their body sessions on its world
+    port) or ``peer`` (a mesh, insecure fleets only). ``loss``: every agent host drops
+    packets with this probability per direction from before the agents start
+    (``lossy_world``: also on the world's port).
     """
 
-    def __init__(
-        self,
-        args: argparse.Namespace,
-        robots: int,
-        seed: int,
-        workdir: Path,
-        prefix: str,
-        credentials: str = "",
-        world_extra: list[str] | None = None,
-        render_workers: int = 0,
-    ) -> None:
-        self.args, self.robots, self.seed, self.workdir = args, robots, seed, workdir
-        self.render_workers = render_workers
-        self.fab = netns.Fabric(robots + FIRST_AGENT - 1 + render_workers, prefix=prefix)
+    prefix: str
+    tcp_rto_max_ms: int = 0
+    agent_mode: str = "client"
+    loss: float = 0.0
+    lossy_world: bool = False
+
+    def __post_init__(self) -> None:
+        lo, hi = TCP_RTO_MAX_RANGE
+        if self.tcp_rto_max_ms and not lo <= self.tcp_rto_max_ms <= hi:
+            raise ValueError(f"tcp_rto_max_ms must be 0 or in [{lo}, {hi}]")
+        if self.agent_mode not in ("client", "peer"):
+            raise ValueError(f"agent mode must be client or peer, got {self.agent_mode!r}")
+        if not 0.0 <= self.loss <= 1.0:
+            raise ValueError(f"loss must be a probability in [0, 1], got {self.loss}")
+
+
+class HostFleet:
+    """One run of ``spec`` on test hosts laid out by ``hosts`` (module docstring): the
+    router, the monitor, the world, the render workers and, once the loss is installed,
+    one agent per robot; logs, the recording and ``result.json`` in ``out``."""
+
+    def __init__(self, spec: FleetSpec, out: Path, hosts: Hosts) -> None:
+        if not spec.insecure and spec.credentials is None:
+            raise ValueError("a secure fleet on test hosts needs credentials made for them")
+        if hosts.agent_mode == "peer" and not spec.insecure:
+            raise ValueError("agents in peer mode need an insecure fleet (secure: a router)")
+        self.spec, self.workdir, self.hosts = spec, out, hosts
+        self.robots, self.seed = spec.robots, spec.seed
+        self.render_workers = spec.render_workers
+        self.fab = netns.Fabric(
+            spec.robots + FIRST_AGENT - 1 + spec.render_workers, prefix=hosts.prefix
+        )
         self.renderers: list[subprocess.Popen[str]] = []
-        self.world_extra = world_extra or []
-        proto = "tls" if credentials else "tcp"
+        proto = "tcp" if spec.insecure else "tls"
         self.router_ep = f"{proto}/{netns.address(ROUTER)}:{P.BUS_PORT}"
         self.world_ep = f"{proto}/{netns.address(ROUTER)}:{P.WORLD_PORT}"
-        self.sec = ["--credentials", credentials] if credentials else ["--insecure"]
+        self.sec = ["--insecure"] if spec.insecure else ["--credentials", str(spec.credentials)]
         self.env = dict(os.environ, PYTHONUNBUFFERED="1", MPLBACKEND="Agg")
         self.ids: list[int] = []
         self.agents: dict[int, subprocess.Popen[str]] = {}
@@ -104,6 +148,9 @@ class HostFleet:
         self._droppers: list[Dropper] = []
         self._dropped = 0
         self._files: list[IO[str]] = []
+        self.t_agents = time.monotonic()  # when the agents started (reset then)
+        #: why the run was cut (:meth:`wait`: the timeout), None when the agents finished
+        self.cut: str | None = None
 
     # ------------------------------------------------------------------ set-up
 
@@ -124,19 +171,17 @@ class HostFleet:
         return self
 
     def _start(self) -> None:
-        rto = int(getattr(self.args, "tcp_rto_max_ms", 0) or 0)
-        if rto:
-            for i in range(1, self.fab.n + 1):
-                self.fab.run(i, ["sysctl", "-q", "-w", f"net.ipv4.tcp_rto_max_ms={rto}"])
+        if self.hosts.tcp_rto_max_ms:
+            cap_tcp_rto(self.fab, self.hosts.tcp_rto_max_ms)
         self.start_router()
-        py, a = sys.executable, self.args
+        py, cfg = sys.executable, self.spec.agent
         self.monitor = subprocess.Popen(
             netns.netns_cmd(
                 self.fab.name(MONITOR),
                 [
                     py, "-m", "tools.eval_loss", "--monitor", "--connect", self.router_ep,
-                    "--out", str(self.workdir), "--d-e", str(a.d_e), "--phi-e-deg",
-                    str(a.phi_e_deg), "--seed", str(self.seed), *self.sec,
+                    "--out", str(self.workdir), "--d-e", repr(cfg.d_e), "--phi-e-deg",
+                    repr(cfg.phi_e_deg), "--seed", str(self.seed), *self.sec,
                 ],
             ),
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._log("monitor"),
@@ -148,7 +193,7 @@ class HostFleet:
         world_net = ["--connect", self.world_ep, "--no-multicast-scouting", *self.sec]
         world = self.fab.popen(
             WORLD,
-            world_command(self.robots, self.seed, world_net, self.world_extra),
+            world_command(self.robots, self.seed, world_net, list(self.spec.world_args)),
             stderr=self._log("world"),
             env=self.env,
             cwd=str(ROOT),
@@ -159,6 +204,11 @@ class HostFleet:
         self.ids = robot_ids(lines.lines, self.robots)
         self._start_renderers()
         self._droppers = [Dropper(self.fab.name(FIRST_AGENT + k)) for k in range(self.robots)]
+        if self.hosts.loss > 0.0:
+            self.set_loss(self.hosts.loss, self.hosts.lossy_world)
+        self.t_agents = time.monotonic()
+        for rid in self.ids:
+            self.start_agent(rid)
 
     def _start_renderers(self) -> None:
         """K render workers, one per host after the agents' (shards 1/K..K/K)."""
@@ -207,10 +257,12 @@ class HostFleet:
     def start_agent(self, rid: int, append: bool = False) -> None:
         """Start robot ``rid``'s agent (again, with ``append``: same id, same state folder)."""
         host = FIRST_AGENT + self.ids.index(rid)
+        mode = self.hosts.agent_mode
+        body = ["--world-connect", self.world_ep] if mode == "client" else []
         net = ["--connect", self.router_ep, "--no-multicast-scouting", *self.sec,
-               "--mode", "client", "--world-connect", self.world_ep]  # fmt: skip
-        state = ["--state-dir", str(self.workdir / "state")]
-        cmd = agent_command(rid, self.robots, self.router_ep, self.args, net, state)
+               "--mode", mode, *body]  # fmt: skip
+        state = ["--state-dir", str(self.workdir / "state")] if self.spec.journal else []
+        cmd = self.spec.agent_command(rid, net, state)
         self.agents[rid] = self.fab.popen(
             host,
             cmd,
@@ -250,12 +302,12 @@ class HostFleet:
         if self.router is not None:
             _kill(self.router)
 
-    def set_loss(self, loss: float) -> None:
+    def set_loss(self, loss: float, lossy_world: bool = False) -> None:
         """Every agent host drops packets with probability ``loss`` per direction, except
-        on the world's port (replaces the loss before)."""
+        on the world's port unless ``lossy_world`` (replaces the loss before)."""
         self.clear_loss()
         for d in self._droppers:
-            d.install(loss, "both", exempt_ports=[P.WORLD_PORT])
+            d.install(loss, "both", exempt_ports=[] if lossy_world else [P.WORLD_PORT])
 
     def clear_loss(self) -> None:
         for d in self._droppers:
@@ -269,12 +321,27 @@ class HostFleet:
 
     # ------------------------------------------------------------------ verdict
 
-    def judge(self, timeout: str | None) -> dict[str, Any]:
-        """Hand the monitor the agents' exit codes (``timeout``: why the run was cut, or
-        None) and return its ``result.json`` (empty when it wrote none)."""
+    def wait(self, busy: Callable[[float], bool] | None = None, period: float = 0.5) -> None:
+        """Watch the agents every ``period`` s until every one has exited and ``busy``
+        (called with the seconds since the agents started: a caller's injector) has nothing
+        pending, or the spec's ``timeout`` (:attr:`cut`)."""
+        while True:
+            now = time.monotonic() - self.t_agents
+            pending = busy(now) if busy is not None else False
+            if not pending and self.all_exited():
+                return
+            if now > self.spec.timeout:
+                self.cut = f"agents still running after {self.spec.timeout:g} s"
+                return
+            time.sleep(period)  # polling the agents' exits, bounded by the timeout
+
+    def judge(self, timeout: str | None = None) -> dict[str, Any]:
+        """Hand the monitor the agents' exit codes (``timeout``: why the run was cut,
+        default :attr:`cut`) and return its ``result.json`` (empty when it wrote none)."""
         assert self.monitor is not None and self.monitor.stdin is not None
         assert self._monitor_lines is not None
-        order = {"ids": self.ids, "exit_codes": self.exit_codes(), "timeout": timeout}
+        cut = timeout if timeout is not None else self.cut
+        order = {"ids": self.ids, "exit_codes": self.exit_codes(), "timeout": cut}
         with contextlib.suppress(OSError):
             self.monitor.stdin.write(json.dumps(order) + "\n")
             self.monitor.stdin.flush()

@@ -30,11 +30,11 @@ from agent.core.formation.shape.spec import PYRAMID
 from agent.core.formation.shape.spec import Shape as FormationShape
 from agent.core.formation.shape.verdict import R_D_MAX, R_PHI_MAX
 from agent.wire import PHASES
-from tools.harness.frame_fit import common_frame_pose
 from tools.harness.observe import AgentView, Observer
 from tools.harness.pairs import evaluate, plan_pairs
 from tools.harness.procs import rogue_reports
 from tools.harness.truth import MOVED_M, excursions, judge_shape
+from tools.lib.frame_fit import common_frame_pose
 
 #: The phases of docs/design.md §1 in order (the wire's list, less the terminal "failed").
 PHASE_ORDER = tuple(p for p in PHASES if p != "failed")
@@ -175,7 +175,7 @@ def plot(obs: Observer, result: dict[str, Any], path: Path) -> None:
         if c in final and p in final:
             ax.plot([final[c][0], final[p][0]], [final[c][1], final[p][1]], "k--", lw=0.8)
     if "obstacles" in result:
-        from tools.obstacle_scenario import draw_obstacles
+        from tools.lib.obstacle_scenario import draw_obstacles
 
         draw_obstacles(ax, result)
     leader = None if unplanned else result.get("leader")
@@ -424,7 +424,7 @@ def summarise(
                 pairs = plan_pairs(plan, [i for i in ids if i in plan.ids], shape, d_e, phi_e)
                 judge_march(obs, result, plan, axis, pairs, d_e, phi_e)
             if "obstacles" in result:
-                from tools.obstacle_scenario import judge_obstacles
+                from tools.lib.obstacle_scenario import judge_obstacles
 
                 judge_obstacles(result, obs.truth, obs.contacts, plan)
         except (ValueError, KeyError, AttributeError, ImportError) as exc:

@@ -25,9 +25,11 @@ started). A robot without an ``exit`` line has no exit code: it did not finish.
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import json
 import math
+import os
 import queue
 import sys
 import threading
@@ -36,7 +38,7 @@ from pathlib import Path
 from typing import Any
 
 from agent.net.bus import Bus, BusConfig
-from agent.wire import PHASES
+from agent.wire import CREDENTIALS_ENV, INSECURE_WARNING, PHASES
 from tools.harness.judge import print_table, summarise
 from tools.harness.observe import AgentView, Observer, Recorder, observe_for, watch
 
@@ -194,6 +196,43 @@ def monitor(
         print_table(result)
     print("monitor done", flush=True)
     return 0 if result.get("success") else 1
+
+
+def add_monitor_arguments(p: argparse.ArgumentParser) -> None:
+    """The monitor's own flags (``python -m tools.eval_loss --monitor``; that tool's parser
+    has the shared ``--out``, ``--timeout``, ``--d-e``, ``--phi-e-deg`` and ``--insecure``)."""
+    p.add_argument(
+        "--monitor", action="store_true", help="only observe and judge a run (see monitor())"
+    )
+    p.add_argument("--seed", type=int, default=None, help="with --monitor: the run's seed")
+    p.add_argument(
+        "--until-done", type=int, default=0, help="with --monitor: stop when N agents finished"
+    )
+    p.add_argument("--connect", action="append", default=[], help="with --monitor: endpoint")
+    p.add_argument(
+        "--credentials",
+        metavar="DIR",
+        default=None,
+        help="with --monitor: fleet credentials folder, joins as 'observer' "
+        f"(default: ${CREDENTIALS_ENV})",
+    )
+
+
+def monitor_main(args: argparse.Namespace) -> int:
+    """``--monitor``: :func:`monitor` with the flags of :func:`add_monitor_arguments`; secure
+    by default, as every process (``agent.wire.network_spec``): 2 without credentials."""
+    creds = "" if args.insecure else (args.credentials or os.environ.get(CREDENTIALS_ENV))
+    if args.insecure:
+        print(INSECURE_WARNING, file=sys.stderr, flush=True)
+    elif not creds:
+        print(
+            "eval_loss: --monitor needs fleet credentials: --credentials DIR (or "
+            f"${CREDENTIALS_ENV}); --insecure for development",
+            file=sys.stderr,
+        )
+        return 2
+    return monitor(args.connect, Path(args.out), args.d_e, args.phi_e_deg, args.until_done,
+                   args.timeout, args.seed, creds or "")  # fmt: skip
 
 
 def read_exits(folder: Path, since: float) -> tuple[dict[int, int | None], list[int]]:

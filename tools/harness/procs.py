@@ -2,14 +2,15 @@
 fleet's network (docs/design.md §8), and stopping them.
 
 Every tool and test that starts ``python -m sim``, ``python -m agent`` or
-``python -m tools.router`` on this machine does it here (``tools.demo``, ``tools.fuzz``,
-``tools.bench world``, ``tools.eval_loss``, tests/system, tests/sim/test_server.py);
-:mod:`tools.harness.hosts` runs the same command lines on test hosts (``tools.eval_chaos``).
+``python -m tools.router`` on this machine does it here (:mod:`tools.harness.fleet`,
+``tools.fuzz``, ``tools.bench world``, tests/system, tests/sim/test_server.py);
+:mod:`tools.harness.hosts` runs the same command lines on test hosts (``tools.eval_loss``,
+``tools.eval_chaos``). An agent's flags are written by its config alone
+(:meth:`agent.config.AgentConfig.to_argv`).
 """
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import json
 import os
@@ -20,11 +21,12 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
+from agent.config import AgentConfig
 from agent.net.bus import BusConfig
 from agent.wire.trust import create_fleet
 
@@ -132,65 +134,34 @@ def wait_ready(world: Proc, timeout: float, idle: Callable[[], object] | None = 
     return next(ln for ln in world.lines if "ready" in ln.lower())
 
 
-def shape_argv(args: argparse.Namespace) -> list[str]:
-    """``--shape`` for the agents: the built-in's name or the formation file's path that
-    ``args.shape`` (a Shape, or that name or path) came from; nothing for the pyramid."""
-    shape = getattr(args, "shape", None)
-    src = str(getattr(shape, "source", shape) or "pyramid")
-    return [] if src == "pyramid" else ["--shape", src]
-
-
 def agent_command(
-    rid: int,
-    robots: int,
-    endpoint: str,
-    args: argparse.Namespace,
-    net: list[str] | None = None,
-    extra: list[str] | None = None,
+    cfg: AgentConfig,
+    net: Sequence[str],
+    *,
+    claim_id: bool = False,
+    log_level: str | None = None,
+    nao: str | None = None,
+    extra: Sequence[str] = (),
 ) -> list[str]:
-    """The argv of ``python -m agent`` for robot ``rid`` (see :func:`start_agent`);
-    :func:`start_agent` runs it here, ``tools.eval_chaos`` inside a network namespace."""
-    auto = bool(getattr(args, "auto_ids", False))
-    if net is None:
-        net = ["--connect", endpoint, "--no-multicast-scouting", "--insecure"]
+    """The argv of ``python -m agent`` running ``cfg`` (its flags: ``cfg.to_argv()``, the
+    agent's defaults left out), joining with ``net``; ``claim_id``: ``--id auto``;
+    ``log_level``: its ``--log-level`` (None: the agent's); ``nao``: the qi URL of the NAO
+    it drives (``--body naoqi``); ``extra``: more flags, last (``--state-dir``, a test's odd
+    setting). :func:`start_agent` runs it here, :mod:`tools.harness.hosts` on a test host."""
     return [
-        sys.executable, "-m", "agent", "--id", "auto" if auto else str(rid), "--fleet-size", str(robots),
-        *net,
-        "--d-e", str(args.d_e), "--phi-e-deg", str(args.phi_e_deg), "--timeout", str(args.agree_timeout),
-        "--orientation", getattr(args, "orientation", "pca"), "--strategy", getattr(args, "strategy", "default"),
-        *shape_argv(args),
-        *(["--march", str(args.march)] if getattr(args, "march", None) is not None else []),
-        *([f"--march-to={args.march_to}"] if getattr(args, "march_to", None) is not None else []),
-        "--log-level", args.agent_log_level,
-        *(["--no-correct"] if getattr(args, "no_correct", False) else []),
-        *(["--publish-camera"] if getattr(args, "publish_camera", False) else []),
-        *(["--research-rounds", str(args.research_rounds)] if getattr(args, "research_rounds", None) is not None else []),
-        *(["--body", "naoqi", "--nao", args.nao_urls[rid]] if getattr(args, "body", "") == "naoqi" else []),
-        *(a for i, a in getattr(args, "agent_arg", None) or [] if i == rid),
-        *(extra or []),
+        sys.executable, "-m", "agent", *cfg.to_argv(claim_id=claim_id), *net,
+        *(["--log-level", log_level] if log_level else []),
+        *(["--body", "naoqi", "--nao", nao] if nao else []),
+        *extra,
     ]  # fmt: skip
 
 
-def start_agent(
-    rid: int,
-    robots: int,
-    endpoint: str,
-    out: Path,
-    args: argparse.Namespace,
-    net: list[str] | None = None,
-    extra: list[str] | None = None,
-    append: bool = False,
-) -> Proc:
-    """Agent process for robot ``rid`` (with ``--auto-ids`` it claims a robot itself);
-    ``net``: its join flags (default: connect to ``endpoint``, insecure); ``extra``: more
-    agent flags (``--state-dir``); ``append``: add to the agent's log (a restart)."""
-    auto = bool(getattr(args, "auto_ids", False))
-    cmd = agent_command(rid, robots, endpoint, args, net, extra)
-    log = (out / (f"agent-slot{rid}.log" if auto else f"agent-{rid}.log")).open(
-        "ab" if append else "wb"
-    )
-    p = subprocess.Popen(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT)
-    return Proc(f"agent {rid}", p, log)
+def start_agent(cmd: list[str], log: Path, append: bool = False) -> Proc:
+    """An agent process running ``cmd`` (:func:`agent_command`), its output to ``log``
+    (``append``: added to, as for a restarted agent)."""
+    f = log.open("ab" if append else "wb")
+    p = subprocess.Popen(cmd, cwd=ROOT, stdout=f, stderr=subprocess.STDOUT)
+    return Proc(log.stem, p, f)
 
 
 def router_command(endpoint: str, net: list[str]) -> list[str]:
@@ -241,26 +212,32 @@ class FleetNet:
 
 
 def fleet_network(
-    args: argparse.Namespace, out: Path, robots: int, ids: list[int] | None = None
+    out: Path,
+    robots: int,
+    ids: Sequence[int] | None = None,
+    *,
+    insecure: bool = False,
+    credentials: Path | None = None,
+    plain_links: bool = False,
 ) -> FleetNet:
     """One run's network: secure by default.
 
-    Secure: a throwaway fleet in ``out/fleet`` unless ``--credentials`` names one, a TLS
-    router on a free loopback port, every process a client of it. ``--plain-links``
-    (tests): the same signatures over plain TCP, the world listening. ``--insecure``:
+    Secure: a throwaway fleet in ``out/fleet`` unless ``credentials`` names one, a TLS
+    router on a free loopback port, every process a client of it. ``plain_links``
+    (tests): the same signatures over plain TCP, the world listening. ``insecure``:
     plain TCP, no signatures. ``ids``: the robots' ids (default 1..robots).
     """
     port = free_port()
-    if args.insecure:
+    if insecure:
         return FleetNet(f"tcp/127.0.0.1:{port}", ["--no-multicast-scouting", "--insecure"])
-    creds = args.credentials
+    creds = credentials
     if creds is None:
         creds = out / "fleet"  # throwaway: made anew for every run
         shutil.rmtree(creds, ignore_errors=True)
         fleet = sorted(ids) if ids else list(range(1, robots + 1))
         create_fleet(creds, [*fleet, fleet[-1] + 1])  # one spare robot key: --rogue's insider
     flags = ["--no-multicast-scouting", "--credentials", str(creds)]
-    if getattr(args, "plain_links", False):
+    if plain_links:
         return FleetNet(f"tcp/127.0.0.1:{port}", [*flags, "--plain-links"], str(creds), False)
     return FleetNet(f"tls/127.0.0.1:{port}", flags, str(creds))
 

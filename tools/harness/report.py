@@ -8,6 +8,11 @@ and ``tools.eval_headings`` use.
 
 A run row holds at least ``seed``, ``outcome``, ``contacts``, ``wall_s`` and ``detail``,
 the key of its group (``loss``, ``fault``, ``case``) and whatever its tool adds.
+
+:func:`run_matrix` is every tool's loop over its matrix: the cases (a group and a seed)
+run one after the other, the tool's report written after each (so that a long matrix can
+be read while it goes on, or cut) and a progress line with an estimate; with ``--report``
+files it runs nothing and reports their rows together.
 """
 
 from __future__ import annotations
@@ -15,10 +20,15 @@ from __future__ import annotations
 import json
 from collections import Counter
 from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import asdict
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from tools.harness.judge import FAILURES, OUTCOMES
+from tools.harness.progress import Progress
+
+Case = TypeVar("Case")
+R = TypeVar("R")
 
 Row = Mapping[str, Any]
 
@@ -61,6 +71,40 @@ def read_runs(paths: Iterable[Path]) -> list[dict[str, Any]]:
     for path in paths:
         rows += json.loads(path.read_text())["runs"]
     return rows
+
+
+def run_matrix(
+    cases: Sequence[Case],
+    run_one: Callable[[Case], R],
+    *,
+    report: Callable[[list[R]], None],
+    progress: str,
+    label: Callable[[Case, R], str],
+    earlier: Sequence[Path] | None = None,
+    row: Callable[..., R] | None = None,
+) -> list[R]:
+    """The runs of ``cases``, one after the other: after each, ``report(runs so far)`` (the
+    tool's JSON and figure) and the progress line named ``progress``, ending with
+    ``label(case, run)``. With ``earlier`` (``--report`` files) nothing runs: their rows,
+    each made a run by ``row(**fields)``, are reported together and returned."""
+    if earlier:
+        assert row is not None, "earlier runs need the row type"
+        runs = [row(**r) for r in read_runs(earlier)]
+        report(runs)
+        return runs
+    bar = Progress(len(cases), progress)
+    runs = []
+    for case in cases:
+        r = run_one(case)
+        runs.append(r)
+        report(runs)
+        bar.step(label(case, r))
+    return runs
+
+
+def exit_status(runs: Iterable[Any]) -> int:
+    """An evaluation tool's exit status: 1 when a run (a dataclass row) failed, else 0."""
+    return 1 if failures(asdict(r) for r in runs) else 0
 
 
 def label(value: object) -> str:

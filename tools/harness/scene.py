@@ -63,7 +63,7 @@ from agent.wire import (
 from sim.nao_model import FOOTPRINT_RADIUS, HEIGHT
 from tools.harness import foxglove as fg
 from tools.harness.foxglove import JSON
-from tools.harness.frame_fit import common_frame_pose
+from tools.lib.frame_fit import common_frame_pose
 
 #: The colours of matplotlib's ``tab10``, as the formation figure gives them: the k-th
 #: robot in ascending id order of the first truth sample.

@@ -50,12 +50,20 @@ OBSTACLE_METHODS = ("near", "paper", "default")
 PLAN_STRATEGIES = (*STRATEGIES, "banded", "default")
 
 
+#: The formation's edge length d_e (m): a child's distance to its parent in the pyramid,
+#: the 0.8 m of the real NAOs (NAO paper 5.2; the paper's simulations of 5.1 use 2 m).
+#: Every default of d_e (the agent's, the planner's, the tools') is this one.
+D_E = 0.8
+#: φ_e (degrees): a child's angle off its parent's backward axis (NAO paper 5.1-5.2: 30°).
+PHI_E_DEG = 30.0
+
+
 @dataclass(frozen=True)
 class PlanParams:
     """The planner's settings, checked on construction (``ValueError`` when invalid)."""
 
-    d_e: float = 0.8
-    phi_e: float = math.radians(30)
+    d_e: float = D_E
+    phi_e: float = math.radians(PHI_E_DEG)
     radius: float = 0.2
     strategy: str = "default"  # "paper" | "optimal" | "capt" | "banded" | "default"
     orientation: str = "pca"  # "pca" | "cp"

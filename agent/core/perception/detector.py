@@ -24,7 +24,13 @@ from agent.core.perception.dbase import DBase
 from agent.core.perception.mbase import MBase
 from agent.core.perception.overlap import split_merged
 from agent.core.perception.recognition import LAMBDA_TH, Match, recognise
-from agent.core.perception.segmentation import check_image, extract_tuples, orange_mask
+from agent.core.perception.segmentation import (
+    ORANGE,
+    OrangeRange,
+    check_image,
+    extract_tuples,
+    orange_mask,
+)
 
 # A NAO cut by the left or right image border has a truncated box, hence a wrong r_g and
 # distance: such groups are dropped (the sweep's overlapping head yaws see it whole).
@@ -74,13 +80,18 @@ class Recogniser:
     """
 
     def __init__(
-        self, mbase: MBase, camera: CameraModel | None = None, threshold: float = LAMBDA_TH
+        self,
+        mbase: MBase,
+        camera: CameraModel | None = None,
+        threshold: float = LAMBDA_TH,
+        orange: OrangeRange = ORANGE,
     ) -> None:
         if not 0.0 < threshold <= 1.0:
             raise ValueError(f"threshold must be in (0, 1], got {threshold}")
         self.mbase = mbase
         self.camera = CameraModel() if camera is None else camera
         self.threshold = threshold
+        self.orange = orange
         self._map_x, self._map_y = self.camera.cylindrical_maps()
         cam = self.camera
         self.horizon_row = cam.cy + cam.fy * math.tan(cam.pitch)
@@ -96,7 +107,7 @@ class Recogniser:
     def matches(self, image_bgr: np.ndarray, head_yaw: float = 0.0) -> list[Match]:
         """Accepted tuple groups of one image (boxes in the cylindrical image)."""
         img = self.check(image_bgr, head_yaw)
-        mask = orange_mask(img)
+        mask = orange_mask(img, orange=self.orange)
         if not mask.any():
             return []
         labels, tuples = extract_tuples(self.cylindrical(mask))
@@ -112,7 +123,11 @@ class Recogniser:
 
 
 class Detector:
-    """Recognises NAOs in forehead-camera images and locates them (no state per call)."""
+    """Recognises NAOs in forehead-camera images and locates them (no state per call).
+
+    M-base, D-base and orange range default to the built-in calibration; a lab's own
+    come from a calibration folder (:mod:`agent.core.perception.calibration`).
+    """
 
     def __init__(
         self,
@@ -120,6 +135,7 @@ class Detector:
         dbase: DBase | None = None,
         camera: CameraModel | None = None,
         threshold: float = LAMBDA_TH,
+        orange: OrangeRange = ORANGE,
     ) -> None:
         self.mbase = MBase.load() if mbase is None else mbase
         self.dbase = DBase.load() if dbase is None else dbase
@@ -130,7 +146,7 @@ class Detector:
             )
         if self.dbase.mbase_digest != self.mbase.digest():
             raise ValueError("the D-base was calibrated for another M-base (digest mismatch)")
-        self.recogniser = Recogniser(self.mbase, self.camera, threshold)
+        self.recogniser = Recogniser(self.mbase, self.camera, threshold, orange)
 
     def detect(self, image_bgr: np.ndarray, head_yaw: float) -> list[Detection]:
         """All NAOs in one BGR image taken at ``head_yaw``; sorted by bearing (left first)."""

@@ -33,7 +33,12 @@ A sighting ``v_ij`` of robot i, in its fixed frame, at true distance d from j:
   robot's aspect). A broken compass looks exactly the same from outside (the robot's
   own sightings turn, its fitted ψ with them, and the others' masks disagree with it by
   one offset), so no mask evidence can call a robot faulty with a false-alarm rate below
-  ``rho``.
+  ``rho``;
+* **a sensor bias** (a robot's distances scaled, or its sightings shifted, all alike):
+  the likelihood-ratio statistic Λ of :mod:`agent.core.formation.frame.bias_test` over a
+  sound robot's sightings, divided by ``bias_scale``, follows χ² with three degrees of
+  freedom in its tail (Wilks, for a model this one describes): ``bias_scale`` is that
+  ratio, measured on fault-free fleets and never below 1.
 
 The fault test of the common frame (:mod:`agent.core.formation.frame.fault_test`) uses
 it: a sighting's normalised residual is χ² with two degrees of freedom under this model,
@@ -78,6 +83,9 @@ class SightingNoise:
     s1: float = 0.0
     r_lin: float = 0.0
     t_lin: float = 0.0
+    #: the bias test's null scale: Λ / bias_scale is χ²₃ in its tail on sound robots
+    #: (measured; module docstring)
+    bias_scale: float = 1.0
     sightings: int = 0  #: how many matched sightings it was fitted on
     corpus: str = ""  #: which corpus (and split) it was fitted on
 
@@ -105,6 +113,8 @@ class SightingNoise:
             raise ValueError(f"sigma_mask must be in (0, π/4), got {self.sigma_mask}")
         if not 0.0 <= self.rho <= 1.0:
             raise ValueError(f"rho must be in [0, 1], got {self.rho}")
+        if not (math.isfinite(self.bias_scale) and self.bias_scale > 0.0):
+            raise ValueError(f"bias_scale must be finite and > 0, got {self.bias_scale}")
         if not (0 <= self.w0 <= 1 and 0 <= self.w90 <= 1 and self.w0 + self.w90 <= 1):
             raise ValueError(f"mask weights w0={self.w0}, w90={self.w90} must be a distribution")
 

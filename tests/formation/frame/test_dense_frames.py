@@ -19,7 +19,7 @@ from agent.core.formation.frame.fleet_frame import FleetFrame, fleet_frame
 from agent.core.formation.frame.neighbour_check import DEFAULT_EPSILON
 from agent.core.formation.frame.poses import PoseMeasurement
 from agent.core.formation.frame.records import NeighborRecord
-from tests.formation.pose_fleets import dense_records, masks_turned
+from tests.formation.pose_fleets import DENSE_NOISE, dense_records, masks_turned
 
 RECORDED = Path(__file__).resolve().parents[2] / "data" / "records-100-seed11.npz"
 
@@ -63,7 +63,7 @@ def _recorded() -> tuple[np.ndarray, list[NeighborRecord]]:
 
 def test_a_dense_aligned_room_is_planned_from_its_firm_pairs(no_pose_pairing: None) -> None:
     pos, _, recs = dense_records(np.random.default_rng(0), 60)
-    frame = fleet_frame(recs, DEFAULT_EPSILON)
+    frame = fleet_frame(recs, DEFAULT_EPSILON, DENSE_NOISE)
     assert (
         frame.reason.startswith("the aligned model, sightings identified") and frame.excluded == ()
     )
@@ -83,9 +83,9 @@ def test_the_recorded_hundred_nao_room_is_planned_at_once(no_pose_pairing: None)
 
 def test_shuffled_dense_records_give_the_same_frame() -> None:
     _, _, recs = dense_records(np.random.default_rng(2), 50)
-    want = fleet_frame(recs, DEFAULT_EPSILON)
+    want = fleet_frame(recs, DEFAULT_EPSILON, DENSE_NOISE)
     order = np.random.default_rng(7).permutation(len(recs))
-    got = fleet_frame([recs[k] for k in order], DEFAULT_EPSILON)
+    got = fleet_frame([recs[k] for k in order], DEFAULT_EPSILON, DENSE_NOISE)
     assert got.ids == want.ids and got.reason == want.reason
     assert got.positions.tobytes() == want.positions.tobytes()
     assert got.headings.tobytes() == want.headings.tobytes()
@@ -101,7 +101,7 @@ def test_a_dense_room_set_down_askew_is_never_planned_wrong(seed: int) -> None:
     heads = math.pi / 2 + rng.uniform(-math.radians(20), math.radians(20), 40)
     pos, heads, recs = dense_records(rng, 40, heads)
     try:
-        frame = fleet_frame(recs, DEFAULT_EPSILON)
+        frame = fleet_frame(recs, DEFAULT_EPSILON, DENSE_NOISE)
     except ValueError as err:
         assert "nobody moves" in str(err)
         return
@@ -122,7 +122,7 @@ def test_masks_of_a_robot_seen_turning_do_not_stop_an_aligned_room(n: int, seed:
     robot = 1 + seed % n
     heads = np.full(n, math.pi / 2)
     pos, heads, recs = dense_records(rng, n, heads)
-    frame = fleet_frame(masks_turned(recs, pos, heads, robot, 34.0), DEFAULT_EPSILON)
+    frame = fleet_frame(masks_turned(recs, pos, heads, robot, 34.0), DEFAULT_EPSILON, DENSE_NOISE)
     err_m, psi = _error(frame, pos)
     assert frame.excluded == () and err_m < 0.15 and psi < 10.0
 

@@ -16,7 +16,7 @@ from agent.core.formation.frame.obstacle_map import (
     merge_sightings,
 )
 from agent.core.formation.frame.records import NeighborRecord
-from agent.core.formation.params import PlanParams
+from agent.core.formation.params import D_E, PlanParams
 from agent.core.formation.plan import plan_from_records
 
 
@@ -83,7 +83,7 @@ def test_shuffled_records_plan_identically_around_a_seen_obstacle() -> None:
         nb = np.array([starts[j] - p for j in sorted(starts) if j != i])
         records.append(NeighborRecord(i, nb))
         sightings[i] = (obstacle - p + 0.01 * i).reshape(1, 2)  # a cm of error each
-    params = PlanParams(d_e=0.8)
+    params = PlanParams(d_e=D_E)
     plan = plan_from_records(records, params, sightings=sightings)
     again = plan_from_records(records[::-1], params, sightings=dict(reversed(sightings.items())))
     assert plan.digest == again.digest

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent.core.formation.params import PlanParams
+from agent.core.formation.params import D_E, PHI_E_DEG, PlanParams
 from agent.core.formation.paths.fallback import banded_plan
 from agent.core.formation.plan import plan_from_positions
 from agent.core.formation.shape.pyramid import pyramid_frame
@@ -17,13 +17,14 @@ from agent.core.formation.waves.execution import check_dependencies
 from agent.core.formation.waves.safety import check_safety
 
 R = 0.2
+PHI_E = math.radians(PHI_E_DEG)
 
 
 def _paths(starts: np.ndarray, vias: tuple[tuple[np.ndarray, ...], ...], targets: np.ndarray):  # type: ignore[no-untyped-def]
     return [np.vstack([starts[k], *vias[k], targets[k]]) for k in range(starts.shape[0])]
 
 
-def _check(pos: np.ndarray, d_e: float = 0.8, radius: float = R) -> None:
+def _check(pos: np.ndarray, d_e: float = D_E, radius: float = R) -> None:
     frame = pyramid_frame(pos)
     bp = banded_plan(pos, frame, d_e, math.radians(30), radius)
     n = pos.shape[0]
@@ -47,7 +48,7 @@ def test_legs_rise_to_the_corridor_and_to_the_slot() -> None:
     rng = np.random.default_rng(4)
     pos = rng.uniform(0, 6.0, (15, 2))
     frame = pyramid_frame(pos)
-    bp = banded_plan(pos, frame, 0.8, math.radians(30), R)
+    bp = banded_plan(pos, frame, D_E, PHI_E, R)
     axis = np.array([math.cos(frame.beta), math.sin(frame.beta)])
     for k in range(15):
         pts = np.vstack([pos[k], *bp.vias[k], bp.targets[k]])
@@ -70,7 +71,7 @@ def test_legs_rise_to_the_corridor_and_to_the_slot() -> None:
 def test_bad_input(starts: np.ndarray, radius: float, match: str) -> None:
     frame = pyramid_frame(np.zeros((1, 2)))
     with pytest.raises(ValueError, match=match):
-        banded_plan(starts, frame, 0.8, math.radians(30), radius)
+        banded_plan(starts, frame, D_E, PHI_E, radius)
 
 
 def test_banded_strategy_rejects_obstacles() -> None:

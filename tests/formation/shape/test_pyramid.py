@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from agent.core.formation.params import D_E
 from agent.core.formation.paths.assignment import assign, uncross
 from agent.core.formation.paths.geometry import paths_cross
 from agent.core.formation.shape.pyramid import (
@@ -30,7 +31,7 @@ def test_layers_and_parents_known_answers() -> None:
 
 @pytest.mark.parametrize("n", range(1, 22))
 def test_slot_geometry_n_1_to_21(n: int) -> None:
-    d_e = 0.8
+    d_e = D_E
     s = slot_positions(n, d_e, PHI)
     assert s.shape == (n, 2)
     assert np.allclose(s[0], [0.0, 0.0])
@@ -94,8 +95,8 @@ def test_assignment_is_a_permutation(strategy: str) -> None:
     rng = np.random.default_rng(11)
     for n in (1, 2, 3, 7, 16, 40):
         s = rng.uniform(-3, 3, (n, 2))
-        f = placed_slots(n, 0.8, PHI, s)
-        perm = assign(s, f, strategy, 0.8, PHI)
+        f = placed_slots(n, D_E, PHI, s)
+        perm = assign(s, f, strategy, D_E, PHI)
         assert sorted(perm.tolist()) == list(range(n))
 
 

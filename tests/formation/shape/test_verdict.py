@@ -9,16 +9,19 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from agent.core.formation.params import D_E, PHI_E_DEG
 from agent.core.formation.shape.verdict import R_D_MAX, R_PHI_MAX, check_pair
 
-D_E, PHI_E = 0.8, math.radians(30)
+PHI_E = math.radians(PHI_E_DEG)
 
 
 def test_a_perfect_pair_worked_by_hand() -> None:
     # axis north; the child stands 0.8 m behind its parent, 30° to the right of the axis:
     # parent − child = 0.8·(sin 30°, cos 30°) = (0.4, 0.6928)
-    c = check_pair(2, 1, np.array([0.4, 0.8 * math.cos(PHI_E)]), math.pi / 2, D_E, PHI_E)
-    assert c.distance == pytest.approx(0.8)
+    c = check_pair(
+        2, 1, D_E * np.array([math.sin(PHI_E), math.cos(PHI_E)]), math.pi / 2, D_E, PHI_E
+    )
+    assert c.distance == pytest.approx(D_E)
     assert c.angle == pytest.approx(PHI_E)
     assert c.r_d == pytest.approx(0.0, abs=1e-12) and c.r_phi == pytest.approx(0.0, abs=1e-12)
     assert c.ok
@@ -27,7 +30,7 @@ def test_a_perfect_pair_worked_by_hand() -> None:
 def test_the_issue_s_bent_pair() -> None:
     # robot 2 placed 15° off: the angle to its parent is 13.8° instead of 30°: r_φ −54 %
     phi = math.radians(13.8)
-    c = check_pair(2, 1, 0.8 * np.array([math.sin(phi), math.cos(phi)]), math.pi / 2, D_E, PHI_E)
+    c = check_pair(2, 1, D_E * np.array([math.sin(phi), math.cos(phi)]), math.pi / 2, D_E, PHI_E)
     assert c.r_phi == pytest.approx(-0.54)
     assert not c.ok
     assert c.text() == "r_d +0.0%, r_φ -54.0% to parent 1"
@@ -61,12 +64,12 @@ def test_turning_the_whole_picture_changes_nothing(
 @pytest.mark.parametrize(
     ("offset", "axis", "d_e", "phi_e", "match"),
     [
-        ([math.nan, 0.0], 0.0, 0.8, 0.5, "offset"),
-        ([1.0, 0.0, 0.0], 0.0, 0.8, 0.5, "offset"),
-        ([1.0, 0.0], math.inf, 0.8, 0.5, "axis"),
+        ([math.nan, 0.0], 0.0, D_E, 0.5, "offset"),
+        ([1.0, 0.0, 0.0], 0.0, D_E, 0.5, "offset"),
+        ([1.0, 0.0], math.inf, D_E, 0.5, "axis"),
         ([1.0, 0.0], 0.0, 0.0, 0.5, "positive"),
-        ([1.0, 0.0], 0.0, 0.8, -0.5, "positive"),
-        ([0.0, 0.0], 0.0, 0.8, 0.5, "same point"),
+        ([1.0, 0.0], 0.0, D_E, -0.5, "positive"),
+        ([0.0, 0.0], 0.0, D_E, 0.5, "same point"),
     ],
 )
 def test_errors(offset: list[float], axis: float, d_e: float, phi_e: float, match: str) -> None:
@@ -79,12 +82,12 @@ def test_facing_misfit_worked_by_hand() -> None:
 
     # axis north; the parent straight ahead (line of sight north) facing north: its back,
     # orientation 0; turned 40° to the left: +40°; its front (orientation π): modulo π, 0
-    ahead = np.array([0.0, 0.8])
+    ahead = np.array([0.0, D_E])
     assert facing_misfit(ahead, 0.0, math.pi / 2) == pytest.approx(0.0)
     assert facing_misfit(ahead, math.radians(40), math.pi / 2) == pytest.approx(math.radians(40))
     assert facing_misfit(ahead, math.pi, math.pi / 2) == pytest.approx(0.0, abs=1e-12)
     # the parent 30° to the right of the axis, facing north: orientation = north − LOS = +30°
-    right = 0.8 * np.array([math.sin(PHI_E), math.cos(PHI_E)])
+    right = D_E * np.array([math.sin(PHI_E), math.cos(PHI_E)])
     assert facing_misfit(right, PHI_E, math.pi / 2) == pytest.approx(0.0, abs=1e-12)
     with pytest.raises(ValueError, match="offset"):
         facing_misfit(np.zeros(2), 0.0, 0.0)
@@ -96,9 +99,11 @@ def test_a_robot_is_sure_only_with_a_margin() -> None:
     from agent.core.formation.shape.verdict import OWN_MARGIN
 
     phi = PHI_E * (1 + 0.9 * R_PHI_MAX)  # in tolerance, but within the camera's own error
-    c = check_pair(2, 1, 0.8 * np.array([math.sin(phi), math.cos(phi)]), math.pi / 2, D_E, PHI_E)
+    c = check_pair(2, 1, D_E * np.array([math.sin(phi), math.cos(phi)]), math.pi / 2, D_E, PHI_E)
     assert c.ok and not c.sure and OWN_MARGIN < 0.9
-    c = check_pair(2, 1, np.array([0.4, 0.8 * math.cos(PHI_E)]), math.pi / 2, D_E, PHI_E)
+    c = check_pair(
+        2, 1, D_E * np.array([math.sin(PHI_E), math.cos(PHI_E)]), math.pi / 2, D_E, PHI_E
+    )
     assert c.sure
 
 

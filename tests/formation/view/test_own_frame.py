@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent.core.formation.params import PlanParams
+from agent.core.formation.params import D_E, PlanParams
 from agent.core.formation.plan import plan_from_positions
 from agent.core.formation.view.own_frame import in_own_frame
 
@@ -18,7 +18,7 @@ STARTS = np.array([[0.0, 0.0], [1.0, 0.1], [0.2, 1.1], [-0.9, 0.4]])
 
 
 def _plan():  # type: ignore[no-untyped-def]
-    return plan_from_positions(IDS, STARTS, PlanParams(d_e=0.8))
+    return plan_from_positions(IDS, STARTS, PlanParams(d_e=D_E))
 
 
 def test_zero_gives_the_same_plan() -> None:

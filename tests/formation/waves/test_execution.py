@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent.core.formation.params import PlanParams
+from agent.core.formation.params import D_E, PlanParams
 from agent.core.formation.plan import Plan, plan_from_positions
 from agent.core.formation.waves.execution import (
     capt_makespan,
@@ -97,7 +97,7 @@ coords = st.floats(-15.0, 15.0, allow_nan=False, allow_infinity=False)
 @settings(max_examples=30, deadline=None)
 @given(
     pts=st.lists(st.tuples(coords, coords), min_size=1, max_size=18),
-    d_e=st.sampled_from([0.8, 2.0]),
+    d_e=st.sampled_from([D_E, 2.0]),  # the NAOs' and the papers' simulations'
     radius=st.sampled_from([0.1, 0.2, 0.4]),
     seed=st.integers(0, 2**16),
 )

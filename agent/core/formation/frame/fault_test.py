@@ -33,19 +33,29 @@ sight, σ_r(d) and σ_t(d)). Then:
    with the measured probability ``rho`` (its body turned while the others looked), which
    a broken compass cannot be told from. So the heading test's p-value is
    ``max(p_Wilks, rho)``: masks name a robot only once they are better than that.
-4. **The verdict.** A robot is *rejected* when the smaller of its two p-values, doubled
-   (Bonferroni over the two tests), is below :data:`ALPHA` (the false-alarm rate per
-   robot and run). Nobody rejected: the fleet is consistent; its rejected edges are
-   wrong pairings, dropped, and the rest fitted again. Someone rejected: each rejected
-   robot r (smallest p first, tie: lowest id) is left out (its sightings and the
-   others' sightings of it) and the rest fitted again; r is a *candidate* when the rest
-   is connected and nobody in it is rejected. Exactly one candidate is *named*; none, or
-   more than one, and nobody can be trusted: the fleet stops (same reason on every
-   agent).
-
-One threshold with a meaning (:data:`ALPHA`) replaces the rules of thumb. Deterministic:
-measurements are taken in canonical order (owner, target) and ties broken by id, so every
-agent names the same robot from the same records, in any order.
+4. **Per robot, its bias test** (:mod:`bias_test`): are r's own sightings all wrong the
+   same way (its distances scaled, or every sighting shifted)? A likelihood-ratio test of
+   a bias (s, b) fitted to r's sightings against none, with the others held at their
+   fitted poses; its statistic over sound robots is χ²₃ (measured: ``bias_scale``). Four
+   sightings 0.3 m off in one pattern are plain here long before each is rejected alone.
+5. **The fleet's global test** (the overall model test before any robot is blamed, as
+   in geodesy's data snooping): all rejected edges and lost strays of the fleet together,
+   ``K``, against the same rates, Poisson-binomial over every edge and sighting. A frame
+   can be wrong without any one robot standing out (a sparse fleet fitted into a wrong
+   shape, each robot with a few sightings landing nowhere); ``P(K ≥ k) < ALPHA`` then
+   fails the frame, and a robot left out must leave a rest that passes it too.
+6. **The verdict.** A robot is *rejected* when the smallest of its three p-values,
+   tripled (Bonferroni over the three tests), is below :data:`ALPHA` (the false-alarm
+   rate per robot and run). Nobody rejected and the global test passed: the fleet is
+   consistent; its rejected edges are wrong pairings, dropped, and the rest fitted
+   again. Someone rejected: each rejected robot r (smallest p first, tie: lowest id) is
+   left out (its sightings and the others' sightings of it) and the rest fitted again; r
+   is a *candidate* when the rest is connected and nobody in it is rejected. Exactly one
+   candidate is *named*; none, or more than one, and nobody can be trusted: the fleet
+   stops (same reason on every agent). One threshold with a meaning (:data:`ALPHA`)
+   replaces the rules of thumb. Deterministic: measurements are taken in canonical order
+   (owner, target) and ties broken by id, so every agent names the same robot from the
+   same records, in any order.
 """
 
 from __future__ import annotations
@@ -57,6 +67,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.stats import chi2
 
+from agent.core.formation.frame.bias_test import bias_fit
 from agent.core.formation.frame.poses import PoseFrame, PoseMeasurement, fit_poses
 from agent.core.formation.frame.records import NeighborRecord
 from agent.core.perception.sighting_noise import SightingNoise
@@ -75,7 +86,7 @@ MASK_GRID = np.radians(np.arange(0.0, 180.0, 1.0))
 
 @dataclass(frozen=True)
 class RobotTest:
-    """One robot's two tests (module docstring, steps 2-3)."""
+    """One robot's three tests (module docstring, steps 2-4)."""
 
     robot: int
     edges: int
@@ -86,17 +97,20 @@ class RobotTest:
     masks: int  #: the others' masks of it
     mask_offset: float  #: rad, the offset Δ the masks agree on best (modulo π)
     p_heading: float
+    bias: float = 0.0  #: Λ of its bias test (:mod:`bias_test`)
+    p_bias: float = 1.0
 
     @property
     def p(self) -> float:
-        """Bonferroni over the two tests."""
-        return min(1.0, 2.0 * min(self.p_position, self.p_heading))
+        """Bonferroni over the three tests."""
+        return min(1.0, 3.0 * min(self.p_position, self.p_heading, self.p_bias))
 
     def describe(self) -> str:
         return (
             f"robot {self.robot}: {self.rejected_edges}/{self.edges} pairs rejected, "
-            f"{self.lost}/{self.strays} strays lost (p {self.p_position:.1e}), masks {math.degrees(self.mask_offset):+.0f}° over "
-            f"{self.masks} (p {self.p_heading:.1e})"
+            f"{self.lost}/{self.strays} strays lost (p {self.p_position:.1e}), masks "
+            f"{math.degrees(self.mask_offset):+.0f}° over {self.masks} (p {self.p_heading:.1e}), "
+            f"bias Λ {self.bias:.0f} (p {self.p_bias:.1e})"
         )
 
 
@@ -229,38 +243,101 @@ def strays(
     return out
 
 
+@dataclass(frozen=True)
+class _Evidence:
+    """What the tests count, gathered once per fitted frame: each edge and whether it is
+    rejected, each edge's sighting distances, each robot's strays (distance, lands) and
+    the distances of every sighting of each record."""
+
+    edges: dict[tuple[int, int], bool]
+    dist: dict[tuple[int, int], list[float]]
+    stray: dict[int, list[tuple[float, bool]]]
+    sighted: dict[int, list[float]]
+
+
+def _evidence(
+    poses: PoseFrame,
+    noise: SightingNoise,
+    records: Sequence[NeighborRecord],
+    elsewhere: np.ndarray | None,
+) -> _Evidence:
+    dist: dict[tuple[int, int], list[float]] = {}
+    for m in poses.measurements:
+        dist.setdefault(_edge(m), []).append(float(np.hypot(*m.vector)))
+    sighted = {
+        rec.robot_id: [float(d) for d in np.hypot(*np.asarray(rec.neighbours).reshape(-1, 2).T)]
+        for rec in records
+        if rec.robot_id in poses.ids
+    }
+    return _Evidence(rejected_edges(poses, noise), dist,
+                     strays(poses, records, noise, elsewhere), sighted)  # fmt: skip
+
+
 def robot_tests(
     poses: PoseFrame,
     noise: SightingNoise,
     records: Sequence[NeighborRecord] = (),
     elsewhere: np.ndarray | None = None,
 ) -> tuple[RobotTest, ...]:
-    """Steps 1-3 for every robot of ``poses`` (ascending id); ``records`` give the
+    """Steps 1-4 for every robot of ``poses`` (ascending id); ``records`` give the
     strays (none without), ``elsewhere`` as :func:`strays`."""
-    edges = rejected_edges(poses, noise)
-    stray = strays(poses, records, noise, elsewhere)
-    sighted = {
-        rec.robot_id: [float(d) for d in np.hypot(*np.asarray(rec.neighbours).reshape(-1, 2).T)]
-        for rec in records
-    }
-    dist: dict[tuple[int, int], list[float]] = {}
-    for m in poses.measurements:
-        dist.setdefault(_edge(m), []).append(float(np.hypot(*m.vector)))
+    return _robot_tests(poses, noise, _evidence(poses, noise, records, elsewhere))
+
+
+def _robot_tests(
+    poses: PoseFrame, noise: SightingNoise, ev: _Evidence, bias: bool = True
+) -> tuple[RobotTest, ...]:
+    """Steps 2-4 from gathered evidence; ``bias`` False: without the bias test (step 4,
+    the costly one: p_bias 1)."""
     out = []
     for r in poses.ids:
-        mine = [e for e in edges if r in e]
-        own = stray.get(r, [])
-        probs = [float(noise.p_reject(float(np.mean(dist[e])))) for e in mine]
+        mine = [e for e in ev.edges if r in e]
+        own = ev.stray.get(r, [])
+        probs = [float(noise.p_reject(float(np.mean(ev.dist[e])))) for e in mine]
         # every sighting of r's own could have ended up a lost stray (step 2)
-        probs += [float(noise.p_stray(d)) for d in sighted.get(r, [])]
-        k = sum(edges[e] for e in mine)
+        probs += [float(noise.p_stray(d)) for d in ev.sighted.get(r, [])]
+        k = sum(ev.edges[e] for e in mine)
         lost = sum(not lands for _, lands in own)
         deltas = mask_deltas(poses, r)
         offset, p_h = mask_test(deltas, noise)
         p_h = max(p_h, noise.rho) if deltas else p_h
         p_pos = tail_at_least(probs, k + lost)
-        out.append(RobotTest(r, len(mine), k, len(own), lost, p_pos, len(deltas), offset, p_h))
+        stat, p_b = 0.0, 1.0
+        if bias:
+            fit = bias_fit(poses, r, noise, noise.bias_scale)
+            stat, p_b = fit.statistic, fit.p
+        out.append(RobotTest(r, len(mine), k, len(own), lost, p_pos, len(deltas), offset, p_h,
+                             stat, p_b))  # fmt: skip
     return tuple(out)
+
+
+@dataclass(frozen=True)
+class FleetCount:
+    """Step 5's global test: rejected edges and lost strays of the whole fleet."""
+
+    failures: int  #: rejected edges + lost strays
+    trials: int  #: edges + sightings
+    p: float  #: P(K ≥ failures) under "every robot is sound"
+
+    def describe(self) -> str:
+        return f"{self.failures} of its {self.trials} pairs and sightings fail (p {self.p:.1e})"
+
+
+def _fleet_count(noise: SightingNoise, ev: _Evidence) -> FleetCount:
+    probs = [float(noise.p_reject(float(np.mean(ev.dist[e])))) for e in ev.edges]
+    probs += [float(noise.p_stray(d)) for r in sorted(ev.sighted) for d in ev.sighted[r]]
+    k = sum(ev.edges.values()) + sum(not lands for r in ev.stray for _, lands in ev.stray[r])
+    return FleetCount(k, len(probs), tail_at_least(probs, k))
+
+
+def fleet_count(
+    poses: PoseFrame,
+    noise: SightingNoise,
+    records: Sequence[NeighborRecord] = (),
+    elsewhere: np.ndarray | None = None,
+) -> FleetCount:
+    """The global test of step 5 on a fitted frame (arguments as :func:`robot_tests`)."""
+    return _fleet_count(noise, _evidence(poses, noise, records, elsewhere))
 
 
 def _in_frame_of(
@@ -361,8 +438,23 @@ def fault_test(
     """
     if not 0.0 < alpha < 1.0:
         raise ValueError(f"alpha must be in (0, 1), got {alpha}")
-    tests = robot_tests(poses, noise, records)
+    ev = _evidence(poses, noise, records, None)
+    whole = _fleet_count(noise, ev)
+    if not search:
+        # a frame that may not name anyone fails on the first rejection: the cheap tests
+        # first, the bias test only if they all pass
+        cheap = _robot_tests(poses, noise, ev, bias=False)
+        worst = min(cheap, key=lambda t: (t.p, t.robot))
+        if worst.p < alpha or whole.p < alpha:
+            why = (f"robot(s) rejected ({worst.describe()})" if worst.p < alpha
+                   else f"the fleet as a whole does not fit: {whole.describe()}")  # fmt: skip
+            return FaultVerdict(False, (), None, (), cheap, why + "; not searched")
+    tests = _robot_tests(poses, noise, ev)
     rejected = sorted((t for t in tests if t.p < alpha), key=lambda t: (t.p, t.robot))
+    if not rejected and whole.p < alpha:
+        why = (f"the fleet as a whole does not fit: {whole.describe()}, and no robot's own "
+               "test rejects it; nobody moves")  # fmt: skip
+        return FaultVerdict(False, (), None, (), tests, why)
     if not rejected:
         clean, drop = _clean(poses, noise)
         if clean is None:
@@ -382,7 +474,10 @@ def fault_test(
         if rest is None or len(rest.ids) != len(poses.ids) - 1:
             continue
         at = seen_by_others(poses, rest, t.robot).reshape(1, 2)
-        if any(u.p < alpha for u in robot_tests(rest, noise, records, at)):
+        rest_ev = _evidence(rest, noise, records, at)
+        if any(u.p < alpha for u in _robot_tests(rest, noise, rest_ev)):
+            continue
+        if _fleet_count(noise, rest_ev).p < alpha:
             continue
         clean, drop = _clean(rest, noise)
         if clean is not None:

@@ -19,14 +19,18 @@ Candidate frames, cheapest first (each built only when the ones before it fail):
    direction.
 4. **The pose fit with every sighting identified where it lands.**
 
-The first candidate the test passes is planned on: with nobody named, as it is (its
-rejected pairs dropped as wrong pairings); with one robot named, fitted again without it,
-the named robot standing still where the *others* saw it (the mean of their sightings of
-it, in the rest's frame) and planned around like an obstacle. Only the general
-candidates (3, 4) may name a robot: the aligned model (1, 2) would blame a sound robot
-merely set down turned, so an aligned candidate that names someone is passed over. A
-candidate that identifies sightings where they land is tested on its sightings as first
-paired (at its refined poses): a sighting that lands nowhere is evidence. When nothing
+A frame with nobody named is preferred: the candidates are tried in order for one the
+test passes with everyone, and it is planned on as it is (a refined candidate has
+identified its sightings; an unrefined one is fitted again without its rejected pairs).
+Only if none passes so is the first general candidate (3, 4) that names a robot taken
+(a poor fit of a sound fleet must not blame a robot a better fit clears): fitted again
+without it, the named robot standing still where the *others* saw it (the mean of their
+sightings of it, in the rest's frame) and planned around like an obstacle. The aligned
+model (1, 2) never names anyone: it would blame a sound robot merely set down turned. A
+candidate that identifies sightings where they land is tested on each sighting as it
+identified it, and on each sighting it dropped as first paired
+(:func:`tested_sightings`): a sighting that lands nowhere is evidence, and a wrong
+pairing it corrected is not held against the robot first paired. When nothing
 passes, :func:`fleet_frame` raises ``ValueError`` with the reason of the last candidate
 tried, the same on every agent (they hold the same records): nobody moves.
 
@@ -51,6 +55,7 @@ from agent.core.formation.frame.neighbour_check import NeighbourGraph, identify_
 from agent.core.formation.frame.pose_pairing import identify_pairs
 from agent.core.formation.frame.poses import (
     PoseFrame,
+    PoseMeasurement,
     evaluate_poses,
     fit_from_graph,
     pair_measurements,
@@ -153,8 +158,8 @@ def _candidates(records: Sequence[NeighborRecord], epsilon: float) -> list[_Cand
             if base is None:
                 return None
             fine = refine_poses(base, records)
-            test = evaluate_poses(fine.ids, base.measurements, fine.positions, fine.headings,
-                                  fine.frame_robot, fine.aligned)  # fmt: skip
+            test = evaluate_poses(fine.ids, tested_sightings(base, fine), fine.positions,
+                                  fine.headings, fine.frame_robot, fine.aligned)  # fmt: skip
             return fine, test
 
         return build
@@ -169,6 +174,18 @@ def _candidates(records: Sequence[NeighborRecord], epsilon: float) -> list[_Cand
         _Candidate("the pose fit", True, as_is(fitted)),
         _Candidate("the pose fit, sightings identified where they land", True, again(fitted)),
     ]
+
+
+def tested_sightings(base: PoseFrame, fine: PoseFrame) -> list[PoseMeasurement]:
+    """The sightings a refined candidate is tested on: each as ``fine`` identified it
+    where it lands, and each ``fine`` dropped (it landed on nobody) as ``base`` first
+    paired it. So a wrong pairing that re-identification corrected is not held against
+    the robot it was first paired with, and a sighting that lands nowhere stays evidence
+    (a faulty robot's sightings are the ones that land nowhere)."""
+    used = {(m.owner, float(m.vector[0]), float(m.vector[1])) for m in fine.measurements}
+    kept = [m for m in base.measurements
+            if (m.owner, float(m.vector[0]), float(m.vector[1])) not in used]  # fmt: skip
+    return sorted([*fine.measurements, *kept], key=lambda m: (m.owner, m.target))
 
 
 def _framed(fine: PoseFrame, test: PoseFrame, verdict: FaultVerdict, how: str) -> FleetFrame:
@@ -214,13 +231,18 @@ def fleet_frame(
     """
     model = shipped_noise() if noise is None else noise
     last = "no candidate frame connects every robot through identified neighbours"
+    naming: FleetFrame | None = None
     for cand in _candidates(records, epsilon):
         built = cand.build()
         if built is None:
             continue
         fine, test = built
-        verdict = fault_test(test, model, records, search=cand.general)
-        if verdict.ok and (cand.general or not verdict.named):
+        verdict = fault_test(test, model, records, search=cand.general and naming is None)
+        if verdict.ok and not verdict.named:
             return _framed(fine, test, verdict, cand.name)
+        if verdict.ok and cand.general and naming is None:
+            naming = _framed(fine, test, verdict, cand.name)
         last = f"{cand.name}: {verdict.reason}"
+    if naming is not None:
+        return naming
     raise ValueError(f"no frame passes the fault test ({last})")

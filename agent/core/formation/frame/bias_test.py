@@ -1,0 +1,199 @@
+"""Is one robot's sensor biased? A generalised likelihood-ratio test per robot
+(docs/design.md §9; the check the papers leave out: NAO paper 4.1.2 trusts every record,
+and its distances come from the D-base of eq. 6, which a miscalibrated robot gets wrong
+for every sighting alike).
+
+A robot with a broken distance (a D-base scaled by s) or a displaced camera (every
+sighting shifted by b in its own frame) makes *all* its sightings wrong the same way:
+
+    v_rj = s · R(−ψ_r)(p_j − p_r) + b + e_rj.
+
+A sound robot has s = 1, b = 0. The counting test of :mod:`fault_test` (how many of r's
+pairs fail their χ² test) needs several pairs each tens of σ off; a bias of 0.3 m over
+four sightings is plain as one pattern long before that. So, per robot r, with every
+other robot held at its fitted pose:
+
+* **H0** (sound): r's pose (x, y, ψ) fitted to r's own sightings and to the others'
+  sightings of r;
+* **H1** (biased): r's pose and its bias (s, b_x, b_y) fitted to the same sightings;
+* each sighting's misfit split along and across its line of sight and whitened by the
+  measured σ_r(d), σ_t(d) (:class:`~agent.core.perception.sighting_noise.SightingNoise`),
+  under the robust Cauchy loss (the sightings' tail is heavier than a Gaussian's: a
+  wrong pairing must not look like a bias);
+* the statistic ``Λ = 2 (cost_H0 − cost_H1)`` has three degrees of freedom more under H1;
+  its null distribution is *measured* on fault-free rendered fleets (``python -m
+  tools.fit_noise``): Λ / ``bias_scale`` is χ²₃ in its tail, so the p-value is
+  ``χ²₃.sf(Λ / bias_scale)``.
+
+Only r's own sightings carry the bias, so the test needs others who see r (they pin its
+position) and at least two sightings of r's own; with fewer it has no power and returns
+p = 1. Deterministic: measurements in canonical (owner, target) order, a fixed start.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.stats import chi2
+
+from agent.core.formation.frame.poses import PoseFrame
+from agent.core.perception.sighting_noise import SightingNoise
+
+#: The Cauchy loss's scale, in σ: a misfit of a few σ counts as a Gaussian's would, a
+#: gross one (a wrong pairing) only logarithmically.
+LOSS_SCALE = 3.0
+#: Fewest own sightings for the test to have power (3 bias parameters, 2 numbers each).
+MIN_OWN = 2
+#: Fewest sightings of r by others (they pin r's position apart from its own sightings).
+MIN_SEEN = 1
+
+
+@dataclass(frozen=True)
+class BiasFit:
+    """One robot's bias test: the statistic, the fitted bias, and the p-value."""
+
+    robot: int
+    own: int  #: its own sightings used
+    seen: int  #: the others' sightings of it used
+    statistic: float  #: Λ = 2 (cost_H0 − cost_H1)
+    scale: float  #: fitted s under H1
+    shift: tuple[float, float]  #: fitted b under H1, m, in r's fixed frame
+    p: float
+
+
+def _rot(a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s], [s, c]])
+
+
+def bias_fit(poses: PoseFrame, robot: int, noise: SightingNoise, bias_scale: float) -> BiasFit:
+    """The test of the module docstring for ``robot`` of ``poses``.
+
+    Raises
+    ------
+    ValueError
+        ``robot`` not in ``poses``, or ``bias_scale`` not positive.
+    """
+    if robot not in poses.ids:
+        raise ValueError(f"robot {robot} has no pose")
+    if not bias_scale > 0.0:
+        raise ValueError(f"bias_scale must be > 0, got {bias_scale}")
+    index = {rid: k for k, rid in enumerate(poses.ids)}
+    ms = sorted(poses.measurements, key=lambda m: (m.owner, m.target))
+    own = [m for m in ms if m.owner == robot and m.target != robot]
+    seen = [m for m in ms if m.target == robot and m.owner != robot]
+    if len(own) < MIN_OWN or len(seen) < MIN_SEEN:
+        return BiasFit(robot, len(own), len(seen), 0.0, 1.0, (0.0, 0.0), 1.0)
+    v_own = np.array([m.vector for m in own], dtype=np.float64).reshape(-1, 2)
+    p_tgt = poses.positions[[index[m.target] for m in own]]
+    v_seen = np.array([m.vector for m in seen], dtype=np.float64).reshape(-1, 2)
+    o = [index[m.owner] for m in seen]
+    p_obs, psi_obs = poses.positions[o], poses.headings[o]
+    # whitening: along/across each observed vector, at its own measured distance
+    v_all = np.vstack([v_own, v_seen])
+    d_all = np.hypot(v_all[:, 0], v_all[:, 1])
+    u_all = v_all / np.maximum(d_all, 1e-9)[:, None]
+    s_r, s_t = noise.sigma_radial(d_all), noise.sigma_tangential(d_all)
+    # the others' sightings of r, as seen from each owner: R(−ψ_o)(p_r − p_o)
+    rot_obs = np.stack([np.array([[c, s], [-s, c]]) for c, s in
+                        zip(np.cos(psi_obs), np.sin(psi_obs), strict=True)])  # fmt: skip
+
+    n_own = len(own)
+
+    def errors(x: np.ndarray, jac_too: bool) -> tuple[np.ndarray, np.ndarray | None]:
+        """Misfits (k, 2) and their Jacobian (k, 2, len(x)), owner's frame."""
+        pr, psi = x[:2], float(x[2])
+        scale, shift = (float(x[3]), x[4:6]) if len(x) > 3 else (1.0, np.zeros(2))
+        c, s = math.cos(psi), math.sin(psi)
+        rel = p_tgt - pr  # common frame
+        unscaled = np.stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]], 1)
+        pred_seen = np.einsum("kij,kj->ki", rot_obs, pr[None, :] - p_obs)
+        e = np.vstack([unscaled * scale + shift, pred_seen]) - v_all
+        if not jac_too:
+            return e, None
+        jac = np.zeros((len(e), 2, len(x)))
+        jac[:n_own, :, :2] = -scale * np.array([[c, s], [-s, c]])
+        jac[:n_own, 0, 2] = scale * (-s * rel[:, 0] + c * rel[:, 1])
+        jac[:n_own, 1, 2] = scale * (-c * rel[:, 0] - s * rel[:, 1])
+        jac[n_own:, :, :2] = rot_obs
+        if len(x) > 3:
+            jac[:n_own, :, 3] = unscaled
+            jac[:n_own, 0, 4] = 1.0
+            jac[:n_own, 1, 5] = 1.0
+        return e, jac
+
+    def whiten(e: np.ndarray) -> np.ndarray:
+        """(k, 2, ...) misfits (or their derivatives) -> (2k, ...): along, then across
+        each line of sight, in σ."""
+        shape = (-1,) + (1,) * (e.ndim - 2)
+        ux, uy = u_all[:, 0].reshape(shape), u_all[:, 1].reshape(shape)
+        along = (e[:, 0] * ux + e[:, 1] * uy) / s_r.reshape(shape)
+        across = (e[:, 1] * ux - e[:, 0] * uy) / s_t.reshape(shape)
+        return np.concatenate([along, across])
+
+    def residuals(x: np.ndarray) -> np.ndarray:
+        return whiten(errors(x, False)[0])
+
+    def jacobian(x: np.ndarray) -> np.ndarray:
+        jac = errors(x, True)[1]
+        assert jac is not None
+        return whiten(jac)
+
+    k = index[robot]
+    x0 = np.array([*poses.positions[k], poses.headings[k]], dtype=np.float64)
+    x_h0, cost0 = _cauchy_fit(residuals, jacobian, x0)
+    x_h1, cost1 = _cauchy_fit(residuals, jacobian, np.concatenate([x_h0, [1.0, 0.0, 0.0]]))
+    stat = max(0.0, 2.0 * (cost0 - cost1))
+    p = float(chi2.sf(stat / bias_scale, 3))
+    return BiasFit(robot, len(own), len(seen), stat, float(x_h1[3]),
+                   (float(x_h1[4]), float(x_h1[5])), p)  # fmt: skip
+
+
+#: Gauss-Newton iterations of :func:`_cauchy_fit` at most, and its relative stop.
+MAX_ITER = 30
+TOL = 1e-7
+
+
+def cauchy_cost(r: np.ndarray) -> float:
+    """½ Σ f² log(1 + (r/f)²), f = :data:`LOSS_SCALE` (scipy's ``loss="cauchy"``)."""
+    f2 = LOSS_SCALE * LOSS_SCALE
+    return float(0.5 * f2 * np.log1p(r * r / f2).sum())
+
+
+def _cauchy_fit(
+    residuals: Callable[[np.ndarray], np.ndarray],
+    jacobian: Callable[[np.ndarray], np.ndarray],
+    x0: np.ndarray,
+) -> tuple[np.ndarray, float]:
+    """Minimise :func:`cauchy_cost` of ``residuals`` from ``x0`` by iteratively reweighted
+    Gauss-Newton (weights ``1 / (1 + (r/f)²)``), halving a step that does not lower the
+    cost; returns (x, cost). A few small dense solves: a robot has tens of sightings."""
+    x = np.asarray(x0, dtype=np.float64).copy()
+    r = residuals(x)
+    cost = cauchy_cost(r)
+    f2 = LOSS_SCALE * LOSS_SCALE
+    for _ in range(MAX_ITER):
+        j = jacobian(x)
+        w = 1.0 / (1.0 + r * r / f2)
+        jw = j * w[:, None]
+        try:
+            step = np.linalg.solve(jw.T @ j + 1e-9 * np.eye(len(x)), -(jw.T @ r))
+        except np.linalg.LinAlgError:
+            break
+        for _ in range(20):
+            trial = x + step
+            r_trial = residuals(trial)
+            c_trial = cauchy_cost(r_trial)
+            if c_trial <= cost:
+                break
+            step = step / 2.0
+        else:
+            break
+        done = cost - c_trial <= TOL * max(cost, 1.0)
+        x, r, cost = trial, r_trial, c_trial
+        if done:
+            break
+    return x, cost

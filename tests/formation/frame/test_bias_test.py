@@ -1,0 +1,99 @@
+"""The bias test per robot (agent/core/formation/frame/bias_test.py, docs/design.md §9)
+and the fleet's global test (fault_test.fleet_count): known answers on synthetic
+fleets, and a test per error branch."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.stats import chi2
+
+from agent.core.formation.frame.bias_test import bias_fit
+from agent.core.formation.frame.fault_test import fault_test, fleet_count
+from agent.core.formation.frame.neighbour_check import DEFAULT_EPSILON
+from agent.core.formation.frame.pose_pairing import identify_pairs
+from agent.core.formation.frame.poses import PoseFrame, fit_from_graph
+from agent.core.formation.frame.records import NeighborRecord
+from agent.core.perception.sighting_noise import SightingNoise
+from tests.formation.pose_fleets import fault, sim_layout, unaligned_records
+
+IDS = list(range(1, 9))
+NOISE = SightingNoise.synthetic(0.01, 0.02, math.radians(1.0))
+
+
+def _fleet(seed: int, kind: str = "", victim: int = 3) -> tuple[PoseFrame, list[NeighborRecord]]:
+    rng = np.random.default_rng(seed)
+    pos = sim_layout(rng, len(IDS))
+    heads = rng.uniform(-math.pi, math.pi, len(IDS))
+    recs = unaligned_records(IDS, pos, heads, rng, 0.02, math.radians(1.0))
+    if kind:
+        recs = [fault(r, kind) if r.robot_id == victim else r for r in recs]
+    return fit_from_graph(identify_pairs(recs, DEFAULT_EPSILON)), recs
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_sound_robots_show_no_bias(seed: int) -> None:
+    poses, _ = _fleet(seed)
+    q = chi2.isf(1e-3, 3)
+    for r in poses.ids:
+        fit = bias_fit(poses, r, NOISE, 1.0)
+        assert fit.statistic < q, (r, fit)
+        assert fit.p > 1e-3
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_a_scaled_robot_is_found_with_its_scale(seed: int) -> None:
+    """Its scale is found too large (not exactly 1.4: the fleet's fit, which holds the
+    others where the test takes them, has absorbed part of the bias)."""
+    poses, _ = _fleet(seed, "scale")
+    fit = bias_fit(poses, 3, NOISE, 1.0)
+    assert fit.p < 1e-6
+    assert fit.scale > 1.1
+
+
+def test_a_shifted_robot_is_found_with_its_shift() -> None:
+    poses, _ = _fleet(2, "shift")
+    fit = bias_fit(poses, 3, NOISE, 1.0)
+    assert fit.p < 1e-6
+    assert fit.shift[0] == pytest.approx(0.5, abs=0.1) and abs(fit.shift[1]) < 0.1
+
+
+def test_the_null_scale_divides_the_statistic() -> None:
+    poses, _ = _fleet(2, "scale")
+    a, b = bias_fit(poses, 3, NOISE, 1.0), bias_fit(poses, 3, NOISE, 4.0)
+    assert a.statistic == b.statistic and b.p == pytest.approx(chi2.sf(a.statistic / 4.0, 3))
+
+
+def test_too_few_sightings_have_no_power() -> None:
+    poses, _ = _fleet(1)
+    # keep one own sighting of robot 2 only
+    own = [m for m in poses.measurements if m.owner == 2][:1]
+    rest = [m for m in poses.measurements if m.owner != 2]
+    thin = PoseFrame(poses.frame_robot, poses.ids, poses.positions, poses.headings,
+                     poses.scores, poses.pairs, tuple(rest + own), poses.aligned)  # fmt: skip
+    fit = bias_fit(thin, 2, NOISE, 1.0)
+    assert fit.p == 1.0 and fit.statistic == 0.0 and fit.own == 1
+
+
+def test_errors() -> None:
+    poses, _ = _fleet(1)
+    with pytest.raises(ValueError, match="no pose"):
+        bias_fit(poses, 99, NOISE, 1.0)
+    with pytest.raises(ValueError, match="bias_scale"):
+        bias_fit(poses, 1, NOISE, 0.0)
+    with pytest.raises(ValueError, match="bias_scale"):
+        SightingNoise.synthetic(0.01).__class__(**{**NOISE.__dict__, "bias_scale": -1.0})
+
+
+def test_a_sound_fleet_passes_the_global_test() -> None:
+    poses, recs = _fleet(3)
+    whole = fleet_count(poses, NOISE, recs)
+    assert whole.failures == 0 and whole.p == 1.0 and whole.trials > len(IDS)
+
+
+def test_a_scaled_robot_is_named_by_the_fault_test() -> None:
+    poses, recs = _fleet(1, "scale")
+    verdict = fault_test(poses, NOISE, recs)
+    assert verdict.ok and verdict.named == (3,), verdict.reason

@@ -1,0 +1,130 @@
+"""tools/harness/fleet.py and hosts.py without processes: what a FleetSpec accepts, the agent
+command lines it writes (the agent's defaults never repeated), the scenario it gives the
+world, what its result says of it; tools/harness/report.py's matrix of runs."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+
+from agent.config import AgentConfig
+from agent.core.formation.shape.spec import BUILTIN
+from agent.core.formation.view.route import Route
+from sim import scenarios
+from tools.harness.fleet import MAX_ROBOTS, Fleet, FleetSpec, march_room, route_length
+from tools.harness.hosts import HostFleet, Hosts
+from tools.harness.report import exit_status, run_matrix
+from tools.lib.faults_report import Run
+
+NET = ["--connect", "tcp/127.0.0.1:9"]
+
+
+@pytest.mark.parametrize(
+    "over, message",
+    [
+        ({"robots": 0}, "--robots must be in"),
+        ({"robots": MAX_ROBOTS + 1}, "--robots must be in"),
+        ({"robots": 1, "isolated": True}, "at least 2 robots"),
+        ({"body": "qi"}, "--body"),
+        ({"render_workers": 9}, "--render-service"),
+        ({"render_workers": 1, "body": "naoqi"}, "--render-service"),
+        ({"noise_scale": -1.0}, "--noise-scale"),
+        ({"body": "naoqi", "auto_ids": True}, "--auto-ids"),
+        ({"timeout": 0.0}, "timeouts"),
+        ({"obstacles": -1}, "obstacles"),
+    ],
+)
+def test_a_spec_refuses_what_no_run_can_be(over: dict[str, object], message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        FleetSpec(**over)  # type: ignore[arg-type]
+
+
+def test_agent_command_lines_repeat_no_default() -> None:
+    spec = FleetSpec(robots=4)
+    cmd = spec.agent_command(2, NET)
+    assert cmd[1:] == ["-m", "agent", "--id", "2", "--fleet-size", "4", *NET]
+    odd = replace(
+        spec,
+        agent=AgentConfig(robot_id=0, timeout=60.0, publish_camera=True),
+        agent_args=((3, "--orientation=cp"),),
+        agent_log_level="DEBUG",
+        auto_ids=True,
+    )
+    three = odd.agent_command(3, NET, ["--state-dir", "s"])
+    assert three[3:] == ["--id", "auto", "--fleet-size", "4", "--timeout=60.0", "--publish-camera",
+                         *NET, "--log-level", "DEBUG", "--state-dir", "s", "--orientation=cp"]  # fmt: skip
+    assert "--orientation=cp" not in odd.agent_command(2, NET)
+    naoqi = replace(spec, body="naoqi").agent_command(1, NET, nao="tcp://h:9559")
+    assert naoqi[-4:] == ["--body", "naoqi", "--nao", "tcp://h:9559"]
+    assert "--body" not in spec.agent_command(1, NET, nao="tcp://h:9559")  # zenoh: no NAO
+    wedge = replace(spec, agent=AgentConfig(robot_id=0, shape=BUILTIN["wedge"]))
+    assert wedge.agent_command(1, NET)[3:] == ["--id", "1", "--fleet-size", "4",
+                                               "--shape", "wedge", *NET]  # fmt: skip
+
+
+def test_the_result_says_what_the_run_was() -> None:
+    march = AgentConfig(robot_id=0, d_e=0.9, march=Route(distance=2.0))
+    meta = FleetSpec(seed=5, agent=march, agent_args=((2, "--sensor-fault=rotate:40"),)).meta()
+    assert meta["seed"] == 5 and meta["d_e"] == 0.9 and meta["phi_e_deg"] == 30.0
+    assert meta["route"] == {"distance": 2.0} and meta["headings"] == "aligned"
+    assert meta["agent_args"] == ["2:--sensor-fault=rotate:40"]  # the judge reads them back
+    assert "route" not in FleetSpec().meta() and "agent_args" not in FleetSpec().meta()
+
+
+def test_a_march_widens_the_room_and_a_world_arg_scenario_wins(tmp_path: Path) -> None:
+    to = FleetSpec(robots=4, seed=3, agent=AgentConfig(robot_id=0, march=Route(to=(3.0, 4.0))))
+    assert route_length(to.agent) == 7.0 and route_length(AgentConfig(robot_id=0)) == 0.0
+    flags = march_room(to, tmp_path)
+    base = scenarios.generate(4, 3)
+    assert flags[0] == "--scenario" and scenarios.load(flags[1]).room == base.room + 7.0
+    assert march_room(replace(to, world_args=("--scenario=x.json",)), tmp_path) == []
+    assert march_room(FleetSpec(headings=scenarios.Headings("random")), tmp_path) != []
+
+
+def test_a_fleet_judged_before_it_started_has_no_result(tmp_path: Path) -> None:
+    fleet = Fleet(FleetSpec(robots=2, seed=1), tmp_path)
+    fleet.result["timeout"] = "harness: the world did not start"
+    r = fleet.judge()
+    assert r["exit_codes"] == {} and r["outcome"] == "safe_abort" and not r["success"]
+    assert json.loads((tmp_path / "result.json").read_text())["seed"] == 1
+    fleet.close()  # again: nothing
+
+
+def test_test_hosts_need_credentials_made_for_them() -> None:
+    with pytest.raises(ValueError, match="credentials"):
+        HostFleet(FleetSpec(), Path("x"), Hosts("t"))
+    with pytest.raises(ValueError, match="peer mode"):
+        HostFleet(FleetSpec(credentials=Path("c")), Path("x"), Hosts("t", agent_mode="peer"))
+    for bad in ({"tcp_rto_max_ms": 999}, {"agent_mode": "router"}, {"loss": 1.5}):
+        with pytest.raises(ValueError):
+            Hosts("t", **bad)
+
+
+def _run(seed: int, outcome: str = "complete") -> Run:
+    return Run(seed=seed, fault="kill-agent@move", outcome=outcome, contacts=0, wall_s=1.0,
+               detail="")  # fmt: skip
+
+
+def test_the_matrix_reports_after_every_run_and_rereads_earlier_files(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    seen: list[int] = []
+    runs = run_matrix(
+        [1, 2, 3],
+        lambda s: _run(s, "unsafe" if s == 2 else "complete"),
+        report=lambda rs: seen.append(len(rs)),
+        progress="t",
+        label=lambda s, r: f"{s}:{r.outcome}",
+    )
+    assert [r.seed for r in runs] == [1, 2, 3] and seen == [1, 2, 3]
+    assert "[t]" in capsys.readouterr().err.split("2:unsafe")[0]  # the progress line, labelled
+    assert exit_status(runs) == 1
+    assert exit_status(runs[:1]) == 0
+    path = tmp_path / "runs.json"
+    path.write_text(json.dumps({"runs": [r.__dict__ for r in runs]}))
+    again = run_matrix([], _run, report=lambda rs: seen.append(-len(rs)), progress="t",
+                       label=lambda s, r: "", earlier=[path, path], row=Run)  # fmt: skip
+    assert again == runs + runs and seen[-1] == -6
