@@ -129,10 +129,16 @@ def test_property_every_built_in(name: str, n: int, d_e: float, phi_deg: float) 
     check_tree(s.parent, s.distance, s.angle)
     assert np.allclose(s.positions[0], 0.0)
     assert np.allclose(s.distance[1:], d_e)
-    # its offsets compose to the slots, and the slots are pairwise >= 2r apart (>= d_e)
+    # its offsets compose to the slots, and the slots are pairwise >= d_e (>= 2r) apart;
+    # the pyramid's as close as its φ_e makes them: neighbours in a layer 2·d_e·sin φ_e,
+    # a slot and the one two layers behind it 2·d_e·cos φ_e
     np.testing.assert_allclose(compose(s.parent, s.distance, s.angle), s.positions, atol=1e-8)
-    assert _pairwise_min(s.positions) >= min(d_e, 2 * d_e * math.sin(phi)) - 1e-9
-    assert _pairwise_min(s.positions) >= 2 * RADIUS - 1e-9
+    if name == "pyramid":
+        spacing = min(d_e, 2 * d_e * math.sin(phi), 2 * d_e * math.cos(phi))
+        assert _pairwise_min(s.positions) >= spacing - 1e-9
+    else:
+        assert _pairwise_min(s.positions) >= d_e - 1e-9
+        assert _pairwise_min(s.positions) >= 2 * RADIUS - 1e-9
     # the leader is at the front: nobody ahead of it
     assert float(np.max(s.positions[:, 1])) <= 1e-9
     # a nested shape: the first slots of a larger fleet are the smaller fleet's

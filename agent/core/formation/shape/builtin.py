@@ -3,7 +3,8 @@ II eqs. 5-7; the others are our additions, on the tree conventions of :mod:`tree
 
 Every built-in spaces its neighbours by the agreed spacing d_e (``PlanParams.d_e``, the
 AUV paper's d_e), so that every two slots are >= d_e apart (the pyramid:
-``min(d_e, 2·d_e·sin φ_e)``), and each places the leader (slot 0) at the front:
+``min(d_e, 2·d_e·sin φ_e, 2·d_e·cos φ_e)``, its neighbours in a layer and a slot and the
+one two layers behind it), and each places the leader (slot 0) at the front:
 
 * ``pyramid`` (AUV eqs. 5-7, :mod:`pyramid`): layer L holds L robots, each child d_e
   behind its parent at φ_e off the backward axis; N robots fill ⌈layers⌉ left-aligned.
