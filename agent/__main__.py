@@ -4,6 +4,7 @@
                     [--world-connect EP]...
                     [--no-multicast-scouting] [--mode peer|client] [--d-e M]
                     [--phi-e-deg 30] [--orientation pca|cp] [--strategy S]
+                    [--shape NAME|FILE]
                     [--timeout S] [--member-grace S] [--join-timeout S]
                     [--research-rounds K] [--explore-step M]
                     [--body zenoh|naoqi]
@@ -15,8 +16,11 @@ over its qi protocol (``--body naoqi --nao tcp://nao.local:9559``: a real robot,
 virtual one served by ``python -m sim --naoqi``). Agents always talk zenoh to each other.
 
 Every agent of a fleet must be started with the same planning parameters (``--d-e``,
-``--phi-e-deg``, ``--orientation``, ``--strategy``, the route): the agreement compares
-their digests and stops the whole fleet, naming the odd robot, when they differ.
+``--phi-e-deg``, ``--orientation``, ``--strategy``, ``--shape``, the route): the agreement
+compares their digests and stops the whole fleet, naming the odd robot, when they differ.
+``--shape`` is a built-in (``pyramid``, the default, ``line``, ``column``, ``wedge``,
+``circle``, ``grid``) or a formation file (docs/formation.md "Shapes"); a malformed file
+is a usage error naming the bad field, before the agent joins the fleet.
 
 ``--world-connect EP`` (so that loss on the robots' radio spares the body): the body's queries to
 the world (register, camera, walk, turn) go through a second zenoh session connected to ``EP`` (the
@@ -250,6 +254,7 @@ def agent_config(args: argparse.Namespace, rid: int) -> AgentConfig:
         phi_e=math.radians(args.phi_e_deg),
         orientation=args.orientation,
         strategy=args.strategy,
+        shape=args.shape,
         timeout=args.timeout,
         wave_timeout=args.wave_timeout,
         member_grace=args.member_grace,
@@ -417,6 +422,7 @@ def main(argv: list[str] | None = None) -> int:
                 formation,
                 recovery=recovery,
             )
+            log.info("robot %d builds the shape %s", rid, args.shape.text())
             code = runner.run()
         finally:
             body.close()

@@ -12,11 +12,14 @@ import argparse
 import dataclasses
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 from agent.core.agreed_params import ParamValue
 from agent.core.formation.frame.research import DEFAULT_STEP
 from agent.core.formation.params import D_E, PHI_E_DEG, PLAN_STRATEGIES, PlanParams
 from agent.core.formation.shape.pyramid import ORIENTATIONS
+from agent.core.formation.shape.schema import parse_shape
+from agent.core.formation.shape.spec import BUILTIN, PYRAMID, Shape
 from agent.core.formation.view.route import Route
 from agent.core.nao import HEAD_YAW_LIMIT
 from agent.core.perception.camera import CameraModel
@@ -29,9 +32,40 @@ from agent.core.perception.sensor_fault import SensorFault
 SEARCH_YAWS = CameraModel().sweep_yaws(limit=HEAD_YAW_LIMIT)
 
 
+def load_shape(spec: str) -> Shape:
+    """The shape ``spec`` names: a built-in (``pyramid``, ``line``, ``column``, ``wedge``,
+    ``circle``, ``grid``) or the path of a formation file (JSON, docs/formation.md
+    "Shapes"). ``ValueError`` naming the file and the bad field, or the missing file."""
+    if spec in BUILTIN:
+        return BUILTIN[spec]
+    path = Path(spec)
+    if not path.is_file():
+        raise ValueError(
+            f"shape {spec!r}: neither a built-in ({', '.join(BUILTIN)}) nor a formation file"
+        )
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ValueError(f"shape file {spec}: {exc}") from exc
+    try:
+        shape = parse_shape(text)
+        PlanParams(shape=shape)  # its slots far enough apart for two robots
+    except ValueError as exc:
+        raise ValueError(f"shape file {spec}: {exc}") from exc
+    return dataclasses.replace(shape, source=str(path.resolve()))
+
+
+def _shape_argument(spec: str) -> Shape:
+    try:
+        return load_shape(spec)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from exc
+
+
 def add_plan_arguments(p: argparse.ArgumentParser) -> None:
-    """``--orientation`` and ``--strategy`` (the agent's and the demo's, which gives them to
-    every agent): part of the agreed parameters (:meth:`AgentConfig.agreed_params`)."""
+    """``--orientation``, ``--strategy`` and ``--shape`` (the agent's and the demo's, which
+    gives them to every agent): part of the agreed parameters
+    (:meth:`AgentConfig.agreed_params`)."""
     p.add_argument(
         "--orientation",
         choices=ORIENTATIONS,
@@ -45,12 +79,20 @@ def add_plan_arguments(p: argparse.ArgumentParser) -> None:
         default="default",
         help="slot assignment strategy of the planner (agent/core/formation/plan.py)",
     )
+    p.add_argument(
+        "--shape",
+        type=_shape_argument,
+        default=PYRAMID,
+        metavar="NAME|FILE",
+        help=f"the formation: a built-in ({', '.join(BUILTIN)}; default pyramid) or a "
+        "formation file (JSON: the slots as a tree, docs/formation.md)",
+    )
 
 
 @dataclass(frozen=True)
 class AgentConfig:
-    """What one agent is told: its robot, the fleet, the pyramid (d_e, phi_e, orientation,
-    strategy) and limits."""
+    """What one agent is told: its robot, the fleet, the formation (d_e, phi_e,
+    orientation, strategy, shape) and limits."""
 
     robot_id: int
     fleet_size: int | None = None
@@ -58,6 +100,7 @@ class AgentConfig:
     phi_e: float = math.radians(PHI_E_DEG)
     orientation: str = "pca"  # pyramid orientation: "pca" (NAO eq. 12) | "cp" (AUV III.B)
     strategy: str = "default"  # assignment strategy, one of formation.params.PLAN_STRATEGIES
+    shape: Shape = PYRAMID  # the formation's shape (agent/core/formation/shape/spec.py)
     timeout: float = 120.0  # s without news (a new record or digest) before agreement fails
     wave_timeout: float = 600.0  # s to wait for earlier waves, and for the fleet to hold
     settle: float = 3.0  # s of unchanged membership when no fleet size is given
@@ -101,9 +144,10 @@ class AgentConfig:
         """The ``python -m agent`` flags that give this config, the inverse of its parser:
         ``agent_config(parse_args(c.to_argv()), c.robot_id) == c``. Only the settings that
         differ from the defaults are written (the agent's defaults have their one home
-        here). ``claim_id``: ``--id auto`` (the agent claims a robot from the world).
+        here); a shape other than the pyramid as ``--shape NAME|FILE``, from its
+        ``source``. ``claim_id``: ``--id auto`` (the agent claims a robot from the world).
         ``ValueError`` for a setting that no flag carries (:data:`NO_FLAG`) when it is not
-        its default."""
+        its default, and for a shape with no source (built in code, not loaded)."""
         fixed = [f for f in NO_FLAG if getattr(self, f) != _DEFAULTS[f]]
         if fixed:
             raise ValueError(f"no python -m agent flag sets {', '.join(fixed)}")
@@ -116,6 +160,13 @@ class AgentConfig:
             value = getattr(self, name)
             if value != _DEFAULTS[name]:
                 argv.append(f"{flag}={value!r}" if isinstance(value, float) else f"{flag}={value}")
+        if self.shape != PYRAMID:  # a built-in's name or a formation file's path
+            if not self.shape.source:
+                raise ValueError(
+                    f"no python -m agent flag sets the shape {self.shape.name!r}: it came "
+                    "from no formation file (its source)"
+                )
+            argv += ["--shape", self.shape.source]
         if not self.correct:
             argv.append("--no-correct")
         if self.march is not None and self.march.distance is not None:
@@ -136,7 +187,11 @@ class AgentConfig:
     def plan_params(self) -> PlanParams:
         """The planning parameters this agent plans with (the formation seam takes them)."""
         return PlanParams(
-            d_e=self.d_e, phi_e=self.phi_e, orientation=self.orientation, strategy=self.strategy
+            d_e=self.d_e,
+            phi_e=self.phi_e,
+            orientation=self.orientation,
+            strategy=self.strategy,
+            shape=self.shape,
         )
 
     def agreed_params(self) -> dict[str, ParamValue]:
@@ -149,6 +204,7 @@ class AgentConfig:
             "radius": pp.radius,
             "orientation": pp.orientation,
             "strategy": pp.strategy,
+            "shape": pp.shape.digest,
             "route": route,
             "march_step": self.march_step if self.march is not None else None,
             "research_rounds": self.research_rounds,
@@ -192,8 +248,8 @@ class AgentConfig:
 
 
 #: The settings written as ``FLAG=VALUE`` by :meth:`AgentConfig.to_argv` (the others:
-#: ``--id``, ``--fleet-size``, ``--phi-e-deg``, ``--no-correct``, the route, the sensor
-#: fault and ``--publish-camera``).
+#: ``--id``, ``--fleet-size``, ``--phi-e-deg``, ``--shape``, ``--no-correct``, the route,
+#: the sensor fault and ``--publish-camera``).
 FLAGS = {
     "d_e": "--d-e",
     "orientation": "--orientation",

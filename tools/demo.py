@@ -4,13 +4,15 @@
     python -m tools.demo --robots 3 --seed 1 --batch 20 [--out DIR]   (seeds 1..20)
     python -m tools.demo --scenario sim/scenarios/paper3.json    (robots from the file)
     python -m tools.demo --robots 4 --orientation cp [--strategy S] [--isolated]
+    python -m tools.demo --robots 6 --shape wedge     (or line, column, circle, grid, FILE)
     python -m tools.demo --view     (watch it live in a browser: http://127.0.0.1:8080/)
 
 Starts ``python -m sim`` and N ``python -m agent`` processes (peers over loopback
 TCP, no multicast so that concurrent runs never mix), shows one live status line per
 agent, and when the agents have finished prints the result table from ground truth:
 per child–parent pair of the pyramid the distance and the angle off the pyramid's
-backward axis, r_d = (d - d_e)/d_e and r_φ = (φ - φ_e)/φ_e (NAO paper 5.1.1);
+backward axis, r_d = (d - d_e)/d_e and r_φ = (φ - φ_e)/φ_e (NAO paper 5.1.1; for
+another shape the same against the pair's distance and angle in the shape's tree);
 collisions; wall and sim time per phase; bytes each agent published; whether every
 agent computed the same plan digest. Writes ``DIR/result.json``, a Fig. 16/24-like
 ``DIR/formation.png`` (starts, walked paths, final pyramid, ids) and ``DIR/run.mcap``
@@ -29,8 +31,9 @@ displacement (``march_distance``) must be within 10 % of the route (|displacemen
 reported (``march_worst_abs_r_d``, ``march_worst_abs_r_phi``); the figure shows the
 pyramid at the start of the march (grey) and at its end, and the tracks in between.
 
-Fleet parameters: ``--d-e``, ``--phi-e-deg``, ``--orientation pca|cp`` and ``--strategy``
-are given to every agent and used by the evaluator's plan. ``--scenario FILE`` starts the
+Fleet parameters: ``--d-e``, ``--phi-e-deg``, ``--orientation pca|cp``, ``--strategy`` and
+``--shape NAME|FILE`` (a built-in or a formation file, docs/formation.md "Shapes") are
+given to every agent and used by the evaluator's plan and its judge of the truth. ``--scenario FILE`` starts the
 world on a scenario file (robot count and ids from the file); ``--isolated`` generates
 the seed's scenario with one robot 2-3 m from every other (``sim.scenarios.generate``).
 

@@ -28,7 +28,7 @@ import numpy as np
 
 from agent.core.control import PAPER_GAINS, wrap_pi
 from agent.core.control.alignment import look_yaws, match_parent
-from agent.core.formation.shape.verdict import FACING_TOL, check_pair, facing_misfit
+from agent.core.formation.shape.verdict import FACING_TOL, check_edge, facing_misfit
 from agent.core.formation.view.passers_by import passers_by
 from agent.core.formation.view.route import Route
 from agent.core.nao import CAMERA_HFOV, HEAD_YAW_LIMIT
@@ -273,13 +273,14 @@ class Hold:
         The child looks where the plan puts its parent (:meth:`_find_parent`; or takes
         the correction's last look, when it did not move after it) and judges
         the measured offset with the formula the evaluation uses
-        (:func:`agent.core.formation.shape.verdict.check_pair`: r_d, r_φ against the pyramid
-        axis). The figures travel in every later status. A parent not found within
-        ``max_correction`` of its planned place, a pair out of tolerance, or a parent whose
-        mask says it faces more than ``FACING_TOL`` from the axis this robot believes in
-        (its own start heading misjudged), stops this robot with the figure: the fleet
-        never reports "formation held" on a formation its own camera says is wrong. The
-        leader has no parent to check.
+        (:func:`agent.core.formation.shape.verdict.check_edge`: r_d, r_φ against its slot's
+        distance and angle from its parent in the shape's tree). The figures travel in
+        every later status. A parent not found within ``max_correction`` of its planned
+        place, a pair out of tolerance, or a parent whose mask says it faces more than
+        ``FACING_TOL`` from the axis this robot believes in (its own start heading
+        misjudged), stops this robot with the figure: the fleet never reports "formation
+        held" on a formation its own camera says is wrong. The leader has no parent to
+        check.
         """
         ctx, report = self.ctx, self.ctx.report
         plan = self.course.plan
@@ -304,7 +305,10 @@ class Hold:
             )
         params = ctx.cfg.plan_params()
         axis = self.course.final_heading
-        check = check_pair(ctx.me, parent, seen, axis, params.d_e, params.phi_e)
+        # this child's slot in the shape's tree: its distance and angle from its parent
+        slots = params.shape.slots(len(plan.robots), params.d_e, params.phi_e)
+        _, dist, ang = slots.edge(rp.order)
+        check = check_edge(ctx.me, parent, seen, axis, dist, ang, params.phi_e)
         report.show_check(check)
         log.info("own check: %s", check.text())
         if not check.sure:  # with a margin for the camera's own error

@@ -21,6 +21,7 @@ from agent.body.in_process import WorldBody
 from agent.config import AgentConfig
 from agent.core.control import wrap_pi
 from agent.core.formation.params import PlanParams
+from agent.core.formation.shape.spec import BUILTIN, PYRAMID, Shape
 from agent.net.bus import Bus
 from agent.phases.context import NORTH
 from agent.phases.membership import Peer
@@ -29,8 +30,10 @@ from sim.world import World
 from tests.body.conftest import Robot, parts
 
 
-def robot_for(rid: int, world: World, bus: Bus, perception: PerceptionAdapter) -> Robot:
-    cfg = AgentConfig(robot_id=rid, fleet_size=3, wave_timeout=5.0)
+def robot_for(
+    rid: int, world: World, bus: Bus, perception: PerceptionAdapter, shape: Shape = PYRAMID
+) -> Robot:
+    cfg = AgentConfig(robot_id=rid, fleet_size=3, wave_timeout=5.0, shape=shape)
     return parts(WorldBody(world, rid), cfg, perception, bus)
 
 
@@ -170,10 +173,10 @@ def test_a_small_correction_is_a_sidestep_without_turning(
     assert world.locomotion.contacts == 0
 
 
-def _holding(world: World, bus: Bus, perception: PerceptionAdapter):  # type: ignore[no-untyped-def]
-    """Every robot on its slot facing the pyramid axis; the runner of a child."""
+def _holding(world: World, bus: Bus, perception: PerceptionAdapter, shape: Shape = PYRAMID):  # type: ignore[no-untyped-def]
+    """Every robot on its slot facing the shape's axis; the runner of a child."""
     fa = FormationAdapter()
-    plan = fa.plan(_true_records(world), PlanParams())
+    plan = fa.plan(_true_records(world), PlanParams(shape=shape))
     origin = np.asarray(world.pose(plan.frame_robot)[:2]) - np.asarray(
         plan.robot(plan.frame_robot).start
     )
@@ -182,7 +185,7 @@ def _holding(world: World, bus: Bus, perception: PerceptionAdapter):  # type: ig
         x, y = origin + np.asarray(rp.target)
         world.set_pose(rp.robot_id, float(x), float(y), axis)
     child = next(rp for rp in plan.robots if rp.parent >= 0)
-    r = robot_for(child.robot_id, world, bus, perception)
+    r = robot_for(child.robot_id, world, bus, perception, shape)
     r.course.follow(plan)
     r.course.face(wrap_pi(axis))
     r.ctx.beliefs.heading = wrap_pi(axis)
@@ -198,6 +201,19 @@ def test_verify_measures_the_pair_and_says_so_in_the_status(
     check = r.ctx.report.figures.check
     assert check is not None and check.parent == child.parent and check.ok
     assert abs(check.r_d) < 0.06 and abs(check.r_phi) < 0.15
+
+
+def test_verify_measures_a_line_s_child_beside_its_parent(
+    world: World, bus: Bus, perception: PerceptionAdapter
+) -> None:
+    # a line: the parent stands d_e to the child's side (90° off its facing), and the pair
+    # is judged against that edge of the line's tree; as a pyramid pair it would be wrong
+    r, _, child, _ = _holding(world, bus, perception, BUILTIN["line"])
+    r.hold.verify()
+    check = r.ctx.report.figures.check
+    assert check is not None and check.parent == child.parent and check.ok
+    assert abs(check.r_d) < 0.06 and abs(check.r_phi) < 0.15
+    assert abs(abs(math.degrees(check.angle)) - 90.0) < 5.0
 
 
 def test_verify_stops_a_robot_whose_parent_is_not_where_the_plan_says(

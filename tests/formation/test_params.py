@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 
 from agent.core.formation.params import FRONT_MAX_N, OPTIMAL_MAX_N, SCHEDULE_MAX_N, PlanParams
+from agent.core.formation.shape.spec import BUILTIN, TREE, Shape
 
 
 def test_params_errors() -> None:
@@ -21,6 +24,16 @@ def test_params_errors() -> None:
     ):
         with pytest.raises(ValueError, match=msg):
             PlanParams(**kw)  # type: ignore[arg-type]
+
+
+def test_a_shape_must_be_one_whose_slots_two_robots_can_hold() -> None:
+    with pytest.raises(ValueError, match="shape must be a Shape"):
+        PlanParams(shape="line")  # type: ignore[arg-type]
+    tight = Shape("tight", TREE, ((0, 1.0, math.pi / 2), (1, 0.3, math.pi)))
+    with pytest.raises(ValueError, match=r"'tight': slots 1 and 2 are 0.300 m apart, closer "):
+        PlanParams(shape=tight)
+    PlanParams(shape=tight, radius=0.14)  # smaller robots fit
+    assert PlanParams(shape=BUILTIN["grid"]).shape.name == "grid"
 
 
 def test_default_strategy_attempts_by_fleet_size() -> None:

@@ -123,3 +123,28 @@ def test_render_service_workers_and_what_they_served(tmp_path: Path) -> None:
     (tmp_path / "render-2.log").write_text("render ready robots=2 shard=2/2 seed=1\n")
     assert served(tmp_path / "render-1.log") == 207
     assert served_by(tmp_path, 3) == {"render-1": 207, "render-2": None, "render-3": None}
+
+
+def test_the_shape_goes_to_every_agent_and_into_the_result(tmp_path: Path) -> None:
+    import json
+
+    from agent.core.formation.shape.spec import BUILTIN, PYRAMID
+
+    net = ["--connect", "tcp/127.0.0.1:9"]
+    a = parse_args([])
+    assert a.shape is PYRAMID and a.spec.agent.shape is PYRAMID
+    assert "--shape" not in a.spec.agent_command(1, net)  # the default: the agents' own
+    assert a.spec.meta()["shape_spec"] == "pyramid"
+    line = parse_args(["--shape", "line"]).spec
+    argv = line.agent_command(1, net)
+    assert argv[argv.index("--shape") + 1] == "line" and line.agent.shape is BUILTIN["line"]
+    assert line.meta()["shape_spec"] == "line"  # what the judge loads again
+    assert line.meta()["shape_digest"] == BUILTIN["line"].digest
+    f = tmp_path / "trio.json"
+    slot = {"parent": 0, "distance": 1, "angle_deg": 90}
+    f.write_text(json.dumps({"name": "p", "slots": [slot, {**slot, "angle_deg": -90}]}))
+    spec = parse_args(["--shape", str(f)]).spec
+    assert spec.agent.shape.name == "p"
+    argv = spec.agent_command(2, net)
+    assert argv[argv.index("--shape") + 1] == str(f.resolve())  # whatever the agents' cwd
+    assert spec.meta()["shape_spec"] == str(f.resolve())

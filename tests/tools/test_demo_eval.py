@@ -65,6 +65,22 @@ def test_summarise_failure_without_truth(tmp_path: Path) -> None:
     assert (tmp_path / "result.json").is_file()
 
 
+def test_summarise_judges_the_shape_the_run_was_given(tmp_path: Path) -> None:
+    # three robots standing in a line facing north, the leader in the middle: a line, no
+    # pyramid
+    obs = Observer(0.0)
+    line = {1: (0.0, 0.0, math.pi / 2), 2: (-0.8, 0.0, math.pi / 2), 3: (0.8, 0.0, math.pi / 2)}
+    obs.truth = [(0.0, line), (1.0, line)]
+    for i in (1, 2, 3):
+        obs.agents[i] = AgentView(phase="done", exit_code=0, plan_digest="ab")
+    for spec, ok in (("line", True), ("pyramid", False)):
+        result = {"robots": 3, "seed": 0, "d_e": 0.8, "phi_e_deg": 30.0, "shape_spec": spec}
+        r = summarise(obs, result, tmp_path, [1, 2, 3], 0.8, math.radians(30), quiet=True)
+        assert r["within_tolerance"] is ok, r["pairs"]
+        assert len(r["pairs"]) == 2
+    assert {p["side"] for p in r["pairs"]} == {"left", "right"}
+
+
 def test_moved_is_the_longest_start_to_final_displacement() -> None:
     r = {"starts": {"1": [0, 0, 0], "2": [1, 1, 0]}, "finals": {"1": [0.3, 0.4, 1], "2": [1, 1, 2]}}
     assert moved(r) == pytest.approx(0.5)

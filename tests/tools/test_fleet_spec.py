@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 
 from agent.config import AgentConfig
+from agent.core.formation.shape.spec import BUILTIN
 from agent.core.formation.view.route import Route
 from sim import scenarios
 from tools.harness.fleet import MAX_ROBOTS, Fleet, FleetSpec, march_room, route_length
@@ -59,6 +60,9 @@ def test_agent_command_lines_repeat_no_default() -> None:
     naoqi = replace(spec, body="naoqi").agent_command(1, NET, nao="tcp://h:9559")
     assert naoqi[-4:] == ["--body", "naoqi", "--nao", "tcp://h:9559"]
     assert "--body" not in spec.agent_command(1, NET, nao="tcp://h:9559")  # zenoh: no NAO
+    wedge = replace(spec, agent=AgentConfig(robot_id=0, shape=BUILTIN["wedge"]))
+    assert wedge.agent_command(1, NET)[3:] == ["--id", "1", "--fleet-size", "4",
+                                               "--shape", "wedge", *NET]  # fmt: skip
 
 
 def test_the_result_says_what_the_run_was() -> None:

@@ -159,6 +159,9 @@ class FleetSpec:
             "noise_scale": float(self.noise_scale),
             "orientation": cfg.orientation,
             "strategy": cfg.strategy,
+            # the judge loads the shape again from its name or file (tools.harness.judge)
+            "shape_spec": cfg.shape.source,
+            "shape_digest": cfg.shape.digest,
         }
         if self.scenario is not None:
             out["scenario"] = str(self.scenario)

@@ -143,6 +143,7 @@ def fleet_spec(p: argparse.ArgumentParser, a: argparse.Namespace) -> FleetSpec:
             a,
             orientation=a.orientation,
             strategy=a.strategy,
+            shape=a.shape,
             timeout=a.agree_timeout,
             correct=not a.no_correct,
             march=_route(a),

@@ -1,5 +1,7 @@
-"""A run judged from ground truth: per child-parent pair of the pyramid r_d = (d - d_e)/d_e
-and r_φ = (φ - φ_e)/φ_e (NAO paper 5.1.1), contacts, the march, phase times, bytes,
+"""A run judged from ground truth: per child-parent pair of the formation (the pyramid by
+default, any shape of ``--shape``) r_d and r_φ (NAO paper 5.1.1: (d - d_e)/d_e and
+(φ - φ_e)/φ_e for the pyramid; against the pair's distance and angle in the shape's tree
+for any shape), contacts, the march, phase times, bytes,
 identical plan digests; the result table and the formation figure (Fig. 16/24-like).
 
 Success: the run's :func:`outcome` is ``complete`` (every agent the fleet kept exited 0
@@ -17,14 +19,19 @@ from __future__ import annotations
 import json
 import math
 import textwrap
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from agent.core.formation.shape.verdict import R_D_MAX, R_PHI_MAX, check_pair
+from agent.config import load_shape
+from agent.core.formation.shape.spec import PYRAMID
+from agent.core.formation.shape.spec import Shape as FormationShape
+from agent.core.formation.shape.verdict import R_D_MAX, R_PHI_MAX
 from agent.wire import PHASES
 from tools.harness.observe import AgentView, Observer
+from tools.harness.pairs import evaluate, plan_pairs
 from tools.harness.procs import rogue_reports
 from tools.harness.truth import MOVED_M, excursions, judge_shape
 from tools.lib.frame_fit import common_frame_pose
@@ -37,7 +44,12 @@ PHASE_ORDER = tuple(p for p in PHASES if p != "failed")
 
 
 def plan_from_agreed(
-    obs: Observer, d_e: float, phi_e: float, orientation: str = "pca", strategy: str = "default"
+    obs: Observer,
+    d_e: float,
+    phi_e: float,
+    orientation: str = "pca",
+    strategy: str = "default",
+    shape: FormationShape = PYRAMID,
 ) -> Any:
     """The plan recomputed by the evaluator from the records the agents exchanged, with
     the fleet's planning parameters."""
@@ -46,39 +58,10 @@ def plan_from_agreed(
 
     fa = FormationAdapter()
     recs = tuple(obs.records[i] for i in sorted(obs.records))
-    params = PlanParams(d_e=d_e, phi_e=phi_e, orientation=orientation, strategy=strategy)
+    params = PlanParams(
+        d_e=d_e, phi_e=phi_e, orientation=orientation, strategy=strategy, shape=shape
+    )
     return fa, fa.plan(recs, params)
-
-
-def pyramid_pairs(plan: Any, ids: list[int]) -> list[tuple[int, int]]:
-    """(child, parent) ids of the planned pyramid (AUV eq. 6 via ``RobotPlan.parent``)."""
-    return sorted((i, int(plan.robot(i).parent)) for i in ids if int(plan.robot(i).parent) >= 0)
-
-
-def evaluate(
-    final: dict[int, tuple[float, float, float]],
-    pairs: list[tuple[int, int]],
-    axis: float,
-    d_e: float,
-    phi_e: float,
-) -> list[dict[str, float]]:
-    """Per pair: distance, angle off the backward axis, r_d, r_φ (NAO paper 5.1.1), by the
-    formula the robots' own check uses (:func:`agent.core.formation.shape.verdict.check_pair`)."""
-    rows = []
-    for child, parent in pairs:
-        offset = np.array(final[parent][:2]) - np.array(final[child][:2])
-        c = check_pair(child, parent, offset, axis, d_e, phi_e)
-        rows.append(
-            {
-                "child": child,
-                "parent": parent,
-                "distance": c.distance,
-                "angle_deg": math.degrees(c.angle),
-                "r_d": c.r_d,
-                "r_phi": c.r_phi,
-            }
-        )
-    return rows
 
 
 MARCH_TOLERANCE = 0.10  # the leader's displacement within 10 % of the route
@@ -89,7 +72,7 @@ def judge_march(
     result: dict[str, Any],
     plan: Any,
     axis: float,
-    pairs: list[tuple[int, int]],
+    pairs: Sequence[tuple[int, int] | tuple[int, int, float, float]],
     d_e: float,
     phi_e: float,
 ) -> None:
@@ -122,7 +105,7 @@ def judge_march(
     result["march_error"] = float(np.hypot(*(disp - v))) / max(length, 1e-9)
     worst_d = worst_phi = 0.0
     for _, poses in obs.truth[k0:]:
-        if all(c in poses and p in poses for c, p in pairs):
+        if all(pr[0] in poses and pr[1] in poses for pr in pairs):
             for row in evaluate(poses, pairs, axis, d_e, phi_e):
                 worst_d = max(worst_d, abs(row["r_d"]))
                 worst_phi = max(worst_phi, abs(row["r_phi"]))
@@ -414,6 +397,7 @@ def summarise(
         result["starts"] = {str(i): list(obs.truth[0][1][i]) for i in ids if i in obs.truth[0][1]}
         result["finals"] = {str(i): list(obs.truth[-1][1][i]) for i in ids if i in obs.truth[-1][1]}
     result["records_observed"] = len(obs.records)
+    shape = load_shape(result.get("shape_spec", "pyramid"))
     if obs.truth and len(obs.records) == n:
         try:
             fa, plan = plan_from_agreed(
@@ -422,6 +406,7 @@ def summarise(
                 phi_e,
                 result.get("orientation", "pca"),
                 result.get("strategy", "default"),
+                shape,
             )
             result["evaluator_plan_digest"] = str(plan.digest)
             result["excluded"] = [int(i) for i in plan.excluded]
@@ -436,7 +421,7 @@ def summarise(
             axis = fa.axis_angle(plan) + frame[2] - math.pi / 2
             result["axis_deg"] = math.degrees(axis)
             if result.get("route"):  # the march against the plan's route and pairs
-                pairs = pyramid_pairs(plan, [i for i in ids if i in plan.ids])
+                pairs = plan_pairs(plan, [i for i in ids if i in plan.ids], shape, d_e, phi_e)
                 judge_march(obs, result, plan, axis, pairs, d_e, phi_e)
             if "obstacles" in result:
                 from tools.lib.obstacle_scenario import judge_obstacles
@@ -455,10 +440,10 @@ def summarise(
     members = [i for i in ids if i not in left_out]
     judged = False
     if obs.truth and members:
-        shape = judge_shape(obs.truth[-1][1], members, d_e, phi_e)
-        result["pairs"], result["shape"] = shape.rows, shape.summary()
-        result.setdefault("leader", shape.leader)
-        judged = not shape.missing
+        verdict = judge_shape(obs.truth[-1][1], members, d_e, phi_e, shape)
+        result["pairs"], result["shape"] = verdict.rows, verdict.summary()
+        result.setdefault("leader", verdict.leader)
+        judged = not verdict.missing
     rows = result["pairs"]
     result["max_abs_r_d"] = max((abs(r["r_d"]) for r in rows), default=math.nan)
     result["max_abs_r_phi"] = max((abs(r["r_phi"]) for r in rows), default=math.nan)

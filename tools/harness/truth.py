@@ -1,6 +1,7 @@
-"""A run's ground truth read as a user would read it: who moved, and the pyramid's shape
-(a tool's verdict comes from the ground truth, never from what the agents claim; NAO
-paper 5.1.1 for r_d and r_φ; AUV paper II eqs. 5-7 for the pyramid's slots).
+"""A run's ground truth read as a user would read it: who moved, and the formation's
+shape (a tool's verdict comes from the ground truth, never from what the agents claim;
+NAO paper 5.1.1 for r_d and r_φ; AUV paper II eqs. 5-7 for the pyramid's slots, the tree
+of agent/core/formation/shape/tree.py for every shape).
 
 Who moved (:func:`excursions`, :data:`MOVED_M`): a robot moved when its true position got
 farther than :data:`MOVED_M` from where it stood when it published its last search record
@@ -8,15 +9,15 @@ farther than :data:`MOVED_M` from where it stood when it published its last sear
 walk on no plan by design, NAO paper 4.1.3 rule 2), whatever its statuses said.
 
 The shape (:func:`judge_shape`), from the true final poses alone, never from the agents'
-planner: the formation faces the mean of its members' true headings (a held pyramid
-faces its axis); its slot tree is the pyramid's definition for that many members
-(:func:`slot_tree`: the leader, and per slot its parent's slot and its side); robots are
-matched to slots by position (:func:`assign_slots`). :func:`check_shape` then judges
-the true poses against any parent links: the leader in front of every other robot, each
-child behind its parent at d_e (|r_d| <= ``R_D_MAX``) and on its own side at ±φ_e (a left
-child on the parent's left, a right child on its right, in the facing frame; |r_φ| <=
-``R_PHI_MAX``, where a child on the wrong side has r_φ near -200 %), every robot with a
-true pose in a slot.
+planner: the formation faces the mean of its members' true headings (a held formation
+faces its axis); its slot tree is the shape's definition for that many members
+(:func:`slot_links`: the leader, and per slot its parent's slot, distance and angle; the
+pyramid's: eq. 6, d_e, ±φ_e); robots are matched to slots by position
+(:func:`assign_slots`). :func:`check_shape` then judges the true poses against any
+parent links: the leader in front of every robot whose slot lies behind it, each child at
+its tree's distance (|r_d| <= ``R_D_MAX``) and angle from its parent (|r_φ| <=
+``R_PHI_MAX``, r_φ = the angle error over φ_e, :func:`check_edge`: a pyramid's child on
+the wrong side has r_φ near -200 %), every robot with a true pose in a slot.
 """
 
 from __future__ import annotations
@@ -28,8 +29,9 @@ from typing import Any
 
 import numpy as np
 
-from agent.core.formation.shape.pyramid import layer_of, parent_of, slot_positions
-from agent.core.formation.shape.verdict import R_D_MAX, R_PHI_MAX
+from agent.core.formation.shape.spec import PYRAMID
+from agent.core.formation.shape.spec import Shape as FormationShape
+from agent.core.formation.shape.verdict import R_D_MAX, R_PHI_MAX, check_edge
 
 Pose = tuple[float, float, float]
 Truth = Sequence[tuple[float, Mapping[int, Pose]]]
@@ -37,8 +39,6 @@ Truth = Sequence[tuple[float, Mapping[int, Pose]]]
 #: A robot that got farther than this (m) from its reference position moved (the truth's
 #: noise bound: a robot only turning on the spot stays well within it).
 MOVED_M = 0.05
-#: A child's side: on its parent's left or right in the formation's facing frame.
-LEFT, RIGHT = 1, -1
 
 
 def excursions(truth: Truth, ids: Sequence[int], refs: Mapping[int, int]) -> dict[int, float]:
@@ -55,17 +55,14 @@ def excursions(truth: Truth, ids: Sequence[int], refs: Mapping[int, int]) -> dic
     return out
 
 
-def slot_tree(k: int) -> list[tuple[int, int]]:
-    """Per slot order 0..k-1 of a pyramid of ``k``: (parent slot, side); the leader's is
-    (-1, 0). Eq. 6: the last slot of a layer is its parent's right child, every other
-    one a left child (slot positions: ``pyramid.slot_positions``)."""
-    tree = [(-1, 0)]
-    for order in range(1, k):
-        parent = parent_of(order)
-        layer = layer_of(order)
-        last = layer * (layer + 1) // 2 - 1
-        tree.append((parent, RIGHT if order == last else LEFT))
-    return tree
+def slot_links(
+    shape: FormationShape, k: int, d_e: float, phi_e: float
+) -> list[tuple[int, float, float]]:
+    """Per slot 0..k-1 of ``shape`` for ``k`` robots: (parent slot, distance, angle) of its
+    tree (:mod:`agent.core.formation.shape.tree`); the leader's is (-1, 0, 0). The
+    pyramid's: eq. 6, each child d_e behind its parent at φ_e on its side."""
+    s = shape.slots(k, d_e, phi_e)
+    return [(int(p), float(d), float(a)) for p, d, a in zip(s.parent, s.distance, s.angle)]
 
 
 def facing_of(final: Mapping[int, Pose], members: Sequence[int]) -> float:
@@ -84,16 +81,21 @@ def _frame(facing: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def assign_slots(
-    final: Mapping[int, Pose], members: Sequence[int], facing: float, d_e: float, phi_e: float
+    final: Mapping[int, Pose],
+    members: Sequence[int],
+    facing: float,
+    d_e: float,
+    phi_e: float,
+    shape: FormationShape = PYRAMID,
 ) -> dict[int, int]:
-    """robot -> slot order: the pyramid of ``len(members)`` slots turned to ``facing`` and
+    """robot -> slot order: the shape's slots for ``len(members)`` turned to ``facing`` and
     centred on the members' true centroid (the translation that fits any assignment
     best), matched to the members' true positions by least total squared distance."""
     from scipy.optimize import linear_sum_assignment
 
     ids = sorted(members)
     fwd, left = _frame(facing)
-    slots = slot_positions(len(ids), d_e, phi_e)  # x to the right, y forward
+    slots = shape.slots(len(ids), d_e, phi_e).positions  # x to the right, y forward
     world = np.outer(slots[:, 1], fwd) - np.outer(slots[:, 0], left)
     pts = np.array([final[i][:2] for i in ids], dtype=np.float64)
     world += pts.mean(axis=0) - world.mean(axis=0)
@@ -104,18 +106,31 @@ def assign_slots(
 
 @dataclass(frozen=True)
 class Link:
-    """A child of the pyramid, its parent, and its side (:data:`LEFT` or :data:`RIGHT`)."""
+    """A child of the shape's tree, its parent, and where it belongs from that parent:
+    ``distance`` (m) and ``angle`` (rad, CCW from the facing)."""
 
     child: int
     parent: int
-    side: int
+    distance: float
+    angle: float
+
+    @property
+    def side(self) -> str:
+        """``left`` or ``right`` of its parent's facing axis, or ``on axis`` (ahead or
+        behind)."""
+        s = math.sin(self.angle)
+        return "left" if s > 1e-9 else "right" if s < -1e-9 else "on axis"
 
 
-def links_of(slot_of: Mapping[int, int]) -> tuple[int, list[Link]]:
-    """(leader, links) of an assignment robot -> slot of a whole pyramid (:func:`slot_tree`)."""
+def links_of(
+    slot_of: Mapping[int, int], shape: FormationShape, d_e: float, phi_e: float
+) -> tuple[int, list[Link]]:
+    """(leader, links) of an assignment robot -> slot of a whole shape (:func:`slot_links`)."""
     robot_at = {s: i for i, s in slot_of.items()}
-    tree = slot_tree(len(robot_at))
-    links = [Link(robot_at[s], robot_at[p], side) for s, (p, side) in enumerate(tree) if p >= 0]
+    tree = slot_links(shape, len(robot_at), d_e, phi_e)
+    links = [
+        Link(robot_at[s], robot_at[p], dist, ang) for s, (p, dist, ang) in enumerate(tree) if p >= 0
+    ]
     return robot_at[0], sorted(links, key=lambda lk: lk.child)
 
 
@@ -149,46 +164,69 @@ class Shape:
         }
 
 
+def _behind_leader(leader: int, links: Sequence[Link]) -> list[int]:
+    """The robots whose slot lies behind the leader's (the tree's offsets composed from
+    the leader, more than 1 mm back along the facing)."""
+    ahead = {leader: 0.0}
+    children: dict[int, list[Link]] = {}
+    for lk in links:
+        children.setdefault(lk.parent, []).append(lk)
+    todo = [leader]
+    while todo:
+        p = todo.pop()
+        for lk in children.get(p, []):
+            if lk.child not in ahead:
+                ahead[lk.child] = ahead[p] + lk.distance * math.cos(lk.angle)
+                todo.append(lk.child)
+    return sorted(i for i, y in ahead.items() if y < -1e-3)
+
+
 def check_shape(
     final: Mapping[int, Pose],
     leader: int,
     links: Sequence[Link],
-    d_e: float,
     phi_e: float,
     facing: float | None = None,
 ) -> Shape:
     """Judge the true final poses against the parent links (module docstring). ``facing``
     (rad): the formation's facing in the world; default: :func:`facing_of` its robots.
-    Per link r_d = (d - d_e)/d_e and r_φ = (φ - φ_e)/φ_e with φ the angle between the
-    backward axis and the line parent -> child, positive towards the child's own side."""
+    Per link r_d and r_φ by the robots' own formula
+    (:func:`agent.core.formation.shape.verdict.check_edge`); ``angle_deg`` is the true
+    angle between the parent's backward axis and the line parent -> child, positive
+    towards the child's own side (the pyramid's: φ_e when right, near −φ_e on the wrong
+    side)."""
     robots = sorted({leader, *(lk.child for lk in links), *(lk.parent for lk in links)})
     missing = [i for i in robots if i not in final]
     if facing is None:
         facing = facing_of(final, robots)
     if missing:
         return Shape(leader, facing, leader_in_front=False, missing=missing)
-    fwd, left = _frame(facing)
+    fwd, _ = _frame(facing)
     rows = []
     for lk in links:
-        v = np.array(final[lk.child][:2]) - np.array(final[lk.parent][:2])  # parent -> child
-        d = float(np.hypot(*v))
-        angle = lk.side * math.atan2(float(v @ left), -float(v @ fwd))
+        offset = np.array(final[lk.parent][:2]) - np.array(final[lk.child][:2])
+        c = check_edge(lk.child, lk.parent, offset, facing, lk.distance, lk.angle, phi_e)
+        off_back = math.pi - abs(lk.angle) + c.r_phi * phi_e
         rows.append({
-            "child": lk.child, "parent": lk.parent, "side": "left" if lk.side == LEFT else "right",
-            "distance": d, "angle_deg": math.degrees(angle),
-            "r_d": (d - d_e) / d_e, "r_phi": (angle - phi_e) / phi_e,
+            "child": lk.child, "parent": lk.parent, "side": lk.side,
+            "distance": c.distance, "angle_deg": math.degrees(off_back),
+            "r_d": c.r_d, "r_phi": c.r_phi,
         })  # fmt: skip
-    ahead = {i: float(np.array(final[i][:2]) @ fwd) for i in robots}
-    front = all(ahead[leader] > ahead[i] for i in robots if i != leader)
+    along = {i: float(np.array(final[i][:2]) @ fwd) for i in robots}
+    front = all(along[leader] > along[i] for i in _behind_leader(leader, links))
     return Shape(leader, facing, rows, front, [])
 
 
 def judge_shape(
-    final: Mapping[int, Pose], members: Sequence[int], d_e: float, phi_e: float
+    final: Mapping[int, Pose],
+    members: Sequence[int],
+    d_e: float,
+    phi_e: float,
+    shape: FormationShape = PYRAMID,
 ) -> Shape:
-    """The pyramid of ``members`` judged from their true final poses alone: facing
-    (:func:`facing_of`), slots by matching (:func:`assign_slots`), then :func:`check_shape`.
-    A member without a true pose fails it (``missing``)."""
+    """The formation of ``members`` judged from their true final poses alone: facing
+    (:func:`facing_of`), slots of ``shape`` by matching (:func:`assign_slots`), then
+    :func:`check_shape`. A member without a true pose fails it (``missing``)."""
     if not members:
         raise ValueError("no members to judge")
     missing = sorted(i for i in members if i not in final)
@@ -196,5 +234,6 @@ def judge_shape(
         facing = facing_of(final, members) if len(missing) < len(members) else 0.0
         return Shape(min(members), facing, leader_in_front=False, missing=missing)
     facing = facing_of(final, members)
-    leader, links = links_of(assign_slots(final, members, facing, d_e, phi_e))
-    return check_shape(final, leader, links, d_e, phi_e, facing)
+    slot_of = assign_slots(final, members, facing, d_e, phi_e, shape)
+    leader, links = links_of(slot_of, shape, d_e, phi_e)
+    return check_shape(final, leader, links, phi_e, facing)

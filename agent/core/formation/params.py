@@ -1,6 +1,7 @@
 """The planner's parameters: ``PlanParams`` (the pyramid's d_e and phi_e of AUV eqs.
 5-7, the robot radius of the safety rule, the eq. 9 threshold epsilon of NAO paper
-4.1.2) and the choices a plan may name: assignment strategy (NAO paper 4.2 and
+4.1.2, the shape: the pyramid or another, :mod:`agent.core.formation.shape.spec`) and
+the choices a plan may name: assignment strategy (NAO paper 4.2 and
 Lemma 1, AUV III.C), pyramid orientation (NAO eqs. 12-13 or CP), common-frame method
 (eq. 10 or least squares), placement, and obstacle method (NAO paper 5.1.2).
 
@@ -16,7 +17,9 @@ from dataclasses import dataclass
 from agent.core.formation.frame.common_frame import METHODS
 from agent.core.formation.frame.neighbour_check import DEFAULT_EPSILON
 from agent.core.formation.paths.assignment import STRATEGIES
+from agent.core.formation.shape.layout import closest_slots
 from agent.core.formation.shape.pyramid import ORIENTATIONS, PLACEMENTS, check_geometry
+from agent.core.formation.shape.spec import PYRAMID, Shape
 
 #: ``default`` strategy: exact min-sum (``optimal``, O(n³)) up to this many robots; the
 #: paper's O(n log n) strategy above. Whatever it starts with, ``default`` falls back to
@@ -72,9 +75,13 @@ class PlanParams:
     # "default": centroid, or front when the centroid placement cannot be scheduled safely
     placement: str = "default"
     obstacle_method: str = "default"  # see OBSTACLE_METHODS
+    #: the formation's shape (the papers' pyramid by default; docs/formation.md "Shapes")
+    shape: Shape = PYRAMID
 
     def __post_init__(self) -> None:
         check_geometry(self.d_e, self.phi_e)
+        if not isinstance(self.shape, Shape):
+            raise ValueError(f"shape must be a Shape, got {self.shape!r}")
         if not (
             isinstance(self.radius, int | float) and math.isfinite(self.radius) and self.radius > 0
         ):
@@ -101,6 +108,13 @@ class PlanParams:
             and self.epsilon > 0
         ):
             raise ValueError(f"epsilon must be a finite distance > 0, got {self.epsilon!r}")
+        if self.shape.capacity is not None:  # a formation file: its slots must be clear
+            a, b, d = closest_slots(self.shape, self.d_e, self.phi_e)
+            if d < 2.0 * self.radius:
+                raise ValueError(
+                    f"shape {self.shape.name!r}: slots {a} and {b} are {d:.3f} m apart, "
+                    f"closer than two robots may stand (2·radius = {2.0 * self.radius:.3f} m)"
+                )
 
     def resolved_strategy(self, n: int) -> str:
         """The assignment strategy for n robots: ``default`` resolved by fleet size."""

@@ -1,7 +1,9 @@
-"""The plan: from neighbour records to one safe pyramid plan (NAO paper 4.1-4.2, 5.2.2 (iii)).
+"""The plan: from neighbour records to one safe plan of the formation's shape, the pyramid
+by default (NAO paper 4.1-4.2, 5.2.2 (iii)).
 
 Pipeline: neighbour check (Algorithm 2, eq. 9) -> common frame (eq. 10 or least
-squares) -> pyramid frame (PCA eq. 12-13, or CP) -> slots (AUV eqs. 5-7) ->
+squares) -> pyramid frame (PCA eq. 12-13, or CP; a shape's frame, :mod:`layout`) ->
+slots (AUV eqs. 5-7, or the shape's tree, ``PlanParams.shape``) ->
 assignment (combined sub-groups + Lemma 1, exact, or bottleneck-bounded; compared by
 :mod:`choice`) -> safe schedule (:mod:`scheduled`, :mod:`scheduler`: slot swaps and via
 points until every close pair has a safe order under the rule of :mod:`safety`) ->
@@ -30,7 +32,10 @@ leg (to the first via point, or to the target); a robot already on its slot has
 ``distance == 0`` and ``heading == axis``.
 
 The digest is sha256 over a canonical binary encoding (ids ascending, float64 bits),
-so two agents holding the same record set compute bit-identical plans and digests.
+so two agents holding the same record set compute bit-identical plans and digests. The
+digest of a plan of any shape but the pyramid also covers the shape's own digest (the
+pyramid's is the papers' plan's, as before shapes were data), so agents planning
+different shapes never agree.
 """
 
 from __future__ import annotations
@@ -49,7 +54,8 @@ from agent.core.formation.frame.obstacle_map import common_frame_obstacles
 from agent.core.formation.frame.records import NeighborRecord
 from agent.core.formation.params import PlanParams
 from agent.core.formation.paths.fallback import banded_plan
-from agent.core.formation.shape.pyramid import pyramid_frame
+from agent.core.formation.shape.layout import shape_frame
+from agent.core.formation.shape.spec import PYRAMID
 from agent.core.formation.waves.choice import choose
 from agent.core.formation.waves.obstacles import plan_around_obstacles, plan_near_obstacles
 from agent.core.formation.waves.scheduled import Scheduled, scheduled_plan
@@ -156,19 +162,6 @@ def _check_positions(ids: Sequence[int], positions: np.ndarray) -> tuple[list[in
     return id_list, pos
 
 
-def _parents(order: np.ndarray) -> np.ndarray:
-    """Eq. 6 on an array of orders (see :func:`pyramid.parent_of`), -1 for the leader."""
-    o = np.asarray(order, dtype=np.int64)
-    t = np.floor(np.sqrt(1.0 + 8.0 * o)).astype(np.int64)
-    t = np.where((t + 1) ** 2 <= 1 + 8 * o, t + 1, t)
-    t = np.where(t * t > 1 + 8 * o, t - 1, t)
-    t = np.where(t % 2 == 0, t - 1, t)
-    layer = (t - 1) // 2 + 1
-    last = layer * (layer + 1) // 2 - 1
-    par = np.where(o == last, o - layer, o - (layer - 1))
-    return np.where(layer == 1, -1, par)
-
-
 def _f(x: float) -> bytes:
     return struct.pack("<d", float(x))
 
@@ -218,7 +211,8 @@ def plan_from_positions(
     obstacles: np.ndarray | None = None,
     frame_robot: int = -1,
 ) -> Plan:
-    """Plan a pyramid for robots at known positions (caller's frame).
+    """Plan the shape of ``params`` (the pyramid by default) for robots at known
+    positions (caller's frame).
 
     Wave 0 is the leader alone, unless the leader's slot lies within 2·radius of another
     robot's start: then the robots that must clear it go first (see :mod:`scheduler`).
@@ -249,12 +243,12 @@ def plan_from_positions(
             frame_origin, beta = op.origin, op.beta
             best = scheduled_plan(pos, op.targets, op.order, op.vias, obs, params, strategy)
     else:
-        frame = pyramid_frame(pos, params.orientation)
+        frame = shape_frame(pos, params.orientation, params.shape)
         starts_p = frame.to_pyramid(pos)
         frame_origin, beta = frame.origin, frame.beta
         chosen = choose(pos, frame, starts_p, params)
         if chosen is None:  # the plan that always exists (see fallback)
-            bp = banded_plan(pos, frame, params.d_e, params.phi_e, params.radius)
+            bp = banded_plan(pos, frame, params.d_e, params.phi_e, params.radius, params.shape)
             frame_origin = bp.origin
             chosen = Scheduled(bp.order, bp.targets, bp.vias, bp.waves, bp.after, "banded")
         best = chosen
@@ -276,7 +270,7 @@ def plan_from_positions(
     ids_arr = np.asarray(sorted_ids, dtype=np.int64)
     row_of_order = np.empty(n, dtype=np.int64)
     row_of_order[order] = np.arange(n)
-    par_order = _parents(order)
+    par_order = params.shape.slots(n, params.d_e, params.phi_e).parent[order]
     parent_ids = np.where(par_order < 0, -1, ids_arr[row_of_order[np.maximum(par_order, 0)]])
     starts_c = pos.copy()
     targets_c = np.array(targets, dtype=np.float64, copy=True)
@@ -313,6 +307,8 @@ def plan_from_positions(
         "obstacles": obs,
         "params": repr((params.d_e, params.phi_e, params.radius, params.orientation)),
     }
+    if params.shape.digest != PYRAMID.digest:  # the pyramid's plan digest is as it was
+        fields_["shape"] = params.shape.digest
     return Plan(
         frame_robot=int(frame_robot),
         leader=leader,

@@ -105,3 +105,74 @@ def test_a_robot_is_sure_only_with_a_margin() -> None:
         2, 1, D_E * np.array([math.sin(PHI_E), math.cos(PHI_E)]), math.pi / 2, D_E, PHI_E
     )
     assert c.sure
+
+
+# ------------------------------------------------------------------ any shape's tree edge
+
+LEFT, RIGHT = math.pi - PHI_E, PHI_E - math.pi  # the pyramid's tree angles
+
+
+def test_an_edge_worked_by_hand() -> None:
+    from agent.core.formation.shape.verdict import check_edge
+
+    # axis north; a line's child belongs 0.8 m to its parent's left (angle 90°); it stands
+    # 0.9 m away, 6° behind that line (parent − child = 0.9·(cos 6°, sin 6°))
+    off = 0.9 * np.array([math.cos(math.radians(6)), math.sin(math.radians(6))])
+    c = check_edge(2, 1, off, math.pi / 2, 0.8, math.pi / 2, PHI_E)
+    assert c.r_d == pytest.approx(0.125)
+    assert math.degrees(c.angle) == pytest.approx(96.0)  # the direction parent → child
+    assert c.r_phi == pytest.approx(-6.0 / 30.0)  # towards the backward axis: negative
+    assert c.ok
+    # a column's child belongs straight behind; it stands 4° to the right of that line
+    # (CCW from the facing: 184°), r_φ counted CCW: +4°/φ_e; 4° to the left: −4°/φ_e
+    off = 0.8 * np.array([-math.sin(math.radians(4)), math.cos(math.radians(4))])
+    c = check_edge(2, 1, off, math.pi / 2, 0.8, math.pi, PHI_E)
+    assert c.r_phi == pytest.approx(4.0 / 30.0)
+    c = check_edge(2, 1, off * np.array([-1.0, 1.0]), math.pi / 2, 0.8, math.pi, PHI_E)
+    assert c.r_phi == pytest.approx(-4.0 / 30.0)
+
+
+@given(
+    st.floats(0.3, 2.0),
+    st.floats(0.05, 1.5),
+    st.floats(-math.pi, math.pi),
+    st.booleans(),
+)
+def test_on_its_own_side_a_pyramid_edge_is_the_pair_check(
+    d: float, phi: float, axis: float, left: bool
+) -> None:
+    from agent.core.formation.shape.verdict import check_edge
+
+    # parent − child at φ off the axis, the child on its side (parent − child turned to the
+    # right of the axis: the child behind-left): check_pair's unsigned angle and the edge's
+    # signed one agree
+    s = 1.0 if left else -1.0
+    off = d * np.array([math.cos(axis - s * phi), math.sin(axis - s * phi)])
+    a = check_pair(2, 1, off, axis, D_E, PHI_E)
+    b = check_edge(2, 1, off, axis, D_E, LEFT if left else RIGHT, PHI_E)
+    assert b.r_d == pytest.approx(a.r_d, abs=1e-12)
+    assert b.r_phi == pytest.approx(a.r_phi, abs=1e-9)
+    # on the wrong side the pair check passes, the edge fails: r_φ = −(φ + φ_e)/φ_e
+    w = check_edge(2, 1, off, axis, D_E, RIGHT if left else LEFT, PHI_E)
+    assert w.r_phi == pytest.approx(-(phi + PHI_E) / PHI_E, abs=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("offset", "axis", "dist", "angle", "phi_e", "match"),
+    [
+        ([math.nan, 0.0], 0.0, 0.8, 0.0, 0.5, "offset"),
+        ([1.0, 0.0, 0.0], 0.0, 0.8, 0.0, 0.5, "offset"),
+        ([1.0, 0.0], math.inf, 0.8, 0.0, 0.5, "finite"),
+        ([1.0, 0.0], 0.0, 0.8, math.nan, 0.5, "finite"),
+        ([1.0, 0.0], 0.0, 0.0, 0.0, 0.5, "positive"),
+        ([1.0, 0.0], 0.0, 0.8, 0.0, -0.5, "positive"),
+        ([0.0, 0.0], 0.0, 0.8, 0.0, 0.5, "same point"),
+    ],
+)
+def test_edge_errors(
+    offset: list[float], axis: float, dist: float, angle: float, phi_e: float, match: str
+) -> None:
+    from agent.core.formation.shape.verdict import check_edge
+
+    with pytest.raises(ValueError, match=match):
+        check_edge(2, 1, np.array(offset), axis, dist, angle, phi_e)

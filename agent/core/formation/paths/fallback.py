@@ -8,13 +8,15 @@ fleet: its last layer at ``Y0 + g`` where ``Y0 = y_max + g`` is the *corridor* l
 
 Order and slots. Robots are sequenced front to back: y descending, then x ascending,
 then row (= id order). Slot columns (eq. 7 puts slots on columns ``sx = d_e sin φ_e``
-apart) are filled by a 1-D transport in x: robots sorted by x fill the columns left to
-right, each column taking as many robots as it has slots; inside a column the robots in
-sequence order take its slots front to back. So within a column, start y and slot y
+apart; for another shape the columns are its distinct slot x and ``sx`` the smallest gap
+between two) are filled by a 1-D transport in x: robots sorted by x fill the columns left
+to right, each column taking as many robots as it has slots; inside a column the robots
+in sequence order take its slots front to back. So within a column, start y and slot y
 fall together along the sequence; robots of different columns have slots >= sx >= c
 apart in x. If ``sx < c``, layer blocks replace the columns: the k-th block of robots
-in the sequence takes the k-th layer (inside a block the robots sorted by x take the
-layer's slots left to right), so along the whole sequence the slot y never increases.
+in the sequence takes the k-th row of slots from the front (the pyramid's k-th layer;
+a row: the slots of equal y; inside a block the robots sorted by x take the row's slots
+left to right), so along the whole sequence the slot y never increases.
 
 Bands. Robot i's path stays inside the x-interval ``[min(x_i, X_i), max(x_i, X_i)]``
 (its *band*). Two robots whose bands are >= c apart never come within c of each other,
@@ -51,7 +53,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agent.core.formation.shape.pyramid import PyramidFrame, centred_slots
+from agent.core.formation.shape.layout import centred, column_step, columns
+from agent.core.formation.shape.pyramid import PyramidFrame
+from agent.core.formation.shape.spec import PYRAMID, Shape
 
 #: Gap between the front-most start and the corridor line, and between the corridor line
 #: and the last layer, in clearances.
@@ -69,9 +73,15 @@ class BandedPlan:
 
 
 def banded_plan(
-    starts: np.ndarray, frame: PyramidFrame, d_e: float, phi_e: float, radius: float
+    starts: np.ndarray,
+    frame: PyramidFrame,
+    d_e: float,
+    phi_e: float,
+    radius: float,
+    shape: Shape = PYRAMID,
 ) -> BandedPlan:
-    """The banded plan of the module doc for robot rows ``starts`` (N, 2), common frame."""
+    """The banded plan of the module doc for robot rows ``starts`` (N, 2), common frame,
+    on the slots of ``shape`` (default the pyramid)."""
     pos = np.asarray(starts, dtype=np.float64)
     if pos.ndim != 2 or pos.shape[1] != 2 or pos.shape[0] < 1:
         raise ValueError(f"starts must be a non-empty (N, 2) array, got shape {pos.shape}")
@@ -84,18 +94,18 @@ def banded_plan(
     g = GAP * c
     sp = frame.to_pyramid(pos)
     y_corr = float(np.max(sp[:, 1])) + g
-    slots = centred_slots(n, d_e, phi_e)
+    slots = centred(shape, n, d_e, phi_e)
     slots = slots + np.array([0.0, y_corr + g - float(np.min(slots[:, 1]))])
     rows = np.arange(n)
     seq = np.lexsort((rows, sp[:, 0], -sp[:, 1]))  # front to back
     rank = np.empty(n, dtype=np.int64)
     rank[seq] = rows  # position in the sequence
     order = np.empty(n, dtype=np.int64)
-    sx = d_e * math.sin(phi_e)  # slot columns are sx apart (eq. 7)
+    col = columns(slots[:, 0])
+    sx = column_step(shape, slots[:, 0], d_e, phi_e)  # the pyramid's: sx apart (eq. 7)
     if n > 1 and sx >= c * (1.0 - 1e-10):
         # columns: robots by x (1-D transport, then sequence rank) fill the slot columns
         # left to right; inside a column, sequence order takes the slots front to back
-        col = np.rint((slots[:, 0] - float(np.min(slots[:, 0]))) / sx).astype(np.int64)
         slot_seq = np.lexsort((-slots[:, 1], col))  # by column, front to back
         by_x = np.lexsort((rank, sp[:, 0]))
         col_of_robot = np.empty(n, dtype=np.int64)
@@ -103,16 +113,17 @@ def banded_plan(
         robots_seq = np.lexsort((rank, col_of_robot))  # by column, then sequence
         order[robots_seq] = slot_seq
     else:
-        # layer blocks: slots of one layer are consecutive orders with equal y
-        layer_start = 0
-        layer = 1
-        while layer_start < n:
-            stop = min(layer_start + layer, n)
-            block = seq[layer_start:stop]
+        # layer blocks: the slots of one row (equal y, a pyramid's layer) front to back,
+        # each row left to right; the next robots of the sequence take a row, by x
+        row = columns(-slots[:, 1])  # rank of the slot's row, front (highest y) first
+        slot_seq = np.lexsort((rows, slots[:, 0], row))
+        bounds = np.flatnonzero(np.diff(row[slot_seq])) + 1
+        start = 0
+        for stop in [*bounds.tolist(), n]:
+            block = seq[start:stop]
             block = block[np.lexsort((block, sp[block, 0]))]
-            order[block] = np.arange(layer_start, stop)  # eq. 7: a layer left to right
-            layer_start = stop
-            layer += 1
+            order[block] = slot_seq[start:stop]  # eq. 7: a layer left to right
+            start = stop
     slot_p = slots[order]
     targets = frame.to_common(slot_p)
     axis = np.array([math.cos(frame.beta), math.sin(frame.beta)])

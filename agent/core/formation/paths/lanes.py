@@ -15,7 +15,8 @@ Geometry (pyramid frame, y = the axis; AUV eq. 7): the slots of one layer are
 2·d_e·sin φ_e apart and consecutive layers are offset by d_e·sin φ_e, so every slot's x
 lies on one grid of step ``2h = d_e·sin φ_e``. A lane is a line x = const half-way
 between two grid columns: it passes every slot at >= h, clear of it when h >= the
-clearance (``LANE_GAP``). A robot with start (x0, y0), lane L and slot (xs, ys),
+clearance (``LANE_GAP``). Any other shape: 2h is the smallest gap between two of its
+slot columns, and a lane h beside a slot's column is >= h from every slot too. A robot with start (x0, y0), lane L and slot (xs, ys),
 |L - xs| = h, walks
 
     (x0, y0) -> (L, y0 + e·|L - x0| / LANE_SLOPE) -> (L, ys) -> (xs, ys),
@@ -117,10 +118,15 @@ def bundle_lanes(
     phi_e: float,
     clearance: float,
     joint: bool = False,
+    step: float | None = None,
 ) -> tuple[np.ndarray, list[tuple[np.ndarray, ...]]] | None:
     """The lane plan of the module doc, in the pyramid frame: (slot order per robot row,
     via points per row), or None when no robot gets a lane (h < LANE_GAP clearances, no
-    bundle). ``order``: each row's slot (a permutation of the rows of ``slots_p``)."""
+    bundle). ``order``: each row's slot (a permutation of the rows of ``slots_p``).
+    ``step``: the smallest gap between two slot columns of another shape
+    (:func:`agent.core.formation.shape.layout.column_step`; h = step / 2 keeps every lane
+    at >= h from every slot, whatever the columns' spacing); default the pyramid's
+    d_e·sin φ_e."""
     p = np.asarray(starts_p, dtype=np.float64)
     s = np.asarray(slots_p, dtype=np.float64)
     perm = np.asarray(order)
@@ -133,7 +139,9 @@ def bundle_lanes(
         raise ValueError(f"clearance must be a finite distance > 0, got {clearance!r}")
     check_geometry(d_e, phi_e)
     out_order = perm.astype(np.int64).copy()
-    h = 0.5 * d_e * math.sin(phi_e)
+    if step is not None and not (math.isfinite(step) and step > 0):
+        raise ValueError(f"the column step must be a finite distance > 0, got {step!r}")
+    h = 0.5 * (d_e * math.sin(phi_e) if step is None else step)
     vias: list[tuple[np.ndarray, ...]] = [() for _ in range(n)]
     if h < LANE_GAP * clearance:
         return None

@@ -62,6 +62,34 @@ def parent_of(order: int) -> int:
     return int(order) - (layer - 1)
 
 
+def layers(order: np.ndarray) -> np.ndarray:
+    """Eq. 5 on an array of orders (see :func:`layer_of`): exact integer fix-up of the
+    float square root."""
+    o = np.asarray(order, dtype=np.int64)
+    t = np.floor(np.sqrt(1.0 + 8.0 * o)).astype(np.int64)
+    t = np.where((t + 1) ** 2 <= 1 + 8 * o, t + 1, t)
+    t = np.where(t * t > 1 + 8 * o, t - 1, t)
+    t = np.where(t % 2 == 0, t - 1, t)
+    return np.asarray((t - 1) // 2 + 1)
+
+
+def parents(order: np.ndarray) -> np.ndarray:
+    """Eq. 6 on an array of orders (see :func:`parent_of`), -1 for the leader."""
+    o = np.asarray(order, dtype=np.int64)
+    layer = layers(o)
+    last = layer * (layer + 1) // 2 - 1
+    par = np.where(o == last, o - layer, o - (layer - 1))
+    return np.asarray(np.where(layer == 1, -1, par))
+
+
+def right_children(order: np.ndarray) -> np.ndarray:
+    """Per order, whether it is its parent's right-back child (eq. 6: the last robot of
+    a full layer, the leader excepted); every other child is a left-back one."""
+    o = np.asarray(order, dtype=np.int64)
+    layer = layers(o)
+    return np.asarray((layer > 1) & (o == layer * (layer + 1) // 2 - 1))
+
+
 def slot_positions(n: int, d_e: float, phi_e: float) -> np.ndarray:
     """(n, 2) slots in the pyramid frame with the leader at (0, 0), by eq. 7 from parents."""
     if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 1:

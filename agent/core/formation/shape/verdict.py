@@ -1,4 +1,4 @@
-"""Is the pyramid right? One formula for the robots' own check and the ground truth's.
+"""Is the formation right? One formula for the robots' own check and the ground truth's.
 
 NAO paper 5.1.1 measures a built pyramid pair by pair: for a child and its parent, the
 distance d between them and the angle φ between the line parent → child and the
@@ -92,6 +92,47 @@ def check_pair(
     cosang = (float(v[0]) * math.cos(axis) + float(v[1]) * math.sin(axis)) / d
     phi = math.acos(min(1.0, max(-1.0, cosang)))
     return PairCheck(child, parent, d, phi, (d - d_e) / d_e, (phi - phi_e) / phi_e)
+
+
+def check_edge(
+    child: int,
+    parent: int,
+    offset: np.ndarray,
+    axis: float,
+    distance: float,
+    angle: float,
+    phi_e: float,
+) -> PairCheck:
+    """Judge a pair of any shape's tree (:mod:`agent.core.formation.shape.tree`) from
+    ``offset`` = parent − child (m), in a frame where the shape's axis points at ``axis``
+    (rad, CCW from +x): the child belongs ``distance`` from its parent at ``angle`` (rad,
+    CCW from the facing).
+
+    r_d = (d − distance) / distance; r_φ = δ / φ_e, δ the signed angle (wrapped to
+    (−π, π]) from the tree's direction parent → child to the measured one, counted
+    positive away from the backward axis on the child's own side (clockwise for a child
+    on its parent's left, counter-clockwise on its right or straight ahead or behind):
+    for the pyramid's pairs (distance d_e, angle ±(π − φ_e)) exactly NAO paper 5.1.1's
+    r_d and (φ − φ_e)/φ_e on the child's own side, and a child on the wrong side has r_φ
+    near −200 %. ``angle`` of the result: the measured direction parent → child, CCW
+    from the facing. ``ValueError`` as :func:`check_pair`.
+    """
+    v = np.asarray(offset, dtype=np.float64).reshape(-1)
+    if v.shape != (2,) or not np.all(np.isfinite(v)):
+        raise ValueError(f"offset must be two finite numbers, got {offset!r}")
+    if not (math.isfinite(axis) and math.isfinite(angle)):
+        raise ValueError(f"axis and angle must be finite, got {axis}, {angle}")
+    if not (distance > 0.0 and phi_e > 0.0 and math.isfinite(distance) and math.isfinite(phi_e)):
+        raise ValueError(f"distance and phi_e must be positive, got {distance}, {phi_e}")
+    d = float(math.hypot(float(v[0]), float(v[1])))
+    if d == 0.0:
+        raise ValueError("child and parent at the same point")
+    # the direction parent → child (−offset), CCW from the facing
+    seen = math.remainder(math.atan2(-float(v[1]), -float(v[0])) - axis, 2.0 * math.pi)
+    delta = math.remainder(seen - angle, 2.0 * math.pi)
+    side = math.sin(angle)  # > 0: the child belongs on its parent's left
+    sign = -1.0 if side > 1e-12 else 1.0
+    return PairCheck(child, parent, d, seen, (d - distance) / distance, sign * delta / phi_e)
 
 
 def facing_misfit(offset: np.ndarray, facing: float, axis: float) -> float:

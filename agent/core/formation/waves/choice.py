@@ -3,12 +3,13 @@ candidate assignments, or the attempts of :meth:`params.PlanParams.attempts` in 
 
 Candidates (n <= ``CANDIDATES_MAX_N``): the min-sum assignment (``optimal``), min-sum
 under bounds on the longest path between B* and min-sum's own (the CAT-ORA idea), and
-CAPT, all on the centred pyramid (AUV eqs. 5-7). Each is made safe and packed
-(:mod:`scheduled`); of those whose total path stays within ``PATH_SLACK`` of the
-optimum, the best by dependency makespan get detours on their critical chain, a copy
-with start sidesteps (:mod:`kinks`) and two copies with bundle lanes (:mod:`lanes`: the
-slots of each bundle re-paired per side and jointly, from the detoured plan's
-assignment), and the smallest makespan wins; a lane plan only when its makespan is
+CAPT, all on the centred slots of the shape (the pyramid: AUV eqs. 5-7). Each is made
+safe and packed (:mod:`scheduled`); of those whose total path stays within
+``PATH_SLACK`` of the optimum, the best by dependency makespan get detours on their
+critical chain, a copy with start sidesteps (:mod:`kinks`) and two copies with bundle
+lanes (:mod:`lanes`: the slots of each bundle re-paired per side and jointly, from the
+detoured plan's assignment; a shape with a single slot column has none), and the
+smallest makespan wins; a lane plan only when its makespan is
 strictly smaller than every other. Otherwise the paper's matching (NAO paper 4.2, Lemma 1) or the
 explicit strategy is tried per placement until one schedules safely.
 """
@@ -23,7 +24,8 @@ from agent.core.formation.params import CANDIDATES_MAX_N, PlanParams
 from agent.core.formation.paths.assignment import assign, bounded_assignment, min_bottleneck
 from agent.core.formation.paths.kinks import start_kinks
 from agent.core.formation.paths.lanes import bundle_lanes
-from agent.core.formation.shape.pyramid import PyramidFrame, placed_slots
+from agent.core.formation.shape.layout import column_step, placed
+from agent.core.formation.shape.pyramid import PyramidFrame
 from agent.core.formation.waves.scheduled import Scheduled, scheduled_plan
 
 #: The ``default`` strategy keeps a plan whose total path is at most this many times the
@@ -82,7 +84,8 @@ def choose(
     empty: list[tuple[np.ndarray, ...]] = [() for _ in range(n)]
     exact = params.strategy == "default" and params.placement in ("default", "centroid")
     if exact and n <= CANDIDATES_MAX_N:
-        slots_p = placed_slots(n, params.d_e, params.phi_e, starts_p, "centroid")
+        slots_p = placed(params.shape, n, params.d_e, params.phi_e, starts_p, "centroid")
+        step = column_step(params.shape, slots_p[:, 0], params.d_e, params.phi_e)
         good: list[tuple[float, float, int, Scheduled]] = []
         bound = math.inf
         for k, (strat, perm) in enumerate(_candidates(starts_p, slots_p)):
@@ -120,9 +123,9 @@ def choose(
             if alt is not None and alt.total <= bound:
                 kinked.append((alt.makespan, alt.total, len(BOUND_STEPS) + 2 + k, alt))
             # the same with bundle lanes (a lane each, slots re-paired in the bundle)
-            for m, joint in enumerate((False, True)):
+            for m, joint in enumerate((False, True) if math.isfinite(step) else ()):
                 ln = bundle_lanes(
-                    starts_p, slots_p, better.order, params.d_e, params.phi_e, clear, joint
+                    starts_p, slots_p, better.order, params.d_e, params.phi_e, clear, joint, step
                 )
                 if ln is None:
                     continue
@@ -151,7 +154,7 @@ def choose(
                     win = lane_win
             return win[3]
     for strat, placement in params.attempts(n):
-        slots_p = placed_slots(n, params.d_e, params.phi_e, starts_p, placement)
+        slots_p = placed(params.shape, n, params.d_e, params.phi_e, starts_p, placement)
         perm = assign(starts_p, slots_p, strat, params.d_e, params.phi_e)
         try:
             return scheduled_plan(

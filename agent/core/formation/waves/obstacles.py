@@ -17,6 +17,10 @@ The paper's procedure, as we implement it:
    to obstacles), deepest vacancy first taken by the deepest robot; the final target is
    the vacant slot moved by the shift. Robots already on a slot of order < N stay.
 
+Any shape whose first N slots of N + M are its slots for N (every shape but ``circle`` and
+``grid``, :attr:`agent.core.formation.shape.spec.Shape.nested`) takes the pyramid's place
+in it; the ``near`` placement below works for every shape.
+
 The path of each robot is thus start -> slot -> shifted slot -> final slot (via points
 that coincide with the previous point are dropped). The safety scheduler treats the
 obstacles as robots that stand still in every wave, and may replace such a path by a
@@ -41,7 +45,7 @@ import numpy as np
 
 from agent.core.formation.params import CANDIDATES_MAX_N, PlanParams
 from agent.core.formation.paths.assignment import assign
-from agent.core.formation.shape.pyramid import centred_slots, placed_slots, pyramid_frame
+from agent.core.formation.shape.layout import centred, placed, shape_frame
 from agent.core.formation.waves.scheduled import Scheduled, path_length, scheduled_plan
 
 #: ``near`` placement: a slot's centre stays this many robot radii from an obstacle's
@@ -103,9 +107,9 @@ def plan_near_obstacles(
     candidate can be scheduled safely.
     """
     n = pos.shape[0]
-    frame = pyramid_frame(pos, params.orientation)
+    frame = shape_frame(pos, params.orientation, params.shape)
     starts_p = frame.to_pyramid(pos)
-    slots = placed_slots(n, params.d_e, params.phi_e, starts_p, "centroid")
+    slots = placed(params.shape, n, params.d_e, params.phi_e, starts_p, "centroid")
     obs_p = frame.to_pyramid(obs)
     shifts = clear_shifts(slots, obs_p, params.d_e / 4.0, SLOT_CLEARANCE * params.radius)
     if n > CANDIDATES_MAX_N:
@@ -157,9 +161,14 @@ def plan_around_obstacles(
     pos: np.ndarray, obs: np.ndarray, params: PlanParams, strategy: str
 ) -> ObstaclePlan:
     n, m = pos.shape[0], obs.shape[0]
+    if not params.shape.nested:
+        raise ValueError(
+            f"obstacles: the paper's procedure fills a shape of N + M slots, and the first N "
+            f"slots of a {params.shape.name!r} of N + M are not its slots for N"
+        )
     everyone = np.vstack([pos, obs])
-    frame = pyramid_frame(everyone, params.orientation)
-    slots_p = centred_slots(n + m, params.d_e, params.phi_e)
+    frame = shape_frame(everyone, params.orientation, params.shape)
+    slots_p = centred(params.shape, n + m, params.d_e, params.phi_e)
     perm = assign(frame.to_pyramid(everyone), slots_p, strategy, params.d_e, params.phi_e)
     robot_slot = perm[:n].copy()
     obs_p = frame.to_pyramid(obs)
