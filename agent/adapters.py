@@ -107,25 +107,27 @@ class PerceptionAdapter:
 
     @staticmethod
     def merge(sightings: list[Sightings]) -> Neighbours:
-        """One entry per neighbour; orientation and confidence of its best sighting."""
+        """One entry per neighbour; orientation and confidence of its best sighting, and
+        that sighting's index among all of ``sightings`` (concatenated in order)."""
         if not sightings:
-            return np.zeros((0, 2)), np.zeros(0), np.zeros(0)
+            return np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0, dtype=np.int64)
         pts = np.concatenate([s[0] for s in sightings]).reshape(-1, 2)
         conf = np.concatenate([s[1] for s in sightings])
         ori = np.concatenate([s[2] for s in sightings])
         if pts.shape[0] == 0:
-            return np.zeros((0, 2)), np.zeros(0), np.zeros(0)
+            return np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0, dtype=np.int64)
         merged = merge_sightings(pts, conf)
         labels = cluster_sightings(pts, conf, 0.25)
         m = merged.shape[0]
         best_conf = np.zeros(m)
         best_ori = np.zeros(m)
+        best = np.zeros(m, dtype=np.int64)
         for lab in range(m):
             idx = np.flatnonzero(labels == lab)
             # seed = most confident sighting, ties by input order (cluster_sightings' rule)
             k = idx[np.argmax(conf[idx])]
-            best_conf[lab], best_ori[lab] = conf[k], ori[k]
-        return merged, best_ori, best_conf
+            best_conf[lab], best_ori[lab], best[lab] = conf[k], ori[k], k
+        return merged, best_ori, best_conf, best
 
 
 class FormationAdapter:
@@ -149,6 +151,11 @@ class FormationAdapter:
                     if len(m.orientations) == k and k
                     else None,
                     confidences=np.array(m.confidences) if len(m.confidences) == k and k else None,
+                    seen_at=np.array(m.seen_at) if len(m.seen_at) == k and k else None,
+                    stances=np.array(m.stances, dtype=np.float64).reshape(-1, 3)
+                    if m.stances
+                    else None,
+                    clock_error=m.clock_error,
                 )
             )
         return out

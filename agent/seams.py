@@ -27,8 +27,10 @@ from agent.wire import NeighborRecordMsg
 
 #: (points (k, 2) in the fixed frame, confidences (k,), orientations (k,))
 Sightings = tuple[np.ndarray, np.ndarray, np.ndarray]
-#: merged neighbours: (points (m, 2), orientations (m,), confidences (m,))
-Neighbours = tuple[np.ndarray, np.ndarray, np.ndarray]
+#: merged neighbours: (points (m, 2), orientations (m,), confidences (m,), best (m,)):
+#: best is the index, among the merged sightings concatenated in order, of the one whose
+#: orientation and confidence each neighbour carries
+Neighbours = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
 
 class Perception(Protocol):

@@ -110,6 +110,9 @@ def _record(d: dict[str, Any]) -> NeighborRecordMsg:
         neighbours=tuple((float(x), float(y)) for x, y in d["neighbours"]),
         orientations=tuple(float(o) for o in d.get("orientations", ())),
         confidences=tuple(float(c) for c in d.get("confidences", ())),
+        seen_at=tuple(float(t) for t in d.get("seen_at", ())),
+        stances=tuple((float(a), float(b), float(h)) for a, b, h in d.get("stances", ())),
+        clock_error=float(d.get("clock_error", 0.0)),
     )
 
 
@@ -120,6 +123,9 @@ def _as_dict(m: NeighborRecordMsg) -> dict[str, Any]:
         "neighbours": [list(p) for p in m.neighbours],
         "orientations": list(m.orientations),
         "confidences": list(m.confidences),
+        "seen_at": list(m.seen_at),
+        "stances": [list(st) for st in m.stances],
+        "clock_error": m.clock_error,
     }
 
 
@@ -134,6 +140,9 @@ def corrupt(rec: NeighborRecordMsg, fault: SensorFault) -> NeighborRecordMsg:
         neighbours=tuple((float(x), float(y)) for x, y in pts),
         orientations=tuple(float(o) for o in ori),
         confidences=rec.confidences,
+        seen_at=rec.seen_at,
+        stances=rec.stances,
+        clock_error=rec.clock_error,
     )
 
 

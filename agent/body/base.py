@@ -69,6 +69,12 @@ class Body(Protocol):
         """The latest robot time seen (s)."""
         ...
 
+    @property
+    def clock_error(self) -> float:
+        """How far this robot's time may be from its fleet's (s): 0 for a simulated body
+        (the world's one clock); on a NAO, the bound of its clock synchronisation."""
+        ...
+
     def camera(self, yaw: float) -> Frame:
         """The forehead image with the head turned to ``yaw`` (rad, + left, ±119.5°)."""
         ...

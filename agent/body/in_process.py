@@ -76,6 +76,10 @@ class WorldBody:
     def t_sim(self) -> float:
         return self.world.t_sim
 
+    @property
+    def clock_error(self) -> float:
+        return 0.0  # the world's one clock
+
     def _check_robot(self, action: str) -> None:
         if self._robot_id not in self.world.robot_ids:
             raise BodyError(action, f"unknown robot {self._robot_id}")

@@ -60,8 +60,17 @@ def _call(action: str, fn: Callable[[], T]) -> T:
 class NaoqiBody:
     """Robot ``robot_id`` is the NAO at ``url`` (``tcp://HOST:9559``)."""
 
-    def __init__(self, url: str, robot_id: int, timeout: float = 10.0) -> None:
+    def __init__(
+        self,
+        url: str,
+        robot_id: int,
+        timeout: float = 10.0,
+        clock_error: float = nao.NTP_CLOCK_ERROR,
+    ) -> None:
+        if not (math.isfinite(clock_error) and 0.0 <= clock_error <= 10.0):
+            raise ValueError(f"clock_error must be in [0, 10] s, got {clock_error!r}")
         self._robot_id = robot_id
+        self._clock_error = clock_error
         self.url = url
         self._t_sim = 0.0
         self.contacts = 0
@@ -113,6 +122,12 @@ class NaoqiBody:
     @property
     def t_sim(self) -> float:
         return self._t_sim
+
+    @property
+    def clock_error(self) -> float:
+        """The bound of this NAO's clock against its fleet's (``nao.NTP_CLOCK_ERROR``
+        unless given)."""
+        return self._clock_error
 
     # ------------------------------------------------------------------ camera
 

@@ -189,6 +189,10 @@ class ZenohBody:
     def t_sim(self) -> float:
         return self._t_sim
 
+    @property
+    def clock_error(self) -> float:
+        return 0.0  # the world's one clock
+
     def camera(self, yaw: float) -> Frame:
         """The forehead image with the head at ``yaw`` (rad, + left, |yaw| <= 119.5°)."""
         if not math.isfinite(yaw) or abs(yaw) > HEAD_YAW_LIMIT + 1e-9:

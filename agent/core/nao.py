@@ -57,6 +57,11 @@ OBSTACLE_RADIUS = 0.15
 OBSTACLE_HEIGHT = 0.6  # m, taller than the camera (0.5 m): the top is seen from below
 
 # ------------------------------------------------------------------ NAOqi
+#: s: how far a NAO's clock (``ALMotion.getTime``) may be from its fleet's when the robots
+#: synchronise their clocks by NTP on one LAN (a few ms in practice; a safe bound). It
+#: bounds the times of a record's stances and sightings (docs/design.md §9 "Masks seen
+#: mid-turn"); a simulated body has the world's one clock (0).
+NTP_CLOCK_ERROR = 0.05
 NAOQI_PORT = 9559  # a NAO's qi service directory: tcp://nao.local:9559
 HEAD_YAW_JOINT = "HeadYaw"
 TOP_CAMERA = 0  # ALVideoDevice camera index of the forehead camera

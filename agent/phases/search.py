@@ -48,6 +48,11 @@ class Search:
         self.obstacle_sightings: list[np.ndarray] = []  # fixed frame, one array per image
         self._round = 0  # the re-search round of the current record (4.1.3 rule 2)
         self._record: NeighborRecordMsg | None = None
+        # the last sweep's image times (one per element of what sweep() returned) and this
+        # body's stances (from, to, heading from the start heading): docs/design.md §9
+        # "Masks seen mid-turn"
+        self._image_times: list[float] = []
+        self._stances: list[tuple[float, float, float]] = []
 
     @property
     def round(self) -> int:
@@ -94,11 +99,18 @@ class Search:
         done = 0
         origin: Frame | None = None
         turned = [0.0, 0.0]
+        times: list[float] = []  # each image's time, in the order of raw
+        spans: list[list[float]] = []  # [from, to] of each stance, to be given headings
         for sweep in range(2):
             if sweep == 1:
+                spans[-1][1] = self._now(spans[-1][1])
                 turned[0] = motion.rotate(math.pi, PAPER_GAINS, "turn to θ = 180°")
+                spans.append([self._now(math.inf)] * 2)
             for k, yaw in enumerate(yaws):
                 frame = motion.look(yaw)
+                times.append(frame.t_sim)
+                if not spans:
+                    spans.append([frame.t_sim, frame.t_sim])
                 if abs(yaw) < 1e-9:
                     motion.last_frame = frame
                     if sweep == 0:
@@ -131,12 +143,20 @@ class Search:
             heading_180 = b.heading
         else:
             log.info("half turn not measured by the views (%d matched)", len(overlaps))
+            spans[-1][1] = self._now(spans[-1][1])
             turned[1] = motion.rotate(math.pi, PAPER_GAINS, "complete the circle to θ = 0°")
+            spans.append([self._now(math.inf)] * 2)
             assert origin is not None and motion.last_frame is not None
             gain0 = b.compass_gain
             self._calibrate(origin, motion.last_frame, turned, h0)
             if b.compass_gain != gain0:
                 heading_180 = wrap_pi(h0 + turned[0] * b.compass_gain / gain0)
+        spans[-1][1] = self._now(spans[-1][1])
+        heads = [h0, heading_180, b.heading][: len(spans)]
+        self._stances = [
+            (t0, max(t0, t1), wrap_pi(h - NORTH)) for (t0, t1), h in zip(spans, heads, strict=True)
+        ]
+        self._image_times = times
         self.obstacle_sightings = [
             ctx.perception.obstacles_fixed(o, h0 if sweep == 0 else heading_180)
             for sweep, o in obst
@@ -144,6 +164,12 @@ class Search:
         return [
             ctx.perception.to_fixed(dets, h0 if sweep == 0 else heading_180) for sweep, dets in raw
         ]
+
+    def _now(self, default: float) -> float:
+        """The time of this body's last head-yaw-0 picture (``default`` if none): a bound
+        of a stance, since the body stood still when it was taken."""
+        frame = self.motion.last_frame
+        return float(frame.t_sim) if frame is not None else default
 
     def _overlap(
         self, before: dict[int, Frame], pairs: tuple[tuple[int, int], ...], k: int, after: Frame
@@ -191,7 +217,11 @@ class Search:
         obstacles (5.1.2) in its fixed frame."""
         ctx = self.ctx
         ctx.report.status(Phase.LOCALISE, 0.0)
-        pts, ori, conf = ctx.perception.merge(sightings)
+        pts, ori, conf, best = ctx.perception.merge(sightings)
+        seen_at: tuple[float, ...] = ()
+        if len(self._image_times) == len(sightings) and len(best):
+            image = np.repeat(np.arange(len(sightings)), [len(s[0]) for s in sightings])
+            seen_at = tuple(float(self._image_times[image[k]]) for k in best)
         obstacles = ctx.perception.merge_obstacles(self.obstacle_sightings)
         fault = ctx.cfg.sensor_fault
         if fault is not None:  # the evaluation's test tool, never on a real fleet
@@ -205,6 +235,9 @@ class Search:
             confidences=tuple(float(c) for c in conf),
             obstacles=tuple((float(x), float(y)) for x, y in obstacles),
             calibration=ctx.cfg.calibration,
+            seen_at=seen_at,
+            stances=tuple(self._stances),
+            clock_error=ctx.body.clock_error if self._stances else 0.0,
         )
         self._record = rec
         ctx.report.status(Phase.LOCALISE, 1.0, f"{len(pts)} neighbours, {len(obstacles)} obstacles")

@@ -21,6 +21,9 @@ MAX_ROBOT_ID = 65535
 #: and a fleet of up to 128 robots (``tools.demo``'s limit) fits even if one saw them all.
 MAX_NEIGHBOURS = 128
 MAX_OBSTACLES = 32  # obstacles one robot may report in its record
+#: Stances one record may carry: the still spans of its owner's body during its search
+#: (two sweeps and up to two turns: 2-3; the bound leaves room for a re-searched round).
+MAX_STANCES = 8
 MAX_MEMBERS = 1024
 MAX_TEXT = 512
 MAX_IMAGE_BYTES = 8 * 1024 * 1024

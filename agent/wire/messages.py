@@ -26,6 +26,7 @@ from agent.wire.fields import (
     MAX_ROBOT_ID,
     MAX_SHIFT,
     MAX_SIDE_STEP,
+    MAX_STANCES,
     MAX_THUMBNAIL_BYTES,
     MAX_THUMBNAIL_HEIGHT,
     MAX_THUMBNAIL_WIDTH,
@@ -112,6 +113,12 @@ class NeighborRecordMsg(Message):
     ``calibration``: the digest of the recogniser's calibration the detections were
     made with (:mod:`agent.core.perception.calibration`); empty from a sender that
     predates it.
+    ``seen_at``: empty or one per neighbour, the sender's clock (s; sim time in the
+    simulation) when the image its orientation comes from was taken. ``stances``: the
+    spans ``(from, to, heading)`` of the sender's clock over which its body stood still
+    at ``heading`` (rad, turned from its heading when its fixed frame was defined), in
+    time order; its body turned between them; ``clock_error``: how far (s) the sender's
+    clock may be from the fleet's (docs/design.md §9 "Masks seen mid-turn").
     """
 
     TAG: ClassVar[str] = "record"
@@ -122,6 +129,9 @@ class NeighborRecordMsg(Message):
     confidences: tuple[float, ...] = ()
     obstacles: tuple[tuple[float, float], ...] = ()
     calibration: str = ""
+    seen_at: tuple[float, ...] = ()
+    stances: tuple[tuple[float, float, float], ...] = ()
+    clock_error: float = 0.0
     SCHEMA: ClassVar[Mapping[str, Callable[[Any], Any]]] = {
         "sender": _ID,
         "round": _int("round", 0, 1_000_000),
@@ -130,12 +140,29 @@ class NeighborRecordMsg(Message):
         "confidences": _seq("confidences", _float("confidence", 0.0, 1.0), MAX_NEIGHBOURS),
         "obstacles": _seq("obstacles", _XY, MAX_OBSTACLES),
         "calibration": _hex("calibration", allow_empty=True),
+        "seen_at": _seq("seen_at", _float("seen_at", 0.0), MAX_NEIGHBOURS),
+        "stances": _seq(
+            "stances",
+            _tuple(
+                "stance",
+                _float("stance from", 0.0),
+                _float("stance to", 0.0),
+                _float("stance heading", -10.0, 10.0),
+            ),
+            MAX_STANCES,
+        ),
+        "clock_error": _float("clock_error", 0.0, 10.0),
     }
 
     def __post_init__(self) -> None:
         super().__post_init__()
         k = len(self.neighbours)
-        for name in ("orientations", "confidences"):
+        last = 0.0
+        for t0, t1, _ in self.stances:
+            if not last <= t0 <= t1:
+                raise ProtocolError(f"stances: span ({t0}, {t1}) out of time order")
+            last = t1
+        for name in ("orientations", "confidences", "seen_at"):
             n = len(getattr(self, name))
             if n not in (0, k):
                 raise ProtocolError(f"{name}: {n} values for {k} neighbours")

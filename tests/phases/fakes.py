@@ -123,6 +123,7 @@ class FakeBody:
     def __init__(self, robot_id: int, image: np.ndarray | None = None) -> None:
         self.robot_id = robot_id
         self.t_sim = 0.0
+        self.clock_error = 0.0
         self.sent: list[tuple[str, float, int]] = []
         self.image = np.zeros((4, 5, 3), np.uint8) if image is None else image
         self.next_id = 100

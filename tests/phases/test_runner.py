@@ -69,10 +69,12 @@ def test_formation_adapter_axis_from_vector_or_angle() -> None:
 def test_perception_merge_keeps_best_sighting_per_neighbour() -> None:
     s1 = (np.array([[1.0, 0.0], [0.0, 1.0]]), np.array([0.7, 0.9]), np.array([0.1, 0.2]))
     s2 = (np.array([[1.1, 0.0]]), np.array([0.9]), np.array([0.3]))
-    pts, ori, conf = PerceptionAdapter.merge([s1, s2])
+    pts, ori, conf, best = PerceptionAdapter.merge([s1, s2])
     assert pts.shape == (2, 2)
     k = int(np.argmin(np.hypot(pts[:, 0] - 1.05, pts[:, 1])))
     assert conf[k] == pytest.approx(0.9) and ori[k] == pytest.approx(0.3)
+    assert best[k] == 2  # the third sighting of the three, in order
+    assert best[1 - k] == 1
     assert PerceptionAdapter.merge([])[0].shape == (0, 2)
 
 

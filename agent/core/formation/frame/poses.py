@@ -63,7 +63,7 @@ from agent.core.formation.frame.neighbour_check import (
     identify_neighbours,
 )
 from agent.core.formation.frame.pose_pairing import identify_pairs, wrap_angle, wrap_half
-from agent.core.formation.frame.records import NeighborRecord
+from agent.core.formation.frame.records import NeighborRecord, mask_orientation
 
 SIGMA_POS = 0.05  #: σ₀ (m) of a sighting's position
 SIGMA_REL = 0.05  #: σ₁: σ per metre of distance (±5 % distance, ±3° bearing)
@@ -153,8 +153,7 @@ def pair_measurements(graph: NeighbourGraph) -> list[PoseMeasurement]:
     out: list[PoseMeasurement] = []
     for p in graph.pairs:
         for o, t, idx, v, w in ((p.i, p.j, p.a, p.v_ij, p.w_ij), (p.j, p.i, p.b, p.v_ji, p.w_ji)):
-            ori = recs[o].orientations
-            theta = math.nan if ori is None else float(ori[idx])
+            theta = mask_orientation(recs[o], idx, recs.get(t))
             out.append(PoseMeasurement(o, t, np.array(v, dtype=np.float64), w, theta, True))
     return out
 
@@ -472,8 +471,8 @@ def one_way_measurements(graph: NeighbourGraph, frame: PoseFrame) -> list[PoseMe
         if len(hits) != 1 or (rid, frame.ids[hits[0]]) in linked:
             continue
         w = 1.0 if rec.confidences is None else float(rec.confidences[a])
-        theta = math.nan if rec.orientations is None else float(rec.orientations[a])
         target = frame.ids[hits[0]]
+        theta = mask_orientation(rec, a, recs.get(target))
         out.append(PoseMeasurement(rid, target, rec.neighbours[a].copy(), w, theta, False))
         linked.add((rid, target))
     return out

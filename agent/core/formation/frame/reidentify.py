@@ -63,7 +63,7 @@ from scipy.spatial import cKDTree
 
 from agent.core.formation.frame.pose_pairing import wrap_angle
 from agent.core.formation.frame.poses import PoseFrame, PoseMeasurement, fit_poses
-from agent.core.formation.frame.records import NeighborRecord
+from agent.core.formation.frame.records import NeighborRecord, mask_orientation
 
 #: Gate (m) within which a placed sighting lands on a robot, at distance 0 ...
 GATE = 0.12
@@ -358,7 +358,7 @@ def _measurements(
     for o, a, t in found:
         rec = records[o]
         w = 1.0 if rec.confidences is None else float(rec.confidences[a])
-        theta = math.nan if rec.orientations is None else float(rec.orientations[a])
+        theta = mask_orientation(rec, a, records.get(t))
         out.append(PoseMeasurement(o, t, rec.neighbours[a].copy(), w, theta, (t, o) in links))
     return out
 
