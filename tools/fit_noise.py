@@ -45,7 +45,9 @@ from typing import Any
 
 import numpy as np
 
+from agent.adapters import FormationAdapter
 from agent.core.formation.frame.poses import PoseFrame
+from agent.core.formation.frame.records import mask_orientation
 from agent.core.perception.sighting_noise import SightingNoise, split
 from agent.wire import NeighborRecordMsg
 from tools.corpus import Run, held_out, load_corpus
@@ -84,6 +86,7 @@ def match(runs: list[Run]) -> Matched:
     for run in runs:
         ids = sorted(run.truth)
         pos = np.array([run.truth[i][:2] for i in ids])
+        core = {r.robot_id: r for r in FormationAdapter.records(run.records)}
         for rec in run.records:
             if rec.sender not in run.truth or not rec.neighbours:
                 continue
@@ -113,11 +116,14 @@ def match(runs: list[Run]) -> Matched:
                 cols[1].append(meas)
                 cols[2].append(meas - d)
                 cols[3].append(d * float(_wrap(np.array(beta - beta_true))))
-                if len(rec.orientations) == len(rec.neighbours):
+                # the mask as if its target stood at its start heading (nan: seen while
+                # it turned; records without times: as recorded)
+                theta = mask_orientation(core[rec.sender], n, core.get(ids[k]))
+                if math.isfinite(theta):
                     hj = run.truth[ids[k]][2]
                     # h_j - h_i = β_ij + θ_ij - π/2 (modulo π) in the fixed frame of i
                     want = (hj - h) - beta_true + math.pi / 2
-                    cols[4].append(float(_wrap_half(np.array(rec.orientations[n] - want))))
+                    cols[4].append(float(_wrap_half(np.array(theta - want))))
                 else:
                     cols[4].append(math.nan)
     a = [np.array(c) for c in cols]
@@ -227,7 +233,6 @@ def bias_scale(fits: list[PoseFrame], model: SightingNoise) -> float:
 def fitted(runs: list[Run]) -> tuple[list[PoseFrame], list[Run]]:
     """Each run's records fitted as the agents fit them (runs that do not connect left
     out), and the runs kept."""
-    from agent.adapters import FormationAdapter
     from agent.core.formation.frame.neighbour_check import DEFAULT_EPSILON
     from agent.core.formation.frame.pose_pairing import identify_pairs
     from agent.core.formation.frame.poses import fit_from_graph
