@@ -29,6 +29,7 @@ and the pictures are the same bit for bit.
 
 from __future__ import annotations
 
+import argparse
 import colorsys
 import math
 from dataclasses import dataclass, fields, replace
@@ -200,3 +201,11 @@ HELP = (
     + ") or KEY:VALUE items, comma separated: hue:DEG, sat:F, light:F, warm:F, noise:SIGMA, "
     "blur:PX, exposure:off|auto|TARGET, seed:N (docs/world.md, Looks)"
 )
+
+
+def look_arg(text: str) -> Look:
+    """``--look SPEC`` as an argparse type: the look; a bad SPEC a usage error saying why."""
+    try:
+        return Look.parse(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
