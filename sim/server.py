@@ -360,7 +360,7 @@ class WorldServer:
                 done, contacts = loco.step(clock=True)  # looks take time too
                 if done or contacts:
                     self._finish(done, contacts)
-                self.cameras.capture_due()
+                pace_wall += self._capture_due()
             else:
                 wait = min(0.05, max(0.0, next_truth - now))
                 due = self.delays.next_due() if self.delays is not None else None
@@ -369,6 +369,15 @@ class WorldServer:
                 self._drain(block=True, timeout=wait)
                 pace_wall = time.monotonic()
                 pace_sim = self.world.t_sim
+
+    def _capture_due(self) -> float:
+        """Draw the pictures of the looks that have ended; the wall time it took (counted
+        as camera handling, like a request's)."""
+        t0 = time.monotonic()
+        self.cameras.capture_due()
+        spent = time.monotonic() - t0
+        self.busy_s["camera"] += spent
+        return spent
 
     def _drain(self, block: bool, timeout: float = 0.0) -> float:
         """Handle queued requests (waiting up to ``timeout`` for the first if ``block``);
