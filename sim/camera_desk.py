@@ -85,10 +85,13 @@ class CameraDesk:
     def _shoot(self, q: Request, rid: int, yaw: float, t_sim: float) -> None:
         try:
             rep = self._camera(q, rid, yaw, t_sim)
-        except ValueError as exc:  # ProtocolError is a ValueError
+        except Exception as exc:  # never let one picture take the world loop down
             self.errors += 1
             self._log(f"camera robot {rid}: {reason(exc)}")
-            rep = ErrorReply(reason=reason(exc, 500))
+            why = (
+                reason(exc, 480) if isinstance(exc, ValueError) else f"internal: {reason(exc, 470)}"
+            )
+            rep = ErrorReply(reason=why)
         if rep is not None:  # else a render worker has it
             self._answer(q, rep)
 

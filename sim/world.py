@@ -280,7 +280,8 @@ class World:
 
     @property
     def t_sim(self) -> float:
-        """Sim time (s): advanced only by :meth:`Locomotion.step`; rendering costs none."""
+        """Sim time (s): advanced only by :meth:`Locomotion.step` (walks, turns and the
+        server's looks, :mod:`sim.glances`); rendering here costs none."""
         return self.locomotion.t_sim
 
     def _quad(

@@ -193,3 +193,21 @@ def test_closing_the_desk_answers_the_looks_in_flight(world: World) -> None:
     d.desk.close("world shutting down")
     (rep,) = d.answers["q"]
     assert isinstance(rep, ErrorReply) and rep.reason == "world shutting down"
+
+
+def test_a_picture_that_fails_is_answered_and_the_desk_goes_on(world: World) -> None:
+    d = Desk(world)
+    d.desk.request("q", 1, 0.1)
+
+    def broken(rid: int, yaw: float, shot: Any = None) -> Any:
+        raise RuntimeError("renderer gone")
+
+    real = world.render
+    try:
+        world.render = broken  # type: ignore[method-assign]
+        d.run("q")
+    finally:
+        world.render = real  # type: ignore[method-assign]
+    (rep,) = d.answers["q"]
+    assert isinstance(rep, ErrorReply) and rep.reason == "internal: RuntimeError: renderer gone"
+    assert d.log and d.desk.errors == 1
