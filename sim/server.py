@@ -50,7 +50,7 @@ passed on the clock (``free_looks``: at once, costing nothing); drawing the pict
 itself costs no sim time. Queued requests are served between steps. With ``reply_delay`` > 0 (a slow world, :mod:`sim.delays`)
 camera and motion replies are held for a seeded random delay and sent by the same loop
 when due, so the world keeps serving meanwhile. With ``render_workers`` > 0 a camera request's state (poses,
-head yaws, sim time) is taken at once and the picture drawn by a
+head yaws, sim time) is taken when its look ends and the picture drawn by a
 :class:`~sim.render_pool.RenderPool` worker; its result comes back through the same queue.
 """
 
