@@ -7,6 +7,11 @@ With ``--naoqi`` every robot is also a virtual NAO (:mod:`sim.naoqi_gateway`): N
 services over the qi protocol, one service directory per robot on its own port, each
 announced before the ready line as ``sim naoqi robot=ID url=tcp://HOST:PORT``.
 
+``--look SPEC`` changes what the world looks like (:mod:`sim.look`: the NAOs' orange,
+light, colour temperature, noise, motion blur, auto exposure); ``--free-looks`` makes
+camera requests cost no sim time (:mod:`sim.glances`: by default a look costs a robot
+the time a NAO takes to turn its head, settle and capture).
+
 With ``--reply-delay MAX_S`` the world is slow: every camera and motion reply is held
 for a seeded random delay up to ``MAX_S`` s (:mod:`sim.delays`), the world serving on.
 """
@@ -16,11 +21,14 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
+from dataclasses import replace
 from typing import Any
 
 from agent.wire import add_network_arguments, network_spec
 from sim import renderer, scenarios
 from sim.delays import check_max_delay
+from sim.look import HELP as LOOK_HELP
+from sim.look import Look
 from sim.server import WorldServer
 from sim.world import World
 
@@ -56,6 +64,18 @@ def build_parser() -> argparse.ArgumentParser:
         default=scenarios.Headings(),
         metavar="KIND",
         help=scenarios.HEADINGS_HELP,
+    )
+    p.add_argument(
+        "--look",
+        default=None,
+        metavar="SPEC",
+        help=LOOK_HELP + "; replaces a --scenario file's look",
+    )
+    p.add_argument(
+        "--free-looks",
+        action="store_true",
+        help="camera requests cost no sim time (recordings made before looks were charged; "
+        "default: a look costs the head turn, settling and capture, sim/glances.py)",
     )
     p.add_argument("--no-noise", action="store_true", help="noiseless walking and turning")
     p.add_argument(
@@ -132,6 +152,8 @@ def main(argv: list[str] | None = None) -> int:
                 isolated=args.isolated,
                 headings=args.headings,
             )
+        if args.look is not None:
+            sc = replace(sc, look=Look.parse(args.look))
         if args.dump_scenario:
             scenarios.dump(sc, args.dump_scenario)
         net = network_spec(args, "world")
@@ -150,6 +172,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"sim: {exc}", file=sys.stderr)
         return 2
     print(f"sim: renderer {world.renderer} ({world.renderer_why})", file=sys.stderr, flush=True)
+    if not sc.look.is_default():
+        print(f"sim: look {sc.look}", file=sys.stderr, flush=True)
     with world:
         try:
             server = WorldServer(
@@ -160,6 +184,7 @@ def main(argv: list[str] | None = None) -> int:
                 render_workers=args.render_workers,
                 reply_delay=args.reply_delay,
                 reply_delay_seed=sc.seed,
+                free_looks=args.free_looks,
             )
         except ValueError as exc:
             print(f"sim: {exc}", file=sys.stderr)

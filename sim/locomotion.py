@@ -218,13 +218,17 @@ class Locomotion:
 
     # ------------------------------------------------------------------ stepping
 
-    def step(self) -> tuple[list[Done], list[Contact]]:
+    def step(self, clock: bool = False) -> tuple[list[Done], list[Contact]]:
         """Advance every active command by one ``dt``; the finished ones and the contacts.
 
         Robots are processed in id order (documented tie-break: when two robots would
         both enter contact in the same step, both stop and one contact is reported).
+        With no command active the clock stands still, unless ``clock`` (a robot is
+        looking: :mod:`sim.glances`), which advances it by ``dt`` all the same.
         """
         if not self._active:
+            if clock:
+                self.t_sim += self.dt
             return [], []
         self.t_sim += self.dt
         done: list[Done] = []

@@ -153,22 +153,33 @@ class NaoBodyFactory:
     With ``mesh_dir`` (the EGL renderer, :mod:`sim.renderer`) every part is an OBJ file
     written there (the same vertices and normals; boxes with flat faces) and its colour is
     multiplied by ``shade`` (the light factor that matches TinyRenderer's light).
+    ``orange``: the colour of the orange parts (a look recolours them, :mod:`sim.look`).
     """
 
-    def __init__(self, client: int, mesh_dir: Path | None = None, shade: float = 1.0) -> None:
+    def __init__(
+        self,
+        client: int,
+        mesh_dir: Path | None = None,
+        shade: float = 1.0,
+        orange: tuple[float, float, float, float] = ORANGE,
+    ) -> None:
         self._client = client
         self._mesh_dir = mesh_dir
         self._shade = shade
+        self._orange = orange
         self._body_shapes = [self._shape(p, (0.0, 0.0, 0.0)) for p in BODY_PARTS]
         # The head's root shape sits at its offset on the head link itself.
         self._head_root = self._shape(HEAD_PARTS[0], HEAD_PARTS[0].pos)
         self._head_shapes = [self._shape(p, (0.0, 0.0, 0.0)) for p in HEAD_PARTS[1:]]
 
+    def _colour(self, part: Part) -> tuple[float, float, float, float]:
+        return self._orange if part.rgba == ORANGE else part.rgba
+
     def _shape(self, part: Part, offset: tuple[float, float, float]) -> int:
         if self._mesh_dir is not None:
             return self._obj_shape(part, offset, self._mesh_dir)
         common: dict[str, object] = {
-            "rgbaColor": part.rgba,
+            "rgbaColor": self._colour(part),
             "specularColor": (0.0, 0.0, 0.0),
             "visualFramePosition": offset,
             "visualFrameOrientation": pb.getQuaternionFromEuler(part.rpy),
@@ -200,10 +211,11 @@ class NaoBodyFactory:
             raise ValueError(f"unknown part shape {part.shape!r}")
         path = obj_mesh.write(where / f"nao_{part.name}.obj", verts, normals, idx)
         k = self._shade
+        c = self._colour(part)
         vid = pb.createVisualShape(
             pb.GEOM_MESH,
             fileName=str(path),
-            rgbaColor=(part.rgba[0] * k, part.rgba[1] * k, part.rgba[2] * k, part.rgba[3]),
+            rgbaColor=(c[0] * k, c[1] * k, c[2] * k, c[3]),
             specularColor=(0.0, 0.0, 0.0),
             visualFramePosition=offset,
             visualFrameOrientation=pb.getQuaternionFromEuler(part.rpy),
@@ -244,11 +256,18 @@ class NaoBodyFactory:
 
 
 HEAD_JOINT = 0
-#: Each link's colour, in link order (:meth:`NaoBodyFactory.create`): a hidden NAO
-#: (:meth:`sim.world.World.render` culls those out of view) gets them back.
-LINK_COLOURS: tuple[tuple[float, float, float, float], ...] = tuple(
-    p.rgba for p in (*HEAD_PARTS, *BODY_PARTS)
-)
+
+
+def link_colours(
+    orange: tuple[float, float, float, float] = ORANGE,
+) -> tuple[tuple[float, float, float, float], ...]:
+    """Each link's colour, in link order (:meth:`NaoBodyFactory.create`), the orange parts
+    in ``orange``: a hidden NAO (:meth:`sim.world.World.render` culls those out of view)
+    gets them back."""
+    return tuple(orange if p.rgba == ORANGE else p.rgba for p in (*HEAD_PARTS, *BODY_PARTS))
+
+
+LINK_COLOURS = link_colours()
 #: Radius (m) of a vertical cylinder about the body's axis that holds every part, whatever
 #: the head's yaw: a NAO farther than that outside the camera's view draws no pixel.
 BOUNDING_RADIUS = max(

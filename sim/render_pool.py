@@ -27,6 +27,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from sim.picture import Shot
 from sim.scenarios import Scenario, from_dict, to_dict
 
 PNG_PARAMS = [
@@ -47,13 +48,15 @@ def png_bytes(img: np.ndarray) -> bytes:
 
 @dataclass(frozen=True)
 class Job:
-    """One render: robot ``robot_id``'s camera at head ``yaw``, in the state given."""
+    """One render: robot ``robot_id``'s camera at head ``yaw``, in the state given, as
+    picture ``shot`` (numbered by the world, so the look develops it as the world would)."""
 
     job_id: int
     robot_id: int
     yaw: float
     poses: dict[int, tuple[float, float, float]]
     heads: dict[int, float]
+    shot: Shot | None = None
 
 
 @dataclass(frozen=True)
@@ -88,7 +91,7 @@ def _worker(index: int, scenario: dict[str, Any], renderer: str, jobs: Any, resu
                 for rid, h in job.heads.items():
                     if rid != job.robot_id:
                         world.set_head_yaw(rid, h)
-                img = world.render(job.robot_id, job.yaw)
+                img = world.render(job.robot_id, job.yaw, job.shot)
                 results.send(Result(job.job_id, index, png=png_bytes(img)))
             except Exception as exc:
                 results.send(Result(job.job_id, index, error=f"{type(exc).__name__}: {exc}"))

@@ -41,13 +41,16 @@ at ``truth_rate`` Hz of wall time and after every finished command; ``world/trut
 
 **Threads and the clock.** zenoh callbacks only put queries on a queue; one loop owns
 PyBullet and the world, and the loop's own state (:class:`sim.bindings.RobotBindings`,
-:class:`sim.motions.Motions`): nothing else calls them. The sim clock advances (in fixed
-steps of 0.02 s) only while at least one walk/turn is active, as fast as possible by
-default or paced at ``speed`` x real time; rendering costs no sim time. Queued requests
-are served between steps. With ``reply_delay`` > 0 (a slow world, :mod:`sim.delays`)
+:class:`sim.motions.Motions`, :class:`sim.camera_desk.CameraDesk`): nothing else calls
+them. The sim clock advances (in fixed steps of 0.02 s) only while at least one
+walk/turn or look is active, as fast as possible by default or paced at ``speed`` x real
+time. A camera request is a look: it costs its robot the time a NAO takes to turn its
+head there, settle and capture (:mod:`sim.glances`), and is answered when that time has
+passed on the clock (``free_looks``: at once, costing nothing); drawing the picture
+itself costs no sim time. Queued requests are served between steps. With ``reply_delay`` > 0 (a slow world, :mod:`sim.delays`)
 camera and motion replies are held for a seeded random delay and sent by the same loop
 when due, so the world keeps serving meanwhile. With ``render_workers`` > 0 a camera request's state (poses,
-head yaws, sim time) is taken at once and the picture drawn by a
+head yaws, sim time) is taken when its look ends and the picture drawn by a
 :class:`~sim.render_pool.RenderPool` worker; its result comes back through the same queue.
 """
 
@@ -67,14 +70,12 @@ from typing import Any
 import zenoh
 
 from agent.wire import (
-    BUSY,
     KEY_ALIVE_ALL,
     KEY_WORLD_CLOCK,
     KEY_WORLD_REGISTER,
     KEY_WORLD_SCENARIO,
     KEY_WORLD_TRUTH_CONTACTS,
     KEY_WORLD_TRUTH_POSES,
-    CameraReply,
     CameraRequest,
     ClockMsg,
     ContactMsg,
@@ -95,13 +96,13 @@ from agent.wire import (
     reason,
     trust,
 )
-from sim import camera, scenarios
+from sim import scenarios
 from sim.bindings import RobotBindings, Unauthorised
+from sim.camera_desk import CameraDesk
 from sim.delays import DelayedReplies
 from sim.locomotion import Contact, Done
 from sim.motions import Motions
-from sim.pending_pictures import Admission, PendingPictures
-from sim.render_pool import Job, RenderPool, Result, png_bytes
+from sim.render_pool import RenderPool
 from sim.requests import CheckedRequest, Query, Request, check, payload_size
 from sim.world import World
 
@@ -144,6 +145,7 @@ class WorldServer:
         render_workers: int = 0,
         reply_delay: float = 0.0,
         reply_delay_seed: int = 0,
+        free_looks: bool = False,
         log: Any = None,
     ) -> None:
         if not (math.isfinite(speed) and speed >= 0):
@@ -156,15 +158,18 @@ class WorldServer:
         self.truth_period = 1.0 / truth_rate
         self.log = log if log is not None else sys.stderr
         self.robot_ids = frozenset(world.robot_ids)  # read by the zenoh callbacks
-        self._cam_pending: PendingPictures[Request] = PendingPictures(len(self.robot_ids))
-        caps = {**INBOX_CAPS, "rendered": max(INBOX_CAPS["rendered"], self._cam_pending.capacity)}
+        self.cameras = CameraDesk(
+            world, self._answer, self._reply, self._log, free_looks=free_looks
+        )
+        cap = self.cameras.pending.capacity
+        caps = {**INBOX_CAPS, "rendered": max(INBOX_CAPS["rendered"], cap)}
         self.inbox: Inbox[Any] = Inbox(
             caps, priority=True, max_weight={"malformed": MALFORMED_MAX_BYTES}
         )
         self.guard = Guard(self._log)
         self._drop_log = Guard(self._log, burst=3, per_second=0.2)  # its count: dropped
         self.bindings = RobotBindings(tuple(world.robot_ids))
-        self.errors = 0
+        self._errors = 0  # with the camera desk's: errors
         self.served = 0
         self.counts: Counter[str] = Counter()  # requests handled, by kind
         self.busy_s: dict[str, float] = defaultdict(float)  # wall seconds on them, by kind
@@ -176,8 +181,6 @@ class WorldServer:
         self.delays: DelayedReplies[Request, Message] | None = (
             DelayedReplies(reply_delay, reply_delay_seed) if reply_delay != 0.0 else None
         )
-        self.pool: RenderPool | None = None
-        self._next_job = 0
         self._stop = threading.Event()
         self._keep: list[Any] = []
         self.session: Any = None
@@ -193,7 +196,7 @@ class WorldServer:
 
     def open(self) -> None:
         if self.render_workers > 0:
-            self.pool = RenderPool(
+            self.cameras.pool = RenderPool(
                 self.world.scenario,
                 self.render_workers,
                 self.guard.wrap(lambda r: self._queue("rendered", r), "render result"),
@@ -232,11 +235,18 @@ class WorldServer:
             if self.counts[k]
         ]
         slow = f" delayed={self.delays.held}" if self.delays is not None else ""
+        g = self.cameras.glances
+        looked = f" looking={g.charged:.2f} s" if g is not None else " free-looks"
         return (
             f"served {' '.join(parts) or 'nothing'}; errors={self.errors} "
             f"rejected={self.rejected} dropped={self.dropped}{slow} "
-            f"contacts={self.world.locomotion.contacts} t_sim={self.world.t_sim:.2f} s"
+            f"contacts={self.world.locomotion.contacts} t_sim={self.world.t_sim:.2f} s{looked}"
         )
+
+    @property
+    def errors(self) -> int:
+        """Requests answered with an ErrorReply (the camera desk's among them)."""
+        return self._errors + self.cameras.errors
 
     @property
     def rejected(self) -> int:
@@ -311,11 +321,7 @@ class WorldServer:
                 self._reply(q, msg)
         for q in self.motions.abandon():
             self._reply(q, ErrorReply(reason="world shutting down"))
-        for pending in self._cam_pending.drain():
-            self._reply(pending.query, ErrorReply(reason="world shutting down"))
-        if self.pool is not None:
-            self.pool.close()
-            self.pool = None
+        self.cameras.close("world shutting down")
         for obj in reversed(self._keep):
             with contextlib.suppress(Exception):
                 obj.undeclare()
@@ -342,7 +348,7 @@ class WorldServer:
             if now >= next_truth:
                 self._publish_truth()
                 next_truth = now + self.truth_period
-            if loco.active:
+            if loco.active or self.cameras.looking:
                 # Serving requests costs no sim time: when pacing, the wall time spent on
                 # them (a render) moves the pacing origin instead of causing a catch-up.
                 pace_wall += self._drain(block=False)
@@ -351,9 +357,10 @@ class WorldServer:
                     delay = target - time.monotonic()
                     if delay > 0:
                         pace_wall += self._drain(block=True, timeout=delay)
-                done, contacts = loco.step()
+                done, contacts = loco.step(clock=True)  # looks take time too
                 if done or contacts:
                     self._finish(done, contacts)
+                pace_wall += self._capture_due()
             else:
                 wait = min(0.05, max(0.0, next_truth - now))
                 due = self.delays.next_due() if self.delays is not None else None
@@ -362,6 +369,15 @@ class WorldServer:
                 self._drain(block=True, timeout=wait)
                 pace_wall = time.monotonic()
                 pace_sim = self.world.t_sim
+
+    def _capture_due(self) -> float:
+        """Draw the pictures of the looks that have ended; the wall time it took (counted
+        as camera handling, like a request's)."""
+        t0 = time.monotonic()
+        self.cameras.capture_due()
+        spent = time.monotonic() - t0
+        self.busy_s["camera"] += spent
+        return spent
 
     def _drain(self, block: bool, timeout: float = 0.0) -> float:
         """Handle queued requests (waiting up to ``timeout`` for the first if ``block``);
@@ -400,11 +416,11 @@ class WorldServer:
                 self._log(f"robot {rid} released (agent gone)")
             return
         if lane == "rendered":
-            self._rendered(item)
+            self.cameras.rendered(item)
             return
         if lane == "malformed":
             _, target, why = item
-            self.errors += 1
+            self._errors += 1
             if isinstance(target, Request):
                 self._reply(target, ErrorReply(reason=why[:500]))
             elif why is None or self.verifier is not None:
@@ -429,9 +445,7 @@ class WorldServer:
             elif isinstance(msg, ScenarioRequest):
                 self._reply(q, self._scenario(q))
             elif isinstance(msg, CameraRequest):
-                rep = self._camera(q, rid, msg.yaw)
-                if rep is not None:  # else a render worker has it
-                    self._answer(q, rep)
+                self.cameras.request(q, rid, msg.yaw)
             elif isinstance(msg, WalkRequest):
                 d, side, legs = msg.distance, msg.lateral, self.world.locomotion
                 go = (lambda: legs.side(rid, side)) if side else (lambda: legs.walk(rid, d))
@@ -440,7 +454,7 @@ class WorldServer:
                 a, legs = msg.angle, self.world.locomotion
                 self._motion(q, rid, "turn", msg.request_id, lambda: legs.turn(rid, a))
         except ValueError as exc:  # ProtocolError is a ValueError
-            self.errors += 1
+            self._errors += 1
             self.guard.reject(f"{req.kind} {q.key}", exc)
             self._answer(q, ErrorReply(reason=reason(exc, 500)), req.kind != "register")
 
@@ -465,66 +479,6 @@ class WorldServer:
             raise ValueError(f"{q.who.cn} may not ask for the scenario")
         text = json.dumps(scenarios.to_dict(self.world.scenario), sort_keys=True)
         return ScenarioReply(scenario=text.encode())
-
-    def _camera(self, q: Request, rid: int, yaw: float) -> Message | None:
-        if self.pool is not None and self.pool.alive > 0:
-            admission, superseded = self._cam_pending.request(q, rid, yaw)
-            if admission is Admission.BUSY:
-                # drawn nothing: the robot may ask again later (agent.net.bus.Busy)
-                self.errors += 1
-                return ErrorReply(reason=f"{BUSY}: {len(self._cam_pending)} pictures being drawn")
-            if admission is Admission.REBOUND:  # its picture in the works answers this
-                if superseded is not None:
-                    self._reply(superseded, ErrorReply(reason="superseded by a repeat"))
-                return None
-            # The state the picture depends on is taken now; a worker draws it.
-            self.world.set_head_yaw(rid, yaw)
-            heads = {r: self.world.head_yaw(r) for r in self.world.robot_ids}
-            job = Job(self._next_job, rid, yaw, self.world.poses(), heads)
-            self._next_job += 1
-            self._cam_pending.add(job.job_id, q, rid, yaw, self.world.t_sim)
-            self.pool.submit(job)
-            return None
-        return self._render_here(rid, yaw, self.world.t_sim)
-
-    def _render_here(self, rid: int, yaw: float, t_sim: float) -> Message:
-        img = self.world.render(rid, yaw)
-        return CameraReply(
-            robot_id=rid,
-            yaw=self.world.head_yaw(rid),
-            t_sim=t_sim,
-            width=img.shape[1],
-            height=img.shape[0],
-            encoding="png",
-            data=png_bytes(img),
-        )
-
-    def _rendered(self, res: Result) -> None:
-        """A worker's picture (or failure) for a pending camera request."""
-        assert self.pool is not None
-        self.pool.worker_done(res)
-        pending = self._cam_pending.done(res.job_id)
-        if pending is not None:
-            q, rid, yaw, t_sim = pending.query, pending.robot_id, pending.yaw, pending.t_sim
-            if res.error:
-                self.errors += 1
-                self._log(f"camera robot {rid}: render failed: {reason(res.error)}")
-                self._answer(q, ErrorReply(reason=f"render failed: {reason(res.error, 480)}"))
-            else:
-                msg = CameraReply(
-                    robot_id=rid, yaw=yaw, t_sim=t_sim, width=camera.WIDTH,
-                    height=camera.HEIGHT, encoding="png", data=res.png,
-                )  # fmt: skip
-                self._answer(q, msg)
-        if res.dead:
-            self._log(f"render worker {res.worker} died; {self.pool.alive} left")
-            if self.pool.alive == 0:  # render what is left here, and from now on
-                for job in self.pool.take_backlog():
-                    left = self._cam_pending.done(job.job_id)
-                    if left is not None:
-                        self._answer(
-                            left.query, self._render_here(job.robot_id, job.yaw, left.t_sim)
-                        )
 
     def _motion(
         self, q: Request, rid: int, kind: str, request_id: int, start: Callable[[], None]

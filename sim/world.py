@@ -10,8 +10,10 @@ range nor in the obstacle range: hues near orange and rose are desaturated, and 
 texture is checked with ``cv2.inRange`` before use.
 
 Robots are kinematic NAO bodies (:mod:`sim.nao_model`); their poses are held here and
-moved by :mod:`sim.locomotion`. Rendering costs no sim time. :class:`World` is the
-in-process API; :mod:`sim.server` puts it on the bus.
+moved by :mod:`sim.locomotion`. The scenario's look (:mod:`sim.look`) recolours the NAOs'
+orange parts as the room is built and develops every picture (:mod:`sim.picture`).
+Rendering here costs no sim time (the server charges a look's time, :mod:`sim.glances`).
+:class:`World` is the in-process API; :mod:`sim.server` puts it on the bus.
 """
 
 from __future__ import annotations
@@ -32,7 +34,8 @@ from agent.wire import nao
 from sim import camera, obj_mesh
 from sim import renderer as renderers
 from sim.locomotion import Locomotion, NoiseModel, Obstacle
-from sim.nao_model import BOUNDING_RADIUS, HEAD_JOINT, LINK_COLOURS, NaoBodyFactory
+from sim.nao_model import BOUNDING_RADIUS, HEAD_JOINT, ORANGE, NaoBodyFactory, link_colours
+from sim.picture import Shot, develop
 from sim.scenarios import Scenario
 
 TEXELS_PER_M = 256
@@ -111,7 +114,8 @@ class World:
     ``noise_scale`` multiplies it (:meth:`~sim.locomotion.NoiseModel.scaled`);
     ``world.locomotion`` runs walk/turn commands (``walk``, ``turn``, ``step``).
     ``renderer`` (:mod:`sim.renderer`): ``tiny`` (default), ``egl`` or ``auto``;
-    ``world.renderer`` is the one used and ``world.renderer_why`` why.
+    ``world.renderer`` is the one used and ``world.renderer_why`` why. The look is the
+    scenario's (``world.look``).
     """
 
     def __init__(
@@ -125,6 +129,10 @@ class World:
         egl_plugin: str | None = None,
     ) -> None:
         self.scenario = scenario
+        self.look = scenario.look
+        orange = self.look.recolour(ORANGE)
+        self._orange = orange
+        self._link_colours = link_colours(orange)
         if gui:  # the GUI is an OpenGL window of its own; its pictures are TinyRenderer's
             if renderers.check(renderer) == "egl":
                 raise ValueError("--gui draws the cameras with TinyRenderer, not --renderer egl")
@@ -198,16 +206,20 @@ class World:
         egl = self.renderer == "egl"
         shade = self._egl_part_shade() if egl else 1.0
         # Near things first: TinyRenderer then skips shading wall texels hidden by them.
-        factory = NaoBodyFactory(cid, tmp if egl else None, shade)
+        factory = NaoBodyFactory(cid, tmp if egl else None, shade, self._orange)
         self._bodies: dict[int, int] = {}
         self._poses: dict[int, tuple[float, float, float]] = {}
         self._head: dict[int, float] = {}
+        self._frames: dict[int, int] = {}  # pictures taken, per robot
+        self._shot_yaw: dict[int, float] = {}  # head yaw of each robot's last picture
         self._dirty: set[int] = set()
         self._hidden: set[int] = set()  # robots made transparent: out of the last view
         for r in sorted(sc.robots, key=lambda r: r.id):
             self._bodies[r.id] = factory.create(r.x, r.y, r.heading)
             self._poses[r.id] = (float(r.x), float(r.y), _wrap(float(r.heading)))
             self._head[r.id] = 0.0
+            self._frames[r.id] = 0
+            self._shot_yaw[r.id] = 0.0
         rng = np.random.default_rng([sc.seed, 0x5EED])
         half = sc.room
         wall_h = 0.8 + 1.2 * half  # the top of the view from a far corner stays on the wall
@@ -268,7 +280,8 @@ class World:
 
     @property
     def t_sim(self) -> float:
-        """Sim time (s): advanced only by :meth:`Locomotion.step`; rendering costs none."""
+        """Sim time (s): advanced only by :meth:`Locomotion.step` (walks, turns and the
+        server's looks, :mod:`sim.glances`); rendering here costs none."""
         return self.locomotion.t_sim
 
     def _quad(
@@ -379,13 +392,31 @@ class World:
         self._head[robot_id] = y
         pb.resetJointState(self._bodies[robot_id], HEAD_JOINT, y, physicsClientId=self._client)
 
-    def render(self, robot_id: int, head_yaw: float) -> np.ndarray:
-        """What ``robot_id``'s forehead camera sees with its head at ``head_yaw`` (rad).
+    def next_shot(self, robot_id: int, head_yaw: float) -> Shot:
+        """Number robot ``robot_id``'s next picture, taken at ``head_yaw``: its frame
+        number and how far its head turned since its last picture (:mod:`sim.picture`)."""
+        self._check(robot_id)
+        y = camera.check_yaw(head_yaw)
+        shot = Shot(robot_id, self._frames[robot_id], y - self._shot_yaw[robot_id])
+        self._frames[robot_id] += 1
+        self._shot_yaw[robot_id] = y
+        return shot
+
+    def render(self, robot_id: int, head_yaw: float, shot: Shot | None = None) -> np.ndarray:
+        """What ``robot_id``'s forehead camera sees with its head at ``head_yaw`` (rad),
+        developed in the world's look as picture ``shot`` (default: :meth:`next_shot`).
 
         The robot's head stays at that yaw afterwards (others see it turned). The
         observer's own body is not drawn. Returns (480, 640, 3) uint8 BGR.
         """
         self._check(robot_id)
+        if shot is None:
+            shot = self.next_shot(robot_id, head_yaw)
+        img = self._render(robot_id, head_yaw)
+        return develop(img, self.look, shot, self.scenario.seed)
+
+    def _render(self, robot_id: int, head_yaw: float) -> np.ndarray:
+        """The renderer's picture of :meth:`render` (before the look develops it)."""
         self.set_head_yaw(robot_id, head_yaw)
         self._sync()
         x, y, th = self._poses[robot_id]
@@ -437,7 +468,7 @@ class World:
             seen = d <= 2.0 * BOUNDING_RADIUS or off <= half + math.asin(BOUNDING_RADIUS / d)
             if seen == (rid in self._hidden):
                 body = self._bodies[rid]
-                for link, rgba in enumerate(LINK_COLOURS):
+                for link, rgba in enumerate(self._link_colours):
                     colour = rgba if seen else (rgba[0], rgba[1], rgba[2], 0.0)
                     pb.changeVisualShape(body, link, rgbaColor=colour, physicsClientId=cid)
                 if seen:

@@ -32,6 +32,8 @@ import numpy as np
 from agent.core.perception.calibration import builtin, load
 from agent.core.perception.compass import VisualCompass
 from agent.core.perception.detector import Detector
+from sim.look import HELP as LOOK_HELP
+from sim.look import Look, look_arg
 from sim.renderer import RENDERERS, choose
 from sim.scenarios import RobotSpec, Scenario
 from sim.world import World
@@ -58,8 +60,9 @@ def run_views(
     max_distance: float = RANGE[1],
     overlap: bool = False,
     renderer: str = "tiny",
+    look: Look | None = None,
 ) -> list[ViewResult]:
-    """The labelled views of :func:`tools.lib.perception_scenes.scenes` through ``detector``,
+    """The labelled views of :func:`tools.lib.perception_scenes.scenes` (in ``look``) through ``detector``,
     each matched with its labels and timed (the first ``keep_images`` keep their picture)."""
     out: list[ViewResult] = []
     views = scenes(
@@ -71,6 +74,7 @@ def run_views(
         max_distance,
         overlap,
         renderer=renderer,
+        look=look,
     )
     with contextlib.closing(views):
         for v, scene in enumerate(views):
@@ -88,14 +92,20 @@ def run_views(
 
 
 def run_compass(
-    seed: int, samples: int, steps_deg: tuple[float, ...], renderer: str = "tiny"
+    seed: int,
+    samples: int,
+    steps_deg: tuple[float, ...],
+    renderer: str = "tiny",
+    look: Look | None = None,
 ) -> dict[str, Any]:
     """Compass error per turn step: the observer turns its body in place in the textured
-    room (head yaw 0) and the compass measures the turn."""
+    room (head yaw 0, the world in ``look``) and the compass measures the turn."""
     rng = np.random.default_rng([seed, 0xC0C0])
     vc = VisualCompass()
     res: dict[str, Any] = {}
-    sc = Scenario(robots=(RobotSpec(1, 0.0, 0.0, math.pi / 2),), seed=seed, room=4.0)
+    sc = Scenario(
+        robots=(RobotSpec(1, 0.0, 0.0, math.pi / 2),), seed=seed, room=4.0, look=look or Look()
+    )
     with World(sc, noise=False, renderer=renderer) as w:
         for step in steps_deg:
             errs = []
@@ -159,6 +169,9 @@ def main(argv: list[str] | None = None) -> int:
         default="tiny",
         help="the views' renderer (sim/renderer.py; default tiny, the reference pictures)",
     )
+    ap.add_argument(
+        "--look", type=look_arg, default=Look(), metavar="SPEC", help="the views' " + LOOK_HELP
+    )
     ap.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     ap.add_argument(
         "--compass-samples", type=int, default=10, help="turns per compass step (0: skip)"
@@ -197,11 +210,13 @@ def main(argv: list[str] | None = None) -> int:
         max_distance=args.max_distance,
         overlap=args.overlap,
         renderer=drawn.name,
+        look=args.look,
     )
     summary: dict[str, Any] = {
         "seed": args.seed,
         "calibration": cal.digest,
         "renderer": drawn.name,
+        "look": str(args.look),
         "clutter": args.clutter,
         "neighbour_heads": args.neighbour_heads,
         "max_distance": args.max_distance,
@@ -210,7 +225,7 @@ def main(argv: list[str] | None = None) -> int:
     }
     if args.compass_samples:
         summary["compass"] = run_compass(
-            args.seed, args.compass_samples, COMPASS_STEPS_DEG, drawn.name
+            args.seed, args.compass_samples, COMPASS_STEPS_DEG, drawn.name, args.look
         )
     figure(views, summary, args.png)
     if args.view_png is not None:

@@ -8,6 +8,8 @@ the chosen robot's field of view. ``--place ID:X:Y:HEADING_DEG`` (repeatable, in
 only) moves robots first, e.g. to look at a NAO 0.6 m ahead turned by some angle::
 
     python -m tools.snapshot --robots 2 --place 1:0:0:90 --place 2:0:0.6:270 --out front.png
+
+``--look SPEC`` (in-process) draws the world in a look (:mod:`sim.look`).
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
@@ -22,6 +25,8 @@ import cv2
 from agent.wire import add_network_arguments
 from sim import scenarios
 from sim.camera import HFOV
+from sim.look import HELP as LOOK_HELP
+from sim.look import look_arg
 from sim.nao_model import FOOTPRINT_RADIUS
 
 
@@ -92,6 +97,8 @@ def run_local(args: argparse.Namespace, out: Path) -> int:
         sc = scenarios.generate(
             args.robots, args.seed, obstacles=args.obstacles, clutter=args.clutter
         )
+    if args.look is not None:
+        sc = replace(sc, look=args.look)
     with World(sc) as w:
         for rid, x, y, th in args.place:
             w.set_pose(rid, x, y, th)
@@ -153,6 +160,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--yaw", type=float, default=0.0, help="head yaw in degrees (+ left)")
     p.add_argument("--top-down", action="store_true", help="plan view instead of the camera")
     p.add_argument("--place", action="append", default=[], help="ID:X:Y:HEADING_DEG")
+    p.add_argument("--look", type=look_arg, default=None, metavar="SPEC", help=LOOK_HELP)
     add_network_arguments(p, ("peer", "client"))
     p.add_argument("--timeout", type=float, default=20.0)
     p.add_argument("--out", default="view.png")

@@ -3,8 +3,9 @@
 A scenario fixes everything the world needs to start (docs/design.md §4): robot ids
 and initial poses ``(x, y, heading)`` in world metres/radians, static obstacles (cylinders,
 radius :data:`agent.core.nao.OBSTACLE_RADIUS` by default), optional orange lookalike clutter for the detector's hard
-cases, the light, the seed of the textures and of the motion noise, and the half-size of
-the square room.
+cases, the light, the seed of the textures and of the motion noise, the half-size of
+the square room and the world's look (:mod:`sim.look`; in JSON its SPEC text under
+``look``, written only when it is not the default, so render workers draw the same).
 
 :func:`generate` draws the paper-like starts of the NAO paper's experiments (§5.2.2):
 every robot faces the same "north" (world +y, heading pi/2), nearest spacing 0.6-1.2 m,
@@ -29,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from agent.wire import nao
+from sim.look import Look
 
 NORTH = math.pi / 2
 MIN_SPACING = 0.6
@@ -131,6 +133,7 @@ class Scenario:
     light: LightSpec = field(default_factory=LightSpec)
     seed: int = 0
     room: float = 4.0  # half-size of the square room, metres (walls at x, y = +-room)
+    look: Look = field(default_factory=Look)
 
     def __post_init__(self) -> None:
         validate(self)
@@ -173,6 +176,8 @@ def validate(sc: Scenario) -> None:
     li = sc.light
     if not (math.isfinite(li.intensity) and 0.0 <= li.intensity <= 3.0):
         raise ValueError(f"light intensity {li.intensity} outside [0, 3]")
+    if not isinstance(sc.look, Look):
+        raise ValueError(f"look {sc.look!r} is not a Look")
 
 
 def generate(
@@ -253,14 +258,19 @@ def generate(
 
 
 def to_dict(sc: Scenario) -> dict[str, Any]:
-    return asdict(sc)
+    """The scenario as JSON-ready data; its look as SPEC text, only when not the default."""
+    d = asdict(sc)
+    del d["look"]
+    if not sc.look.is_default():
+        d["look"] = str(sc.look)
+    return d
 
 
 def from_dict(d: Any) -> Scenario:
     """Build a scenario from parsed JSON; ``ValueError`` with the reason if it does not fit."""
     if not isinstance(d, dict):
         raise ValueError("scenario must be a JSON object")
-    unknown = set(d) - {"robots", "obstacles", "clutter", "light", "seed", "room"}
+    unknown = set(d) - {"robots", "obstacles", "clutter", "light", "seed", "room", "look"}
     if unknown:
         raise ValueError(f"unknown scenario keys {sorted(unknown)}")
     try:
@@ -271,6 +281,10 @@ def from_dict(d: Any) -> Scenario:
         kw: dict[str, Any] = {}
         if "room" in d:
             kw["room"] = float(d["room"])
+        if "look" in d:
+            if not isinstance(d["look"], str):
+                raise ValueError(f"look {d['look']!r} is not a SPEC string")
+            kw["look"] = Look.parse(d["look"])
         seed = d.get("seed", 0)
         if isinstance(seed, bool) or not isinstance(seed, int):
             raise ValueError(f"seed {seed!r} is not an int")

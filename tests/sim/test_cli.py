@@ -8,6 +8,7 @@ import pytest
 
 from sim import scenarios
 from sim.__main__ import build_parser, main
+from sim.look import Look
 
 
 @pytest.mark.parametrize(
@@ -24,6 +25,8 @@ from sim.__main__ import build_parser, main
         (["--noise-scale", "nan"], "noise scale"),
         (["--listen", "nonsense"], "endpoint"),
         (["--scenario", "/nonexistent.json"], "No such file"),
+        (["--look", "sunny"], "neither KEY:VALUE nor a preset"),
+        (["--look", "noise:-3"], "outside [0, 64]"),
     ],
 )
 def test_bad_arguments(argv: list[str], reason: str, capsys: pytest.CaptureFixture[str]) -> None:
@@ -68,10 +71,31 @@ def test_dump_isolated_scenario(tmp_path: Path) -> None:
     assert scenarios.load(out) == scenarios.generate(4, 2, isolated=True)
 
 
+def test_a_look_goes_into_the_scenario(tmp_path: Path) -> None:
+    out = tmp_path / "sc.json"
+    argv = [
+        "--robots",
+        "2",
+        "--seed",
+        "2",
+        "--look",
+        "dim-warm,hue:30",
+        "--dump-scenario",
+        str(out),
+    ]
+    assert main([*argv, "--listen", "x", "--insecure"]) == 2  # stops after writing it
+    assert str(scenarios.load(out).look) == str(Look.parse("dim-warm,hue:30"))
+    again = tmp_path / "again.json"  # a file's look, replaced by --look
+    argv = ["--scenario", str(out), "--look", "default", "--dump-scenario", str(again)]
+    assert main([*argv, "--listen", "x", "--insecure"]) == 2
+    assert scenarios.load(again).look.is_default()
+
+
 def test_help_documents_the_stable_flags() -> None:
     text = build_parser().format_help()
     for flag in ("--robots", "--seed", "--scenario", "--connect", "--listen",
-                 "--no-multicast-scouting", "--mode", "--gui", "--speed", "--noise-scale"):  # fmt: skip
+                 "--no-multicast-scouting", "--mode", "--gui", "--speed", "--noise-scale",
+                 "--look", "--free-looks"):  # fmt: skip
         assert flag in text
 
 

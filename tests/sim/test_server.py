@@ -38,6 +38,8 @@ from agent.wire import (
     key_walk,
 )
 from sim import scenarios
+from sim.glances import LookTiming
+from sim.locomotion import DT
 from tools.harness.procs import free_port, start_world, stop, wait_ready
 
 pytestmark = pytest.mark.system
@@ -148,6 +150,16 @@ def test_camera_round_trip(client: Client) -> None:
         img = png(rep.data)
         assert img.shape == (480, 640, 3)
         assert img.std() > 10  # a textured room, not a blank picture
+
+
+def test_a_look_costs_its_robot_the_head_turn_settling_and_capture(client: Client) -> None:
+    """The world's clock charges a camera request the time a NAO takes for it
+    (sim/glances.py): the picture comes at the first clock step past that time."""
+    t0 = client.ask(key_camera(3), CameraRequest(yaw=0.0)).t_sim
+    rep = client.ask(key_camera(3), CameraRequest(yaw=0.6))
+    assert isinstance(rep, CameraReply)
+    cost = LookTiming().cost(0.0, 0.6)
+    assert cost - 1e-6 <= rep.t_sim - t0 < cost + DT + 1e-6
 
 
 def test_camera_yaw_as_selector_parameter(client: Client) -> None:

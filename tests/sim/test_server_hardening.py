@@ -58,7 +58,8 @@ def server() -> Any:
 
     world = SimpleNamespace(robot_ids=(1, 2, 3), t_sim=0.0)
     log = SimpleNamespace(lines=[], write=lambda t: log.lines.append(t), flush=lambda: None)
-    srv = WorldServer(world, log=log)  # type: ignore[arg-type]
+    # free looks: a camera request is drawn at once (looks on the clock: test_glances.py)
+    srv = WorldServer(world, free_looks=True, log=log)  # type: ignore[arg-type]
     srv.log_lines = log.lines
     return srv
 
@@ -251,10 +252,10 @@ def test_a_full_render_queue_answers_busy(server: Any) -> None:
 
     from agent.wire import BUSY
 
-    server.pool = SimpleNamespace(alive=1)
-    cap = server._cam_pending.capacity
+    server.cameras.pool = SimpleNamespace(alive=1)
+    cap = server.cameras.pending.capacity
     for job in range(cap):  # every slot taken (by ids outside the world: a flood)
-        server._cam_pending.add(job, None, 100 + job, 0.0, 0.0)
+        server.cameras.pending.add(job, None, 100 + job, 0.0, 0.0)
     q = FakeQuery(key_camera(3), encode(CameraRequest(yaw=0.0)))
     server.admit("camera", q)
     server._drain(block=False)
@@ -273,8 +274,9 @@ def test_a_repeated_camera_query_is_answered_by_the_picture_in_the_works(server:
     from sim.render_pool import Result
 
     jobs: list[Any] = []
-    server.pool = SimpleNamespace(alive=1, submit=jobs.append, worker_done=lambda r: None)
+    server.cameras.pool = SimpleNamespace(alive=1, submit=jobs.append, worker_done=lambda r: None)
     server.world.set_head_yaw = lambda rid, yaw: None
+    server.world.next_shot = lambda rid, yaw: None
     server.world.poses = dict
     server.world.head_yaw = lambda rid: 0.0
     first, again, other = (
@@ -283,12 +285,12 @@ def test_a_repeated_camera_query_is_answered_by_the_picture_in_the_works(server:
     for q in (first, again, other):
         server.admit("camera", q)
         server._drain(block=False)
-    assert len(jobs) == 1 and len(server._cam_pending) == 1
+    assert len(jobs) == 1 and len(server.cameras.pending) == 1
     (gone,) = first.replies
     assert isinstance(gone, ErrorReply) and "superseded" in gone.reason
     (busy,) = other.replies
     assert isinstance(busy, ErrorReply) and busy.reason.startswith(BUSY)
-    server._rendered(Result(jobs[0].job_id, 0, png=b"png"))
+    server.cameras.rendered(Result(jobs[0].job_id, 0, png=b"png"))
     (pic,) = again.replies
     assert isinstance(pic, CameraReply) and pic.robot_id == 3 and pic.yaw == 0.5
-    assert len(server._cam_pending) == 0 and len(first.replies) == 1
+    assert len(server.cameras.pending) == 0 and len(first.replies) == 1

@@ -148,3 +148,22 @@ def test_the_shape_goes_to_every_agent_and_into_the_result(tmp_path: Path) -> No
     argv = spec.agent_command(2, net)
     assert argv[argv.index("--shape") + 1] == str(f.resolve())  # whatever the agents' cwd
     assert spec.meta()["shape_spec"] == str(f.resolve())
+
+
+def test_the_worlds_look_and_free_looks_go_to_the_world(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from sim.look import Look
+    from tools.harness.fleet import Fleet
+
+    a = parse_args([])
+    assert a.spec.look.is_default() and not a.spec.free_looks
+    assert "--look" not in Fleet(a.spec, tmp_path)._world_flags()
+    a = parse_args(["--look", "teal-caps,noise:2", "--free-looks"])
+    assert a.spec.look == Look.parse("teal-caps,noise:2")
+    flags = Fleet(a.spec, tmp_path)._world_flags()
+    assert flags[-3:] == ["--look", str(a.spec.look), "--free-looks"]
+    assert a.spec.meta()["look"] == str(a.spec.look) and a.spec.meta()["free_looks"]
+    with pytest.raises(SystemExit):
+        parse_args(["--look", "hue:999"])
+    assert "outside [-180, 180]" in capsys.readouterr().err

@@ -13,6 +13,8 @@ import sys
 from pathlib import Path
 
 from agent.core.nao import NAOQI_PORT
+from sim.look import HELP as LOOK_HELP
+from sim.look import look_arg
 from tools.calibrate.check import Floors
 from tools.calibrate.plan import PlanSpec, coarse
 
@@ -100,7 +102,13 @@ def parser() -> argparse.ArgumentParser:
     k.add_argument("--report", type=Path, default=None, help="default: CALIBRATION/report")
     _floor_args(k)
     r = sub.add_parser("rehearse", help="capture, build and check against virtual NAOs")
-    r.add_argument("--look", default="default", metavar="SPEC", help="the world's look")
+    r.add_argument(
+        "--look",
+        type=lambda text: str(look_arg(text)),
+        default="default",
+        metavar="SPEC",
+        help=LOOK_HELP,
+    )
     r.add_argument("--out", type=Path, required=True, help="DIR/captures and DIR/calibration")
     r.add_argument("--seed", type=int, default=0, help="the room's texture and motion noise")
     r.add_argument("--no-noise", action="store_true", help="turn NAO-j without motion noise")

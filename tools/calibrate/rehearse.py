@@ -9,9 +9,10 @@ NAO-j is played by :class:`WorldHand`, which puts it where the prompt says throu
 world loop (:class:`RehearsalServer`, so the world is only ever touched by its loop). Turns on the spot carry the world's motion noise, as a real NAO's do: the
 capture measures them with NAO-j's visual compass like on a real floor.
 
-``look``: what the world looks like. The world renders one look today (its NAO model,
-even light); :func:`make_world` is the one place where a look named on the command line
-becomes the world's, and refuses any other than ``default`` until the world has looks.
+``look``: what the world looks like (a SPEC of :mod:`sim.look`: the NAOs' orange, the
+light, noise, motion blur, auto exposure); :func:`make_world` is the one place where a
+look named on the command line becomes the world's. The world's clock charges every
+picture the time a NAO takes for it (:mod:`sim.glances`), as a real NAO spends it.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from typing import Any, TextIO
 
 from agent.body.naoqi import NaoqiBody
 from agent.core.perception.camera import CameraModel
+from sim.look import Look
 from sim.naoqi_gateway import NaoqiGateway
 from sim.scenarios import RobotSpec, Scenario
 from sim.server import NetConfig, WorldServer
@@ -41,25 +43,18 @@ from tools.calibrate.plan import PlanSpec
 from tools.harness.procs import free_port
 
 OBSERVER, SUBJECT = 1, 2
-DEFAULT_LOOK = "default"
 NORTH = math.pi / 2
 
 
 def make_world(look: str, seed: int = 0, noise: bool = True) -> World:
     """The world of a rehearsal: NAO-i at the origin facing north, NAO-j 1 m ahead, in a
-    4 m room (NAO-j reaches 3.1 m ahead and to either side), in ``look``.
-
-    The hook for the world's looks: once :class:`sim.world.World` renders other looks,
-    parse ``look`` here and pass it to the world; until then only the default."""
-    if look not in ("", DEFAULT_LOOK):
-        raise ValueError(
-            f"look {look!r}: the simulated world renders only its default look so far "
-            f"(use --look {DEFAULT_LOOK})"
-        )
+    4 m room (NAO-j reaches 3.1 m ahead and to either side), in ``look`` (a SPEC of
+    :mod:`sim.look`; ``ValueError`` if it is not one)."""
     sc = Scenario(
         robots=(RobotSpec(OBSERVER, 0.0, 0.0, NORTH), RobotSpec(SUBJECT, 0.0, 1.0, -NORTH)),
         seed=seed,
         room=4.0,
+        look=Look.parse(look),
     )
     return World(sc, noise=noise)
 
@@ -162,7 +157,7 @@ def rehearse(
             "observer": {"id": OBSERVER, "url": urls[OBSERVER]},
             "subject": {"id": SUBJECT, "url": urls[SUBJECT]},
         }
-        extra = {"look": look or DEFAULT_LOOK, "rehearsal": {"seed": seed, "noise": noise}}
+        extra = {"look": str(world.look), "rehearsal": {"seed": seed, "noise": noise}}
         folder = CaptureFolder.create_or_resume(caps, spec, robots, CameraModel(), extra)
         bodies: list[NaoqiBody] = []
         try:

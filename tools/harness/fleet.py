@@ -36,6 +36,7 @@ from agent.config import AgentConfig
 from agent.net.bus import Bus
 from sim import scenarios
 from sim.locomotion import MAX_NOISE_SCALE
+from sim.look import Look
 from tools.harness.judge import summarise
 from tools.harness.live import live_sinks
 from tools.harness.observe import AgentView, LiveView, Observer, Recorder, observe_for, observer_bus
@@ -77,7 +78,8 @@ class FleetSpec:
     The world: a ``scenario`` file (its robot ids ``scenario_ids``), else the seed's
     generated one (``isolated``: one robot 2-3 m from every other; ``headings``; with
     ``obstacles`` K > 0 the blocking scenario of :mod:`tools.lib.obstacle_scenario`),
-    ``noise_scale``, more ``world_args``, its ``renderer`` and ``render_workers``. The
+    ``noise_scale``, its ``look`` (:mod:`sim.look`) and ``free_looks`` (camera requests
+    cost no sim time), more ``world_args``, its ``renderer`` and ``render_workers``. The
     network: secure by default (a throwaway fleet in ``OUT/fleet`` unless ``credentials``),
     ``plain_links`` (tests), ``insecure``. Limits: ``timeout`` for the agents, wall s;
     ``world_timeout`` for the world's start. ``rogue`` S > 0: attackers for S s
@@ -98,6 +100,8 @@ class FleetSpec:
     headings: scenarios.Headings = field(default_factory=scenarios.Headings)
     obstacles: int = 0
     noise_scale: float = 1.0
+    look: Look = field(default_factory=Look)
+    free_looks: bool = False
     world_args: tuple[str, ...] = ()
     renderer: str | None = None
     render_workers: int = 0
@@ -168,6 +172,10 @@ class FleetSpec:
         if self.isolated:
             out["isolated"] = True
         out["headings"] = str(self.headings)
+        if not self.look.is_default():
+            out["look"] = str(self.look)
+        if self.free_looks:
+            out["free_looks"] = True
         if self.agent_args:
             out["agent_args"] = [f"{i}:{a}" for i, a in self.agent_args]
         if cfg.march is not None and cfg.march.distance is not None:
@@ -325,7 +333,9 @@ class Fleet:
         naoqi = ["--naoqi"] if spec.body == "naoqi" else []
         noise = [f"--noise-scale={spec.noise_scale:g}"]
         drawn = ["--renderer", spec.renderer] if spec.renderer else []
-        return [*room, *spec.world_args, *naoqi, *noise, *drawn]
+        look = [] if spec.look.is_default() else ["--look", str(spec.look)]
+        free = ["--free-looks"] if spec.free_looks else []
+        return [*room, *spec.world_args, *naoqi, *noise, *drawn, *look, *free]
 
     def close(self) -> None:
         """Stop every process (agents first, the router last), the bus and the recording;

@@ -19,6 +19,8 @@ from agent.config import AgentConfig, add_plan_arguments
 from agent.core.formation.params import D_E, PHI_E_DEG
 from agent.core.formation.view.route import Route
 from sim import scenarios
+from sim.look import HELP as LOOK_HELP
+from sim.look import Look, look_arg
 from sim.renderer import RENDERERS
 from tools.harness.fleet import MAX_RENDER_WORKERS, FleetSpec
 from tools.harness.live import add_live_arguments, check_live_argument
@@ -90,6 +92,10 @@ def add_fleet_arguments(p: argparse.ArgumentParser) -> None:
     add("--world-timeout", type=float, default=FleetSpec.world_timeout)
     add("--noise-scale", type=float, default=FleetSpec.noise_scale, metavar="K",
         help="the world multiplies its walking and turning noise by K (python -m sim)")  # fmt: skip
+    add("--look", type=look_arg, default=Look(), metavar="SPEC",
+        help="python -m sim's --look: " + LOOK_HELP)  # fmt: skip
+    add("--free-looks", action="store_true",
+        help="python -m sim --free-looks: camera requests cost no sim time")  # fmt: skip
     add("--body", choices=("zenoh", "naoqi"), default=FleetSpec.body,
         help="agents drive the world over zenoh, or its virtual NAOs over qi (sim --naoqi)")  # fmt: skip
     add("--world-arg", action="append", default=[], help="extra argument for python -m sim")
@@ -164,6 +170,8 @@ def fleet_spec(p: argparse.ArgumentParser, a: argparse.Namespace) -> FleetSpec:
             headings=a.headings,
             obstacles=a.obstacles,
             noise_scale=a.noise_scale,
+            look=a.look,
+            free_looks=a.free_looks,
             world_args=tuple(a.world_arg),
             renderer=a.renderer,
             render_workers=a.render_service,

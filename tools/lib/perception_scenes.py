@@ -35,6 +35,7 @@ import numpy as np
 
 from agent.core.perception import SIGHT_MAX, SIGHT_MIN
 from agent.core.perception.camera import CameraModel
+from sim.look import Look
 from sim.scenarios import ClutterSpec, RobotSpec, Scenario
 from sim.world import World
 
@@ -101,6 +102,7 @@ def make_world(
     seed: int,
     room: float = 4.0,
     renderer: str = "tiny",
+    look: Look | None = None,
 ) -> World:
     robots = tuple(RobotSpec(i + 1, -3.0 + 0.7 * i, -3.0, math.pi / 2) for i in range(n_robots + 1))
     items: list[ClutterSpec] = []
@@ -114,7 +116,7 @@ def make_world(
             x, y = (float(v) for v in rng.uniform(-spread, spread, size=2))
             z = float(rng.uniform(size / 2, 0.75))
             items.append(ClutterSpec(round(x, 3), round(y, 3), round(z, 3), round(size, 3)))
-    sc = Scenario(robots=robots, clutter=tuple(items), seed=seed, room=room)
+    sc = Scenario(robots=robots, clutter=tuple(items), seed=seed, room=room, look=look or Look())
     return World(sc, noise=False, renderer=renderer)
 
 
@@ -278,9 +280,10 @@ def scenes(
     max_distance: float = RANGE[1],
     overlap: bool = False,
     renderer: str = "tiny",
+    look: Look | None = None,
 ) -> Generator[Scene, None, None]:
     """``n_views`` labelled views of seed ``seed`` (a new world every
-    ``VIEWS_PER_WORLD`` views, drawn by ``renderer``), seen by ``cam``; with ``overlap`` each view puts a NAO
+    ``VIEWS_PER_WORLD`` views, drawn by ``renderer`` in ``look``), seen by ``cam``; with ``overlap`` each view puts a NAO
     partly behind another and measures the visible fractions. Close the generator (or
     run it to the end) to close the last world."""
     if not RANGE[0] < max_distance <= 4.0:
@@ -293,7 +296,7 @@ def scenes(
                 if w is not None:
                     w.close()
                 room = room_for(max_distance)
-                w = make_world(rng, 3, clutter, seed * 1000 + v, room, renderer)
+                w = make_world(rng, 3, clutter, seed * 1000 + v, room, renderer, look)
             assert w is not None
             n_others = int(rng.integers(2, 4)) if overlap else int(rng.integers(1, 4))
             for rid in range(n_others + 2, 5):  # park unused robots in a corner, facing the wall
