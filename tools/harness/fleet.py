@@ -36,7 +36,7 @@ from agent.config import AgentConfig
 from agent.net.bus import Bus
 from sim import scenarios
 from sim.locomotion import MAX_NOISE_SCALE
-from tools.harness.judge import summarise
+from tools.harness.judge import plan_meta, summarise
 from tools.harness.live import live_sinks
 from tools.harness.observe import AgentView, LiveView, Observer, Recorder, observe_for, observer_bus
 from tools.harness.procs import (
@@ -157,11 +157,8 @@ class FleetSpec:
             "d_e": cfg.d_e,
             "phi_e_deg": cfg.phi_e_deg,
             "noise_scale": float(self.noise_scale),
-            "orientation": cfg.orientation,
-            "strategy": cfg.strategy,
             # the judge loads the shape again from its name or file (tools.harness.judge)
-            "shape_spec": cfg.shape.source,
-            "shape_digest": cfg.shape.digest,
+            **plan_meta(cfg),
         }
         if self.scenario is not None:
             out["scenario"] = str(self.scenario)
