@@ -26,6 +26,7 @@ from tools.lib.faults_report import Run
 
 NET = ["--connect", "tcp/127.0.0.1:9"]
 ROOT = Path(__file__).resolve().parents[2]
+WEDGE = load_shape(str(ROOT / "docs/examples/wedge.json"))  # 9 slots
 
 
 @pytest.mark.parametrize(
@@ -41,6 +42,7 @@ ROOT = Path(__file__).resolve().parents[2]
         ({"body": "naoqi", "auto_ids": True}, "--auto-ids"),
         ({"timeout": 0.0}, "timeouts"),
         ({"obstacles": -1}, "obstacles"),
+        ({"robots": 10, "agent": AgentConfig(robot_id=0, shape=WEDGE)}, "9 slots, too few"),
     ],
 )
 def test_a_spec_refuses_what_no_run_can_be(over: dict[str, object], message: str) -> None:

@@ -128,6 +128,8 @@ class FleetSpec:
             raise ValueError("--body naoqi drives the robot at a fixed URL: no --auto-ids")
         if not (self.timeout > 0 and self.world_timeout > 0 and self.obstacles >= 0):
             raise ValueError("the timeouts must be > 0 and the obstacles >= 0")
+        # a formation file with fewer slots than robots: refused before anything starts
+        self.agent.shape.check_fleet(self.robots)
 
     def agent_config(self, rid: int) -> AgentConfig:
         """Robot ``rid``'s agent settings."""
