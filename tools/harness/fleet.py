@@ -37,7 +37,6 @@ from agent.net.bus import Bus
 from sim import scenarios
 from sim.locomotion import MAX_NOISE_SCALE
 from tools.harness.judge import plan_meta, summarise
-from tools.harness.live import live_sinks
 from tools.harness.observe import AgentView, LiveView, Observer, Recorder, observe_for, observer_bus
 from tools.harness.procs import (
     FleetNet,
@@ -54,6 +53,7 @@ from tools.harness.procs import (
     wait_ready,
 )
 from tools.harness.render import served_by, start_render_workers
+from tools.harness.view.live import live_sinks
 
 #: The most robots a run has. Each robot is an agent process (~100 MB of its own memory
 #: and a TLS session at the router): 128 robots need ~13 GB. The wire's records carry at

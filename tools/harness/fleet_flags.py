@@ -21,7 +21,7 @@ from agent.core.formation.view.route import Route
 from sim import scenarios
 from sim.renderer import RENDERERS
 from tools.harness.fleet import MAX_RENDER_WORKERS, FleetSpec
-from tools.harness.live import add_live_arguments, check_live_argument
+from tools.harness.view.live import add_live_arguments, check_live_argument
 
 LOG_LEVELS = ("DEBUG", "INFO", "WARNING")
 
