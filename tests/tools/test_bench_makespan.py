@@ -39,9 +39,12 @@ def test_one_fleet_measured(tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
     r = mk.evaluate("nao", 5, 0, "line")
     assert r["safe"] and r["lb"] <= r["capt"] + 1e-9 and r["makespan"] >= r["lb"] - 1e-9
     assert r["ms_capt"] == pytest.approx(r["makespan"] / r["capt"])
+    # the critical chain adds up to the makespan, its last robot walks its whole path
+    assert sum(x for _, _, x in r["chain"]) == pytest.approx(r["makespan"])
+    assert r["chain"][-1][1] == r["chain"][-1][2]
     rows = tmp_path / "rows.jsonl"
     assert mk.main(["--set", "held-out", "--families", "nao", "--sizes", "4", "--seeds", "1",
-                    "--shapes", "pyramid,wedge", "--json", str(rows)]) == 0  # fmt: skip
+                    "--shapes", "pyramid,wedge", "--json", str(rows), "--chain"]) == 0  # fmt: skip
     assert [json.loads(x)["shape"] for x in rows.read_text().splitlines()] == ["pyramid", "wedge"]
     capsys.readouterr()
     assert mk.main(["--summary", str(rows)]) == 0

@@ -25,7 +25,8 @@ B* (the bottleneck assignment's longest straight path to the same slots, ÷ the 
 speed: no assignment to these slots finishes sooner), the ratios ``ms/capt`` and ``ms/lb``,
 ``safe`` (the wave checker and the dependency checker, with the release points and
 waiting until the robots waited for hold their slots: timing-robust 2·radius clearance),
-and the plan's seconds. The summary gives per family and over the set the median and
+the plan's seconds, and its critical chain (:func:`critical_chain`: who waits for
+whom along the path that ends last; ``--chain`` prints it). The summary gives per family and over the set the median and
 worst ``ms/capt``, and the fleets that failed the clearance.
 
 The runs are single-process and CPU-light but a plan of 100 robots in two blobs takes up
@@ -56,7 +57,9 @@ from agent.core.formation.waves.execution import (
     capt_makespan,
     check_dependencies,
     dependency_makespan,
+    dependency_starts,
     path_lengths,
+    release_points,
 )
 from agent.core.formation.waves.safety import check_safety
 from tools.bench.plan import _rows_after, _rows_at, nao_group
@@ -175,12 +178,32 @@ def evaluate(family: str, n: int, seed: int, shape: str, radius: float = 0.2) ->
         "lb_capt": lb / capt if capt > 1e-9 else 1.0,
         "safe": _safe(plan, radius),
         "plan_s": dt,
+        "chain": critical_chain(plan),
     }
 
 
 def _makespan(plan: Plan) -> float:
     lengths = path_lengths(plan.paths())
     return dependency_makespan(lengths, _rows_after(plan), plan.wave_of(), _rows_at(plan))
+
+
+def critical_chain(plan: Plan) -> list[tuple[int, float, float]]:
+    """What the makespan is made of: from the first robot to start to the last to hold,
+    per robot of the waiting chain (robot id, its path length m, how far along it the
+    next robot of the chain waits for it: its release point; the last robot: its whole
+    length). The makespan is the sum of the last column (unit speed)."""
+    lengths = path_lengths(plan.paths())
+    after, at, waves = _rows_after(plan), _rows_at(plan), plan.wave_of()
+    start = dependency_starts(lengths, after, waves, at)
+    rel = release_points(lengths, after, at)
+    i = int(np.argmax(start + lengths))
+    chain = [(plan.robots[i].robot_id, float(lengths[i]), float(lengths[i]))]
+    while after[i]:
+        k = max(range(len(after[i])), key=lambda m: (start[after[i][m]] + rel[i][m], -m))
+        j = after[i][k]
+        chain.append((plan.robots[j].robot_id, float(lengths[j]), float(rel[i][k])))
+        i = j
+    return chain[::-1]
 
 
 def _safe(plan: Plan, radius: float) -> bool:
@@ -267,6 +290,7 @@ def main(argv: list[str] | None = None) -> int:
                     help=f"fleet sizes (default {','.join(map(str, SIZES))}; nao: "
                     f"{','.join(map(str, NAO_SIZES))} unless given)")  # fmt: skip
     ap.add_argument("--seeds", type=int, default=None, help="the set's first K seeds only")
+    ap.add_argument("--chain", action="store_true", help="print each plan's critical chain")
     ap.add_argument("--json", type=Path, default=None, help="append one row per fleet")
     ap.add_argument("--summary", type=Path, default=None,
                     help="summarise the rows of this file (no planning)")  # fmt: skip
@@ -297,6 +321,10 @@ def main(argv: list[str] | None = None) -> int:
                         f"{'safe' if r['safe'] else 'UNSAFE'}  {r['plan_s']:.1f} s",
                         flush=True,
                     )
+                    if a.chain:
+                        print("    chain (id, path m, walked when the next starts m): " + ", ".join(
+                            f"{i} {ln:.1f}/{x:.1f}" for i, ln, x in r["chain"]
+                        ))  # fmt: skip
                     if a.json is not None:
                         with a.json.open("a") as f:
                             f.write(json.dumps(r) + "\n")
