@@ -20,7 +20,8 @@ Every agent of a fleet must be started with the same planning parameters (``--d-
 compares their digests and stops the whole fleet, naming the odd robot, when they differ.
 ``--shape`` is a built-in (``pyramid``, the default, ``line``, ``column``, ``wedge``,
 ``circle``, ``grid``) or a formation file (docs/formation.md "Shapes"); a malformed file
-is a usage error naming the bad field, before the agent joins the fleet.
+is a usage error naming the bad field, before the agent joins the fleet; so is a file with
+fewer slots than ``--fleet-size`` robots (without ``--fleet-size`` the plan stops on it).
 
 ``--world-connect EP`` (so that loss on the robots' radio spares the body): the body's queries to
 the world (register, camera, walk, turn) go through a second zenoh session connected to ``EP`` (the
@@ -211,6 +212,11 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         p.error("--nao needs --body naoqi")
     if args.fleet_size is not None and args.fleet_size < 1:
         p.error("--fleet-size must be >= 1")
+    if args.fleet_size is not None:  # a formation file too short for the fleet: at start
+        try:
+            args.shape.check_fleet(args.fleet_size)
+        except ValueError as exc:
+            p.error(f"--shape: {exc}")
     if not (math.isfinite(args.d_e) and args.d_e > 0):
         p.error("--d-e must be > 0")
     if not 0 < args.phi_e_deg < 90:

@@ -213,6 +213,8 @@ class AgentConfig:
     def __post_init__(self) -> None:
         if self.fleet_size is not None and self.fleet_size < 1:
             raise ValueError(f"fleet size must be >= 1, got {self.fleet_size}")
+        if self.fleet_size is not None:  # a formation file with fewer slots: refused now
+            self.shape.check_fleet(self.fleet_size)
         if not (math.isfinite(self.d_e) and self.d_e > 0.0):
             raise ValueError(f"d_e must be > 0 m, got {self.d_e}")
         if not (math.isfinite(self.phi_e) and 0.0 < self.phi_e < math.pi / 2):

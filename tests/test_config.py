@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -59,7 +60,6 @@ shapes = st.sampled_from([*BUILTIN.values(), load_shape(str(ROOT / "docs/example
 configs = st.builds(
     AgentConfig,
     robot_id=st.integers(0, MAX_ROBOT_ID),
-    fleet_size=st.one_of(st.none(), st.integers(1, 200)),
     d_e=st.one_of(st.just(D_E), positive(10.0)),
     # phi_e as --phi-e-deg gives it: the radians of some degrees in (0, 90)
     phi_e=st.one_of(
@@ -78,6 +78,10 @@ configs = st.builds(
     explore_step=st.floats(0.2, 5.0, allow_nan=False),
     sensor_fault=faults,
     publish_camera=st.booleans(),
+).flatmap(  # a fleet size the shape holds (a formation file has so many slots)
+    lambda c: st.one_of(st.none(), st.integers(1, c.shape.capacity or 200)).map(
+        lambda n: replace(c, fleet_size=n)
+    )
 )
 
 
@@ -166,6 +170,25 @@ def test_the_shape_argument(tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
         p.parse_args(["--shape", str(bad)])
     assert exc.value.code == 2
     assert "slots[0].parent: 3 is not an earlier slot (0..0)" in capsys.readouterr().err
+
+
+def test_a_fleet_larger_than_its_formation_file_is_refused_at_start(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    f = tmp_path / "pair.json"
+    f.write_text(json.dumps(TWO))
+    pair = load_shape(str(f))
+    why = rf"shape 'pair' \(file {f.resolve()}\) has 2 slots, too few for 3 robots"
+    with pytest.raises(ValueError, match=why):
+        AgentConfig(robot_id=1, fleet_size=3, shape=pair)
+    assert AgentConfig(robot_id=1, fleet_size=2, shape=pair).fleet_size == 2  # it fits
+    assert AgentConfig(robot_id=1, shape=pair).fleet_size is None  # learnt at agreement
+    with pytest.raises(SystemExit) as exc:
+        parse_args(["--id", "1", "--fleet-size", "3", "--shape", str(f)])
+    assert exc.value.code == 2
+    assert "--shape: shape 'pair' (file " in capsys.readouterr().err
+    assert parse_args(["--id", "1", "--fleet-size", "2", "--shape", str(f)]).shape == pair
+    assert parse_args(["--id", "1", "--shape", str(f)]).fleet_size is None
 
 
 def test_the_shape_is_planned_with_and_agreed() -> None:

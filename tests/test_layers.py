@@ -16,7 +16,9 @@
 - no import cycles among the modules of ``agent/``, ``sim/`` and ``tools/`` (imports
   under ``if TYPE_CHECKING:`` included: a cycle of types is still a knot);
 - no source file (agent, sim, tools and the tests; Python, JavaScript, HTML) over 600
-  lines; no folder of ``agent/`` with more than 15 modules;
+  lines; no folder of ``agent/``, ``sim/`` or ``tools/`` with more than 15 modules (the
+  command-line tools of ``tools/`` and the world's modules of ``sim/`` held at their
+  count);
 - the formation core's rooms are layered (``FORMATION_TIERS``): a module imports only
   its own room and the rooms of lower tiers.
 """
@@ -295,20 +297,21 @@ def test_the_formation_order_catches_an_upward_import() -> None:
 
 
 MAX_MODULES = 15
-# folders over the limit today, with their count: they may shrink, never grow
-OVER_MODULES: dict[str, int] = {}
+# folders over the limit today, with their count: they may shrink, never grow (tools/: one
+# module per command, ``python -m tools.NAME``, whose names users type)
+OVER_MODULES: dict[str, int] = {"sim": 21, "tools": 28}
 
 
 def _module_counts() -> dict[str, int]:
-    """Modules (``.py`` files but ``__init__.py``) of every folder of ``agent/``."""
-    folders = {p.parent for p in (ROOT / "agent").rglob("*.py")}
+    """Modules (``.py`` files but ``__init__.py``) of every folder of the packages."""
+    folders = {p.parent for pkg in PACKAGES for p in (ROOT / pkg).rglob("*.py")}
     return {
         d.relative_to(ROOT).as_posix(): sum(1 for f in d.glob("*.py") if f.name != "__init__.py")
         for d in sorted(folders)
     }
 
 
-def test_no_agent_folder_over_15_modules() -> None:
+def test_no_folder_over_15_modules() -> None:
     counts = _module_counts()
     over = {d: n for d, n in counts.items() if n > OVER_MODULES.get(d, MAX_MODULES)}
     assert over == {}

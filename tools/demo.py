@@ -67,9 +67,9 @@ import numpy as np
 from agent.wire import INSECURE_WARNING
 from tools.harness.fleet import FleetSpec, run_fleet
 from tools.harness.fleet_flags import add_fleet_arguments, fleet_spec
-from tools.harness.live import DEFAULT_LIVE, serve
 from tools.harness.progress import Progress
-from tools.harness.webpage import DEFAULT_WEB, serve_page
+from tools.harness.view.live import DEFAULT_LIVE, serve
+from tools.harness.view.webpage import DEFAULT_WEB, serve_page
 
 # ===================================================================== CLI
 

@@ -39,8 +39,8 @@ from tools.harness import report
 from tools.harness.fleet import Fleet, FleetSpec
 from tools.harness.fleet_flags import add_agent_arguments, agent_settings
 from tools.harness.judge import outcome
-from tools.harness.live import add_live_arguments, check_live_argument
 from tools.harness.observe import AgentView
+from tools.harness.view.live import add_live_arguments, check_live_argument
 from tools.lib.faults_report import Run, plot, print_table
 
 FAULTS = (

@@ -43,7 +43,7 @@ from tools.harness import report
 from tools.harness.fleet import FleetSpec, run_fleet
 from tools.harness.fleet_flags import parse_fleet_spec
 from tools.harness.judge import outcome
-from tools.harness.live import add_live_arguments, check_live_argument
+from tools.harness.view.live import add_live_arguments, check_live_argument
 
 
 @dataclass

@@ -47,6 +47,7 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
+from agent.config import add_plan_arguments
 from tools import netns
 from tools.harness import report
 from tools.harness.fleet import FleetSpec
@@ -141,6 +142,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "(mesh, docs/design.md §3; only with --insecure)",
     )
     add_agent_arguments(ap, agreement=False)
+    add_plan_arguments(ap)  # the agents' and the monitor's: it judges the shape they plan
     add_monitor_arguments(ap)  # --monitor: only observe and judge a run (a test host's)
     ap.add_argument(
         "--insecure",
@@ -149,7 +151,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "by default (a fleet made under OUT/fleet, a TLS router)",
     )
     args = ap.parse_args(argv)
-    args.agent = agent_settings(ap, args)
+    args.agent = agent_settings(
+        ap, args, orientation=args.orientation, strategy=args.strategy, shape=args.shape
+    )
     return args
 
 

@@ -23,7 +23,7 @@ from typing import Any
 from agent.config import AgentConfig
 from sim import scenarios
 from tools.harness.fleet import FleetSpec, run_fleet
-from tools.harness.live import add_live_arguments, check_live_argument
+from tools.harness.view.live import add_live_arguments, check_live_argument
 
 
 def run(

@@ -47,7 +47,7 @@ def load(path: Path) -> Replay:
         reader = make_reader(f)
         for _, channel, message in reader.iter_messages(log_time_order=False):
             if channel.message_encoding != "msgpack":
-                continue  # Foxglove's view of the run (tools/harness/scene.py)
+                continue  # Foxglove's view of the run (tools/harness/view/scene.py)
             if rp.t0_ns == 0:
                 rp.t0_ns = message.publish_time
             t = (message.publish_time - rp.t0_ns) / 1e9

@@ -10,14 +10,14 @@ router with the ``observer`` identity of ``--credentials``, which the ACL lets o
 subscribe; every message shown has passed the signature check) and serves what it sees
 as Foxglove's well-known schemas over the Foxglove WebSocket protocol (``--live``,
 default 127.0.0.1:8765): the same scene builder as the recorder
-(:class:`tools.harness.scene.Scene`). ``--record FILE`` also writes the MCAP recording.
+(:class:`tools.harness.view.scene.Scene`). ``--record FILE`` also writes the MCAP recording.
 
 ``--replay FILE``: the wire channels of a recording (``tools.demo``'s run.mcap) fed
 through the same scene builder at their recorded pace (``--speed K`` times faster),
 once or in a loop.
 
 ``--web [HOST:PORT]`` (default 127.0.0.1:8080) serves the page in the browser
-(:mod:`tools.harness.webpage`): top-down map, each robot's phase, camera views, log.
+(:mod:`tools.harness.view.webpage`): top-down map, each robot's phase, camera views, log.
 Runs until Ctrl-C, or ``--for S`` seconds.
 """
 
@@ -31,9 +31,9 @@ from pathlib import Path
 from typing import Any
 
 from agent.wire import TruthPosesMsg, decode, reason
-from tools.harness.live import DEFAULT_LIVE, Fanout, LiveServer, check_live_argument, serve
-from tools.harness.scene import Scene
-from tools.harness.webpage import DEFAULT_WEB, PageServer, serve_page
+from tools.harness.view.live import DEFAULT_LIVE, Fanout, LiveServer, check_live_argument, serve
+from tools.harness.view.scene import Scene
+from tools.harness.view.webpage import DEFAULT_WEB, PageServer, serve_page
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:

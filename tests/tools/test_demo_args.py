@@ -89,6 +89,24 @@ def test_usage_errors(
     assert exc.value.code == 2 and message in capsys.readouterr().err
 
 
+def test_a_fleet_larger_than_its_formation_file_is_a_usage_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import json
+
+    f = tmp_path / "pair.json"
+    slot = {"parent": 0, "distance": 1, "angle_deg": 90}
+    f.write_text(json.dumps({"name": "pair", "slots": [slot]}))
+    three = tmp_path / "three.json"
+    scenarios.dump(scenarios.generate(3, 1), three)
+    for argv in (["--robots", "3"], ["--scenario", str(three)]):  # the robots, or the file's
+        with pytest.raises(SystemExit) as exc:
+            parse_args([*argv, "--shape", str(f)])
+        err = capsys.readouterr().err
+        assert exc.value.code == 2 and "has 2 slots, too few for 3 robots" in err
+    assert parse_args(["--robots", "2", "--shape", str(f)]).spec.robots == 2
+
+
 def test_the_demo_turns_the_camera_feed_on_and_other_tools_leave_it_off() -> None:
     from agent.config import AgentConfig
     from tools.harness.fleet import FleetSpec

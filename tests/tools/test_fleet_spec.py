@@ -5,21 +5,28 @@ world, what its result says of it; tools/harness/report.py's matrix of runs."""
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import replace
 from pathlib import Path
 
 import pytest
 
-from agent.config import AgentConfig
+from agent.config import AgentConfig, load_shape
+from agent.core.formation.shape.schema import parse_shape
 from agent.core.formation.shape.spec import BUILTIN
 from agent.core.formation.view.route import Route
 from sim import scenarios
+from tools import eval_loss
+from tools.harness import monitor
 from tools.harness.fleet import MAX_ROBOTS, Fleet, FleetSpec, march_room, route_length
 from tools.harness.hosts import HostFleet, Hosts
+from tools.harness.judge import plan_meta
 from tools.harness.report import exit_status, run_matrix
 from tools.lib.faults_report import Run
 
 NET = ["--connect", "tcp/127.0.0.1:9"]
+ROOT = Path(__file__).resolve().parents[2]
+WEDGE = load_shape(str(ROOT / "docs/examples/wedge.json"))  # 9 slots
 
 
 @pytest.mark.parametrize(
@@ -35,6 +42,7 @@ NET = ["--connect", "tcp/127.0.0.1:9"]
         ({"body": "naoqi", "auto_ids": True}, "--auto-ids"),
         ({"timeout": 0.0}, "timeouts"),
         ({"obstacles": -1}, "obstacles"),
+        ({"robots": 10, "agent": AgentConfig(robot_id=0, shape=WEDGE)}, "9 slots, too few"),
     ],
 )
 def test_a_spec_refuses_what_no_run_can_be(over: dict[str, object], message: str) -> None:
@@ -101,6 +109,41 @@ def test_test_hosts_need_credentials_made_for_them() -> None:
     for bad in ({"tcp_rto_max_ms": 999}, {"agent_mode": "router"}, {"loss": 1.5}):
         with pytest.raises(ValueError):
             Hosts("t", **bad)
+
+
+@pytest.mark.parametrize("shape", ["line", str(ROOT / "docs/examples/wedge.json")])
+def test_a_host_fleets_monitor_judges_the_agents_shape(
+    shape: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """HostFleet tells its monitor the agents' planning parameters (``monitor_command``),
+    and ``tools.eval_loss --monitor`` reads them back into the config it judges with: a
+    fleet of the line is judged against the line, not the pyramid."""
+    cfg = AgentConfig(robot_id=0, d_e=0.9, phi_e=math.radians(40.0), orientation="cp",
+                      strategy="banded", shape=load_shape(shape))  # fmt: skip
+    fleet = HostFleet(FleetSpec(robots=3, seed=4, agent=cfg, insecure=True), tmp_path, Hosts("t"))
+    argv = fleet.monitor_argv
+    assert argv[1:4] == ["-m", "tools.eval_loss", "--monitor"] and argv[-1] == "--insecure"
+    seen: dict[str, tuple[object, ...]] = {}
+
+    def judged(*args: object) -> int:
+        seen["args"] = args
+        return 0
+
+    monkeypatch.setattr(monitor, "monitor", judged)
+    assert eval_loss.main(argv[3:]) == 0
+    connect, out, agent, *_ = seen["args"]
+    assert connect == [fleet.router_ep] and out == tmp_path and isinstance(agent, AgentConfig)
+    assert agent.shape == cfg.shape and agent.shape.digest == cfg.shape.digest
+    assert (agent.orientation, agent.strategy, agent.d_e) == ("cp", "banded", 0.9)
+    assert agent.phi_e == pytest.approx(cfg.phi_e, abs=1e-12)
+    assert plan_meta(agent)["shape_spec"] == cfg.shape.source  # what the judge loads again
+
+
+def test_a_host_fleet_refuses_a_shape_its_monitor_cannot_be_told(tmp_path: Path) -> None:
+    made_in_code = parse_shape((ROOT / "docs/examples/wedge.json").read_text())  # no source
+    spec = FleetSpec(agent=AgentConfig(robot_id=0, shape=made_in_code), insecure=True)
+    with pytest.raises(ValueError, match="cannot be told the shape 'wedge'"):
+        HostFleet(spec, tmp_path, Hosts("t"))
 
 
 def _run(seed: int, outcome: str = "complete") -> Run:

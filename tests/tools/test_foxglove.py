@@ -1,6 +1,6 @@
 """The recording that Foxglove opens: a fake observer stream written by the
 recorder and read back with ``mcap``'s reader (tools/harness/observe.py ``Recorder``,
-tools/harness/scene.py, tools/harness/foxglove.py)."""
+tools/harness/view/scene.py, tools/harness/view/foxglove.py)."""
 
 from __future__ import annotations
 
@@ -25,9 +25,9 @@ from agent.wire import (
     TruthPosesMsg,
     encode,
 )
-from tools.harness import foxglove as fg
 from tools.harness.observe import Observer, Recorder
-from tools.harness.scene import Scene, to_world
+from tools.harness.view import foxglove as fg
+from tools.harness.view.scene import Scene, to_world
 
 NORTH = math.pi / 2
 WORLD = {1: (1.0, 2.0), 2: (2.0, 2.2), 3: (1.4, 3.1)}  # aligned starts (world m)
@@ -420,7 +420,7 @@ def viewer_accepts(schema: dict[str, Any], where: str = "$") -> None:
 
 
 def test_the_viewers_accept_every_schema() -> None:
-    from tools.harness.scene import STATUS
+    from tools.harness.view.scene import STATUS
 
     for schema in [*fg.SCHEMAS.values(), STATUS]:
         viewer_accepts(schema)

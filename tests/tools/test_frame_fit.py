@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from tools.harness.scene import to_world
+from tools.harness.view.scene import to_world
 from tools.lib.frame_fit import common_frame_pose
 
 

@@ -1,5 +1,5 @@
 """The live view: foxglove-sdk's WebSocket server fed by the same scene
-builder as the recorder (tools/harness/live.py, tools/view.py). A client of the Foxglove
+builder as the recorder (tools/harness/view/live.py, tools/view.py). A client of the Foxglove
 WebSocket protocol (the ``websockets`` package) joins, receives ``advertise``, subscribes
 and receives messages; the source is a real 3-NAO demo run (its recording,
 tests/data/demo-3-seed1.mcap, replayed by ``python -m tools.view --replay``) or the
@@ -23,9 +23,9 @@ from typing import Any
 import pytest
 
 from agent.wire import decode
-from tools.harness.live import Fanout, LiveServer, parse_address
 from tools.harness.observe import Observer, Recorder
 from tools.harness.procs import free_port
+from tools.harness.view.live import Fanout, LiveServer, parse_address
 from tools.view import wire_messages
 
 ROOT = Path(__file__).resolve().parents[2]

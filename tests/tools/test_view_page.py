@@ -1,5 +1,5 @@
 """The page in the browser, in a real headless browser: Debian's ``chromium``
-driven by Playwright for Python (tools/web/, tools/harness/webpage.py, tools/view.py).
+driven by Playwright for Python (tools/web/, tools/harness/view/webpage.py, tools/view.py).
 
 Fed by a real 3-NAO demo run: its recording (tests/data/demo-3-seed1.mcap) replayed
 through the scene builder into the live Foxglove WebSocket server, which the page joins.
@@ -28,11 +28,11 @@ from typing import Any
 import pytest
 
 from agent.wire import TruthPosesMsg, decode
-from tools.harness import foxglove as fg
-from tools.harness.live import Fanout, LiveServer
 from tools.harness.procs import free_port
-from tools.harness.scene import Scene
-from tools.harness.webpage import PageServer
+from tools.harness.view import foxglove as fg
+from tools.harness.view.live import Fanout, LiveServer
+from tools.harness.view.scene import Scene
+from tools.harness.view.webpage import PageServer
 from tools.view import wire_messages
 
 ROOT = Path(__file__).resolve().parents[2]

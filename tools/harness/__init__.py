@@ -5,12 +5,15 @@ and judge runs).
 observed, stopped, judged); ``fleet_flags``: the command-line flags of a run (``tools.demo``'s).
 ``procs``: ports, the world, router, agents and rogues, the fleet's network, stopping.
 ``observe``: the MCAP recorder, the bus observer, the live status lines.
-``scene``: the Foxglove channels of a recording (scene, plan, frames, log, statuses).
-``foxglove``: Foxglove's well-known schemas as JSON Schema, and their message builders.
+``view``: a run as people see it: Foxglove's schemas, the scene's channels of a recording,
+the live server and the page in the browser (``view.foxglove``, ``view.scene``,
+``view.live``, ``view.webpage``).
+``render``: the render workers of a run (cameras drawn beside the world).
 ``judge``: a run judged from ground truth, its outcome (one rule), the result table, the
 formation figure.
 ``truth``: the ground truth read as a user would: who moved, the pyramid's shape from the
 true final poses.
+``pairs``: the planned formation's child-parent pairs judged by the robots' own formula.
 ``monitor``: one run observed and judged by a process of its own (``tools.eval_loss``,
 the compose observer).
 ``report``: the evaluation tools' shared runs JSON, table and outcome figure, and their

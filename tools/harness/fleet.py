@@ -37,8 +37,7 @@ from agent.net.bus import Bus
 from sim import scenarios
 from sim.locomotion import MAX_NOISE_SCALE
 from sim.look import Look
-from tools.harness.judge import summarise
-from tools.harness.live import live_sinks
+from tools.harness.judge import plan_meta, summarise
 from tools.harness.observe import AgentView, LiveView, Observer, Recorder, observe_for, observer_bus
 from tools.harness.procs import (
     FleetNet,
@@ -55,6 +54,7 @@ from tools.harness.procs import (
     wait_ready,
 )
 from tools.harness.render import served_by, start_render_workers
+from tools.harness.view.live import live_sinks
 
 #: The most robots a run has. Each robot is an agent process (~100 MB of its own memory
 #: and a TLS session at the router): 128 robots need ~13 GB. The wire's records carry at
@@ -132,6 +132,8 @@ class FleetSpec:
             raise ValueError("--body naoqi drives the robot at a fixed URL: no --auto-ids")
         if not (self.timeout > 0 and self.world_timeout > 0 and self.obstacles >= 0):
             raise ValueError("the timeouts must be > 0 and the obstacles >= 0")
+        # a formation file with fewer slots than robots: refused before anything starts
+        self.agent.shape.check_fleet(self.robots)
 
     def agent_config(self, rid: int) -> AgentConfig:
         """Robot ``rid``'s agent settings."""
@@ -161,11 +163,8 @@ class FleetSpec:
             "d_e": cfg.d_e,
             "phi_e_deg": cfg.phi_e_deg,
             "noise_scale": float(self.noise_scale),
-            "orientation": cfg.orientation,
-            "strategy": cfg.strategy,
             # the judge loads the shape again from its name or file (tools.harness.judge)
-            "shape_spec": cfg.shape.source,
-            "shape_digest": cfg.shape.digest,
+            **plan_meta(cfg),
         }
         if self.scenario is not None:
             out["scenario"] = str(self.scenario)

@@ -23,7 +23,7 @@ from sim.look import HELP as LOOK_HELP
 from sim.look import Look, look_arg
 from sim.renderer import RENDERERS
 from tools.harness.fleet import MAX_RENDER_WORKERS, FleetSpec
-from tools.harness.live import add_live_arguments, check_live_argument
+from tools.harness.view.live import add_live_arguments, check_live_argument
 
 LOG_LEVELS = ("DEBUG", "INFO", "WARNING")
 

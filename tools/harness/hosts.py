@@ -9,6 +9,7 @@ host 1     the zenoh router (``python -m tools.router``), the rendezvous; its se
            body sessions
 host 2     the world (``python -m sim``)
 host 3     the monitor (:mod:`tools.harness.monitor`), which records and judges the run
+           with the agents' planning parameters and shape (:func:`monitor_command`)
 host 4..   one agent each (``python -m agent --id I --state-dir``, ids from the world's
            ready line)
 then       one render worker each when ``render_workers`` K > 0 (the world spread over hosts:
@@ -68,6 +69,27 @@ def host_fleet_credentials(out: Path, robots: int) -> str:
     if not (root / "ca.pem").exists():
         create_fleet(root, range(1, robots + 1), hosts=[netns.address(ROUTER)])
     return str(root)
+
+
+def monitor_command(spec: FleetSpec, connect: str, out: Path, sec: list[str]) -> list[str]:
+    """The argv of the monitor of ``spec``'s run (``python -m tools.eval_loss --monitor``)
+    joining at ``connect`` with ``sec`` (``--insecure`` or ``--credentials DIR``), writing
+    to ``out``: it judges the run with the agents' planning parameters, their d_e and φ_e,
+    orientation, strategy and shape (a built-in's name or a formation file's path, its
+    ``source``; :func:`agent.config.load_shape` loads it again). ``ValueError`` for a shape
+    with no source (built in code, not loaded): the monitor could not judge against it."""
+    cfg = spec.agent
+    if not cfg.shape.source:
+        raise ValueError(
+            f"the monitor cannot be told the shape {cfg.shape.name!r}: it came from no "
+            "formation file (its source)"
+        )
+    return [
+        sys.executable, "-m", "tools.eval_loss", "--monitor", "--connect", connect,
+        "--out", str(out), "--seed", str(spec.seed), "--d-e", repr(cfg.d_e),
+        "--phi-e-deg", repr(cfg.phi_e_deg), "--orientation", cfg.orientation,
+        "--strategy", cfg.strategy, "--shape", cfg.shape.source, *sec,
+    ]  # fmt: skip
 
 
 #: Bounds of Linux's ``net.ipv4.tcp_rto_max_ms`` (kernel >= 6.15; ms).
@@ -139,6 +161,8 @@ class HostFleet:
         self.router_ep = f"{proto}/{netns.address(ROUTER)}:{P.BUS_PORT}"
         self.world_ep = f"{proto}/{netns.address(ROUTER)}:{P.WORLD_PORT}"
         self.sec = ["--insecure"] if spec.insecure else ["--credentials", str(spec.credentials)]
+        # refused here, before any host exists: a shape the monitor cannot be told
+        self.monitor_argv = monitor_command(spec, self.router_ep, out, self.sec)
         self.env = dict(os.environ, PYTHONUNBUFFERED="1", MPLBACKEND="Agg")
         self.ids: list[int] = []
         self.agents: dict[int, subprocess.Popen[str]] = {}
@@ -174,15 +198,10 @@ class HostFleet:
         if self.hosts.tcp_rto_max_ms:
             cap_tcp_rto(self.fab, self.hosts.tcp_rto_max_ms)
         self.start_router()
-        py, cfg = sys.executable, self.spec.agent
         self.monitor = subprocess.Popen(
             netns.netns_cmd(
                 self.fab.name(MONITOR),
-                [
-                    py, "-m", "tools.eval_loss", "--monitor", "--connect", self.router_ep,
-                    "--out", str(self.workdir), "--d-e", repr(cfg.d_e), "--phi-e-deg",
-                    repr(cfg.phi_e_deg), "--seed", str(self.seed), *self.sec,
-                ],
+                self.monitor_argv,
             ),
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._log("monitor"),
             text=True, env=self.env, cwd=str(ROOT), start_new_session=True,

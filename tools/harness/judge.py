@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from agent.config import load_shape
+from agent.config import AgentConfig, load_shape
 from agent.core.formation.shape.spec import PYRAMID
 from agent.core.formation.shape.spec import Shape as FormationShape
 from agent.core.formation.shape.verdict import R_D_MAX, R_PHI_MAX
@@ -41,6 +41,19 @@ PHASE_ORDER = tuple(p for p in PHASES if p != "failed")
 
 
 # ===================================================================== evaluation
+
+
+def plan_meta(cfg: AgentConfig) -> dict[str, Any]:
+    """What a run's ``result.json`` says of the fleet's planning parameters besides the
+    pyramid's d_e and φ_e, so that :func:`summarise` plans and judges the run as the agents
+    did: their ``orientation``, ``strategy`` and shape (``shape_spec``: the name or file
+    :func:`agent.config.load_shape` loads it from again; ``shape_digest``)."""
+    return {
+        "orientation": cfg.orientation,
+        "strategy": cfg.strategy,
+        "shape_spec": cfg.shape.source,
+        "shape_digest": cfg.shape.digest,
+    }
 
 
 def plan_from_agreed(

@@ -37,9 +37,10 @@ import time
 from pathlib import Path
 from typing import Any
 
+from agent.config import AgentConfig
 from agent.net.bus import Bus, BusConfig
 from agent.wire import CREDENTIALS_ENV, INSECURE_WARNING, PHASES
-from tools.harness.judge import print_table, summarise
+from tools.harness.judge import plan_meta, print_table, summarise
 from tools.harness.observe import AgentView, Observer, Recorder, observe_for, watch
 
 #: Phases an agent reaches only after agreement (its first one ends ``agree_s``).
@@ -50,15 +51,16 @@ TERMINAL_PHASES = ("done", "failed")
 def monitor(
     connect: list[str],
     out: Path,
-    d_e: float,
-    phi_e_deg: float,
+    agent: AgentConfig,
     until_done: int = 0,
     timeout_s: float = 900.0,
     seed: int | None = None,
     credentials: str = "",
     exits: Path | None = None,
 ) -> int:
-    """Observe the bus like ``tools.demo`` does, until the run is over; judge it.
+    """Observe the bus like ``tools.demo`` does, until the run is over; judge it with the
+    agents' planning parameters ``agent`` (d_e, φ_e, orientation, strategy and shape: a run
+    of ``--shape line`` is judged against the line, not the pyramid).
 
     ``credentials``: a fleet credentials folder (``agent.wire.trust``); the monitor then joins
     as a zenoh client of the TLS router with the ``observer`` identity (observers only
@@ -159,8 +161,9 @@ def monitor(
     result: dict[str, Any] = {
         "robots": len(ids),
         "seed": seed,
-        "d_e": d_e,
-        "phi_e_deg": phi_e_deg,
+        "d_e": agent.d_e,
+        "phi_e_deg": agent.phi_e_deg,
+        **plan_meta(agent),
         "wall_total": time.monotonic() - obs.t0,  # since the monitor started
     }
     if order.get("timeout"):
@@ -179,7 +182,7 @@ def monitor(
         result["displacement_m"] = {
             str(i): math.dist(first[i][:2], last[i][:2]) for i in ids if i in first and i in last
         }
-    result = summarise(obs, result, out, ids, d_e, math.radians(phi_e_deg), quiet=True)
+    result = summarise(obs, result, out, ids, agent.d_e, agent.phi_e, quiet=True)
     # protocol latency: from the last agent entering exchange to the last one agreeing
     views = [obs.agents[i] for i in ids if i in obs.agents]
     entered = [v.phase_wall.get("exchange") for v in views]
@@ -200,7 +203,9 @@ def monitor(
 
 def add_monitor_arguments(p: argparse.ArgumentParser) -> None:
     """The monitor's own flags (``python -m tools.eval_loss --monitor``; that tool's parser
-    has the shared ``--out``, ``--timeout``, ``--d-e``, ``--phi-e-deg`` and ``--insecure``)."""
+    has the shared ``--out``, ``--timeout``, ``--insecure`` and the agents' settings,
+    ``--d-e``, ``--phi-e-deg``, ``--orientation``, ``--strategy`` and ``--shape``, read into
+    ``args.agent``)."""
     p.add_argument(
         "--monitor", action="store_true", help="only observe and judge a run (see monitor())"
     )
@@ -231,8 +236,8 @@ def monitor_main(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 2
-    return monitor(args.connect, Path(args.out), args.d_e, args.phi_e_deg, args.until_done,
-                   args.timeout, args.seed, creds or "")  # fmt: skip
+    return monitor(args.connect, Path(args.out), args.agent, args.until_done, args.timeout,
+                   args.seed, creds or "")  # fmt: skip
 
 
 def read_exits(folder: Path, since: float) -> tuple[dict[int, int | None], list[int]]:

@@ -36,10 +36,10 @@ from agent.wire import (
     encode,
     id_from_key,
 )
-from tools.harness.foxglove import JSON
-from tools.harness.live import Fanout, Sink
 from tools.harness.procs import FleetNet
-from tools.harness.scene import Scene
+from tools.harness.view.foxglove import JSON
+from tools.harness.view.live import Fanout, Sink
+from tools.harness.view.scene import Scene
 
 # ===================================================================== recording
 
@@ -49,7 +49,7 @@ class Recorder:
 
     Two kinds of channel (docs/agent.md "Recordings"): one per bus key with the exact
     msgpack wire payloads (``tools.replay`` reads them), and the JSON channels of
-    Foxglove's well-known schemas that :class:`tools.harness.scene.Scene` derives from the
+    Foxglove's well-known schemas that :class:`tools.harness.view.scene.Scene` derives from the
     same messages (``/scene``, ``/scene/obstacles``, ``/scene/plan``, ``/tf``, ``/log``,
     ``/robots/{id}/status``, ``/nao/{id}/camera`` and its ``/annotations``). Every message's log time is the world time (``t_sim``) of
     the latest ground-truth sample (0 before the first); its publish time is the wall
@@ -63,8 +63,8 @@ class Recorder:
     ``params``: the fleet's planning parameters (default: the demo's), ``obstacles``: the
     world's (x, y, radius), if known; else the scenario file that the harness writes beside
     the recording (``scenario.json``) during this run is read. ``sinks``: where the
-    Foxglove channels go besides the file (``--live``: :class:`tools.harness.live.LiveServer`);
-    one scene builder for all (:class:`tools.harness.live.Fanout`).
+    Foxglove channels go besides the file (``--live``: :class:`tools.harness.view.live.LiveServer`);
+    one scene builder for all (:class:`tools.harness.view.live.Fanout`).
     """
 
     def __init__(

@@ -165,8 +165,12 @@ def test_a_tree_shape_holds_its_slots_only() -> None:
     s = t.slots(2, D, PHI)
     np.testing.assert_allclose(s.positions, [[0, 0], [0, -1]], atol=1e-12)
     assert s.edge(1) == (0, 1.0, math.pi)
-    with pytest.raises(ValueError, match="3 slots, too few for 4 robots"):
+    with pytest.raises(ValueError, match="'two' has 3 slots, too few for 4 robots"):
         t.slots(4, D, PHI)
+    t.check_fleet(3)  # the slots it holds; a built-in holds any fleet
+    BUILTIN["line"].check_fleet(10**5)
+    with pytest.raises(ValueError, match=r"^shape 'two' has 3 slots, too few for 4 robots \("):
+        t.check_fleet(4)  # built in code: no file to name
     with pytest.raises(ValueError, match="int >= 1"):
         t.slots(0, D, PHI)
     with pytest.raises(ValueError, match="child slot"):

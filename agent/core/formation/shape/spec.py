@@ -84,6 +84,20 @@ class Shape:
         (every shape but ``circle`` and ``grid``, whose layout depends on N)."""
         return self.rule not in ("circle", "grid")
 
+    def check_fleet(self, n: int) -> None:
+        """``ValueError`` when a fleet of ``n`` robots does not fit the shape: a fixed tree
+        with fewer slots than robots (a built-in holds any N; a fleet of N takes slots
+        0..N−1). One message naming the shape, its file and both counts; checked where the
+        fleet size is first known (the agent's ``--fleet-size``, a fleet's spec), so that a
+        short file stops the start, not the plan."""
+        cap = self.capacity
+        if cap is not None and n > cap:
+            where = f" (file {self.source})" if self.source else ""
+            raise ValueError(
+                f"shape {self.name!r}{where} has {cap} slots, too few for {n} robots "
+                f"(a fleet of N robots takes its first N slots)"
+            )
+
     def slots(self, n: int, d_e: float, phi_e: float) -> Slots:
         """The slots of a fleet of ``n`` (``ValueError`` for n < 1, a bad d_e or φ_e, or
         more robots than a fixed tree holds)."""
@@ -91,9 +105,7 @@ class Shape:
             return RULES[self.rule](n, d_e, phi_e)
         if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 1:
             raise ValueError(f"number of robots must be an int >= 1, got {n!r}")
-        cap = len(self.edges) + 1
-        if n > cap:
-            raise ValueError(f"shape {self.name!r} has {cap} slots, too few for {n} robots")
+        self.check_fleet(int(n))
         parent, distance, angle = (a[: int(n)] for a in self._arrays())
         return Slots(parent, distance, angle, compose(parent, distance, angle))
 

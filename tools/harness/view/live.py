@@ -2,14 +2,14 @@
 also sent to while the recorder writes them (docs/design.md §10 "Seeing the fleet",
 "Live"; docs/view.md).
 
-One scene builder (:class:`tools.harness.scene.Scene`), several sinks: the MCAP recorder
+One scene builder (:class:`tools.harness.view.scene.Scene`), several sinks: the MCAP recorder
 (:class:`tools.harness.observe.Recorder`) and :class:`LiveServer`, each a :class:`Sink`.
 :class:`Fanout` is the scene's ``Emit`` over them; a sink that fails is counted and
 logged, never costs another sink a message.
 
 :class:`LiveServer` is foxglove-sdk's WebSocket server (Foxglove WebSocket protocol,
 subprotocol ``foxglove.sdk.v1``) in a context of its own, one JSON channel per topic with
-the topic's JSON Schema. Foxglove, Lichtblick and the page of :mod:`tools.harness.webpage`
+the topic's JSON Schema. Foxglove, Lichtblick and the page of :mod:`tools.harness.view.webpage`
 connect to it. The protocol has no latched topics: a viewer that subscribes late would
 never see the obstacles or the plan, which are sent once. So the latest message of each
 topic in :data:`LATCHED` is sent again every :data:`RELATCH_S` seconds of wall time.
@@ -31,7 +31,7 @@ from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Protocol
 
 from agent.wire import Guard
-from tools.harness.foxglove import JSON
+from tools.harness.view.foxglove import JSON
 
 if TYPE_CHECKING:
     from foxglove.websocket import ServerListener
@@ -45,7 +45,7 @@ RELATCH_S = 1.0
 
 class Sink(Protocol):
     """Takes one JSON ``message`` of ``schema`` on ``topic`` at world time ``t_ns``
-    (the signature of :class:`tools.harness.scene.Emit`)."""
+    (the signature of :class:`tools.harness.view.scene.Emit`)."""
 
     def emit(self, topic: str, schema: JSON, message: JSON, t_ns: int) -> None: ...
 

@@ -3,7 +3,7 @@ channels (docs/design.md §10 "Seeing the fleet"; docs/agent.md "Recordings").
 
 :class:`Scene` takes what the observer sees on the bus (ground truth, statuses, records,
 digests, contacts) and emits JSON messages of Foxglove's well-known schemas
-(:mod:`tools.harness.foxglove`):
+(:mod:`tools.harness.view.foxglove`):
 
 * ``/scene`` (``foxglove.SceneUpdate``), one per truth sample: every robot at its
   ground-truth pose, a cylinder of the NAO's footprint and height, an arrow for its
@@ -61,8 +61,8 @@ from agent.wire import (
     reason,
 )
 from sim.nao_model import FOOTPRINT_RADIUS, HEIGHT
-from tools.harness import foxglove as fg
-from tools.harness.foxglove import JSON
+from tools.harness.view import foxglove as fg
+from tools.harness.view.foxglove import JSON
 from tools.lib.frame_fit import common_frame_pose
 
 #: The colours of matplotlib's ``tab10``, as the formation figure gives them: the k-th

@@ -19,10 +19,10 @@ from http.server import SimpleHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 from typing import Any
 
-from tools.harness.live import parse_address
+from tools.harness.view.live import parse_address
 
 #: the page's files
-WEB = Path(__file__).resolve().parents[1] / "web"
+WEB = Path(__file__).resolve().parents[2] / "web"
 DEFAULT_WEB = "127.0.0.1:8080"
 
 

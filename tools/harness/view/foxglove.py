@@ -9,7 +9,7 @@ enum values; descriptions left out; checked against ``@foxglove/schemas`` 2.1.0)
 from small shared parts; every field is required but those Foxglove added later, and the
 builders below fill every field. ``foxglove.CompressedImage``
 and ``foxglove.ImageAnnotations`` carry the camera frames agents publish with
-``--publish-camera`` (tools/harness/scene.py).
+``--publish-camera`` (tools/harness/view/scene.py).
 
 The builders (:func:`stamp`, :func:`pose`, :func:`colour`, primitives, :func:`log`,
 :func:`frame_transform`) return plain dicts ready for ``json.dumps``.
