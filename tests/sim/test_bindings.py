@@ -1,11 +1,12 @@
-"""sim/bindings.py: who may claim and drive which robot, without zenoh (docs/design.md §8)."""
+"""sim/server/bindings.py: who may claim and drive which robot, without zenoh
+(docs/design.md §8)."""
 
 from __future__ import annotations
 
 import pytest
 
 from agent.wire.trust import Identity
-from sim.bindings import RobotBindings, Unauthorised
+from sim.server.bindings import RobotBindings, Unauthorised
 
 
 def test_register_hands_out_the_lowest_free_id_and_tokens_take_ids() -> None:

@@ -1,5 +1,5 @@
-"""Looks on the world clock (sim/glances.py, sim/camera_desk.py): what a look costs, the
-glances in flight, and a real world's camera desk charging them while others walk."""
+"""Looks on the world clock (sim/server/glances.py, sim/server/camera_desk.py): what a look costs,
+the glances in flight, and a real world's camera desk charging them while others walk."""
 
 from __future__ import annotations
 
@@ -11,12 +11,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agent.wire import BUSY, CameraReply, ErrorReply, Message
-from sim.camera_desk import CameraDesk
-from sim.glances import CAPTURE_S, HEAD_YAW_MAX_SPEED, SETTLE_S, Glances, LookTiming
-from sim.locomotion import DT
-from sim.pending_pictures import Admission
+from sim.physics.locomotion import DT
+from sim.physics.world import World
 from sim.scenarios import RobotSpec, Scenario
-from sim.world import World
+from sim.server.camera_desk import CameraDesk
+from sim.server.glances import CAPTURE_S, HEAD_YAW_MAX_SPEED, SETTLE_S, Glances, LookTiming
+from sim.server.pending_pictures import Admission
 
 NORTH = math.pi / 2
 

@@ -1,4 +1,4 @@
-"""Walking, turning, noise statistics and contacts (sim/locomotion.py)."""
+"""Walking, turning, noise statistics and contacts (sim/physics/locomotion.py)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from agent.wire import MAX_SIDE_STEP
-from sim.locomotion import (
+from sim.physics.locomotion import (
     DT,
     SIDE_SPEED,
     WALK_SPEED,
@@ -16,9 +16,9 @@ from sim.locomotion import (
     NoiseModel,
     Obstacle,
 )
-from sim.nao_model import FOOTPRINT_RADIUS
+from sim.physics.nao_model import FOOTPRINT_RADIUS
+from sim.physics.world import World
 from sim.scenarios import RobotSpec, Scenario
-from sim.world import World
 
 NORTH = math.pi / 2
 

@@ -1,4 +1,4 @@
-"""Looks of the world parsed and checked (sim/look.py): a test per error branch, the
+"""Looks of the world parsed and checked (sim/camera/look.py): a test per error branch, the
 presets, and the SPEC text round trip."""
 
 from __future__ import annotations
@@ -9,8 +9,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sim.look import AE_TARGET, PRESETS, RANGES, Look
-from sim.nao_model import ORANGE
+from sim.camera.look import AE_TARGET, PRESETS, RANGES, Look
+from sim.physics.nao_model import ORANGE
 
 
 def test_default_and_empty_specs_are_the_default_look() -> None:

@@ -1,10 +1,10 @@
-"""One picture per robot and a fair bound (:mod:`sim.pending_pictures`)."""
+"""One picture per robot and a fair bound (:mod:`sim.server.pending_pictures`)."""
 
 from __future__ import annotations
 
 import pytest
 
-from sim.pending_pictures import MIN_CAPACITY, Admission, PendingPictures
+from sim.server.pending_pictures import MIN_CAPACITY, Admission, PendingPictures
 
 
 def test_the_capacity_is_at_least_the_fleet() -> None:

@@ -1,12 +1,12 @@
-"""Pictures developed in a look (sim/picture.py): each step on synthetic pictures."""
+"""Pictures developed in a look (sim/camera/picture.py): each step on synthetic pictures."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from sim.look import Look
-from sim.picture import AE_GAIN_MAX, LUMA_BGR, Shot, develop, exposure_gain, smear
+from sim.camera.look import Look
+from sim.camera.picture import AE_GAIN_MAX, LUMA_BGR, Shot, develop, exposure_gain, smear
 
 SHOT = Shot(robot_id=1, frame=0, turned=0.0)
 

@@ -1,4 +1,5 @@
-"""The rendered NAO against the camera model (sim/world.py, sim/camera.py, sim/nao_model.py)."""
+"""The rendered NAO against the camera model (sim/physics/world.py, sim/camera/camera.py,
+sim/physics/nao_model.py)."""
 
 from __future__ import annotations
 
@@ -9,10 +10,10 @@ import cv2
 import numpy as np
 import pytest
 
-from sim import camera
-from sim.nao_model import BODY_PARTS, HEAD_PARTS, NECK_Z
+from sim.camera import camera
+from sim.physics.nao_model import BODY_PARTS, HEAD_PARTS, NECK_Z
+from sim.physics.world import World
 from sim.scenarios import RobotSpec, Scenario, generate
-from sim.world import World
 
 NORTH = math.pi / 2
 

@@ -57,7 +57,7 @@ def test_queries_go_to_the_worker_of_their_robot_then_back_to_the_world(tmp_path
     logs = [(tmp_path / f"w{i}.log").open("wb") for i in (1, 2)]
     workers = [
         subprocess.Popen(
-            [sys.executable, "-m", "sim.render_worker", *net, "--shard", f"{i}/2"],
+            [sys.executable, "-m", "sim.server.render_worker", *net, "--shard", f"{i}/2"],
             cwd=ROOT,
             stdout=logs[i - 1],
             stderr=subprocess.STDOUT,

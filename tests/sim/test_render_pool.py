@@ -1,4 +1,4 @@
-"""Rendering in worker processes gives the world's own pictures (sim/render_pool.py)."""
+"""Rendering in worker processes gives the world's own pictures (sim/server/render_pool.py)."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ import cv2
 import numpy as np
 import pytest
 
-from sim.render_pool import Job, RenderPool, Result
+from sim.physics.world import World
 from sim.scenarios import RobotSpec, Scenario
-from sim.world import World
+from sim.server.render_pool import Job, RenderPool, Result
 
 NORTH = math.pi / 2
 

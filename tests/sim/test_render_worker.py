@@ -1,5 +1,5 @@
-"""sim/render_worker.py without zenoh: shards, the camera queries it takes, answers and
-refuses, the poses it follows; and the world's scenario queryable (sim/server.py)."""
+"""sim/server/render_worker.py without zenoh: shards, the camera queries it takes, answers and
+refuses, the poses it follows; and the world's scenario queryable (sim/server/server.py)."""
 
 from __future__ import annotations
 
@@ -28,8 +28,8 @@ from agent.wire import (
     trust,
 )
 from sim import scenarios
-from sim.render_worker import RenderWorker, parse_shard, shard_robots
-from sim.world import World
+from sim.physics.world import World
+from sim.server.render_worker import RenderWorker, parse_shard, shard_robots
 from tests.fakes import zb
 from tests.sim.test_server_hardening import Exploding, FakeQuery
 
@@ -227,7 +227,7 @@ def test_secure_poses_are_taken_from_the_world_only(room: World, fleet: trust.Cr
 
 
 def test_the_world_hands_out_its_scenario(tmp_path: Path) -> None:
-    from sim.server import WorldServer
+    from sim.server.server import WorldServer
 
     world = SimpleNamespace(robot_ids=(1, 2, 3), t_sim=0.0, scenario=SCENARIO)
     log = SimpleNamespace(write=lambda t: None, flush=lambda: None)

@@ -1,4 +1,4 @@
-"""The renderer choice (sim/renderer.py): TinyRenderer always, PyBullet's EGL plugin where
+"""The renderer choice (sim/camera/renderer.py): TinyRenderer always, PyBullet's EGL plugin where
 it runs, ``auto``'s fallback, the ``--renderer`` flags, and EGL's pictures against
 TinyRenderer's on the same scenes.
 
@@ -19,10 +19,10 @@ import numpy as np
 import pybullet as pb
 import pytest
 
-from sim import obj_mesh
-from sim import renderer as renderers
+from sim.camera import obj_mesh
+from sim.camera import renderer as renderers
+from sim.physics.world import World
 from sim.scenarios import RobotSpec, Scenario, generate
-from sim.world import World
 
 
 def _egl_state() -> str | None:
@@ -86,7 +86,7 @@ def test_auto_falls_back_to_tiny_when_the_plugin_fails(
 
 def test_the_renderer_flag_on_every_command() -> None:
     from sim.__main__ import build_parser as sim_parser
-    from sim.render_worker import build_parser as worker_parser
+    from sim.server.render_worker import build_parser as worker_parser
     from tools.bench.render import main as bench_main
     from tools.demo import parse_args as demo_args
     from tools.harness.render import render_command
@@ -132,7 +132,7 @@ def test_box_mesh_faces_point_outward() -> None:
 @pytest.mark.usefixtures("need_egl")
 def test_egl_shade_is_the_plugins_light() -> None:
     """A flat grey wall facing the camera, lit from several directions, has the
-    brightness :func:`sim.renderer.egl_shade` says (shadow map off)."""
+    brightness :func:`sim.camera.renderer.egl_shade` says (shadow map off)."""
     client = int(pb.connect(pb.DIRECT))
     try:
         renderers.load_egl(client)
@@ -182,7 +182,7 @@ def test_egl_pictures_match_tinyrenderers(pair: tuple[World, World]) -> None:
             assert b.shape == a.shape and b.dtype == a.dtype
             diff = np.abs(a.astype(int) - b.astype(int))
             assert diff.mean() < 6.0, (rid, yaw, diff.mean())
-            # registered to a fraction of a pixel (sim.camera.PROJECTION_EGL)
+            # registered to a fraction of a pixel (sim.camera.camera.PROJECTION_EGL)
             ga, gb = (cv2.cvtColor(x, cv2.COLOR_BGR2GRAY).astype(np.float32) for x in (a, b))
             (du, dv), _ = cv2.phaseCorrelate(ga, gb)
             assert abs(du) < 0.15 and abs(dv) < 0.15, (rid, yaw, du, dv)

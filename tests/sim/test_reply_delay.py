@@ -1,4 +1,4 @@
-"""A slow world (``python -m sim --reply-delay MAX_S``, sim/delays.py): camera and motion
+"""A slow world (``python -m sim --reply-delay MAX_S``, sim/server/delays.py): camera and motion
 replies held for a seeded random delay by the world's one loop, which keeps serving."""
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from agent.wire import (
 )
 from sim import scenarios
 from sim.__main__ import main
-from sim.delays import MAX_REPLY_DELAY_S, DelayedReplies
+from sim.server.delays import MAX_REPLY_DELAY_S, DelayedReplies
 
 
 class TimedQuery:
@@ -88,8 +88,8 @@ def test_bad_reply_delay_is_a_usage_error(bad: str, capsys: pytest.CaptureFixtur
 def slow_world() -> Iterator[Any]:
     """A real world (2 robots) served by its loop in a thread, replies held up to 0.6 s;
     queries are handed to it as the zenoh callbacks would (no session)."""
-    from sim.server import WorldServer
-    from sim.world import World
+    from sim.physics.world import World
+    from sim.server.server import WorldServer
 
     log = type("Log", (), {"write": lambda self, t: None, "flush": lambda self: None})()
     with World(scenarios.generate(2, 3)) as world:

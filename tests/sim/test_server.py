@@ -1,4 +1,4 @@
-"""The world over a real zenoh session on loopback (sim/server.py, python -m sim)."""
+"""The world over a real zenoh session on loopback (sim/server/server.py, python -m sim)."""
 
 from __future__ import annotations
 
@@ -38,8 +38,8 @@ from agent.wire import (
     key_walk,
 )
 from sim import scenarios
-from sim.glances import LookTiming
-from sim.locomotion import DT
+from sim.physics.locomotion import DT
+from sim.server.glances import LookTiming
 from tools.harness.procs import free_port, start_world, stop, wait_ready
 
 pytestmark = pytest.mark.system
@@ -154,7 +154,7 @@ def test_camera_round_trip(client: Client) -> None:
 
 def test_a_look_costs_its_robot_the_head_turn_settling_and_capture(client: Client) -> None:
     """The world's clock charges a camera request the time a NAO takes for it
-    (sim/glances.py): the picture comes at the first clock step past that time."""
+    (sim/server/glances.py): the picture comes at the first clock step past that time."""
     t0 = client.ask(key_camera(3), CameraRequest(yaw=0.0)).t_sim
     rep = client.ask(key_camera(3), CameraRequest(yaw=0.6))
     assert isinstance(rep, CameraReply)
@@ -356,7 +356,7 @@ def test_client_cli(
     tmp_path: Path,
     capsys: pytest.CaptureFixture[str],
 ) -> None:
-    from sim import client as cli
+    from sim.server import client as cli
 
     common = ["--connect", world[1], "--no-multicast-scouting", "--insecure", "--timeout", "30"]
     out = tmp_path / "c.png"

@@ -1,4 +1,4 @@
-"""The world server's callbacks hardened, without zenoh (sim/server.py): fake queries
+"""The world server's callbacks hardened, without zenoh (sim/server/server.py): fake queries
 through the checks and the bounded inbox; motion request ids executed once."""
 
 from __future__ import annotations
@@ -54,7 +54,7 @@ class Exploding:
 def server() -> Any:
     from types import SimpleNamespace
 
-    from sim.server import WorldServer
+    from sim.server.server import WorldServer
 
     world = SimpleNamespace(robot_ids=(1, 2, 3), t_sim=0.0)
     log = SimpleNamespace(lines=[], write=lambda t: log.lines.append(t), flush=lambda: None)
@@ -92,7 +92,7 @@ def test_malformed_requests_are_sorted_out_in_the_callback(
 
 
 def test_huge_malformed_requests_cannot_pile_up(server: Any) -> None:
-    from sim.server import MALFORMED_MAX_BYTES
+    from sim.server.server import MALFORMED_MAX_BYTES
 
     alone = FakeQuery(key_camera(3), FakeZBytes(MALFORMED_MAX_BYTES + 1))
     server.admit("camera", alone)  # heavier than the whole lane: dropped unanswered
@@ -127,7 +127,7 @@ def test_a_callback_survives_a_query_that_explodes(server: Any) -> None:
 def test_a_flood_of_malformed_requests_is_bounded_and_cannot_delay_a_valid_one(
     server: Any,
 ) -> None:
-    from sim.server import INBOX_CAPS
+    from sim.server.server import INBOX_CAPS
 
     first = [FakeQuery(key_camera(3), b"garbage") for _ in range(10)]
     for q in first:
@@ -194,7 +194,7 @@ def _ask(server: Any, kind: str, msg: Any, rid: int = 3) -> FakeQuery:
 
 
 def _finish(server: Any, legs: FakeLegs, rid: int, kind: str, t: float) -> None:
-    from sim.locomotion import Done
+    from sim.physics.locomotion import Done
 
     legs.moving.discard(rid)
     server._finish([Done(rid, kind, "done", t)], [])
@@ -235,7 +235,7 @@ def test_a_request_id_reused_for_another_motion_is_refused(server: Any, legs: Fa
 
 
 def test_the_motion_cache_is_bounded_per_robot(server: Any, legs: FakeLegs) -> None:
-    from sim.server import MOTION_CACHE
+    from sim.server.server import MOTION_CACHE
 
     for i in range(1, MOTION_CACHE + 2):
         _ask(server, "turn", TurnRequest(angle=0.1, request_id=i))
@@ -271,7 +271,7 @@ def test_a_repeated_camera_query_is_answered_by_the_picture_in_the_works(server:
     from types import SimpleNamespace
 
     from agent.wire import BUSY, CameraReply
-    from sim.render_pool import Result
+    from sim.server.render_pool import Result
 
     jobs: list[Any] = []
     server.cameras.pool = SimpleNamespace(alive=1, submit=jobs.append, worker_done=lambda r: None)

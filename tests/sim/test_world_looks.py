@@ -1,6 +1,6 @@
-"""The world in a look (sim/world.py with sim/look.py, sim/picture.py): the default look
-draws today's pictures bit for bit, a recolour reaches both renderers and survives the
-culling, the scenario carries the look to render workers, which draw the same pictures."""
+"""The world in a look (sim/physics/world.py with sim/camera/look.py, sim/camera/picture.py):
+the default look draws today's pictures bit for bit, a recolour reaches both renderers and
+survives the culling, the scenario carries the look to render workers, which draw the same pictures."""
 
 from __future__ import annotations
 
@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 
 from sim import scenarios
-from sim.look import Look
-from sim.picture import Shot
-from sim.render_pool import Job, RenderPool, Result
+from sim.camera.look import Look
+from sim.camera.picture import Shot
+from sim.physics.world import World
 from sim.scenarios import RobotSpec, Scenario
-from sim.world import World
+from sim.server.render_pool import Job, RenderPool, Result
 from tests.sim.test_renderer import _need_egl
 
 NORTH = math.pi / 2

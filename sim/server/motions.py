@@ -8,7 +8,7 @@ answered with the first result (the last ``cache`` results per robot are kept, o
 dropped), and an id reused for the other kind of motion is refused. So a client may
 retry a motion whose reply it lost.
 
-Only the world loop of :mod:`sim.server` calls these methods; ``start`` is its own
+Only the world loop of :mod:`sim.server.server` calls these methods; ``start`` is its own
 callable, run at once on that loop.
 """
 
@@ -19,8 +19,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from agent.wire import CommandReply
-from sim.locomotion import Done
-from sim.requests import Request
+from sim.physics.locomotion import Done
+from sim.server.requests import Request
 
 
 @dataclass

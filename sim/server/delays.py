@@ -7,7 +7,7 @@ many robots, or a real NAO's busy NAOqi, answers late; ``tools.eval_chaos`` meas
 that does to the formation. Each reply to a camera, walk or turn query is held for a
 delay drawn uniformly from ``[0, max_s]`` by a numpy ``Generator`` seeded with the
 world's seed (its own stream: the world's other random draws do not change), then sent
-by the world's one loop (:mod:`sim.server`): nothing sleeps, so the world keeps serving
+by the world's one loop (:mod:`sim.server.server`): nothing sleeps, so the world keeps serving
 every other request meanwhile. The delays are drawn in the order the replies are made.
 """
 

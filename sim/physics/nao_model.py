@@ -25,7 +25,7 @@ from pathlib import Path
 
 import pybullet as pb
 
-from sim import obj_mesh
+from sim.camera import obj_mesh
 
 HEIGHT = 0.573
 WIDTH = 0.28
@@ -150,10 +150,10 @@ def sphere_mesh(r: float, rings: int = 8, segments: int = 14) -> Mesh:
 class NaoBodyFactory:
     """Creates NAO multibodies in one PyBullet client, sharing the visual shapes.
 
-    With ``mesh_dir`` (the EGL renderer, :mod:`sim.renderer`) every part is an OBJ file
+    With ``mesh_dir`` (the EGL renderer, :mod:`sim.camera.renderer`) every part is an OBJ file
     written there (the same vertices and normals; boxes with flat faces) and its colour is
     multiplied by ``shade`` (the light factor that matches TinyRenderer's light).
-    ``orange``: the colour of the orange parts (a look recolours them, :mod:`sim.look`).
+    ``orange``: the colour of the orange parts (a look recolours them, :mod:`sim.camera.look`).
     """
 
     def __init__(
@@ -262,7 +262,7 @@ def link_colours(
     orange: tuple[float, float, float, float] = ORANGE,
 ) -> tuple[tuple[float, float, float, float], ...]:
     """Each link's colour, in link order (:meth:`NaoBodyFactory.create`), the orange parts
-    in ``orange``: a hidden NAO (:meth:`sim.world.World.render` culls those out of view)
+    in ``orange``: a hidden NAO (:meth:`sim.physics.world.World.render` culls those out of view)
     gets them back."""
     return tuple(orange if p.rgba == ORANGE else p.rgba for p in (*HEAD_PARTS, *BODY_PARTS))
 

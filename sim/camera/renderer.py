@@ -6,7 +6,7 @@
   GPU, Mesa's llvmpipe rasterises on the CPU, several times cheaper per frame than
   TinyRenderer. The plugin draws only primitives and OBJ meshes (not meshes given as
   vertex lists), ignores texture changes and uses its own light model, so the world builds
-  its room for it from OBJ files (:mod:`sim.obj_mesh`) and matches TinyRenderer's light
+  its room for it from OBJ files (:mod:`sim.camera.obj_mesh`) and matches TinyRenderer's light
   with colour factors (:func:`egl_shade`). It must be loaded before the scene is built.
 - ``auto``: ``egl`` when the plugin loads and passes :func:`self_test` (a tiny scene drawn
   and checked not empty), else ``tiny``; :func:`choose` says which and why.
@@ -45,7 +45,7 @@ RENDERER_HELP = (
 #: check the fallback of ``auto``).
 PLUGIN_ENV = "NAO_EGL_PLUGIN"
 
-#: TinyRenderer's light (sim.camera.render): ambient and diffuse shares of the intensity.
+#: TinyRenderer's light (sim.camera.camera.render): ambient and diffuse shares of the intensity.
 TINY_AMBIENT = 0.62
 TINY_DIFFUSE = 0.38
 
@@ -162,7 +162,7 @@ def elf_symbol(path: str, name: str) -> tuple[int, int] | None:
 def self_test(path: str | None = None) -> str | None:
     """Draw an orange box with the EGL plugin in a client of its own; None when the
     picture shows it, else why not."""
-    from sim import obj_mesh
+    from sim.camera import obj_mesh
 
     client = int(pb.connect(pb.DIRECT))
     if client < 0:
@@ -232,7 +232,7 @@ def egl_shade(normal: tuple[float, float, float], light: tuple[float, float, flo
 def tiny_shade(
     normal: tuple[float, float, float], light: tuple[float, float, float], intensity: float
 ) -> float:
-    """TinyRenderer's light factor (ambient + diffuse, :mod:`sim.camera`) for the same."""
+    """TinyRenderer's light factor (ambient + diffuse, :mod:`sim.camera.camera`) for the same."""
     d = sum(a * b for a, b in zip(normal, light, strict=True))
     return intensity * (TINY_AMBIENT + TINY_DIFFUSE * max(0.0, d))
 

@@ -2,7 +2,7 @@
 auto exposure and sensor noise (docs/world.md "Looks"; docs/design.md §4). numpy only.
 
 The renderer draws a clean, evenly lit scene; :func:`develop` turns it into what a camera
-would deliver under a :class:`sim.look.Look`, in the order light reaches the sensor:
+would deliver under a :class:`sim.camera.look.Look`, in the order light reaches the sensor:
 
 1. **light** (``light``): every value times F, the room's light level;
 2. **colour temperature** (``warm``): red times (1 + 0.3 w), blue times (1 - 0.3 w);
@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sim.look import WARM_GAIN, Look
+from sim.camera.look import WARM_GAIN, Look
 
 AE_GAIN_MIN = 1.0 / 8.0
 AE_GAIN_MAX = 8.0

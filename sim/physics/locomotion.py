@@ -29,7 +29,7 @@ robot id, so results do not depend on what other robots do):
 :meth:`NoiseModel.scaled` multiplies every σ by K (``python -m sim --noise-scale K``,
 for execution noise that moves robots off their planned corridors).
 
-**Contacts.** Each robot is a disc of radius :data:`~sim.nao_model.FOOTPRINT_RADIUS`
+**Contacts.** Each robot is a disc of radius :data:`~sim.physics.nao_model.FOOTPRINT_RADIUS`
 (0.155 m, half the NAO's 0.311 m depth); obstacles are discs of their radius; the walls
 bound the room. A step that would bring a moving robot into overlap with another body
 *while approaching it* is not taken: every robot involved stops, its command ends with
@@ -46,7 +46,7 @@ from typing import Protocol
 import numpy as np
 
 from agent.wire import MAX_SIDE_STEP
-from sim.nao_model import FOOTPRINT_RADIUS
+from sim.physics.nao_model import FOOTPRINT_RADIUS
 
 WALK_SPEED = 0.095  # m/s forwards (NAO default)
 BACK_SPEED = 0.06  # m/s backwards
@@ -224,7 +224,7 @@ class Locomotion:
         Robots are processed in id order (documented tie-break: when two robots would
         both enter contact in the same step, both stop and one contact is reported).
         With no command active the clock stands still, unless ``clock`` (a robot is
-        looking: :mod:`sim.glances`), which advances it by ``dt`` all the same.
+        looking: :mod:`sim.server.glances`), which advances it by ``dt`` all the same.
         """
         if not self._active:
             if clock:

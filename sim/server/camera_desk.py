@@ -1,9 +1,9 @@
 """The world's camera service on its loop: a camera request becomes a look on the clock
-(:mod:`sim.glances`), then a picture drawn in the world process or by the render pool
-(:mod:`sim.render_pool`, at most one per robot in the works: :mod:`sim.pending_pictures`)
-(docs/design.md §3, ``world/robot/{id}/camera``; docs/world.md "Clock").
+(:mod:`sim.server.glances`), then a picture drawn in the world process or by the render
+pool (:mod:`sim.server.render_pool`, at most one per robot in the works:
+:mod:`sim.server.pending_pictures`) (docs/design.md §3, ``world/robot/{id}/camera``; docs/world.md "Clock").
 
-Only the world loop of :mod:`sim.server` calls these methods: :meth:`CameraDesk.request`
+Only the world loop of :mod:`sim.server.server` calls these methods: :meth:`CameraDesk.request`
 for a checked camera request, :meth:`CameraDesk.capture_due` after every step of the
 clock, :meth:`CameraDesk.rendered` for a render worker's result. With ``free_looks`` a
 request is drawn at once and costs no time (the world before looks were charged).
@@ -14,13 +14,13 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from agent.wire import BUSY, CameraReply, ErrorReply, Message, reason
-from sim import camera
-from sim.glances import Glances, LookTiming
-from sim.pending_pictures import Admission, PendingPictures
-from sim.picture import Shot
-from sim.render_pool import Job, RenderPool, Result, png_bytes
-from sim.requests import Request
-from sim.world import World
+from sim.camera import camera
+from sim.camera.picture import Shot
+from sim.physics.world import World
+from sim.server.glances import Glances, LookTiming
+from sim.server.pending_pictures import Admission, PendingPictures
+from sim.server.render_pool import Job, RenderPool, Result, png_bytes
+from sim.server.requests import Request
 
 #: ``answer(query, message)``: a camera reply (held for its delay in a slow world).
 Answer = Callable[[Request, Message], None]

@@ -1,9 +1,9 @@
 """Meshes as Wavefront OBJ files, the form PyBullet's EGL renderer plugin can draw
-(docs/design.md §4; :mod:`sim.renderer`).
+(docs/design.md §4; :mod:`sim.camera.renderer`).
 
 The plugin draws a ``GEOM_MESH`` visual shape only from a file (OBJ, STL, COLLADA), not
-from the vertex lists :mod:`sim.nao_model` and :mod:`sim.world` hand to TinyRenderer, and
-it ignores a texture set later with ``changeVisualShape``: a textured quad's picture must
+from the vertex lists :mod:`sim.physics.nao_model` and :mod:`sim.physics.world` hand to
+TinyRenderer, and it ignores a texture set later with ``changeVisualShape``: a textured quad's picture must
 come with its OBJ, through a material file (``map_Kd``). :func:`write` writes the same
 vertices, normals (kept by the loader: smooth parts stay smooth) and texture coordinates.
 """

@@ -1,13 +1,13 @@
 """The world on the bus: zenoh queryables and publications of docs/design.md §3.
 
 Queryables (payloads are :mod:`agent.wire` messages; what a query may carry and how it
-is authenticated and checked: :mod:`sim.requests`):
+is authenticated and checked: :mod:`sim.server.requests`):
 
 - ``world/register``: ``RegisterRequest(want)`` -> ``RegisterReply(robot_id)``: the lowest
   free robot id of the scenario (or ``want`` if it is free); who may claim or drive which
-  robot, and how long: :mod:`sim.bindings`.
+  robot, and how long: :mod:`sim.server.bindings`.
 - ``world/robot/{id}/camera``: ``CameraRequest(yaw)`` -> ``CameraReply`` (PNG). Declared
-  not complete: where render workers serve a robot's camera (:mod:`sim.render_worker`,
+  not complete: where render workers serve a robot's camera (:mod:`sim.server.render_worker`,
   complete queryables), a best-matching query goes to one of them, and to the world
   only when none is left.
 - ``world/scenario``: ``ScenarioRequest`` -> ``ScenarioReply`` (the scenario as JSON, for
@@ -15,7 +15,7 @@ is authenticated and checked: :mod:`sim.requests`):
 - ``world/robot/{id}/walk`` / ``turn``: ``WalkRequest`` (a walk, or a sidestep with
   ``lateral``) / ``TurnRequest`` -> a ``CommandReply(done|contact)`` sent when the motion has finished in sim time. A
   request with a ``request_id`` (> 0) is executed once per (robot, id), so a client may
-  retry a motion whose reply it lost (:mod:`sim.motions`; the last ``MOTION_CACHE``
+  retry a motion whose reply it lost (:mod:`sim.server.motions`; the last ``MOTION_CACHE``
   results per robot are kept).
 
 Anything malformed or impossible (unknown robot, NaN, yaw out of range, wrong schema
@@ -30,7 +30,7 @@ the malformed lane also holds at most ``MALFORMED_MAX_BYTES`` of payloads),
 so a flood of garbage can neither grow memory nor delay a valid request by more than
 one queue's worth. Every callback survives every exception; rejected input is counted
 in ``rejected`` and logged with a reason cut to 200 characters, rate limited. At most
-one camera request per robot waits for render workers (:mod:`sim.pending_pictures`:
+one camera request per robot waits for render workers (:mod:`sim.server.pending_pictures`:
 a repeat at the same yaw is answered by the picture in the works, and no robot of the
 world is refused for want of room); liveliness tokens of ids that are not robots of this
 world are ignored.
@@ -40,18 +40,18 @@ at ``truth_rate`` Hz of wall time and after every finished command; ``world/trut
 (``ContactMsg``) when a contact happens.
 
 **Threads and the clock.** zenoh callbacks only put queries on a queue; one loop owns
-PyBullet and the world, and the loop's own state (:class:`sim.bindings.RobotBindings`,
-:class:`sim.motions.Motions`, :class:`sim.camera_desk.CameraDesk`): nothing else calls
+PyBullet and the world, and the loop's own state (:class:`sim.server.bindings.RobotBindings`,
+:class:`sim.server.motions.Motions`, :class:`sim.server.camera_desk.CameraDesk`): nothing else calls
 them. The sim clock advances (in fixed steps of 0.02 s) only while at least one
 walk/turn or look is active, as fast as possible by default or paced at ``speed`` x real
 time. A camera request is a look: it costs its robot the time a NAO takes to turn its
-head there, settle and capture (:mod:`sim.glances`), and is answered when that time has
-passed on the clock (``free_looks``: at once, costing nothing); drawing the picture
-itself costs no sim time. Queued requests are served between steps. With ``reply_delay`` > 0 (a slow world, :mod:`sim.delays`)
+head there, settle and capture (:mod:`sim.server.glances`), and is answered when that time
+has passed on the clock (``free_looks``: at once, costing nothing); drawing the picture
+itself costs no sim time. Queued requests are served between steps. With ``reply_delay`` > 0 (a slow world, :mod:`sim.server.delays`)
 camera and motion replies are held for a seeded random delay and sent by the same loop
 when due, so the world keeps serving meanwhile. With ``render_workers`` > 0 a camera request's state (poses,
 head yaws, sim time) is taken when its look ends and the picture drawn by a
-:class:`~sim.render_pool.RenderPool` worker; its result comes back through the same queue.
+:class:`~sim.server.render_pool.RenderPool` worker; its result comes back through the same queue.
 """
 
 from __future__ import annotations
@@ -97,14 +97,14 @@ from agent.wire import (
     trust,
 )
 from sim import scenarios
-from sim.bindings import RobotBindings, Unauthorised
-from sim.camera_desk import CameraDesk
-from sim.delays import DelayedReplies
-from sim.locomotion import Contact, Done
-from sim.motions import Motions
-from sim.render_pool import RenderPool
-from sim.requests import CheckedRequest, Query, Request, check, payload_size
-from sim.world import World
+from sim.physics.locomotion import Contact, Done
+from sim.physics.world import World
+from sim.server.bindings import RobotBindings, Unauthorised
+from sim.server.camera_desk import CameraDesk
+from sim.server.delays import DelayedReplies
+from sim.server.motions import Motions
+from sim.server.render_pool import RenderPool
+from sim.server.requests import CheckedRequest, Query, Request, check, payload_size
 
 #: How the world joins the bus: the shared :class:`agent.wire.NetworkSpec`.
 NetConfig = NetworkSpec
@@ -177,7 +177,7 @@ class WorldServer:
         if isinstance(render_workers, bool) or not 0 <= render_workers <= 16:
             raise ValueError(f"render workers {render_workers!r} must be in [0, 16]")
         self.render_workers = render_workers
-        # a slow world: camera and motion replies held back (sim.delays); None: at once
+        # a slow world: camera and motion replies held back (sim.server.delays); None: at once
         self.delays: DelayedReplies[Request, Message] | None = (
             DelayedReplies(reply_delay, reply_delay_seed) if reply_delay != 0.0 else None
         )
@@ -460,7 +460,7 @@ class WorldServer:
 
     def _authorise(self, q: Request, rid: int) -> None:
         """Secure: only robot ``rid``'s key, in the session bound to ``rid``, drives it
-        (:meth:`sim.bindings.RobotBindings.authorise`); refusals count as untrusted."""
+        (:meth:`sim.server.bindings.RobotBindings.authorise`); refusals count as untrusted."""
         try:
             self.bindings.authorise(q.who, q.epoch, rid)
         except Unauthorised:

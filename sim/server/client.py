@@ -1,12 +1,14 @@
-"""``python -m sim.client``: poke a running world by hand (camera, walk, turn, poses).
+"""``python -m sim.server.client``: poke a running world by hand (camera, walk, turn, poses).
 
 A small command-line client of the world's bus contract (docs/design.md §3), for people
 trying the world and for debugging; agents use ``agent/body/zenoh_world.py`` instead::
 
-    python -m sim.client --credentials fleet/ --connect tls/127.0.0.1:7447 camera 1 --yaw 30
-    python -m sim.client --credentials fleet/ --connect tls/127.0.0.1:7447 walk 1 0.2 --times 5
-    python -m sim.client --credentials fleet/ --connect tls/127.0.0.1:7447 poses
-    python -m sim.client --insecure --connect tcp/127.0.0.1:7447 turn 1 -15
+    python -m sim.server.client --credentials fleet/ --connect tls/127.0.0.1:7447 \
+        camera 1 --yaw 30
+    python -m sim.server.client --credentials fleet/ --connect tls/127.0.0.1:7447 \
+        walk 1 0.2 --times 5
+    python -m sim.server.client --credentials fleet/ --connect tls/127.0.0.1:7447 poses
+    python -m sim.server.client --insecure --connect tcp/127.0.0.1:7447 turn 1 -15
 
 With credentials (docs/design.md §8) the client acts with a key of the folder: robot N's for
 ``camera``/``walk``/``turn N`` and ``register --want N``, the observer's for ``poses``
@@ -65,7 +67,7 @@ class WorldError(RuntimeError):
 
 
 #: Counts and logs (cut, rate limited) what this client refuses; never raises.
-GUARD = Guard(lambda line: print(f"sim.client: {line}", file=sys.stderr))
+GUARD = Guard(lambda line: print(f"sim.server.client: {line}", file=sys.stderr))
 
 
 class Link:
@@ -210,7 +212,9 @@ def run(args: argparse.Namespace, session: Link) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m sim.client", description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(
+        prog="python -m sim.server.client", description=__doc__.split("\n")[0]
+    )
     add_network_arguments(p, ("peer", "client"))
     p.add_argument("--as", dest="as_", default="", help="act with this identity's key")
     p.add_argument("--timeout", type=float, default=60.0, help="seconds to wait for a reply")
@@ -236,13 +240,13 @@ def main(argv: list[str] | None = None) -> int:
         with zenoh.open(cfg) as session:
             return run(args, Link(session, spec))
     except WorldError as exc:
-        print(f"sim.client: {exc}", file=sys.stderr)
+        print(f"sim.server.client: {exc}", file=sys.stderr)
         return 1
     except (ValueError, OSError) as exc:  # ProtocolError is a ValueError
-        print(f"sim.client: {exc}", file=sys.stderr)
+        print(f"sim.server.client: {exc}", file=sys.stderr)
         return 2
     except zenoh.ZError as exc:
-        print(f"sim.client: zenoh: {exc}", file=sys.stderr)
+        print(f"sim.server.client: zenoh: {exc}", file=sys.stderr)
         return 2
 
 

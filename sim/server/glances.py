@@ -38,8 +38,8 @@ different joints). Nothing here reads wall time, so the clock stays deterministi
 same requests in the same order give the same times and pictures.
 
 ``python -m sim --free-looks`` turns the charge off (pictures at once, at the current
-time: recordings made before it); the in-process :meth:`sim.world.World.render` never
-charges time, and neither do the separate render workers of :mod:`sim.render_worker`,
+time: recordings made before it); the in-process :meth:`sim.physics.world.World.render` never
+charges time, and neither do the separate render workers of :mod:`sim.server.render_worker`,
 which answer camera queries without the world's clock.
 """
 
@@ -50,7 +50,7 @@ from dataclasses import dataclass
 from typing import Generic, TypeVar
 
 from agent.wire import nao
-from sim.pending_pictures import Admission
+from sim.server.pending_pictures import Admission
 
 #: HeadYaw's maximum joint speed (rad/s; NAO H25 joint table, ``ALMotion.getLimits``).
 HEAD_YAW_MAX_SPEED = 8.26797

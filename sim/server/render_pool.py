@@ -27,7 +27,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from sim.picture import Shot
+from sim.camera.picture import Shot
 from sim.scenarios import Scenario, from_dict, to_dict
 
 PNG_PARAMS = [
@@ -69,7 +69,7 @@ class Result:
 
 
 def _worker(index: int, scenario: dict[str, Any], renderer: str, jobs: Any, results: Any) -> None:
-    from sim.world import World
+    from sim.physics.world import World
 
     try:
         world = World(from_dict(scenario), noise=False, renderer=renderer)
@@ -100,7 +100,7 @@ def _worker(index: int, scenario: dict[str, Any], renderer: str, jobs: Any, resu
 class RenderPool:
     """K worker processes rendering camera jobs; results go to ``on_result``.
 
-    ``renderer``: the world's (``tiny`` or ``egl``, :mod:`sim.renderer`), so a worker's
+    ``renderer``: the world's (``tiny`` or ``egl``, :mod:`sim.camera.renderer`), so a worker's
     picture is the one the world would draw."""
 
     def __init__(

@@ -11,7 +11,7 @@
   or, with a fixed id, the one that last commanded it. A newer epoch of the same key (a
   restarted agent) takes an unclaimed robot over; an older one (a replay) is refused.
 
-Only the world loop of :mod:`sim.server` calls these methods; they keep no other state.
+Only the world loop of :mod:`sim.server.server` calls these methods; they keep no other state.
 """
 
 from __future__ import annotations

@@ -7,7 +7,7 @@ before the copy, at most ``MAX_REQUEST_BYTES``), the signer known, and every rep
 by the world and bound to the request, so that a reply can neither be forged nor
 replayed to another request. :func:`check` decodes and checks its payload cheaply where
 it arrives (robot id, schema, the camera's yaw) and gives a :class:`CheckedRequest`, or
-a ``ValueError`` saying why not; the world loop (:mod:`sim.server`) serves the checked
+a ``ValueError`` saying why not; the world loop (:mod:`sim.server.server`) serves the checked
 ones and answers the others with their reason.
 
 - ``world/register``: ``RegisterRequest(want)``; no payload means any free id.
@@ -37,7 +37,7 @@ from agent.wire import (
     take_payload,
     trust,
 )
-from sim import camera
+from sim.camera import camera
 
 #: Longest ``yaw`` selector parameter read (a float needs a few dozen characters).
 MAX_PARAM_CHARS = 64

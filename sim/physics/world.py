@@ -9,11 +9,12 @@ detector's hard cases. No wall or floor colour falls in (or near) the detector's
 range nor in the obstacle range: hues near orange and rose are desaturated, and every
 texture is checked with ``cv2.inRange`` before use.
 
-Robots are kinematic NAO bodies (:mod:`sim.nao_model`); their poses are held here and
-moved by :mod:`sim.locomotion`. The scenario's look (:mod:`sim.look`) recolours the NAOs'
-orange parts as the room is built and develops every picture (:mod:`sim.picture`).
-Rendering here costs no sim time (the server charges a look's time, :mod:`sim.glances`).
-:class:`World` is the in-process API; :mod:`sim.server` puts it on the bus.
+Robots are kinematic NAO bodies (:mod:`sim.physics.nao_model`); their poses are held here
+and moved by :mod:`sim.physics.locomotion`. The scenario's look (:mod:`sim.camera.look`)
+recolours the NAOs' orange parts as the room is built and develops every picture
+(:mod:`sim.camera.picture`). Rendering here costs no sim time (the server charges a look's
+time, :mod:`sim.server.glances`).
+:class:`World` is the in-process API; :mod:`sim.server.server` puts it on the bus.
 """
 
 from __future__ import annotations
@@ -31,11 +32,11 @@ import numpy as np
 import pybullet as pb
 
 from agent.wire import nao
-from sim import camera, obj_mesh
-from sim import renderer as renderers
-from sim.locomotion import Locomotion, NoiseModel, Obstacle
-from sim.nao_model import BOUNDING_RADIUS, HEAD_JOINT, ORANGE, NaoBodyFactory, link_colours
-from sim.picture import Shot, develop
+from sim.camera import camera, obj_mesh
+from sim.camera import renderer as renderers
+from sim.camera.picture import Shot, develop
+from sim.physics.locomotion import Locomotion, NoiseModel, Obstacle
+from sim.physics.nao_model import BOUNDING_RADIUS, HEAD_JOINT, ORANGE, NaoBodyFactory, link_colours
 from sim.scenarios import Scenario
 
 TEXELS_PER_M = 256
@@ -110,10 +111,10 @@ def light_direction(azimuth: float, elevation: float) -> tuple[float, float, flo
 class World:
     """A room with NAOs; poses, head yaws, the sim clock, and their forehead cameras.
 
-    ``noise`` switches the seeded motion noise of :mod:`sim.locomotion` on or off;
-    ``noise_scale`` multiplies it (:meth:`~sim.locomotion.NoiseModel.scaled`);
+    ``noise`` switches the seeded motion noise of :mod:`sim.physics.locomotion` on or off;
+    ``noise_scale`` multiplies it (:meth:`~sim.physics.locomotion.NoiseModel.scaled`);
     ``world.locomotion`` runs walk/turn commands (``walk``, ``turn``, ``step``).
-    ``renderer`` (:mod:`sim.renderer`): ``tiny`` (default), ``egl`` or ``auto``;
+    ``renderer`` (:mod:`sim.camera.renderer`): ``tiny`` (default), ``egl`` or ``auto``;
     ``world.renderer`` is the one used and ``world.renderer_why`` why. The look is the
     scenario's (``world.look``).
     """
@@ -281,7 +282,7 @@ class World:
     @property
     def t_sim(self) -> float:
         """Sim time (s): advanced only by :meth:`Locomotion.step` (walks, turns and the
-        server's looks, :mod:`sim.glances`); rendering here costs none."""
+        server's looks, :mod:`sim.server.glances`); rendering here costs none."""
         return self.locomotion.t_sim
 
     def _quad(
@@ -394,7 +395,7 @@ class World:
 
     def next_shot(self, robot_id: int, head_yaw: float) -> Shot:
         """Number robot ``robot_id``'s next picture, taken at ``head_yaw``: its frame
-        number and how far its head turned since its last picture (:mod:`sim.picture`)."""
+        number and how far its head turned since its last picture (:mod:`sim.camera.picture`)."""
         self._check(robot_id)
         y = camera.check_yaw(head_yaw)
         shot = Shot(robot_id, self._frames[robot_id], y - self._shot_yaw[robot_id])

@@ -5,7 +5,7 @@ fx = fy = 320 / tan(30.45°) ≈ 543.9 px, principal point at the image centre),
 :data:`CAMERA_Z` = 0.50 m above the floor, 6.2 cm in front of the head yaw
 axis, pitched down 1.2°. The head yaws within ±119.5° (positive = to the robot's left);
 a request outside that range is an error, never a clamp. Rendered by PyBullet's CPU
-TinyRenderer or its EGL plugin (:mod:`sim.renderer`) and returned as a (480, 640, 3)
+TinyRenderer or its EGL plugin (:mod:`sim.camera.renderer`) and returned as a (480, 640, 3)
 uint8 BGR array (OpenCV order).
 
 :func:`project` is the same camera model in closed form: where a world point lands in
@@ -117,7 +117,7 @@ def render(
     """Render the forehead camera of a robot at (x, y, heading) with head ``yaw``.
 
     ``renderer``: ``pb.ER_TINY_RENDERER``, or ``pb.ER_BULLET_HARDWARE_OPENGL`` in a client
-    with the EGL plugin (:mod:`sim.renderer`; it ignores the light coefficients).
+    with the EGL plugin (:mod:`sim.camera.renderer`; it ignores the light coefficients).
     Returns a (480, 640, 3) uint8 BGR image.
     """
     yaw = check_yaw(yaw)

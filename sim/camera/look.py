@@ -5,8 +5,8 @@ A real NAO's pictures differ from the simulated default in ways the detector of 
 paper 3.1 (an HSV threshold on the caps' and shoulders' orange) and the visual compass
 of 3.2.1 are sensitive to: the plastic's orange, the room's light level and colour
 temperature, sensor noise, motion blur while the head turns and the camera's auto
-exposure. A :class:`Look` names those parameters; :mod:`sim.picture` applies the
-picture's part of them and :mod:`sim.world` recolours the NAO model's orange parts.
+exposure. A :class:`Look` names those parameters; :mod:`sim.camera.picture` applies the
+picture's part of them and :mod:`sim.physics.world` recolours the NAO model's orange parts.
 
 ``SPEC`` is a comma list, each item a ``KEY:VALUE`` or the name of a preset (a preset's
 values, later items overriding them):
@@ -112,7 +112,7 @@ class Look:
         return self.hue != 0.0 or self.sat != 1.0
 
     def develops(self) -> bool:
-        """True when :func:`sim.picture.develop` changes a picture."""
+        """True when :func:`sim.camera.picture.develop` changes a picture."""
         return (
             self.light != 1.0
             or self.warm != 0.0

@@ -1,7 +1,7 @@
-"""``python -m sim.render_worker``: forehead cameras drawn in a process of their own (rendering is
-the world's bottleneck in large fleets).
+"""``python -m sim.server.render_worker``: forehead cameras drawn in a process of their own
+(rendering is the world's bottleneck in large fleets).
 
-    python -m sim.render_worker --connect tls/ROUTER:7448 --credentials DIR [--shard 1/2]
+    python -m sim.server.render_worker --connect tls/ROUTER:7448 --credentials DIR [--shard 1/2]
 
 A render worker is the world's camera made a service (docs/world.md "Render workers"):
 
@@ -70,15 +70,15 @@ from agent.wire import (
     take_payload,
     trust,
 )
-from sim import camera, renderer
-from sim.client import Link, WorldError, ask
-from sim.render_pool import png_bytes
-from sim.requests import CheckedRequest, Query, Request, check, payload_size
+from sim.camera import camera, renderer
+from sim.physics.world import World
 from sim.scenarios import Scenario, from_dict
-from sim.server import MALFORMED_MAX_BYTES, zenoh_config
-from sim.world import World
+from sim.server.client import Link, WorldError, ask
+from sim.server.render_pool import png_bytes
+from sim.server.requests import CheckedRequest, Query, Request, check, payload_size
+from sim.server.server import MALFORMED_MAX_BYTES, zenoh_config
 
-#: Lanes of the worker's inbox, served in this order (as the world's, sim.server).
+#: Lanes of the worker's inbox, served in this order (as the world's, sim.server.server).
 INBOX_CAPS = {"valid": 256, "malformed": 1024}
 
 
@@ -337,7 +337,7 @@ def fetch_scenario(link: Link, wait_s: float) -> Scenario:
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
-        prog="python -m sim.render_worker",
+        prog="python -m sim.server.render_worker",
         description="A render worker: draws the world's forehead cameras, so that the world "
         "spreads over cores and hosts.",
     )
