@@ -93,7 +93,7 @@ def _shifted(proj: tuple[float, ...], du: float, dv: float) -> tuple[float, ...]
 
 #: OpenGL samples a pixel at its centre, TinyRenderer at its corner: the EGL plugin's
 #: picture sits half a pixel left of and below TinyRenderer's (measured by phase
-#: correlation, ``tests/sim/test_renderer.py``); this projection moves it back.
+#: correlation, ``tests/sim/camera/test_renderer.py``); this projection moves it back.
 PROJECTION_EGL = _shifted(
     pb.computeProjectionMatrixFOV(
         fov=math.degrees(VFOV), aspect=WIDTH / HEIGHT, nearVal=NEAR_EGL, farVal=FAR

@@ -224,7 +224,7 @@ def egl_shade(normal: tuple[float, float, float], light: tuple[float, float, flo
     """The EGL plugin's light factor, shadow map off (:func:`shadow_map_off`), for a
     surface of unit ``normal`` under the unit ``light`` direction: its shader (bullet3's
     instancingPS) gives ``i (1 - a) + a`` with ambient ``a`` = 0.5 and ``i`` = 0.5 + 0.5 n.l,
-    so 0.75 + 0.25 n.l (``tests/sim/test_renderer.py`` measures it)."""
+    so 0.75 + 0.25 n.l (``tests/sim/camera/test_renderer.py`` measures it)."""
     d = max(-1.0, min(1.0, sum(a * b for a, b in zip(normal, light, strict=True))))
     return 0.75 + 0.25 * d
 

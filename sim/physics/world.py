@@ -454,7 +454,7 @@ class World:
         seen or not (at 50 NAOs 95 ms a picture, 79 ms culled); a NAO whose bounding
         cylinder lies wholly outside the horizontal field of view (plus
         :data:`CULL_MARGIN`) draws no pixel, so the picture is the same
-        (``tests/sim/test_render.py`` compares them)."""
+        (``tests/sim/camera/test_render.py`` compares them)."""
         x, y, th = self._poses[robot_id]
         eye, _, _ = camera.camera_pose(x, y, th, self._head[robot_id])
         look = th + self._head[robot_id]

@@ -19,7 +19,7 @@ from sim.camera.picture import Shot
 from sim.physics.world import World
 from sim.scenarios import RobotSpec, Scenario
 from sim.server.render_pool import Job, RenderPool, Result
-from tests.sim.test_renderer import _need_egl
+from tests.sim.camera.test_renderer import _need_egl
 
 NORTH = math.pi / 2
 #: sha256 of four pictures of ``_golden_world`` drawn before looks existed (commit

@@ -31,7 +31,7 @@ from sim import scenarios
 from sim.physics.world import World
 from sim.server.render_worker import RenderWorker, parse_shard, shard_robots
 from tests.fakes import zb
-from tests.sim.test_server_hardening import Exploding, FakeQuery
+from tests.sim.server.test_server_hardening import Exploding, FakeQuery
 
 SCENARIO = scenarios.generate(3, 7)
 
