@@ -19,7 +19,7 @@ ENV PYTHONUNBUFFERED=1 \
     PIP_CERT=/etc/ssl/certs/ca-certificates.crt
 
 # iptables: fault injection inside an agent container (LOSS=0.2 in docker-compose.yml).
-# libegl1 libegl-mesa0 libgl1-mesa-dri: the cameras' EGL renderer (sim/renderer.py; Mesa's
+# libegl1 libegl-mesa0 libgl1-mesa-dri: the cameras' EGL renderer (sim/camera/renderer.py; Mesa's
 # llvmpipe on the CPU), else the world falls back to TinyRenderer.
 RUN apt-get update -qq \
     && apt-get install -y -qq --no-install-recommends iptables \

@@ -7,13 +7,13 @@ With ``--naoqi`` every robot is also a virtual NAO (:mod:`sim.naoqi_gateway`): N
 services over the qi protocol, one service directory per robot on its own port, each
 announced before the ready line as ``sim naoqi robot=ID url=tcp://HOST:PORT``.
 
-``--look SPEC`` changes what the world looks like (:mod:`sim.look`: the NAOs' orange,
+``--look SPEC`` changes what the world looks like (:mod:`sim.camera.look`: the NAOs' orange,
 light, colour temperature, noise, motion blur, auto exposure); ``--free-looks`` makes
-camera requests cost no sim time (:mod:`sim.glances`: by default a look costs a robot
+camera requests cost no sim time (:mod:`sim.server.glances`: by default a look costs a robot
 the time a NAO takes to turn its head, settle and capture).
 
 With ``--reply-delay MAX_S`` the world is slow: every camera and motion reply is held
-for a seeded random delay up to ``MAX_S`` s (:mod:`sim.delays`), the world serving on.
+for a seeded random delay up to ``MAX_S`` s (:mod:`sim.server.delays`), the world serving on.
 """
 
 from __future__ import annotations
@@ -25,12 +25,13 @@ from dataclasses import replace
 from typing import Any
 
 from agent.wire import add_network_arguments, network_spec
-from sim import renderer, scenarios
-from sim.delays import check_max_delay
-from sim.look import HELP as LOOK_HELP
-from sim.look import Look
-from sim.server import WorldServer
-from sim.world import World
+from sim import scenarios
+from sim.camera import renderer
+from sim.camera.look import HELP as LOOK_HELP
+from sim.camera.look import Look
+from sim.physics.world import World
+from sim.server.delays import check_max_delay
+from sim.server.server import WorldServer
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -75,7 +76,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--free-looks",
         action="store_true",
         help="camera requests cost no sim time (recordings made before looks were charged; "
-        "default: a look costs the head turn, settling and capture, sim/glances.py)",
+        "default: a look costs the head turn, settling and capture, sim/server/glances.py)",
     )
     p.add_argument("--no-noise", action="store_true", help="noiseless walking and turning")
     p.add_argument(
@@ -83,7 +84,8 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         default=1.0,
         metavar="K",
-        help="multiply the walking and turning noise by K (default 1; see sim/locomotion.py)",
+        help="multiply the walking and turning noise by K "
+        "(default 1; see sim/physics/locomotion.py)",
     )
     p.add_argument(
         "--speed",
@@ -104,7 +106,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=0.0,
         metavar="MAX_S",
         help="a slow world: hold every camera and motion reply for a random delay in "
-        "[0, MAX_S] s, drawn from the scenario's seed (default 0: at once; sim/delays.py)",
+        "[0, MAX_S] s, drawn from the scenario's seed (default 0: at once; sim/server/delays.py)",
     )
     add_network_arguments(p, ("peer", "client", "router"))
     p.add_argument(

@@ -19,7 +19,7 @@ NAOqi names and signatures:
   ``releaseImage``, ``unsubscribe``.
 - ``ALRobotPosture``: ``goToPosture(name, speed)``, ``getPosture``.
 
-**Threads.** The world loop of :class:`sim.server.WorldServer` owns the world. A qi
+**Threads.** The world loop of :class:`sim.server.server.WorldServer` owns the world. A qi
 method never touches it: it puts a request into the server's queue (the same queue its
 zenoh queryables feed, with a query object that answers into a ``qi.Promise``) and
 returns the promise's future at once, so qi's event loop never blocks on the world;
@@ -55,7 +55,7 @@ from agent.wire import (
     key_walk,
     nao,
 )
-from sim.server import WorldServer
+from sim.server.server import WorldServer
 
 #: NAOqi image array: width, height, layers, colour space, s, µs, data, camera, 4 angles.
 IMAGE_SIGNATURE = "(iiiiiiriffff)"

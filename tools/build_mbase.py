@@ -27,9 +27,9 @@ import numpy as np
 
 from agent.core.perception.camera import CameraModel
 from agent.core.perception.mbase import DATA_DIR, MBase
-from sim import nao_model
+from sim.physics import nao_model
+from sim.physics.world import World
 from sim.scenarios import RobotSpec, Scenario
-from sim.world import World
 from tools.calibrate.masks import MaskView, MBaseBuilder
 
 NORTH = math.pi / 2
@@ -82,7 +82,7 @@ def build(step_deg: float = 5.0, distance: float = 0.6, seed: int = 0) -> MBase:
                 "every_deg": HEAD_EVERY * step_deg,
             },
             "seed": seed,
-            "renderer": "sim.world.World (PyBullet TinyRenderer), noise off",
+            "renderer": "sim.physics.world.World (PyBullet TinyRenderer), noise off",
             "nao_model": {
                 "height": nao_model.HEIGHT,
                 "width": nao_model.WIDTH,

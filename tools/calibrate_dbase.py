@@ -21,8 +21,8 @@ from agent.core.perception.camera import CameraModel
 from agent.core.perception.dbase import DBase
 from agent.core.perception.detector import Recogniser
 from agent.core.perception.mbase import DATA_DIR, MBase
+from sim.physics.world import World
 from sim.scenarios import RobotSpec, Scenario
-from sim.world import World
 from tools.calibrate.distances import (
     DISTANCES,
     MIN_SAMPLES,
@@ -100,7 +100,7 @@ def calibrate(
         "distance_reference": "optical centre (head yaw 0) to the observed NAO's body centre",
         "min_samples": MIN_SAMPLES,
         "seed": seed,
-        "renderer": "sim.world.World (PyBullet TinyRenderer), noise off",
+        "renderer": "sim.physics.world.World (PyBullet TinyRenderer), noise off",
         **stats,
     }
     return DBase(fits, mb.digest(), meta), samples, stats

@@ -1,4 +1,5 @@
-"""``python -m tools.compare_renderers``: EGL's pictures against TinyRenderer's (sim/renderer.py).
+"""``python -m tools.compare_renderers``: EGL's pictures against TinyRenderer's
+(sim/camera/renderer.py).
 
     python -m tools.compare_renderers --fleets 3,10 --seeds 1,2,3 --views 6
 
@@ -6,7 +7,7 @@ For each fleet size and seed it builds the same generated scenario twice, once p
 renderer, draws ``--views`` pictures of each (observers and head yaws cycling) and
 prints the pixel difference (mean and 95th percentile of |EGL - Tiny| over every
 channel, share of pixels differing by more than 16) and, for each NAO in view (its
-bounding box projected into the picture, :func:`sim.camera.project`), the IoU of the
+bounding box projected into the picture, :func:`sim.camera.camera.project`), the IoU of the
 detector's orange mask (H 2-10, S >= 170, V >= 50) inside that box. ``--png DIR`` saves
 each pair side by side.
 """
@@ -21,10 +22,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from sim import camera
-from sim.nao_model import BOUNDING_RADIUS, HEIGHT
+from sim.camera import camera
+from sim.physics.nao_model import BOUNDING_RADIUS, HEIGHT
+from sim.physics.world import World
 from sim.scenarios import generate
-from sim.world import World
 
 ORANGE_LO, ORANGE_HI = (2, 170, 50), (10, 255, 255)
 

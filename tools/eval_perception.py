@@ -32,11 +32,11 @@ import numpy as np
 from agent.core.perception.calibration import builtin, load
 from agent.core.perception.compass import VisualCompass
 from agent.core.perception.detector import Detector
-from sim.look import HELP as LOOK_HELP
-from sim.look import Look, look_arg
-from sim.renderer import RENDERERS, choose
+from sim.camera.look import HELP as LOOK_HELP
+from sim.camera.look import Look, look_arg
+from sim.camera.renderer import RENDERERS, choose
+from sim.physics.world import World
 from sim.scenarios import RobotSpec, Scenario
-from sim.world import World
 from tools.lib.perception_report import (
     ViewResult,
     figure,
@@ -167,7 +167,7 @@ def main(argv: list[str] | None = None) -> int:
         "--renderer",
         choices=RENDERERS,
         default="tiny",
-        help="the views' renderer (sim/renderer.py; default tiny, the reference pictures)",
+        help="the views' renderer (sim/camera/renderer.py; default tiny, the reference pictures)",
     )
     ap.add_argument(
         "--look", type=look_arg, default=Look(), metavar="SPEC", help="the views' " + LOOK_HELP

@@ -6,7 +6,7 @@ over hosts).
 Lays one run out on network-namespace hosts as :class:`tools.harness.hosts.HostFleet` does
 (router on host 1, the world on host 2, the monitor on host 3, one agent per host from
 host 4) and adds ``--workers`` K render workers, each on a host of its own
-(``python -m sim.render_worker --shard i/K``, on the router's world port): the world keeps
+(``python -m sim.server.render_worker --shard i/K``, on the router's world port): the world keeps
 the physics, the clock and the poses, the workers draw every camera picture, zenoh routes
 each query to the worker whose key it matches. Secure by default (a fleet made under
 ``--out``); ``--insecure`` for plain TCP. Prints one line: the monitor's verdict, the

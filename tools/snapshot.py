@@ -9,7 +9,7 @@ only) moves robots first, e.g. to look at a NAO 0.6 m ahead turned by some angle
 
     python -m tools.snapshot --robots 2 --place 1:0:0:90 --place 2:0:0.6:270 --out front.png
 
-``--look SPEC`` (in-process) draws the world in a look (:mod:`sim.look`).
+``--look SPEC`` (in-process) draws the world in a look (:mod:`sim.camera.look`).
 """
 
 from __future__ import annotations
@@ -24,10 +24,10 @@ import cv2
 
 from agent.wire import add_network_arguments
 from sim import scenarios
-from sim.camera import HFOV
-from sim.look import HELP as LOOK_HELP
-from sim.look import look_arg
-from sim.nao_model import FOOTPRINT_RADIUS
+from sim.camera.camera import HFOV
+from sim.camera.look import HELP as LOOK_HELP
+from sim.camera.look import look_arg
+from sim.physics.nao_model import FOOTPRINT_RADIUS
 
 
 def parse_place(text: str) -> tuple[int, float, float, float]:
@@ -89,7 +89,7 @@ def plan_view(
 
 
 def run_local(args: argparse.Namespace, out: Path) -> int:
-    from sim.world import World
+    from sim.physics.world import World
 
     if args.scenario:
         sc = scenarios.load(args.scenario)
@@ -115,11 +115,11 @@ def run_local(args: argparse.Namespace, out: Path) -> int:
 
 
 def run_remote(args: argparse.Namespace, out: Path) -> int:
-    """Ask a running world (``sim.client``'s link: sealed with credentials, or not)."""
+    """Ask a running world (``sim.server.client``'s link: sealed with credentials, or not)."""
     import zenoh
 
     from agent.wire import CameraReply, CameraRequest, key_camera, network_spec
-    from sim.client import Link, WorldError, ask, truth
+    from sim.server.client import Link, WorldError, ask, truth
 
     spec = network_spec(args, "observer" if args.top_down else f"robot-{args.robot}")
     cfg = zenoh.Config()

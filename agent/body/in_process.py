@@ -6,7 +6,7 @@ renders and the same locomotion (noise, contacts) as the world process, called
 directly. A motion steps the world's clock until this robot's command has finished;
 other robots of the world stand still meanwhile (one agent drives one body).
 
-The world is named by the structural types below (``sim.world.World`` fits them), so
+The world is named by the structural types below (``sim.physics.world.World`` fits them), so
 this lowest floor never imports the world: ``sim/`` depends on ``agent.wire``, not the
 other way round.
 """
@@ -25,7 +25,7 @@ from agent.wire import MAX_SIDE_STEP, MAX_STEP
 
 
 class Finished(Protocol):
-    """A motion that ended during one locomotion step (``sim.locomotion.Done``)."""
+    """A motion that ended during one locomotion step (``sim.physics.locomotion.Done``)."""
 
     @property
     def robot_id(self) -> int: ...
@@ -47,7 +47,7 @@ class Legs(Protocol):
 
 
 class World(Protocol):
-    """What the in-process body needs of the world (``sim.world.World`` has it)."""
+    """What the in-process body needs of the world (``sim.physics.world.World`` has it)."""
 
     @property
     def t_sim(self) -> float: ...

@@ -4,7 +4,7 @@ A scenario fixes everything the world needs to start (docs/design.md §4): robot
 and initial poses ``(x, y, heading)`` in world metres/radians, static obstacles (cylinders,
 radius :data:`agent.core.nao.OBSTACLE_RADIUS` by default), optional orange lookalike clutter for the detector's hard
 cases, the light, the seed of the textures and of the motion noise, the half-size of
-the square room and the world's look (:mod:`sim.look`; in JSON its SPEC text under
+the square room and the world's look (:mod:`sim.camera.look`; in JSON its SPEC text under
 ``look``, written only when it is not the default, so render workers draw the same).
 
 :func:`generate` draws the paper-like starts of the NAO paper's experiments (§5.2.2):
@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from agent.wire import nao
-from sim.look import Look
+from sim.camera.look import Look
 
 NORTH = math.pi / 2
 MIN_SPACING = 0.6

@@ -3,7 +3,7 @@ every body).
 
 - ``world``: :class:`agent.body.in_process.WorldBody`, the world in this process;
 - ``zenoh``: :class:`agent.body.zenoh_world.ZenohBody` over a real zenoh session (loopback) to a
-  :class:`sim.server.WorldServer` whose loop runs in a thread of this process;
+  :class:`sim.server.server.WorldServer` whose loop runs in a thread of this process;
 - ``naoqi``: :class:`agent.body.naoqi.NaoqiBody` over the real qi protocol (loopback) to
   the virtual NAOs of :class:`sim.naoqi_gateway.NaoqiGateway` on that same world loop.
 
@@ -35,8 +35,8 @@ from agent.phases.search import Search
 from agent.phases.waves import Itinerary
 from agent.seams import Perception
 from sim import scenarios
+from sim.physics.world import World
 from sim.scenarios import RobotSpec, Scenario
-from sim.world import World
 from tools.harness.procs import free_port
 
 KINDS = ("world", "zenoh", "naoqi")
@@ -72,7 +72,7 @@ def rig(kind: str, scenario: Scenario, noise: bool = False) -> Iterator[Rig]:
             yield Rig(kind, world, lambda rid: keep(WorldBody(world, rid)))
             return
         from agent.net.bus import Bus, BusConfig
-        from sim.server import NetConfig, WorldServer
+        from sim.server.server import NetConfig, WorldServer
 
         ep = f"tcp/127.0.0.1:{free_port()}"
         server = WorldServer(world, NetConfig(listen=(ep,), multicast_scouting=False))

@@ -24,9 +24,9 @@ from agent.core.perception.compass import CompassResult
 from agent.net.bus import Bus
 from agent.phases.context import NORTH
 from agent.phases.motion import _plausible
-from sim.locomotion import NoiseModel
+from sim.physics.locomotion import NoiseModel
+from sim.physics.world import World
 from sim.scenarios import RobotSpec, Scenario
-from sim.world import World
 from tests.body.conftest import Robot, parts
 
 #: one robot at the origin facing north, in the textured room

@@ -16,8 +16,8 @@ from agent.adapters import PerceptionAdapter
 from agent.body.in_process import WorldBody
 from agent.config import AgentConfig
 from agent.net.bus import Bus
+from sim.physics.world import World
 from sim.scenarios import RobotSpec, Scenario
-from sim.world import World
 from tests.body.conftest import Robot, parts
 
 NORTH = math.pi / 2

@@ -26,7 +26,7 @@ from agent.net.bus import Bus
 from agent.phases.march import LOST, Marcher, MarchHalt
 from agent.phases.membership import Peer
 from agent.wire import NeighborRecordMsg
-from sim.world import World
+from sim.physics.world import World
 from tests.body.conftest import Robot, parts
 
 

@@ -17,8 +17,8 @@ from agent import wire as protocol
 from agent.core import nao
 from agent.core.perception import detector
 from agent.core.perception.camera import CameraModel
-from sim import camera as sim_camera
-from sim import locomotion, nao_model
+from sim.camera import camera as sim_camera
+from sim.physics import locomotion, nao_model
 
 
 def test_sim_reaches_the_same_module_through_the_protocol() -> None:

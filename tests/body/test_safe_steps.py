@@ -24,9 +24,9 @@ from agent.net.bus import Bus
 from agent.phases.context import AgentFailure
 from agent.phases.membership import Peer
 from agent.phases.reporting import Phase
-from sim.nao_model import FOOTPRINT_RADIUS
+from sim.physics.nao_model import FOOTPRINT_RADIUS
+from sim.physics.world import World
 from sim.scenarios import RobotSpec, Scenario
-from sim.world import World
 from tests.body.conftest import Robot, parts
 
 #: robot 1 facing north, robot 2 standing 0.8 m ahead of it, facing it

@@ -23,8 +23,8 @@ from agent.core.perception.obstacles import (
     horizon_row,
     obstacle_mask,
 )
+from sim.physics.world import World, make_texture
 from sim.scenarios import ClutterSpec, ObstacleSpec, RobotSpec, Scenario
-from sim.world import World, make_texture
 
 
 @pytest.fixture(scope="module")

@@ -8,7 +8,7 @@ import pytest
 
 from sim import scenarios
 from sim.__main__ import build_parser, main
-from sim.look import Look
+from sim.camera.look import Look
 
 
 @pytest.mark.parametrize(

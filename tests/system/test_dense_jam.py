@@ -19,7 +19,7 @@ from agent.config import AgentConfig
 from agent.core.formation.waves.jam import FLEET_STOP
 from agent.net.bus import Bus, BusConfig
 from agent.wire import KEY_STATUS_ALL, KEY_WORLD_TRUTH_ALL, ContactMsg, StatusMsg
-from sim.nao_model import FOOTPRINT_RADIUS
+from sim.physics.nao_model import FOOTPRINT_RADIUS
 from sim.scenarios import dump
 from tests.system.world import Watch, agent_on
 from tools.harness.procs import (

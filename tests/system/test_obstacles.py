@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sim.nao_model import FOOTPRINT_RADIUS
+from sim.physics.nao_model import FOOTPRINT_RADIUS
 from tests.system.world import run_demo
 
 pytestmark = [pytest.mark.system, pytest.mark.slow]

@@ -30,8 +30,8 @@ from agent import wire as P
 from agent.net.bus import Bus, BusConfig, BusError, NoRoute
 from agent.wire import trust as T
 from sim import scenarios
-from sim.server import WorldServer
-from sim.world import World
+from sim.physics.world import World
+from sim.server.server import WorldServer
 from tools.harness.procs import free_port
 
 pytestmark = pytest.mark.system
@@ -223,7 +223,7 @@ def test_sim_client_acts_with_the_robots_key(
     tmp_path: Path,
     capsys: pytest.CaptureFixture[str],
 ) -> None:
-    from sim import client as cli
+    from sim.server import client as cli
 
     _, ep = secure_world
     common = ["--credentials", str(fleet.root), "--plain-links", "--connect", ep,

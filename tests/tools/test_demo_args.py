@@ -133,7 +133,7 @@ def test_render_service_workers_and_what_they_served(tmp_path: Path) -> None:
         with pytest.raises(SystemExit):
             parse_args(bad)
     cmd = render_command(["--connect", "tls/h:1"], (2, 3))
-    assert cmd[1:] == ["-m", "sim.render_worker", "--connect", "tls/h:1", "--shard", "2/3"]
+    assert cmd[1:] == ["-m", "sim.server.render_worker", "--connect", "tls/h:1", "--shard", "2/3"]
     (tmp_path / "render-1.log").write_text(
         "render ready robots=1,3 shard=1/2 seed=1\n"
         "[render t=   65.00] served camera=207 (260 ms); errors=0 rejected=0\n"
@@ -171,7 +171,7 @@ def test_the_shape_goes_to_every_agent_and_into_the_result(tmp_path: Path) -> No
 def test_the_worlds_look_and_free_looks_go_to_the_world(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from sim.look import Look
+    from sim.camera.look import Look
     from tools.harness.fleet import Fleet
 
     a = parse_args([])

@@ -71,7 +71,7 @@ class FakeSession:
 
 
 def test_sim_client_truth_survives_bad_samples() -> None:
-    from sim import client
+    from sim.server import client
 
     good = TruthPosesMsg(t_sim=2.0, poses=((1, 0.0, 0.0, 0.0),))
     session = FakeSession()
@@ -95,7 +95,7 @@ def test_sim_client_truth_survives_bad_samples() -> None:
 
 
 def test_sim_client_ask_skips_bad_replies() -> None:
-    from sim import client
+    from sim.server import client
 
     rep = CameraReply(robot_id=3, yaw=0.0, t_sim=0.0, width=1, height=1, encoding="png", data=b"x")
     replies = [

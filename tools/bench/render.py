@@ -17,7 +17,7 @@ workers; CPU-seconds per frame is the number that carries to a machine with more
 (there frames per second should scale with the workers, up to one core per worker).
 Writes ``render_bench.json`` and ``render_bench.png`` into ``--out`` if given.
 
-``--renderer`` is passed to the world and the workers (:mod:`sim.renderer`). With
+``--renderer`` is passed to the world and the workers (:mod:`sim.camera.renderer`). With
 ``--in-process`` it instead times ``World.render`` itself, no processes, no PNG, no bus:
 for each renderer of ``--renderers`` and each fleet size of ``--fleets`` it draws
 ``--frames`` pictures (observers and head yaws cycling, after 2 untimed ones) and prints
@@ -41,7 +41,7 @@ from typing import Any
 import zenoh
 
 from agent.wire import CameraReply, CameraRequest, decode, encode, key_camera
-from sim.renderer import RENDERERS, check
+from sim.camera.renderer import RENDERERS, check
 from tools.harness.procs import ROOT, Proc, free_port, stop
 from tools.harness.render import served, start_render_workers
 
@@ -117,8 +117,8 @@ def sweep(endpoint: str, robots: int, frames: int, warmup: int) -> tuple[float, 
 
 def in_process(renderer: str, robots: int, seed: int, frames: int) -> dict[str, Any]:
     """Frames per CPU-second and per wall second of ``World.render`` with ``robots`` NAOs."""
+    from sim.physics.world import World
     from sim.scenarios import generate
-    from sim.world import World
 
     with World(generate(robots, seed), noise=False, renderer=renderer) as w:
         ids = w.robot_ids

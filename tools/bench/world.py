@@ -181,9 +181,9 @@ def sim_speed_bus(n: int, seed: int, sim_seconds: float) -> float:
 
 
 def render_breakdown(n: int, seed: int) -> tuple[float, float, float]:
-    from sim.render_pool import PNG_PARAMS
+    from sim.physics.world import World
     from sim.scenarios import generate
-    from sim.world import World
+    from sim.server.render_pool import PNG_PARAMS
 
     with World(generate(3, seed)) as w:
         tr, te, tc = [], [], []
@@ -201,8 +201,8 @@ def render_breakdown(n: int, seed: int) -> tuple[float, float, float]:
 
 def sim_speed(n: int, seed: int, sim_seconds: float) -> tuple[float, float]:
     """(sim seconds per wall second, per CPU second of this process) with ``n`` robots."""
+    from sim.physics.world import World
     from sim.scenarios import generate
-    from sim.world import World
 
     with World(generate(n, seed)) as w:
         loco = w.locomotion
@@ -239,7 +239,7 @@ TABLE2 = (
 
 def noise_vs_table2(robots: int, out: Path | None) -> None:
     """Heading error after one open-loop walk, over seeded robots, against Table 2."""
-    from sim.locomotion import Locomotion
+    from sim.physics.locomotion import Locomotion
 
     class Store:
         robot_ids: tuple[int, ...] = (1,)

@@ -13,8 +13,8 @@ import sys
 from pathlib import Path
 
 from agent.core.nao import NAOQI_PORT
-from sim.look import HELP as LOOK_HELP
-from sim.look import look_arg
+from sim.camera.look import HELP as LOOK_HELP
+from sim.camera.look import look_arg
 from tools.calibrate.check import Floors
 from tools.calibrate.plan import PlanSpec, coarse
 

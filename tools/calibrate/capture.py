@@ -37,7 +37,7 @@ from tools.harness.progress import Progress
 
 MAX_STEP_DEG = 30.0  # the compass needs the two images to overlap (60.9° field of view)
 #: a turn closer than this to its target is left as it is: a NAO does not turn by a
-#: fraction of a degree (the simulated one errs by 1.1° (σ) on any turn, sim/locomotion.py)
+#: fraction of a degree (the simulated one errs by 1.1° (σ) on any turn, sim/physics/locomotion.py)
 TOLERANCE_DEG = 1.5
 EXTRA_TURNS = 4  # top-up turns after the planned steps
 

@@ -1,7 +1,7 @@
 """Rehearse: the whole calibration against virtual NAOs over qi (capture, build, check).
 
-The simulated world (:class:`sim.world.World`) with two robots is served in this process
-by its world loop (:class:`sim.server.WorldServer`) and its qi gateway
+The simulated world (:class:`sim.physics.world.World`) with two robots is served in this process
+by its world loop (:class:`sim.server.server.WorldServer`) and its qi gateway
 (:class:`sim.naoqi_gateway.NaoqiGateway`): robot 1 is NAO-i, robot 2 NAO-j, each a
 virtual NAO on its own qi port. The capture drives them exactly as it drives real NAOs
 (:class:`agent.body.naoqi.NaoqiBody` over the qi protocol); only the person who places
@@ -9,10 +9,10 @@ NAO-j is played by :class:`WorldHand`, which puts it where the prompt says throu
 world loop (:class:`RehearsalServer`, so the world is only ever touched by its loop). Turns on the spot carry the world's motion noise, as a real NAO's do: the
 capture measures them with NAO-j's visual compass like on a real floor.
 
-``look``: what the world looks like (a SPEC of :mod:`sim.look`: the NAOs' orange, the
+``look``: what the world looks like (a SPEC of :mod:`sim.camera.look`: the NAOs' orange, the
 light, noise, motion blur, auto exposure); :func:`make_world` is the one place where a
 look named on the command line becomes the world's. The world's clock charges every
-picture the time a NAO takes for it (:mod:`sim.glances`), as a real NAO spends it.
+picture the time a NAO takes for it (:mod:`sim.server.glances`), as a real NAO spends it.
 """
 
 from __future__ import annotations
@@ -30,11 +30,11 @@ from typing import Any, TextIO
 
 from agent.body.naoqi import NaoqiBody
 from agent.core.perception.camera import CameraModel
-from sim.look import Look
+from sim.camera.look import Look
 from sim.naoqi_gateway import NaoqiGateway
+from sim.physics.world import World
 from sim.scenarios import RobotSpec, Scenario
-from sim.server import NetConfig, WorldServer
-from sim.world import World
+from sim.server.server import NetConfig, WorldServer
 from tools.calibrate.build import build
 from tools.calibrate.capture import Placement, capture
 from tools.calibrate.check import Floors, check, write
@@ -49,7 +49,7 @@ NORTH = math.pi / 2
 def make_world(look: str, seed: int = 0, noise: bool = True) -> World:
     """The world of a rehearsal: NAO-i at the origin facing north, NAO-j 1 m ahead, in a
     4 m room (NAO-j reaches 3.1 m ahead and to either side), in ``look`` (a SPEC of
-    :mod:`sim.look`; ``ValueError`` if it is not one)."""
+    :mod:`sim.camera.look`; ``ValueError`` if it is not one)."""
     sc = Scenario(
         robots=(RobotSpec(OBSERVER, 0.0, 0.0, NORTH), RobotSpec(SUBJECT, 0.0, 1.0, -NORTH)),
         seed=seed,

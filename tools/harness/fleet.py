@@ -35,8 +35,8 @@ from typing import Any
 from agent.config import AgentConfig
 from agent.net.bus import Bus
 from sim import scenarios
-from sim.locomotion import MAX_NOISE_SCALE
-from sim.look import Look
+from sim.camera.look import Look
+from sim.physics.locomotion import MAX_NOISE_SCALE
 from tools.harness.judge import plan_meta, summarise
 from tools.harness.observe import AgentView, LiveView, Observer, Recorder, observe_for, observer_bus
 from tools.harness.procs import (
@@ -61,7 +61,7 @@ from tools.harness.view.live import live_sinks
 #: most ``agent.wire.MAX_NEIGHBOURS`` (128) neighbours, so even a robot that sees every
 #: other one of 128 fits; the scenario generator places up to 200.
 MAX_ROBOTS = 128
-#: The most render workers a run has (``python -m sim.render_worker --shard i/K``).
+#: The most render workers a run has (``python -m sim.server.render_worker --shard i/K``).
 MAX_RENDER_WORKERS = 8
 
 
@@ -78,7 +78,7 @@ class FleetSpec:
     The world: a ``scenario`` file (its robot ids ``scenario_ids``), else the seed's
     generated one (``isolated``: one robot 2-3 m from every other; ``headings``; with
     ``obstacles`` K > 0 the blocking scenario of :mod:`tools.lib.obstacle_scenario`),
-    ``noise_scale``, its ``look`` (:mod:`sim.look`) and ``free_looks`` (camera requests
+    ``noise_scale``, its ``look`` (:mod:`sim.camera.look`) and ``free_looks`` (camera requests
     cost no sim time), more ``world_args``, its ``renderer`` and ``render_workers``. The
     network: secure by default (a throwaway fleet in ``OUT/fleet`` unless ``credentials``),
     ``plain_links`` (tests), ``insecure``. Limits: ``timeout`` for the agents, wall s;

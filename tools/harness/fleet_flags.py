@@ -19,9 +19,9 @@ from agent.config import AgentConfig, add_plan_arguments
 from agent.core.formation.params import D_E, PHI_E_DEG
 from agent.core.formation.view.route import Route
 from sim import scenarios
-from sim.look import HELP as LOOK_HELP
-from sim.look import Look, look_arg
-from sim.renderer import RENDERERS
+from sim.camera.look import HELP as LOOK_HELP
+from sim.camera.look import Look, look_arg
+from sim.camera.renderer import RENDERERS
 from tools.harness.fleet import MAX_RENDER_WORKERS, FleetSpec
 from tools.harness.view.live import add_live_arguments, check_live_argument
 
@@ -102,8 +102,8 @@ def add_fleet_arguments(p: argparse.ArgumentParser) -> None:
     add("--renderer", choices=RENDERERS, default=None,
         help="python -m sim's and the render workers' --renderer (default: theirs, auto)")  # fmt: skip
     add("--render-service", type=int, default=0, metavar="K",
-        help="K render workers (python -m sim.render_worker --shard i/K) draw the cameras instead "
-        f"of the world (for large fleets, K <= {MAX_RENDER_WORKERS}; default 0: the world)")  # fmt: skip
+        help="K render workers (python -m sim.server.render_worker --shard i/K) draw the "
+        f"cameras instead of the world (for large fleets, K <= {MAX_RENDER_WORKERS}; default 0: the world)")  # fmt: skip
     add("--agent-arg", action="append", default=[], type=agent_arg, metavar="ID:ARG",
         help="extra argument for robot ID's agent only, e.g. 3:--orientation=cp (an odd agent)")  # fmt: skip
     add("--credentials", type=Path, default=None,

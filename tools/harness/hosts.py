@@ -13,7 +13,7 @@ host 3     the monitor (:mod:`tools.harness.monitor`), which records and judges 
 host 4..   one agent each (``python -m agent --id I --state-dir``, ids from the world's
            ready line)
 then       one render worker each when ``render_workers`` K > 0 (the world spread over hosts:
-           ``python -m sim.render_worker --shard i/K`` on the world's port), started
+           ``python -m sim.server.render_worker --shard i/K`` on the world's port), started
            after the world; they draw every camera picture
 =========  ====================================================================
 

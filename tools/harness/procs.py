@@ -3,7 +3,7 @@ fleet's network (docs/design.md §8), and stopping them.
 
 Every tool and test that starts ``python -m sim``, ``python -m agent`` or
 ``python -m tools.router`` on this machine does it here (:mod:`tools.harness.fleet`,
-``tools.fuzz``, ``tools.bench world``, tests/system, tests/sim/test_server.py);
+``tools.fuzz``, ``tools.bench world``, tests/system, tests/sim/server/test_server.py);
 :mod:`tools.harness.hosts` runs the same command lines on test hosts (``tools.eval_loss``,
 ``tools.eval_chaos``). An agent's flags are written by its config alone
 (:meth:`agent.config.AgentConfig.to_argv`).

@@ -1,7 +1,7 @@
 """Render workers of one run (cameras drawn beside the world; docs/world.md "Render workers"): their
 command line, starting K of them beside the world, and what each one served.
 
-``tools.demo --render-service K`` starts K ``python -m sim.render_worker`` processes with
+``tools.demo --render-service K`` starts K ``python -m sim.server.render_worker`` processes with
 shards 1/K..K/K once the world is ready and before the agents; each writes
 ``render-{i}.log``, whose summary line (``served camera=N ...``) says how many camera
 queries it answered. :mod:`tools.harness.hosts` runs the same command line on test hosts.
@@ -24,11 +24,11 @@ READY_S = 180.0
 def render_command(
     net: list[str], shard: tuple[int, int], renderer: str | None = None
 ) -> list[str]:
-    """The argv of ``python -m sim.render_worker`` (``net``: its join flags; ``renderer``:
+    """The argv of ``python -m sim.server.render_worker`` (``net``: its join flags; ``renderer``:
     its ``--renderer``, None for the worker's default)."""
     kind = ["--renderer", renderer] if renderer else []
     return [
-        sys.executable, "-m", "sim.render_worker", *net, "--shard", f"{shard[0]}/{shard[1]}",
+        sys.executable, "-m", "sim.server.render_worker", *net, "--shard", f"{shard[0]}/{shard[1]}",
         *kind,
     ]  # fmt: skip
 

@@ -23,7 +23,7 @@ import numpy as np
 from agent.core.formation.params import PlanParams
 from agent.core.formation.plan import plan_from_positions
 from agent.core.nao import OBSTACLE_RADIUS, OBSTACLE_RGBA
-from sim.nao_model import FOOTPRINT_RADIUS
+from sim.physics.nao_model import FOOTPRINT_RADIUS
 from sim.scenarios import ObstacleSpec, Scenario, dump, generate
 
 OBSTACLE_COLOUR = OBSTACLE_RGBA[:3]

@@ -35,9 +35,9 @@ import numpy as np
 
 from agent.core.perception import SIGHT_MAX, SIGHT_MIN
 from agent.core.perception.camera import CameraModel
-from sim.look import Look
+from sim.camera.look import Look
+from sim.physics.world import World
 from sim.scenarios import ClutterSpec, RobotSpec, Scenario
-from sim.world import World
 
 YAW_LIMIT = math.radians(119.5)
 HALF_WIDTH = 0.15  # m: half the shoulder width of a NAO plus a margin

@@ -13,7 +13,7 @@ import pytest
 
 from agent.body.in_process import WorldBody
 from agent.core.perception.camera import CameraModel
-from sim.world import World
+from sim.physics.world import World
 from tools.calibrate.capture import Placement, capture
 from tools.calibrate.folder import CaptureFolder
 from tools.calibrate.plan import PlanSpec

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from agent.core.perception.camera import CameraModel
-from sim.world import World
+from sim.physics.world import World
 from tests.tools.calibrate.conftest import SMALL, Hand, take
 from tools.calibrate.capture import TOLERANCE_DEG, Placement, console_prompt, wrap_deg
 from tools.calibrate.folder import JOURNAL, CaptureFolder

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from sim.look import Look
+from sim.camera.look import Look
 from tools.calibrate.__main__ import parser
 from tools.calibrate.rehearse import make_world
 

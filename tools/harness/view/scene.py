@@ -60,7 +60,7 @@ from agent.wire import (
     id_from_key,
     reason,
 )
-from sim.nao_model import FOOTPRINT_RADIUS, HEIGHT
+from sim.physics.nao_model import FOOTPRINT_RADIUS, HEIGHT
 from tools.harness.view import foxglove as fg
 from tools.harness.view.foxglove import JSON
 from tools.lib.frame_fit import common_frame_pose
