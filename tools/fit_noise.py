@@ -25,8 +25,10 @@ used.
 * ``bias_scale``, the bias test's null scale (:func:`bias_scale`: its statistic over sound
   robots against χ²₃, at the 90th and 99th percentiles);
 * ``rho``, the rate of sound robots seen turned as a whole: the share (counted as
-  ``(k + 1) / (n + 1)``) of sound robots whose masks fail the heading test's Wilks
-  statistic at ``TURNED_P``.
+  ``(k + 1) / (n + 1)``) of sound robots whose masks, turned back to their start heading
+  by the records' times, fail the heading test's Wilks statistic at ``TURNED_P``;
+  ``rho_untimed`` the same over robots whose records carry no times (masks as recorded).
+  A corpus without robots of one kind keeps the shipped rate of that kind.
 
 Prints the model with its figures, writes it (``--write``: into the shipped data folder)
 and draws ``--png``.
@@ -48,7 +50,7 @@ import numpy as np
 from agent.adapters import FormationAdapter
 from agent.core.formation.frame.poses import PoseFrame
 from agent.core.formation.frame.records import mask_orientation
-from agent.core.perception.sighting_noise import SightingNoise, split
+from agent.core.perception.sighting_noise import SightingNoise, shipped_noise, split
 from agent.wire import NeighborRecordMsg
 from tools.corpus import Run, held_out, load_corpus
 from tools.lib.frame_fit import frame_error
@@ -193,18 +195,26 @@ def fit(m: Matched, runs: list[Run], corpus: str) -> tuple[SightingNoise, dict[s
         r0=max(r0, 1e-3), r1=r1, t0=max(t0, 1e-3), t1=t1,
         g0=0.0, g1=0.0, sigma_mask=sm, w0=w0, w90=w90, sightings=int(dist.size), corpus=corpus,
     )  # fmt: skip
-    ed, bad, wilks, sd, slost = pair_rejections(fits, base, [r.records for r in runs_kept])
+    ed, bad, wilks, timed, sd, slost = pair_rejections(fits, base, [r.records for r in runs_kept])
     sightings = sum(len(m.neighbours) for r in runs_kept for m in r.records)
+
     # the rate at which sound robots' masks agree on an offset the per-mask model cannot
     # explain (Wilks' p below TURNED_P), counted conservatively ((k + 1) / (n + 1))
-    rho = (float((wilks < TURNED_P).sum()) + 1.0) / (len(wilks) + 1.0)
+    # robots whose records carry times apart from those whose do not (their masks are not
+    # turned back); a corpus without one kind keeps the shipped rate of that kind
+    def rate(sel: np.ndarray, shipped: float) -> float:
+        w = wilks[sel]
+        return (float((w < TURNED_P).sum()) + 1.0) / (len(w) + 1.0) if len(w) else shipped
+
+    shipped = shipped_noise()
+    rho, rho_untimed = rate(timed, shipped.rho), rate(~timed, shipped.rho_untimed)
     gc, gr, gn = binned(ed, bad, np.mean)
     g0, g1 = _line(gc, gr, gn)
     # lost strays per sighting of a sound robot: too few to bin by distance, one rate
     # (counted conservatively, (k + 1) / (n + 2))
     sc, sr_, sn = binned(sd, slost, np.mean)
     s0, s1 = (float(slost.sum()) + 1.0) / (float(sightings) + 2.0), 0.0
-    model = replace(base, g0=g0, g1=g1, rho=rho, s0=s0, s1=s1,
+    model = replace(base, g0=g0, g1=g1, rho=rho, rho_untimed=rho_untimed, s0=s0, s1=s1,
                     bias_scale=bias_scale(fits, replace(base, g0=g0, g1=g1)))  # fmt: skip
     bins = {"d": x, "sr": np.array(sr), "st": np.array(st), "n": w, "dist": dist, "along": along,
             "across": across, "gd": gc, "gross": gr, "gn": gn, "sd": sc, "stray": sr_, "sn": sn}  # fmt: skip
@@ -265,15 +275,16 @@ def residuals(fits: list[PoseFrame]) -> tuple[np.ndarray, np.ndarray, np.ndarray
 
 def pair_rejections(
     fits: list[PoseFrame], noise: SightingNoise, records: list[tuple[NeighborRecordMsg, ...]]
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Every pair of every fit: its mean sighting distance and whether the χ² test rejects
-    it under ``noise``; every robot's heading-test p-value (Wilks'); every stray sighting's
-    distance and whether it is lost (lands on no robot)."""
-    from agent.adapters import FormationAdapter
+    it under ``noise``; every robot's heading-test p-value (Wilks') and whether its record
+    carries times (stances); every stray sighting's distance and whether it is lost (lands
+    on no robot)."""
     from agent.core.formation.frame.fault_test import mask_deltas, mask_test, rejected_edges, strays
 
-    dist, bad, wilks, sd, slost = [], [], [], [], []
+    dist, bad, wilks, timed, sd, slost = [], [], [], [], [], []
     for poses, recs in zip(fits, records, strict=True):
+        has_times = {m.sender for m in recs if m.stances}
         for row in strays(poses, FormationAdapter.records(recs), noise).values():
             for d_s, lands in row:
                 sd.append(d_s)
@@ -290,7 +301,9 @@ def pair_rejections(
             deltas = mask_deltas(poses, rid)
             if deltas:
                 wilks.append(mask_test(deltas, noise)[1])
-    return np.array(dist), np.array(bad), np.array(wilks), np.array(sd), np.array(slost)
+                timed.append(rid in has_times)
+    return (np.array(dist), np.array(bad), np.array(wilks), np.array(timed, dtype=bool),
+            np.array(sd), np.array(slost))  # fmt: skip
 
 
 def draw(m: Matched, model: SightingNoise, bins: dict[str, np.ndarray], path: Path) -> None:

@@ -28,12 +28,15 @@ A sighting ``v_ij`` of robot i, in its fixed frame, at true distance d from j:
   ``N(±π/2, σ_m)`` with ``w90``, otherwise uniform (front/back, 180°, is folded away by
   the modulo);
 * **a robot seen turned as a whole**: with probability ``rho`` the others' masks of a
-  *sound* robot all agree on an offset that the per-mask model above cannot explain
-  (they saw its body turned: mid-turn in its own search, or a bias of the masks for that
-  robot's aspect). A broken compass looks exactly the same from outside (the robot's
-  own sightings turn, its fitted ψ with them, and the others' masks disagree with it by
-  one offset), so no mask evidence can call a robot faulty with a false-alarm rate below
-  ``rho``;
+  *sound* robot all agree on an offset that the per-mask model above cannot explain (a
+  bias of the masks for that robot's aspect, say). A broken compass looks exactly the
+  same from outside (the robot's own sightings turn, its fitted ψ with them, and the
+  others' masks disagree with it by one offset), so no mask evidence can call a robot
+  faulty with a false-alarm rate below ``rho``. The masks are those turned back to the
+  robot's start heading by the records' times (a mask of a robot seen while it turned in
+  its own search set aside: docs/design.md §9 "Masks seen mid-turn"); ``rho_untimed`` is
+  the rate for records without times, where a robot seen mid-turn is seen turned as a
+  whole (measured on the corpus of such records at 7.7 %);
 * **a sensor bias** (a robot's distances scaled, or its sightings shifted, all alike):
   the likelihood-ratio statistic Λ of :mod:`agent.core.formation.frame.bias_test` over a
   sound robot's sightings, divided by ``bias_scale``, follows χ² with three degrees of
@@ -79,6 +82,8 @@ class SightingNoise:
     w0: float
     w90: float
     rho: float = 0.0  #: rate of sound robots seen turned as a whole (module docstring)
+    #: the same rate for a robot whose record carries no times (module docstring)
+    rho_untimed: float = 0.0
     s0: float = 0.0
     s1: float = 0.0
     r_lin: float = 0.0
@@ -101,6 +106,7 @@ class SightingNoise:
             "w0",
             "w90",
             "rho",
+            "rho_untimed",
             "s0",
             "s1",
         ):
@@ -111,8 +117,9 @@ class SightingNoise:
             raise ValueError("sighting noise: r0, t0 must be > 0 and r1, t1, r_lin, t_lin >= 0")
         if not 0 < self.sigma_mask < math.pi / 4:
             raise ValueError(f"sigma_mask must be in (0, π/4), got {self.sigma_mask}")
-        if not 0.0 <= self.rho <= 1.0:
-            raise ValueError(f"rho must be in [0, 1], got {self.rho}")
+        for name in ("rho", "rho_untimed"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f"{name} must be in [0, 1], got {getattr(self, name)}")
         if not (math.isfinite(self.bias_scale) and self.bias_scale > 0.0):
             raise ValueError(f"bias_scale must be finite and > 0, got {self.bias_scale}")
         if not (0 <= self.w0 <= 1 and 0 <= self.w90 <= 1 and self.w0 + self.w90 <= 1):
@@ -172,6 +179,7 @@ class SightingNoise:
         third = 1.0 / math.sqrt(3.0)
         return cls(r0=floor, r1=0.0, t0=floor, t1=0.0, g0=0.0, g1=0.0,
                    sigma_mask=shipped.sigma_mask, w0=shipped.w0, w90=shipped.w90, rho=shipped.rho,
+                   rho_untimed=shipped.rho_untimed,
                    r_lin=relative * third, t_lin=bearing * third, corpus="synthetic")  # fmt: skip
 
     def save(self, directory: Path = DATA_DIR, stem: str = "sighting_noise") -> Path:

@@ -4,6 +4,7 @@ the sighting noise model it rests on (agent/core/perception/sighting_noise.py)."
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -117,6 +118,20 @@ def test_the_faulty_robot_is_named(kind: str) -> None:
     v = ft.fault_test(build_poses(fleet(1, kind=kind, victim=3)), NOISE)
     assert v.ok and v.named == (3,), v.reason
     assert v.poses is not None and 3 not in v.poses.ids
+
+
+def test_masks_name_a_broken_compass_only_when_the_records_say_when() -> None:
+    """A sound robot is seen turned as a whole at ``rho_untimed`` when records carry no
+    times (masks as recorded), at ``rho`` when they do (masks turned back): a broken
+    compass is named only from timed records when ``rho_untimed`` is above α."""
+    model = replace(NOISE, rho=0.0, rho_untimed=0.08)
+    recs = fleet(1, kind="rotate", victim=3)
+    untimed = ft.fault_test(build_poses(recs), model, recs)
+    assert untimed.named == (), untimed.reason
+    still = np.array([[0.0, 1.0, 0.0]])  # every robot stood still all along
+    timed = [replace(r, stances=still) for r in recs]
+    v = ft.fault_test(build_poses(timed), model, timed)
+    assert v.ok and v.named == (3,), v.reason
 
 
 def test_same_verdict_for_shuffled_records() -> None:

@@ -147,12 +147,13 @@ def test_masks_name_a_turned_robot_only_when_better_than_rho(
     """A broken compass (record turned 40°) fits in position, ψ absorbs it; only the
     others' masks of it disagree, by one offset. With masks that err independently
     (ρ = 0) they name it; with the measured rate ρ of sound robots seen turned as a whole
-    they cannot tell it from one, and nobody is named (docs/design.md §9)."""
+    they cannot tell it from one, and nobody is named (docs/design.md §9). These records
+    carry no times: the rate of that kind, ``rho_untimed``, is the one that counts."""
     rng = np.random.default_rng(7)
     ids = list(range(1, 7))
     pos = sim_layout(rng, 6)
     recs = unaligned_records(ids, pos, rng.uniform(-math.pi, math.pi, 6), rng, 0.03, 0.03)
     recs[3] = fault(recs[3], "rotate")
-    noise = dataclasses.replace(SightingNoise.synthetic(0.01, 0.03, 0.03), rho=rho)
+    noise = dataclasses.replace(SightingNoise.synthetic(0.01, 0.03, 0.03), rho_untimed=rho)
     ff = fleet_frame(recs, DEFAULT_EPSILON, noise)
     assert ff.excluded == named, ff.reason

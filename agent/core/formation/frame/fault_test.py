@@ -30,9 +30,14 @@ sight, σ_r(d) and σ_t(d)). Then:
    the generalised likelihood ratio ``2·max_Δ Σ log f(δ_k − Δ)/f(δ_k)`` over the
    others' masks δ_k of r is χ²₁ under "r is sound" (Wilks; Δ on a 1° grid) *if the
    masks err independently*. They do not always: a sound robot is seen turned as a whole
-   with the measured probability ``rho`` (its body turned while the others looked), which
+   with the measured probability ``rho`` (what the model of the masks leaves out), which
    a broken compass cannot be told from. So the heading test's p-value is
-   ``max(p_Wilks, rho)``: masks name a robot only once they are better than that.
+   ``max(p_Wilks, rho)``: masks name a robot only once they are better than that. The
+   masks are those turned back to r's start heading by the times of the records
+   (:func:`records.mask_orientation`; a mask of r seen while r turned is set aside); for
+   a robot whose record carries no times (an older agent) the floor is ``rho_untimed``,
+   the rate measured on records without times, where a robot seen mid-turn in its own
+   search looks exactly like a broken compass.
 4. **Per robot, its bias test** (:mod:`bias_test`): are r's own sightings all wrong the
    same way (its distances scaled, or every sighting shifted)? A likelihood-ratio test of
    a bias (s, b) fitted to r's sightings against none, with the others held at their
@@ -253,6 +258,9 @@ class _Evidence:
     p_edge: dict[tuple[int, int], float]  #: p_reject at the edge's mean sighting distance
     stray: dict[int, list[tuple[float, bool]]]
     sighted: dict[int, list[float]]
+    #: robots whose records carry stances: their masks are turned back to their start
+    #: heading (records.mask_orientation), the others' are as recorded
+    timed: frozenset[int] = frozenset()
 
 
 def _evidence(
@@ -270,8 +278,9 @@ def _evidence(
         if rec.robot_id in poses.ids
     }
     p_edge = {e: float(noise.p_reject(float(np.mean(d)))) for e, d in sorted(dist.items())}
+    timed = frozenset(r.robot_id for r in records if r.stances is not None and len(r.stances))
     return _Evidence(rejected_edges(poses, noise), p_edge,
-                     strays(poses, records, noise, elsewhere), sighted)  # fmt: skip
+                     strays(poses, records, noise, elsewhere), sighted, timed)  # fmt: skip
 
 
 def robot_tests(
@@ -301,7 +310,7 @@ def _robot_tests(
         lost = sum(not lands for _, lands in own)
         deltas = mask_deltas(poses, r)
         offset, p_h = mask_test(deltas, noise)
-        p_h = max(p_h, noise.rho) if deltas else p_h
+        p_h = max(p_h, noise.rho if r in ev.timed else noise.rho_untimed) if deltas else p_h
         p_pos = tail_at_least(probs, k + lost)
         stat, p_b = 0.0, 1.0
         if bias:
