@@ -24,11 +24,15 @@ used.
   every rejection is a false one).
 * ``bias_scale``, the bias test's null scale (:func:`bias_scale`: its statistic over sound
   robots against χ²₃, at the 90th and 99th percentiles);
-* ``rho``, the rate of sound robots seen turned as a whole: the share (counted as
-  ``(k + 1) / (n + 1)``) of sound robots whose masks, turned back to their start heading
-  by the records' times, fail the heading test's Wilks statistic at ``TURNED_P``;
-  ``rho_untimed`` the same over robots whose records carry no times (masks as recorded).
-  A corpus without robots of one kind keeps the shipped rate of that kind.
+* ``mask_scale``, the heading test's null scale (:func:`null_scale`: Wilks' statistic
+  over the sound robots whose records carry times, against χ²₁ at the 90th and 99th
+  percentiles, never below 1);
+* ``rho``, the rate of sound robots seen turned as a whole beyond that: the share of
+  sound robots with times whose masks, turned back to their start heading, fail the
+  scaled test at ``TURNED_P`` (0 when none does); ``rho_untimed`` the same over robots
+  whose records carry no times (masks as recorded), counted conservatively as
+  ``(k + 1) / (n + 1)``. A corpus without robots of one kind keeps the shipped figures of
+  that kind.
 
 Prints the model with its figures, writes it (``--write``: into the shipped data folder)
 and draws ``--png``.
@@ -46,6 +50,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy.stats import chi2
 
 from agent.adapters import FormationAdapter
 from agent.core.formation.frame.poses import PoseFrame
@@ -200,21 +205,31 @@ def fit(m: Matched, runs: list[Run], corpus: str) -> tuple[SightingNoise, dict[s
 
     # the rate at which sound robots' masks agree on an offset the per-mask model cannot
     # explain (Wilks' p below TURNED_P), counted conservatively ((k + 1) / (n + 1))
-    # robots whose records carry times apart from those whose do not (their masks are not
-    # turned back); a corpus without one kind keeps the shipped rate of that kind
-    def rate(sel: np.ndarray, shipped: float) -> float:
-        w = wilks[sel]
-        return (float((w < TURNED_P).sum()) + 1.0) / (len(w) + 1.0) if len(w) else shipped
-
+    # the heading test's null scale, on the robots whose masks are turned back by the
+    # records' times (the only ones an agent of today sees), then the rates of sound robots
+    # seen turned as a whole beyond it: of timed records the share seen (0 when none is:
+    # no mechanism remains once masks seen mid-turn are set aside); of records without
+    # times counted conservatively, (k + 1) / (n + 1). A corpus without one kind keeps the
+    # shipped figure of that kind.
     shipped = shipped_noise()
-    rho, rho_untimed = rate(timed, shipped.rho), rate(~timed, shipped.rho_untimed)
+    wstat = chi2.isf(np.clip(wilks, 1e-300, 1.0), 1) * base.mask_scale  # Wilks' Λ, unscaled
+    mscale = null_scale(wstat[timed], 1) if timed.any() else shipped.mask_scale
+    p_scaled = chi2.sf(wstat / mscale, 1)
+    rho = float((p_scaled[timed] < TURNED_P).mean()) if timed.any() else shipped.rho
+    untimed = p_scaled[~timed]
+    rho_untimed = (
+        (float((untimed < TURNED_P).sum()) + 1.0) / (len(untimed) + 1.0)
+        if len(untimed)
+        else shipped.rho_untimed
+    )
     gc, gr, gn = binned(ed, bad, np.mean)
     g0, g1 = _line(gc, gr, gn)
     # lost strays per sighting of a sound robot: too few to bin by distance, one rate
     # (counted conservatively, (k + 1) / (n + 2))
     sc, sr_, sn = binned(sd, slost, np.mean)
     s0, s1 = (float(slost.sum()) + 1.0) / (float(sightings) + 2.0), 0.0
-    model = replace(base, g0=g0, g1=g1, rho=rho, rho_untimed=rho_untimed, s0=s0, s1=s1,
+    model = replace(base, g0=g0, g1=g1, rho=rho, rho_untimed=rho_untimed, mask_scale=mscale,
+                    s0=s0, s1=s1,
                     bias_scale=bias_scale(fits, replace(base, g0=g0, g1=g1)))  # fmt: skip
     bins = {"d": x, "sr": np.array(sr), "st": np.array(st), "n": w, "dist": dist, "along": along,
             "across": across, "gd": gc, "gross": gr, "gn": gn, "sd": sc, "stray": sr_, "sn": sn}  # fmt: skip
@@ -225,19 +240,23 @@ def fit(m: Matched, runs: list[Run], corpus: str) -> tuple[SightingNoise, dict[s
 BIAS_QUANTILES = (0.9, 0.99)
 
 
-def bias_scale(fits: list[PoseFrame], model: SightingNoise) -> float:
-    """The bias test's null scale: the largest ratio, at :data:`BIAS_QUANTILES`, of the
-    sound robots' statistic Λ (every robot of fault-free fleets) to χ²₃'s quantile, and
-    never below 1 (a test on a lighter tail than χ²₃ keeps χ²₃)."""
-    from scipy.stats import chi2
+def null_scale(stats: np.ndarray, dof: int) -> float:
+    """A test's null scale: the largest ratio, at :data:`BIAS_QUANTILES`, of its
+    statistic over sound robots to χ²_dof's quantile, and never below 1 (a statistic with
+    a lighter tail than χ²_dof keeps χ²_dof); 1 without statistics."""
+    if stats.size == 0:
+        return 1.0
+    ratios = [float(np.quantile(stats, q)) / float(chi2.isf(1.0 - q, dof)) for q in BIAS_QUANTILES]
+    return max(1.0, *ratios)
 
+
+def bias_scale(fits: list[PoseFrame], model: SightingNoise) -> float:
+    """The bias test's null scale (:func:`null_scale`, χ²₃) over every robot of the
+    fault-free fleets."""
     from agent.core.formation.frame.bias_test import bias_fit
 
     stats = np.array([bias_fit(f, r, model, 1.0).statistic for f in fits for r in f.ids])
-    if stats.size == 0:
-        return 1.0
-    ratios = [float(np.quantile(stats, q)) / float(chi2.isf(1.0 - q, 3)) for q in BIAS_QUANTILES]
-    return max(1.0, *ratios)
+    return null_scale(stats, 3)
 
 
 def fitted(runs: list[Run]) -> tuple[list[PoseFrame], list[Run]]:

@@ -91,6 +91,9 @@ class SightingNoise:
     #: the bias test's null scale: Λ / bias_scale is χ²₃ in its tail on sound robots
     #: (measured; module docstring)
     bias_scale: float = 1.0
+    #: the heading test's null scale: Wilks' statistic / mask_scale is χ²₁ in its tail on
+    #: sound robots whose records carry times (measured; module docstring)
+    mask_scale: float = 1.0
     sightings: int = 0  #: how many matched sightings it was fitted on
     corpus: str = ""  #: which corpus (and split) it was fitted on
 
@@ -120,8 +123,10 @@ class SightingNoise:
         for name in ("rho", "rho_untimed"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"{name} must be in [0, 1], got {getattr(self, name)}")
-        if not (math.isfinite(self.bias_scale) and self.bias_scale > 0.0):
-            raise ValueError(f"bias_scale must be finite and > 0, got {self.bias_scale}")
+        for name in ("bias_scale", "mask_scale"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0.0):
+                raise ValueError(f"{name} must be finite and > 0, got {v}")
         if not (0 <= self.w0 <= 1 and 0 <= self.w90 <= 1 and self.w0 + self.w90 <= 1):
             raise ValueError(f"mask weights w0={self.w0}, w90={self.w90} must be a distribution")
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from scipy.stats import binom
+from scipy.stats import binom, chi2
 
 from agent.core.formation.frame import fault_test as ft
 from agent.core.formation.frame.poses import build_poses
@@ -62,7 +62,8 @@ def test_rejection_rate_is_clipped() -> None:
 @pytest.mark.parametrize(
     ("field", "value"),
     [("r0", 0.0), ("t0", -1.0), ("r1", -0.1), ("sigma_mask", 0.0), ("sigma_mask", 1.0),
-     ("w0", 1.2), ("w90", -0.1), ("g0", math.nan)],
+     ("w0", 1.2), ("w90", -0.1), ("g0", math.nan), ("rho_untimed", 1.5), ("mask_scale", 0.0),
+     ("bias_scale", math.inf)],
 )  # fmt: skip
 def test_model_refuses_each_bad_field(field: str, value: float) -> None:
     good = dict(r0=0.1, r1=0.0, t0=0.1, t1=0.0, g0=0.0, g1=0.0, sigma_mask=0.1, w0=0.5, w90=0.2)
@@ -118,6 +119,14 @@ def test_the_faulty_robot_is_named(kind: str) -> None:
     v = ft.fault_test(build_poses(fleet(1, kind=kind, victim=3)), NOISE)
     assert v.ok and v.named == (3,), v.reason
     assert v.poses is not None and 3 not in v.poses.ids
+
+
+def test_the_mask_scale_divides_wilks_statistic() -> None:
+    deltas = [math.radians(a) for a in (9, 11, 10, 12)]
+    _, p1 = ft.mask_test(deltas, NOISE)
+    _, p2 = ft.mask_test(deltas, replace(NOISE, mask_scale=2.0))
+    stat = float(chi2.isf(p1, 1))
+    assert p2 == pytest.approx(float(chi2.sf(stat / 2.0, 1)), rel=1e-6) and p2 > p1
 
 
 def test_masks_name_a_broken_compass_only_when_the_records_say_when() -> None:

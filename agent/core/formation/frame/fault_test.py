@@ -173,7 +173,8 @@ def tail_at_least(p: Sequence[float], k: int) -> float:
 
 
 def mask_test(deltas: Sequence[float], noise: SightingNoise) -> tuple[float, float]:
-    """(Δ, p-value) of the heading test of step 3 over mask misfits ``deltas`` (rad)."""
+    """(Δ, p-value) of the heading test of step 3 over mask misfits ``deltas`` (rad): Wilks'
+    statistic divided by the measured null scale ``noise.mask_scale``, against χ²₁."""
     d = np.asarray(deltas, dtype=np.float64)
     if d.size == 0:
         return 0.0, 1.0
@@ -181,7 +182,7 @@ def mask_test(deltas: Sequence[float], noise: SightingNoise) -> tuple[float, flo
     best = int(np.argmax(np.round(logf, 12)))  # the first (smallest Δ) of equal maxima
     stat = max(0.0, 2.0 * float(logf[best] - logf[0]))
     offset = float((MASK_GRID[best] + math.pi / 2) % math.pi - math.pi / 2)
-    return offset, float(chi2.sf(stat, 1))
+    return offset, float(chi2.sf(stat / noise.mask_scale, 1))
 
 
 def mask_deltas(poses: PoseFrame, target: int) -> list[float]:

@@ -1,0 +1,28 @@
+"""tools/fit_noise.py's null scale of a test statistic (the bias test's, χ²₃, and the
+heading test's, χ²₁): known answers."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.stats import chi2
+
+from tools.fit_noise import BIAS_QUANTILES, null_scale
+
+
+@pytest.mark.parametrize("dof", [1, 3])
+def test_a_statistic_with_the_chi2_tail_keeps_it(dof: int) -> None:
+    stats = chi2.ppf(np.linspace(0.0005, 0.9995, 2000), dof)
+    assert null_scale(stats, dof) == pytest.approx(1.0, abs=0.02)
+
+
+def test_a_heavier_tail_is_scaled_by_its_worst_quantile_ratio() -> None:
+    base = chi2.ppf(np.linspace(0.0005, 0.9995, 2000), 1)
+    stats = np.where(base > chi2.isf(0.1, 1), 3.0 * base, base)  # the top 10 % tripled
+    want = max(float(np.quantile(stats, q)) / float(chi2.isf(1 - q, 1)) for q in BIAS_QUANTILES)
+    assert null_scale(stats, 1) == pytest.approx(want) and want > 2.5
+
+
+def test_a_lighter_tail_or_none_is_one() -> None:
+    assert null_scale(0.5 * chi2.ppf(np.linspace(0.01, 0.99, 99), 1), 1) == 1.0
+    assert null_scale(np.array([]), 3) == 1.0
