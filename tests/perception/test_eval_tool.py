@@ -7,11 +7,14 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from agent.core.perception.calibration import builtin
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
+@pytest.mark.slow  # the evaluation tool on rendered views: CI's slow tier
 def test_eval_perception_json(tmp_path: Path) -> None:
     png = tmp_path / "eval.png"
     view = tmp_path / "view.png"

@@ -4,11 +4,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
+
 from agent.core.perception.dbase import DBase
 from agent.core.perception.mbase import MBase
 from tools import build_mbase
 
 
+@pytest.mark.slow  # rebuilds the packaged M-base from its renders: CI's slow tier
 def test_packaged_mbase_regenerates_identically(tmp_path: Path) -> None:
     packaged = MBase.load()
     assert build_mbase.main(["--out", str(tmp_path)]) == 0

@@ -90,6 +90,7 @@ def test_cylinder_partly_hidden_behind_a_nearer_one(known: World, det: ObstacleD
     _check(_closest(dets, 3.0, -0.5), 3.0, -0.5, 0.05, 2.0)
 
 
+@pytest.mark.slow  # a matrix of rendered views: CI's slow tier
 def test_accuracy_on_seeded_views(det: ObstacleDetector) -> None:
     rng = np.random.default_rng(2024)
     errors: list[tuple[float, float]] = []

@@ -39,27 +39,33 @@ def summary(request: pytest.FixtureRequest, detector: Detector) -> dict[str, Any
     return summarise(run_views(seed, VIEWS, clutter, detector, neighbour_heads=heads))
 
 
+@pytest.mark.slow  # a matrix of rendered views: CI's slow tier
 def test_enough_labelled_robots(summary: dict[str, Any]) -> None:
     assert summary["robots_counted"] >= 50
 
 
+@pytest.mark.slow  # a matrix of rendered views: CI's slow tier
 def test_recall_and_precision(summary: dict[str, Any]) -> None:
     assert summary["recall"] >= 0.95
     assert summary["precision"] >= 0.99
 
 
+@pytest.mark.slow  # a matrix of rendered views: CI's slow tier
 def test_distance_within_5_percent(summary: dict[str, Any]) -> None:
     assert summary["distance_error_m"]["within_5pct"] >= 0.95
 
 
+@pytest.mark.slow  # a matrix of rendered views: CI's slow tier
 def test_far_robots_are_part_of_the_sets(summary: dict[str, Any]) -> None:
     assert summary["bands"]["2.25-3"]["robots"] >= 15
 
 
+@pytest.mark.slow  # a matrix of rendered views: CI's slow tier
 def test_bearing_within_3deg(summary: dict[str, Any]) -> None:
     assert summary["bearing_error_deg"]["within_3"] >= 0.95
 
 
+@pytest.mark.slow  # a matrix of rendered views: CI's slow tier
 def test_overlapping_naos_recall(detector: Detector) -> None:
     s = summarise(run_views(104, OVERLAP_VIEWS, True, detector, overlap=True))
     o = s["overlap"]

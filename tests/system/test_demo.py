@@ -4,6 +4,9 @@ Runs ``python -m tools.demo`` exactly as ``make demo`` does (agents claim their 
 with ``--id auto``), then checks the printed table, the result JSON, the figure and the
 MCAP recording, and replays the recording with ``python -m tools.replay``. Bounded:
 the demo's own limits stop every process well inside the test timeout.
+
+The first demo (TLS, as ``make demo`` runs) is the fast tier's run end to end; the demo
+with ``--body naoqi`` is a second whole-fleet run and waits for CI's slow tier.
 """
 
 from __future__ import annotations
@@ -15,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-pytestmark = [pytest.mark.system, pytest.mark.slow]
+pytestmark = pytest.mark.system
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -105,6 +108,7 @@ def check_recording_schemas(path: Path) -> None:
     assert counts["world/truth/poses"] > 0 and all(counts[f"nao/{i}/status"] for i in (1, 2, 3))
 
 
+@pytest.mark.slow
 def test_three_robot_demo_with_body_naoqi(tmp_path: Path) -> None:
     """``tools.demo --body naoqi``: the world serves its robots as virtual NAOs over the qi
     protocol; each agent drives its NAO through ALMotion/ALVideoDevice/ALRobotPosture

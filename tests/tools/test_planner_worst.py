@@ -55,6 +55,7 @@ def _safe(plan) -> bool:  # type: ignore[no-untyped-def]
     )
 
 
+@pytest.mark.slow  # 13–34 s an instance under load: CI's slow tier
 @pytest.mark.parametrize(("fam", "n", "seed", "before", "bound"), KNOWN_BAD)
 def test_known_bad_instances_keep_the_bound_and_the_clearance(
     fam: str, n: int, seed: int, before: float, bound: float
