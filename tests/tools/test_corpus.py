@@ -102,7 +102,8 @@ def test_the_shipped_model_was_fitted_on_the_corpus() -> None:
 
     m = SightingNoise.load()
     assert "held-out fleets excluded" in m.corpus and m.sightings > 1000
-    assert 0.0 < m.rho < 0.2 and math.isfinite(m.r1)
+    assert 0.0 <= m.rho < 0.2 and 0.0 < m.rho_untimed < 0.2 and math.isfinite(m.r1)
+    assert m.mask_scale >= 1.0 and m.bias_scale >= 1.0
 
 
 @pytest.mark.slow

@@ -49,11 +49,37 @@ async def _listen(url: str, seconds: float, until: int) -> dict[str, Any]:
                 raise
             await asyncio.sleep(0.2)
     seen: dict[str, Any] = {"ops": [], "channels": {}, "messages": defaultdict(list)}
-    subs: dict[int, str] = {}
+    subs: dict[int, str] = {}  # subscription id -> topic
+    asked: dict[int, tuple[float, int]] = {}  # subscription id -> (when, channel id)
+    heard: set[str] = set()
+    next_sub = 1
     count = 0
+
+    async def subscribe(channels: list[tuple[int, str]]) -> None:
+        # fresh subscription ids, as the page does (tools/web/view.js)
+        nonlocal next_sub
+        add = []
+        for cid, topic in channels:
+            subs[next_sub] = topic
+            asked[next_sub] = (time.monotonic(), cid)
+            add.append({"id": next_sub, "channelId": cid})
+            next_sub += 1
+        await ws.send(json.dumps({"op": "subscribe", "subscriptions": add}))
+
     async with ws:
         assert ws.subprotocol == PROTOCOL
         while time.monotonic() < deadline and count < until:
+            # a subscription can reach the server before the channel it just advertised
+            # (foxglove-sdk: "attempted to subscribe to unknown channel"): ask again for
+            # every topic still silent 3 s after it was asked, as the page does
+            now = time.monotonic()
+            stale = [k for k, (t, _) in asked.items() if now - t > 3.0 and subs[k] not in heard]
+            if stale:
+                await ws.send(json.dumps({"op": "unsubscribe", "subscriptionIds": stale}))
+                again = [(asked[k][1], subs[k]) for k in stale]
+                for k in stale:
+                    del asked[k]
+                await subscribe(again)
             try:
                 frame = await asyncio.wait_for(ws.recv(), 0.5)
             except TimeoutError:
@@ -64,16 +90,14 @@ async def _listen(url: str, seconds: float, until: int) -> dict[str, Any]:
                 op = json.loads(frame)
                 seen["ops"].append(op["op"])
                 if op["op"] == "advertise":
-                    add = []
                     for ch in op["channels"]:
                         seen["channels"][ch["topic"]] = ch
-                        subs[ch["id"]] = ch["topic"]
-                        add.append({"id": ch["id"], "channelId": ch["id"]})
-                    await ws.send(json.dumps({"op": "subscribe", "subscriptions": add}))
+                    await subscribe([(ch["id"], ch["topic"]) for ch in op["channels"]])
                 continue
             assert frame[0] == 1  # message data
             sub = int.from_bytes(frame[1:5], "little")
             t_ns = int.from_bytes(frame[5:13], "little")
+            heard.add(subs[sub])
             seen["messages"][subs[sub]].append((t_ns, json.loads(frame[13:])))
             count += 1
     return seen
