@@ -27,11 +27,12 @@ used.
 * ``mask_scale``, the heading test's null scale (:func:`null_scale`: Wilks' statistic
   over the sound robots whose records carry times, against χ²₁ at the 90th and 99th
   percentiles, never below 1);
-* ``rho``, the rate of sound robots seen turned as a whole beyond that: the share of
-  sound robots with times whose masks, turned back to their start heading, fail the
-  scaled test at ``TURNED_P`` (0 when none does); ``rho_untimed`` the same over robots
-  whose records carry no times (masks as recorded), counted conservatively as
-  ``(k + 1) / (n + 1)``. A corpus without robots of one kind keeps the shipped figures of
+* ``rho``, the rate of sound robots seen turned as a whole beyond that: of the sound
+  robots with times (masks turned back to their start heading), those failing the
+  scaled test at ``TURNED_P`` beyond the share the model itself puts there
+  (:func:`excess_rate`: 0 unless their count is significantly above it); ``rho_untimed``
+  the share over robots whose records carry no times (masks as recorded), counted
+  conservatively as ``(k + 1) / (n + 1)``. A corpus without robots of one kind keeps the shipped figures of
   that kind.
 
 Prints the model with its figures, writes it (``--write``: into the shipped data folder)
@@ -215,7 +216,7 @@ def fit(m: Matched, runs: list[Run], corpus: str) -> tuple[SightingNoise, dict[s
     wstat = chi2.isf(np.clip(wilks, 1e-300, 1.0), 1) * base.mask_scale  # Wilks' Λ, unscaled
     mscale = null_scale(wstat[timed], 1) if timed.any() else shipped.mask_scale
     p_scaled = chi2.sf(wstat / mscale, 1)
-    rho = float((p_scaled[timed] < TURNED_P).mean()) if timed.any() else shipped.rho
+    rho = excess_rate(p_scaled[timed]) if timed.any() else shipped.rho
     untimed = p_scaled[~timed]
     rho_untimed = (
         (float((untimed < TURNED_P).sum()) + 1.0) / (len(untimed) + 1.0)
@@ -238,6 +239,20 @@ def fit(m: Matched, runs: list[Run], corpus: str) -> tuple[SightingNoise, dict[s
 
 #: The tail quantiles at which the bias test's null is compared with χ²₃.
 BIAS_QUANTILES = (0.9, 0.99)
+
+
+def excess_rate(p: np.ndarray, level: float = 0.05) -> float:
+    """The rate of sound robots seen turned beyond the model, from their heading-test
+    p-values ``p``: the count ``k`` below :data:`TURNED_P` against the ``n·TURNED_P`` the
+    model itself puts there. 0 when ``k`` is within that (a one-sided binomial test at
+    ``level``: no evidence of a mechanism the model leaves out), else the excess
+    ``(k − n·TURNED_P) / n``."""
+    from scipy.stats import binom
+
+    n, k = len(p), int((np.asarray(p) < TURNED_P).sum())
+    if n == 0 or k == 0 or float(binom.sf(k - 1, n, TURNED_P)) >= level:
+        return 0.0
+    return (k - n * TURNED_P) / n
 
 
 def null_scale(stats: np.ndarray, dof: int) -> float:

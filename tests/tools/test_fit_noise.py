@@ -26,3 +26,14 @@ def test_a_heavier_tail_is_scaled_by_its_worst_quantile_ratio() -> None:
 def test_a_lighter_tail_or_none_is_one() -> None:
     assert null_scale(0.5 * chi2.ppf(np.linspace(0.01, 0.99, 99), 1), 1) == 1.0
     assert null_scale(np.array([]), 3) == 1.0
+
+
+def test_the_excess_rate_counts_only_what_the_model_does_not_put_there() -> None:
+    from tools.fit_noise import TURNED_P, excess_rate
+
+    assert excess_rate(np.array([])) == 0.0
+    assert excess_rate(np.full(500, 0.5)) == 0.0
+    one = np.concatenate([np.full(499, 0.5), [1e-5]])  # 1 of 500, the model expects 0.5
+    assert excess_rate(one) == 0.0
+    many = np.concatenate([np.full(480, 0.5), np.full(20, 1e-5)])  # 20 of 500: a mechanism
+    assert excess_rate(many) == pytest.approx((20 - 500 * TURNED_P) / 500)
