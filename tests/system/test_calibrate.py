@@ -40,7 +40,10 @@ def test_rehearse_leaves_a_checked_calibration(tmp_path: Path) -> None:
 
 
 def test_a_look_the_world_cannot_render_is_refused(tmp_path: Path) -> None:
+    """A malformed look is refused before anything starts (argparse's exit 2)."""
     from tools.calibrate import __main__ as cli
 
-    assert cli.main(["rehearse", "--look", "hue:20", "--out", str(tmp_path)]) == 2
+    with pytest.raises(SystemExit) as stop:
+        cli.main(["rehearse", "--look", "hue:abc", "--out", str(tmp_path)])
+    assert stop.value.code == 2
     assert not (tmp_path / "captures").exists()
