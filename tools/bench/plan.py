@@ -45,7 +45,9 @@ import numpy as np
 from agent.core.formation.params import D_E as D_NAO  # the real NAOs' d_e (demo_wait)
 from agent.core.formation.params import PlanParams
 from agent.core.formation.plan import Plan, plan_from_positions
-from agent.core.formation.shape.pyramid import placed_slots, pyramid_frame
+from agent.core.formation.shape.layout import placed
+from agent.core.formation.shape.pyramid import pyramid_frame
+from agent.core.formation.shape.spec import PYRAMID
 from agent.core.formation.waves.execution import (
     capt_makespan,
     check_dependencies,
@@ -187,7 +189,7 @@ def measures(
     starts = plan.starts()
     n = starts.shape[0]
     frame = pyramid_frame(starts)
-    slots = frame.to_common(placed_slots(n, d_e, PHI_E, frame.to_pyramid(starts), "centroid"))
+    slots = frame.to_common(placed(PYRAMID, n, d_e, PHI_E, frame.to_pyramid(starts), "centroid"))
     lengths = path_lengths(plan.paths())
     waves = plan.wave_of()
     after = _rows_after(plan)

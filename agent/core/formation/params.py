@@ -17,8 +17,8 @@ from dataclasses import dataclass
 from agent.core.formation.frame.common_frame import METHODS
 from agent.core.formation.frame.neighbour_check import DEFAULT_EPSILON
 from agent.core.formation.paths.assignment import STRATEGIES
-from agent.core.formation.shape.layout import closest_slots
-from agent.core.formation.shape.pyramid import ORIENTATIONS, PLACEMENTS, check_geometry
+from agent.core.formation.shape.layout import PLACEMENTS, closest_slots
+from agent.core.formation.shape.pyramid import ORIENTATIONS, check_geometry
 from agent.core.formation.shape.spec import PYRAMID, Shape
 
 #: ``default`` strategy: exact min-sum (``optimal``, O(n³)) up to this many robots; the

@@ -10,15 +10,16 @@ import pytest
 from agent.core.formation.params import D_E
 from agent.core.formation.paths.assignment import assign, uncross
 from agent.core.formation.paths.geometry import paths_cross
+from agent.core.formation.shape.layout import placed
 from agent.core.formation.shape.pyramid import (
     PyramidFrame,
     layer_of,
     parent_of,
     pca_axis,
-    placed_slots,
     pyramid_frame,
     slot_positions,
 )
+from agent.core.formation.shape.spec import PYRAMID
 from tests.formation.conftest import random_fleet
 
 PHI = math.radians(30)
@@ -61,7 +62,7 @@ def test_slot_errors() -> None:
     with pytest.raises(ValueError, match="orientation"):
         pyramid_frame(np.zeros((2, 2)), "star")
     with pytest.raises(ValueError, match="placement"):
-        placed_slots(3, 1.0, PHI, np.zeros((3, 2)), "middle")
+        placed(PYRAMID, 3, 1.0, PHI, np.zeros((3, 2)), "middle")
 
 
 def test_frame_round_trip_and_eq13() -> None:
@@ -95,7 +96,7 @@ def test_assignment_is_a_permutation(strategy: str) -> None:
     rng = np.random.default_rng(11)
     for n in (1, 2, 3, 7, 16, 40):
         s = rng.uniform(-3, 3, (n, 2))
-        f = placed_slots(n, D_E, PHI, s)
+        f = placed(PYRAMID, n, D_E, PHI, s, "centroid")
         perm = assign(s, f, strategy, D_E, PHI)
         assert sorted(perm.tolist()) == list(range(n))
 
@@ -105,7 +106,7 @@ def test_optimal_is_minimal_and_paper_matches_lemma1_within_pairs() -> None:
     for _ in range(20):
         s = random_fleet(rng, 10, 0.6)
         s = s - s.mean(axis=0)
-        f = placed_slots(10, 2.0, PHI, s)
+        f = placed(PYRAMID, 10, 2.0, PHI, s, "centroid")
         tot = {
             k: np.hypot(*(s - f[assign(s, f, k, 2.0, PHI)]).T).sum()
             for k in ("paper", "optimal", "capt")

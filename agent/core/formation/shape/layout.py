@@ -9,7 +9,8 @@ shape), its slots placed in that frame, and the step of its slot columns (for th
   CP it is north, as for every shape.
 * Placement: ``centroid`` (the slots' centroid at o_p, the translation that minimises
   Σ|slot − start|²) or ``front`` (moved along the axis until the rearmost slot is d_e
-  ahead of the front-most start), exactly :func:`pyramid.placed_slots` for the pyramid.
+  ahead of the front-most start, so that no slot lies among the starts: used when the
+  overlapping placement cannot be scheduled).
 """
 
 from __future__ import annotations
@@ -22,13 +23,14 @@ from scipy.spatial import cKDTree
 
 from agent.core.formation.shape.pyramid import (
     ORIENTATIONS,
-    PLACEMENTS,
     PyramidFrame,
     pca_axis,
     pyramid_frame,
 )
 from agent.core.formation.shape.spec import PYRAMID, Shape
 
+#: The placement policies of :func:`placed` (module doc).
+PLACEMENTS = ("centroid", "front")
 #: Slot x coordinates closer than this (m) are one column.
 COLUMN_TOL = 1e-9
 

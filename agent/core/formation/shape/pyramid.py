@@ -171,34 +171,6 @@ def pyramid_frame(positions: np.ndarray, orientation: str = "pca") -> PyramidFra
     return PyramidFrame(origin=pts.mean(axis=0), beta=beta)
 
 
-def centred_slots(n: int, d_e: float, phi_e: float) -> np.ndarray:
-    """Slots in the pyramid frame, translated so that their centroid is o_p."""
-    s = slot_positions(n, d_e, phi_e)
-    return np.asarray(s - s.mean(axis=0))
-
-
-PLACEMENTS = ("centroid", "front")
-
-
-def placed_slots(
-    n: int, d_e: float, phi_e: float, starts_p: np.ndarray, placement: str = "centroid"
-) -> np.ndarray:
-    """Slots in the pyramid frame for a placement policy.
-
-    ``centroid``: slot centroid at o_p (see module doc). ``front``: the same pattern moved
-    along +y_p until its last layer is d_e ahead of the front-most start, so that no slot
-    lies among the starts (used when the overlapping placement cannot be scheduled).
-    """
-    s = centred_slots(n, d_e, phi_e)
-    if placement == "centroid":
-        return s
-    if placement != "front":
-        raise ValueError(f"placement must be one of {PLACEMENTS}, got {placement!r}")
-    front = float(np.max(starts_p[:, 1])) if starts_p.size else 0.0
-    shift = front + d_e - float(np.min(s[:, 1]))
-    return np.asarray(s + np.array([0.0, max(shift, 0.0)]))
-
-
 def nearest_to(point: np.ndarray, positions: np.ndarray) -> int:
     """Index of the position nearest ``point`` (ties: lowest index = lowest id)."""
     d2 = np.sum((np.asarray(positions) - np.asarray(point)) ** 2, axis=1)
