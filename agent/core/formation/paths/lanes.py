@@ -1,7 +1,7 @@
 """Bundle lanes: robots that walk along the pyramid's axis past each other's starts get a
 lane each, between two slot columns (to bring the planner's worst makespan to at most 2× CAPT's; our
-addition to NAO paper 4.2's straight paths, kept to the safety rule of :mod:`safety` by the
-scheduler as every via point is).
+addition to NAO paper 4.2's straight paths, in the plan of docs/design.md §1 (step 5), kept
+to the safety rule of :mod:`safety` by the scheduler as every via point is).
 
 The worst fleet of ``python -m tools.bench plan`` is a line of 100 robots along the
 pyramid's axis: ~40 of them walk from one end of the line to the pyramid, ~35 from the
@@ -27,20 +27,24 @@ into the slot. Lanes closer than ``LANE_CLEAR`` clearances to the x of a bundle 
 are not used (they would run over the starts ahead).
 
 Which robot in which lane. A bundle is the robots that walk the same way along the
-axis (e) and whose straight path, >= ``LANE_MIN_LENGTH`` clearances long and at least
-twice as long along the axis as across it, passes within ``LANE_NEAR`` clearances of
-another start ahead of it. Its slots stay its slots; each picks one of its two lanes,
+axis (e) to the slots of the given pairing (so that each robot is re-paired once, by
+its own bundle) and whose straight path, >= ``LANE_MIN_LENGTH`` clearances long and at
+least twice as long along the axis as across it, passes within ``LANE_NEAR`` clearances
+of another start ahead of it. Its slots stay its slots; each picks one of its two lanes,
 outermost slot first (by |xs - xc|, xc the median x of the bundle's starts; then the
 deeper, then the slot order): its outer lane, unless that one already holds more of the
 bundle's robots than the inner one (a tie: outer). Then robots and slots are paired
 again (the bundle's slots permuted among its robots): robots nearest the pyramid first
 (by y0 along e, then row), slots by their lane's |L - xc| (inner lanes first, then L),
 then the deepest first (the robot that enters a lane first goes deepest: the one
-behind it need only wait until it is past its own slot), then xs, then slot order. The
-farther robots thus take outer lanes and step out further before the nearer robots'
-starts: no two lanes cross. ``joint=False`` pairs each side (L >= xc or not) on its
-own, with the robots whose original slot's lane lies on that side; ``joint=True``
-pairs the whole bundle at once. A robot whose step to the lane would reach its slot's
+behind it need only wait until it is past its own slot), then xs, then slot order; each
+robot in turn takes the first free slot of that order that lies ahead of it along e.
+When every slot lies ahead of every robot, the two orders are zipped: the farther
+robots take outer lanes and step out further before the nearer robots' starts, and no
+two lanes cross. A robot that starts among the slot rows (a line centred on the shape)
+skips the slots behind it instead of walking against its bundle. ``joint=False``
+pairs each side (L >= xc or not) on its own, with the robots whose original slot's lane
+lies on that side; ``joint=True`` pairs the whole bundle at once. A robot whose step to the lane would reach its slot's
 row keeps its straight path; so does a robot whose slot has no usable lane.
 
 Robots that share a lane still wait for each other, and the robots standing between
@@ -110,6 +114,26 @@ def _pick_lanes(
     return out
 
 
+def _pair(
+    robots: list[int], ks: list[int], p: np.ndarray, s: np.ndarray, e: float
+) -> list[tuple[int, int]]:
+    """Robots (nearest the shape first) paired with the slots ``ks`` (in the module doc's
+    order): each takes the first free slot ahead of it along e. When every slot lies
+    ahead of every robot this is the two orders zipped. A robot that starts among the
+    slot rows (a line centred on the shape) has fewer slots ahead of it than one behind
+    it: the slots ahead of the robots are nested sets, the nearest robot's the smallest,
+    so taking the first of them leaves a slot ahead for every robot after it (the given
+    pairing is one: every robot of a bundle walks its way)."""
+    free = list(ks)
+    out: list[tuple[int, int]] = []
+    for i in robots:
+        y_i = float(p[i, 1])
+        k = next(k for k in free if e * (float(s[k, 1]) - y_i) > 0.0)  # never empty (above)
+        free.remove(k)
+        out.append((i, k))
+    return out
+
+
 def bundle_lanes(
     starts_p: np.ndarray,
     slots_p: np.ndarray,
@@ -148,7 +172,8 @@ def bundle_lanes(
     rows = lane_rows(p, s[out_order], clearance)
     changed = False
     for e in (-1.0, 1.0):
-        bundle = [int(i) for i in rows if (s[out_order[i], 1] - p[i, 1]) * e > 0]
+        # the bundle of the given pairing, so that no robot is re-paired twice
+        bundle = [int(i) for i in rows if (s[perm[i], 1] - p[i, 1]) * e > 0]
         if not bundle:
             continue
         x0 = p[bundle, 0]
@@ -175,7 +200,7 @@ def bundle_lanes(
                     k,
                 ),
             )
-            for i, k in zip(robots, ks, strict=True):
+            for i, k in _pair(robots, ks, p, s, e):
                 out_order[i] = k
                 ln, ys = lane[k], float(s[k, 1])
                 x_i, y_i = p[i].tolist()
