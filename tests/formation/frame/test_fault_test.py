@@ -168,3 +168,47 @@ def test_a_wrong_pairing_is_a_rejected_pair_not_a_faulty_robot() -> None:
     recs[0] = type(bad)(bad.robot_id, nb, bad.orientations, bad.confidences)
     v = ft.fault_test(build_poses(recs), NOISE)
     assert v.ok and v.named == (), v.reason
+
+
+def test_the_surprise_of_equal_rates_is_the_count() -> None:
+    """With equal rates the surprise orders outcomes as the count does: the same test."""
+    p = [0.1] * 6
+    for k in range(7):
+        failed = [True] * k + [False] * (6 - k)
+        assert ft.surprise_tail(p, failed) == pytest.approx(ft.tail_at_least(p, k), rel=1e-12)
+
+
+def test_the_surprise_by_hand() -> None:
+    """Two trials, 0.2 and 0.01: the rarer failing alone is as surprising as both failing
+    or rarer, P = 0.01 (its weight, 4.6 nats, beats the other's 1.4); the commoner
+    failing alone is beaten by every outcome with the rare one, P = 0.2·0.99 + 0.01."""
+    assert ft.surprise_tail([0.2, 0.01], [False, True]) == pytest.approx(0.01)
+    assert ft.surprise_tail([0.2, 0.01], [True, False]) == pytest.approx(0.2 * 0.99 + 0.01)
+    assert ft.surprise_tail([0.2, 0.01], [False, False]) == 1.0
+    assert ft.surprise_tail([], []) == 1.0
+    # a rate of one half or more weighs nothing: its failure is no surprise
+    assert ft.surprise_tail([0.5, 0.6], [True, True]) == 1.0
+
+
+def test_lost_strays_are_not_hidden_among_common_pair_rejections() -> None:
+    """Five own sightings all landing nowhere (0.5 % each) beside six pairs at 10 %: the
+    count test's P(K ≥ 5) is ~9·10⁻⁵, the surprise's ~10⁻¹⁰."""
+    p = [0.1] * 6 + [0.005] * 5
+    failed = [False] * 6 + [True] * 5
+    assert ft.tail_at_least(p, 5) > 5e-5
+    assert ft.surprise_tail(p, failed) < 1e-9
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    p=st.lists(st.floats(1e-4, 0.6), min_size=1, max_size=12),
+    bits=st.lists(st.booleans(), min_size=12, max_size=12),
+)
+def test_property_the_surprise_is_a_probability_and_more_failures_never_raise_it(
+    p: list[float], bits: list[bool]
+) -> None:
+    failed = bits[: len(p)]
+    a = ft.surprise_tail(p, failed)
+    assert 0.0 <= a <= 1.0
+    more = [True, *failed[1:]]
+    assert ft.surprise_tail(p, more) <= a + 1e-12
