@@ -19,11 +19,8 @@ sight, σ_r(d) and σ_t(d)). Then:
    sound, its edges are rejected independently with probabilities ``p_reject(d)`` (a
    faulty neighbour explains its one shared edge) and each of its sightings ends up a
    lost stray with ``p_stray(d)`` (a ghost or merged detection), both measured on
-   fault-free fleets. The p-value is that of the failures' *surprise* (each failure
-   weighted by ``−logit`` of its own rate, :func:`surprise_tail`) under those rates:
-   the most powerful statistic against "r's trials fail more often than measured", where
-   a plain count ``k_r + s_r`` would let a robot whose five sightings all land nowhere
-   (0.5 % each) hide among its pairs' 10 % rates.
+   fault-free fleets, so ``k_r + s_r`` is Poisson-binomial over ``n_r + m_r`` trials
+   and the p-value is ``P(K ≥ k_r + s_r)``.
    A robot with wrong distances or a lying record has its own sightings off: those that
    pair are rejected, those that do not pair land nowhere.
 3. **Per robot, its heading test.** A robot whose compass is broken has its own
@@ -69,7 +66,6 @@ sight, σ_r(d) and σ_t(d)). Then:
 from __future__ import annotations
 
 import math
-from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -89,8 +85,6 @@ ALPHA = 1e-4
 #: tail is heavier than a Gaussian's) while a faulty robot's misfits, tens of σ, are
 #: rejected anyway.
 ALPHA_SIGHTING = 1e-6
-#: The quantum of :func:`surprise_tail`'s weights (nats): its null is exact for them.
-SURPRISE_QUANTUM = 0.05
 #: Mask offsets tried by the heading test (step 3): every degree of the half circle.
 MASK_GRID = np.radians(np.arange(0.0, 180.0, 1.0))
 
@@ -176,29 +170,6 @@ def tail_at_least(p: Sequence[float], k: int) -> float:
         dist[1:] = dist[1:] * (1.0 - q) + dist[:-1] * q
         dist[0] *= 1.0 - q
     return float(min(1.0, max(0.0, dist[k:].sum())))
-
-
-def surprise_tail(p: Sequence[float], failed: Sequence[bool]) -> float:
-    """``P(T ≥ t)`` for the *surprise* ``T = Σ x_i·w_i`` of independent trials ``x_i``
-    with probabilities ``p``, each failure weighted by ``w_i = max(0, −logit p_i)``
-    (rounded to :data:`SURPRISE_QUANTUM` nats), ``t`` its value for the trials
-    ``failed``: exact by dynamic programming over the rounded sums. Against "r's trials
-    fail more often than measured", ``T`` is the likelihood ratio's own statistic
-    (Neyman-Pearson): five of five sightings landing nowhere, each with a rate of 0.5 %,
-    weigh more than five rejected pairs at a rate of 10 % each, where a plain count of
-    failures weighs them alike."""
-    q = np.clip(np.asarray(p, dtype=np.float64), 1e-12, 1.0 - 1e-12)
-    w = np.maximum(0, np.round(np.log((1.0 - q) / q) / SURPRISE_QUANTUM)).astype(np.int64)
-    t = int(w[np.asarray(failed, dtype=bool)].sum()) if len(w) else 0
-    if t <= 0:
-        return 1.0
-    dist = np.zeros(int(w.sum()) + 1)
-    dist[0] = 1.0
-    for wi, qi in zip(w.tolist(), q.tolist(), strict=True):
-        moved = dist[: len(dist) - wi] * qi
-        dist *= 1.0 - qi
-        dist[wi:] += moved
-    return float(min(1.0, max(0.0, dist[t:].sum())))
 
 
 def mask_test(deltas: Sequence[float], noise: SightingNoise) -> tuple[float, float]:
@@ -334,20 +305,14 @@ def _robot_tests(
         mine = [e for e in ev.edges if r in e]
         own = ev.stray.get(r, [])
         probs = [ev.p_edge[e] for e in mine]
-        failed = [ev.edges[e] for e in mine]
-        # every sighting of r's own could have ended up a lost stray (step 2): the lost
-        # ones are its sightings at their distances
-        lost_at = Counter(round(d, 9) for d, lands in own if not lands)
-        for d in ev.sighted.get(r, []):
-            probs.append(float(noise.p_stray(d)))
-            failed.append(lost_at[round(d, 9)] > 0)
-            lost_at[round(d, 9)] -= 1
+        # every sighting of r's own could have ended up a lost stray (step 2)
+        probs += [float(noise.p_stray(d)) for d in ev.sighted.get(r, [])]
         k = sum(ev.edges[e] for e in mine)
         lost = sum(not lands for _, lands in own)
         deltas = mask_deltas(poses, r)
         offset, p_h = mask_test(deltas, noise)
         p_h = max(p_h, noise.rho if r in ev.timed else noise.rho_untimed) if deltas else p_h
-        p_pos = surprise_tail(probs, failed)
+        p_pos = tail_at_least(probs, k + lost)
         stat, p_b = 0.0, 1.0
         if bias:
             fit = bias_fit(poses, r, noise, noise.bias_scale)
