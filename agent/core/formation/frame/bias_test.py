@@ -29,15 +29,16 @@ A bias is a pattern of *all* r's sightings, so it must show without any one of t
 the statistic is taken with the sighting that fits worst under H0 (r's own or another's
 of r) set aside. One gross error (a NAO half hidden at close range, a wrong pairing)
 is a rejected sighting, counted by the position test of :mod:`fault_test` at its
-measured rate, and never a bias on its own: the robust loss below only bounds such a
-sighting's weight, and H1's three parameters can still absorb much of it when r has
+measured rate, and never a bias on its own: the Cauchy loss above only slows such a
+sighting's growth, and H1's three parameters can still absorb much of it when r has
 few sightings (measured: one sighting 13 σ off at 0.7 m, Λ 37, named a sound robot of
 a four-NAO fleet before the worst was set aside). The fitted bias reported is the one
 all the sightings show.
 
 Only r's own sightings carry the bias, so the test needs others who see r (they pin its
 position) and at least two sightings of r's own, after the worst is set aside; with
-fewer it has no power and returns p = 1. Deterministic: measurements in canonical (owner, target) order, a fixed start.
+fewer it has no power and returns p = 1. Deterministic: measurements in canonical
+(owner, target) order, a fixed start, the first of equally bad sightings set aside.
 """
 
 from __future__ import annotations
@@ -98,11 +99,9 @@ def bias_fit(poses: PoseFrame, robot: int, noise: SightingNoise, bias_scale: flo
     if len(own) < MIN_OWN or len(seen) < MIN_SEEN:
         return BiasFit(robot, len(own), len(seen), 0.0, 1.0, (0.0, 0.0), 1.0)
     whole = _Sightings(poses, robot, own, seen, noise).fit()
-    worst = whole.worst  # own sightings first, then the others'
-    own, seen = (
-        [m for k, m in enumerate(own) if k != worst],
-        [m for k, m in enumerate(seen) if k != worst - len(own)],
-    )
+    worst, n_own = whole.worst, len(own)  # indexed over own sightings, then the others'
+    own = [m for k, m in enumerate(own) if k != worst]
+    seen = [m for k, m in enumerate(seen) if k != worst - n_own]
     if len(own) < MIN_OWN or len(seen) < MIN_SEEN:
         return BiasFit(robot, len(own), len(seen), 0.0, 1.0, (0.0, 0.0), 1.0)
     kept = _Sightings(poses, robot, own, seen, noise).fit()
