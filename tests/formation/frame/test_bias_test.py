@@ -45,13 +45,14 @@ def test_sound_robots_show_no_bias(seed: int) -> None:
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
-def test_a_scaled_robot_is_found_with_its_scale(seed: int) -> None:
-    """Its scale is found too large (not exactly 1.4: the fleet's fit, which holds the
-    others where the test takes them, has absorbed part of the bias)."""
+def test_a_scaled_robot_is_found_with_a_bias(seed: int) -> None:
+    """Found, with a fitted bias far from none. Which bias is not pinned: its longest
+    sighting, the one that fits worst, is set aside, and on the shorter rest a scale and
+    a shift trade off (with two sightings left the similarity is exact)."""
     poses, _ = _fleet(seed, "scale")
     fit = bias_fit(poses, 3, NOISE, 1.0)
     assert fit.p < 1e-6
-    assert fit.scale > 1.1
+    assert abs(fit.scale - 1.0) > 0.05 or math.hypot(*fit.shift) > 0.1
 
 
 def test_a_shifted_robot_is_found_with_its_shift() -> None:

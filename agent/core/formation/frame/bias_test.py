@@ -32,8 +32,9 @@ is a rejected sighting, counted by the position test of :mod:`fault_test` at its
 measured rate, and never a bias on its own: the Cauchy loss above only slows such a
 sighting's growth, and H1's three parameters can still absorb much of it when r has
 few sightings (measured: one sighting 13 σ off at 0.7 m, Λ 37, named a sound robot of
-a four-NAO fleet before the worst was set aside). The fitted bias reported is the one
-all the sightings show.
+a four-NAO fleet before the worst was set aside). The fitted bias reported is the
+rest's: with two sightings left it is exact and says little (a similarity maps any two
+points onto any two).
 
 Only r's own sightings carry the bias, so the test needs others who see r (they pin its
 position) and at least two sightings of r's own, after the worst is set aside; with
@@ -98,16 +99,15 @@ def bias_fit(poses: PoseFrame, robot: int, noise: SightingNoise, bias_scale: flo
     seen = [m for m in ms if m.target == robot and m.owner != robot]
     if len(own) < MIN_OWN or len(seen) < MIN_SEEN:
         return BiasFit(robot, len(own), len(seen), 0.0, 1.0, (0.0, 0.0), 1.0)
-    whole = _Sightings(poses, robot, own, seen, noise).fit()
-    worst, n_own = whole.worst, len(own)  # indexed over own sightings, then the others'
+    x_h0, worst = _Sightings(poses, robot, own, seen, noise).worst()
+    n_own = len(own)  # the worst is indexed over own sightings, then the others'
     own = [m for k, m in enumerate(own) if k != worst]
     seen = [m for k, m in enumerate(seen) if k != worst - n_own]
     if len(own) < MIN_OWN or len(seen) < MIN_SEEN:
         return BiasFit(robot, len(own), len(seen), 0.0, 1.0, (0.0, 0.0), 1.0)
-    kept = _Sightings(poses, robot, own, seen, noise).fit()
+    kept = _Sightings(poses, robot, own, seen, noise).fit(x_h0)
     p = float(chi2.sf(kept.statistic / bias_scale, 3))
-    # the bias as all its sightings show it (the best estimate), its test without the worst
-    return BiasFit(robot, len(own), len(seen), kept.statistic, whole.scale, whole.shift, p)
+    return BiasFit(robot, len(own), len(seen), kept.statistic, kept.scale, kept.shift, p)
 
 
 @dataclass(frozen=True)
@@ -117,7 +117,6 @@ class _Fit:
     statistic: float  #: Λ = 2 (cost_H0 − cost_H1)
     scale: float  #: fitted s under H1
     shift: tuple[float, float]  #: fitted b under H1
-    worst: int  #: the sighting (own, then seen) that fits worst under H0 (the first of equal)
 
 
 class _Sightings:
@@ -190,16 +189,21 @@ class _Sightings:
         assert jac is not None
         return self.whiten(jac)
 
-    def fit(self) -> _Fit:
-        """H0 from the fitted pose, H1 from H0's solution, Λ, and the worst sighting."""
-        x_h0, cost0 = _cauchy_fit(self.residuals, self.jacobian, self.x0)
+    def worst(self) -> tuple[np.ndarray, int]:
+        """H0's solution and the sighting (own, then seen) that fits worst under it (by its
+        whitened χ², the first of equal ones)."""
+        x_h0, _ = _cauchy_fit(self.residuals, self.jacobian, self.x0)
+        r, k = self.residuals(x_h0), len(self.v_all)
+        return x_h0, int(np.argmax(np.round(r[:k] ** 2 + r[k:] ** 2, 9)))
+
+    def fit(self, start: np.ndarray) -> _Fit:
+        """H0 from ``start`` (r's pose), H1 from H0's solution, and Λ."""
+        x_h0, cost0 = _cauchy_fit(self.residuals, self.jacobian, start)
         x_h1, cost1 = _cauchy_fit(
             self.residuals, self.jacobian, np.concatenate([x_h0, [1.0, 0.0, 0.0]])
         )
-        r, k = self.residuals(x_h0), len(self.v_all)
-        worst = int(np.argmax(np.round(r[:k] ** 2 + r[k:] ** 2, 9)))
         return _Fit(max(0.0, 2.0 * (cost0 - cost1)), float(x_h1[3]),
-                    (float(x_h1[4]), float(x_h1[5])), worst)  # fmt: skip
+                    (float(x_h1[4]), float(x_h1[5])))  # fmt: skip
 
 
 #: Gauss-Newton iterations of :func:`_cauchy_fit` at most, and its relative stop.
