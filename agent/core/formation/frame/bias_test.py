@@ -82,8 +82,8 @@ def _rot(a: float) -> np.ndarray:
 
 
 def bias_fit(poses: PoseFrame, robot: int, noise: SightingNoise, bias_scale: float) -> BiasFit:
-    """The test of the module docstring for ``robot`` of ``poses``: fitted once on all its
-    sightings, then again with the one that fits worst under H0 set aside.
+    """The test of the module docstring for ``robot`` of ``poses``: H0 fitted on all its
+    sightings to find the one that fits worst, then H0 and H1 on the rest.
 
     Raises
     ------
