@@ -1,4 +1,4 @@
-"""Recorded fleets the frame once got wrong, kept as known answers (docs/design.md §9):
+"""Recorded fleets where the frame is fragile, kept as known answers (docs/design.md §9):
 each file of ``tests/data/runs`` holds the neighbour records a real run published (the
 world rendering, the agents' own perception) and its true start poses, in the corpus's
 format (``python -m tools.corpus``).
@@ -6,9 +6,10 @@ format (``python -m tools.corpus``).
 * ``n04_obstacle1_s1_*``: four NAOs and one obstacle (``python -m tools.demo --robots 4
   --seed 1 --obstacles 1``), the test of routing around an obstacle. Robot 2 sees robot 4
   at 0.63 m, from one of two pictures: in one of them the distance comes out 0.72 m
-  (13 σ), and which picture a robot keeps depends on the timing of the search. That one
-  sighting, among robot 2's three, made the bias test call robot 2 biased (Λ 37) and
-  the fleet leave a sound robot out; in ``_c`` robot 2 kept the good picture.
+  (13 σ), and which picture a robot keeps depends on the timing of the search. Kept in
+  the bias test, that one sighting among robot 2's three reads as a biased sensor
+  (Λ 37) and leaves a sound robot out; the test sets the worst sighting aside. In ``_c``
+  robot 2 kept the good picture.
 """
 
 from __future__ import annotations

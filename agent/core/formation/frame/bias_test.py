@@ -31,8 +31,8 @@ of r) set aside. One gross error (a NAO half hidden at close range, a wrong pair
 is a rejected sighting, counted by the position test of :mod:`fault_test` at its
 measured rate, and never a bias on its own: the Cauchy loss above only slows such a
 sighting's growth, and H1's three parameters can still absorb much of it when r has
-few sightings (measured: one sighting 13 σ off at 0.7 m, Λ 37, named a sound robot of
-a four-NAO fleet before the worst was set aside). The fitted bias reported is the
+few sightings (measured: one sighting 13 σ off at 0.7 m among three gives Λ 37, enough
+to name a sound robot of a four-NAO fleet if it were kept: ``tests/data/runs``). The fitted bias reported is the
 rest's: with two sightings left it is exact and says little (a similarity maps any two
 points onto any two).
 
@@ -132,7 +132,7 @@ class _Sightings:
         noise: SightingNoise,
     ) -> None:
         index = {rid: k for k, rid in enumerate(poses.ids)}
-        self.own = tuple(own)
+        self.n_own = len(own)
         self.x0 = np.array([*poses.positions[index[robot]], poses.headings[index[robot]]])
         v_own = np.array([m.vector for m in own], dtype=np.float64).reshape(-1, 2)
         self.p_tgt = poses.positions[[index[m.target] for m in own]]
@@ -151,7 +151,7 @@ class _Sightings:
 
     def errors(self, x: np.ndarray, jac_too: bool) -> tuple[np.ndarray, np.ndarray | None]:
         """Misfits (k, 2) and their Jacobian (k, 2, len(x)), owner's frame."""
-        n_own = len(self.own)
+        n_own = self.n_own
         pr, psi = x[:2], float(x[2])
         scale, shift = (float(x[3]), x[4:6]) if len(x) > 3 else (1.0, np.zeros(2))
         c, s = math.cos(psi), math.sin(psi)
