@@ -33,30 +33,19 @@ def _to_world(plan: Plan, pos: np.ndarray, headings: np.ndarray) -> np.ndarray:
     return np.asarray(pos[k] + plan.targets() @ np.array([[c, s], [-s, c]]))
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason=(
-        "a known bug found by the property's random search: in a fleet of five set down at "
-        "random, the aligned model with its sightings identified where they land fits a wrong "
-        "frame (robot 2 to 3: 1.43 m against the true 0.74 m) that passes the fault test: the "
-        "heading test looks for one offset common to a robot's masks, and masks scattered by "
-        "wrong headings are read as the model's uniform part. The property below runs "
-        "derandomised until the masks get a goodness-of-fit test"
-    ),
-)
-@pytest.mark.parametrize("seed", [35, 75])
-def test_the_known_wrong_aligned_frame_that_passes_the_fault_test(seed: int) -> None:
-    inner = test_start_headings_leave_the_pyramid_in_the_world_unchanged
-    inner.hypothesis.inner_test(seed=seed, turn=0.0)  # type: ignore[attr-defined]
-
-
-@settings(max_examples=15, deadline=None, derandomize=True,
-          suppress_health_check=[HealthCheck.too_slow])  # fmt: skip
+@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.integers(0, 10_000), st.floats(-math.pi, math.pi))
 # hypothesis found it: two groups of near-equal headings (145° and -95° ± 10°) whose
 # papers' model landed exactly half of every robot's sightings, a wrong frame planned at
 # once (reidentify.LAND_SHARE)
 @example(seed=391, turn=0.0)
+# hypothesis found them: four robots facing within 16° of each other and one turned
+# 130° (seed 35), or two turned 45° and 60° (seed 75); the aligned model with its
+# sightings identified where they land fits a wrong frame (robot 2 to 3: 1.43 m against
+# the true 0.74 m) that passes the fault test at p 3-4·10⁻⁴, while the pose fit explains
+# every sighting (p 1): the candidate that fits best is taken (fleet_frame)
+@example(seed=35, turn=0.0)
+@example(seed=75, turn=0.0)
 def test_start_headings_leave_the_pyramid_in_the_world_unchanged(seed: int, turn: float) -> None:
     rng = np.random.default_rng(seed)
     pos = sim_layout(rng, len(IDS))

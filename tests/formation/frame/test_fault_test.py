@@ -168,3 +168,23 @@ def test_a_wrong_pairing_is_a_rejected_pair_not_a_faulty_robot() -> None:
     recs[0] = type(bad)(bad.robot_id, nb, bad.orientations, bad.confidences)
     v = ft.fault_test(build_poses(recs), NOISE)
     assert v.ok and v.named == (), v.reason
+
+
+def test_the_robot_left_out_stands_where_the_others_agree_it_is() -> None:
+    # robot 3 is left out; one of the others' sightings of it is paired wrongly (a
+    # sighting of some other place): the place is the consensus of the others, not a mean
+    # dragged off by the one wrong sighting (which would make every sighting of the
+    # consensus land nowhere)
+    poses = build_poses(fleet(4))
+    rest = ft._without(poses, 3)
+    assert rest is not None
+    seen = [m for m in poses.measurements if m.target == 3 and m.owner in rest.ids]
+    assert len(seen) >= 3
+    good = ft.seen_by_others(poses, rest, 3, NOISE)
+    wrong = replace(seen[0], vector=np.asarray(seen[0].vector) * -1.0)
+    others = [m for m in poses.measurements if m is not seen[0]]
+    bad = replace(poses, measurements=(wrong, *others))
+    at = ft.seen_by_others(bad, rest, 3, NOISE)
+    mean = np.mean([rest.to_common(m.owner, m.vector)[0] for m in [wrong, *seen[1:]]], axis=0)
+    assert float(np.hypot(*(at - good))) < 0.05
+    assert float(np.hypot(*(mean - good))) > 0.2

@@ -132,6 +132,10 @@ class FaultVerdict:
     dropped: tuple[tuple[int, int], ...]
     tests: tuple[RobotTest, ...]
     reason: str
+    #: step 5's global test of the robots to plan, as tested (before wrong pairings are
+    #: dropped; the named robot left out): how well the frame fits, to choose between
+    #: frames that pass
+    fleet: FleetCount | None = None
 
 
 def _edge(m: PoseMeasurement) -> tuple[int, int]:
@@ -380,17 +384,37 @@ def refit(
         return None
 
 
-def seen_by_others(poses: PoseFrame, rest: PoseFrame, robot: int) -> np.ndarray:
-    """Where ``rest`` (the fit without ``robot``) saw it: the mean of the others'
-    sightings of it in ``rest``'s frame (sorted by owner); with none, its own estimate
-    in ``poses`` mapped into ``rest``'s frame through the robots both share."""
+def seen_by_others(
+    poses: PoseFrame, rest: PoseFrame, robot: int, noise: SightingNoise
+) -> np.ndarray:
+    """Where ``rest`` (the fit without ``robot``) saw it, in ``rest``'s frame: the mean of
+    the largest set of the others' sightings of it that agree with one of them within the
+    sighting gate (step 1's χ² level, each sighting's error taken as large again as the
+    model's for the pair of two noisy sightings; tie: the set around the lowest owner's
+    sighting). One sighting paired with the wrong robot so never drags the place off the
+    others' consensus, where a mean of all would (and every sighting of the consensus
+    would then land nowhere). With no sighting of it, its own estimate in ``poses`` mapped
+    into ``rest``'s frame through the robots both share."""
     seen = [
-        rest.to_common(m.owner, m.vector)[0]
+        (m.owner, np.asarray(m.vector, dtype=np.float64), rest.to_common(m.owner, m.vector)[0])
         for m in sorted(poses.measurements, key=lambda m: (m.owner, m.target))
         if m.target == robot and m.owner in rest.ids
     ]
     if seen:
-        return np.asarray(np.mean(np.array(seen), axis=0))
+        q = float(chi2.isf(ALPHA_SIGHTING, 2))
+        best: list[int] = []
+        for _, _, centre in seen:
+            agree = []
+            for j, (owner, vector, at) in enumerate(seen):
+                psi = float(rest.headings[rest.ids.index(owner)])
+                c, s = math.cos(psi), math.sin(psi)
+                d = centre - at  # common frame, turned into the owner's fixed frame
+                err = np.array([[c * d[0] + s * d[1], -s * d[0] + c * d[1]]])
+                if 0.5 * float(noise.chi2(vector.reshape(1, 2), err)[0]) <= q:
+                    agree.append(j)
+            if len(agree) > len(best):
+                best = agree
+        return np.asarray(np.mean(np.array([seen[j][2] for j in best]), axis=0))
     common = [i for i in rest.ids if i in poses.ids]
     a = np.array([poses.positions[poses.ids.index(i)] for i in common])
     b = np.array([rest.positions[rest.ids.index(i)] for i in common])
@@ -459,50 +483,51 @@ def fault_test(
         if worst.p < alpha or whole.p < alpha:
             why = (f"robot(s) rejected ({worst.describe()})" if worst.p < alpha
                    else f"the fleet as a whole does not fit: {whole.describe()}")  # fmt: skip
-            return FaultVerdict(False, (), None, (), cheap, why + "; not searched")
+            return FaultVerdict(False, (), None, (), cheap, why + "; not searched", whole)
     tests = _robot_tests(poses, noise, ev)
     rejected = sorted((t for t in tests if t.p < alpha), key=lambda t: (t.p, t.robot))
     if not rejected and whole.p < alpha:
         why = (f"the fleet as a whole does not fit: {whole.describe()}, and no robot's own "
                "test rejects it; nobody moves")  # fmt: skip
-        return FaultVerdict(False, (), None, (), tests, why)
+        return FaultVerdict(False, (), None, (), tests, why, whole)
     if not rejected:
         clean, drop = _clean(poses, noise)
         if clean is None:
             return FaultVerdict(False, (), None, drop, tests,
                                 f"the pairs {_names(drop)} do not fit and without them the fleet is "
-                                "not connected; nobody moves")  # fmt: skip
+                                "not connected; nobody moves", whole)  # fmt: skip
         why = "every robot passes its test" + (
             f"; pairs {_names(drop)} rejected (wrong pairings)" if drop else ""
         )
-        return FaultVerdict(True, (), clean, drop, tests, why)
+        return FaultVerdict(True, (), clean, drop, tests, why, whole)
     if not search:
         why = f"{len(rejected)} robot(s) rejected ({rejected[0].describe()}); not searched"
-        return FaultVerdict(False, (), None, (), tests, why)
-    candidates: list[tuple[int, PoseFrame, tuple[tuple[int, int], ...]]] = []
+        return FaultVerdict(False, (), None, (), tests, why, whole)
+    candidates: list[tuple[int, PoseFrame, tuple[tuple[int, int], ...], FleetCount]] = []
     for t in rejected:
         rest = _without(poses, t.robot)
         if rest is None or len(rest.ids) != len(poses.ids) - 1:
             continue
-        at = seen_by_others(poses, rest, t.robot).reshape(1, 2)
+        at = seen_by_others(poses, rest, t.robot, noise).reshape(1, 2)
         rest_ev = _evidence(rest, noise, records, at)
         if any(u.p < alpha for u in _robot_tests(rest, noise, rest_ev)):
             continue
-        if _fleet_count(noise, rest_ev).p < alpha:
+        rest_count = _fleet_count(noise, rest_ev)
+        if rest_count.p < alpha:
             continue
         clean, drop = _clean(rest, noise)
         if clean is not None:
-            candidates.append((t.robot, clean, drop))
+            candidates.append((t.robot, clean, drop, rest_count))
     first = rejected[0].describe()
     if len(candidates) == 1:
-        r, clean, drop = candidates[0]
+        r, clean, drop, rest_count = candidates[0]
         extra = f"; pairs {_names(drop)} rejected (wrong pairings)" if drop else ""
         why = (f"robot {r} named: its sightings do not fit at p < {alpha:g} and the others pass "
                f"without it ({next(t for t in tests if t.robot == r).describe()}){extra}")  # fmt: skip
-        return FaultVerdict(True, (r,), clean, drop, tests, why)
+        return FaultVerdict(True, (r,), clean, drop, tests, why, rest_count)
     if candidates:
         names = sorted(c[0] for c in candidates)
         why = f"ambiguous: leaving out any of {names} makes the rest pass ({first}); nobody moves"
-        return FaultVerdict(False, (), None, (), tests, why)
+        return FaultVerdict(False, (), None, (), tests, why, whole)
     why = f"inconsistent beyond one robot: no single robot explains it ({first}); nobody moves"
-    return FaultVerdict(False, (), None, (), tests, why)
+    return FaultVerdict(False, (), None, (), tests, why, whole)
