@@ -36,8 +36,8 @@ Only if none passes so is the first general candidate (3, 4) that names a robot 
 (a poor fit of a sound fleet must not blame a robot a better fit clears): fitted again
 without it, the named robot standing still where the *others* saw it (where most of their
 sightings of it agree, in the rest's frame: :func:`fault_test.seen_by_others`) and
-planned around like an obstacle. The aligned
-model (1, 2) never names anyone: it would blame a sound robot merely set down turned. A
+planned around like an obstacle. The aligned model (1, 2) never names anyone: it would
+blame a sound robot merely set down turned. A
 candidate that identifies sightings where they land is tested on each sighting as it
 identified it, and on each sighting it dropped as first paired
 (:func:`tested_sightings`): a sighting that lands nowhere is evidence, and a wrong
