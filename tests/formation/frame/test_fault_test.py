@@ -188,3 +188,14 @@ def test_the_robot_left_out_stands_where_the_others_agree_it_is() -> None:
     mean = np.mean([rest.to_common(m.owner, m.vector)[0] for m in [wrong, *seen[1:]]], axis=0)
     assert float(np.hypot(*(at - good))) < 0.05
     assert float(np.hypot(*(mean - good))) > 0.2
+
+
+def test_two_faulty_robots_that_never_saw_each_other_stop_the_fleet() -> None:
+    # leaving one out cannot explain the other (they share no sighting): nobody is
+    # named, and nobody moves
+    recs = fleet(1, n=12)
+    poses = build_poses(recs)
+    assert not any({m.owner, m.target} == {1, 5} for m in poses.measurements)
+    bad = [fault(r, "scale") if r.robot_id in (1, 5) else r for r in recs]
+    v = ft.fault_test(build_poses(bad), NOISE, bad)
+    assert not v.ok and v.named == () and "beyond one robot" in v.reason, v.reason

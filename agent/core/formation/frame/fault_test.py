@@ -54,8 +54,12 @@ sight, σ_r(d) and σ_t(d)). Then:
    rate per robot and run). Nobody rejected and the global test passed: the fleet is
    consistent; its rejected edges are wrong pairings, dropped, and the rest fitted
    again. Someone rejected: each rejected robot r (smallest p first, tie: lowest id) is
-   left out (its sightings and the others' sightings of it) and the rest fitted again; r
-   is a *candidate* when the rest is connected and nobody in it is rejected. Exactly one
+   left out (its sightings and the others' sightings of it) and the rest fitted again
+   (:func:`multi_start.refit`: warm, and from the spanning tree); r is a *candidate*
+   when the rest is connected and nobody in it is rejected. A robot is not tried when
+   another rejected robot shares no sighting with it: leaving r out changes the others'
+   evidence through their sightings of each other, so it cannot be what rejected a
+   robot it never saw nor was seen by (and in a dense fleet each try costs a fit). Exactly one
    candidate is *named*; none, or more than one, and nobody can be trusted: the fleet
    stops (same reason on every agent). One threshold with a meaning (:data:`ALPHA`)
    replaces the rules of thumb. Deterministic: measurements are taken in canonical order
@@ -73,7 +77,8 @@ import numpy as np
 from scipy.stats import chi2
 
 from agent.core.formation.frame.bias_test import bias_fit
-from agent.core.formation.frame.poses import PoseFrame, PoseMeasurement, fit_poses
+from agent.core.formation.frame.multi_start import refit
+from agent.core.formation.frame.poses import PoseFrame, PoseMeasurement
 from agent.core.formation.frame.records import NeighborRecord
 from agent.core.perception.sighting_noise import SightingNoise
 
@@ -355,35 +360,6 @@ def fleet_count(
     return _fleet_count(noise, _evidence(poses, noise, records, elsewhere))
 
 
-def _in_frame_of(
-    poses: PoseFrame, ids: tuple[int, ...], frame: int
-) -> tuple[np.ndarray, np.ndarray]:
-    """Poses of ``ids`` (ascending) re-expressed in ``frame``'s fixed frame: a start."""
-    k = poses.ids.index(frame)
-    c, s = math.cos(-poses.headings[k]), math.sin(-poses.headings[k])
-    rows = [poses.ids.index(i) for i in ids]
-    rel = poses.positions[rows] - poses.positions[k]
-    pos = np.stack([c * rel[:, 0] - s * rel[:, 1], s * rel[:, 0] + c * rel[:, 1]], axis=1)
-    psi = np.asarray((poses.headings[rows] - poses.headings[k] + math.pi) % (2 * math.pi) - math.pi)
-    return pos, psi
-
-
-def refit(
-    poses: PoseFrame, ids: Sequence[int], keep: Sequence[PoseMeasurement]
-) -> PoseFrame | None:
-    """The robust fit again over ``ids`` and the measurements ``keep``, started from the
-    current poses; None when they no longer connect at least two robots."""
-    rid = tuple(sorted(ids))
-    if len(rid) < 2:
-        return None
-    try:
-        first = fit_poses(rid, keep)  # validates, and picks the frame robot
-        start = _in_frame_of(poses, rid, first.frame_robot)
-        return fit_poses(rid, keep, first.frame_robot, start)
-    except ValueError:
-        return None
-
-
 def seen_by_others(
     poses: PoseFrame, rest: PoseFrame, robot: int, noise: SightingNoise
 ) -> np.ndarray:
@@ -504,7 +480,13 @@ def fault_test(
         why = f"{len(rejected)} robot(s) rejected ({rejected[0].describe()}); not searched"
         return FaultVerdict(False, (), None, (), tests, why, whole)
     candidates: list[tuple[int, PoseFrame, tuple[tuple[int, int], ...], FleetCount]] = []
+    seen_with: dict[int, set[int]] = {i: {i} for i in poses.ids}
+    for m in poses.measurements:
+        seen_with[m.owner].add(m.target)
+        seen_with[m.target].add(m.owner)
     for t in rejected:
+        if any(u.robot not in seen_with[t.robot] for u in rejected):
+            continue  # another robot rejected that shares no sighting with it: not its doing
         rest = _without(poses, t.robot)
         if rest is None or len(rest.ids) != len(poses.ids) - 1:
             continue

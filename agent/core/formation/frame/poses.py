@@ -452,6 +452,15 @@ def fit_poses(
     return evaluate_poses(rid, measurements, pos, wrap_angle(psi), frame)
 
 
+def fit_cost(poses: PoseFrame) -> float:
+    """The objective of :func:`fit_poses` (its soft-L1 cost) at ``poses``, over their
+    measurements: of two fits of the same measurements, the lower is the better estimate."""
+    prob = _Problem(poses.ids, poses.measurements, poses.ids.index(poses.frame_robot))
+    if not prob.m:
+        return 0.0
+    return robust_lm.soft_l1_cost(prob.fun(prob.pack(poses.positions, poses.headings)))
+
+
 def one_way_measurements(graph: NeighbourGraph, frame: PoseFrame) -> list[PoseMeasurement]:
     """Unpaired sightings that, placed from their owner's pose, fall within ε of exactly one
     other robot not yet linked to the owner (as :func:`common_frame.lsq_positions`)."""

@@ -1,0 +1,104 @@
+"""Fitting the poses again from more than one start (docs/design.md §9).
+
+The robust SE(2) fit of :mod:`poses` is local: Levenberg–Marquardt on a soft-L1 cost,
+from a start. Recorded fleets showed two starts that miss the best fit, each for a
+known reason:
+
+* **A warm start keeps a robot pulled off by a faulty one.** When the fault test leaves a
+  robot out and fits the rest again, the poses fitted with it are a natural start; but a
+  neighbour its misfits pulled round stays there (in a fleet of ten, a robot whose
+  distances read 1.4 times too long had pulled a neighbour 11° off, and the rest, fitted
+  warm, still failed). :func:`refit` fits from the warm start and from the spanning tree
+  and keeps the better.
+* **A mask gives a heading only modulo π**, and the position misfits of a robot with
+  few sightings can hold a heading half a turn off (in a fleet of fifty, a sound robot
+  fitted 172° off was rejected, and the rest passed without it: a sound robot left out).
+  :func:`half_turned` fits again with one robot turned half round.
+
+Of fits of the same measurements, the one with the lowest robust cost
+(:func:`poses.fit_cost`, the M-estimator's own objective) is the estimate the model
+prefers: no new threshold. Tie (costs within :data:`TIE` of each other, relatively): the
+first start. Deterministic: every start is a function of the poses and measurements.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from agent.core.formation.frame.poses import PoseFrame, PoseMeasurement, fit_cost, fit_poses
+
+#: Two costs within this fraction of each other are a tie (the first start is kept): two
+#: starts that reach the same minimum agree far closer (the fit stops when a step lowers
+#: the cost by less than ``robust_lm.FTOL``, 1e-12, of it).
+TIE = 1e-6
+
+
+def better(a: PoseFrame, b: PoseFrame) -> PoseFrame:
+    """``b`` if its cost is lower than ``a``'s beyond :data:`TIE`, else ``a``: two fits
+    of the same measurements in the same robot's frame (the soft-L1 loss acts per axis,
+    so the cost of the same poses moves slightly with the frame)."""
+    ca, cb = fit_cost(a), fit_cost(b)
+    return b if cb < ca - TIE * max(ca, 1e-12) else a
+
+
+def in_frame_of(
+    poses: PoseFrame, ids: tuple[int, ...], frame: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Poses of ``ids`` (ascending) re-expressed in ``frame``'s fixed frame: a start."""
+    k = poses.ids.index(frame)
+    c, s = math.cos(-poses.headings[k]), math.sin(-poses.headings[k])
+    rows = [poses.ids.index(i) for i in ids]
+    rel = poses.positions[rows] - poses.positions[k]
+    pos = np.stack([c * rel[:, 0] - s * rel[:, 1], s * rel[:, 0] + c * rel[:, 1]], axis=1)
+    psi = np.asarray((poses.headings[rows] - poses.headings[k] + math.pi) % (2 * math.pi) - math.pi)
+    return pos, psi
+
+
+def refit(
+    poses: PoseFrame, ids: Sequence[int], keep: Sequence[PoseMeasurement]
+) -> PoseFrame | None:
+    """The robust fit again over ``ids`` and the measurements ``keep``: from the spanning
+    tree and from the current poses, the better of the two (module docstring); None when
+    they no longer connect at least two robots."""
+    rid = tuple(sorted(ids))
+    if len(rid) < 2:
+        return None
+    try:
+        first = fit_poses(rid, keep)  # validates, and picks the frame robot
+        warm = fit_poses(rid, keep, first.frame_robot, in_frame_of(poses, rid, first.frame_robot))
+    except ValueError:
+        return None
+    return better(warm, first)
+
+
+def half_turned(poses: PoseFrame, robot: int) -> PoseFrame | None:
+    """The fit again from ``poses`` with ``robot`` turned half round where it stands, when
+    it fits better than ``poses`` (module docstring), else None. ``poses`` must be a fit
+    of their own measurements (:func:`poses.fit_poses`): a minimum of the cost to compare
+    with. Turning the frame robot (held at ψ = 0) is turning every other robot half round
+    about it.
+
+    Raises
+    ------
+    ValueError
+        ``robot`` has no pose in ``poses``.
+    """
+    if robot not in poses.ids:
+        raise ValueError(f"robot {robot} is not among {list(poses.ids)}")
+    pos = poses.positions.copy()
+    psi = poses.headings.copy()
+    if robot == poses.frame_robot:
+        pos, psi = -pos, psi + math.pi
+        psi[poses.ids.index(robot)] = 0.0
+    else:
+        psi[poses.ids.index(robot)] += math.pi
+    psi = (psi + math.pi) % (2 * math.pi) - math.pi
+    try:
+        turned = fit_poses(poses.ids, poses.measurements, poses.frame_robot, (pos, psi))
+    except ValueError:
+        return None
+    best = better(poses, turned)
+    return None if best is poses else best

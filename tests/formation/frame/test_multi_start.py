@@ -1,0 +1,113 @@
+"""Fitting the poses again from more than one start
+(agent/core/formation/frame/multi_start.py)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from agent.core.formation.frame import multi_start as ms
+from agent.core.formation.frame.poses import (
+    PoseFrame,
+    build_poses,
+    evaluate_poses,
+    fit_cost,
+    fit_poses,
+)
+from tests.formation.frame.test_fault_test import fleet
+
+
+def _turned_start(good: PoseFrame, robot: int) -> tuple[np.ndarray, np.ndarray]:
+    """``good``'s poses with ``robot`` turned half round (the frame robot: every other
+    robot turned half round about it)."""
+    pos, psi = good.positions.copy(), good.headings.copy()
+    if robot == good.frame_robot:
+        pos, psi = -pos, psi + math.pi
+        psi[good.ids.index(robot)] = 0.0
+    else:
+        psi[good.ids.index(robot)] += math.pi
+    return pos, (psi + math.pi) % (2 * math.pi) - math.pi
+
+
+def _stuck(good: PoseFrame, robot: int) -> PoseFrame:
+    """The fit of ``good``'s measurements from ``robot`` half turned round: a local
+    minimum of the robust cost, half a turn from the truth."""
+    wrong = fit_poses(good.ids, good.measurements, good.frame_robot, _turned_start(good, robot))
+    k = good.ids.index(robot)
+    if robot == good.frame_robot:
+        k = (k + 1) % len(good.ids)  # the others are turned: look at one of them
+    off = abs((wrong.headings[k] - good.headings[k] + math.pi) % (2 * math.pi) - math.pi)
+    assert off > math.radians(170.0), "the turned start is not a local minimum here"
+    return wrong
+
+
+def _same(a: PoseFrame, b: PoseFrame) -> bool:
+    return bool(
+        np.allclose(a.positions, b.positions, atol=1e-6)
+        and np.allclose(a.headings, b.headings, atol=1e-6)
+    )
+
+
+@pytest.mark.parametrize(("seed", "robot"), [(0, 3), (1, 8), (2, 5)])
+def test_a_robot_fitted_half_turned_round_is_turned_back(seed: int, robot: int) -> None:
+    good = build_poses(fleet(seed))
+    wrong = _stuck(good, robot)
+    back = ms.half_turned(wrong, robot)
+    assert back is not None and _same(back, good)
+    assert fit_cost(back) < fit_cost(wrong) / 10.0
+
+
+def test_the_frame_robot_half_turned_round_is_turned_back() -> None:
+    good = build_poses(fleet(0))
+    wrong = _stuck(good, good.frame_robot)
+    back = ms.half_turned(wrong, good.frame_robot)
+    assert back is not None and _same(back, good)
+
+
+def test_turning_a_well_fitted_robot_never_fits_better() -> None:
+    good = build_poses(fleet(1))
+    assert all(ms.half_turned(good, r) is None for r in good.ids)
+
+
+def test_a_warm_start_half_a_turn_off_is_refitted_from_the_tree() -> None:
+    good = build_poses(fleet(2))
+    wrong = _stuck(good, 4)
+    again = ms.refit(wrong, good.ids, good.measurements)
+    assert again is not None and _same(again, good)
+
+
+def test_refit_with_too_few_or_unconnected_robots_is_none() -> None:
+    good = build_poses(fleet(0))
+    assert ms.refit(good, good.ids[:1], good.measurements) is None
+    robot = good.ids[-1]
+    cut = [m for m in good.measurements if robot not in (m.owner, m.target)]
+    assert ms.refit(good, good.ids, cut) is None  # robot no longer connected
+
+
+def test_better_keeps_the_first_of_equal_costs() -> None:
+    good = build_poses(fleet(0))
+    twin = replace(good, positions=good.positions.copy())
+    assert ms.better(good, twin) is good and ms.better(twin, good) is twin
+    wrong = _stuck(good, 3)
+    assert ms.better(wrong, good) is good and ms.better(good, wrong) is good
+
+
+def test_half_turning_an_unknown_robot_is_refused() -> None:
+    good = build_poses(fleet(0))
+    with pytest.raises(ValueError, match="not among"):
+        ms.half_turned(good, 99)
+
+
+def test_poses_are_expressed_in_another_robots_frame() -> None:
+    good = build_poses(fleet(0))
+    other = good.ids[-1]
+    pos, psi = ms.in_frame_of(good, good.ids, other)
+    k = good.ids.index(other)
+    assert np.allclose(pos[k], 0.0) and psi[k] == pytest.approx(0.0)
+    moved = evaluate_poses(good.ids, good.measurements, pos, psi, other)
+    # the same poses, moved: the soft-L1 loss acts per axis, so the cost is not exactly
+    # invariant to the frame (which is why fits are only compared in one frame)
+    assert fit_cost(moved) == pytest.approx(fit_cost(good), rel=1e-3)
