@@ -22,6 +22,17 @@ because the frame's choice follows the model:
   where they land absorbs robot 2 (every sighting of it re-identified) and passes with
   everyone, but its global test doubts it (p 10⁻³); the pose fit names robot 2 and the
   rest fits (p 0.4-0.9).
+* ``n04_aligned_s1160+scale:1.4@2``: leaving robot 2 out, the rest fitted warm keeps a
+  robot pulled round; fitted from the spanning tree as well (the lower cost kept), it
+  passes, and robot 2 is named.
+
+And one where nobody can be named, and nobody is:
+
+* ``n10_random_s1144+scale:1.4@8``: robot 10, sound, fits badly on its own (its ψ 11°
+  off, its masks disagreeing, p 4·10⁻¹⁰), and robot 8 carries the fault; the two share
+  no sighting. Leaving 10 out made the rest pass, and robot 10 was named while the
+  faulty robot 8 was planned on. Leaving out a robot cannot clear another it never saw
+  nor was seen by: the fleet stops.
 """
 
 from __future__ import annotations
@@ -38,7 +49,11 @@ from tools.lib.frame_fit import frame_error
 
 DATA = Path(__file__).parents[2] / "data"
 RUNS = sorted((DATA / "runs").glob("*.json"))
-NAMED = ["n07_jitter20_s1125+shift:0.5@2", "n09_aligned_s1028+shift:0.5@2"]
+NAMED = [
+    "n07_jitter20_s1125+shift:0.5@2",
+    "n09_aligned_s1028+shift:0.5@2",
+    "n04_aligned_s1160+scale:1.4@2",
+]
 
 
 def test_the_recorded_runs_are_there() -> None:
@@ -65,3 +80,10 @@ def test_the_faulty_robot_is_named(name: str) -> None:
     est = {i: (ff.positions[k], ff.heading_of(i)) for k, i in enumerate(ff.ids)}
     pos_err, psi_err = frame_error(est, {i: t for i, t in run.truth.items() if i in ff.ids})
     assert pos_err < 0.15 and psi_err < 0.17, (pos_err, psi_err)
+
+
+def test_two_robots_inconsistent_apart_stop_the_fleet() -> None:
+    name = "n10_random_s1144+scale:1.4@8"
+    (run,) = [r for r in runs_of(DATA / "frames" / "n10_random_s1144.json") if r.name == name]
+    with pytest.raises(ValueError, match="beyond one robot"):
+        fleet_frame(FormationAdapter.records(run.records), DEFAULT_EPSILON)
