@@ -111,7 +111,8 @@ def test_the_corpus_gate(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> 
     """No sound robot left out, the faulty robot named in at least the share the
     estimator holds today, planning refused on at most 1 % of fault-free runs."""
     rc = eval_frames.main(["--corpus", str(CORPUS), "--png", str(tmp_path / "f.png"),
-                           "--min-named", str(NAMED_FLOOR), "--max-refused", "0.01"])  # fmt: skip
+                           "--min-named", str(NAMED_FLOOR), "--max-refused", "0.01",
+                           "--jobs", "2"])  # fmt: skip
     out = capsys.readouterr().out
     assert rc == 0, out
     assert "without a fault: 0 with a sound robot left out" in out
