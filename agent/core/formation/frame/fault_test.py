@@ -59,7 +59,7 @@ sight, σ_r(d) and σ_t(d)). Then:
    when the rest is connected and nobody in it is rejected. A robot is not tried when
    another rejected robot shares no sighting with it: leaving r out changes the others'
    evidence through their sightings of each other, so it cannot be what rejected a
-   robot it never saw nor was seen by (and in a dense fleet each try costs a fit).
+   robot it never saw nor was seen by (and in a dense fleet each such search is a fit).
    Exactly one candidate is *named*; none, or more than one, and nobody can be trusted: the fleet
    stops (same reason on every agent). One threshold with a meaning (:data:`ALPHA`)
    replaces the rules of thumb. Deterministic: measurements are taken in canonical order

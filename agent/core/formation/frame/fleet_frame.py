@@ -20,7 +20,7 @@ Candidate frames, cheapest first (each built only when the ones before it fail):
    turn off (a local minimum of its cost): when its test rejects robots, each (in the
    test's order) is fitted again half turned round (:func:`multi_start.half_turned`), and
    the first that fits better replaces the fit, which is tested again (candidate 4 then
-   builds on it). A sound robot of fifty, fitted 172° off, was left out before this.
+   builds on it). Without it, a sound robot of fifty fitted 172° off is left out.
 4. **The pose fit with every sighting identified where it lands.**
 
 A frame with nobody named is preferred: the candidates are tried in order for one the
