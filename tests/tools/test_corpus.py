@@ -107,6 +107,25 @@ def test_the_shipped_model_was_fitted_on_the_corpus() -> None:
 
 
 @pytest.mark.slow
+def test_the_shipped_model_is_what_its_fleets_measure() -> None:
+    """``python -m tools.fit_noise --seeds-below 1133`` gives the shipped model, figure
+    for figure: the file is a measurement, never a hand edit."""
+    import dataclasses
+
+    from agent.core.perception.sighting_noise import SightingNoise
+
+    runs = fit_noise.tuned_runs(CORPUS, fit_noise.SHIPPED_SEEDS_BELOW)
+    assert runs and all(r.seed < fit_noise.SHIPPED_SEEDS_BELOW and not r.fault for r in runs)
+    model, _ = fit_noise.fit(fit_noise.match(runs), runs, "")
+    shipped = SightingNoise.load()
+    for f in dataclasses.fields(SightingNoise):
+        if f.name != "corpus":
+            assert getattr(model, f.name) == pytest.approx(getattr(shipped, f.name), rel=1e-9), (
+                f.name
+            )
+
+
+@pytest.mark.slow
 def test_the_corpus_gate(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """No sound robot left out, the faulty robot named in at least the share the
     estimator holds today, planning refused on at most 1 % of fault-free runs."""

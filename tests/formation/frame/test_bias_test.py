@@ -120,3 +120,72 @@ def test_one_gross_sighting_is_not_a_bias(seed: int) -> None:
     assert (
         fit.own + fit.seen == own + sum(m.target == victim.robot_id for m in poses.measurements) - 1
     )
+
+
+def _own_cut(poses: PoseFrame, robot: int, keep: int) -> tuple[PoseFrame, np.ndarray]:
+    """``poses`` with only the first ``keep`` of ``robot``'s own measurements, and the
+    others' vectors (the sightings no pair uses)."""
+    own = [m for m in poses.measurements if m.owner == robot]
+    rest = [m for m in poses.measurements if m.owner != robot]
+    cut = PoseFrame(poses.frame_robot, poses.ids, poses.positions, poses.headings,
+                    poses.scores, poses.pairs, tuple(rest + own[:keep]), poses.aligned)  # fmt: skip
+    return cut, np.array([m.vector for m in own[keep:]], dtype=np.float64).reshape(-1, 2)
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_unpaired_sightings_join_the_test(seed: int) -> None:
+    """A scaled robot whose sightings mostly failed to pair (they land nowhere at s = 1):
+    with its one paired sighting the test has no power; given the unpaired ones, each
+    lands on its robot under the fitted bias (which bias is not pinned: see
+    test_a_scaled_robot_is_found_with_a_bias)."""
+    poses, _ = _fleet(seed, "scale")
+    cut, loose = _own_cut(poses, 3, 1)
+    assert len(loose) >= 2
+    assert bias_fit(cut, 3, NOISE, 1.0).p == 1.0
+    fit = bias_fit(cut, 3, NOISE, 1.0, loose)
+    assert fit.own == len(loose)  # one paired and the unpaired, less the one set aside
+    assert fit.p < 1e-6
+    assert abs(fit.scale - 1.0) > 0.05 or math.hypot(*fit.shift) > 0.1
+
+
+def test_a_pairing_the_bias_made_is_undone() -> None:
+    """The scaled robot's measurements paired with the wrong robots (each target moved
+    on by one): each sighting is identified where it lands, so the wrong pairing costs
+    the test nothing."""
+    poses, _ = _fleet(2, "scale")
+    own = [m for m in poses.measurements if m.owner == 3]
+    targets = [m.target for m in own]
+    moved = [dataclasses.replace(m, target=targets[(k + 1) % len(own)]) for k, m in enumerate(own)]
+    rest = [m for m in poses.measurements if m.owner != 3]
+    wrong = PoseFrame(poses.frame_robot, poses.ids, poses.positions, poses.headings,
+                      poses.scores, poses.pairs, tuple(rest + moved), poses.aligned)  # fmt: skip
+    fit, right = bias_fit(wrong, 3, NOISE, 1.0), bias_fit(poses, 3, NOISE, 1.0)
+    assert fit.statistic == pytest.approx(right.statistic, rel=1e-6)
+    assert fit.p < 1e-6
+
+
+def test_a_sighting_of_a_robot_left_out_lands_where_it_stands() -> None:
+    """Robot 3 is sound; robot 5 is left out of the frame, so 3's sighting of it pairs
+    with nobody. Told where 5 stands (``elsewhere``), it lands there and 3 stays sound;
+    the statistic is never larger than without."""
+    poses, _ = _fleet(1)
+    keep = [i for i in poses.ids if i != 5]
+    ms = [m for m in poses.measurements if 5 not in (m.owner, m.target)]
+    mine = [m.vector for m in poses.measurements if m.owner == 3 and m.target == 5]
+    assert mine
+    k = [poses.ids.index(i) for i in keep]
+    rest = PoseFrame(poses.frame_robot, tuple(keep), poses.positions[k], poses.headings[k],
+                     poses.scores, poses.pairs, tuple(ms), poses.aligned)  # fmt: skip
+    at = poses.positions[poses.ids.index(5)].reshape(1, 2)
+    loose = np.array(mine, dtype=np.float64).reshape(-1, 2)
+    told = bias_fit(rest, 3, NOISE, 1.0, loose, at)
+    blind = bias_fit(rest, 3, NOISE, 1.0, loose)
+    assert told.p > 1e-3 and told.statistic <= blind.statistic + 1e-9
+
+
+def test_the_order_of_unpaired_sightings_does_not_matter() -> None:
+    poses, _ = _fleet(3, "scale")
+    cut, loose = _own_cut(poses, 3, 1)
+    a = bias_fit(cut, 3, NOISE, 1.0, loose)
+    b = bias_fit(cut, 3, NOISE, 1.0, loose[::-1].copy())
+    assert a.statistic == pytest.approx(b.statistic, rel=1e-9, abs=1e-9)

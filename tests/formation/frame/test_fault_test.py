@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from scipy.stats import binom, chi2
 
 from agent.core.formation.frame import fault_test as ft
-from agent.core.formation.frame.poses import build_poses
+from agent.core.formation.frame.poses import PoseFrame, build_poses
 from agent.core.perception.sighting_noise import SightingNoise
 from tests.formation.pose_fleets import fault, sim_layout, unaligned_records
 
@@ -199,3 +199,36 @@ def test_two_faulty_robots_that_never_saw_each_other_stop_the_fleet() -> None:
     bad = [fault(r, "scale") if r.robot_id in (1, 5) else r for r in recs]
     v = ft.fault_test(build_poses(bad), NOISE, bad)
     assert not v.ok and v.named == () and "beyond one robot" in v.reason, v.reason
+
+
+def _cut(poses: PoseFrame, robot: int, keep: int) -> PoseFrame:
+    """``poses`` with only the first ``keep`` of ``robot``'s own measurements."""
+    own = [m for m in poses.measurements if m.owner == robot]
+    rest = [m for m in poses.measurements if m.owner != robot]
+    return replace(poses, measurements=tuple(rest + own[:keep]))
+
+
+def test_unpaired_are_the_sightings_no_pair_uses() -> None:
+    recs = fleet(1)
+    poses = build_poses(recs)
+    cut = _cut(poses, 3, 1)
+    loose = ft.unpaired(cut, recs)
+    assert set(loose) == {3}
+    used = {tuple(m.vector) for m in cut.measurements if m.owner == 3}
+    mine = [tuple(v) for v in recs[2].neighbours if tuple(v) not in used]
+    assert [tuple(v) for v in loose[3]] == mine and len(mine) >= 2
+
+
+def test_a_scaled_robot_whose_sightings_did_not_pair_is_named_from_any_order() -> None:
+    """Robot 3's distances 40 % too long, and only one of its sightings paired: the bias
+    test takes the unpaired ones from its record, each landing on the robot it saw under
+    the fitted bias; the verdict is the same for the records in any order."""
+    recs = fleet(2, kind="scale", victim=3)
+    poses = _cut(build_poses(recs), 3, 1)
+    v = ft.fault_test(poses, NOISE, recs)
+    assert v.ok and v.named == (3,), v.reason
+    order = np.random.default_rng(3).permutation(len(recs))
+    w = ft.fault_test(poses, NOISE, [recs[k] for k in order])
+    assert w.named == v.named and w.reason == v.reason
+    (t3,) = [t for t in v.tests if t.robot == 3]
+    assert t3.p_bias < 1e-6, t3.describe()

@@ -36,10 +36,24 @@ to name a sound robot of a four-NAO fleet if it were kept: ``tests/data/runs``).
 rest's: with two sightings left it is exact and says little (a similarity maps any two
 points onto any two).
 
+**Every own sighting, identified where it lands.** A bias moves r's sightings off the
+robots they saw, so the fleet's pairing is the first thing it spoils: a sighting 40 %
+too long pairs with a farther robot, or with none and stays unpaired. So r's own
+sightings enter the test unlabelled, the paired ones and the unpaired ones (``loose``)
+alike, and each is matched, under each hypothesis and at every step of its fit, to the
+robot it lands nearest to in σ (the max-mixture of Olson & Agarwal, docs/papers.md:
+the misfit is the smallest over the robots it could have seen). Under H1 the scaled
+sightings land on the robots they saw, under H0 on none, and Λ measures it. The others'
+sightings of r keep their pairing: they are sound. ``elsewhere``: more places where a
+robot stands that the frame leaves out (a robot left out by the fault test is still
+where the others saw it, and r's sightings of it land there). The null scale is
+measured on this very statistic (``python -m tools.fit_noise``).
+
 Only r's own sightings carry the bias, so the test needs others who see r (they pin its
 position) and at least two sightings of r's own, after the worst is set aside; with
 fewer it has no power and returns p = 1. Deterministic: measurements in canonical
-(owner, target) order, a fixed start, the first of equally bad sightings set aside.
+(owner, target) order, unpaired sightings in record order, a fixed start, the first of
+equally bad sightings set aside and the lowest-indexed of equally near robots matched.
 """
 
 from __future__ import annotations
@@ -81,9 +95,18 @@ def _rot(a: float) -> np.ndarray:
     return np.array([[c, -s], [s, c]])
 
 
-def bias_fit(poses: PoseFrame, robot: int, noise: SightingNoise, bias_scale: float) -> BiasFit:
+def bias_fit(
+    poses: PoseFrame,
+    robot: int,
+    noise: SightingNoise,
+    bias_scale: float,
+    loose: np.ndarray | None = None,
+    elsewhere: np.ndarray | None = None,
+) -> BiasFit:
     """The test of the module docstring for ``robot`` of ``poses``: H0 fitted on all its
-    sightings to find the one that fits worst, then H0 and H1 on the rest.
+    sightings to find the one that fits worst, then H0 and H1 on the rest. ``loose``
+    (k, 2): its own sightings no measurement of ``poses`` uses, in its fixed frame;
+    ``elsewhere`` (k, 2): more places, common frame, where they may land.
 
     Raises
     ------
@@ -95,17 +118,21 @@ def bias_fit(poses: PoseFrame, robot: int, noise: SightingNoise, bias_scale: flo
     if not bias_scale > 0.0:
         raise ValueError(f"bias_scale must be > 0, got {bias_scale}")
     ms = sorted(poses.measurements, key=lambda m: (m.owner, m.target))
-    own = [m for m in ms if m.owner == robot and m.target != robot]
+    own: list[PoseMeasurement | np.ndarray] = [
+        m for m in ms if m.owner == robot and m.target != robot
+    ]
+    if loose is not None:
+        own += [np.asarray(v, dtype=np.float64) for v in np.asarray(loose).reshape(-1, 2)]
     seen = [m for m in ms if m.target == robot and m.owner != robot]
-    if len(own) < MIN_OWN or len(seen) < MIN_SEEN:
+    if len(own) < MIN_OWN or len(seen) < MIN_SEEN or len(poses.ids) < 2:
         return BiasFit(robot, len(own), len(seen), 0.0, 1.0, (0.0, 0.0), 1.0)
-    x_h0, worst = _Sightings(poses, robot, own, seen, noise).worst()
+    x_h0, worst = _Sightings(poses, robot, own, seen, noise, elsewhere).worst()
     n_own = len(own)  # the worst is indexed over own sightings, then the others'
     own = [m for k, m in enumerate(own) if k != worst]
     seen = [m for k, m in enumerate(seen) if k != worst - n_own]
     if len(own) < MIN_OWN or len(seen) < MIN_SEEN:
         return BiasFit(robot, len(own), len(seen), 0.0, 1.0, (0.0, 0.0), 1.0)
-    kept = _Sightings(poses, robot, own, seen, noise).fit(x_h0)
+    kept = _Sightings(poses, robot, own, seen, noise, elsewhere).fit(x_h0)
     p = float(chi2.sf(kept.statistic / bias_scale, 3))
     return BiasFit(robot, len(own), len(seen), kept.statistic, kept.scale, kept.shift, p)
 
@@ -127,15 +154,29 @@ class _Sightings:
         self,
         poses: PoseFrame,
         robot: int,
-        own: list[PoseMeasurement],
+        own: list[PoseMeasurement | np.ndarray],
         seen: list[PoseMeasurement],
         noise: SightingNoise,
+        elsewhere: np.ndarray | None = None,
     ) -> None:
         index = {rid: k for k, rid in enumerate(poses.ids)}
-        self.n_own = len(own)
+        paired = [m for m in own if isinstance(m, PoseMeasurement)]
+        loose = [np.asarray(v, dtype=np.float64) for v in own if not isinstance(v, PoseMeasurement)]
+        self.n_own, self.n_paired = len(own), len(paired)
         self.x0 = np.array([*poses.positions[index[robot]], poses.headings[index[robot]]])
-        v_own = np.array([m.vector for m in own], dtype=np.float64).reshape(-1, 2)
-        self.p_tgt = poses.positions[[index[m.target] for m in own]]
+        v_own = np.array([m.vector for m in paired] + loose, dtype=np.float64).reshape(-1, 2)
+        #: where an own sighting may land: every other robot, and ``elsewhere``
+        others = [rid for rid in poses.ids if rid != robot]
+        self.p_any = poses.positions[[index[rid] for rid in others]]
+        #: the robots the fit paired r's sightings with (rows of ``p_any``)
+        self.paired_to = np.array([others.index(m.target) for m in paired], dtype=np.intp)
+        self.p_tgt = self.p_any[self.paired_to].reshape(-1, 2)
+        if elsewhere is not None:
+            extra = np.asarray(elsewhere, dtype=np.float64).reshape(-1, 2)
+            self.p_any = np.vstack([self.p_any, extra])
+        #: True: every own sighting matched where it lands; False: the paired ones keep
+        #: their pairing (the first start), the loose ones matched
+        self.free = True
         v_seen = np.array([m.vector for m in seen], dtype=np.float64).reshape(-1, 2)
         o = [index[m.owner] for m in seen]
         self.p_obs = poses.positions[o]
@@ -155,7 +196,8 @@ class _Sightings:
         pr, psi = x[:2], float(x[2])
         scale, shift = (float(x[3]), x[4:6]) if len(x) > 3 else (1.0, np.zeros(2))
         c, s = math.cos(psi), math.sin(psi)
-        rel = self.p_tgt - pr  # common frame
+        first = 0 if self.free else self.n_paired
+        rel = np.vstack([self.p_tgt[:first], self._landing(first, pr, c, s, scale, shift)]) - pr
         unscaled = np.stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]], 1)
         pred_seen = np.einsum("kij,kj->ki", self.rot_obs, pr[None, :] - self.p_obs)
         e = np.vstack([unscaled * scale + shift, pred_seen]) - self.v_all
@@ -171,6 +213,58 @@ class _Sightings:
             jac[:n_own, 0, 4] = 1.0
             jac[:n_own, 1, 5] = 1.0
         return e, jac
+
+    def _landing(
+        self, first: int, pr: np.ndarray, c: float, s: float, scale: float, shift: np.ndarray
+    ) -> np.ndarray:
+        """Where each own sighting from ``first`` on lands: the place of the robot it lands
+        nearest to (in σ) under the pose and bias, the max-mixture association, redone at
+        every evaluation (tie: the first robot)."""
+        return np.asarray(self.p_any[self._matched(first, pr, c, s, scale, shift)])
+
+    def _matched(
+        self, first: int, pr: np.ndarray, c: float, s: float, scale: float, shift: np.ndarray
+    ) -> np.ndarray:
+        """The rows of ``p_any`` that the own sightings from ``first`` on land nearest to."""
+        if first == self.n_own:
+            return np.zeros(0, dtype=np.intp)
+        rel = self.p_any - pr
+        pred = np.stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]], 1)
+        pred = pred * scale + shift
+        v, u = self.v_all[first : self.n_own], self.u_all[first : self.n_own]
+        e = pred[None, :, :] - v[:, None, :]  # (sightings, robots, 2)
+        along = (e[..., 0] * u[:, None, 0] + e[..., 1] * u[:, None, 1]) / self.s_r[
+            first : self.n_own, None
+        ]
+        across = (e[..., 1] * u[:, None, 0] - e[..., 0] * u[:, None, 1]) / self.s_t[
+            first : self.n_own, None
+        ]
+        return np.asarray(np.argmin(np.round(along**2 + across**2, 9), axis=1), dtype=np.intp)
+
+    def _keeps_pairing(self, x: np.ndarray) -> bool:
+        """Whether every paired sighting lands, at ``x``, on the robot the fit paired it
+        with (the loose ones are matched alike under both starts)."""
+        scale, shift = (float(x[3]), x[4:6]) if len(x) > 3 else (1.0, np.zeros(2))
+        psi = float(x[2])
+        hit = self._matched(0, x[:2], math.cos(psi), math.sin(psi), scale, shift)[: self.n_paired]
+        return bool(np.array_equal(hit, self.paired_to))
+
+    def _best(self, start: np.ndarray) -> tuple[np.ndarray, float]:
+        """One hypothesis, every sighting matched where it lands, fitted from ``start``;
+        and, unless that solution keeps the fit's pairing, from a second start as well:
+        the solution with the fit's pairing kept (the loose sightings matched). The lower
+        cost wins (tie: the first). The matched cost is never above the paired one at the
+        same x, so the second start is a start of the same problem, not another model; it
+        is needed when the pairing holds the pose in a basin the matching alone leaves."""
+        self.free = True
+        x_a, c_a = _cauchy_fit(self.residuals, self.jacobian, start)
+        if self._keeps_pairing(x_a):
+            return x_a, c_a
+        self.free = False
+        x_p, _ = _cauchy_fit(self.residuals, self.jacobian, start)
+        self.free = True
+        x_b, c_b = _cauchy_fit(self.residuals, self.jacobian, x_p)
+        return (x_a, c_a) if c_a <= c_b else (x_b, c_b)
 
     def whiten(self, e: np.ndarray) -> np.ndarray:
         """(k, 2, ...) misfits (or their derivatives) -> (2k, ...): along, then across
@@ -192,16 +286,14 @@ class _Sightings:
     def worst(self) -> tuple[np.ndarray, int]:
         """H0's solution and the sighting (own, then seen) that fits worst under it (by its
         whitened χ², the first of equal ones)."""
-        x_h0, _ = _cauchy_fit(self.residuals, self.jacobian, self.x0)
+        x_h0, _ = self._best(self.x0)
         r, k = self.residuals(x_h0), len(self.v_all)
         return x_h0, int(np.argmax(np.round(r[:k] ** 2 + r[k:] ** 2, 9)))
 
     def fit(self, start: np.ndarray) -> _Fit:
-        """H0 from ``start`` (r's pose), H1 from H0's solution, and Λ."""
-        x_h0, cost0 = _cauchy_fit(self.residuals, self.jacobian, start)
-        x_h1, cost1 = _cauchy_fit(
-            self.residuals, self.jacobian, np.concatenate([x_h0, [1.0, 0.0, 0.0]])
-        )
+        """H0 from ``start`` (r's pose), H1 from H0's solution with no bias, and Λ."""
+        x_h0, cost0 = self._best(start)
+        x_h1, cost1 = self._best(np.concatenate([x_h0, [1.0, 0.0, 0.0]]))
         return _Fit(max(0.0, 2.0 * (cost0 - cost1)), float(x_h1[3]),
                     (float(x_h1[4]), float(x_h1[5])))  # fmt: skip
 

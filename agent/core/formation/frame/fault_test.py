@@ -43,6 +43,9 @@ sight, σ_r(d) and σ_t(d)). Then:
    a bias (s, b) fitted to r's sightings against none, with the others held at their
    fitted poses; its statistic over sound robots is χ²₃ (measured: ``bias_scale``). Four
    sightings 0.3 m off in one pattern are plain here long before each is rejected alone.
+   r's own sightings enter it unlabelled, the unpaired ones too (:func:`unpaired`), each
+   matched to the robot it lands nearest to: a scaled robot's sightings mostly fail to
+   pair, or pair wrongly, at s = 1.
 5. **The fleet's global test** (the overall model test before any robot is blamed, as
    in geodesy's data snooping): all rejected edges and lost strays of the fleet together,
    ``K``, against the same rates, Poisson-binomial over every edge and sighting. A frame
@@ -71,7 +74,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.stats import chi2
@@ -217,6 +220,24 @@ def rejected_edges(poses: PoseFrame, noise: SightingNoise) -> dict[tuple[int, in
     return dict(sorted(out.items()))
 
 
+def unpaired(poses: PoseFrame, records: Sequence[NeighborRecord]) -> dict[int, np.ndarray]:
+    """Each fitted robot's own sightings that no measurement of ``poses`` uses, (k, 2) in
+    its fixed frame, in record order (robots with none left out)."""
+    used: dict[int, set[tuple[float, float]]] = {}
+    for m in poses.measurements:
+        used.setdefault(m.owner, set()).add((float(m.vector[0]), float(m.vector[1])))
+    out: dict[int, np.ndarray] = {}
+    for rec in sorted(records, key=lambda r: r.robot_id):
+        if rec.robot_id not in poses.ids:
+            continue
+        mine = used.get(rec.robot_id, set())
+        vecs = np.asarray(rec.neighbours, dtype=np.float64).reshape(-1, 2)
+        keep = [v for v in vecs if (float(v[0]), float(v[1])) not in mine]
+        if keep:
+            out[rec.robot_id] = np.array(keep)
+    return out
+
+
 def strays(
     poses: PoseFrame,
     records: Sequence[NeighborRecord],
@@ -227,21 +248,10 @@ def strays(
     ``elsewhere`` (k, 2): more places, common frame, where a robot stands that ``poses``
     leaves out (a sighting of it lands)."""
     q = float(chi2.isf(ALPHA_SIGHTING, 2))
-    used: dict[int, set[tuple[float, float]]] = {}
-    for m in poses.measurements:
-        used.setdefault(m.owner, set()).add((float(m.vector[0]), float(m.vector[1])))
     index = {rid: k for k, rid in enumerate(poses.ids)}
     out: dict[int, list[tuple[float, bool]]] = {}
-    for rec in sorted(records, key=lambda r: r.robot_id):
-        if rec.robot_id not in index:
-            continue
-        k = index[rec.robot_id]
-        mine = used.get(rec.robot_id, set())
-        vecs = np.asarray(rec.neighbours, dtype=np.float64).reshape(-1, 2)
-        keep = [v for v in vecs if (float(v[0]), float(v[1])) not in mine]
-        if not keep:
-            continue
-        v = np.array(keep)
+    for rid, v in unpaired(poses, records).items():
+        k = index[rid]
         c, s = math.cos(poses.headings[k]), math.sin(poses.headings[k])
         others = np.delete(np.arange(len(poses.ids)), k)
         places = poses.positions[others]
@@ -254,7 +264,7 @@ def strays(
             e = own - x  # to every other robot, in this robot's fixed frame
             lands = bool(len(e)) and float(noise.chi2(np.repeat(x[None], len(e), 0), e).min()) <= q
             row.append((float(np.hypot(*x)), lands))
-        out[rec.robot_id] = row
+        out[rid] = row
     return out
 
 
@@ -271,6 +281,10 @@ class _Evidence:
     #: robots whose records carry stances: their masks are turned back to their start
     #: heading (records.mask_orientation), the others' are as recorded
     timed: frozenset[int] = frozenset()
+    #: each robot's own sightings no pair uses (:func:`unpaired`), for its bias test
+    loose: dict[int, np.ndarray] = field(default_factory=dict)
+    #: places (common frame) where a robot the frame leaves out stands
+    elsewhere: np.ndarray | None = None
 
 
 def _evidence(
@@ -290,7 +304,8 @@ def _evidence(
     p_edge = {e: float(noise.p_reject(float(np.mean(d)))) for e, d in sorted(dist.items())}
     timed = frozenset(r.robot_id for r in records if r.stances is not None and len(r.stances))
     return _Evidence(rejected_edges(poses, noise), p_edge,
-                     strays(poses, records, noise, elsewhere), sighted, timed)  # fmt: skip
+                     strays(poses, records, noise, elsewhere), sighted, timed,
+                     unpaired(poses, records), elsewhere)  # fmt: skip
 
 
 def robot_tests(
@@ -324,7 +339,7 @@ def _robot_tests(
         p_pos = tail_at_least(probs, k + lost)
         stat, p_b = 0.0, 1.0
         if bias:
-            fit = bias_fit(poses, r, noise, noise.bias_scale)
+            fit = bias_fit(poses, r, noise, noise.bias_scale, ev.loose.get(r), ev.elsewhere)
             stat, p_b = fit.statistic, fit.p
         out.append(RobotTest(r, len(mine), k, len(own), lost, p_pos, len(deltas), offset, p_h,
                              stat, p_b))  # fmt: skip
