@@ -117,6 +117,8 @@ class Surveyor(Protocol):
 
     def restore(self, record: NeighborRecordMsg) -> None: ...
 
+    def restarted(self, start_heading: float) -> None: ...
+
 
 class Stepper(Protocol):
     """Distance control to a goal with safe steps (NAO paper 4.2; execution noise moves robots off

@@ -53,6 +53,8 @@ class Search:
         # "Masks seen mid-turn"
         self._image_times: list[float] = []
         self._stances: list[tuple[float, float, float]] = []
+        #: set by :meth:`restarted`: the start heading in this process's fixed frame
+        self._restart: float | None = None
 
     @property
     def round(self) -> int:
@@ -71,6 +73,17 @@ class Search:
     def restore(self, record: NeighborRecordMsg) -> None:
         """The record journaled before a crash, and its round, as this robot's."""
         self._round, self._record = record.round, record
+
+    def restarted(self, start_heading: float) -> None:
+        """This process searches after a crash of the agent (agent/recovery/resume.py): its
+        fixed frame is defined again, and the body's headings since it was set down are
+        unknown, with ``start_heading`` (rad, in the new frame) its heading at the start.
+        The record's stances then begin with the instant it was set down, ``(0, 0,
+        start_heading)``, so that a mask of this robot taken before this search (while
+        its body stood where the crash left it, or turned) falls between stances and is
+        set aside (docs/design.md §9, "Masks seen mid-turn"), instead of being read at the
+        first stance's heading, as a robot that stood still since it was set down."""
+        self._restart = wrap_pi(start_heading)
 
     def sweep(self) -> list[Sightings]:
         """Sweeps at θ = 0 and θ = 180° (5.2.2 (iii)); returns fixed-frame sightings.
@@ -156,6 +169,8 @@ class Search:
         self._stances = [
             (t0, max(t0, t1), wrap_pi(h - NORTH)) for (t0, t1), h in zip(spans, heads, strict=True)
         ]
+        if self._restart is not None and self._stances and self._stances[0][0] > 0.0:
+            self._stances.insert(0, (0.0, 0.0, self._restart))
         self._image_times = times
         self.obstacle_sightings = [
             ctx.perception.obstacles_fixed(o, h0 if sweep == 0 else heading_180)

@@ -178,7 +178,10 @@ class Resumption:
             if st.record is None:
                 if moved:
                     self.remeasure_heading(journal)
-                b.heading = NORTH  # the new search defines the fixed frame again from here
+                # the new search defines the fixed frame again from here: the start heading
+                # is then NORTH − heading, and the body's headings until now are unknown
+                self.survey.restarted(wrap_pi(NORTH - b.heading))
+                b.heading = NORTH
                 return Phase.SEARCH, None
             self.survey.restore(st.record)
             return self.rejoin(st, journal, verdict, moved)

@@ -305,6 +305,9 @@ class FakeSurveyor:
     def restore(self, record: NeighborRecordMsg) -> None:
         self.round, self.record = record.round, record
 
+    def restarted(self, start_heading: float) -> None:
+        self.start_heading: float | None = start_heading
+
 
 class FakeStepper:
     """The :class:`~agent.phases.roles.Stepper` role: every goal reached at once."""

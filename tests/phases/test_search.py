@@ -149,3 +149,25 @@ def test_a_record_of_sightings_given_without_their_sweep_carries_no_times() -> N
     s, _, _ = search()
     rec = s.localise([(np.array([[1.0, 0.0]]), np.array([0.9]), np.array([0.1]))])
     assert rec.seen_at == () and rec.stances == ()
+
+
+def test_a_restarted_search_says_the_body_was_set_down_and_nothing_since() -> None:
+    """After a crash (agent/recovery/resume.py) the record's stances begin with the
+    instant the robot was set down, at the start heading in the new fixed frame, and then
+    the new search's: a mask of it taken before the new search falls between stances (its
+    body stood where the crash left it) and is set aside, not read at the first heading."""
+    from agent.core.formation.frame.records import heading_at
+
+    cfg = AgentConfig(robot_id=3)
+    ctx = context(cfg, perception=SeesOne(cfg.search_yaws[2]))  # type: ignore[arg-type]
+    ctx.report.journal = FakeJournal()
+    mover = ClockedMover(ctx.beliefs, image=np.full((4, 5, 3), 7, np.uint8))
+    s = Search(ctx, mover)  # type: ignore[arg-type]
+    s.restarted(0.3 + 2 * math.pi)
+    rec = s.localise(s.sweep())
+    assert rec.stances[0] == pytest.approx((0.0, 0.0, 0.3))
+    first = rec.stances[1]
+    assert first[0] == pytest.approx(10.5)
+    stances = np.array(rec.stances)
+    assert math.isnan(heading_at(stances, 5.0))  # the crash: nobody knows
+    assert heading_at(stances, first[0]) == pytest.approx(first[2])

@@ -118,6 +118,18 @@ def test_before_the_record_it_searches_again_facing_north(tmp_path: Path) -> Non
     st = JournalState(robot_id=3, phase="search", heading=NORTH)
     assert r.resumption.resume(st) == (Phase.SEARCH, None)
     assert r.ctx.beliefs.heading == NORTH and r.survey.record is None
+    assert r.survey.start_heading == 0.0  # the new frame is the old one: it did not turn
+
+
+def test_a_search_resumed_turned_tells_the_search_its_start_heading(tmp_path: Path) -> None:
+    """Crashed 0.4 rad past north with no reference view to re-measure against: the new
+    search's frame is defined where it stands, so the start heading in it is −0.4 rad,
+    and the search is told so (its stances say nothing of the body since)."""
+    r = rig(Journal(tmp_path, 3))
+    st = JournalState(robot_id=3, phase="search", heading=NORTH + 0.4)
+    assert r.resumption.resume(st) == (Phase.SEARCH, None)
+    assert r.ctx.beliefs.heading == NORTH
+    assert r.survey.start_heading == pytest.approx(-0.4)
 
 
 def test_with_a_record_it_rejoins_the_exchange(tmp_path: Path) -> None:
