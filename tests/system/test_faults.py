@@ -9,6 +9,7 @@ A secure fleet (TLS router, every process a zenoh client, agents with ``--state-
   finds its journal of the finished run in the same ``--state-dir``, archives it and
   starts a new run, which completes too (before, it resumed the old agreement and
   stopped after 60 s with "nobody served the agreed records");
+* an agent killed during its search searches again, and is planned on like the rest;
 * the router killed while the fleet moves and started again 3 s later: the clients
   reconnect, the grace period keeps the membership, the fleet finishes.
 """
@@ -75,3 +76,17 @@ def test_router_killed_during_the_move_and_restarted_the_formation_completes(
     assert run.injected_at_s is not None, run
     assert run.outcome == "complete", run
     assert run.contacts == 0
+
+
+def test_agent_killed_during_its_search_is_in_the_pyramid(tmp_path: Path) -> None:
+    """Killed mid-search and started again, the robot searches again and its record's
+    stances begin with the instant it was set down: the others' masks of it, taken while
+    its body stood where the crash left it, are set aside, and it is planned on like the
+    rest (judged from the truth: ``complete``, never ``degraded``; seed 1 was a sound
+    robot left out before)."""
+    run, out = _run("kill-agent@search", tmp_path)
+    assert run.victim >= 0 and run.injected_at_s is not None, run
+    assert run.outcome == "complete", run
+    assert run.contacts == 0
+    log = (out / f"agent-{run.victim}.log").read_text(errors="replace")
+    assert "resumes at search" in log, log[-2000:]
