@@ -82,8 +82,7 @@ def test_agent_killed_during_its_search_is_in_the_pyramid(tmp_path: Path) -> Non
     """Killed mid-search and started again, the robot searches again and its record's
     stances begin with the instant it was set down: the others' masks of it, taken while
     its body stood where the crash left it, are set aside, and it is planned on like the
-    rest (judged from the truth: ``complete``, never ``degraded``; seed 1 was a sound
-    robot left out before)."""
+    rest (judged from the truth: ``complete``, never ``degraded``)."""
     run, out = _run("kill-agent@search", tmp_path)
     assert run.victim >= 0 and run.injected_at_s is not None, run
     assert run.outcome == "complete", run
