@@ -48,6 +48,8 @@ from tools.lib.perception_report import (
 from tools.lib.perception_scenes import RANGE, scenes
 
 COMPASS_STEPS_DEG = (5.0, 10.0, 15.0, 20.0, 30.0, 40.0)
+#: How far from the reference view's place the compass is measured (``--compass-away``), m.
+COMPASS_AWAY_M = (0.0, 0.25, 0.5, 1.0, 1.5, 2.0)
 
 
 def run_views(
@@ -140,6 +142,53 @@ def run_compass(
     return res
 
 
+def run_compass_away(
+    seed: int,
+    samples: int,
+    away_m: tuple[float, ...],
+    renderer: str = "tiny",
+    look: Look | None = None,
+) -> dict[str, Any]:
+    """Compass error against a reference view taken elsewhere: the observer's reference is
+    drawn at one place, the second view ``d`` metres away in a random direction and turned by
+    up to ±20° (a resumed robot turned back to θ = 0 by its estimate). The pure-rotation
+    model of the compass then meets parallax; the RMS error per ``d`` is the compass's
+    noise away from its reference (:data:`agent.core.control.heading_fix.COMPASS_AWAY`)."""
+    rng = np.random.default_rng([seed, 0xA3A7])
+    vc = VisualCompass()
+    res: dict[str, Any] = {}
+    sc = Scenario(
+        robots=(RobotSpec(1, 0.0, 0.0, math.pi / 2),), seed=seed, room=4.0, look=look or Look()
+    )
+    with World(sc, noise=False, renderer=renderer) as w:
+        for d in away_m:
+            errs, fails = [], 0
+            for _ in range(samples):
+                x, y = (float(v) for v in rng.uniform(-1.5, 1.5, size=2))
+                h0 = float(rng.uniform(-math.pi, math.pi))
+                way = float(rng.uniform(-math.pi, math.pi))
+                turn = float(rng.uniform(-1.0, 1.0)) * math.radians(20.0)
+                w.set_pose(1, x, y, h0)
+                a = w.render(1, 0.0)
+                w.set_pose(1, x + d * math.cos(way), y + d * math.sin(way), h0 + turn)
+                r = vc.measure(a, w.render(1, 0.0))
+                if not r.ok:
+                    fails += 1
+                    continue
+                errs.append(math.degrees(r.dtheta - turn))
+            e = np.array(errs) if errs else np.array([np.nan])
+            res[f"{d:g}"] = {
+                "n": samples,
+                "failures": fails,
+                "rms_err_deg": float(np.sqrt(np.nanmean(e**2))),
+                "p95_err_deg": float(np.nanpercentile(np.abs(e), 95)),
+                "max_err_deg": float(np.nanmax(np.abs(e))),
+            }
+            print(f"\rcompass {d:g} m away", end="", file=sys.stderr)
+    print(file=sys.stderr)
+    return res
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
         prog="python -m tools.eval_perception", description=__doc__.split("\n")[0]
@@ -176,6 +225,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--compass-samples", type=int, default=10, help="turns per compass step (0: skip)"
     )
+    ap.add_argument(
+        "--compass-away",
+        type=int,
+        default=0,
+        metavar="N",
+        help="turns per distance from the compass's reference view (parallax; 0: skip)",
+    )
     ap.add_argument("--png", type=Path, default=Path("out/perception/eval.png"))
     ap.add_argument("--view-png", type=Path, default=None, help="also save one annotated view here")
     ap.add_argument(
@@ -186,8 +242,11 @@ def main(argv: list[str] | None = None) -> int:
         help="a calibration folder (python -m tools.calibrate build); default: the built-in one",
     )
     args = ap.parse_args(argv)
-    if args.views < 1 or args.compass_samples < 0:
-        print("error: --views must be >= 1 and --compass-samples >= 0", file=sys.stderr)
+    if args.views < 1 or args.compass_samples < 0 or args.compass_away < 0:
+        print(
+            "error: --views must be >= 1, --compass-samples and --compass-away >= 0",
+            file=sys.stderr,
+        )
         return 2
     if not RANGE[0] < args.max_distance <= 4.0:
         print(f"error: --max-distance must be in ({RANGE[0]}, 4.0]", file=sys.stderr)
@@ -226,6 +285,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.compass_samples:
         summary["compass"] = run_compass(
             args.seed, args.compass_samples, COMPASS_STEPS_DEG, drawn.name, args.look
+        )
+    if args.compass_away:
+        summary["compass_away"] = run_compass_away(
+            args.seed, args.compass_away, COMPASS_AWAY_M, drawn.name, args.look
         )
     figure(views, summary, args.png)
     if args.view_png is not None:

@@ -37,7 +37,9 @@ resumption (re-measuring the heading, turning back to the axis at hold) with its
 id (:meth:`~agent.recovery.journaling.Journaling.resuming`): a second crash during the
 resumption resumes from there.
 
-Tie-break: the compass's re-measurement overrides the estimate when it is within 20° of it.
+The heading re-measurement is weighed against the estimate by their errors
+(:mod:`agent.core.control.heading_fix`): in place the compass wins; away from the
+reference view's place its parallax grows, and the estimate keeps its weight.
 """
 
 from __future__ import annotations
@@ -51,6 +53,7 @@ from agent.body.base import MotionResult
 from agent.core.agreed_params import params_digest
 from agent.core.agreement import Agreement
 from agent.core.control import PAPER_GAINS, advance, wrap_pi
+from agent.core.control.heading_fix import compass_sigma, estimate_sigma, fuse
 from agent.phases.context import NORTH, AgentFailure
 from agent.phases.reporting import Phase
 from agent.phases.roles import Crew
@@ -61,8 +64,6 @@ from agent.wire import NeighborRecordMsg, canonical_digest
 
 log = logging.getLogger("agent.recovery.resume")
 
-#: The compass's re-measured heading replaces the estimate only within this of it.
-REMEASURE_LIMIT = math.radians(20.0)
 #: Below this the robot does not turn back to θ = 0 to re-measure (compass overlap).
 REORIENT_MIN = math.radians(5.0)
 #: Where a resumed agent starts, by journaled phase (after agreement).
@@ -175,24 +176,30 @@ class Resumption:
             if st.command:
                 motions.save()  # answered: the beliefs as they are now, nothing in flight
             moved = st.command != "" or abs(wrap_pi(b.heading - NORTH)) > REORIENT_MIN
+            sigma = estimate_sigma(st.command, st.command_value, known=bool(st.request_id))
             if st.record is None:
                 if moved:
-                    self.remeasure_heading(journal)
+                    self.remeasure_heading(journal, sigma)
                 # the new search defines the fixed frame again from here: the start heading
                 # is then NORTH − heading, and the body's headings until now are unknown
                 self.survey.restarted(wrap_pi(NORTH - b.heading))
                 b.heading = NORTH
                 return Phase.SEARCH, None
             self.survey.restore(st.record)
-            return self.rejoin(st, journal, verdict, moved)
+            return self.rejoin(st, journal, verdict, moved, sigma)
 
     def rejoin(
-        self, st: JournalState, journal: Journal | None, verdict: Verdict | None, moved: bool
+        self,
+        st: JournalState,
+        journal: Journal | None,
+        verdict: Verdict | None,
+        moved: bool,
+        sigma: float,
     ) -> tuple[Phase, NeighborRecordMsg]:
         """With its record (restored): back into the exchange, or, agreed (by the
         journal, or by the others meanwhile), the agreed records fetched, the plan made
         again and checked against the journal, the heading re-measured before a move or
-        a hold; the stage to go on with."""
+        a hold (``sigma``: the heading estimate's σ); the stage to go on with."""
         ctx, b = self.ctx, self.ctx.beliefs
         assert st.record is not None
         digest, members, phase = st.agreed_digest, st.agreed_members, st.phase
@@ -231,7 +238,7 @@ class Resumption:
             # hold's own check judges the pair against it
             course.face(ctx.formation.goals(course.plan, ctx.me)[1])
         if stage in (Phase.MOVE, Phase.HOLD) and moved:
-            self.remeasure_heading(journal)
+            self.remeasure_heading(journal, sigma)
             turn = wrap_pi(course.final_heading - b.heading)
             if stage == Phase.HOLD and abs(turn) > REORIENT_MIN:  # face the axis again, as arrived
                 self.motion.rotate(turn, PAPER_GAINS, "resumed: turn back to the pyramid axis")
@@ -274,8 +281,10 @@ class Resumption:
             log.warning("contact while turning (the turn in flight at the crash)")
         return rep
 
-    def remeasure_heading(self, journal: Journal | None) -> None:
-        """Turn to θ = 0 (by the estimate) and measure the heading against the reference view."""
+    def remeasure_heading(self, journal: Journal | None, sigma: float) -> None:
+        """Turn to θ = 0 (by the estimate, σ ``sigma``), measure the heading against the
+        reference view, and weigh the two by their errors (the compass's grows with the
+        distance from the reference view's place, the frame's origin)."""
         ctx, b = self.ctx, self.ctx.beliefs
         ref = None
         if journal is not None:
@@ -301,17 +310,16 @@ class Resumption:
                 math.degrees(b.heading),
             )
             return
-        measured = wrap_pi(NORTH + float(res.dtheta))
-        off = wrap_pi(measured - b.heading)
-        if abs(off) > REMEASURE_LIMIT:
-            log.warning(
-                "heading re-measured %.1f°, %.1f° off the estimate: kept the estimate",
-                math.degrees(measured), math.degrees(off),
-            )  # fmt: skip
-            return
+        away = float(np.hypot(*b.position))
+        fix = fuse(b.heading, sigma, wrap_pi(NORTH + float(res.dtheta)), compass_sigma(away))
+        verdict = "weighed in" if fix.accepted else "beyond the gate: kept the estimate"
         log.info(
-            "heading re-measured against the reference view: %.1f° (estimate %.1f°)",
-            math.degrees(measured), math.degrees(b.heading),
+            "heading re-measured %.1f m from the reference view: %+.1f° off the estimate "
+            "%.1f° (σ %.1f° against the compass's %.1f°): %s, heading %.1f° (gain %.2f)",
+            away, math.degrees(fix.innovation), math.degrees(b.heading),
+            math.degrees(sigma), math.degrees(fix.sigma_compass), verdict,
+            math.degrees(fix.heading), fix.gain,
         )  # fmt: skip
-        b.heading = measured
-        self.motion.last_frame = frame
+        b.heading = fix.heading
+        if fix.accepted and fix.gain > 0.5:
+            self.motion.last_frame = frame

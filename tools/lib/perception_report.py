@@ -304,3 +304,8 @@ def print_summary(summary: dict[str, Any], seed: int, clutter: bool) -> None:
                 f"compass step {step:>3}°: failures {c['failures']}/{c['n']}, error median {c['median_err_deg']:.2f}°, "
                 f"p95 {c['p95_err_deg']:.2f}°, max {c['max_err_deg']:.2f}°, within 2° {c['within_2deg']:.2f}"
             )
+    for away, c in summary.get("compass_away", {}).items():
+        print(
+            f"compass {away:>4} m from its reference view: failures {c['failures']}/{c['n']}, "
+            f"error rms {c['rms_err_deg']:.2f}°, p95 {c['p95_err_deg']:.2f}°, max {c['max_err_deg']:.2f}°"
+        )
