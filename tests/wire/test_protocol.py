@@ -196,7 +196,7 @@ def test_keys_and_ids() -> None:
 
 def test_network_spec_json5_items() -> None:
     spec = p.NetworkSpec(connect=("tcp/10.0.0.1:7447",), multicast_scouting=False, mode="client")
-    lossy = list(p.LOSSY_LINK_SETTINGS)
+    lossy = [*p.LOSSY_LINK_SETTINGS, *p.QUIET_SETTINGS]
     assert spec.json5_items() == [
         ("mode", '"client"'),
         *lossy,
@@ -220,6 +220,9 @@ def test_lossy_link_settings_are_accepted_by_zenoh() -> None:
         cfg.insert_json5(key, value)
     assert json.loads(cfg.get_json("transport/link/tx/lease")) == 30000
     assert json.loads(cfg.get_json("connect"))["timeout_ms"]["client"] == 60000
+    for key, value in p.QUIET_SETTINGS:
+        cfg.insert_json5(key, value)
+    assert json.loads(cfg.get_json("transport/shared_memory/enabled")) is False
 
 
 @pytest.mark.parametrize(
