@@ -232,3 +232,16 @@ def test_a_scaled_robot_whose_sightings_did_not_pair_is_named_from_any_order() -
     assert w.named == v.named and w.reason == v.reason
     (t3,) = [t for t in v.tests if t.robot == 3]
     assert t3.p_bias < 1e-6, t3.describe()
+
+
+@pytest.mark.parametrize("kind", ["", "scale", "rotate"])
+def test_whether_anyone_is_rejected_is_the_full_tests_answer(kind: str) -> None:
+    # the search asks only whether the rest rejects anyone: the bias test is skipped once
+    # a cheap test has, never changing the answer
+    recs = fleet(5, kind=kind)
+    poses = build_poses(recs)
+    ev = ft._evidence(poses, NOISE, recs, None)
+    full = ft._robot_tests(poses, NOISE, ev)
+    for alpha in (ft.ALPHA, 0.5, min(t.p for t in full) * 1.5):
+        want = any(t.p < alpha for t in full)
+        assert ft._rejects_anyone(poses, NOISE, ev, alpha) == want

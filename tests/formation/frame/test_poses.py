@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -392,3 +393,48 @@ def test_candidates_built_in_blocks_give_the_same_pairs(monkeypatch: pytest.Monk
     assert [(p.i, p.j, p.a, p.b, p.eps_d) for p in blocks] == [
         (p.i, p.j, p.a, p.b, p.eps_d) for p in whole
     ]
+
+
+def _coo_jacobian(prob: Any, x: np.ndarray) -> Any:
+    """The fit's Jacobian as a COO matrix of its entries, made CSR (the reference)."""
+    from scipy.sparse import coo_matrix
+
+    _, psi = prob.unpack(x)
+    rows = np.arange(prob.m)
+    co, ct = prob.col[prob.o], prob.col[prob.t]
+    c, s = np.cos(psi[prob.o]), np.sin(psi[prob.o])
+    dpx = -(-s * prob.v[:, 0] - c * prob.v[:, 1]) * prob.sp
+    dpy = -(c * prob.v[:, 0] - s * prob.v[:, 1]) * prob.sp
+    dm = prob.sm * np.cos(2.0 * (psi[prob.t] - psi[prob.o] - prob.mask_ref))
+    r_list, c_list, v_list = [], [], []
+    for cols, sign in ((ct, 1.0), (co, -1.0)):
+        ok = cols >= 0
+        r, k = rows[ok], cols[ok]
+        r_list += [2 * r, 2 * r + 1, 2 * prob.m + r]
+        c_list += [k, k + 1, k + 2]
+        v_list += [sign * prob.sp[ok], sign * prob.sp[ok], sign * dm[ok]]
+    ok = co >= 0
+    r_list += [2 * rows[ok], 2 * rows[ok] + 1]
+    c_list += [co[ok] + 2, co[ok] + 2]
+    v_list += [dpx[ok], dpy[ok]]
+    entries = (np.concatenate(v_list), (np.concatenate(r_list), np.concatenate(c_list)))
+    return coo_matrix(entries, (3 * prob.m, prob.nvar)).tocsr()
+
+
+@pytest.mark.parametrize(("anchor", "masks"), [(0, True), (2, False), (5, True)])
+def test_the_jacobian_is_the_coo_matrix_bit_for_bit(anchor: int, masks: bool) -> None:
+    # the fit's steps depend on every array of the sparse Jacobian: built directly, it
+    # must be what coo_matrix(...).tocsr() of its entries gives, to the last bit
+    from agent.core.formation.frame.poses import _Problem
+
+    rng = np.random.default_rng(anchor)
+    heads = rng.uniform(-3, 3, 6)
+    recs = unaligned_records(list(range(1, 7)), sim_layout(rng, 6), heads, rng, masks=masks)
+    graph = identify_pairs(recs)
+    prob = _Problem(graph.ids, pair_measurements(graph), anchor)
+    x = rng.normal(size=prob.nvar)
+    got, want = prob.jac(x), _coo_jacobian(prob, x)
+    for name in ("data", "indices", "indptr"):
+        a, b = getattr(got, name), getattr(want, name)
+        assert a.dtype == b.dtype and a.tobytes() == b.tobytes(), name
+    assert got.has_canonical_format and want.has_canonical_format

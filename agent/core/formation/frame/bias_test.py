@@ -117,7 +117,9 @@ def bias_fit(
         raise ValueError(f"robot {robot} has no pose")
     if not bias_scale > 0.0:
         raise ValueError(f"bias_scale must be > 0, got {bias_scale}")
-    ms = sorted(poses.measurements, key=lambda m: (m.owner, m.target))
+    # r's own and the others' of r, filtered, then sorted (stably): as the sorted list filtered
+    mine = (m for m in poses.measurements if robot in (m.owner, m.target))
+    ms = sorted(mine, key=lambda m: (m.owner, m.target))
     own: list[PoseMeasurement | np.ndarray] = [
         m for m in ms if m.owner == robot and m.target != robot
     ]
@@ -189,6 +191,12 @@ class _Sightings:
         # the others' sightings of r, as seen from each owner: R(−ψ_o)(p_r − p_o)
         self.rot_obs = np.stack([np.array([[c, s], [-s, c]]) for c, s in
                                  zip(np.cos(psi_obs), np.sin(psi_obs), strict=True)])  # fmt: skip
+        # the own sightings' columns, for :meth:`_matched`
+        n_own = self.n_own
+        self.vx, self.vy = self.v_all[:n_own, 0].copy(), self.v_all[:n_own, 1].copy()
+        self.ux, self.uy = self.u_all[:n_own, 0].copy(), self.u_all[:n_own, 1].copy()
+        self.sr_own, self.st_own = self.s_r[:n_own].copy(), self.s_t[:n_own].copy()
+        self._last: tuple[tuple[int, bytes], np.ndarray] | None = None
 
     def errors(self, x: np.ndarray, jac_too: bool) -> tuple[np.ndarray, np.ndarray | None]:
         """Misfits (k, 2) and their Jacobian (k, 2, len(x)), owner's frame."""
@@ -225,21 +233,25 @@ class _Sightings:
     def _matched(
         self, first: int, pr: np.ndarray, c: float, s: float, scale: float, shift: np.ndarray
     ) -> np.ndarray:
-        """The rows of ``p_any`` that the own sightings from ``first`` on land nearest to."""
+        """The rows of ``p_any`` that the own sightings from ``first`` on land nearest to.
+        A pure function of its arguments: the last answer is kept, since the fit asks for
+        the Jacobian at the point whose residuals it has just taken."""
         if first == self.n_own:
             return np.zeros(0, dtype=np.intp)
-        rel = self.p_any - pr
-        pred = np.stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]], 1)
-        pred = pred * scale + shift
-        v, u = self.v_all[first : self.n_own], self.u_all[first : self.n_own]
-        e = pred[None, :, :] - v[:, None, :]  # (sightings, robots, 2)
-        along = (e[..., 0] * u[:, None, 0] + e[..., 1] * u[:, None, 1]) / self.s_r[
-            first : self.n_own, None
-        ]
-        across = (e[..., 1] * u[:, None, 0] - e[..., 0] * u[:, None, 1]) / self.s_t[
-            first : self.n_own, None
-        ]
-        return np.asarray(np.argmin(np.round(along**2 + across**2, 9), axis=1), dtype=np.intp)
+        key = (first, np.array([pr[0], pr[1], c, s, scale, shift[0], shift[1]]).tobytes())
+        if self._last is not None and self._last[0] == key:
+            return self._last[1]
+        relx, rely = self.p_any[:, 0] - pr[0], self.p_any[:, 1] - pr[1]
+        px = (c * relx + s * rely) * scale + shift[0]
+        py = (-s * relx + c * rely) * scale + shift[1]
+        ex = px[None, :] - self.vx[first:, None]  # (sightings, robots)
+        ey = py[None, :] - self.vy[first:, None]
+        ux, uy = self.ux[first:, None], self.uy[first:, None]
+        along = (ex * ux + ey * uy) / self.sr_own[first:, None]
+        across = (ey * ux - ex * uy) / self.st_own[first:, None]
+        hit = np.asarray(np.argmin(np.round(along**2 + across**2, 9), axis=1), dtype=np.intp)
+        self._last = (key, hit)
+        return hit
 
     def _keeps_pairing(self, x: np.ndarray) -> bool:
         """Whether every paired sighting lands, at ``x``, on the robot the fit paired it

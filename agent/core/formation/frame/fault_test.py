@@ -201,8 +201,10 @@ def mask_deltas(poses: PoseFrame, target: int) -> list[float]:
     """δ = ψ_t − ψ_o − (β + θ − π/2) of the others' masks of ``target`` (by owner id)."""
     index = {rid: k for k, rid in enumerate(poses.ids)}
     out = []
-    for m in sorted(poses.measurements, key=lambda m: (m.owner, m.target)):
-        if m.target != target or not math.isfinite(m.orientation):
+    # filtered, then sorted (stably): the order of the sorted list, filtered
+    of_it = (m for m in poses.measurements if m.target == target)
+    for m in sorted(of_it, key=lambda m: (m.owner, m.target)):
+        if not math.isfinite(m.orientation):
             continue
         ref = math.atan2(float(m.vector[1]), float(m.vector[0])) + m.orientation - math.pi / 2
         out.append(float(poses.headings[index[target]] - poses.headings[index[m.owner]] - ref))
@@ -324,26 +326,38 @@ def _robot_tests(
 ) -> tuple[RobotTest, ...]:
     """Steps 2-4 from gathered evidence; ``bias`` False: without the bias test (step 4,
     the costly one: p_bias 1)."""
-    out = []
-    for r in poses.ids:
-        mine = [e for e in ev.edges if r in e]
-        own = ev.stray.get(r, [])
-        probs = [ev.p_edge[e] for e in mine]
-        # every sighting of r's own could have ended up a lost stray (step 2)
-        probs += [float(noise.p_stray(d)) for d in ev.sighted.get(r, [])]
-        k = sum(ev.edges[e] for e in mine)
-        lost = sum(not lands for _, lands in own)
-        deltas = mask_deltas(poses, r)
-        offset, p_h = mask_test(deltas, noise)
-        p_h = max(p_h, noise.rho if r in ev.timed else noise.rho_untimed) if deltas else p_h
-        p_pos = tail_at_least(probs, k + lost)
-        stat, p_b = 0.0, 1.0
-        if bias:
-            fit = bias_fit(poses, r, noise, noise.bias_scale, ev.loose.get(r), ev.elsewhere)
-            stat, p_b = fit.statistic, fit.p
-        out.append(RobotTest(r, len(mine), k, len(own), lost, p_pos, len(deltas), offset, p_h,
-                             stat, p_b))  # fmt: skip
-    return tuple(out)
+    return tuple(_robot_test(poses, noise, ev, r, bias) for r in poses.ids)
+
+
+def _robot_test(
+    poses: PoseFrame, noise: SightingNoise, ev: _Evidence, r: int, bias: bool
+) -> RobotTest:
+    """Steps 2-4 for robot ``r`` (``bias`` as :func:`_robot_tests`)."""
+    mine = [e for e in ev.edges if r in e]
+    own = ev.stray.get(r, [])
+    probs = [ev.p_edge[e] for e in mine]
+    # every sighting of r's own could have ended up a lost stray (step 2)
+    probs += [float(noise.p_stray(d)) for d in ev.sighted.get(r, [])]
+    k = sum(ev.edges[e] for e in mine)
+    lost = sum(not lands for _, lands in own)
+    deltas = mask_deltas(poses, r)
+    offset, p_h = mask_test(deltas, noise)
+    p_h = max(p_h, noise.rho if r in ev.timed else noise.rho_untimed) if deltas else p_h
+    p_pos = tail_at_least(probs, k + lost)
+    stat, p_b = 0.0, 1.0
+    if bias:
+        fit = bias_fit(poses, r, noise, noise.bias_scale, ev.loose.get(r), ev.elsewhere)
+        stat, p_b = fit.statistic, fit.p
+    return RobotTest(r, len(mine), k, len(own), lost, p_pos, len(deltas), offset, p_h, stat, p_b)
+
+
+def _rejects_anyone(poses: PoseFrame, noise: SightingNoise, ev: _Evidence, alpha: float) -> bool:
+    """Whether any robot's test (steps 2-4) rejects it at ``alpha``: the same answer as
+    :func:`_robot_tests`, the costly bias test run only while nobody is rejected yet (the
+    cheap tests of every robot first; a robot's p only falls when its bias test is added)."""
+    if any(_robot_test(poses, noise, ev, r, False).p < alpha for r in poses.ids):
+        return True
+    return any(_robot_test(poses, noise, ev, r, True).p < alpha for r in poses.ids)
 
 
 @dataclass(frozen=True)
@@ -507,10 +521,9 @@ def fault_test(
             continue
         at = seen_by_others(poses, rest, t.robot, noise).reshape(1, 2)
         rest_ev = _evidence(rest, noise, records, at)
-        if any(u.p < alpha for u in _robot_tests(rest, noise, rest_ev)):
-            continue
+        # the global test first: either failing rules the candidate out, and it is cheap
         rest_count = _fleet_count(noise, rest_ev)
-        if rest_count.p < alpha:
+        if rest_count.p < alpha or _rejects_anyone(rest, noise, rest_ev, alpha):
             continue
         clean, drop = _clean(rest, noise)
         if clean is not None:

@@ -16,19 +16,20 @@ This is the same count a k-d tree per robot gives, computed without a Python loo
 candidates (a 50-NAO record set has ~10⁵ candidates, a 100-NAO one ~7·10⁵, and
 every agent plans on the same records): candidates are grouped by the sighting counts of
 their two robots, and within a group the nearest sighting is found by brute force over
-j's sightings (a robot reports at most ``MAX_NEIGHBOURS``), in chunks of at most
-:data:`CHUNK_ELEMENTS` distances. Determinism: elementwise arithmetic only (no BLAS, so
-no host-dependent summation order), and of two equidistant sightings of j the one with
-the lower index is the nearest (``np.argmin``).
+j's sightings (a robot reports at most ``MAX_NEIGHBOURS``), one sighting of j at a time
+over every (candidate, sighting of i) of a chunk of at most :data:`CHUNK_ELEMENTS`.
+Determinism: elementwise arithmetic only (no BLAS, so no host-dependent summation order),
+and of two equidistant sightings of j the one with the lower index is the nearest (a
+strictly nearer one replaces it, as ``np.argmin`` picks the first).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-#: Most (candidate, sighting of i, sighting of j) distances held at once (~2 MB an
-#: array; of 2^14 .. 2^20, 2^18 measured fastest on a 50-NAO record set).
-CHUNK_ELEMENTS = 1 << 18
+#: Most (candidate, sighting of i) distances held at once (256 kB an array; of 2^13 ..
+#: 2^17, 2^15 measured fastest on a 50-NAO record set, by a few per cent).
+CHUNK_ELEMENTS = 1 << 15
 
 
 def support_one_side(
@@ -90,12 +91,16 @@ def support_one_side(
     live = np.flatnonzero((di > 1) & (dj > 1))
     if live.size == 0:
         return out
-    groups = np.stack([di[live], dj[live]], axis=1)
-    keys, inverse = np.unique(groups, axis=0, return_inverse=True)
-    inverse = inverse.reshape(-1)
-    for g, (a, b) in enumerate(keys.tolist()):
-        members = live[inverse == g]
-        step = max(1, CHUNK_ELEMENTS // (a * b))
+    # group by (a, b) = (di, dj), one integer key each; members in ascending order
+    key = di[live] * (int(counts.max()) + 1) + dj[live]
+    by_key = np.argsort(key, kind="stable")
+    keys, first = np.unique(key[by_key], return_index=True)
+    bounds = [*first.tolist(), live.size]
+    width = int(counts.max()) + 1
+    for g, k in enumerate(keys.tolist()):
+        a, b = divmod(k, width)
+        members = live[by_key[bounds[g] : bounds[g + 1]]]
+        step = max(1, CHUNK_ELEMENTS // a)
         for lo in range(0, members.size, step):
             cand = members[lo : lo + step]
             out[cand] = _count(cand, a, b, src, dst, turn, oi, oj, starts, vecs, epsilon, rel_tol)
@@ -126,11 +131,24 @@ def _count(
     s = np.sin(-turn[cand])[:, None]
     mx = rx * c - ry * s  # (v_k − v_src) · [[c, s], [−s, c]], row vector times matrix
     my = rx * s + ry * c
-    dx = mx[:, :, None] - vecs[hj, 0][:, None, :]
-    dy = my[:, :, None] - vecs[hj, 1][:, None, :]
-    d2 = dx * dx + dy * dy  # (C, a, b)
-    near = np.argmin(d2, axis=2)  # (C, a)
-    dist = np.sqrt(np.take_along_axis(d2, near[:, :, None], axis=2)[:, :, 0])
+    # the nearest of j's sightings, one sighting of j at a time (the first of equal
+    # distances, as np.argmin over them): (C, a) arrays, no (C, a, b) one
+    hx, hy = vecs[hj, 0], vecs[hj, 1]
+    d2 = np.full(mx.shape, np.inf)
+    near = np.zeros(mx.shape, dtype=np.int64)
+    dx = np.empty_like(mx)
+    dy = np.empty_like(mx)
+    closer = np.empty(mx.shape, dtype=bool)
+    for h in range(b):
+        np.subtract(mx, hx[:, h : h + 1], out=dx)
+        np.subtract(my, hy[:, h : h + 1], out=dy)
+        np.multiply(dx, dx, out=dx)
+        np.multiply(dy, dy, out=dy)
+        np.add(dx, dy, out=dx)  # dx² + dy², as one (C, a, b) array held it
+        np.less(dx, d2, out=closer)
+        np.copyto(d2, dx, where=closer)
+        np.copyto(near, h, where=closer)
+    dist = np.sqrt(d2)
     hit = np.take_along_axis(hj, near, axis=1)
     tol = 0.5 * epsilon + rel_tol * np.sqrt(rx * rx + ry * ry)
     ok = (dist <= tol) & (hit != dst[cand][:, None]) & (ki != src[cand][:, None])

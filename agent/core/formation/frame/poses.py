@@ -52,7 +52,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.sparse import coo_matrix, csr_matrix
+from scipy.sparse import csr_matrix
 from scipy.spatial import cKDTree
 
 from agent.core.formation.frame import robust_lm
@@ -274,25 +274,24 @@ class _Problem:
         dpy = -(c * self.v[:, 0] - s * self.v[:, 1]) * self.sp
         delta = psi[self.t] - psi[self.o] - self.mask_ref
         dm = self.sm * np.cos(2.0 * delta)
-        r_list: list[np.ndarray] = []
-        c_list: list[np.ndarray] = []
-        v_list: list[np.ndarray] = []
-        for cols, sign in ((ct, 1.0), (co, -1.0)):
-            ok = cols >= 0
-            r, k = rows[ok], cols[ok]
-            r_list += [2 * r, 2 * r + 1, 2 * self.m + r]
-            c_list += [k, k + 1, k + 2]
-            v_list += [sign * self.sp[ok], sign * self.sp[ok], sign * dm[ok]]
-        ok = co >= 0
-        r, k = rows[ok], co[ok]
-        r_list += [2 * r, 2 * r + 1]
-        c_list += [k + 2, k + 2]
-        v_list += [dpx[ok], dpy[ok]]
-        shape = (3 * self.m, self.nvar)
-        coo = coo_matrix(
-            (np.concatenate(v_list), (np.concatenate(r_list), np.concatenate(c_list))), shape
+        # (row, column, value) of every entry, as three per row at most: each sighting's
+        # position rows touch both robots' columns and the owner's ψ, its mask row both ψ
+        rows = np.concatenate([2 * rows, 2 * rows + 1, 2 * self.m + rows] * 2
+                              + [2 * rows, 2 * rows + 1])  # fmt: skip
+        cols = np.concatenate([ct, ct + 1, ct + 2, co, co + 1, co + 2, co + 2, co + 2])
+        vals = np.concatenate([1.0 * self.sp, 1.0 * self.sp, 1.0 * dm,
+                               -1.0 * self.sp, -1.0 * self.sp, -1.0 * dm, dpx, dpy])  # fmt: skip
+        have = np.concatenate([ct >= 0] * 3 + [co >= 0] * 5)
+        rows, cols, vals = rows[have], cols[have], vals[have]
+        # as ``coo_matrix(...).tocsr()`` gives it: rows in order, columns ascending in each
+        order = np.argsort(rows * self.nvar + cols, kind="stable")
+        indptr = np.zeros(3 * self.m + 1, dtype=np.int32)
+        np.cumsum(np.bincount(rows, minlength=3 * self.m), out=indptr[1:])
+        out = csr_matrix(
+            (vals[order], cols[order].astype(np.int32), indptr), shape=(3 * self.m, self.nvar)
         )
-        return coo.tocsr()
+        out.has_canonical_format = True  # sorted, no duplicates: as tocsr() leaves it
+        return out
 
 
 def _residuals(
