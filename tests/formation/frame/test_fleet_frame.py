@@ -9,7 +9,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from agent.core.formation.frame.fleet_frame import fleet_frame
+from agent.core.formation.frame.fault_test import FaultVerdict, FleetCount, RobotTest
+from agent.core.formation.frame.fleet_frame import DOUBT, fleet_frame, surprise
 from agent.core.formation.frame.neighbour_check import DEFAULT_EPSILON
 from agent.core.perception.sighting_noise import SightingNoise
 from tests.formation.pose_fleets import fault, sim_layout, unaligned_records
@@ -157,3 +158,26 @@ def test_masks_name_a_turned_robot_only_when_better_than_rho(
     noise = dataclasses.replace(SightingNoise.synthetic(0.01, 0.03, 0.03), rho_untimed=rho)
     ff = fleet_frame(recs, DEFAULT_EPSILON, noise)
     assert ff.excluded == named, ff.reason
+
+
+def _verdict(global_p: float, robot_p: list[float]) -> FaultVerdict:
+    tests = tuple(
+        RobotTest(i + 1, 3, 0, 0, 0, 1.0, 2, 0.0, 1.0, 0.0, p / 3.0) for i, p in enumerate(robot_p)
+    )
+    return FaultVerdict(True, (), None, (), tests, "", FleetCount(0, 10, global_p))
+
+
+def test_a_frame_surprises_by_its_global_test_or_its_worst_robot_over_the_fleet() -> None:
+    """By hand: the smaller of the global p and the worst robot's p times n."""
+    assert surprise(_verdict(0.5, [0.9, 0.3, 1.0])) == pytest.approx(0.5)
+    assert surprise(_verdict(0.5, [0.9, 0.03, 1.0])) == pytest.approx(0.09)
+    assert surprise(_verdict(0.004, [0.9, 0.03, 1.0])) == pytest.approx(0.004)
+    # the shifted robot's frame of the recorded run: its worst robot 3.3e-4 of seven
+    assert surprise(_verdict(0.3, [3.3e-4, *[0.5] * 6])) < DOUBT
+    assert surprise(_verdict(0.3, [])) == pytest.approx(0.3)
+
+
+def test_surprise_needs_the_global_test() -> None:
+    v = _verdict(0.5, [0.9])
+    with pytest.raises(ValueError, match="without its global test"):
+        surprise(FaultVerdict(v.ok, v.named, v.poses, v.dropped, v.tests, v.reason, None))

@@ -26,8 +26,10 @@ Candidate frames, cheapest first (each built only when the ones before it fail):
 A frame with nobody named is preferred: the candidates are tried in order for one the
 test passes with everyone, and it is planned on as it is (a refined candidate has
 identified its sightings; an unrefined one is fitted again without its rejected pairs).
-A frame that passes with everyone is *doubted* when the fleet's global test gives it
-p < :data:`DOUBT`: the later candidates are then tried too, and of every frame that
+A frame that passes with everyone is *doubted* when it surprises the noise model at
+:data:`DOUBT`: its global test gives p below it, or its most surprising robot does once
+multiplied by the number of robots (Bonferroni over the fleet: some robot of n sound ones
+looks that odd with at most that probability). The later candidates are then tried too, and of every frame that
 passed, those naming a robot included (judged on the rest, the named robot left out),
 the one whose global test gives the largest p is kept (the fit the noise model finds
 least surprising; tie: the earlier). A frame built on the aligned model can pass with
@@ -35,7 +37,9 @@ one robot fitted wrong, its sightings all landing nowhere (in five robots, four 
 within 16° of each other and one turned 130°: p 4·10⁻⁴), where the pose fit explains
 every sighting (p 1); and identifying sightings where they land can absorb a faulty
 robot, every sighting of it re-identified (p 10⁻³), where the pose fit names it and the
-rest fits (p 0.4).
+rest fits (p 0.4); or with a robot's sightings all shifted 0.5 m re-identified onto its
+neighbours, every robot passing (the worst at p 3·10⁻⁴ of seven, its global test not
+surprised) and one start 0.47 m off, where the pose fit names that robot.
 Only if none passes so is the first general candidate (3, 4) that names a robot taken
 (a poor fit of a sound fleet must not blame a robot a better fit clears): fitted again
 without it, the named robot standing still where the *others* saw it (where most of their
@@ -81,7 +85,7 @@ from agent.core.formation.frame.reidentify import refine_poses
 from agent.core.perception.sighting_noise import SightingNoise, shipped_noise
 
 #: The level at which a frame that passes the fault test is doubted (module docstring): a
-#: passed frame whose global test (:class:`fault_test.FleetCount`) has p below it is
+#: passed frame whose :func:`surprise` is below it is
 #: compared with the later candidates, and the one that fits best is kept. It decides
 #: only how far the search goes (a correct frame is doubted in about 1 % of fleets, and
 #: each doubt costs the later candidates: ~60 CPU s at 100 NAOs), never whether a frame
@@ -249,6 +253,15 @@ def _framed(
                       excluded=(robot,), excluded_at=at.reshape(1, 2), reason=reason)  # fmt: skip
 
 
+def surprise(verdict: FaultVerdict) -> float:
+    """How well a frame that passed fits (module docstring, *doubted*): the smaller of its
+    global test's p and its most surprising robot's p times the number of robots."""
+    if verdict.fleet is None:
+        raise ValueError("a verdict without its global test (a frame that did not pass)")
+    worst = min((t.p for t in verdict.tests), default=1.0)
+    return min(verdict.fleet.p, worst * max(1, len(verdict.tests)))
+
+
 def fleet_frame(
     records: Sequence[NeighborRecord], epsilon: float, noise: SightingNoise | None = None
 ) -> FleetFrame:
@@ -292,7 +305,7 @@ def fleet_frame(
             continue
         assert verdict.fleet is not None  # a passed verdict carries its global test
         frame = _framed(fine, test, verdict, cand.name, model)
-        if not verdict.named and verdict.fleet.p >= DOUBT:
+        if not verdict.named and surprise(verdict) >= DOUBT:
             return frame
         passed.append((verdict.fleet.p, bool(verdict.named), frame))
     if any(not named for _, named, _ in passed):
