@@ -43,7 +43,7 @@ import math
 import numpy as np
 
 #: Most (candidate, sighting of i) entries held at once.
-CHUNK_ELEMENTS = 1 << 16
+CHUNK_ELEMENTS = 1 << 15
 #: Width (m) of the distance bands that bound a window of j's sightings (a power of two,
 #: so that a distance divides by it exactly), and the most bands (wider for far sightings).
 BAND_WIDTH = 1.0 / 64.0
