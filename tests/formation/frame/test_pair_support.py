@@ -1,6 +1,8 @@
 """Loop-consistency support of candidate pairs (agent/core/formation/frame/pair_support.py):
-known answers by hand, the vectorised count against a plain loop over candidates (the
-implementation it replaced), and one test per error branch."""
+known answers by hand, the windowed count against a brute force over all of j's sightings
+(exactly, ties included) and against a plain loop over candidates with a k-d tree (the
+implementation it replaced), the brute-force path for far or non-finite input, and one
+test per error branch."""
 
 from __future__ import annotations
 
@@ -47,6 +49,37 @@ def loop_reference(
         dist, k = cKDTree(vecs[mine]).query(moved)
         tol = 0.5 * epsilon + rel_tol * np.hypot(rel[:, 0], rel[:, 1])
         out[t] = int(np.sum((dist <= tol) & (mine[k] != dst[t])))
+    return out
+
+
+def brute_reference(
+    src: np.ndarray,
+    dst: np.ndarray,
+    turn: np.ndarray,
+    owner: np.ndarray,
+    vecs: np.ndarray,
+    epsilon: float,
+    rel_tol: float,
+) -> np.ndarray:
+    """One candidate at a time, every sighting of j looked at: np.argmin of d² (the first
+    of equal ones), with the module's float operations, so the counts must agree exactly."""
+    out = np.zeros(src.shape[0], dtype=np.int64)
+    for t in range(src.shape[0]):
+        others = np.flatnonzero((owner == owner[src[t]]) & (np.arange(owner.size) != src[t]))
+        mine = np.flatnonzero(owner == owner[dst[t]])
+        if others.size == 0 or mine.size < 2:
+            continue
+        rx = vecs[others, 0] - vecs[src[t], 0]
+        ry = vecs[others, 1] - vecs[src[t], 1]
+        c, s = np.cos(-turn[t : t + 1]), np.sin(-turn[t : t + 1])
+        mx, my = rx * c - ry * s, rx * s + ry * c
+        dx = mx[:, None] - vecs[mine, 0][None, :]
+        dy = my[:, None] - vecs[mine, 1][None, :]
+        d2 = dx * dx + dy * dy
+        k = np.argmin(d2, axis=1)
+        tol = 0.5 * epsilon + rel_tol * np.sqrt(rx * rx + ry * ry)
+        near = np.sqrt(d2[np.arange(others.size), k]) <= tol
+        out[t] = int(np.sum(near & (mine[k] != dst[t])))
     return out
 
 
@@ -130,6 +163,72 @@ def test_the_vectorised_count_is_the_loop_over_candidates(case: tuple[np.ndarray
     assert np.array_equal(got, want) or _only_ties_differ(case, got, want)
 
 
+@st.composite
+def tie_prone_sets(draw: st.DrawFn) -> tuple[np.ndarray, ...]:
+    """Sightings on a lattice of 0.25 m (exact in binary) and quarter turns: many moved
+    sightings at exactly equal distances from two of j's, and on distance-band edges."""
+    n = draw(st.integers(2, 5))
+    counts = draw(st.lists(st.integers(1, 7), min_size=n, max_size=n))
+    owner = np.repeat(np.arange(n), counts)
+    cells = draw(st.lists(st.integers(-12, 12), min_size=2 * owner.size, max_size=2 * owner.size))
+    vecs = 0.25 * np.array(cells, dtype=np.float64).reshape(-1, 2)
+    pairs = [(a, b) for a in range(owner.size) for b in range(owner.size) if owner[a] != owner[b]]
+    chosen = draw(st.lists(st.sampled_from(pairs), min_size=1, max_size=40))
+    turns = draw(
+        st.lists(
+            st.sampled_from([0.0, math.pi / 2, -math.pi / 2, math.pi, 0.7]),
+            min_size=len(chosen),
+            max_size=len(chosen),
+        )
+    )
+    src = np.array([a for a, _ in chosen], dtype=np.int64)
+    dst = np.array([b for _, b in chosen], dtype=np.int64)
+    return src, dst, np.array(turns), owner, vecs
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.one_of(sighting_sets(), tie_prone_sets()), st.sampled_from([0.35, 0.5, 1.0]))
+def test_the_windowed_count_is_the_brute_force_exactly(
+    case: tuple[np.ndarray, ...], epsilon: float
+) -> None:
+    src, dst, turn, owner, vecs = case
+    got = support_one_side(src, dst, turn, owner, vecs, epsilon, REL)
+    assert np.array_equal(got, brute_reference(src, dst, turn, owner, vecs, epsilon, REL))
+
+
+def test_the_windowed_count_is_the_brute_force_on_a_dense_random_set() -> None:
+    rng = np.random.default_rng(11)
+    owner = np.repeat(np.arange(12), rng.integers(1, 12, size=12))
+    vecs = rng.uniform(-3, 3, size=(owner.size, 2))
+    src, dst = np.nonzero(owner[:, None] != owner[None, :])
+    turn = rng.uniform(-math.pi, math.pi, size=src.size)
+    got = support_one_side(src, dst, turn, owner, vecs, EPS, REL)
+    assert got.sum() > 0
+    assert np.array_equal(got, brute_reference(src, dst, turn, owner, vecs, EPS, REL))
+
+
+@pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
+@pytest.mark.parametrize("scale", [1e120, 1e160])
+def test_far_sightings_take_the_brute_force(scale: float) -> None:
+    rng = np.random.default_rng(5)
+    owner = np.repeat(np.arange(4), 3)
+    vecs = rng.uniform(-3, 3, size=(owner.size, 2))
+    vecs[4] *= scale  # beyond HUGE; at 1e160 the squares overflow to inf
+    src, dst = np.nonzero(owner[:, None] != owner[None, :])
+    turn = rng.uniform(-math.pi, math.pi, size=src.size)
+    got = support_one_side(src, dst, turn, owner, vecs, EPS, REL)
+    assert np.array_equal(got, brute_reference(src, dst, turn, owner, vecs, EPS, REL))
+
+
+def test_a_non_finite_turn_takes_the_brute_force() -> None:
+    owner, vecs = triangle(math.pi / 2)
+    src, dst = np.array([0, 0]), np.array([2, 2])
+    turn = np.array([math.pi / 2, math.nan])
+    got = support_one_side(src, dst, turn, owner, vecs, EPS, REL)
+    assert got.tolist() == [1, 0]
+    assert np.array_equal(got, brute_reference(src, dst, turn, owner, vecs, EPS, REL))
+
+
 def _only_ties_differ(case: tuple[np.ndarray, ...], got: np.ndarray, want: np.ndarray) -> bool:
     """Every differing count has a moved sighting equally near dst and another of j's."""
     src, dst, turn, owner, vecs = case
@@ -157,6 +256,7 @@ def test_small_chunks_give_the_same_counts(monkeypatch: pytest.MonkeyPatch) -> N
     monkeypatch.setattr(pair_support, "CHUNK_ELEMENTS", 7)
     assert np.array_equal(support_one_side(src, dst, turn, owner, vecs, EPS, REL), whole)
     assert np.array_equal(whole, loop_reference(src, dst, turn, owner, vecs, EPS, REL))
+    assert np.array_equal(whole, brute_reference(src, dst, turn, owner, vecs, EPS, REL))
 
 
 @pytest.mark.parametrize(

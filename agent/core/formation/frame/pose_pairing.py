@@ -211,7 +211,8 @@ def identify_pairs(
         linked: set[tuple[int, int]] = set()
         paired: set[int] = set()  # robots (record index) paired by supported candidates
         first = support[order] > 0
-        for t in _in_slices(np.concatenate((order[first], order[~first]))):
+        taken = _Taken(owner, ra, rb, len(recs))
+        for t in taken.open(np.concatenate((order[first], order[~first]))):
             da, db = int(ra[t]), int(rb[t])
             oa, ob = int(owner[da]), int(owner[db])
             if da in used or db in used or (oa, ob) in linked:
@@ -222,6 +223,7 @@ def identify_pairs(
                 continue
             used.update((da, db))
             linked.add((oa, ob))
+            taken.take(da, db, oa, ob)
             pairs.append(
                 NeighbourPair(
                     i=ids[oa],
@@ -281,11 +283,30 @@ def _scored_candidates(
     return ra_all, rb_all, cost_all, turn_all, sup_all
 
 
-def _in_slices(order: np.ndarray, size: int = 1 << 16) -> Iterator[int]:
-    """The candidates of ``order`` as Python ints, a slice at a time (not one list of
-    millions)."""
-    for lo in range(0, order.size, size):
-        yield from order[lo : lo + size].tolist()
+class _Taken:
+    """The sightings used and robot pairs linked so far, as arrays: :meth:`open` passes
+    over the candidates that an earlier acceptance already rules out, a slice at a time
+    (the greedy loop checks the rest as before, so it accepts the same candidates; most
+    of ~10⁵ candidates fall here, in one array operation rather than one Python step)."""
+
+    def __init__(self, owner: np.ndarray, ra: np.ndarray, rb: np.ndarray, robots: int) -> None:
+        self.owner, self.ra, self.rb = owner, ra, rb
+        self.used = np.zeros(owner.size, dtype=bool)
+        self.linked = np.zeros((robots, robots), dtype=bool)
+
+    def take(self, da: int, db: int, oa: int, ob: int) -> None:
+        """Sightings ``da``, ``db`` of robots ``oa``, ``ob`` are paired."""
+        self.used[da] = self.used[db] = True
+        self.linked[oa, ob] = True
+
+    def open(self, order: np.ndarray, size: int = 1 << 12) -> Iterator[int]:
+        """The candidates of ``order`` as Python ints, but those whose sightings are used
+        or whose robots are linked when their slice is reached."""
+        for lo in range(0, order.size, size):
+            t = order[lo : lo + size]
+            a, b = self.ra[t], self.rb[t]
+            free = ~(self.used[a] | self.used[b] | self.linked[self.owner[a], self.owner[b]])
+            yield from t[free].tolist()
 
 
 def _mask_cost(
