@@ -93,6 +93,14 @@ def run_views(
     return out
 
 
+def compass_room(seed: int, renderer: str, look: Look | None) -> World:
+    """The textured 4 m room with one observer, noiseless, in ``look`` (the compass's scene)."""
+    sc = Scenario(
+        robots=(RobotSpec(1, 0.0, 0.0, math.pi / 2),), seed=seed, room=4.0, look=look or Look()
+    )
+    return World(sc, noise=False, renderer=renderer)
+
+
 def run_compass(
     seed: int,
     samples: int,
@@ -105,10 +113,7 @@ def run_compass(
     rng = np.random.default_rng([seed, 0xC0C0])
     vc = VisualCompass()
     res: dict[str, Any] = {}
-    sc = Scenario(
-        robots=(RobotSpec(1, 0.0, 0.0, math.pi / 2),), seed=seed, room=4.0, look=look or Look()
-    )
-    with World(sc, noise=False, renderer=renderer) as w:
+    with compass_room(seed, renderer, look) as w:
         for step in steps_deg:
             errs = []
             fails = 0
@@ -157,10 +162,7 @@ def run_compass_away(
     rng = np.random.default_rng([seed, 0xA3A7])
     vc = VisualCompass()
     res: dict[str, Any] = {}
-    sc = Scenario(
-        robots=(RobotSpec(1, 0.0, 0.0, math.pi / 2),), seed=seed, room=4.0, look=look or Look()
-    )
-    with World(sc, noise=False, renderer=renderer) as w:
+    with compass_room(seed, renderer, look) as w:
         for d in away_m:
             errs, fails = [], 0
             for _ in range(samples):

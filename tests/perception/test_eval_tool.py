@@ -29,6 +29,8 @@ def test_eval_perception_json(tmp_path: Path) -> None:
             "4",
             "--compass-samples",
             "1",
+            "--compass-away",
+            "3",
             "--json",
             "--png",
             str(png),
@@ -47,18 +49,22 @@ def test_eval_perception_json(tmp_path: Path) -> None:
     for key in ("recall", "precision", "distance_error_m", "bearing_error_deg", "compass"):
         assert key in summary
     assert summary["compass"]["featureless"]["ok"] is False
+    away = summary["compass_away"]
+    assert set(away) == {"0", "0.25", "0.5", "1", "1.5", "2"}
+    assert away["0"]["failures"] == 0 and away["0"]["max_err_deg"] < 1.0  # in place: exact
     assert png.stat().st_size > 10_000 and view.stat().st_size > 10_000
 
 
-def test_eval_perception_rejects_bad_arguments() -> None:
+@pytest.mark.parametrize("flag", ["--views=0", "--compass-away=-1"])
+def test_eval_perception_rejects_bad_arguments(flag: str) -> None:
     out = subprocess.run(
-        [sys.executable, "-m", "tools.eval_perception", "--views", "0"],
+        [sys.executable, "-m", "tools.eval_perception", flag],
         cwd=ROOT,
         capture_output=True,
         text=True,
         timeout=60,
     )
-    assert out.returncode == 2 and "--views" in out.stderr
+    assert out.returncode == 2 and flag.split("=")[0] in out.stderr
 
 
 def test_eval_perception_names_a_bad_calibration_folder(tmp_path: Path) -> None:
