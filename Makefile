@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 # the fast tier runs on this many workers (pytest-xdist): its system tests mostly wait on
-# real processes, so two workers take it from about 13 to about 8 minutes on two cores
+# real processes, so two workers take it from about 13 to about 7 minutes on two cores
 TEST_JOBS ?= 2
 
 .PHONY: demo test lint venv clean

@@ -321,5 +321,4 @@ class Resumption:
             math.degrees(fix.heading), fix.gain,
         )  # fmt: skip
         b.heading = fix.heading
-        if fix.accepted and fix.gain > 0.5:
-            self.motion.last_frame = frame
+        self.motion.last_frame = frame  # the view here: the next turn's compass reference

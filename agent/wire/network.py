@@ -39,7 +39,7 @@ LOSSY_LINK_SETTINGS: tuple[tuple[str, str], ...] = (
 
 #: zenoh settings for a process that mostly waits. zenoh's shared-memory transport (on by
 #: default) keeps a task waking about every 100 ms: 0.15 % of a core per process with
-#: nothing to send (measured: five bare client sessions, 0.15 % with it and 0.00–0.05 %
+#: nothing to send (measured: five bare zenoh clients, 0.15 % with it and 0.00–0.05 %
 #: without; ``python -m tools.bench idle``). The fleet's messages are a few hundred bytes,
 #: below its 3 kB threshold, robots on separate hosts share no memory, and the camera's
 #: pictures cross the router's TLS link: nothing here uses it.

@@ -1,7 +1,7 @@
 """Loop-consistency support of candidate pairs (agent/core/formation/frame/pair_support.py):
 known answers by hand, the windowed count against a brute force over all of j's sightings
-(exactly, ties included) and against a plain loop over candidates with a k-d tree (the
-implementation it replaced), the brute-force path for far or non-finite input, and one
+(exactly, ties included) and against a plain loop over candidates with a k-d tree (an
+independent algorithm), the brute-force path for far or non-finite input, and one
 test per error branch."""
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ def loop_reference(
     epsilon: float,
     rel_tol: float,
 ) -> np.ndarray:
-    """One candidate at a time, a k-d tree per robot (as pose_pairing counted before)."""
+    """One candidate at a time, a k-d tree per robot (an algorithm of its own)."""
     out = np.zeros(src.shape[0], dtype=np.int64)
     for t in range(src.shape[0]):
         oi, oj = owner[src[t]], owner[dst[t]]

@@ -286,7 +286,7 @@ def _scored_candidates(
 class _Taken:
     """The sightings used and robot pairs linked so far, as arrays: :meth:`open` passes
     over the candidates that an earlier acceptance already rules out, a slice at a time
-    (the greedy loop checks the rest as before, so it accepts the same candidates; most
+    (the greedy loop checks the rest one at a time, so it accepts the same candidates; most
     of ~10⁵ candidates fall here, in one array operation rather than one Python step)."""
 
     def __init__(self, owner: np.ndarray, ra: np.ndarray, rb: np.ndarray, robots: int) -> None:
