@@ -55,6 +55,9 @@ class Research:
         verdict = ctx.formation.research(decision.records, k, ctx.cfg.explore_step)
         if verdict.connected:
             return None
+        if verdict.blind:
+            cal = ctx.cfg.calibration[:12] or "built-in"
+            raise AgentFailure(f"{verdict.reason} (calibration {cal}): stopping")
         if k > ctx.cfg.research_rounds:
             raise AgentFailure(
                 f"{verdict.reason} after {ctx.cfg.research_rounds} re-search round(s): "

@@ -5,9 +5,13 @@ each one textured quad with a rich, seeded texture (rectangles, discs, lines and
 text-like marks in many colours) so that feature matching -- the visual compass of the
 NAO paper 3.2.1 -- has plenty to hold on to; optional static obstacles (cylinders in the obstacle rose of :mod:`agent.core.nao`),
 optional orange lookalike clutter and a light whose strength and direction vary for the
-detector's hard cases. No wall or floor colour falls in (or near) the detector's orange
-range nor in the obstacle range: hues near orange and rose are desaturated, and every
-texture is checked with ``cv2.inRange`` before use.
+detector's hard cases. No wall or floor colour falls in (or near) the caps' colour nor in
+the obstacle range: hues near the caps' (orange, and the hue a look turns them to) are
+desaturated, and every texture is checked with ``cv2.inRange`` before use. That is the
+NAO paper's premise (3.1.1): the caps and shoulders are the only things of their colour in
+view, as a lab chooses its robots' colour against its room. The orange stays out of the
+room in every look, so that the built-in calibration, made for orange caps, sees nothing
+where the caps are of another colour.
 
 Robots are kinematic NAO bodies (:mod:`sim.physics.nao_model`); their poses are held here
 and moved by :mod:`sim.physics.locomotion`. The scenario's look (:mod:`sim.camera.look`)
@@ -51,29 +55,34 @@ TILE = 1.0  # metres: edge of the triangles the floor and walls are cut into
 CULL_MARGIN = math.radians(5.0)
 
 
-def _safe_colour(rng: np.random.Generator) -> tuple[int, int, int]:
-    """A random BGR colour far from the detector's orange.
+def _safe_colour(rng: np.random.Generator, turn: int = 0) -> tuple[int, int, int]:
+    """A random BGR colour far from the orange and from the caps' colour (the orange turned
+    by ``turn``, OpenCV hue units).
 
-    Saturated colours take hues in OpenCV H [22, 160] (yellow-green round to magenta);
-    reds, oranges and pinks (H < 22 or > 160) are kept pale (S <= 90).
+    Saturated colours take hues in OpenCV H [22, 160] counted from the orange's and from
+    the caps' (yellow-green round to magenta for orange caps); the hues around either
+    (reds, oranges and pinks for orange caps) are kept pale (S <= 90).
     """
     h = int(rng.integers(0, 180))
     v = int(rng.integers(30, 256))
-    s = int(rng.integers(60, 256)) if 22 <= h <= 160 else int(rng.integers(0, 91))
+    clear = 22 <= h <= 160 and 22 <= (h - turn) % 180 <= 160
+    s = int(rng.integers(60, 256)) if clear else int(rng.integers(0, 91))
     hsv = np.array([[[h, s, v]]], dtype=np.uint8)
     b, g, r = cv2.cvtColor(hsv, cv2.COLOR_HSV2BGR)[0, 0]
     return int(b), int(g), int(r)
 
 
-def make_texture(rng: np.random.Generator, width: int, height: int) -> np.ndarray:
-    """A seeded BGR texture rich in corners and blobs, with no orange texel."""
-    base = np.array(_safe_colour(rng), dtype=np.float64) * 0.4 + 110.0
+def make_texture(rng: np.random.Generator, width: int, height: int, turn: int = 0) -> np.ndarray:
+    """A seeded BGR texture rich in corners and blobs, with no orange texel and none of the
+    caps' colour (the orange turned by ``turn`` OpenCV hue units: a look's caps,
+    :meth:`World.caps_turn`)."""
+    base = np.array(_safe_colour(rng, turn), dtype=np.float64) * 0.4 + 110.0
     img = np.empty((height, width, 3), dtype=np.uint8)
     img[:] = np.clip(base, 0, 255).astype(np.uint8)
     area = width * height
     for _ in range(area // 2500):
         kind = int(rng.integers(0, 5))
-        col = _safe_colour(rng)
+        col = _safe_colour(rng, turn)
         x, y = int(rng.integers(0, width)), int(rng.integers(0, height))
         size = int(rng.integers(8, 90))
         if kind == 0:
@@ -89,15 +98,25 @@ def make_texture(rng: np.random.Generator, width: int, height: int) -> np.ndarra
         else:
             pts = rng.integers(-size, size, size=(int(rng.integers(3, 6)), 2)) + np.array([x, y])
             cv2.fillPoly(img, [pts.astype(np.int32)], col)
-    # Belt and braces: desaturate anything that still lands near the orange range.
+    # Belt and braces: desaturate anything that still lands near the orange or the caps'.
     hsv = cv2.cvtColor(img, cv2.COLOR_BGR2HSV)
-    bad = cv2.inRange(hsv, GUARD_LO, GUARD_HI) > 0
-    bad |= cv2.inRange(hsv, (170, 110, 40), (180, 255, 255)) > 0
+    bad = _near_orange(hsv)
+    if turn:  # hues counted from the caps'
+        rel = hsv.copy()
+        rel[..., 0] = (hsv[..., 0].astype(np.int16) - turn) % 180
+        bad |= _near_orange(rel)
     bad |= cv2.inRange(hsv, nao.OBSTACLE_HSV_LO, nao.OBSTACLE_HSV_HI) > 0
     if bad.any():
         grey = img[bad].mean(axis=1, keepdims=True)
         img[bad] = np.clip(grey, 0, 255).astype(np.uint8)
     return img
+
+
+def _near_orange(hsv: np.ndarray) -> np.ndarray:
+    """The texels of an HSV image in the guard band around the orange."""
+    bad: np.ndarray = cv2.inRange(hsv, GUARD_LO, GUARD_HI) > 0
+    bad |= cv2.inRange(hsv, (170, 110, 40), (180, 255, 255)) > 0
+    return bad
 
 
 def light_direction(azimuth: float, elevation: float) -> tuple[float, float, float]:
@@ -200,6 +219,12 @@ class World:
             )
         )
 
+    @property
+    def caps_turn(self) -> int:
+        """How far the look turns the caps' hue, in OpenCV hue units (0 for orange caps): the
+        room's textures keep clear of the caps' colour (module docstring)."""
+        return round(self.look.hue / 2.0) % 180
+
     def _build_in(self, tmp: Path) -> None:
         """Build the room (files for textures and, with EGL, meshes go to ``tmp``)."""
         sc = self.scenario
@@ -222,6 +247,7 @@ class World:
             self._frames[r.id] = 0
             self._shot_yaw[r.id] = 0.0
         rng = np.random.default_rng([sc.seed, 0x5EED])
+        turn = self.caps_turn
         half = sc.room
         wall_h = 0.8 + 1.2 * half  # the top of the view from a far corner stays on the wall
         # Floor: z = 0, seen from above.
@@ -229,14 +255,14 @@ class World:
             tmp / "floor.png",
             [(-half, -half, 0.0), (half, -half, 0.0), (half, half, 0.0), (-half, half, 0.0)],
             (0.0, 0.0, 1.0),
-            make_texture(rng, *_texture_size(2 * half, 2 * half, 160)),
+            make_texture(rng, *_texture_size(2 * half, 2 * half, 160), turn),
         )
         corners = [(-half, -half), (half, -half), (half, half), (-half, half)]
         for i in range(4):
             (x0, y0), (x1, y1) = corners[i], corners[(i + 1) % 4]
             # Inward normal: rotate the wall direction by +90° (counter-clockwise room).
             dx, dy = (x1 - x0) / (2 * half), (y1 - y0) / (2 * half)
-            tex = make_texture(rng, *_texture_size(2 * half, wall_h, TEXELS_PER_M))
+            tex = make_texture(rng, *_texture_size(2 * half, wall_h, TEXELS_PER_M), turn)
             self._quad(
                 tmp / f"wall{i}.png",
                 [(x0, y0, 0.0), (x1, y1, 0.0), (x1, y1, wall_h), (x0, y0, wall_h)],

@@ -151,3 +151,16 @@ def test_research_config_is_validated() -> None:
         with pytest.raises(ValueError, match=match):
             AgentConfig(robot_id=1, **kw)  # type: ignore[arg-type]
     assert AgentConfig(robot_id=1).agreed_params()["research_rounds"] == 2
+
+
+def test_nobody_walks_when_no_robot_saw_any_other() -> None:
+    """A fleet whose records are all empty stops at once, naming the calibration: its
+    robots may not recognise each other, and could not see each other on the way."""
+    empty = tuple(NeighborRecordMsg(sender=i, round=0, neighbours=()) for i in (1, 2, 3))
+    r = rig()
+    with pytest.raises(AgentFailure, match=r"no robot saw any other.*calibration built-in"):
+        r.research.next_round(Decision("agreed", records=empty))
+    assert r.mover.walks == [] and r.search.round == 0
+    lab = rig(calibration="ab" * 32)
+    with pytest.raises(AgentFailure, match="calibration abababababab"):
+        lab.research.next_round(Decision("agreed", records=empty))

@@ -185,3 +185,25 @@ def test_the_worlds_look_and_free_looks_go_to_the_world(
     with pytest.raises(SystemExit):
         parse_args(["--look", "hue:999"])
     assert "outside [-180, 180]" in capsys.readouterr().err
+
+
+def test_the_calibration_goes_to_every_agent_and_a_bad_folder_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from agent.core.perception.calibration import builtin
+
+    net = ["--connect", "tcp/127.0.0.1:9"]
+    assert "--calibration" not in parse_args([]).spec.agent_command(1, net)
+    folder = tmp_path / "cal"
+    builtin().save(folder, {"source": "a test: the built-in calibration written out"})
+    spec = parse_args(["--calibration", str(folder)]).spec
+    for rid in (1, 2):
+        argv = spec.agent_command(rid, net)
+        assert argv[argv.index("--calibration") + 1] == str(folder.resolve())
+    assert spec.meta()["calibration"] == str(folder.resolve())
+    (folder / "orange.json").write_text("{}")
+    with pytest.raises(SystemExit) as stop:
+        parse_args(["--calibration", str(folder)])
+    assert stop.value.code == 2
+    err = capsys.readouterr().err
+    assert f"--calibration {folder}" in err and "orange.json" in err

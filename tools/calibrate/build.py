@@ -65,7 +65,12 @@ def build(captures: Path, out: Path, stream: TextIO | None = None) -> Built:
     fit = orange.learn_orange([cf.image(r) for r in views if r.shot.kind == "main"], spec.d_s, cam)
     orange.figure(fit, report / "orange.png")
     o = fit.orange
-    print(f"orange range: H {o.low[0]}-{o.high[0]}, S >= {o.low[1]}, V >= {o.low[2]}", file=log)
+    print(
+        f"orange range: H {o.low[0]}-{o.high[0]}, S {o.low[1]}-{o.high[1]}, "
+        f"V {o.low[2]}-{o.high[2]}; it keeps {100 * fit.kept:.1f} % of the caps' pixels and "
+        f"{fit.background_share:.1e} of the background",
+        file=log,
+    )
     builder = masks.MBaseBuilder(cam, o, spec.d_s, window_m=orange.HALF_WIDTH)
     for r in sorted(views, key=mask_order):
         # labelled with the planned orientation: NAO-j turned to within the capture's
@@ -133,7 +138,11 @@ def build(captures: Path, out: Path, stream: TextIO | None = None) -> Built:
             "sightings": seen,
             "views": len(dviews),
         },
-        "orange": {"peak_hue": fit.peak_hue, "background_share": fit.background_share},
+        "orange": {
+            "peak_hue": fit.peak_hue,
+            "background_share": fit.background_share,
+            "caps_kept": round(fit.kept, 4),
+        },
         "report": [f"{REPORT}/orange.png", f"{REPORT}/dbase.png", f"{REPORT}/table1.txt"],
     }
     digest = cal.save(Path(out), meta)

@@ -8,10 +8,22 @@ images (blurred as the segmentation blurs them), the hue histogram of the satura
 pixels inside the window is compared with the one outside it, per pixel of area: the
 hue where the window has the most surplus is the caps' hue, and the band of hues around
 it that still has a surplus (``BAND_SHARE`` of the peak) is theirs. The pixels of that
-band inside the window are the orange pixels; the range is their hue band widened by
-``HUE_MARGIN`` and their saturation and value floors (the ``FLOOR_PERCENTILE`` lowered by
-``SV_MARGIN``), then raised while more than ``BACKGROUND_SHARE`` of the pixels outside the
-window would pass. :func:`figure` draws the histograms with the range chosen.
+band inside the window are the orange pixels.
+
+Their saturation and value bound the range from both sides: the range is a tolerance box
+of the orange pixels, ``[Q_q - m, Q_(1-q) + m]`` in S and in V (``Q_q`` the q-quantile),
+the hue band widened by ``HUE_MARGIN``. The margin m (``SV_MARGINS``, largest first) is
+what the range leaves for light
+that differs from the captures', q (``TAILS``, smallest first) the share of the caps'
+shading it gives up at each end. The first box in that order, margins before tails, that
+lets at most ``BACKGROUND_SHARE`` of the pixels outside the window through is the range:
+as much room for the light as the background allows. A room with the caps' colour on its
+walls may let no box through. The range is then the box with the least background among
+those that keep at least ``KEEP`` of the caps' pixels: a box tighter than the caps' own
+shading loses them in the parts of the room the captures did not see, and the
+recogniser's head-and-shoulders test (NAO paper 3.1.2) rejects a stray patch of the
+colour; the background share is reported, and the check measures the outcome.
+:func:`figure` draws the histograms with the range chosen.
 """
 
 from __future__ import annotations
@@ -34,10 +46,10 @@ HALF_WIDTH = 0.25  # m: NAO-j's half-width with a margin (its arms)
 S_PROBE, V_PROBE = 80, 40  # what counts as a coloured pixel at all
 BAND_SHARE = 0.05
 HUE_MARGIN = 2
-FLOOR_PERCENTILE = 1.0
-SV_MARGIN = 40
-S_RANGE, V_RANGE = (80, 230), (30, 200)  # where the floors may end up
+SV_MARGINS = (40, 30, 20, 10, 0)  # S and V widening of the caps' box, largest first
+TAILS = (0.01, 0.025, 0.05)  # share of the caps' pixels each end of the box may give up
 BACKGROUND_SHARE = 2e-5
+KEEP = 0.99  # share of the caps' pixels a range must keep when the background is unavoidable
 MIN_SURPLUS = 1e-3  # of the window's pixels: less, and no orange was seen
 HUES = HUE_MAX + 1
 
@@ -45,7 +57,8 @@ HUES = HUE_MAX + 1
 @dataclass(frozen=True)
 class OrangeFit:
     """The range and what it came from: hue histograms (per pixel) inside and outside the
-    window, the orange pixels' S and V, the background share inside the range."""
+    window, the orange pixels' S and V, the background share inside the range, the share of the
+    orange pixels the range keeps."""
 
     orange: OrangeRange
     peak_hue: int
@@ -54,6 +67,7 @@ class OrangeFit:
     s_values: np.ndarray
     v_values: np.ndarray
     background_share: float
+    kept: float
     images: int
 
 
@@ -113,21 +127,56 @@ def learn_orange(
             break
     fgp, bgp = np.concatenate(fg), np.concatenate(bg)
     cand = fgp[_in_band(fgp[:, 0], lo, hi) & (fgp[:, 1] >= S_PROBE) & (fgp[:, 2] >= V_PROBE)]
-    s_floor = int(np.clip(np.percentile(cand[:, 1], FLOOR_PERCENTILE) - SV_MARGIN, *S_RANGE))
-    v_floor = int(np.clip(np.percentile(cand[:, 2], FLOOR_PERCENTILE) - SV_MARGIN, *V_RANGE))
+    if not len(cand):
+        raise ValueError("no pixel of the caps' hue is saturated and bright enough to measure")
     h0, h1 = (lo - HUE_MARGIN) % HUES, (hi + HUE_MARGIN) % HUES
+    bgp = bgp[_in_band(bgp[:, 0], h0, h1)]  # the background that the hue band lets through
+    n_bg = max(sum(len(b) for b in bg), 1)
+    orange, bshare = _box(cand, bgp, n_bg, h0, h1)
+    kept = float(np.mean(_inside(cand, orange)))
+    return OrangeFit(
+        orange, peak, inside, outside, cand[:, 1], cand[:, 2], bshare, kept, len(images)
+    )
 
-    def share(s: int, v: int) -> float:
-        hit = _in_band(bgp[:, 0], h0, h1) & (bgp[:, 1] >= s) & (bgp[:, 2] >= v)
-        return float(hit.mean()) if len(bgp) else 0.0
 
-    bshare = share(s_floor, v_floor)
-    while bshare > BACKGROUND_SHARE and (s_floor < S_RANGE[1] or v_floor < V_RANGE[1]):
-        s_floor = min(S_RANGE[1], s_floor + 10)
-        v_floor = min(V_RANGE[1], v_floor + 10)
-        bshare = share(s_floor, v_floor)
-    orange = OrangeRange((h0, s_floor, v_floor), (h1, 255, 255))
-    return OrangeFit(orange, peak, inside, outside, cand[:, 1], cand[:, 2], bshare, len(images))
+def _inside(px: np.ndarray, o: OrangeRange) -> np.ndarray:
+    """Which of the in-band pixels ``px`` (N×3 HSV) the range's S and V bounds let through."""
+    (_, s0, v0), (_, s1, v1) = o.low, o.high
+    return (px[:, 1] >= s0) & (px[:, 1] <= s1) & (px[:, 2] >= v0) & (px[:, 2] <= v1)
+
+
+def _box(
+    caps: np.ndarray, background: np.ndarray, n_bg: int, h0: int, h1: int
+) -> tuple[OrangeRange, float]:
+    """The range of the module docstring: the first tolerance box of the caps' pixels
+    (margins before tails) that lets at most ``BACKGROUND_SHARE`` of the ``n_bg``
+    background pixels through (``background``: those in the hue band), else the one with
+    the least background of those that keep ``KEEP`` of the caps' pixels (the widest
+    when none does); and its background share."""
+    admissible: list[tuple[float, int, OrangeRange]] = []
+    widest: tuple[OrangeRange, float] | None = None
+    for q in TAILS:
+        s_lo, s_hi = np.percentile(caps[:, 1], (100 * q, 100 * (1 - q)))
+        v_lo, v_hi = np.percentile(caps[:, 2], (100 * q, 100 * (1 - q)))
+        for m in SV_MARGINS:
+            o = OrangeRange(
+                (h0, _clip(s_lo - m), _clip(v_lo - m)), (h1, _clip(s_hi + m), _clip(v_hi + m))
+            )
+            share = float(np.count_nonzero(_inside(background, o))) / n_bg
+            widest = (o, share) if widest is None else widest
+            if share <= BACKGROUND_SHARE:
+                return o, share
+            if np.mean(_inside(caps, o)) >= KEEP:
+                admissible.append((share, len(admissible), o))  # ties: the wider, earlier
+    if not admissible:  # caps' colours that spread beyond every box: the widest
+        assert widest is not None
+        return widest
+    share, _, o = min(admissible)
+    return o, share
+
+
+def _clip(x: float) -> int:
+    return int(np.clip(round(x), 0, 255))
 
 
 def figure(fit: OrangeFit, path: Path) -> None:
@@ -147,14 +196,18 @@ def figure(fit: OrangeFit, path: Path) -> None:
     ax1.set_ylabel(f"share of pixels (S >= {S_PROBE}, V >= {V_PROBE})")
     ax1.set_title(f"Hue: range {h0}-{h1} (peak {fit.peak_hue})")
     ax1.legend(fontsize=8)
-    for ax, vals, floor, name in (
-        (ax2, fit.s_values, s0, "saturation"),
-        (ax3, fit.v_values, v0, "value"),
+    (_, s1, v1) = fit.orange.high
+    for ax, vals, bounds, name in (
+        (ax2, fit.s_values, (s0, s1), "saturation"),
+        (ax3, fit.v_values, (v0, v1), "value"),
     ):
         ax.hist(vals, bins=64, range=(0, 255), color="tab:orange")
-        ax.axvline(floor, color="k", ls="--", label=f"floor {floor}")
+        ax.axvspan(bounds[0], bounds[1], color="k", alpha=0.08)
+        ax.axvline(bounds[0], color="k", ls="--", label=f"range {bounds[0]}-{bounds[1]}")
+        ax.axvline(bounds[1], color="k", ls="--")
         ax.set_xlabel(f"{name} of the caps' pixels")
         ax.legend(fontsize=8)
+    ax3.set_title(f"the range keeps {100 * fit.kept:.1f} % of the caps' pixels")
     ax2.set_title(f"{fit.images} views; background inside the range {fit.background_share:.1e}")
     fig.tight_layout()
     fig.savefig(path, dpi=90)

@@ -79,7 +79,9 @@ class FleetSpec:
     generated one (``isolated``: one robot 2-3 m from every other; ``headings``; with
     ``obstacles`` K > 0 the blocking scenario of :mod:`tools.lib.obstacle_scenario`),
     ``noise_scale``, its ``look`` (:mod:`sim.camera.look`) and ``free_looks`` (camera requests
-    cost no sim time), more ``world_args``, its ``renderer`` and ``render_workers``. The
+    cost no sim time), more ``world_args``, its ``renderer`` and ``render_workers``. Every
+    agent's recogniser: the ``calibration`` folder (``python -m agent --calibration DIR``,
+    built by ``python -m tools.calibrate``), else the built-in one. The
     network: secure by default (a throwaway fleet in ``OUT/fleet`` unless ``credentials``),
     ``plain_links`` (tests), ``insecure``. Limits: ``timeout`` for the agents, wall s;
     ``world_timeout`` for the world's start. ``rogue`` S > 0: attackers for S s
@@ -102,6 +104,7 @@ class FleetSpec:
     noise_scale: float = 1.0
     look: Look = field(default_factory=Look)
     free_looks: bool = False
+    calibration: Path | None = None
     world_args: tuple[str, ...] = ()
     renderer: str | None = None
     render_workers: int = 0
@@ -145,13 +148,14 @@ class FleetSpec:
         """The argv of robot ``rid``'s agent joining with ``net`` (``extra``: more flags
         before its own ``agent_args``; ``nao``: its NAO's qi URL with ``body`` naoqi)."""
         mine = [a for i, a in self.agent_args if i == rid]
+        cal = [] if self.calibration is None else ["--calibration", str(self.calibration)]
         return agent_command(
             self.agent_config(rid),
             net,
             claim_id=self.auto_ids,
             log_level=self.agent_log_level,
             nao=nao if self.body == "naoqi" else None,
-            extra=[*(extra or []), *mine],
+            extra=[*cal, *(extra or []), *mine],
         )
 
     def meta(self) -> dict[str, Any]:
@@ -175,6 +179,8 @@ class FleetSpec:
             out["look"] = str(self.look)
         if self.free_looks:
             out["free_looks"] = True
+        if self.calibration is not None:
+            out["calibration"] = str(self.calibration)
         if self.agent_args:
             out["agent_args"] = [f"{i}:{a}" for i, a in self.agent_args]
         if cfg.march is not None and cfg.march.distance is not None:

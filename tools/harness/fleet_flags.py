@@ -18,6 +18,7 @@ from typing import Any
 from agent.config import AgentConfig, add_plan_arguments
 from agent.core.formation.params import D_E, PHI_E_DEG
 from agent.core.formation.view.route import Route
+from agent.core.perception.calibration import CalibrationError, load
 from sim import scenarios
 from sim.camera.look import HELP as LOOK_HELP
 from sim.camera.look import Look, look_arg
@@ -96,6 +97,9 @@ def add_fleet_arguments(p: argparse.ArgumentParser) -> None:
         help="python -m sim's --look: " + LOOK_HELP)  # fmt: skip
     add("--free-looks", action="store_true",
         help="python -m sim --free-looks: camera requests cost no sim time")  # fmt: skip
+    add("--calibration", type=Path, default=None, metavar="DIR",
+        help="every agent's --calibration: the recogniser's calibration folder built by "
+        "python -m tools.calibrate (default: the built-in one)")  # fmt: skip
     add("--body", choices=("zenoh", "naoqi"), default=FleetSpec.body,
         help="agents drive the world over zenoh, or its virtual NAOs over qi (sim --naoqi)")  # fmt: skip
     add("--world-arg", action="append", default=[], help="extra argument for python -m sim")
@@ -127,6 +131,18 @@ def _route(a: argparse.Namespace) -> Route | None:
             raise ValueError(f"--march-to wants X,Y, got {a.march_to!r}")
         return Route(to=(float(xy[0]), float(xy[1])))
     return None
+
+
+def _calibration(p: argparse.ArgumentParser, folder: Path | None) -> Path | None:
+    """``--calibration``'s folder, absolute, once it loads (a bad one: a usage error naming
+    what is wrong, before any process starts)."""
+    if folder is None:
+        return None
+    try:
+        load(folder)
+    except CalibrationError as exc:
+        p.error(f"--calibration {folder}: {exc}")
+    return folder.resolve()
 
 
 def fleet_spec(p: argparse.ArgumentParser, a: argparse.Namespace) -> FleetSpec:
@@ -172,6 +188,7 @@ def fleet_spec(p: argparse.ArgumentParser, a: argparse.Namespace) -> FleetSpec:
             noise_scale=a.noise_scale,
             look=a.look,
             free_looks=a.free_looks,
+            calibration=_calibration(p, a.calibration),
             world_args=tuple(a.world_arg),
             renderer=a.renderer,
             render_workers=a.render_service,

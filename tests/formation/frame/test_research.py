@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 
 from agent.core.formation.frame.records import NeighborRecord
 from agent.core.formation.frame.research import (
+    BLIND,
     DEFAULT_APPROACH,
     DEFAULT_STEP,
     GOLDEN_ANGLE,
@@ -82,10 +83,20 @@ def test_ties_keep_the_component_with_the_lowest_id() -> None:
     pos = np.array([[0.0, 0.0], [1.0, 0.0], [6.0, 0.0], [6.0, 0.9]])  # no equal vectors (eq. 9)
     r = decide_research(records_from_positions([5, 6, 2, 9], pos, seen=3.0), 1)
     assert r.kept == (2, 9) and r.searchers == (5, 6)
-    # everyone alone: the lowest id is the anchor
+    assert not r.blind
+
+
+def test_nobody_walks_blind_when_no_robot_saw_any_other() -> None:
     far = np.array([[0.0, 0.0], [5.0, 0.0], [0.0, 5.0]])
     r = decide_research(records_from_positions([3, 1, 2], far, seen=3.0), 1)
-    assert r.kept == (1,) and r.searchers == (2, 3) and r.isolated == (1, 2, 3)
+    assert r.blind and not r.connected and r.kept == () and r.moves == ()
+    assert r.searchers == (1, 2, 3) and r.isolated == (1, 2, 3)
+    assert r.reason == BLIND and np.allclose(r.move(2), 0.0)
+    # one sighting, even one that no pair explains, is a group to walk towards
+    one = records_from_positions([1, 2], np.array([[0.0, 0.0], [2.5, 0.0]]), seen=3.0)
+    seen = [one[0], NeighborRecord(2, np.zeros((0, 2)))]
+    r = decide_research(seen, 1)
+    assert not r.blind and r.searchers and r.kept
 
 
 def test_bad_arguments() -> None:
@@ -147,8 +158,11 @@ def test_every_agent_decides_alike_from_shuffled_records(
     # invariants: kept and searchers split the fleet; the kept group is the largest
     assert sorted(r.kept + r.searchers) == ids
     assert set(r.kept).isdisjoint(r.searchers)
-    assert all(len(r.kept) >= len(c) for c in r.components)
     assert r.connected == (len(r.components) == 1)
+    if r.blind:  # nobody saw anybody: nobody walks
+        assert not any(rec.count for rec in recs) and r.moves == ()
+        return
+    assert all(len(r.kept) >= len(c) for c in r.components)
     assert [m[0] for m in r.moves] == list(r.searchers)
     assert not set(r.isolated) & set(r.kept) or r.kept == (min(ids),)
     for i in r.searchers:

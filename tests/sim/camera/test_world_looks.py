@@ -145,3 +145,25 @@ def test_render_workers_develop_the_worlds_look() -> None:
             want = w.render(1, job.yaw, job.shot)
             img = cv2.imdecode(np.frombuffer(got[job.job_id], np.uint8), cv2.IMREAD_COLOR)
             assert img is not None and np.array_equal(img, want)
+
+
+@pytest.mark.parametrize("hue", [0.0, 167.0, -90.0])
+def test_the_room_keeps_clear_of_the_caps_colour_whatever_the_look(hue: float) -> None:
+    """No texel of the room falls in the caps' colour band, turned with them by the look
+    (the NAO paper's premise: the caps are the only things of their colour in view), nor in
+    the orange's."""
+    from sim.physics.world import GUARD_HI, GUARD_LO, make_texture
+
+    turn = round(hue / 2.0) % 180
+    tex = make_texture(np.random.default_rng(7), 768, 512, turn)
+    hsv = cv2.cvtColor(tex, cv2.COLOR_BGR2HSV)
+    rel = ((hsv[..., 0].astype(int) - turn) % 180).astype(np.uint8)
+    rel_hsv = np.dstack([rel, hsv[..., 1], hsv[..., 2]])
+    assert not cv2.inRange(rel_hsv, GUARD_LO, GUARD_HI).any()
+    assert not cv2.inRange(rel_hsv, (170, 110, 40), (180, 255, 255)).any()
+    assert not cv2.inRange(hsv, GUARD_LO, GUARD_HI).any()
+    # the texture is as rich in saturated colour as the orange caps' room
+    assert np.mean(hsv[..., 1] >= 110) > 0.05
+    if turn == 0:  # the orange caps' room is drawn as it always was
+        same = make_texture(np.random.default_rng(7), 768, 512)
+        assert np.array_equal(tex, same)

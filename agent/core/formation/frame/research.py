@@ -17,7 +17,12 @@ agent reaches the same one from the same records in any order):
    is the largest one, ties to the one holding the lowest id; every robot outside it
    must search again. A robot with no identified neighbour is a component of one, so it
    always searches again (rule 2) unless every robot is alone, when the lowest id keeps
-   its place as the anchor.
+   its place as the anchor (and the others walk towards their one-sided sightings);
+4. no record holds a sighting at all (``blind``): nobody walks, and the fleet stops. The
+   exploration is there to join a group, and there is none; either the robots stand out
+   of each other's sight, which a person must fix, or the camera does not recognise
+   these robots (a calibration made for other caps or light), and then a robot that walks
+   cannot see the robots in its way either (docs/design.md §1, Plan).
 
 **The exploration move** (deterministic, documented): the robots of one component that
 searches again move as a block, every member by the same vector (its internal geometry
@@ -82,6 +87,11 @@ class Research:
     reason: str
 
     @property
+    def blind(self) -> bool:
+        """No robot saw any other: nobody explores (module doc, step 4)."""
+        return bool(self.searchers) and not self.kept
+
+    @property
     def connected(self) -> bool:
         """Whether the common frame reaches every robot (nobody searches again)."""
         return not self.searchers
@@ -92,6 +102,12 @@ class Research:
             if rid == robot_id:
                 return np.array([dx, dy], dtype=np.float64)
         return np.zeros(2)
+
+
+BLIND = (
+    "no robot saw any other: the robots stand out of each other's sight, or the camera does "
+    "not recognise them (a calibration made for other caps or light); nobody walks blind"
+)
 
 
 def components(graph: NeighbourGraph) -> tuple[tuple[int, ...], ...]:
@@ -169,6 +185,9 @@ def decide_research(
             raise ValueError(f"{name} must be a finite distance > 0, got {v!r}")
     graph = identify_neighbours(records, epsilon)
     comps = components(graph)
+    if len(graph.ids) > 1 and not any(r.count for r in graph.records):
+        ids = tuple(graph.ids)
+        return Research(round_, comps, (), ids, ids, (), BLIND)
     if len(comps) > 1:
         # frames that are not parallel (docs/design.md §9): the pose fit's pairing may join
         # what eq. 9 cannot; the planner uses it too, so the fewer groups win
