@@ -396,12 +396,13 @@ def _cauchy_fit(
     r = residuals(x)
     cost = cauchy_cost(r)
     f2 = LOSS_SCALE * LOSS_SCALE
+    ridge = 1e-9 * np.eye(len(x))
     for _ in range(MAX_ITER):
         j = jacobian(x)
         w = 1.0 / (1.0 + r * r / f2)
         jw = j * w[:, None]
         try:
-            step = np.linalg.solve(jw.T @ j + 1e-9 * np.eye(len(x)), -(jw.T @ r))
+            step = np.linalg.solve(jw.T @ j + ridge, -(jw.T @ r))
         except np.linalg.LinAlgError:
             break
         for _ in range(20):
