@@ -251,15 +251,18 @@ class _Problem:
 
     def misfit(self, pos: np.ndarray, psi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Position misfit (m, 2) in metres and mask misfit δ (m,) in rad (modulo π)."""
-        c, s = np.cos(psi[self.o]), np.sin(psi[self.o])
-        rv = np.stack([c * self.v[:, 0] - s * self.v[:, 1], s * self.v[:, 0] + c * self.v[:, 1]], 1)
-        e = pos[self.t] - pos[self.o] - rv
+        e = self._position_misfit(pos, psi)
         delta = np.where(self.has_mask, wrap_half(psi[self.t] - psi[self.o] - self.mask_ref), 0.0)
         return e, delta
 
+    def _position_misfit(self, pos: np.ndarray, psi: np.ndarray) -> np.ndarray:
+        c, s = np.cos(psi[self.o]), np.sin(psi[self.o])
+        rv = np.stack([c * self.v[:, 0] - s * self.v[:, 1], s * self.v[:, 0] + c * self.v[:, 1]], 1)
+        return np.asarray(pos[self.t] - pos[self.o] - rv)
+
     def fun(self, x: np.ndarray) -> np.ndarray:
         pos, psi = self.unpack(x)
-        e, _ = self.misfit(pos, psi)
+        e = self._position_misfit(pos, psi)
         delta = psi[self.t] - psi[self.o] - self.mask_ref
         rm = self.sm * np.sin(2.0 * delta) / 2.0
         return np.concatenate([(e * self.sp[:, None]).reshape(-1), rm])
