@@ -207,6 +207,7 @@ class _Sightings:
         self.pax, self.pay = self.p_any[:, 0].copy(), self.p_any[:, 1].copy()
         #: (x's bytes, free) -> the own sightings' (p_target − p_r) at x, for the Jacobian
         self._rel: tuple[tuple[bytes, bool], np.ndarray, np.ndarray] | None = None
+        self._seen_jac: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
     def errors(self, x: np.ndarray, jac_too: bool) -> tuple[np.ndarray, np.ndarray | None]:
         """Misfits (k, 2) and their Jacobian (k, 2, len(x)), owner's frame."""
@@ -259,7 +260,7 @@ class _Sightings:
         ux, uy = self.ux[first:, None], self.uy[first:, None]
         along = (ex * ux + ey * uy) / self.sr_own[first:, None]
         across = (ey * ux - ex * uy) / self.st_own[first:, None]
-        hit = np.asarray(np.argmin(np.round(along**2 + across**2, 9), axis=1), dtype=np.intp)
+        hit = np.asarray((along**2 + across**2).round(9).argmin(axis=1), dtype=np.intp)
         self._last = (key, hit)
         return hit
 
@@ -335,28 +336,43 @@ class _Sightings:
     def jacobian(self, x: np.ndarray) -> np.ndarray:
         """``whiten(errors(x, True)[1])``, bit for bit, by columns."""
         relx, rely = self._targets_rel(x)
-        n_own, k = self.n_own, len(self.v_all)
+        n_own, k, nx = self.n_own, len(self.v_all), len(x)
         psi = float(x[2])
         c, s = math.cos(psi), math.sin(psi)
-        scale = float(x[3]) if len(x) > 3 else 1.0
-        j0 = np.zeros((k, len(x)))  # d(misfit along x) / dx, as ``errors`` fills jac[:, 0]
-        j1 = np.zeros((k, len(x)))  # d(misfit along y) / dx
+        scale = float(x[3]) if nx > 3 else 1.0
+        j0 = np.zeros((n_own, nx))  # d(misfit along x) / dx, as ``errors`` fills jac[:, 0]
+        j1 = np.zeros((n_own, nx))  # d(misfit along y) / dx
         m = -scale * np.array([[c, s], [-s, c]])
-        j0[:n_own, 0], j0[:n_own, 1] = m[0, 0], m[0, 1]
-        j1[:n_own, 0], j1[:n_own, 1] = m[1, 0], m[1, 1]
-        j0[:n_own, 2] = scale * (-s * relx + c * rely)
-        j1[:n_own, 2] = scale * (-c * relx - s * rely)
-        j0[n_own:, 0], j0[n_own:, 1] = self.c_obs, self.s_obs
-        j1[n_own:, 0], j1[n_own:, 1] = self.ms_obs, self.c_obs
-        if len(x) > 3:
-            j0[:n_own, 3] = c * relx + s * rely
-            j1[:n_own, 3] = -s * relx + c * rely
-            j0[:n_own, 4] = 1.0
-            j1[:n_own, 5] = 1.0
-        ux, uy = self.ux_all[:, None], self.uy_all[:, None]
-        along = (j0 * ux + j1 * uy) / self.s_r[:, None]
-        across = (j1 * ux - j0 * uy) / self.s_t[:, None]
-        return np.concatenate([along, across])
+        j0[:, 0], j0[:, 1] = m[0, 0], m[0, 1]
+        j1[:, 0], j1[:, 1] = m[1, 0], m[1, 1]
+        j0[:, 2] = scale * (-s * relx + c * rely)
+        j1[:, 2] = scale * (-c * relx - s * rely)
+        if nx > 3:
+            j0[:, 3] = c * relx + s * rely
+            j1[:, 3] = -s * relx + c * rely
+            j0[:, 4] = 1.0
+            j1[:, 5] = 1.0
+        ux, uy = self.ux_all[:n_own, None], self.uy_all[:n_own, None]
+        out = np.empty((2 * k, nx))
+        out[:n_own] = (j0 * ux + j1 * uy) / self.s_r[:n_own, None]
+        out[k : k + n_own] = (j1 * ux - j0 * uy) / self.s_t[:n_own, None]
+        seen_along, seen_across = self._seen_jacobian(nx)
+        out[n_own:k], out[k + n_own :] = seen_along, seen_across
+        return out
+
+    def _seen_jacobian(self, nx: int) -> tuple[np.ndarray, np.ndarray]:
+        """The whitened Jacobian of the others' sightings of r (along, across), the same
+        at every x: they move with r's position only, by their owners' fixed headings."""
+        if nx not in self._seen_jac:
+            n_own, k = self.n_own, len(self.v_all)
+            j0, j1 = np.zeros((k - n_own, nx)), np.zeros((k - n_own, nx))
+            j0[:, 0], j0[:, 1] = self.c_obs, self.s_obs
+            j1[:, 0], j1[:, 1] = self.ms_obs, self.c_obs
+            ux, uy = self.ux_all[n_own:, None], self.uy_all[n_own:, None]
+            along = (j0 * ux + j1 * uy) / self.s_r[n_own:, None]
+            across = (j1 * ux - j0 * uy) / self.s_t[n_own:, None]
+            self._seen_jac[nx] = (along, across)
+        return self._seen_jac[nx]
 
     def worst(self) -> tuple[np.ndarray, int]:
         """H0's solution and the sighting (own, then seen) that fits worst under it (by its
