@@ -169,3 +169,12 @@ def test_the_weighted_and_damped_matrices_are_the_products_bit_for_bit(
     d = np.maximum(h.diagonal(), 1e-12)
     want = (h + diags(lam * d)).tocsc()
     assert _same(_Damped(h.copy())(lam * d), want)
+
+
+def test_a_jacobian_with_an_entry_given_twice_is_weighted_as_the_product() -> None:
+    """Two entries at one place: the product adds them weighted one at a time."""
+    j = csr_matrix((np.array([0.1, 0.7, 0.3]), np.array([0, 0, 1]), np.array([0, 2, 3])), (2, 2))
+    assert not j.has_canonical_format
+    w = np.array([1.0 / 3.0, 0.9])
+    got, want = _row_scaled(j, w), diags(w) @ j
+    assert got.toarray().tobytes() == want.toarray().tobytes()

@@ -44,7 +44,10 @@ LAMBDA_MAX = 1e12  #: damping beyond which no step can lower the cost: stop
 def _row_scaled(j: csr_matrix, w: np.ndarray) -> csr_matrix:
     """``diags(w) @ j`` as that product leaves it: each entry times its row's weight,
     the entries that become 0 left out (the product keeps no zeros). What follows reads
-    only the entries and their places, never their order in a row: the same bits."""
+    only the entries and their places, never their order in a row: the same bits. A
+    matrix with an entry given twice is left to the product itself (it adds each weighted)."""
+    if not j.has_canonical_format:
+        return diags(w) @ j
     rows = np.repeat(np.arange(j.shape[0]), np.diff(j.indptr))
     out = csr_matrix((j.data * w[rows], j.indices.copy(), j.indptr.copy()), shape=j.shape)
     out.eliminate_zeros()
