@@ -5,6 +5,7 @@ turned round, junk detections between robots, and determinism under shuffled rec
 from __future__ import annotations
 
 import math
+from functools import partial
 
 import numpy as np
 import pytest
@@ -12,6 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agent.core.formation.frame.fleet_frame import fleet_frame
+from agent.core.formation.frame.pose_pairing import wrap_angle
 from agent.core.formation.frame.poses import build_poses, evaluate_poses
 from agent.core.formation.frame.records import NeighborRecord
 from agent.core.formation.frame.reidentify import (
@@ -19,12 +21,20 @@ from agent.core.formation.frame.reidentify import (
     GATE,
     GATE_REL,
     MIN_APART,
+    MIN_SIGHTINGS,
+    RESEAT_GAIN,
+    RESEAT_SHARE,
+    _counted_where_needed,
     _landings,
+    _place,
+    _position_landings,
     _seen_on,
     gate,
+    heading_bound,
     identify_sightings,
     landing,
     mostly_land,
+    own_bound,
     refine_poses,
     reseat_headings,
     reseat_positions,
@@ -317,3 +327,187 @@ def test_landing_and_the_votes_counts_follow_the_definition(seed: int, n: int, m
         moved[k] = c  # k standing at c; the points' owner is none of the robots
         hits = _landing_by_definition(moved, -1, pts, pd)
         assert count == sum(h == k for h in hits)
+
+
+def _reseat_positions_every_candidate(
+    positions: np.ndarray, headings: np.ndarray, sightings: list[np.ndarray]
+) -> np.ndarray:
+    """reseat_positions with every candidate's landings counted (no bound): the reference."""
+    out = np.array(positions, dtype=np.float64)
+    placed = [_place(out[k], float(headings[k]), v) for k, v in enumerate(sightings)]
+    dists = [np.hypot(v[:, 0], v[:, 1]) for v in sightings]
+    unseen = seen_counts(out, headings, sightings) == 0
+    firm = np.array([v.shape[0] < MIN_SIGHTINGS or (
+        2 * int(_landings(out, k, placed[k][None], dists[k])[0]) >= v.shape[0] and not unseen[k])
+        for k, v in enumerate(sightings)], dtype=bool)  # fmt: skip
+    for k, vecs in enumerate(sightings):
+        if firm[k]:
+            continue
+        dist = dists[k]
+        now = int(_landings(out, k, placed[k][None], dist)[0])
+        turned = _place(np.zeros(2), float(headings[k]), vecs)
+        others = np.delete(np.arange(out.shape[0]), k)
+        cand = (out[others][None, :, :] - turned[:, None, :]).reshape(-1, 2)
+        solid = out[others][firm[others]]
+        if solid.shape[0]:
+            gap = np.hypot(
+                cand[:, None, 0] - solid[None, :, 0], cand[:, None, 1] - solid[None, :, 1]
+            )
+            cand = cand[np.min(gap, axis=1) >= MIN_APART]
+        if cand.shape[0] == 0:
+            continue
+        own = _landings(out, k, cand[:, None, :] + turned[None, :, :], dist)
+        pts = np.concatenate([placed[j] for j in range(len(sightings)) if j != k])
+        pd = np.concatenate([dists[j] for j in range(len(sightings)) if j != k])
+        seen = _seen_on(out, k, np.vstack([out[k][None], cand]), pts, pd)
+        seen_now, seen_c = int(seen[0]), seen[1:]
+        shift = np.hypot(cand[:, 0] - out[k, 0], cand[:, 1] - out[k, 1])
+        best = int(np.lexsort((np.arange(cand.shape[0]), shift, -(own + seen_c)))[0])
+        gain = int(own[best] + seen_c[best]) - (now + seen_now)
+        if (
+            own[best] >= RESEAT_SHARE * vecs.shape[0]
+            and gain >= RESEAT_GAIN
+            and seen_c[best] >= seen_now
+        ):
+            out[k] = cand[best]
+            placed[k] = _place(out[k], float(headings[k]), vecs)
+            firm[k] = True
+    return out
+
+
+def _messy_room(seed: int, n: int, off: int) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+    """A dense room's fitted poses with ``off`` robots misplaced or turned, and noisy
+    sightings, some missed: robots for the vote, with candidates tied or near the gate."""
+    rng = np.random.default_rng(seed)
+    side = 0.8 * math.sqrt(n)
+    pos = rng.uniform(0.0, side, size=(n, 2))
+    psi = rng.uniform(-math.pi, math.pi, n)
+    sightings = []
+    for k in range(n):
+        w = np.delete(pos, k, axis=0) - pos[k]
+        w = w[(np.hypot(*w.T) < 3.5) & (rng.random(n - 1) < 0.8)]
+        w = w @ rot(-psi[k]).T
+        sightings.append(w * (1.0 + rng.normal(0.0, 0.03, (len(w), 1))))
+    fitted, heads = pos.copy(), psi.copy()
+    for k in rng.choice(n, size=min(off, n), replace=False):
+        if rng.random() < 0.5:
+            fitted[k] += rng.normal(0.0, 0.8, 2)
+        else:
+            heads[k] += rng.uniform(-math.pi, math.pi)
+    return fitted, heads, sightings
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(2, 30), st.integers(0, 6))
+def test_the_landing_bound_is_never_below_the_count(seed: int, n: int, off: int) -> None:
+    """own_bound, against every candidate's landings counted (_landings)."""
+    pos, psi, sightings = _messy_room(seed, n, off)
+    for k in range(n):
+        turned = _place(np.zeros(2), float(psi[k]), sightings[k])
+        dist = np.hypot(*sightings[k].T)
+        cand = (np.delete(pos, k, axis=0)[None, :, :] - turned[:, None, :]).reshape(-1, 2)
+        count = _landings(pos, k, cand[:, None, :] + turned[None, :, :], dist)
+        assert np.all(own_bound(pos, k, turned, dist) >= count)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(2, 40), st.integers(0, 8))
+def test_reseated_positions_are_those_of_every_candidate_counted(
+    seed: int, n: int, off: int
+) -> None:
+    """The vote on positions counts only the candidates its bound leaves in the running:
+    the same positions, bit for bit, as counting every candidate."""
+    pos, psi, sightings = _messy_room(seed, n, off)
+    got = reseat_positions(pos, psi, sightings)
+    assert got.tobytes() == _reseat_positions_every_candidate(pos, psi, sightings).tobytes()
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(8, 30), st.integers(0, 3))
+def test_the_candidates_left_uncounted_cannot_have_the_most(seed: int, n: int, slack: int) -> None:
+    """_counted_where_needed with any bound at or above the counts (looser bounds count more
+    candidates, past its first share): every candidate it counts has its exact count, and
+    every one it leaves out has a bound plus its extra below the best found."""
+    pos, psi, sightings = _messy_room(seed, n, 4)
+    rng = np.random.default_rng(seed)
+    for k in range(n):
+        turned = _place(np.zeros(2), float(psi[k]), sightings[k])
+        dist = np.hypot(*sightings[k].T)
+        cand = (np.delete(pos, k, axis=0)[None, :, :] - turned[:, None, :]).reshape(-1, 2)
+        if cand.shape[0] == 0:
+            continue
+        count = _landings(pos, k, cand[:, None, :] + turned[None, :, :], dist)
+        bound = count + rng.integers(0, slack + 1, cand.shape[0])
+        extra = rng.integers(0, 4, cand.shape[0])
+        counter = partial(_position_landings, pos, k, cand, turned, dist)
+        got = _counted_where_needed(counter, bound, extra)
+        done = got >= 0
+        assert np.array_equal(got[done], count[done])
+        best = int(np.max(count + extra))
+        assert best == int(np.max(got[done] + extra[done]))
+        assert np.all(bound[~done] + extra[~done] < best)
+
+
+def _reseat_headings_every_candidate(
+    positions: np.ndarray, headings: np.ndarray, sightings: list[np.ndarray]
+) -> np.ndarray:
+    """reseat_headings with every candidate heading's landings counted: the reference."""
+    out = np.array(headings, dtype=np.float64)
+    for k, vecs in enumerate(sightings):
+        m = vecs.shape[0]
+        if m < MIN_SIGHTINGS:
+            continue
+        dist = np.hypot(vecs[:, 0], vecs[:, 1])
+        now = int(np.sum(landing(positions, k, _place(positions[k], out[k], vecs), dist) >= 0))
+        if 2 * now >= m:
+            continue
+        rel = positions - positions[k]
+        rng = np.hypot(rel[:, 0], rel[:, 1])
+        close = np.abs(rng[None, :] - dist[:, None]) <= gate(dist)[:, None]
+        close[:, k] = False
+        a_idx, t_idx = np.nonzero(close)
+        if a_idx.size == 0:
+            continue
+        cand = wrap_angle(
+            np.arctan2(rel[t_idx, 1], rel[t_idx, 0]) - np.arctan2(vecs[a_idx, 1], vecs[a_idx, 0])
+        )
+        placed = np.stack([_place(positions[k], float(h), vecs) for h in cand])
+        counts = _landings(positions, k, placed, dist)
+        turn = np.abs(wrap_angle(cand - out[k]))
+        best = int(np.lexsort((np.arange(cand.size), turn, -counts))[0])
+        if counts[best] >= max(RESEAT_SHARE * m, now + RESEAT_GAIN):
+            out[k] = float(cand[best])
+    return out
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(2, 30), st.integers(0, 6))
+def test_the_heading_bound_is_never_below_the_count(seed: int, n: int, off: int) -> None:
+    """heading_bound, against the landings counted at every heading that puts a sighting
+    on a robot (the vote's candidates, where the arcs' ends lie) and at random ones."""
+    pos, _, sightings = _messy_room(seed, n, off)
+    rng = np.random.default_rng(seed)
+    for k in range(n):
+        vecs = sightings[k]
+        if vecs.shape[0] == 0:
+            continue
+        dist = np.hypot(*vecs.T)
+        rel = np.delete(pos, k, axis=0) - pos[k]
+        exact = (
+            np.arctan2(rel[:, 1], rel[:, 0])[None, :] - np.arctan2(vecs[:, 1], vecs[:, 0])[:, None]
+        )
+        heads = wrap_angle(np.concatenate([exact.ravel(), rng.uniform(-math.pi, math.pi, 50)]))
+        placed = np.stack([_place(pos[k], float(h), vecs) for h in heads])
+        assert np.all(heading_bound(pos, k, vecs, heads) >= _landings(pos, k, placed, dist))
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(2, 40), st.integers(0, 8))
+def test_reseated_headings_are_those_of_every_candidate_counted(
+    seed: int, n: int, off: int
+) -> None:
+    """The vote on headings counts only the candidates its bound leaves in the running, and
+    none when no heading can land enough: the same headings as counting every candidate."""
+    pos, psi, sightings = _messy_room(seed, n, off)
+    got = reseat_headings(pos, psi, sightings)
+    assert got.tobytes() == _reseat_headings_every_candidate(pos, psi, sightings).tobytes()

@@ -8,15 +8,16 @@ import os
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.optimize import least_squares
-from scipy.sparse import csr_matrix
+from scipy.sparse import csr_matrix, diags
 
-from agent.core.formation.frame.robust_lm import minimise, soft_l1_cost
+from agent.core.formation.frame.robust_lm import _Damped, _row_scaled, minimise, soft_l1_cost
 
 
 def _line(xs: np.ndarray, ys: np.ndarray):  # type: ignore[no-untyped-def]
@@ -132,3 +133,48 @@ def test_the_result_does_not_depend_on_the_blas_threads() -> None:
         )  # fmt: skip
         out.append(done.stdout.strip())
     assert out[0] == out[1] and len(out[0]) == 64
+
+
+def _same(a: Any, b: Any) -> bool:
+    """The same entries at the same places (each made canonical: what SuperLU and the
+    products read)."""
+    a, b = a.copy(), b.copy()
+    a.sum_duplicates()
+    b.sum_duplicates()
+    return all(getattr(a, k).tobytes() == getattr(b, k).tobytes()
+               for k in ("indptr", "indices", "data"))  # fmt: skip
+
+
+@settings(max_examples=80, deadline=None)
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    rows=st.integers(1, 12),
+    cols=st.integers(1, 6),
+    zeros=st.booleans(),
+    lam=st.floats(1e-12, 1e12),
+)
+def test_the_weighted_and_damped_matrices_are_the_products_bit_for_bit(
+    seed: int, rows: int, cols: int, zeros: bool, lam: float
+) -> None:
+    """``diags(w) @ j`` and ``(h + diags(λd)).tocsc()`` as taken without the products: the
+    same entries (explicit zeros in ``j`` and missing diagonals in ``h`` included)."""
+    rng = np.random.default_rng(seed)
+    dense = rng.normal(size=(rows, cols)) * (rng.random((rows, cols)) < 0.5)
+    j = csr_matrix(dense)
+    if zeros and j.nnz:
+        j.data[rng.random(j.nnz) < 0.3] = 0.0  # explicit zeros, as a mask row's without a mask
+    w = rng.uniform(0.1, 1.0, rows)
+    assert _same(_row_scaled(j, w), diags(w) @ j)
+    h = (j.T @ (diags(w) @ j)).tocsc()
+    d = np.maximum(h.diagonal(), 1e-12)
+    want = (h + diags(lam * d)).tocsc()
+    assert _same(_Damped(h.copy())(lam * d), want)
+
+
+def test_a_jacobian_with_an_entry_given_twice_is_weighted_as_the_product() -> None:
+    """Two entries at one place: the product adds them weighted one at a time."""
+    j = csr_matrix((np.array([0.1, 0.7, 0.3]), np.array([0, 0, 1]), np.array([0, 2, 3])), (2, 2))
+    assert not j.has_canonical_format
+    w = np.array([1.0 / 3.0, 0.9])
+    got, want = _row_scaled(j, w), diags(w) @ j
+    assert got.toarray().tobytes() == want.toarray().tobytes()

@@ -197,6 +197,17 @@ class _Sightings:
         self.ux, self.uy = self.u_all[:n_own, 0].copy(), self.u_all[:n_own, 1].copy()
         self.sr_own, self.st_own = self.s_r[:n_own].copy(), self.s_t[:n_own].copy()
         self._last: tuple[tuple[int, bytes], np.ndarray] | None = None
+        # the same numbers by columns, for :meth:`residuals` and :meth:`jacobian` (each
+        # product and sum as :meth:`errors` and :meth:`whiten` take it: the same bits)
+        self.c_obs, self.s_obs = self.rot_obs[:, 0, 0].copy(), self.rot_obs[:, 0, 1].copy()
+        self.ms_obs = self.rot_obs[:, 1, 0].copy()  # −sin ψ_o
+        self.px_obs, self.py_obs = self.p_obs[:, 0].copy(), self.p_obs[:, 1].copy()
+        self.vx_all, self.vy_all = self.v_all[:, 0].copy(), self.v_all[:, 1].copy()
+        self.ux_all, self.uy_all = self.u_all[:, 0].copy(), self.u_all[:, 1].copy()
+        self.pax, self.pay = self.p_any[:, 0].copy(), self.p_any[:, 1].copy()
+        #: (x's bytes, free) -> the own sightings' (p_target − p_r) at x, for the Jacobian
+        self._rel: tuple[tuple[bytes, bool], np.ndarray, np.ndarray] | None = None
+        self._seen_jac: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
     def errors(self, x: np.ndarray, jac_too: bool) -> tuple[np.ndarray, np.ndarray | None]:
         """Misfits (k, 2) and their Jacobian (k, 2, len(x)), owner's frame."""
@@ -249,7 +260,7 @@ class _Sightings:
         ux, uy = self.ux[first:, None], self.uy[first:, None]
         along = (ex * ux + ey * uy) / self.sr_own[first:, None]
         across = (ey * ux - ex * uy) / self.st_own[first:, None]
-        hit = np.asarray(np.argmin(np.round(along**2 + across**2, 9), axis=1), dtype=np.intp)
+        hit = np.asarray((along**2 + across**2).round(9).argmin(axis=1), dtype=np.intp)
         self._last = (key, hit)
         return hit
 
@@ -287,13 +298,81 @@ class _Sightings:
         across = (e[:, 1] * ux - e[:, 0] * uy) / self.s_t.reshape(shape)
         return np.concatenate([along, across])
 
+    def _targets_rel(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The places the own sightings land on at ``x`` less r's position, by columns
+        (as :meth:`errors`' ``rel``; kept for the Jacobian at the same point)."""
+        key = (x.tobytes(), self.free)
+        if self._rel is not None and self._rel[0] == key:
+            return self._rel[1], self._rel[2]
+        scale, shift = (float(x[3]), x[4:6]) if len(x) > 3 else (1.0, np.zeros(2))
+        psi = float(x[2])
+        c, s = math.cos(psi), math.sin(psi)
+        first = 0 if self.free else self.n_paired
+        rows = self._matched(first, x[:2], c, s, scale, shift)
+        if first:
+            rows = np.concatenate([self.paired_to[:first], rows])
+        relx, rely = self.pax[rows] - x[0], self.pay[rows] - x[1]
+        self._rel = (key, relx, rely)
+        return relx, rely
+
     def residuals(self, x: np.ndarray) -> np.ndarray:
-        return self.whiten(self.errors(x, False)[0])
+        """``whiten(errors(x)[0])``, bit for bit, by columns (no (k, 2) arrays)."""
+        relx, rely = self._targets_rel(x)
+        psi = float(x[2])
+        c, s = math.cos(psi), math.sin(psi)
+        ox, oy = c * relx + s * rely, -s * relx + c * rely
+        if len(x) > 3:
+            scale = float(x[3])
+            ox, oy = ox * scale + x[4], oy * scale + x[5]
+        else:
+            ox, oy = ox * 1.0 + 0.0, oy * 1.0 + 0.0
+        dx, dy = x[0] - self.px_obs, x[1] - self.py_obs
+        ex = np.concatenate([ox, self.c_obs * dx + self.s_obs * dy]) - self.vx_all
+        ey = np.concatenate([oy, self.ms_obs * dx + self.c_obs * dy]) - self.vy_all
+        along = (ex * self.ux_all + ey * self.uy_all) / self.s_r
+        across = (ey * self.ux_all - ex * self.uy_all) / self.s_t
+        return np.concatenate([along, across])
 
     def jacobian(self, x: np.ndarray) -> np.ndarray:
-        jac = self.errors(x, True)[1]
-        assert jac is not None
-        return self.whiten(jac)
+        """``whiten(errors(x, True)[1])``, bit for bit, by columns."""
+        relx, rely = self._targets_rel(x)
+        n_own, k, nx = self.n_own, len(self.v_all), len(x)
+        psi = float(x[2])
+        c, s = math.cos(psi), math.sin(psi)
+        scale = float(x[3]) if nx > 3 else 1.0
+        j0 = np.zeros((n_own, nx))  # d(misfit along x) / dx, as ``errors`` fills jac[:, 0]
+        j1 = np.zeros((n_own, nx))  # d(misfit along y) / dx
+        m = -scale * np.array([[c, s], [-s, c]])
+        j0[:, 0], j0[:, 1] = m[0, 0], m[0, 1]
+        j1[:, 0], j1[:, 1] = m[1, 0], m[1, 1]
+        j0[:, 2] = scale * (-s * relx + c * rely)
+        j1[:, 2] = scale * (-c * relx - s * rely)
+        if nx > 3:
+            j0[:, 3] = c * relx + s * rely
+            j1[:, 3] = -s * relx + c * rely
+            j0[:, 4] = 1.0
+            j1[:, 5] = 1.0
+        ux, uy = self.ux_all[:n_own, None], self.uy_all[:n_own, None]
+        out = np.empty((2 * k, nx))
+        out[:n_own] = (j0 * ux + j1 * uy) / self.s_r[:n_own, None]
+        out[k : k + n_own] = (j1 * ux - j0 * uy) / self.s_t[:n_own, None]
+        seen_along, seen_across = self._seen_jacobian(nx)
+        out[n_own:k], out[k + n_own :] = seen_along, seen_across
+        return out
+
+    def _seen_jacobian(self, nx: int) -> tuple[np.ndarray, np.ndarray]:
+        """The whitened Jacobian of the others' sightings of r (along, across), the same
+        at every x: they move with r's position only, by their owners' fixed headings."""
+        if nx not in self._seen_jac:
+            n_own, k = self.n_own, len(self.v_all)
+            j0, j1 = np.zeros((k - n_own, nx)), np.zeros((k - n_own, nx))
+            j0[:, 0], j0[:, 1] = self.c_obs, self.s_obs
+            j1[:, 0], j1[:, 1] = self.ms_obs, self.c_obs
+            ux, uy = self.ux_all[n_own:, None], self.uy_all[n_own:, None]
+            along = (j0 * ux + j1 * uy) / self.s_r[n_own:, None]
+            across = (j1 * ux - j0 * uy) / self.s_t[n_own:, None]
+            self._seen_jac[nx] = (along, across)
+        return self._seen_jac[nx]
 
     def worst(self) -> tuple[np.ndarray, int]:
         """H0's solution and the sighting (own, then seen) that fits worst under it (by its
@@ -333,12 +412,13 @@ def _cauchy_fit(
     r = residuals(x)
     cost = cauchy_cost(r)
     f2 = LOSS_SCALE * LOSS_SCALE
+    ridge = 1e-9 * np.eye(len(x))
     for _ in range(MAX_ITER):
         j = jacobian(x)
         w = 1.0 / (1.0 + r * r / f2)
         jw = j * w[:, None]
         try:
-            step = np.linalg.solve(jw.T @ j + 1e-9 * np.eye(len(x)), -(jw.T @ r))
+            step = np.linalg.solve(jw.T @ j + ridge, -(jw.T @ r))
         except np.linalg.LinAlgError:
             break
         for _ in range(20):

@@ -232,6 +232,7 @@ class _Problem:
         )
         self.sm = np.where(self.has_mask, w / SIGMA_MASK, 0.0)
         self.m = len(measurements)
+        self._layout: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def unpack(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         pos = np.zeros((self.n, 2))
@@ -250,15 +251,18 @@ class _Problem:
 
     def misfit(self, pos: np.ndarray, psi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Position misfit (m, 2) in metres and mask misfit δ (m,) in rad (modulo π)."""
-        c, s = np.cos(psi[self.o]), np.sin(psi[self.o])
-        rv = np.stack([c * self.v[:, 0] - s * self.v[:, 1], s * self.v[:, 0] + c * self.v[:, 1]], 1)
-        e = pos[self.t] - pos[self.o] - rv
+        e = self._position_misfit(pos, psi)
         delta = np.where(self.has_mask, wrap_half(psi[self.t] - psi[self.o] - self.mask_ref), 0.0)
         return e, delta
 
+    def _position_misfit(self, pos: np.ndarray, psi: np.ndarray) -> np.ndarray:
+        c, s = np.cos(psi[self.o]), np.sin(psi[self.o])
+        rv = np.stack([c * self.v[:, 0] - s * self.v[:, 1], s * self.v[:, 0] + c * self.v[:, 1]], 1)
+        return np.asarray(pos[self.t] - pos[self.o] - rv)
+
     def fun(self, x: np.ndarray) -> np.ndarray:
         pos, psi = self.unpack(x)
-        e, _ = self.misfit(pos, psi)
+        e = self._position_misfit(pos, psi)
         delta = psi[self.t] - psi[self.o] - self.mask_ref
         rm = self.sm * np.sin(2.0 * delta) / 2.0
         return np.concatenate([(e * self.sp[:, None]).reshape(-1), rm])
@@ -266,7 +270,6 @@ class _Problem:
     def jac(self, x: np.ndarray) -> csr_matrix:
         """The Jacobian, sparse: each sighting touches its two robots' columns only."""
         _, psi = self.unpack(x)
-        rows = np.arange(self.m)
         co, ct = self.col[self.o], self.col[self.t]
         c, s = np.cos(psi[self.o]), np.sin(psi[self.o])
         # d(R(ψ)v)/dψ = [-s vx - c vy, c vx - s vy]
@@ -274,24 +277,33 @@ class _Problem:
         dpy = -(c * self.v[:, 0] - s * self.v[:, 1]) * self.sp
         delta = psi[self.t] - psi[self.o] - self.mask_ref
         dm = self.sm * np.cos(2.0 * delta)
+        vals = np.concatenate([1.0 * self.sp, 1.0 * self.sp, 1.0 * dm,
+                               -1.0 * self.sp, -1.0 * self.sp, -1.0 * dm, dpx, dpy])  # fmt: skip
+        if self._layout is None:
+            self._layout = self._jac_layout(co, ct)
+        take, cols, indptr = self._layout
+        out = csr_matrix((vals[take], cols.copy(), indptr.copy()), shape=(3 * self.m, self.nvar))
+        out.has_canonical_format = True  # sorted, no duplicates: as tocsr() leaves it
+        return out
+
+    def _jac_layout(
+        self, co: np.ndarray, ct: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Where the Jacobian's entries go, the same at every x: which of the values
+        :meth:`jac` lists are kept, in CSR order, their columns and the row pointers."""
+        rows = np.arange(self.m)
         # (row, column, value) of every entry, as three per row at most: each sighting's
         # position rows touch both robots' columns and the owner's ψ, its mask row both ψ
         rows = np.concatenate([2 * rows, 2 * rows + 1, 2 * self.m + rows] * 2
                               + [2 * rows, 2 * rows + 1])  # fmt: skip
         cols = np.concatenate([ct, ct + 1, ct + 2, co, co + 1, co + 2, co + 2, co + 2])
-        vals = np.concatenate([1.0 * self.sp, 1.0 * self.sp, 1.0 * dm,
-                               -1.0 * self.sp, -1.0 * self.sp, -1.0 * dm, dpx, dpy])  # fmt: skip
-        have = np.concatenate([ct >= 0] * 3 + [co >= 0] * 5)
-        rows, cols, vals = rows[have], cols[have], vals[have]
+        have = np.flatnonzero(np.concatenate([ct >= 0] * 3 + [co >= 0] * 5))
+        rows, cols = rows[have], cols[have]
         # as ``coo_matrix(...).tocsr()`` gives it: rows in order, columns ascending in each
         order = np.argsort(rows * self.nvar + cols, kind="stable")
         indptr = np.zeros(3 * self.m + 1, dtype=np.int32)
         np.cumsum(np.bincount(rows, minlength=3 * self.m), out=indptr[1:])
-        out = csr_matrix(
-            (vals[order], cols[order].astype(np.int32), indptr), shape=(3 * self.m, self.nvar)
-        )
-        out.has_canonical_format = True  # sorted, no duplicates: as tocsr() leaves it
-        return out
+        return have[order], cols[order].astype(np.int32), indptr
 
 
 def _residuals(

@@ -21,6 +21,9 @@ would: where does it land? This module does that, in rounds (at most
    heading (ties: the candidate closest to the fitted heading, then the lower index).
    A robot whose distances are wrong (a sensor fault) lands few sightings under any
    heading and keeps its fitted one, and its misfit stays evidence for :mod:`fault_test`.
+   Only the headings that can still win are counted (:func:`heading_bound`: a sighting
+   lands on a robot only from an arc of headings, by the law of cosines), and none when
+   no heading can land enough.
    **Positions re-seated first** (:func:`reseat_positions`, before the heading vote, on
    the fitted headings: on 50 NAOs seed 12's records the heading vote, run first on a
    distorted neighbourhood, turned robot 49 by 23°). A robot whose own sightings mostly
@@ -36,7 +39,10 @@ would: where does it land? This module does that, in rounds (at most
    wrong pairing, and the fleet fell back to the pose pairing (4.8 CPU s an agent
    instead of ~0.5, ×50 agents on 2 cores: a 194 s plan phase). Counting the others'
    sightings keeps a robot from being moved off the place they see it at, where its
-   own sightings may happen to land in a dense lattice.
+   own sightings may happen to land in a dense lattice. Only the candidates that can
+   still win are counted (:func:`own_bound`: a sighting lands from a candidate only if a
+   displacement between two robots matches the difference of two of its sightings, an
+   upper bound from one k-d tree; the same winner, ~10 % of the candidates placed).
 2. **Sightings identified** (:func:`identify_sightings`): a sighting placed from its
    owner's pose that lands within the gate ``GATE + GATE_REL·d`` of one robot, and that
    robot alone (the second nearest at least :data:`AMBIGUITY` times farther), is a
@@ -56,7 +62,8 @@ the same records.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from functools import partial
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -151,13 +158,18 @@ def reseat_headings(
         cand = wrap_angle(
             np.arctan2(rel[t_idx, 1], rel[t_idx, 0]) - np.arctan2(vecs[a_idx, 1], vecs[a_idx, 0])
         )
+        need = max(RESEAT_SHARE * m, now + RESEAT_GAIN)
+        bound = heading_bound(positions, k, vecs, cand)
+        if np.max(bound) < need:
+            continue  # no heading can land enough: whichever wins is refused
         # every candidate's placement at once: one k-d tree, not one per candidate (100
         # NAOs: ~55 000 trees, ~5 of ~10 CPU s of a plan); the same counts
-        placed = np.stack([_place(positions[k], float(h), vecs) for h in cand])
-        counts = _landings(positions, k, placed, dist)
+        count = partial(_heading_landings, positions, k, cand, vecs, dist)
+        counts = _counted_where_needed(count, bound, np.zeros(cand.size, dtype=np.int64))
         turn = np.abs(wrap_angle(cand - out[k]))
-        best = int(np.lexsort((np.arange(cand.size), turn, -counts))[0])
-        if counts[best] >= max(RESEAT_SHARE * m, now + RESEAT_GAIN):
+        done = np.flatnonzero(counts >= 0)  # the others cannot win
+        best = int(done[np.lexsort((done, turn[done], -counts[done]))[0]])
+        if counts[best] >= need:
             out[k] = float(cand[best])
     return out
 
@@ -169,6 +181,121 @@ def _landings(positions: np.ndarray, k: int, points: np.ndarray, dist: np.ndarra
     c, m = points.shape[0], points.shape[1]
     hit = landing(positions, k, points.reshape(-1, 2), np.tile(dist, c))
     return np.asarray((hit >= 0).reshape(c, m).sum(axis=1), dtype=np.int64)
+
+
+#: Slack (m) of :func:`own_bound`'s distances: the same distance taken from other sums
+#: differs by rounding (~1e-15 m in a room), far below this.
+BOUND_SLACK = 1e-9
+#: Slack (rad) of :func:`heading_bound`'s arcs.
+ARC_SLACK = 1e-6
+
+
+def own_bound(positions: np.ndarray, k: int, turned: np.ndarray, dist: np.ndarray) -> np.ndarray:
+    """An upper bound on :func:`_landings` for every candidate position of robot k of
+    :func:`reseat_positions` (``positions[t] − turned[a]`` for each sighting a and each
+    robot t ≠ k, a-major), without placing any: sighting b lands from that candidate only
+    if some robot u ≠ k stands within b's gate of ``p_t − v_a + v_b``, that is, only if a
+    displacement ``p_u − p_t`` between two robots lies within the gate of ``v_b − v_a``.
+    So the displacements between the robots are put in one k-d tree and each of the m²
+    differences of k's turned sightings looked up once (the bound counts, per candidate,
+    the sightings b with such a displacement from t). ``turned`` (m, 2): k's sightings
+    turned by its heading; ``dist`` (m,) their measured distances."""
+    others = np.delete(positions, k, axis=0)
+    n, m = others.shape[0], turned.shape[0]
+    if n == 0 or m == 0:
+        return np.zeros(m * n, dtype=np.int64)
+    disp = (others[None, :, :] - others[:, None, :]).reshape(-1, 2)  # row t·n + u: p_u − p_t
+    diff = (turned[None, :, :] - turned[:, None, :]).reshape(-1, 2)  # row a·m + b: v_b − v_a
+    reach = gate(dist) + BOUND_SLACK
+    near = cKDTree(diff).sparse_distance_matrix(
+        cKDTree(disp), float(np.max(reach)), output_type="ndarray"
+    )
+    ab, tu, d = near["i"].astype(np.int64), near["j"].astype(np.int64), near["v"]
+    ok = d <= reach[ab % m]
+    a, b, t = ab[ok] // m, ab[ok] % m, tu[ok] // n
+    hit = np.zeros((m * n, m), dtype=bool)  # (candidate a·n + t, sighting b)
+    hit[a * n + t, b] = True  # each (candidate, sighting) once
+    return np.asarray(hit.sum(axis=1), dtype=np.int64)
+
+
+def _position_landings(
+    positions: np.ndarray,
+    k: int,
+    cand: np.ndarray,
+    turned: np.ndarray,
+    dist: np.ndarray,
+    idx: np.ndarray,
+) -> np.ndarray:
+    """:func:`_landings` of robot k's sightings ``turned`` from the positions ``cand[idx]``."""
+    return _landings(positions, k, cand[idx][:, None, :] + turned[None, :, :], dist)
+
+
+def _heading_landings(
+    positions: np.ndarray,
+    k: int,
+    cand: np.ndarray,
+    vectors: np.ndarray,
+    dist: np.ndarray,
+    idx: np.ndarray,
+) -> np.ndarray:
+    """:func:`_landings` of robot k's sightings ``vectors`` at the headings ``cand[idx]``."""
+    placed = np.stack([_place(positions[k], float(h), vectors) for h in cand[idx]])
+    return _landings(positions, k, placed, dist)
+
+
+def _counted_where_needed(
+    count: Callable[[np.ndarray], np.ndarray], bound: np.ndarray, extra: np.ndarray
+) -> np.ndarray:
+    """``count(idx)`` (the landings of the candidates ``idx``) for every candidate that
+    can still have the most landings plus ``extra``, −1 for the others: those whose
+    ``bound`` (their count at most) plus ``extra`` is below the best count plus ``extra``
+    found. Counted from the highest bound down: the candidates of the top bounds, then
+    every other one whose bound reaches the best found."""
+    own = np.full(bound.shape[0], -1, dtype=np.int64)
+    if bound.shape[0] == 0:
+        return own
+    top = bound + extra
+    order = np.argsort(-top, kind="stable")
+    first = order[: max(64, bound.shape[0] // 16)]
+    own[first] = count(first)
+    best = int(np.max(own[first] + extra[first]))
+    rest = order[first.size :]
+    rest = rest[top[rest] >= best]
+    if rest.size:
+        own[rest] = count(rest)
+    return own
+
+
+def heading_bound(
+    positions: np.ndarray, k: int, vectors: np.ndarray, headings: np.ndarray
+) -> np.ndarray:
+    """An upper bound on :func:`_landings` of robot k's sightings ``vectors`` (m, 2) placed
+    from its position at each of ``headings`` (C,): sighting b (length d, bearing β) lands
+    on robot u (at distance r, bearing α from k) only if the placed point is within b's
+    gate g of it, that is, only if ``cos(h + β − α) ≥ (d² + r² − g²) / (2dr)``: an arc of
+    headings per (b, u). The bound counts, per heading, the sightings with an arc holding
+    it (every gate widened by :data:`BOUND_SLACK` and every arc by :data:`ARC_SLACK`:
+    rounding, and the arc cosine's near a tangent, stay far inside them)."""
+    c = headings.shape[0]
+    rel = np.delete(positions, k, axis=0) - positions[k]
+    if c == 0 or rel.shape[0] == 0 or vectors.shape[0] == 0:
+        return np.zeros(c, dtype=np.int64)
+    r = np.hypot(rel[:, 0], rel[:, 1])
+    d = np.hypot(vectors[:, 0], vectors[:, 1])
+    g = gate(d) + BOUND_SLACK
+    b, u = np.nonzero(np.abs(d[:, None] - r[None, :]) <= g[:, None])
+    if b.size == 0:
+        return np.zeros(c, dtype=np.int64)
+    dd, rr, gg = d[b], r[u], g[b]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cos_min = (dd * dd + rr * rr - gg * gg) / (2.0 * dd * rr)
+    half = np.where(np.isfinite(cos_min), np.arccos(np.clip(cos_min, -1.0, 1.0)), math.pi)
+    centre = np.arctan2(rel[u, 1], rel[u, 0]) - np.arctan2(vectors[b, 1], vectors[b, 0])
+    off = np.abs(wrap_angle(headings[:, None] - centre[None, :]))  # (C, arcs)
+    inside = off <= half[None, :] + ARC_SLACK
+    starts = np.flatnonzero(np.r_[True, b[1:] != b[:-1]])  # the arcs come by sighting
+    lands = np.logical_or.reduceat(inside, starts, axis=1)  # any arc of b holds the heading
+    return np.asarray(lands.sum(axis=1), dtype=np.int64)
 
 
 def _seen_on(
@@ -242,22 +369,28 @@ def reseat_positions(
         others = np.delete(np.arange(out.shape[0]), k)
         cand = (out[others][None, :, :] - rot[:, None, :]).reshape(-1, 2)  # (m·(N-1), 2)
         solid = out[others][firm[others]]
+        keep = None
         if solid.shape[0]:
             gap = np.hypot(
                 cand[:, None, 0] - solid[None, :, 0], cand[:, None, 1] - solid[None, :, 1]
             )
-            cand = cand[np.min(gap, axis=1) >= MIN_APART]
+            keep = np.flatnonzero(np.min(gap, axis=1) >= MIN_APART)
+            cand = cand[keep]
         if cand.shape[0] == 0:
             continue
-        own = _landings(out, k, cand[:, None, :] + rot[None, :, :], dist)
         theirs_pts = [placed[j] for j in range(len(sightings)) if j != k]
         theirs_d = [dists[j] for j in range(len(sightings)) if j != k]
         pts = np.concatenate(theirs_pts) if theirs_pts else np.zeros((0, 2))
         pd = np.concatenate(theirs_d) if theirs_d else np.zeros(0)
         seen = _seen_on(out, k, np.vstack([out[k][None], cand]), pts, pd)
         seen_now, seen_c = int(seen[0]), seen[1:]
+        bound = own_bound(out, k, rot, dist)
+        count = partial(_position_landings, out, k, cand, rot, dist)
+        own = _counted_where_needed(count, bound if keep is None else bound[keep], seen_c)
         shift = np.hypot(cand[:, 0] - out[k, 0], cand[:, 1] - out[k, 1])
-        best = int(np.lexsort((np.arange(cand.shape[0]), shift, -(own + seen_c)))[0])
+        done = np.flatnonzero(own >= 0)  # the others cannot win (:func:`_counted_where_needed`)
+        keys = (done, shift[done], -(own[done] + seen_c[done]))
+        best = int(done[np.lexsort(keys)[0]])
         gain = int(own[best] + seen_c[best]) - (now + seen_now)
         if own[best] >= RESEAT_SHARE * m and gain >= RESEAT_GAIN and seen_c[best] >= seen_now:
             out[k] = cand[best]

@@ -28,7 +28,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
-from scipy.sparse import csr_matrix, diags
+from scipy.sparse import csc_matrix, csr_matrix, diags
 from scipy.sparse.linalg import splu
 
 #: Iteration budget (accepted or refused steps).
@@ -39,6 +39,42 @@ FTOL = 1e-12
 XTOL = 1e-12
 LAMBDA0 = 1e-3  #: initial damping
 LAMBDA_MAX = 1e12  #: damping beyond which no step can lower the cost: stop
+
+
+def _row_scaled(j: csr_matrix, w: np.ndarray) -> csr_matrix:
+    """``diags(w) @ j`` as that product leaves it: each entry times its row's weight,
+    the entries that become 0 left out (the product keeps no zeros). What follows reads
+    only the entries and their places, never their order in a row: the same bits. A
+    matrix with an entry given twice is left to the product itself (it adds each weighted)."""
+    if not j.has_canonical_format:
+        return diags(w) @ j
+    rows = np.repeat(np.arange(j.shape[0]), np.diff(j.indptr))
+    out = csr_matrix((j.data * w[rows], j.indices.copy(), j.indptr.copy()), shape=j.shape)
+    out.eliminate_zeros()
+    return out
+
+
+class _Damped:
+    """``(h + diags(v)).tocsc()`` for one ``h`` and many ``v`` (Marquardt's λ changes,
+    ``h`` does not): ``h``'s entries with ``v`` added on its diagonal, when ``h`` holds
+    every diagonal entry (else the sum itself). The same entries and values as the sum
+    (``h`` keeps no zeros, so ``h_ij + 0`` is ``h_ij``); SuperLU takes its input sorted."""
+
+    def __init__(self, h: csc_matrix) -> None:
+        self.h = h
+        h.sort_indices()  # the same matrix, its rows in order in each column
+        cols = np.repeat(np.arange(h.shape[1]), np.diff(h.indptr))
+        self.diag = np.flatnonzero(h.indices == cols)
+        self.full = self.diag.size == h.shape[0] == h.shape[1]
+
+    def __call__(self, v: np.ndarray) -> csc_matrix:
+        if not self.full:
+            return (self.h + diags(v)).tocsc()
+        data = self.h.data.copy()
+        data[self.diag] = data[self.diag] + v
+        out = csc_matrix((data, self.h.indices, self.h.indptr), shape=self.h.shape)
+        out.has_sorted_indices = True
+        return out
 
 
 def soft_l1_cost(f: np.ndarray) -> float:
@@ -67,14 +103,15 @@ def minimise(
     while it < MAX_ITER and x.size and f.size:
         j = jac(x)
         w = 1.0 / np.sqrt(1.0 + f * f)
-        jw = diags(w) @ j
+        jw = _row_scaled(j, w)
         h = (j.T @ jw).tocsc()
         g = np.asarray(jw.T @ f, dtype=np.float64).reshape(-1)
         d = np.maximum(h.diagonal(), 1e-12)
+        damp = _Damped(h)
         improved = False
         while it < MAX_ITER:
             it += 1
-            a = (h + diags(lam * d)).tocsc()
+            a = damp(lam * d)
             try:
                 step = -splu(a).solve(g)
             except RuntimeError:  # SuperLU: "Factor is exactly singular"
