@@ -33,6 +33,7 @@ from types import TracebackType
 from typing import Any
 
 from agent.config import AgentConfig
+from agent.core.formation.shape.spec import Shape
 from agent.net.bus import Bus
 from sim import scenarios
 from sim.camera.look import Look
@@ -113,6 +114,7 @@ class FleetSpec:
     rogue: float = 0.0
     rogue_replay: Path | None = None
     live: str | None = None
+    reshapes: tuple[Shape, ...] = ()
 
     def __post_init__(self) -> None:
         if not 1 <= self.robots <= MAX_ROBOTS:
@@ -134,6 +136,12 @@ class FleetSpec:
             raise ValueError("the timeouts must be > 0 and the obstacles >= 0")
         # a formation file with fewer slots than robots: refused before anything starts
         self.agent.shape.check_fleet(self.robots)
+        for shape in self.reshapes:
+            shape.check_fleet(self.robots)
+            if not shape.source:
+                raise ValueError(f"reshape to {shape.name!r}: a shape from no name or file")
+        if self.reshapes and self.agent.reshape_wait <= 0.0:
+            raise ValueError("reshapes need agents that wait for them (reshape_wait > 0)")
 
     def agent_config(self, rid: int) -> AgentConfig:
         """Robot ``rid``'s agent settings."""
@@ -177,6 +185,8 @@ class FleetSpec:
             out["free_looks"] = True
         if self.agent_args:
             out["agent_args"] = [f"{i}:{a}" for i, a in self.agent_args]
+        if self.reshapes:  # the judge loads each again, and judges the last
+            out["reshape_specs"] = [s.source for s in self.reshapes]
         if cfg.march is not None and cfg.march.distance is not None:
             out["route"] = {"distance": float(cfg.march.distance)}
         elif cfg.march is not None and cfg.march.to is not None:
@@ -239,6 +249,7 @@ class Fleet:
         self._rec: Recorder | None = None
         self._live: LiveView | None = None
         self._bus: Bus | None = None
+        self._op_bus: Bus | None = None
         self._closed = False
 
     # ------------------------------------------------------------------ start and stop
@@ -348,6 +359,8 @@ class Fleet:
             stop(self.router)
         if self._bus is not None:
             self._bus.close()
+        if self._op_bus is not None:
+            self._op_bus.close()
         if self._rec is not None:
             self._rec.close()
 
@@ -405,6 +418,35 @@ class Fleet:
         name = f"agent-slot{rid}.log" if self.spec.auto_ids else f"agent-{rid}.log"
         self.agents[rid] = start_agent(cmd, self.out / name, append)
 
+    def operator(self) -> Callable[[float], bool] | None:
+        """With the spec's reshapes, the operator (docs/formation.md "Reshaping"): a
+        :meth:`wait` caller that commands each shape in turn once the fleet holds
+        (:class:`tools.lib.reshape.Reshaper`, signed with the operator's key), pending
+        until the last is held or refused; its transitions go to ``result["reshapes"]``.
+        None without reshapes."""
+        if not self.spec.reshapes:
+            return None
+        assert self.net is not None, "the fleet has not started"
+        from agent.wire import KEY_RESHAPE
+        from tools.lib.reshape import Reshaper, Seen
+
+        bus = self._op_bus = Bus(self.net.operator())
+        op = Reshaper(self.spec.reshapes, self.ids, lambda m: bus.publish(KEY_RESHAPE, m))
+        self.result["reshapes"] = []
+
+        def step(elapsed: float) -> bool:
+            views = self.obs.agents
+            seen = {
+                i: Seen(v.phase, v.plan_digest, v.t_sim, v.detail)
+                for i, v in views.items()
+                if i in self.ids
+            }
+            pending = op.step(elapsed, seen)
+            self.result["reshapes"] = [t.as_dict() for t in op.done]
+            return pending
+
+        return step
+
     def running(self, rid: int) -> bool:
         p = self.agents.get(rid)
         return p is not None and p.popen.poll() is None
@@ -457,5 +499,5 @@ def run_fleet(spec: FleetSpec, out: Path, quiet: bool = True) -> dict[str, Any]:
     start: a world or router that did not come up)."""
     fleet = Fleet(spec, out, quiet)
     with fleet:
-        fleet.wait()
+        fleet.wait(fleet.operator())
     return fleet.judge()
