@@ -32,6 +32,8 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any
 
+import numpy as np
+
 from agent.config import AgentConfig
 from agent.core.formation.shape.spec import Shape
 from agent.net.bus import Bus
@@ -204,13 +206,26 @@ def route_length(cfg: AgentConfig) -> float:
     return math.hypot(*cfg.march.to) + 2.0  # the leader's target is near the fleet's centre
 
 
+def reshape_reach(spec: FleetSpec) -> float:
+    """How far (m) a slot of the spec's reshapes may lie from the slots' mean, the most of
+    any shape (0 without reshapes): each new shape stands on the held slots' mean, which
+    lies within the room, so a room this much larger holds it (a line of 8 at d_e 0.8
+    spans 5.6 m: the generated room of 6 m did not)."""
+    cfg, reach = spec.agent, 0.0
+    for shape in spec.reshapes:
+        pos = shape.slots(spec.robots, cfg.d_e, cfg.phi_e).positions
+        reach = max(reach, float(np.max(np.hypot(*(pos - pos.mean(axis=0)).T))))
+    return reach
+
+
 def march_room(spec: FleetSpec, out: Path) -> list[str]:
     """World flags for the run's scenario, written to ``out/scenario.json``: the file of
     ``scenario``, or the seed's generated one (``isolated``, ``headings``); with a march,
-    its room's half-size enlarged by the route's length (sim/scenarios is not changed).
+    its room's half-size enlarged by the route's length, with reshapes by the reach of
+    their shapes (:func:`reshape_reach`; sim/scenarios is not changed).
     [] when the world generates the default scenario itself, or when the caller chose a
     scenario with ``world_args``."""
-    extra = route_length(spec.agent)
+    extra = route_length(spec.agent) + reshape_reach(spec)
     turned = spec.headings.kind != "aligned"
     if (extra <= 0.0 and spec.scenario is None and not spec.isolated and not turned) or any(
         "--scenario" in a for a in spec.world_args

@@ -1,5 +1,5 @@
 """Reshaping on command: the plan from the shape a fleet holds to another (docs/formation.md
-"Reshaping", docs/design.md §10; the same planner as every plan, NAO paper 4.2 and
+"Reshaping", docs/design.md §11; the same planner as every plan, NAO paper 4.2 and
 5.2.2 (iii), AUV paper III.B–C for the slots).
 
 The fleet holds the plan every agent agreed on; an operator's command names that plan
@@ -18,7 +18,7 @@ not used: it is known to that robot alone unless exchanged and agreed, and the p
 would then wait for one more agreement round. A robot walks from where it believes it
 stands to its new target (its legs are goals, not vectors), its steps are checked by its
 camera (agent/phases/safe_steps.py), and at the new slot it checks and corrects against
-its new parent as at every hold (docs/design.md §10 gives the reasons).
+its new parent as at every hold (docs/design.md §11 gives the reasons).
 
 The transition's digest chains the held plan's and the new plan's, so a fleet that
 took line then wedge never shows the digest of one that took the wedge at once. ψ (each

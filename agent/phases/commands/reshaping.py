@@ -1,5 +1,5 @@
 """Reshape on command: the held formation becomes another shape (docs/formation.md
-"Reshaping", docs/design.md §10; the plan is agent/core/formation/reshape.py).
+"Reshaping", docs/design.md §11; the plan is agent/core/formation/reshape.py).
 
 LISTEN   with ``--reshape-wait S``, once the whole fleet is ``done`` the robot stays,
          ``done``, for S s (again after each reshape), listening for the operator's
