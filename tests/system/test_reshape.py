@@ -2,6 +2,7 @@
 
 - The TLS router's access control: the operator's command on ``fleet/reshape`` reaches a
   robot; the same put by robot 1's key or the observer's never does.
+- ``python -m tools.fleet reshape`` as a process against two robots' sessions.
 - ``python -m tools.demo --robots 4 --reshape line``: the fleet builds the pyramid, the
   demo (the operator, with the run's operator key) commands the line once every robot
   holds; every robot plans the same transition (the evaluator recomputes its digest from
@@ -101,3 +102,54 @@ def test_four_robots_reshape_a_pyramid_into_a_line(tmp_path: Path) -> None:
     assert r["contacts"] == 0
     assert r["success"] is True and res.returncode == 0
     assert "reshape 1 to line: held" in res.stdout
+
+
+def test_the_operator_cli_commands_a_holding_fleet_over_real_sessions(tmp_path: Path) -> None:
+    """``tools.fleet reshape`` as a process: two robots' sessions (robot keys, signatures
+    over plain links) say ``done`` on plan A; the operator's command reaches them signed
+    by the operator, naming A and the line; they say ``done`` on plan B; the CLI reports
+    the transition held and exits 0."""
+    from agent.config import load_shape
+    from agent.net.bus import Bus, BusConfig
+
+    root = tmp_path / "fleet"
+    T.create_fleet(root, [1, 2])
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    a, b = "aa" * 32, "bb" * 32
+
+    def robot(i: int) -> Bus:
+        spec = BusConfig(
+            listen=(ep,) if i == 1 else (), connect=() if i == 1 else (ep,),
+            multicast_scouting=False, credentials=str(root), identity=f"robot-{i}", tls=False,
+        )  # fmt: skip
+        return Bus(spec)
+
+    with robot(1) as r1, robot(2) as r2:
+        r1.subscribe(P.KEY_RESHAPE)
+        cli = subprocess.Popen(
+            [sys.executable, "-m", "tools.fleet", "reshape", "--shape", "line",
+             "--fleet-size", "2", "--credentials", str(root), "--plain-links",
+             "--connect", ep, "--no-multicast-scouting", "--timeout", "60"],
+            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        got: list[tuple[P.ReshapeMsg, str]] = []
+        plan, end = a, time.monotonic() + 40.0
+        try:
+            while cli.poll() is None and time.monotonic() < end:
+                for i, bus in ((1, r1), (2, r2)):
+                    bus.publish(
+                        P.key_status(i), P.StatusMsg(sender=i, phase="done", plan_digest=plan)
+                    )
+                for ev in r1.drain(0.3):
+                    if isinstance(ev.msg, P.ReshapeMsg):
+                        got.append((ev.msg, ev.signer))
+                        plan = b  # the fleet takes it
+            out, err = cli.communicate(timeout=10)
+        finally:
+            if cli.poll() is None:
+                cli.kill()
+    assert cli.returncode == 0, err[-2000:]
+    msg, signer = got[0]
+    assert signer == "operator" and msg.base == a and msg.command == 1
+    assert msg.shape_digest == load_shape("line").digest
+    assert "reshape 1 to line: held (every robot done on plan bbbbbbbbbbbb)" in out
