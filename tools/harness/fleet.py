@@ -210,7 +210,7 @@ def reshape_reach(spec: FleetSpec) -> float:
     """How far (m) a slot of the spec's reshapes may lie from the slots' mean, the most of
     any shape (0 without reshapes): each new shape stands on the held slots' mean, which
     lies within the room, so a room this much larger holds it (a line of 8 at d_e 0.8
-    spans 5.6 m: the generated room of 6 m did not)."""
+    spans 5.6 m; the room generated for 8 robots is 6–7 m wide)."""
     cfg, reach = spec.agent, 0.0
     for shape in spec.reshapes:
         pos = shape.slots(spec.robots, cfg.d_e, cfg.phi_e).positions
