@@ -118,7 +118,7 @@ def reshape_command(args: argparse.Namespace) -> int:
             for ev in bus.drain(0.2):
                 if isinstance(ev.msg, StatusMsg) and id_from_key(ev.key) == ev.msg.sender:
                     m = ev.msg
-                    seen[m.sender] = Seen(m.phase, m.plan_digest, m.t_sim, m.detail)
+                    seen[m.sender] = Seen(m.phase, m.plan_digest, m.t_sim, m.detail, m.error)
             if len(seen) >= args.fleet_size:  # the fleet: the robots heard, all of them
                 op.robots = sorted(seen)
             if op.robots:

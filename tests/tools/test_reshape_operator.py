@@ -142,3 +142,18 @@ def test_the_judge_recomputes_the_transitions_held_and_the_final_shape() -> None
     result["reshapes"] = [{"outcome": "held"}, {"outcome": "held"}]
     judge_reshapes(result, first, p)
     assert result["reshape_ok"] is True and final_shape_spec(result) == "wedge"
+
+
+def test_a_robot_the_fleet_left_out_is_no_member_to_reshape() -> None:
+    """It stopped by design (``failed``, left out of the plan) and stands still: the
+    others hold, so the command goes out, and the transition is judged on them."""
+    op, sent = operator("line")
+    out = Seen("failed", A, 5.0, "", "AgentFailure: left out of the plan, standing still: x")
+    assert op.step(0.0, {**fleet_at("done", A), 3: out}) and len(sent) == 1
+    assert sent[0].base == A
+    assert not op.step(9.0, {**fleet_at("done", B, t=50.0), 3: out})
+    assert op.ok and op.done[0].sim_s == 40.0
+    # a robot that failed otherwise is a failure of the fleet
+    op, sent = operator("line")
+    broken = Seen("failed", A, 5.0, "", "AgentFailure: formation off: parent 1")
+    assert op.step(0.0, {**fleet_at("done", A), 3: broken}) and sent == []

@@ -452,7 +452,7 @@ class Fleet:
         def step(elapsed: float) -> bool:
             views = self.obs.agents
             seen = {
-                i: Seen(v.phase, v.plan_digest, v.t_sim, v.detail)
+                i: Seen(v.phase, v.plan_digest, v.t_sim, v.detail, v.error)
                 for i, v in views.items()
                 if i in self.ids
             }

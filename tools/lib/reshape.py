@@ -28,6 +28,8 @@ from agent.wire import ReshapeMsg
 
 #: Seconds between two sends of a command not yet taken by every robot.
 RESEND_S = 2.0
+#: What the status of a robot the fleet's check left out says (agent/phases/waves.py).
+LEFT_OUT = "left out of the plan"
 
 
 @dataclass(frozen=True)
@@ -38,6 +40,13 @@ class Seen:
     digest: str
     t_sim: float = 0.0
     detail: str = ""
+    error: str = ""
+
+    @property
+    def left_out(self) -> bool:
+        """The fleet's check left this robot out of the plan: it stands still, stopped
+        by design, and is no member of the formation to reshape."""
+        return self.phase == "failed" and LEFT_OUT in self.error
 
 
 def command_of(shape: Shape, base: str, number: int) -> ReshapeMsg:
@@ -113,23 +122,24 @@ class Reshaper:
         shapes are still pending."""
         if not self.pending:
             return False
+        members = [i for i in self.robots if not (i in seen and seen[i].left_out)]
         cur = self._current
         if cur is None:
-            base = held_digest(seen, self.robots)
+            base = held_digest(seen, members)
             if not base:
                 return True
             k = len(self.done)
             cur = self._current = Transition(self.shapes[k].name, self.first_command + k, base)
-            self._t0, self._sim0 = now, max(seen[i].t_sim for i in self.robots)
+            self._t0, self._sim0 = now, max(seen[i].t_sim for i in members)
             self._send(now)
             return True
-        self._judge(cur, now, seen)
+        self._judge(cur, now, {i: seen[i] for i in members})
         if cur.outcome != "pending":
             self.done.append(cur)
             self._current = None
             self._stopped = cur.outcome != "held"
             return self.step(now, seen)  # the next shape, at once
-        still = [i for i in self.robots if seen[i].phase == "done" and seen[i].digest == cur.base]
+        still = [i for i in members if seen[i].phase == "done" and seen[i].digest == cur.base]
         if still and now - self._last_send >= self.resend:
             self._send(now)
         return True
@@ -142,22 +152,22 @@ class Reshaper:
         self._last_send = now
 
     def _judge(self, cur: Transition, now: float, seen: Mapping[int, Seen]) -> None:
-        failed = {i: seen[i].detail for i in self.robots if seen[i].phase == "failed"}
+        """``seen``: the members' statuses (the robots left out apart)."""
+        failed = {i: s.detail for i, s in seen.items() if s.phase == "failed"}
         refusal = f"reshape {cur.command} to "
         refused = [
             i
-            for i in self.robots
-            if seen[i].digest == cur.base and seen[i].detail.startswith(refusal)
-            and "refused" in seen[i].detail
-        ]  # fmt: skip
-        new = held_digest(seen, self.robots)
+            for i, s in seen.items()
+            if s.digest == cur.base and s.detail.startswith(refusal) and "refused" in s.detail
+        ]
+        new = held_digest(seen, list(seen))
         if failed:
             cur.outcome, cur.detail = "failed", f"robots {sorted(failed)} failed"
         elif new and new != cur.base:
             cur.outcome, cur.plan = "held", new
-            cur.sim_s = max(seen[i].t_sim for i in self.robots) - self._sim0
+            cur.sim_s = max(s.t_sim for s in seen.values()) - self._sim0
             cur.detail = f"every robot done on plan {new[:12]}"
-        elif len(refused) == len(self.robots):
+        elif refused and len(refused) == len(seen):
             cur.outcome, cur.detail = "refused", seen[refused[0]].detail
         elif now - self._t0 > self.timeout:
             cur.outcome, cur.detail = "timeout", f"not held within {self.timeout:g} s"
