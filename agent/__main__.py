@@ -7,7 +7,7 @@
                     [--shape NAME|FILE]
                     [--timeout S] [--member-grace S] [--join-timeout S]
                     [--research-rounds K] [--explore-step M]
-                    [--body zenoh|naoqi]
+                    [--reshape-wait S] [--body zenoh|naoqi]
                     [--nao tcp://HOST:9559] [--state-dir DIR] [--publish-camera]
                     [--exit-record FILE]
 
@@ -125,6 +125,17 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         type=float,
         default=None,
         help="first exploration leg of a robot that searches again (m, default 2)",
+    )
+    p.add_argument(
+        "--reshape-wait",
+        type=float,
+        default=0.0,
+        metavar="S",
+        help=(
+            "once the fleet holds its shape, stay S s listening for the operator's reshape "
+            "command (python -m tools.fleet reshape), again after each reshape; 0 (default): "
+            "exit at done"
+        ),
     )
     p.add_argument(
         "--no-correct",
@@ -265,6 +276,7 @@ def agent_config(args: argparse.Namespace, rid: int) -> AgentConfig:
         wave_timeout=args.wave_timeout,
         member_grace=args.member_grace,
         correct=not args.no_correct,
+        reshape_wait=args.reshape_wait,
         march=args.route,
         sensor_fault=args.sensor_fault,
         publish_camera=args.publish_camera,

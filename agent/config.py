@@ -116,6 +116,9 @@ class AgentConfig:
     correct: bool = True  # final visual alignment to the parent (see Hold.correct)
     max_correction: float = 0.3  # m
     march: Route | None = None  # march in formation after hold; None: stop at hold
+    # s to stay once the fleet holds, listening for the operator's reshape command
+    # (agent/phases/commands/reshaping.py), again after each reshape; 0: exit at done
+    reshape_wait: float = 0.0
     march_step: float = 0.1  # m per leader step: half a follower's 20 cm, so they keep up
     march_pause: float = 4.0  # the leader rests this many times each step's duration
     lost_rounds: int = 3  # head searches for a lost parent before the fleet halts
@@ -220,7 +223,7 @@ class AgentConfig:
         if not (math.isfinite(self.phi_e) and 0.0 < self.phi_e < math.pi / 2):
             raise ValueError(f"phi_e must be in (0°, 90°), got {math.degrees(self.phi_e)}°")
         self.plan_params()  # orientation and strategy: ValueError when unknown
-        for name in ("timeout", "wave_timeout", "settle", "member_grace"):
+        for name in ("timeout", "wave_timeout", "settle", "member_grace", "reshape_wait"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0.0):
                 raise ValueError(f"{name} must be finite and >= 0, got {v}")
@@ -259,6 +262,7 @@ FLAGS = {
     "timeout": "--timeout",
     "wave_timeout": "--wave-timeout",
     "member_grace": "--member-grace",
+    "reshape_wait": "--reshape-wait",
     "research_rounds": "--research-rounds",
     "explore_step": "--explore-step",
 }

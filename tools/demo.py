@@ -5,6 +5,7 @@
     python -m tools.demo --scenario sim/scenarios/paper3.json    (robots from the file)
     python -m tools.demo --robots 4 --orientation cp [--strategy S] [--isolated]
     python -m tools.demo --robots 6 --shape wedge     (or line, column, circle, grid, FILE)
+    python -m tools.demo --robots 8 --reshape line --reshape wedge   (pyramid, then line, wedge)
     python -m tools.demo --view     (watch it live in a browser: http://127.0.0.1:8080/)
 
 Starts ``python -m sim`` and N ``python -m agent`` processes (peers over loopback
@@ -30,6 +31,14 @@ displacement (``march_distance``) must be within 10 % of the route (|displacemen
 <= 0.1·|V|); the worst |r_d| and |r_φ| over the truth samples of the march are
 reported (``march_worst_abs_r_d``, ``march_worst_abs_r_phi``); the figure shows the
 pyramid at the start of the march (grey) and at its end, and the tracks in between.
+
+Reshaping on command (docs/formation.md "Reshaping"): ``--reshape SHAPE`` (repeat it:
+``--reshape line --reshape wedge``) makes the demo the operator too: once the fleet
+holds, it sends the signed command for each shape in turn (the ``operator`` key of the
+run's fleet), waits until the fleet holds it, and prints each transition's sim and wall
+time (``reshapes`` in the result); the agents stay ``--reshape-wait`` s (default 20) for
+a command, and the ground truth is judged against the last shape. Success also needs
+every reshape held.
 
 Fleet parameters: ``--d-e``, ``--phi-e-deg``, ``--orientation pca|cp``, ``--strategy`` and
 ``--shape NAME|FILE`` (a built-in or a formation file, docs/formation.md "Shapes") are
@@ -123,6 +132,11 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         if page is not None:
             page.close()
+    for t in result.get("reshapes", []):
+        print(
+            f"reshape {t['command']} to {t['shape']}: {t['outcome']} ({t['detail']}); "
+            f"sim {t['sim_s']:.1f} s, wall {t['wall_s']:.1f} s"
+        )
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(result, indent=2, default=float))

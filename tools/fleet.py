@@ -1,12 +1,15 @@
 """Fleet credentials (docs/design.md §8): create them, show them, hand them out per host.
 
     python -m tools.fleet init --robots 3 --out fleet/          # CA + robot-1..3, world,
-                                                                 # observer, router
+                                                                 # observer, router, operator
     python -m tools.fleet init --ids 2,5,9 --host router.lab --out fleet/
     python -m tools.fleet show fleet/                           # the roster, checked
     python -m tools.fleet export fleet/ --identity robot-2 --out robot-2/   # one host's set
     python -m tools.fleet revoke fleet/ --robot 3 --reason key-compromise   # withdraw keys
     python -m tools.fleet revoke fleet/ --identity observer --identity robot-4
+    python -m tools.fleet export fleet/ --identity operator --out operator/
+    python -m tools.fleet reshape --shape line --credentials operator/ --fleet-size 8 \
+        --connect tls/ROUTER:7447                           # the fleet holding: take a line
 
 ``export`` copies the public part (``ca.pem``, ``certs/``, ``crl.pem``) and exactly one
 private key: that is what one host gets. The CA's private key (``ca-private/``) never
@@ -14,6 +17,14 @@ leaves the machine that made the fleet. ``revoke`` (which needs that key) adds
 certificates to ``crl.pem``, the revocation list signed by the CA; revoking one again
 changes nothing. Hand the new ``crl.pem`` to every host (docs/security.md "Revoking a
 key"). See ``agent/wire/trust.py`` for the layout and the checks.
+
+``reshape`` (docs/formation.md "Reshaping"): once every robot of the fleet (``--fleet-size``
+of them, started with ``--reshape-wait``) is ``done`` on one plan, publish the operator's
+signed command to take the shape of ``--shape NAME|FILE`` (repeat it: one shape after
+the other), wait until the fleet holds it, and print each transition's outcome, sim and
+wall time. It signs with the ``operator`` key of ``--credentials`` (a robot's key may not
+command: the router refuses it, and every agent too). Exit 0 when every shape is held,
+1 otherwise.
 """
 
 from __future__ import annotations
@@ -21,8 +32,10 @@ from __future__ import annotations
 import argparse
 import shutil
 import sys
+import time
 from pathlib import Path
 
+from agent.wire import add_network_arguments
 from agent.wire.trust import (
     REASONS,
     Credentials,
@@ -75,6 +88,50 @@ def _revoked_identities(args: argparse.Namespace) -> list[Identity]:
     return sorted(who)
 
 
+def reshape_command(args: argparse.Namespace) -> int:
+    """``reshape``: drive :class:`tools.lib.reshape.Reshaper` over the operator's own bus."""
+    from agent.config import load_shape
+    from agent.net.bus import Bus, BusError
+    from agent.wire import KEY_RESHAPE, KEY_STATUS_ALL, StatusMsg, id_from_key, network_spec
+    from tools.lib.reshape import Reshaper, Seen
+
+    try:
+        shapes = [load_shape(s) for s in args.shape]
+        for shape in shapes:
+            shape.check_fleet(args.fleet_size)
+        spec = network_spec(args, "operator")
+        bus = Bus(spec)
+    except (ValueError, BusError) as exc:
+        print(f"fleet reshape: {exc}", file=sys.stderr)
+        return 2
+    seen: dict[int, Seen] = {}
+    with bus:
+        bus.subscribe(KEY_STATUS_ALL)
+        op = Reshaper(
+            shapes,
+            [],
+            lambda msg: bus.publish(KEY_RESHAPE, msg, "reshape"),
+            timeout=args.timeout,
+        )
+        t0 = time.monotonic()
+        while op.pending:
+            for ev in bus.drain(0.2):
+                if isinstance(ev.msg, StatusMsg) and id_from_key(ev.key) == ev.msg.sender:
+                    m = ev.msg
+                    seen[m.sender] = Seen(m.phase, m.plan_digest, m.t_sim, m.detail, m.error)
+            if len(seen) >= args.fleet_size:  # the fleet: the robots heard, all of them
+                op.robots = sorted(seen)
+            if op.robots:
+                op.step(time.monotonic() - t0, seen)
+        bus.drain(0.5)  # the last re-send out before the session closes
+    for t in op.done:
+        print(
+            f"reshape {t.command} to {t.shape}: {t.outcome} ({t.detail}); "
+            f"sim {t.sim_s:.1f} s, wall {t.wall_s:.1f} s, sent {t.sends}x"
+        )
+    return 0 if op.ok else 1
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m tools.fleet", description=__doc__.split("\n")[0])
     sub = p.add_subparsers(dest="cmd", required=True)
@@ -88,7 +145,7 @@ def main(argv: list[str] | None = None) -> int:
     s.add_argument("dir")
     e = sub.add_parser("export", help="one host's credentials: public part + one private key")
     e.add_argument("dir")
-    e.add_argument("--identity", required=True, help="robot-N, world, observer or router")
+    e.add_argument("--identity", required=True, help="robot-N, world, observer, router or operator")
     e.add_argument("--out", required=True)
     r = sub.add_parser("revoke", help="withdraw identities' certificates (needs the CA's key)")
     r.add_argument("dir")
@@ -99,14 +156,21 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument(
         "--reason", choices=sorted(REASONS), default="unspecified", help="RFC 5280 reason"
     )
+    o = sub.add_parser("reshape", help="command the fleet holding a shape to take another")
+    o.add_argument("--shape", action="append", required=True, help="NAME|FILE (repeat)")
+    o.add_argument("--fleet-size", type=int, required=True, help="robots in the fleet")
+    o.add_argument("--timeout", type=float, default=900.0, help="s per transition")
+    add_network_arguments(o, ("peer", "client"))
     args = p.parse_args(argv)
+    if args.cmd == "reshape":
+        return reshape_command(args)
     try:
         if args.cmd == "init":
             paths = create_fleet(args.out, _ids(args), hosts=args.host, valid_days=args.days)
             creds = Credentials(paths.root)
             print(
                 f"fleet created in {paths.root}: robots {creds.robots()}, world, observer, "
-                f"router; keep {paths.ca_key} offline"
+                f"router, operator; keep {paths.ca_key} offline"
             )
         elif args.cmd == "show":
             creds = Credentials(args.dir)

@@ -38,6 +38,7 @@ import zenoh
 
 from agent.wire import (
     BUSY,
+    KEY_RESHAPE,
     MAX_MESSAGE_BYTES,
     MAX_PUBLICATION_BYTES,
     MAX_REQUEST_BYTES,
@@ -168,7 +169,11 @@ def zenoh_config(spec: NetworkSpec) -> zenoh.Config:
 
 
 def key_owner(key: str) -> Identity:
-    """Who may sign on ``key``: the world on ``world/...``, robot i on ``nao/i/...``."""
+    """Who may sign on ``key``: the world on ``world/...``, robot i on ``nao/i/...``, the
+    operator on :data:`~agent.wire.keys.KEY_RESHAPE` (never a robot: a robot's key cannot
+    command the fleet)."""
+    if key == KEY_RESHAPE:
+        return Identity("operator")
     return Identity("world") if key.startswith("world/") else Identity.robot(id_from_key(key))
 
 

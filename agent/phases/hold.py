@@ -34,6 +34,7 @@ from agent.core.formation.view.route import Route
 from agent.core.nao import CAMERA_HFOV, HEAD_YAW_LIMIT
 from agent.phases.context import AgentFailure, Context
 from agent.phases.march import Marcher
+from agent.phases.membership import Peer, on_plan
 from agent.phases.reporting import Phase
 from agent.phases.roles import Course, Fleet, Mover, Stepper
 
@@ -74,16 +75,16 @@ class Hold:
         self.steps = steps
         self.course = course
 
-    def run(self) -> None:
-        """Arrived: correct against the parent, march if there is a route, report
-        ``done`` and stay until all are."""
+    def run(self, march: bool = True) -> None:
+        """Arrived: correct against the parent, march if there is a route (and
+        ``march``: not after a reshape), report ``done`` and stay until all are."""
         ctx, report, course = self.ctx, self.ctx.report, self.course
         where = ctx.beliefs.position.round(2).tolist()
         self._arrived_at = ctx.beliefs.position.copy()
         report.status(Phase.HOLD, 0.5, f"arrived at believed {where}", force=True)
         self.correct()
         self.verify()
-        if ctx.cfg.march is not None:
+        if ctx.cfg.march is not None and march:
             report.status(Phase.MARCH, 0.0, "formation held; waiting for the fleet", force=True)
             self.wait_all((Phase.MARCH, Phase.DONE, Phase.FAILED), Phase.MARCH, "waiting for")
             failed = [i for i, p in self.fleet.peers.items() if p.phase == Phase.FAILED]
@@ -247,14 +248,15 @@ class Hold:
             if peer.phase == Phase.FAILED:
                 why = f"parent {parent} failed"
                 break
-            clear = self.fleet.arrived(passing)
-            if peer.phase in (Phase.DONE, Phase.MARCH) and clear:
+            clear = self.fleet.arrived(passing, self.course.digest)
+            finished = on_plan(peer, (Phase.DONE, Phase.MARCH), self.course.digest)
+            if finished and clear:
                 break
             if clear and ctx.cfg.correct:
                 self._follow(parent)
             gone = peer.seen_alive and not peer.alive
             if ctx.clock() > deadline:
-                if peer.phase in (Phase.DONE, Phase.MARCH):
+                if finished:
                     why = f"robot(s) passing near did not arrive in time ({list(passing)})"
                 else:
                     why = f"parent {parent} {'out of reach' if gone else 'did not finish'} in time"
@@ -306,7 +308,8 @@ class Hold:
         params = ctx.cfg.plan_params()
         axis = self.course.final_heading
         # this child's slot in the shape's tree: its distance and angle from its parent
-        slots = params.shape.slots(len(plan.robots), params.d_e, params.phi_e)
+        shape = self.course.shape or params.shape  # a reshape's, else the agreed one
+        slots = shape.slots(len(plan.robots), params.d_e, params.phi_e)
         _, dist, ang = slots.edge(rp.order)
         check = check_edge(ctx.me, parent, seen, axis, dist, ang, params.phi_e)
         report.show_check(check)
@@ -368,6 +371,15 @@ class Hold:
         if stop:
             raise AgentFailure(stop)
 
+    def _finished(self, peer: Peer, phases: tuple[Phase, ...], mine: Phase) -> bool:
+        """Whether ``peer`` is in ``phases`` of this robot's plan; waiting to be ``done``,
+        also when it shows a plan this robot never followed: a reshape's, which it
+        started only once it was done on this one (agent/phases/commands/reshaping.py)."""
+        if on_plan(peer, phases, self.course.digest):
+            return True
+        ahead = bool(peer.plan_digest) and peer.plan_digest not in self.course.history
+        return mine == Phase.DONE and ahead
+
     def wait_all(
         self, phases: tuple[Phase, ...], mine: Phase, text: str, linger: float = 0.0
     ) -> None:
@@ -391,7 +403,7 @@ class Hold:
                 i
                 for i in members
                 if i != ctx.me
-                and fleet.peer(i).phase not in phases
+                and not self._finished(fleet.peer(i), phases, mine)
                 and (fleet.peer(i).alive or patient)
             ]
             agr = fleet.agreement

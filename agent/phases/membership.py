@@ -50,10 +50,12 @@ from agent.wire import (
     KEY_ALIVE_ALL,
     KEY_DIGEST_ALL,
     KEY_RECORD_ALL,
+    KEY_RESHAPE,
     KEY_STATUS_ALL,
     DigestMsg,
     NeighborRecordMsg,
     RecordSetReply,
+    ReshapeMsg,
     StatusMsg,
     id_from_key,
     key_alive,
@@ -70,6 +72,9 @@ ARRIVED = (Phase.HOLD, Phase.MARCH, Phase.DONE, Phase.FAILED)
 #: condition no deadline names is still looked at (one wake-up in 2 s costs ~0.005 % of
 #: a core).
 MAX_WAIT = 2.0
+#: Plans an agent keeps the operator's newest reshape command for (each command names the
+#: plan it reshapes): a bound on what a flood of commands can make it hold.
+COMMANDS_KEPT = 8
 #: The sleep when the next deadline has already passed (s): its owner acts on it after
 #: this wait; this keeps a deadline nobody acts on from spinning the loop.
 MIN_WAIT = 0.01
@@ -103,6 +108,16 @@ class Peer:
     shift: tuple[float, float] = (0.0, 0.0)
 
 
+def on_plan(peer: Peer, phases: Collection[str], digest: str) -> bool:
+    """Whether ``peer`` is in one of ``phases`` of the plan ``digest`` ("": of any plan).
+    A failed member counts whatever its plan; one that shows no digest yet counts too.
+    After a reshape the fleet's statuses name two plans for a while: a member ``done``
+    on the plan it held has not yet started the new one (agent/phases/commands/reshaping.py)."""
+    if peer.phase not in phases:
+        return False
+    return not digest or peer.phase == Phase.FAILED or peer.plan_digest in ("", digest)
+
+
 class Membership:
     """The fleet as heard by one agent; see the module docstring."""
 
@@ -121,11 +136,15 @@ class Membership:
         # called with each record, digest or status accepted (its key owned by its
         # sender, from the sender's current session), before it is handled
         self.observers: list[Callable[[Event], None]] = []
+        #: the operator's newest reshape command per plan it reshapes (its ``base``;
+        #: the bus let through only the operator's signature on its key), at most
+        #: :data:`COMMANDS_KEPT`; agent/phases/commands/reshaping.py acts on the held plan's
+        self.commands: dict[str, ReshapeMsg] = {}
 
     def start(self) -> None:
         """Subscribe to the fleet, declare our token, serve the agreed record set."""
         bus, me = self.ctx.bus, self.ctx.me
-        for key in (KEY_RECORD_ALL, KEY_DIGEST_ALL, KEY_STATUS_ALL):
+        for key in (KEY_RECORD_ALL, KEY_DIGEST_ALL, KEY_STATUS_ALL, KEY_RESHAPE):
             bus.subscribe(key)
         bus.watch_alive(KEY_ALIVE_ALL)
         bus.declare_alive(key_alive(me))
@@ -197,6 +216,9 @@ class Membership:
                     agr.member_joined(ev.robot_id, now)
             return
         msg = ev.msg
+        if isinstance(msg, ReshapeMsg) and ev.key == KEY_RESHAPE:
+            self.take_command(msg)
+            return
         if not isinstance(msg, NeighborRecordMsg | DigestMsg | StatusMsg):
             return
         try:
@@ -238,6 +260,23 @@ class Membership:
             member.shift = (msg.shift_x, msg.shift_y)
             for a in self.agreements():
                 a.on_peer_phase(msg.sender, msg.phase, now)  # a searcher's: news
+
+    def take_command(self, msg: ReshapeMsg) -> None:
+        """Keep the operator's command ``msg`` if it is the newest for its plan (a retry
+        repeats its number); it waits there until this robot holds that plan
+        (agent/phases/commands/reshaping.py; meanwhile it is deferred, and said so)."""
+        old = self.commands.get(msg.base)
+        if old is not None and old.command >= msg.command:
+            return
+        self.commands.pop(msg.base, None)
+        self.commands[msg.base] = msg
+        while len(self.commands) > COMMANDS_KEPT:  # the oldest plan's goes first
+            del self.commands[next(iter(self.commands))]
+        report = self.ctx.report
+        if report.phase != Phase.DONE:
+            log.info("reshape command %d deferred: robot in %s", msg.command, report.phase)
+            text = f"reshape {msg.command} to {msg.name} deferred until the fleet holds"
+            report.status(report.phase, 0.0, text, force=True)
 
     def expire(self) -> None:
         """Members whose token vanished and who stayed silent for the grace period are gone."""
@@ -342,13 +381,14 @@ class Membership:
             }
         )
 
-    def arrived(self, among: Collection[int] | None = None) -> bool:
+    def arrived(self, among: Collection[int] | None = None, digest: str = "") -> bool:
         """Whether every live member of the agreement (or of ``among``) has arrived
-        (:data:`ARRIVED`)."""
+        (:data:`ARRIVED`); with ``digest``, on that plan (a member still holding the
+        plan before a reshape has not started the new one: it may walk yet)."""
         if among is None:
             among = self.agreement.held_members() if self.agreement else ()
         for i in among:
             peer = self.peer(i)
-            if i != self.ctx.me and peer.alive and peer.phase not in ARRIVED:
+            if i != self.ctx.me and peer.alive and not on_plan(peer, ARRIVED, digest):
                 return False
         return True

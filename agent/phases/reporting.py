@@ -205,8 +205,12 @@ class Reporter:
         return self._last + (self.interval if self._pending else self.heartbeat)
 
     def show_plan(self, digest: str, wave: int) -> None:
-        """The agreed plan's digest and this robot's wave in it (-1: not in a wave)."""
-        self._figures = replace(self._figures, plan_digest=digest, wave=wave)
+        """The agreed plan's digest and this robot's wave in it (-1: not in a wave); a
+        new plan (a reshape's) starts with none of the old one's check, walk and shift."""
+        old = self._figures
+        if old.plan_digest and digest != old.plan_digest:
+            old = Figures(blocked_by=old.blocked_by)
+        self._figures = replace(old, plan_digest=digest, wave=wave)
 
     def show_check(self, check: PairCheck) -> None:
         """This robot's own check of its pair."""

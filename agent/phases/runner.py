@@ -2,7 +2,7 @@
 
 ::
 
-    SEARCH ─► LOCALISE ─► EXCHANGE/AGREE ─► PLAN ─► WAIT ─► MOVE ─► HOLD ─► (MARCH) ─► DONE
+    SEARCH ─► LOCALISE ─► EXCHANGE/AGREE ─► PLAN ─► WAIT ─► MOVE ─► HOLD ─► (MARCH) ─► DONE ─► (RESHAPE)
       ▲ re-search when the agreed set leaves a robot unseen │
       └─────────────────────────────────────────────────────┘
     RESUME: a restarted agent enters where its journal says (its run still going);
@@ -25,6 +25,9 @@ PLAN/WAIT/MOVE   the formation core on the agreed records, identical on every ag
                  (agent/phases/waves.py, safe_steps.py, motion.py).
 HOLD/MARCH/DONE  correct against the parent, march the route if there is one, ``done``
                  and stay until all are (agent/phases/hold.py, march.py).
+RESHAPE          with ``--reshape-wait``: listen for the operator's command, plan the
+                 transition to its shape and walk it as every plan (PLAN, WAIT, MOVE,
+                 HOLD, DONE; agent/phases/commands/reshaping.py).
 
 With ``--publish-camera`` (for viewers) the perception is wrapped by
 agent/phases/camera_feed.py, which publishes thumbnails of the analysed frames for viewers.
@@ -52,6 +55,7 @@ from agent.core.agreement import Decision
 from agent.net.bus import Bus
 from agent.phases.agreeing import Agreeing
 from agent.phases.camera_feed import CameraFeed
+from agent.phases.commands.reshaping import Reshaping
 from agent.phases.context import AgentFailure, Context
 from agent.phases.hold import Hold
 from agent.phases.march import MarchHalt
@@ -112,6 +116,7 @@ class Runner:
         self.research = Research(ctx, fleet, self.motion, self.search)
         self.waves = Waves(ctx, fleet, self.motion, self.safe_steps, course)
         self.hold = Hold(ctx, fleet, self.motion, self.safe_steps, course)
+        self.reshaping = Reshaping(ctx, fleet, fleet.commands, course, self.walk_reshape)
         crew = Crew(ctx, fleet, self.motion, self.waves, course, self.search)
         self.recovery: Recovery = Fresh() if recovery is None else recovery(crew)
         ctx.report.journal = self.recovery
@@ -159,6 +164,14 @@ class Runner:
         if stage in (Phase.SEARCH, Phase.AGREE, Phase.WAIT, Phase.MOVE):
             self.waves.move()  # MOVE
         self.hold.run()  # HOLD, CORRECT, (MARCH), DONE
+        self.reshaping.run()  # (RESHAPE: PLAN, WAIT, MOVE, HOLD, DONE), as commanded
+
+    def walk_reshape(self) -> None:
+        """A reshape's plan walked as every plan: WAIT, MOVE, HOLD (a new hold: its
+        parent, its checks), DONE; no march."""
+        self.waves.wait_for_earlier_waves()
+        self.waves.move()
+        Hold(self.ctx, self.membership, self.motion, self.safe_steps, self.course).run(False)
 
     def agree(self, record: NeighborRecordMsg) -> Decision[NeighborRecordMsg]:
         """Agreement rounds, with re-search rounds (4.1.3 rule 2) until the agreed records

@@ -49,10 +49,12 @@ from typing import TypeVar
 from agent.core.agreement import Decision
 from agent.core.control import PAPER_GAINS, wrap_pi
 from agent.core.formation.plan import Plan
+from agent.core.formation.shape.spec import Shape
 from agent.core.formation.view.own_frame import in_own_frame
 from agent.core.formation.waves.jam import yields
 from agent.core.formation.waves.release import walked_along
 from agent.phases.context import NORTH, AgentFailure, Context
+from agent.phases.membership import on_plan
 from agent.phases.record_sets import record_set
 from agent.phases.reporting import Phase
 from agent.phases.roles import Course, Fleet, Hearing, Mover, Stepper
@@ -100,6 +102,9 @@ class Itinerary:
 
     def __init__(self) -> None:
         self._plan: Plan | None = None
+        self._common: Plan | None = None
+        self._shape: Shape | None = None
+        self._history: tuple[str, ...] = ()
         self._leg = 0
         self._final_heading = NORTH
 
@@ -116,6 +121,25 @@ class Itinerary:
         return self._plan
 
     @property
+    def common(self) -> Plan:
+        """The agreed plan in the common frame (every agent's, bit for bit: what a
+        reshape starts from, agent/core/formation/reshape.py); AgentFailure before one."""
+        if self._common is None:
+            raise AgentFailure("no plan yet")
+        return self._common
+
+    @property
+    def shape(self) -> Shape | None:
+        """The shape the plan builds when a reshape command chose it; None: the agreed
+        parameters' (``--shape``)."""
+        return self._shape
+
+    @property
+    def history(self) -> tuple[str, ...]:
+        """The digests of every plan this robot followed, the current one last."""
+        return self._history
+
+    @property
     def digest(self) -> str:
         """The agreed plan's digest ("" before one): the common plan's, on every agent."""
         return "" if self._plan is None else str(self._plan.digest)
@@ -130,9 +154,17 @@ class Itinerary:
         """The pyramid axis, once the goals are known (north before)."""
         return self._final_heading
 
-    def follow(self, plan: Plan) -> None:
-        """``plan`` is the agreed one."""
+    def follow(self, plan: Plan, common: Plan | None = None, shape: Shape | None = None) -> None:
+        """``plan`` is the agreed one (``common``: the same in the common frame, when
+        ``plan`` is turned to this robot's own; ``shape``: the one a reshape chose); a new
+        plan is walked from its first leg."""
         self._plan = plan
+        self._common = plan if common is None else common
+        if plan.digest not in self._history:
+            self._history = (*self._history, str(plan.digest))
+        if shape is not None:
+            self._shape = shape
+        self._leg = 0
 
     def at_leg(self, leg: int) -> None:
         """The robot is on leg ``leg`` of its move (or resumes there after a crash)."""
@@ -176,8 +208,8 @@ class Waves:
                 f"left out of the plan, standing still: {plan.verdict or 'sightings do not fit'}"
             )
         # the common frame turned to this robot's fixed frame by its start heading ψ
-        plan = in_own_frame(plan, plan.psi_of(ctx.me))
-        self.course.follow(plan)
+        common, plan = plan, in_own_frame(plan, plan.psi_of(ctx.me))
+        self.course.follow(plan, common)
         self.fleet.served = record_set(ctx.me, decision)
         self.fleet.pin_sessions({int(r) for r in ctx.formation.members(plan)}, digest)
         wave = int(plan.robot(ctx.me).wave)
@@ -210,7 +242,7 @@ class Waves:
             pending = []
             for i in earlier:
                 peer = self.fleet.peer(i)
-                if peer.phase in (Phase.HOLD, Phase.MARCH, Phase.DONE):
+                if on_plan(peer, (Phase.HOLD, Phase.MARCH, Phase.DONE), self.course.digest):
                     continue
                 same_plan = peer.plan_digest == self.course.digest
                 released = i in at and _released(peer.walked, at[i], same_plan)

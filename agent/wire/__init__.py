@@ -5,7 +5,8 @@ concept:
 
 - :mod:`~agent.wire.keys`: key expressions of the bus;
 - :mod:`~agent.wire.fields`: limits and field validators, :class:`ProtocolError`;
-- :mod:`~agent.wire.messages`: the message schemas;
+- :mod:`~agent.wire.messages`: the message schemas; :mod:`~agent.wire.command`: the
+  operator's reshape command;
 - :mod:`~agent.wire.codec`: the bounded msgpack codec;
 - :mod:`~agent.wire.receive`: receiving helpers (:class:`Guard`, :class:`Inbox`);
 - :mod:`~agent.wire.network`: the join flags and zenoh settings every process shares;
@@ -27,6 +28,7 @@ from agent.wire.codec import (
     take_payload,
     unpack_bounded,
 )
+from agent.wire.command import ReshapeMsg
 from agent.wire.fields import (
     DIGEST_HEX_LEN,
     HEAD_YAW_LIMIT,
@@ -45,6 +47,7 @@ from agent.wire.fields import (
     MAX_PUBLICATION_BYTES,
     MAX_REQUEST_BYTES,
     MAX_ROBOT_ID,
+    MAX_SHAPE_SLOTS,
     MAX_SHIFT,
     MAX_SIDE_STEP,
     MAX_STEP,
@@ -65,6 +68,7 @@ from agent.wire.keys import (
     KEY_DIGEST_ALL,
     KEY_RECORD_ALL,
     KEY_RECORDS_ALL,
+    KEY_RESHAPE,
     KEY_STATUS_ALL,
     KEY_WORLD_CLOCK,
     KEY_WORLD_REGISTER,
@@ -138,6 +142,7 @@ __all__ = [
     "KEY_DIGEST_ALL",
     "KEY_RECORDS_ALL",
     "KEY_RECORD_ALL",
+    "KEY_RESHAPE",
     "KEY_STATUS_ALL",
     "KEY_WORLD_CLOCK",
     "KEY_WORLD_REGISTER",
@@ -164,6 +169,7 @@ __all__ = [
     "MAX_REQUEST_BYTES",
     "MAX_REQUEST_ID",
     "MAX_ROBOT_ID",
+    "MAX_SHAPE_SLOTS",
     "MAX_SHIFT",
     "MAX_SIDE_STEP",
     "MAX_STEP",
@@ -197,6 +203,7 @@ __all__ = [
     "RecordSetRequest",
     "RegisterReply",
     "RegisterRequest",
+    "ReshapeMsg",
     "ScenarioReply",
     "ScenarioRequest",
     "StatusMsg",

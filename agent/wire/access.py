@@ -12,6 +12,7 @@ from agent.wire.identity import Identity
 from agent.wire.keys import (
     KEY_CAMERA_ALL,
     KEY_RECORDS_ALL,
+    KEY_RESHAPE,
     KEY_WORLD_SCENARIO,
     KEY_WORLD_TRUTH_POSES,
 )
@@ -70,8 +71,14 @@ def acl_settings(roster: Iterable[Identity]) -> dict[str, Any]:
     """
     roster = sorted(set(roster))
     rules = [
-        # every fleet member may watch membership and hear the fleet's statuses
-        _rule("hear-fleet", ["declare_subscriber"], ["ingress"], ["nao/**", "world/clock"]),
+        # every fleet member may watch membership, hear the fleet's statuses and the
+        # operator's commands
+        _rule(
+            "hear-fleet",
+            ["declare_subscriber"],
+            ["ingress"],
+            ["nao/**", "world/clock", KEY_RESHAPE],
+        ),
         _rule(
             "watch-alive",
             ["declare_liveliness_subscriber", "liveliness_query"],
@@ -82,8 +89,10 @@ def acl_settings(roster: Iterable[Identity]) -> dict[str, Any]:
             "deliver-fleet",
             ["put", "liveliness_token", "declare_subscriber"],
             ["egress"],
-            ["nao/**", "world/clock"],
+            ["nao/**", "world/clock", KEY_RESHAPE],
         ),
+        # the operator: publishes the reshape command, and nothing else; no robot may
+        _rule("operator-command", ["put"], ["ingress"], [KEY_RESHAPE]),
         # the agreed record sets (for agents restarted after a crash): any member asks, every robot
         # serves its own
         _rule("ask-records", ["query"], ["ingress"], [KEY_RECORDS_ALL]),
@@ -131,6 +140,11 @@ def acl_settings(roster: Iterable[Identity]) -> dict[str, Any]:
             "observer",
             ["observer"] if Identity("observer") in roster else [],
             ["observe", "observe-deliver"],
+        ),
+        (
+            "operator",
+            ["operator"] if Identity("operator") in roster else [],
+            ["operator-command"],
         ),
     ]
     for sid, names, rule_ids in roles:

@@ -25,6 +25,9 @@ MAX_OBSTACLES = 32  # obstacles one robot may report in its record
 #: (two sweeps and up to two turns: 2-3; the bound leaves room for a re-searched round).
 MAX_STANCES = 8
 MAX_MEMBERS = 1024
+#: Child slots of a shape a reshape command carries (its leader's slot is implicit): a
+#: fixed tree for every member of the largest fleet (~30 kB, within a publication)
+MAX_SHAPE_SLOTS = MAX_MEMBERS - 1
 MAX_TEXT = 512
 MAX_IMAGE_BYTES = 8 * 1024 * 1024
 MAX_MESSAGE_BYTES = MAX_IMAGE_BYTES + 4096

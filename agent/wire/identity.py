@@ -1,7 +1,9 @@
 """Fleet identities (docs/design.md §8 "Trust"): who a certificate's common name says it is.
 
-``robot-{id}``, ``world``, ``observer``, ``router`` and ``render`` (the render workers of
-large fleets, one key for all of them); the common name *is* the identity.
+``robot-{id}``, ``world``, ``observer``, ``router``, ``render`` (the render workers of
+large fleets, one key for all of them) and ``operator`` (who commands a fleet that holds
+a shape to take another, docs/formation.md "Reshaping"; it never speaks for a robot); the
+common name *is* the identity.
 """
 
 from __future__ import annotations
@@ -11,7 +13,7 @@ from dataclasses import dataclass
 
 from agent.wire.fields import MAX_ROBOT_ID, ProtocolError
 
-ROLES = ("robot", "world", "observer", "router", "render")
+ROLES = ("robot", "world", "observer", "router", "render", "operator")
 _ROBOT_CN = re.compile(r"robot-(0|[1-9][0-9]{0,4})")
 
 
@@ -41,7 +43,7 @@ class Identity:
     @property
     def cn(self) -> str:
         """The certificate common name: ``robot-2``, ``world``, ``observer``, ``router``,
-        ``render``."""
+        ``render``, ``operator``."""
         return f"robot-{self.robot_id}" if self.role == "robot" else self.role
 
     @classmethod
@@ -51,7 +53,7 @@ class Identity:
     @property
     def code(self) -> int:
         """The compact wire code of the identity: the robot id, or -1 world, -2 observer,
-        -3 router, -4 render (one msgpack byte for the roles and robots up to 127)."""
+        -3 router, -4 render, -5 operator (one msgpack byte for the roles and robots up to 127)."""
         return self.robot_id if self.role == "robot" else -ROLES.index(self.role)
 
     @classmethod

@@ -18,6 +18,9 @@ KEY_STATUS_ALL = "nao/*/status"
 KEY_RECORDS_ALL = "nao/*/records"
 #: Every agent's camera frames for viewers (``--publish-camera``).
 KEY_CAMERA_FEED_ALL = "nao/*/camera"
+#: The operator's reshape command (:class:`~agent.wire.messages.ReshapeMsg`): signed by the
+#: ``operator`` identity alone, heard by every robot (docs/formation.md "Reshaping").
+KEY_RESHAPE = "fleet/reshape"
 KEY_WORLD_REGISTER = "world/register"
 #: The world's scenario (render workers build their copy of the room from it).
 KEY_WORLD_SCENARIO = "world/scenario"

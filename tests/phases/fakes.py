@@ -238,7 +238,7 @@ class FakeFleet:
     def pin_sessions(self, members: set[int], plan_digest: str) -> None:
         self.pinned = (members, plan_digest)
 
-    def arrived(self, among: Collection[int] | None = None) -> bool:
+    def arrived(self, among: Collection[int] | None = None, digest: str = "") -> bool:
         return self.clear
 
     def fleet_stop(self, plan: Plan | None) -> str:

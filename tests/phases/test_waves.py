@@ -140,6 +140,19 @@ def test_waits_pass_when_earlier_waves_hold() -> None:
     r.waves.wait_for_earlier_waves()
 
 
+def test_an_earlier_wave_done_on_another_plan_does_not_hold_this_one() -> None:
+    """After a reshape a member still ``done`` on the held plan has not started the new
+    one (agent/phases/commands/reshaping.py): it is waited for, until it holds this plan."""
+    r = waiting((1, 2))
+    for i in (1, 2):
+        r.fleet.peers[i] = Peer(alive=True, phase="done", seen_alive=True, plan_digest="cd" * 32)
+    with pytest.raises(AgentFailure, match=r"robots \[1, 2\] of earlier waves did not hold"):
+        r.waves.wait_for_earlier_waves()
+    for i in (1, 2):
+        r.fleet.peers[i] = Peer(alive=True, phase="hold", seen_alive=True, plan_digest="ab" * 32)
+    r.waves.wait_for_earlier_waves()
+
+
 def test_member_of_an_earlier_wave_that_leaves_stops_us() -> None:
     r = waiting((1, 2))
     r.fleet.peers[1] = Peer(alive=False, phase="move", seen_alive=True)

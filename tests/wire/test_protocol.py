@@ -62,6 +62,15 @@ SAMPLES: list[p.Message] = [
         yaw=-0.4,
         detections=(p.CameraDetection(id=0, box=(10, 20, 30, 60), d=1.2, phi=-0.3),),
     ),
+    p.ReshapeMsg(
+        command=3,
+        base="ab" * 32,
+        name="v",
+        rule="tree",
+        orient="width",
+        shape_digest="cd" * 32,
+        slots=((0, 0.8, 2.3), (0, 0.8, -2.3)),
+    ),
 ]
 
 

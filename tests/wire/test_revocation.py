@@ -179,7 +179,7 @@ def test_revoked_world_and_observer_lose_their_subjects(root: Path) -> None:
     acl = T.acl_settings(T.Credentials(root).roster)
     subjects = {s["id"]: s["cert_common_names"] for s in acl["subjects"]}
     assert "world" not in subjects and "observer" not in subjects
-    assert subjects["members"] == ["robot-1", "robot-2", "robot-3"]
+    assert subjects["members"] == ["operator", "robot-1", "robot-2", "robot-3"]
     for p in acl["policies"]:  # every policy names subjects that exist
         assert set(p["subjects"]) <= set(subjects)
 

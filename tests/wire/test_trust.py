@@ -82,6 +82,7 @@ def test_create_fleet_writes_the_roster_and_private_keys(fleet: T.Credentials) -
     assert fleet.own_robot_keys() == [1, 2, 3]
     assert {w.cn for w in fleet.roster} == {
         "robot-1", "robot-2", "robot-3", "world", "observer", "router", "render",
+        "operator",
     }  # fmt: skip
     key = fleet.paths.key(T.Identity.robot(2))
     assert key.stat().st_mode & 0o777 == 0o600

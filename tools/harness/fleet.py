@@ -32,7 +32,10 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any
 
+import numpy as np
+
 from agent.config import AgentConfig
+from agent.core.formation.shape.spec import Shape
 from agent.net.bus import Bus
 from sim import scenarios
 from sim.camera.look import Look
@@ -116,6 +119,7 @@ class FleetSpec:
     rogue: float = 0.0
     rogue_replay: Path | None = None
     live: str | None = None
+    reshapes: tuple[Shape, ...] = ()
 
     def __post_init__(self) -> None:
         if not 1 <= self.robots <= MAX_ROBOTS:
@@ -137,6 +141,12 @@ class FleetSpec:
             raise ValueError("the timeouts must be > 0 and the obstacles >= 0")
         # a formation file with fewer slots than robots: refused before anything starts
         self.agent.shape.check_fleet(self.robots)
+        for shape in self.reshapes:
+            shape.check_fleet(self.robots)
+            if not shape.source:
+                raise ValueError(f"reshape to {shape.name!r}: a shape from no name or file")
+        if self.reshapes and self.agent.reshape_wait <= 0.0:
+            raise ValueError("reshapes need agents that wait for them (reshape_wait > 0)")
 
     def agent_config(self, rid: int) -> AgentConfig:
         """Robot ``rid``'s agent settings."""
@@ -183,6 +193,8 @@ class FleetSpec:
             out["calibration"] = str(self.calibration)
         if self.agent_args:
             out["agent_args"] = [f"{i}:{a}" for i, a in self.agent_args]
+        if self.reshapes:  # the judge loads each again, and judges the last
+            out["reshape_specs"] = [s.source for s in self.reshapes]
         if cfg.march is not None and cfg.march.distance is not None:
             out["route"] = {"distance": float(cfg.march.distance)}
         elif cfg.march is not None and cfg.march.to is not None:
@@ -200,13 +212,26 @@ def route_length(cfg: AgentConfig) -> float:
     return math.hypot(*cfg.march.to) + 2.0  # the leader's target is near the fleet's centre
 
 
+def reshape_reach(spec: FleetSpec) -> float:
+    """How far (m) a slot of the spec's reshapes may lie from the slots' mean, the most of
+    any shape (0 without reshapes): each new shape stands on the held slots' mean, which
+    lies within the room, so a room this much larger holds it (a line of 8 at d_e 0.8
+    spans 5.6 m; the room generated for 8 robots is 6–7 m wide)."""
+    cfg, reach = spec.agent, 0.0
+    for shape in spec.reshapes:
+        pos = shape.slots(spec.robots, cfg.d_e, cfg.phi_e).positions
+        reach = max(reach, float(np.max(np.hypot(*(pos - pos.mean(axis=0)).T))))
+    return reach
+
+
 def march_room(spec: FleetSpec, out: Path) -> list[str]:
     """World flags for the run's scenario, written to ``out/scenario.json``: the file of
     ``scenario``, or the seed's generated one (``isolated``, ``headings``); with a march,
-    its room's half-size enlarged by the route's length (sim/scenarios is not changed).
+    its room's half-size enlarged by the route's length, with reshapes by the reach of
+    their shapes (:func:`reshape_reach`; sim/scenarios is not changed).
     [] when the world generates the default scenario itself, or when the caller chose a
     scenario with ``world_args``."""
-    extra = route_length(spec.agent)
+    extra = route_length(spec.agent) + reshape_reach(spec)
     turned = spec.headings.kind != "aligned"
     if (extra <= 0.0 and spec.scenario is None and not spec.isolated and not turned) or any(
         "--scenario" in a for a in spec.world_args
@@ -245,6 +270,7 @@ class Fleet:
         self._rec: Recorder | None = None
         self._live: LiveView | None = None
         self._bus: Bus | None = None
+        self._op_bus: Bus | None = None
         self._closed = False
 
     # ------------------------------------------------------------------ start and stop
@@ -354,6 +380,8 @@ class Fleet:
             stop(self.router)
         if self._bus is not None:
             self._bus.close()
+        if self._op_bus is not None:
+            self._op_bus.close()
         if self._rec is not None:
             self._rec.close()
 
@@ -411,6 +439,35 @@ class Fleet:
         name = f"agent-slot{rid}.log" if self.spec.auto_ids else f"agent-{rid}.log"
         self.agents[rid] = start_agent(cmd, self.out / name, append)
 
+    def operator(self) -> Callable[[float], bool] | None:
+        """With the spec's reshapes, the operator (docs/formation.md "Reshaping"): a
+        :meth:`wait` caller that commands each shape in turn once the fleet holds
+        (:class:`tools.lib.reshape.Reshaper`, signed with the operator's key), pending
+        until the last is held or refused; its transitions go to ``result["reshapes"]``.
+        None without reshapes."""
+        if not self.spec.reshapes:
+            return None
+        assert self.net is not None, "the fleet has not started"
+        from agent.wire import KEY_RESHAPE
+        from tools.lib.reshape import Reshaper, Seen
+
+        bus = self._op_bus = Bus(self.net.operator())
+        op = Reshaper(self.spec.reshapes, self.ids, lambda m: bus.publish(KEY_RESHAPE, m))
+        self.result["reshapes"] = []
+
+        def step(elapsed: float) -> bool:
+            views = self.obs.agents
+            seen = {
+                i: Seen(v.phase, v.plan_digest, v.t_sim, v.detail, v.error)
+                for i, v in views.items()
+                if i in self.ids
+            }
+            pending = op.step(elapsed, seen)
+            self.result["reshapes"] = [t.as_dict() for t in op.done]
+            return pending
+
+        return step
+
     def running(self, rid: int) -> bool:
         p = self.agents.get(rid)
         return p is not None and p.popen.poll() is None
@@ -463,5 +520,5 @@ def run_fleet(spec: FleetSpec, out: Path, quiet: bool = True) -> dict[str, Any]:
     start: a world or router that did not come up)."""
     fleet = Fleet(spec, out, quiet)
     with fleet:
-        fleet.wait()
+        fleet.wait(fleet.operator())
     return fleet.judge()

@@ -15,8 +15,9 @@ import math
 from pathlib import Path
 from typing import Any
 
-from agent.config import AgentConfig, add_plan_arguments
+from agent.config import AgentConfig, add_plan_arguments, load_shape
 from agent.core.formation.params import D_E, PHI_E_DEG
+from agent.core.formation.shape.spec import Shape
 from agent.core.formation.view.route import Route
 from agent.core.perception.calibration import CalibrationError, load
 from sim import scenarios
@@ -87,6 +88,12 @@ def add_fleet_arguments(p: argparse.ArgumentParser) -> None:
                        help="after hold, the fleet marches D m along the pyramid's axis")  # fmt: skip
     march.add_argument("--march-to", default=None, metavar="X,Y",
                        help="after hold, the leader marches to (X, Y) m in the common frame")  # fmt: skip
+    add("--reshape", action="append", default=[], type=_shape_arg, metavar="NAME|FILE",
+        help="once the fleet holds, the operator commands it to take this shape (repeat: "
+        "one after the other; docs/formation.md Reshaping); the final shape is judged")  # fmt: skip
+    add("--reshape-wait", type=float, default=None, metavar="S",
+        help=f"agents stay S s for a reshape command once the fleet holds (default with "
+        f"--reshape: {RESHAPE_WAIT:g})")  # fmt: skip
     add("--publish-camera", action=argparse.BooleanOptionalAction, default=True,
         help="agents publish thumbnails of their camera frames with detections for viewers "
         "(run.mcap's /nao/ID/camera channels); on in the demo, off on real fleets")  # fmt: skip
@@ -120,6 +127,18 @@ def add_fleet_arguments(p: argparse.ArgumentParser) -> None:
     add_live_arguments(p)
     add("--plain-links", action="store_true",
         help="tests: signatures over plain TCP links (no TLS/ACL), as behind a bad router")  # fmt: skip
+
+
+#: Seconds the demo's agents stay for a reshape command once the fleet holds (the
+#: operator sends it at once; after the last transition the run ends this much later).
+RESHAPE_WAIT = 20.0
+
+
+def _shape_arg(spec: str) -> Shape:
+    try:
+        return load_shape(spec)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _route(a: argparse.Namespace) -> Route | None:
@@ -159,6 +178,7 @@ def fleet_spec(p: argparse.ArgumentParser, a: argparse.Namespace) -> FleetSpec:
         a.scenario_ids = sorted(r.id for r in sc.robots)
         a.robots, a.seed = len(a.scenario_ids), sc.seed
     rounds = {} if a.research_rounds is None else {"research_rounds": a.research_rounds}
+    wait = a.reshape_wait if a.reshape_wait is not None else (RESHAPE_WAIT if a.reshape else 0.0)
     try:
         agent = agent_settings(
             p,
@@ -170,6 +190,7 @@ def fleet_spec(p: argparse.ArgumentParser, a: argparse.Namespace) -> FleetSpec:
             correct=not a.no_correct,
             march=_route(a),
             publish_camera=a.publish_camera,
+            reshape_wait=wait,
             **rounds,
         )
         return FleetSpec(
@@ -200,6 +221,7 @@ def fleet_spec(p: argparse.ArgumentParser, a: argparse.Namespace) -> FleetSpec:
             rogue=a.rogue,
             rogue_replay=a.rogue_replay,
             live=a.live,
+            reshapes=tuple(a.reshape),
         )
     except ValueError as exc:
         p.error(str(exc))

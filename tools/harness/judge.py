@@ -35,6 +35,7 @@ from tools.harness.pairs import evaluate, plan_pairs
 from tools.harness.procs import rogue_reports
 from tools.harness.truth import MOVED_M, excursions, judge_shape
 from tools.lib.frame_fit import common_frame_pose
+from tools.lib.reshape import final_shape_spec, judge_reshapes
 
 #: The phases of docs/design.md §1 in order (the wire's list, less the terminal "failed").
 PHASE_ORDER = tuple(p for p in PHASES if p != "failed")
@@ -75,6 +76,14 @@ def plan_from_agreed(
         d_e=d_e, phi_e=phi_e, orientation=orientation, strategy=strategy, shape=shape
     )
     return fa, fa.plan(recs, params)
+
+
+def plan_params(result: dict[str, Any], d_e: float, phi_e: float, shape: FormationShape) -> Any:
+    """The fleet's planning parameters as ``result`` records them."""
+    from agent.core.formation.params import PlanParams
+
+    orientation, strategy = result.get("orientation", "pca"), result.get("strategy", "default")
+    return PlanParams(d_e=d_e, phi_e=phi_e, orientation=orientation, strategy=strategy, shape=shape)
 
 
 MARCH_TOLERANCE = 0.10  # the leader's displacement within 10 % of the route
@@ -422,6 +431,8 @@ def summarise(
                 shape,
             )
             result["evaluator_plan_digest"] = str(plan.digest)
+            if result.get("reshape_specs"):  # the transitions, recomputed
+                judge_reshapes(result, plan, plan_params(result, d_e, phi_e, shape))
             result["excluded"] = [int(i) for i in plan.excluded]
             result["verdict"] = plan.verdict
             result["leader"] = int(plan.leader)
@@ -453,7 +464,8 @@ def summarise(
     members = [i for i in ids if i not in left_out]
     judged = False
     if obs.truth and members:
-        verdict = judge_shape(obs.truth[-1][1], members, d_e, phi_e, shape)
+        final = load_shape(final_shape_spec(result))  # the last shape taken
+        verdict = judge_shape(obs.truth[-1][1], members, d_e, phi_e, final)
         result["pairs"], result["shape"] = verdict.rows, verdict.summary()
         result.setdefault("leader", verdict.leader)
         judged = not verdict.missing
@@ -484,7 +496,7 @@ def summarise(
             )
         )
         result["rogue_defeated"] = trusted
-    marched = result.get("march_ok", True)
+    marched = result.get("march_ok", True) and result.get("reshape_ok", True)
     result["outcome"], result["outcome_detail"] = outcome(result)
     result["success"] = bool(
         result["outcome"] == "complete" and "timeout" not in result and trusted and marched

@@ -240,7 +240,9 @@ class Observer:
         view.bytes_by_kind[kind] += size or len(encode(msg))
         view.count_by_kind[kind] += 1
         if isinstance(msg, StatusMsg):
-            if msg.phase not in view.phase_wall:
+            # the first formation's phases (a reshape's plan, wait, move and hold come
+            # after its done: docs/formation.md "Reshaping" times them per transition)
+            if msg.phase not in view.phase_wall and "done" not in view.phase_wall:
                 view.phase_wall[msg.phase] = now
                 view.phase_sim[msg.phase] = msg.t_sim
             view.phase, view.progress, view.detail = msg.phase, msg.progress, msg.detail

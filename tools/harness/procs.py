@@ -198,7 +198,8 @@ class FleetNet:
         """Secure TLS runs meet at a router; the others at the world's listener."""
         return bool(self.credentials) and self.tls
 
-    def observer(self) -> BusConfig:
+    def observer(self, identity: str = "observer") -> BusConfig:
+        """The bus of an observer (or of another fleet identity that is no robot)."""
         if not self.credentials:
             return BusConfig(connect=(self.endpoint,), multicast_scouting=False)
         return BusConfig(
@@ -206,9 +207,13 @@ class FleetNet:
             multicast_scouting=False,
             mode="client" if self.tls else "peer",
             credentials=self.credentials,
-            identity="observer",
+            identity=identity,
             tls=self.tls,
         )
+
+    def operator(self) -> BusConfig:
+        """The operator's bus: it publishes the reshape commands (docs/formation.md)."""
+        return self.observer("operator")
 
 
 def fleet_network(

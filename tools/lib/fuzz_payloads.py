@@ -124,7 +124,18 @@ def valid_samples() -> dict[str, list[P.Message]]:
                 ),
             ),
         ],
-    }
+        "reshape": [
+            P.ReshapeMsg(
+                command=1, base="ab" * 32, name="line", rule="line", orient="width",
+                shape_digest="cd" * 32,
+            ),
+            P.ReshapeMsg(
+                command=2**31 - 1, base="ab" * 32, name="w" * 64, rule="tree", orient="depth",
+                shape_digest="cd" * 32,
+                slots=tuple((k // 2, 0.8, 2.356) for k in range(P.MAX_SHAPE_SLOTS)),
+            ),
+        ],
+    }  # fmt: skip
     assert set(out) == set(P.message_types()), "every message type needs a sample"
     return out
 
