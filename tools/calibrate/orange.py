@@ -10,19 +10,17 @@ hue where the window has the most surplus is the caps' hue, and the band of hues
 it that still has a surplus (``BAND_SHARE`` of the peak) is theirs. The pixels of that
 band inside the window are the orange pixels.
 
-Their saturation and value bound the range from both sides: the range is a tolerance box
-of the orange pixels, ``[Q_q - m, Q_(1-q) + m]`` in S and in V (``Q_q`` the q-quantile),
-the hue band widened by ``HUE_MARGIN``. The margin m (``SV_MARGINS``, largest first) is
-what the range leaves for light
-that differs from the captures', q (``TAILS``, smallest first) the share of the caps'
-shading it gives up at each end. The first box in that order, margins before tails, that
-lets at most ``BACKGROUND_SHARE`` of the pixels outside the window through is the range:
-as much room for the light as the background allows. A room with the caps' colour on its
-walls may let no box through. The range is then the box with the least background among
-those that keep at least ``KEEP`` of the caps' pixels: a box tighter than the caps' own
-shading loses them in the parts of the room the captures did not see, and the
-recogniser's head-and-shoulders test (NAO paper 3.1.2) rejects a stray patch of the
-colour; the background share is reported, and the check measures the outcome.
+Their saturation and value bound the range, a box in HSV: the hue band widened by
+``HUE_MARGIN``; ceilings ``SV_MARGIN`` above the orange pixels' 99th percentiles of S and
+V (``CEILING_TAIL``); and the floors that keep the most orange pixels while at most
+``BACKGROUND_SHARE`` of the pixels outside the window pass, ties to the lower floors
+(found exactly over every pair of floors from two-dimensional cumulative counts). The
+range keeps at least ``MIN_KEPT`` of the orange pixels, and is as wide as the background
+allows: a dim room, whose greys take a warm hue,
+raises the floors; a room clear of the caps' colour leaves them low. When no floors keep
+the background out, those that let the least through, and the build reports the share
+(the recogniser's head-and-shoulders test, NAO paper 3.1.2, rejects a stray patch; the
+check measures the outcome).
 :func:`figure` draws the histograms with the range chosen.
 """
 
@@ -46,10 +44,10 @@ HALF_WIDTH = 0.25  # m: NAO-j's half-width with a margin (its arms)
 S_PROBE, V_PROBE = 80, 40  # what counts as a coloured pixel at all
 BAND_SHARE = 0.05
 HUE_MARGIN = 2
-SV_MARGINS = (40, 30, 20, 10, 0)  # S and V widening of the caps' box, largest first
-TAILS = (0.01, 0.025, 0.05)  # share of the caps' pixels each end of the box may give up
+SV_MARGIN = 40  # S and V above the caps' brightest, most saturated pixels the range allows
+MIN_KEPT = 0.5  # the least share of the caps' pixels a range keeps, whatever passes
+CEILING_TAIL = 1.0  # per cent of the caps' pixels above which the ceilings are set
 BACKGROUND_SHARE = 2e-5
-KEEP = 0.99  # share of the caps' pixels a range must keep when the background is unavoidable
 MIN_SURPLUS = 1e-3  # of the window's pixels: less, and no orange was seen
 HUES = HUE_MAX + 1
 
@@ -148,31 +146,37 @@ def _inside(px: np.ndarray, o: OrangeRange) -> np.ndarray:
 def _box(
     caps: np.ndarray, background: np.ndarray, n_bg: int, h0: int, h1: int
 ) -> tuple[OrangeRange, float]:
-    """The range of the module docstring: the first tolerance box of the caps' pixels
-    (margins before tails) that lets at most ``BACKGROUND_SHARE`` of the ``n_bg``
-    background pixels through (``background``: those in the hue band), else the one with
-    the least background of those that keep ``KEEP`` of the caps' pixels (the widest
-    when none does); and its background share."""
-    admissible: list[tuple[float, int, OrangeRange]] = []
-    widest: tuple[OrangeRange, float] | None = None
-    for q in TAILS:
-        s_lo, s_hi = np.percentile(caps[:, 1], (100 * q, 100 * (1 - q)))
-        v_lo, v_hi = np.percentile(caps[:, 2], (100 * q, 100 * (1 - q)))
-        for m in SV_MARGINS:
-            o = OrangeRange(
-                (h0, _clip(s_lo - m), _clip(v_lo - m)), (h1, _clip(s_hi + m), _clip(v_hi + m))
-            )
-            share = float(np.count_nonzero(_inside(background, o))) / n_bg
-            widest = (o, share) if widest is None else widest
-            if share <= BACKGROUND_SHARE:
-                return o, share
-            if np.mean(_inside(caps, o)) >= KEEP:
-                admissible.append((share, len(admissible), o))  # ties: the wider, earlier
-    if not admissible:  # caps' colours that spread beyond every box: the widest
-        assert widest is not None
-        return widest
-    share, _, o = min(admissible)
-    return o, share
+    """The range of the module docstring: of the boxes with the ceilings of the caps'
+    pixels (``caps``), the floors that keep the most of them (at least ``MIN_KEPT``) while at most
+    ``BACKGROUND_SHARE`` of the ``n_bg`` background pixels pass (``background``: those in
+    the hue band); ties to the lower floors, S before V. When no floors keep the
+    background out, those that let the least through. Returns the range and its
+    background share."""
+    s_hi = _clip(np.percentile(caps[:, 1], 100 - CEILING_TAIL) + SV_MARGIN)
+    v_hi = _clip(np.percentile(caps[:, 2], 100 - CEILING_TAIL) + SV_MARGIN)
+
+    def at_least(px: np.ndarray) -> np.ndarray:
+        """[s, v]: how many of ``px`` under the ceilings have S >= s and V >= v."""
+        px = px[(px[:, 1] <= s_hi) & (px[:, 2] <= v_hi)]
+        h = np.zeros((256, 256), np.int64)
+        np.add.at(h, (px[:, 1].astype(np.intp), px[:, 2].astype(np.intp)), 1)
+        out: np.ndarray = h[::-1, ::-1].cumsum(0).cumsum(1)[::-1, ::-1]
+        return out
+
+    kept, passed = at_least(caps), at_least(background)
+    share = passed / n_bg
+    enough = kept >= MIN_KEPT * len(caps)  # a range for the caps, not for nothing
+    share = np.where(enough, share, np.inf)
+    ok = share <= BACKGROUND_SHARE
+    s_idx, v_idx = np.indices(share.shape)
+    if ok.any():  # the most caps; then the lowest floors (sum), then the lower S
+        score = np.where(ok, kept, -1)
+        key = np.lexsort(((s_idx).ravel(), (s_idx + v_idx).ravel(), -score.ravel()))
+    else:  # the least background; then the most caps
+        key = np.lexsort(((s_idx + v_idx).ravel(), -kept.ravel(), share.ravel()))
+    s_lo, v_lo = np.unravel_index(int(key[0]), share.shape)
+    o = OrangeRange((h0, int(s_lo), int(v_lo)), (h1, s_hi, v_hi))
+    return o, float(share[s_lo, v_lo])
 
 
 def _clip(x: float) -> int:
