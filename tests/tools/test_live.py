@@ -170,14 +170,17 @@ def test_the_recorder_fans_the_scene_out_to_the_live_server(tmp_path: Path) -> N
     t = threading.Thread(target=client, daemon=True)
     t.start()
     try:
-        deadline = time.monotonic() + 30.0  # the client has subscribed to the first channels
+        waited = False
         fed = 0
         while fed < len(msgs):
             _, key, data = msgs[fed]
             obs.take(key, decode(data), rec)
             fed += 1
-            if fed == 40:  # a few channels exist: wait for the client to subscribe to them
-                while not live.subscribed() and time.monotonic() < deadline:
+            if not waited and "/scene" in live.topics():
+                # /scene is advertised: feed on once the client has subscribed to it (a
+                # deadline, not a guess at how long the subscription takes)
+                waited, deadline = True, time.monotonic() + 30.0
+                while "/scene" not in live.subscribed() and time.monotonic() < deadline:
                     time.sleep(0.05)
             time.sleep(0.002)
         time.sleep(1.0)
