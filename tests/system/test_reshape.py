@@ -12,7 +12,6 @@
 
 from __future__ import annotations
 
-import json
 import queue
 import subprocess
 import sys
@@ -24,6 +23,7 @@ import pytest
 from agent import wire as P
 from agent.wire import trust as T
 from tests.system.test_security import client, session
+from tests.system.world import run_demo
 from tools.harness.procs import free_port
 
 pytestmark = pytest.mark.system
@@ -75,15 +75,11 @@ def test_the_router_delivers_the_operators_command_and_no_robots(tmp_path: Path)
 
 @pytest.mark.slow
 def test_four_robots_reshape_a_pyramid_into_a_line(tmp_path: Path) -> None:
-    res = subprocess.run(
-        [sys.executable, "-m", "tools.demo", "--robots", "4", "--seed", "1",
-         "--reshape", "line", "--reshape-wait", "10",
-         "--out", str(tmp_path / "demo"), "--json", str(tmp_path / "result.json"),
-         "--timeout", "400", "--no-publish-camera"],
-        cwd=ROOT, capture_output=True, text=True, timeout=460,
+    res, r = run_demo(
+        tmp_path, "--robots", "4", "--seed", "1", "--reshape", "line", "--reshape-wait", "10",
+        "--no-publish-camera",
     )  # fmt: skip
     assert "identical plan digests" in res.stdout, res.stderr[-2000:]
-    r = json.loads((tmp_path / "result.json").read_text())
     assert r["shape_spec"] == "pyramid" and r["reshape_specs"] == ["line"]
     (t,) = r["reshapes"]
     assert t["outcome"] == "held", t

@@ -171,7 +171,7 @@ def _box(
     s_idx, v_idx = np.indices(share.shape)
     if ok.any():  # the most caps; then the lowest floors (sum), then the lower S
         score = np.where(ok, kept, -1)
-        key = np.lexsort(((s_idx).ravel(), (s_idx + v_idx).ravel(), -score.ravel()))
+        key = np.lexsort((s_idx.ravel(), (s_idx + v_idx).ravel(), -score.ravel()))
     else:  # the least background; then the most caps
         key = np.lexsort(((s_idx + v_idx).ravel(), -kept.ravel(), share.ravel()))
     s_lo, v_lo = np.unravel_index(int(key[0]), share.shape)
