@@ -181,3 +181,82 @@ def test_surprise_needs_the_global_test() -> None:
     v = _verdict(0.5, [0.9])
     with pytest.raises(ValueError, match="without its global test"):
         surprise(FaultVerdict(v.ok, v.named, v.poses, v.dropped, v.tests, v.reason, None))
+
+
+def _rests_passing(monkeypatch: pytest.MonkeyPatch, passing: set[int]) -> list[tuple[int, ...]]:
+    """Make the rest framed without a robot's record pass exactly when that robot is in
+    ``passing`` (with the true poses of :func:`_fleet` (1), in the lowest robot's fixed
+    frame); returns the robots tried, in order."""
+    import agent.core.formation.frame.fleet_frame as ff_mod
+
+    pos, h, _ = _fleet(1)
+    tried: list[tuple[int, ...]] = []
+    real = ff_mod._first_passed
+
+    def fake(records, epsilon, model, suspects):  # type: ignore[no-untyped-def]
+        if suspects is not None:
+            return real(records, epsilon, model, suspects)
+        ids = tuple(sorted(r.robot_id for r in records))
+        left = tuple(sorted(set(IDS) - set(ids)))
+        tried.append(left)
+        if left[0] not in passing:
+            return None, "a fake reason"
+        rows = [IDS.index(i) for i in ids]
+        psi_f = h[rows[0]] - math.pi / 2
+        c, s = math.cos(-psi_f), math.sin(-psi_f)
+        w = pos[rows] - pos[rows[0]]
+        fixed = np.stack([c * w[:, 0] - s * w[:, 1], s * w[:, 0] + c * w[:, 1]], axis=1)
+        frame = ff_mod.FleetFrame(ids[0], ids, fixed, h[rows] - h[rows[0]], False, reason="fake")
+        return frame, "fake"
+
+    monkeypatch.setattr(ff_mod, "_first_passed", fake)
+    return tried
+
+
+def _two_faulty() -> list[Any]:
+    _, _, recs = _fleet(1)
+    return [fault(r, "scale") if r.robot_id in (2, 5) else r for r in recs]
+
+
+def test_framed_again_without_one_record_names_that_robot(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """No candidate passes (two robots faulty); the suspects are tried smallest p first,
+    and the one whose rest, framed again without its record, passes is named."""
+    recs = _two_faulty()
+    with pytest.raises(ValueError):
+        fleet_frame(recs, DEFAULT_EPSILON)  # no single robot explains it
+    tried = _rests_passing(monkeypatch, {5})
+    ff = fleet_frame(recs, DEFAULT_EPSILON)
+    assert ff.excluded == (5,) and 5 not in ff.ids and "framed again" in ff.reason
+    assert (5,) in tried and len(set(tried)) == len(tried)  # each suspect tried once
+    # it stands where the others saw it: the world's place, in the rest's frame
+    pos, h, _ = _fleet(1)
+    psi_f = h[0] - math.pi / 2
+    c, s = math.cos(-psi_f), math.sin(-psi_f)
+    w = pos[IDS.index(5)] - pos[0]
+    expected = np.array([c * w[0] - s * w[1], s * w[0] + c * w[1]])
+    np.testing.assert_allclose(ff.excluded_at[0], expected, atol=1e-6)
+
+
+def test_framed_again_two_robots_whose_rests_pass_is_ambiguous(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Two suspects whose rests both pass: nobody can be trusted, the fleet stops."""
+    tried = _rests_passing(monkeypatch, {2, 5})
+    with pytest.raises(ValueError, match="no frame passes"):
+        fleet_frame(_two_faulty(), DEFAULT_EPSILON)
+    assert len(tried) >= 2
+
+
+def test_framed_again_no_rest_passes_stops(monkeypatch: pytest.MonkeyPatch) -> None:
+    tried = _rests_passing(monkeypatch, set())
+    with pytest.raises(ValueError, match="no frame passes"):
+        fleet_frame(_two_faulty(), DEFAULT_EPSILON)
+    assert tried  # the suspects were tried
+
+
+def test_a_fault_free_fleet_never_reframes(monkeypatch: pytest.MonkeyPatch) -> None:
+    tried = _rests_passing(monkeypatch, set(IDS))
+    ff = fleet_frame(_fleet(1)[2], DEFAULT_EPSILON)
+    assert ff.excluded == () and tried == []

@@ -29,9 +29,11 @@ identified its sightings; an unrefined one is fitted again without its rejected 
 A frame that passes with everyone is *doubted* when it surprises the noise model at
 :data:`DOUBT`: its global test gives p below it, or its most surprising robot does once
 multiplied by the number of robots (Bonferroni over the fleet: some robot of n sound ones
-looks that odd with at most that probability). The later candidates are then tried too, and of every frame that
-passed, those naming a robot included (judged on the rest, the named robot left out),
-the one whose global test gives the largest p is kept (the fit the noise model finds
+looks that odd with at most that probability). The later candidates are then tried too,
+and a frame that passes with everyone after a general candidate has named a robot is
+not taken for its place in the order either: of every frame that passed, those naming
+a robot included (judged on the rest, the named robot left out), the one whose global
+test gives the largest p is kept (the fit the noise model finds
 least surprising; tie: the earlier). A frame built on the aligned model can pass with
 one robot fitted wrong, its sightings all landing nowhere (in five robots, four set down
 within 16° of each other and one turned 130°: p 4·10⁻⁴), where the pose fit explains
@@ -49,9 +51,24 @@ blame a sound robot merely set down turned. A
 candidate that identifies sightings where they land is tested on each sighting as it
 identified it, and on each sighting it dropped as first paired
 (:func:`tested_sightings`): a sighting that lands nowhere is evidence, and a wrong
-pairing it corrected is not held against the robot first paired. When nothing
-passes, :func:`fleet_frame` raises ``ValueError`` with the reason of the last candidate
-tried, the same on every agent (they hold the same records): nobody moves.
+pairing it corrected is not held against the robot first paired.
+
+When nothing passes, the fleet is *framed again without a record*: "robot r is faulty"
+means its record is untrusted, not merely its pairs, and the rest must then pass the
+same test on a frame built from the others' records alone, paired and fitted from
+scratch. Leaving out only the pairs a faulty robot's sightings made keeps what they did
+to the rest: pairings made around its false places, a neighbour pulled round (in a fleet
+of ten, a robot whose distances read 1.4 times too long left a sound robot it never saw
+11° off, and the rest, fitted again from those pairs, failed). So each robot a general
+candidate's test rejected at :data:`fault_test.ALPHA` (smallest p first, tie: lowest id)
+has its whole record set aside and the candidates run again on the others with nobody
+named (:func:`_without_record`); exactly one such robot whose rest passes is named,
+standing where the others saw it. None, or more than one, and :func:`fleet_frame` raises
+``ValueError`` with the reason of the last candidate tried, the same on every agent
+(they hold the same records): nobody moves. A robot is so named only when its own test
+rejects it (at ALPHA in one of the two general frames) and the rest passes: a sound
+robot is left out with at most 2·ALPHA per run. The search runs only where the fleet
+would otherwise stop, and costs one framing of the rest per suspect.
 
 Every robot is then planned from its estimated start position, and walks in the common
 frame by turning its own plan by its estimated start heading ψ (:mod:`own_frame`).
@@ -284,6 +301,26 @@ def fleet_frame(
         one is ambiguous): the reason says which.
     """
     model = shipped_noise() if noise is None else noise
+    suspects: dict[int, tuple[float, PoseFrame]] = {}
+    frame, last = _first_passed(records, epsilon, model, suspects)
+    if frame is not None:
+        return frame
+    named = _without_record(records, epsilon, model, suspects)
+    if named is not None:
+        return named
+    raise ValueError(f"no frame passes the fault test ({last})")
+
+
+def _first_passed(
+    records: Sequence[NeighborRecord],
+    epsilon: float,
+    model: SightingNoise,
+    suspects: dict[int, tuple[float, PoseFrame]] | None,
+) -> tuple[FleetFrame | None, str]:
+    """The candidate loop of the module docstring: (the frame, None if none passes; the
+    reason of the last candidate tried). ``suspects`` None: no robot may be named (the
+    general candidates are tested without a search); else it collects every robot a
+    general candidate's test rejects, with its smallest p and the poses it was tested on."""
     last = "no candidate frame connects every robot through identified neighbours"
     passed: list[tuple[float, bool, FleetFrame]] = []  # (global p, names a robot, frame)
     for cand in _candidates(records, epsilon):
@@ -292,25 +329,62 @@ def fleet_frame(
             continue
         fine, test = built
         searched = any(named for _, named, _ in passed)
-        verdict = fault_test(test, model, records, search=cand.general and not searched)
+        search = suspects is not None and cand.general and not searched
+        verdict = fault_test(test, model, records, search=search)
         rejected = [t.robot for t in sorted(verdict.tests, key=lambda t: (t.p, t.robot))
                     if t.p < ALPHA]  # fmt: skip
         if rejected and cand.turn is not None and cand.turn(rejected):
             built = cand.build()
             assert built is not None  # a better fit of the same robots
             fine, test = built
-            verdict = fault_test(test, model, records, search=cand.general and not searched)
+            verdict = fault_test(test, model, records, search=search)
+        if suspects is not None and cand.general:
+            for t in verdict.tests:
+                if t.p < ALPHA and (t.robot not in suspects or t.p < suspects[t.robot][0]):
+                    suspects[t.robot] = (t.p, test)
         last = f"{cand.name}: {verdict.reason}"
         if not verdict.ok or (verdict.named and not cand.general):
             continue
         assert verdict.fleet is not None  # a passed verdict carries its global test
         frame = _framed(fine, test, verdict, cand.name, model)
-        if not verdict.named and surprise(verdict) >= DOUBT:
-            return frame
+        if not verdict.named and not searched and surprise(verdict) >= DOUBT:
+            return frame, last
         passed.append((verdict.fleet.p, bool(verdict.named), frame))
     if any(not named for _, named, _ in passed):
         # every frame that passed with everyone is doubted: the best fit of all that passed
-        return max(passed, key=lambda c: c[0])[2]  # the first of equal p
+        return max(passed, key=lambda c: c[0])[2], last  # the first of equal p
     if passed:
-        return passed[0][2]  # the first general candidate that names a robot
-    raise ValueError(f"no frame passes the fault test ({last})")
+        return passed[0][2], last  # the first general candidate that names a robot
+    return None, last
+
+
+def _without_record(
+    records: Sequence[NeighborRecord],
+    epsilon: float,
+    model: SightingNoise,
+    suspects: dict[int, tuple[float, PoseFrame]],
+) -> FleetFrame | None:
+    """The last resort of the module docstring (*framed again without its record*): each
+    robot a general candidate's test rejected (smallest p first, tie: lowest id) is taken
+    as faulty, its whole record set aside, and the rest framed from scratch with nobody
+    named; exactly one such robot whose rest passes is named, standing where the others
+    saw it. None: no suspect, or none or more than one whose rest passes."""
+    found: list[tuple[int, FleetFrame, PoseFrame]] = []
+    for robot, (_, tested) in sorted(suspects.items(), key=lambda kv: (kv[1][0], kv[0])):
+        rest = [r for r in records if r.robot_id != robot]
+        inner, _ = _first_passed(rest, epsilon, model, None)
+        if inner is None or set(inner.ids) != {r.robot_id for r in rest}:
+            continue
+        found.append((robot, inner, tested))
+        if len(found) > 1:
+            return None  # ambiguous: nobody can be trusted
+    if not found:
+        return None
+    robot, inner, tested = found[0]
+    poses = evaluate_poses(inner.ids, (), inner.positions, inner.headings, inner.frame_robot)
+    at = seen_by_others(tested, poses, robot, model)
+    p = suspects[robot][0]
+    reason = (f"robot {robot} named: its sightings do not fit at p {p:.1e} < {ALPHA:g}, and "
+              f"the others, framed again without its record, pass ({inner.reason})")  # fmt: skip
+    return FleetFrame(inner.frame_robot, inner.ids, inner.positions, inner.headings, False,
+                      excluded=(robot,), excluded_at=at.reshape(1, 2), reason=reason)  # fmt: skip
