@@ -235,6 +235,7 @@ def test_no_import_cycles() -> None:
 # The formation core (agent/core/formation), lowest tier first: its rooms (folders) and its
 # root modules. A module may import its own room and any room of a lower tier, never
 # one of its own tier or above:
+# - joined (robots joined by pairs: disjoint sets) stands below everything;
 # - frame (the common frame from the records) and shape (the pyramid) stand alone;
 # - paths (assignment, straight and bent paths, their geometry) build on the shape;
 # - params names the choices of the rooms below it;
@@ -245,6 +246,7 @@ def test_no_import_cycles() -> None:
 #   so does reshape (the plan from a held plan's slots to another shape).
 FORMATION = "agent.core.formation"
 FORMATION_TIERS: tuple[tuple[str, ...], ...] = (
+    ("joined",),
     ("frame", "shape"),
     ("paths",),
     ("params",),
@@ -288,7 +290,7 @@ def test_every_formation_room_has_a_tier() -> None:
     """A new room (or root module) of the formation core must be placed in the order."""
     rooms = {_room(m) for m in MODULES if m.startswith(FORMATION + ".")}
     assert rooms == {r for tier in FORMATION_TIERS for r in tier}
-    for room in rooms - {"plan", "params", "reshape"}:
+    for room in rooms - {"plan", "params", "reshape", "joined"}:
         assert (ROOT / "agent/core/formation" / room / "__init__.py").is_file(), room
 
 

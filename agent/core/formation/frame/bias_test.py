@@ -63,7 +63,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import chi2
+from scipy.special import chdtrc
 
 from agent.core.formation.frame.poses import PoseFrame, PoseMeasurement
 from agent.core.perception.sighting_noise import SightingNoise
@@ -135,7 +135,7 @@ def bias_fit(
     if len(own) < MIN_OWN or len(seen) < MIN_SEEN:
         return BiasFit(robot, len(own), len(seen), 0.0, 1.0, (0.0, 0.0), 1.0)
     kept = _Sightings(poses, robot, own, seen, noise, elsewhere).fit(x_h0)
-    p = float(chi2.sf(kept.statistic / bias_scale, 3))
+    p = float(chdtrc(3, kept.statistic / bias_scale))
     return BiasFit(robot, len(own), len(seen), kept.statistic, kept.scale, kept.shift, p)
 
 

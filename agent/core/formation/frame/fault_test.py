@@ -77,7 +77,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.stats import chi2
+from scipy.special import chdtrc, chdtri
 
 from agent.core.formation.frame.bias_test import bias_fit
 from agent.core.formation.frame.multi_start import refit
@@ -194,7 +194,7 @@ def mask_test(deltas: Sequence[float], noise: SightingNoise) -> tuple[float, flo
     best = int(np.argmax(np.round(logf, 12)))  # the first (smallest Δ) of equal maxima
     stat = max(0.0, 2.0 * float(logf[best] - logf[0]))
     offset = float((MASK_GRID[best] + math.pi / 2) % math.pi - math.pi / 2)
-    return offset, float(chi2.sf(stat / noise.mask_scale, 1))
+    return offset, float(chdtrc(1, stat / noise.mask_scale))
 
 
 def mask_deltas(poses: PoseFrame, target: int) -> list[float]:
@@ -213,7 +213,7 @@ def mask_deltas(poses: PoseFrame, target: int) -> list[float]:
 
 def rejected_edges(poses: PoseFrame, noise: SightingNoise) -> dict[tuple[int, int], bool]:
     """Every edge of ``poses`` (ascending) and whether it is rejected (step 1)."""
-    q = float(chi2.isf(ALPHA_SIGHTING, 2))
+    q = float(chdtri(2, ALPHA_SIGHTING))
     x2 = sighting_chi2(poses, noise)
     out: dict[tuple[int, int], bool] = {}
     for k, m in enumerate(poses.measurements):
@@ -249,7 +249,7 @@ def strays(
     """Each robot's stray sightings (step 2): (distance, lands on a robot) in record order.
     ``elsewhere`` (k, 2): more places, common frame, where a robot stands that ``poses``
     leaves out (a sighting of it lands)."""
-    q = float(chi2.isf(ALPHA_SIGHTING, 2))
+    q = float(chdtri(2, ALPHA_SIGHTING))
     index = {rid: k for k, rid in enumerate(poses.ids)}
     out: dict[int, list[tuple[float, bool]]] = {}
     for rid, v in unpaired(poses, records).items():
@@ -406,7 +406,7 @@ def seen_by_others(
         if m.target == robot and m.owner in rest.ids
     ]
     if seen:
-        q = float(chi2.isf(ALPHA_SIGHTING, 2))
+        q = float(chdtri(2, ALPHA_SIGHTING))
         best: list[int] = []
         for _, _, centre in seen:
             agree = []

@@ -35,9 +35,9 @@ record order gives the same firm graph.
 from __future__ import annotations
 
 import numpy as np
-from scipy.cluster.hierarchy import DisjointSet
 
 from agent.core.formation.frame.neighbour_check import NeighbourGraph, mutual_support
+from agent.core.formation.joined import Joined
 
 #: The support's tolerance as a share of ε (module docstring).
 SUPPORT_TOL_SHARE = 0.5
@@ -119,7 +119,7 @@ def _forest(graph: NeighbourGraph, support: np.ndarray, min_support: int) -> Nei
     order = sorted(
         range(len(pairs)), key=lambda k: (-int(support[k]), pairs[k].eps_d, pairs[k].i, pairs[k].j)
     )
-    joined = DisjointSet(graph.ids)
+    joined = Joined(graph.ids)
     keep = []
     for k in order:
         # merge() is True when the pair joins two parts of the forest (Kruskal)

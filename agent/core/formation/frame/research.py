@@ -55,7 +55,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.cluster.hierarchy import DisjointSet
 
 from agent.core.formation.frame.neighbour_check import (
     DEFAULT_EPSILON,
@@ -64,6 +63,7 @@ from agent.core.formation.frame.neighbour_check import (
 )
 from agent.core.formation.frame.pose_pairing import identify_pairs
 from agent.core.formation.frame.records import NeighborRecord
+from agent.core.formation.joined import Joined
 
 NORTH = math.pi / 2
 GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))  # 137.5°
@@ -113,7 +113,7 @@ BLIND = (
 def components(graph: NeighbourGraph) -> tuple[tuple[int, ...], ...]:
     """Connected components of the identified-neighbour graph, each ascending, ordered
     by size (largest first), ties by lowest id."""
-    joined = DisjointSet(graph.ids)
+    joined = Joined(graph.ids)
     for p in graph.pairs:
         joined.merge(p.i, p.j)
     comps = [tuple(sorted(g)) for g in joined.subsets()]
