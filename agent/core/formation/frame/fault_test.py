@@ -79,7 +79,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import chi2
 
-from agent.core.formation.frame.bias_test import bias_fit
+from agent.core.formation.frame.bias_test import BiasFit, bias_fits
 from agent.core.formation.frame.multi_start import refit
 from agent.core.formation.frame.poses import PoseFrame, PoseMeasurement
 from agent.core.formation.frame.records import NeighborRecord
@@ -325,14 +325,21 @@ def _robot_tests(
     poses: PoseFrame, noise: SightingNoise, ev: _Evidence, bias: bool = True
 ) -> tuple[RobotTest, ...]:
     """Steps 2-4 from gathered evidence; ``bias`` False: without the bias test (step 4,
-    the costly one: p_bias 1)."""
-    return tuple(_robot_test(poses, noise, ev, r, bias) for r in poses.ids)
+    the costly one: p_bias 1). The robots' bias tests are fitted side by side
+    (:func:`bias_test.bias_fits`)."""
+    fits = _bias_fits(poses, noise, ev) if bias else {}
+    return tuple(_robot_test(poses, noise, ev, r, fits.get(r)) for r in poses.ids)
+
+
+def _bias_fits(poses: PoseFrame, noise: SightingNoise, ev: _Evidence) -> dict[int, BiasFit]:
+    """Step 4 for every robot of ``poses``."""
+    return bias_fits(poses, poses.ids, noise, noise.bias_scale, ev.loose, ev.elsewhere)
 
 
 def _robot_test(
-    poses: PoseFrame, noise: SightingNoise, ev: _Evidence, r: int, bias: bool
+    poses: PoseFrame, noise: SightingNoise, ev: _Evidence, r: int, fit: BiasFit | None
 ) -> RobotTest:
-    """Steps 2-4 for robot ``r`` (``bias`` as :func:`_robot_tests`)."""
+    """Steps 2-4 for robot ``r``, its bias test ``fit`` (None: without it, p_bias 1)."""
     mine = [e for e in ev.edges if r in e]
     own = ev.stray.get(r, [])
     probs = [ev.p_edge[e] for e in mine]
@@ -344,20 +351,19 @@ def _robot_test(
     offset, p_h = mask_test(deltas, noise)
     p_h = max(p_h, noise.rho if r in ev.timed else noise.rho_untimed) if deltas else p_h
     p_pos = tail_at_least(probs, k + lost)
-    stat, p_b = 0.0, 1.0
-    if bias:
-        fit = bias_fit(poses, r, noise, noise.bias_scale, ev.loose.get(r), ev.elsewhere)
-        stat, p_b = fit.statistic, fit.p
+    stat, p_b = (0.0, 1.0) if fit is None else (fit.statistic, fit.p)
     return RobotTest(r, len(mine), k, len(own), lost, p_pos, len(deltas), offset, p_h, stat, p_b)
 
 
 def _rejects_anyone(poses: PoseFrame, noise: SightingNoise, ev: _Evidence, alpha: float) -> bool:
     """Whether any robot's test (steps 2-4) rejects it at ``alpha``: the same answer as
-    :func:`_robot_tests`, the costly bias test run only while nobody is rejected yet (the
-    cheap tests of every robot first; a robot's p only falls when its bias test is added)."""
-    if any(_robot_test(poses, noise, ev, r, False).p < alpha for r in poses.ids):
+    :func:`_robot_tests`, the costly bias tests run only when nobody is rejected without
+    them (the cheap tests of every robot first; a robot's p only falls when its bias test
+    is added)."""
+    if any(_robot_test(poses, noise, ev, r, None).p < alpha for r in poses.ids):
         return True
-    return any(_robot_test(poses, noise, ev, r, True).p < alpha for r in poses.ids)
+    fits = _bias_fits(poses, noise, ev)
+    return any(_robot_test(poses, noise, ev, r, fits[r]).p < alpha for r in poses.ids)
 
 
 @dataclass(frozen=True)
