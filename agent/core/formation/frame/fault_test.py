@@ -274,12 +274,12 @@ def strays(
 class _Evidence:
     """What the tests count, gathered once per fitted frame: each edge and whether it is
     rejected, each edge's base rate of rejection, each robot's strays (distance, lands) and
-    the distances of every sighting of each record."""
+    the rate ``p_stray`` of every sighting of each record."""
 
     edges: dict[tuple[int, int], bool]
     p_edge: dict[tuple[int, int], float]  #: p_reject at the edge's mean sighting distance
     stray: dict[int, list[tuple[float, bool]]]
-    sighted: dict[int, list[float]]
+    sighted: dict[int, list[float]]  #: p_stray at each sighting's distance, by record
     #: robots whose records carry stances: their masks are turned back to their start
     #: heading (records.mask_orientation), the others' are as recorded
     timed: frozenset[int] = frozenset()
@@ -299,7 +299,7 @@ def _evidence(
     for m in poses.measurements:
         dist.setdefault(_edge(m), []).append(float(np.hypot(*m.vector)))
     sighted = {
-        rec.robot_id: [float(d) for d in np.hypot(*np.asarray(rec.neighbours).reshape(-1, 2).T)]
+        rec.robot_id: [float(p) for p in noise.p_stray(np.hypot(*rec.neighbours.reshape(-1, 2).T))]
         for rec in records
         if rec.robot_id in poses.ids
     }
@@ -344,7 +344,7 @@ def _robot_test(
     own = ev.stray.get(r, [])
     probs = [ev.p_edge[e] for e in mine]
     # every sighting of r's own could have ended up a lost stray (step 2)
-    probs += [float(noise.p_stray(d)) for d in ev.sighted.get(r, [])]
+    probs += ev.sighted.get(r, [])
     k = sum(ev.edges[e] for e in mine)
     lost = sum(not lands for _, lands in own)
     deltas = mask_deltas(poses, r)
@@ -380,7 +380,7 @@ class FleetCount:
 
 def _fleet_count(noise: SightingNoise, ev: _Evidence) -> FleetCount:
     probs = [ev.p_edge[e] for e in ev.edges]
-    probs += [float(noise.p_stray(d)) for r in sorted(ev.sighted) for d in ev.sighted[r]]
+    probs += [p for r in sorted(ev.sighted) for p in ev.sighted[r]]
     k = sum(ev.edges.values()) + sum(not lands for r in ev.stray for _, lands in ev.stray[r])
     return FleetCount(k, len(probs), tail_at_least(probs, k))
 
