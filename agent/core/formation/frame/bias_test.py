@@ -52,8 +52,8 @@ measured on this very statistic (``python -m tools.fit_noise``).
 **Every robot at once** (:func:`bias_fits`, what the fault test runs): the robots' fits
 are independent (each holds the others at their fitted poses), so they run side by side,
 one array operation for every robot still fitting at each Gauss-Newton step
-(:class:`_Batch`); at 50 NAOs one robot at a time spent most of its time calling numpy
-on arrays of tens of numbers. Each robot's misfits and Jacobian are its own, element for
+(:class:`_Batch`): fitted one at a time, the robots of a 50-NAO fleet cost mostly
+numpy's overhead per call on arrays of tens of numbers. Each robot's misfits and Jacobian are its own, element for
 element; only the sums over its sightings run over padded rows, so its Λ is its fit
 alone's up to rounding (``tests/formation/frame/test_bias_batch.py``).
 
