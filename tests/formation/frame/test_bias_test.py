@@ -5,20 +5,17 @@ fleets, and a test per error branch."""
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
 from scipy.stats import chi2
 
-from agent.core.formation.frame.bias_test import _Sightings, bias_fit
+from agent.core.formation.frame.bias_test import bias_fit
 from agent.core.formation.frame.fault_test import fault_test, fleet_count
 from agent.core.formation.frame.neighbour_check import DEFAULT_EPSILON
 from agent.core.formation.frame.pose_pairing import identify_pairs
-from agent.core.formation.frame.poses import PoseFrame, PoseMeasurement, fit_from_graph
+from agent.core.formation.frame.poses import PoseFrame, fit_from_graph
 from agent.core.formation.frame.records import NeighborRecord
 from agent.core.perception.sighting_noise import SightingNoise
 from tests.formation.pose_fleets import fault, sim_layout, unaligned_records
@@ -192,43 +189,3 @@ def test_the_order_of_unpaired_sightings_does_not_matter() -> None:
     a = bias_fit(cut, 3, NOISE, 1.0, loose)
     b = bias_fit(cut, 3, NOISE, 1.0, loose[::-1].copy())
     assert a.statistic == pytest.approx(b.statistic, rel=1e-9, abs=1e-9)
-
-
-_fleet_once = functools.cache(_fleet)
-
-
-@settings(max_examples=60, deadline=None)
-@given(
-    seed=st.integers(1, 6),
-    robot=st.integers(1, 8),
-    step=st.lists(st.floats(-0.5, 0.5), min_size=6, max_size=6),
-    biased=st.booleans(),
-    free=st.booleans(),
-    loose=st.booleans(),
-)
-def test_the_residuals_and_jacobian_by_columns_are_the_definitions_bit_for_bit(
-    seed: int, robot: int, step: list[float], biased: bool, free: bool, loose: bool
-) -> None:
-    """The fits' residuals and Jacobian, taken by columns, equal ``whiten(errors(x))`` (the
-    definition: the misfits in the owner's frame, then whitened) in every bit, at any
-    pose and bias, with every own sighting matched where it lands or the pairing kept."""
-    poses, _ = _fleet_once(seed, "scale" if seed % 2 else "")
-    ms = sorted((m for m in poses.measurements if robot in (m.owner, m.target)),
-                key=lambda m: (m.owner, m.target))  # fmt: skip
-    own: list[PoseMeasurement | np.ndarray] = [m for m in ms if m.owner == robot]
-    if loose:
-        own.append(np.array([0.7, -0.4]))
-    seen = [m for m in ms if m.target == robot]
-    if not own or not seen:
-        return
-    sights = _Sightings(poses, robot, own, seen, NOISE, np.array([[9.0, 9.0]]))
-    sights.free = free
-    x = sights.x0 + np.array(step[:3])
-    if biased:
-        x = np.concatenate([x, [1.0 + step[3], step[4], step[5]]])
-    want_r = sights.whiten(sights.errors(x, False)[0])
-    jac = sights.errors(x, True)[1]
-    assert jac is not None
-    for _ in range(2):  # the second time from what the first kept
-        assert sights.residuals(x).tobytes() == want_r.tobytes()
-        assert sights.jacobian(x).tobytes() == sights.whiten(jac).tobytes()

@@ -111,3 +111,34 @@ def test_poses_are_expressed_in_another_robots_frame() -> None:
     # the same poses, moved: the soft-L1 loss acts per axis, so the cost is not exactly
     # invariant to the frame (which is why fits are only compared in one frame)
     assert fit_cost(moved) == pytest.approx(fit_cost(good), rel=1e-3)
+
+
+@pytest.mark.parametrize(("seed", "robot"), [(0, 3), (1, 8), (2, 5)])
+def test_a_robot_held_half_a_turn_off_fits_its_sightings_better_turned(
+    seed: int, robot: int
+) -> None:
+    """The screen before a whole fit from the turned start: a robot stuck half a turn
+    off fits its own sightings and the others' of it better turned, its pose alone
+    refitted; a well-fitted robot never does, and no whole fit is then tried."""
+    good = build_poses(fleet(seed))
+    assert ms._turn_helps(_stuck(good, robot), robot)
+    assert not any(ms._turn_helps(good, r) for r in good.ids if r != good.frame_robot)
+
+
+def test_a_turn_that_does_not_help_the_robot_tries_no_whole_fit(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    good = build_poses(fleet(1))
+    fits: list[int] = []
+    real = ms.fit_poses
+
+    def counted(*args, **kwargs):  # type: ignore[no-untyped-def]
+        fits.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(ms, "fit_poses", counted)
+    robot = next(r for r in good.ids if r != good.frame_robot)
+    assert ms.half_turned(good, robot) is None and fits == []
+    lonely = replace(good, measurements=tuple(m for m in good.measurements
+                                              if robot not in (m.owner, m.target)))  # fmt: skip
+    assert not ms._turn_helps(lonely, robot)  # no sighting of it: nothing to turn

@@ -49,6 +49,14 @@ robot stands that the frame leaves out (a robot left out by the fault test is st
 where the others saw it, and r's sightings of it land there). The null scale is
 measured on this very statistic (``python -m tools.fit_noise``).
 
+**Every robot at once** (:func:`bias_fits`, what the fault test runs): the robots' fits
+are independent (each holds the others at their fitted poses), so they run side by side,
+one array operation for every robot still fitting at each Gauss-Newton step
+(:class:`_Batch`): fitted one at a time, the robots of a 50-NAO fleet cost mostly
+numpy's overhead per call on arrays of tens of numbers. Each robot's misfits and Jacobian are its own, element for
+element; only the sums over its sightings run over padded rows, so its Λ is its fit
+alone's up to rounding (``tests/formation/frame/test_bias_batch.py``).
+
 Only r's own sightings carry the bias, so the test needs others who see r (they pin its
 position) and at least two sightings of r's own, after the worst is set aside; with
 fewer it has no power and returns p = 1. Deterministic: measurements in canonical
@@ -59,7 +67,7 @@ equally bad sightings set aside and the lowest-indexed of equally near robots ma
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -90,11 +98,6 @@ class BiasFit:
     p: float
 
 
-def _rot(a: float) -> np.ndarray:
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[c, -s], [s, c]])
-
-
 def bias_fit(
     poses: PoseFrame,
     robot: int,
@@ -113,30 +116,72 @@ def bias_fit(
     ValueError
         ``robot`` not in ``poses``, or ``bias_scale`` not positive.
     """
-    if robot not in poses.ids:
-        raise ValueError(f"robot {robot} has no pose")
+    return bias_fits(poses, (robot,), noise, bias_scale, {robot: loose}, elsewhere)[robot]
+
+
+def bias_fits(
+    poses: PoseFrame,
+    robots: Sequence[int],
+    noise: SightingNoise,
+    bias_scale: float,
+    loose: Mapping[int, np.ndarray | None] | None = None,
+    elsewhere: np.ndarray | None = None,
+) -> dict[int, BiasFit]:
+    """:func:`bias_fit` of each of ``robots`` (``loose``: each one's own sightings no
+    measurement uses, as :func:`bias_fit`'s), their fits run side by side (one array
+    operation for all the robots at each step: :class:`_Batch`); each robot's answer is
+    its own fit's, whatever others are fitted beside it, up to rounding.
+
+    Raises
+    ------
+    ValueError
+        A robot not in ``poses``, or ``bias_scale`` not positive.
+    """
+    for robot in robots:
+        if robot not in poses.ids:
+            raise ValueError(f"robot {robot} has no pose")
     if not bias_scale > 0.0:
         raise ValueError(f"bias_scale must be > 0, got {bias_scale}")
-    # r's own and the others' of r, filtered, then sorted (stably): as the sorted list filtered
-    mine = (m for m in poses.measurements if robot in (m.owner, m.target))
-    ms = sorted(mine, key=lambda m: (m.owner, m.target))
-    own: list[PoseMeasurement | np.ndarray] = [
-        m for m in ms if m.owner == robot and m.target != robot
-    ]
-    if loose is not None:
-        own += [np.asarray(v, dtype=np.float64) for v in np.asarray(loose).reshape(-1, 2)]
-    seen = [m for m in ms if m.target == robot and m.owner != robot]
-    if len(own) < MIN_OWN or len(seen) < MIN_SEEN or len(poses.ids) < 2:
-        return BiasFit(robot, len(own), len(seen), 0.0, 1.0, (0.0, 0.0), 1.0)
-    x_h0, worst = _Sightings(poses, robot, own, seen, noise, elsewhere).worst()
-    n_own = len(own)  # the worst is indexed over own sightings, then the others'
-    own = [m for k, m in enumerate(own) if k != worst]
-    seen = [m for k, m in enumerate(seen) if k != worst - n_own]
-    if len(own) < MIN_OWN or len(seen) < MIN_SEEN:
-        return BiasFit(robot, len(own), len(seen), 0.0, 1.0, (0.0, 0.0), 1.0)
-    kept = _Sightings(poses, robot, own, seen, noise, elsewhere).fit(x_h0)
-    p = float(chdtrc(3, kept.statistic / bias_scale))
-    return BiasFit(robot, len(own), len(seen), kept.statistic, kept.scale, kept.shift, p)
+    loose = {} if loose is None else loose
+    out: dict[int, BiasFit] = {}
+    tried: list[tuple[int, list[PoseMeasurement | np.ndarray], list[PoseMeasurement]]] = []
+    for robot in robots:
+        # r's own and the others' of r, filtered, then sorted (stably): as the sorted
+        # list filtered
+        mine = (m for m in poses.measurements if robot in (m.owner, m.target))
+        ms = sorted(mine, key=lambda m: (m.owner, m.target))
+        own: list[PoseMeasurement | np.ndarray] = [
+            m for m in ms if m.owner == robot and m.target != robot
+        ]
+        extra = loose.get(robot)
+        if extra is not None:
+            own += [np.asarray(v, dtype=np.float64) for v in np.asarray(extra).reshape(-1, 2)]
+        seen = [m for m in ms if m.target == robot and m.owner != robot]
+        if len(own) < MIN_OWN or len(seen) < MIN_SEEN or len(poses.ids) < 2:
+            out[robot] = BiasFit(robot, len(own), len(seen), 0.0, 1.0, (0.0, 0.0), 1.0)
+        else:
+            tried.append((robot, own, seen))
+    if not tried:
+        return out
+    every = [_Sightings(poses, r, own, seen, noise, elsewhere) for r, own, seen in tried]
+    x_all, worst = _Batch(every).worst()
+    rest: list[tuple[int, list[PoseMeasurement | np.ndarray], list[PoseMeasurement]]] = []
+    starts = []
+    for (robot, own, seen), x_h0, w in zip(tried, x_all, worst, strict=True):
+        n_own = len(own)  # the worst is indexed over own sightings, then the others'
+        own = [m for k, m in enumerate(own) if k != w]
+        seen = [m for k, m in enumerate(seen) if k != w - n_own]
+        if len(own) < MIN_OWN or len(seen) < MIN_SEEN:
+            out[robot] = BiasFit(robot, len(own), len(seen), 0.0, 1.0, (0.0, 0.0), 1.0)
+        else:
+            rest.append((robot, own, seen))
+            starts.append(x_h0)
+    if rest:
+        kept = [_Sightings(poses, r, own, seen, noise, elsewhere) for r, own, seen in rest]
+        for (robot, own, seen), fit in zip(rest, _Batch(kept).fit(np.array(starts)), strict=True):
+            p = float(chdtrc(3, fit.statistic / bias_scale))
+            out[robot] = BiasFit(robot, len(own), len(seen), fit.statistic, fit.scale, fit.shift, p)
+    return {r: out[r] for r in robots}
 
 
 @dataclass(frozen=True)
@@ -196,18 +241,14 @@ class _Sightings:
         self.vx, self.vy = self.v_all[:n_own, 0].copy(), self.v_all[:n_own, 1].copy()
         self.ux, self.uy = self.u_all[:n_own, 0].copy(), self.u_all[:n_own, 1].copy()
         self.sr_own, self.st_own = self.s_r[:n_own].copy(), self.s_t[:n_own].copy()
-        self._last: tuple[tuple[int, bytes], np.ndarray] | None = None
-        # the same numbers by columns, for :meth:`residuals` and :meth:`jacobian` (each
-        # product and sum as :meth:`errors` and :meth:`whiten` take it: the same bits)
+        # the same numbers by columns, for :class:`_Batch` (each product and sum as
+        # :meth:`errors` and :meth:`whiten` take it: the same bits)
         self.c_obs, self.s_obs = self.rot_obs[:, 0, 0].copy(), self.rot_obs[:, 0, 1].copy()
         self.ms_obs = self.rot_obs[:, 1, 0].copy()  # −sin ψ_o
         self.px_obs, self.py_obs = self.p_obs[:, 0].copy(), self.p_obs[:, 1].copy()
         self.vx_all, self.vy_all = self.v_all[:, 0].copy(), self.v_all[:, 1].copy()
         self.ux_all, self.uy_all = self.u_all[:, 0].copy(), self.u_all[:, 1].copy()
         self.pax, self.pay = self.p_any[:, 0].copy(), self.p_any[:, 1].copy()
-        #: (x's bytes, free) -> the own sightings' (p_target − p_r) at x, for the Jacobian
-        self._rel: tuple[tuple[bytes, bool], np.ndarray, np.ndarray] | None = None
-        self._seen_jac: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
     def errors(self, x: np.ndarray, jac_too: bool) -> tuple[np.ndarray, np.ndarray | None]:
         """Misfits (k, 2) and their Jacobian (k, 2, len(x)), owner's frame."""
@@ -216,7 +257,8 @@ class _Sightings:
         scale, shift = (float(x[3]), x[4:6]) if len(x) > 3 else (1.0, np.zeros(2))
         c, s = math.cos(psi), math.sin(psi)
         first = 0 if self.free else self.n_paired
-        rel = np.vstack([self.p_tgt[:first], self._landing(first, pr, c, s, scale, shift)]) - pr
+        landing = self.p_any[self._matched(first, pr, c, s, scale, shift)]
+        rel = np.vstack([self.p_tgt[:first], landing]) - pr
         unscaled = np.stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]], 1)
         pred_seen = np.einsum("kij,kj->ki", self.rot_obs, pr[None, :] - self.p_obs)
         e = np.vstack([unscaled * scale + shift, pred_seen]) - self.v_all
@@ -233,25 +275,12 @@ class _Sightings:
             jac[:n_own, 1, 5] = 1.0
         return e, jac
 
-    def _landing(
-        self, first: int, pr: np.ndarray, c: float, s: float, scale: float, shift: np.ndarray
-    ) -> np.ndarray:
-        """Where each own sighting from ``first`` on lands: the place of the robot it lands
-        nearest to (in σ) under the pose and bias, the max-mixture association, redone at
-        every evaluation (tie: the first robot)."""
-        return np.asarray(self.p_any[self._matched(first, pr, c, s, scale, shift)])
-
     def _matched(
         self, first: int, pr: np.ndarray, c: float, s: float, scale: float, shift: np.ndarray
     ) -> np.ndarray:
-        """The rows of ``p_any`` that the own sightings from ``first`` on land nearest to.
-        A pure function of its arguments: the last answer is kept, since the fit asks for
-        the Jacobian at the point whose residuals it has just taken."""
-        if first == self.n_own:
-            return np.zeros(0, dtype=np.intp)
-        key = (first, np.array([pr[0], pr[1], c, s, scale, shift[0], shift[1]]).tobytes())
-        if self._last is not None and self._last[0] == key:
-            return self._last[1]
+        """The rows of ``p_any`` that the own sightings from ``first`` on land nearest to
+        (in σ) under the pose and bias: the max-mixture association, redone at every
+        evaluation (tie: the first robot)."""
         relx, rely = self.p_any[:, 0] - pr[0], self.p_any[:, 1] - pr[1]
         px = (c * relx + s * rely) * scale + shift[0]
         py = (-s * relx + c * rely) * scale + shift[1]
@@ -260,34 +289,7 @@ class _Sightings:
         ux, uy = self.ux[first:, None], self.uy[first:, None]
         along = (ex * ux + ey * uy) / self.sr_own[first:, None]
         across = (ey * ux - ex * uy) / self.st_own[first:, None]
-        hit = np.asarray((along**2 + across**2).round(9).argmin(axis=1), dtype=np.intp)
-        self._last = (key, hit)
-        return hit
-
-    def _keeps_pairing(self, x: np.ndarray) -> bool:
-        """Whether every paired sighting lands, at ``x``, on the robot the fit paired it
-        with (the loose ones are matched alike under both starts)."""
-        scale, shift = (float(x[3]), x[4:6]) if len(x) > 3 else (1.0, np.zeros(2))
-        psi = float(x[2])
-        hit = self._matched(0, x[:2], math.cos(psi), math.sin(psi), scale, shift)[: self.n_paired]
-        return bool(np.array_equal(hit, self.paired_to))
-
-    def _best(self, start: np.ndarray) -> tuple[np.ndarray, float]:
-        """One hypothesis, every sighting matched where it lands, fitted from ``start``;
-        and, unless that solution keeps the fit's pairing, from a second start as well:
-        the solution with the fit's pairing kept (the loose sightings matched). The lower
-        cost wins (tie: the first). The matched cost is never above the paired one at the
-        same x, so the second start is a start of the same problem, not another model; it
-        is needed when the pairing holds the pose in a basin the matching alone leaves."""
-        self.free = True
-        x_a, c_a = _cauchy_fit(self.residuals, self.jacobian, start)
-        if self._keeps_pairing(x_a):
-            return x_a, c_a
-        self.free = False
-        x_p, _ = _cauchy_fit(self.residuals, self.jacobian, start)
-        self.free = True
-        x_b, c_b = _cauchy_fit(self.residuals, self.jacobian, x_p)
-        return (x_a, c_a) if c_a <= c_b else (x_b, c_b)
+        return np.asarray((along**2 + across**2).round(9).argmin(axis=1), dtype=np.intp)
 
     def whiten(self, e: np.ndarray) -> np.ndarray:
         """(k, 2, ...) misfits (or their derivatives) -> (2k, ...): along, then across
@@ -298,140 +300,290 @@ class _Sightings:
         across = (e[:, 1] * ux - e[:, 0] * uy) / self.s_t.reshape(shape)
         return np.concatenate([along, across])
 
-    def _targets_rel(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The places the own sightings land on at ``x`` less r's position, by columns
-        (as :meth:`errors`' ``rel``; kept for the Jacobian at the same point)."""
-        key = (x.tobytes(), self.free)
-        if self._rel is not None and self._rel[0] == key:
-            return self._rel[1], self._rel[2]
-        scale, shift = (float(x[3]), x[4:6]) if len(x) > 3 else (1.0, np.zeros(2))
-        psi = float(x[2])
-        c, s = math.cos(psi), math.sin(psi)
-        first = 0 if self.free else self.n_paired
-        rows = self._matched(first, x[:2], c, s, scale, shift)
-        if first:
-            rows = np.concatenate([self.paired_to[:first], rows])
-        relx, rely = self.pax[rows] - x[0], self.pay[rows] - x[1]
-        self._rel = (key, relx, rely)
-        return relx, rely
 
-    def residuals(self, x: np.ndarray) -> np.ndarray:
-        """``whiten(errors(x)[0])``, bit for bit, by columns (no (k, 2) arrays)."""
-        relx, rely = self._targets_rel(x)
-        psi = float(x[2])
-        c, s = math.cos(psi), math.sin(psi)
-        ox, oy = c * relx + s * rely, -s * relx + c * rely
-        if len(x) > 3:
-            scale = float(x[3])
-            ox, oy = ox * scale + x[4], oy * scale + x[5]
-        else:
-            ox, oy = ox * 1.0 + 0.0, oy * 1.0 + 0.0
-        dx, dy = x[0] - self.px_obs, x[1] - self.py_obs
-        ex = np.concatenate([ox, self.c_obs * dx + self.s_obs * dy]) - self.vx_all
-        ey = np.concatenate([oy, self.ms_obs * dx + self.c_obs * dy]) - self.vy_all
-        along = (ex * self.ux_all + ey * self.uy_all) / self.s_r
-        across = (ey * self.ux_all - ex * self.uy_all) / self.s_t
-        return np.concatenate([along, across])
-
-    def jacobian(self, x: np.ndarray) -> np.ndarray:
-        """``whiten(errors(x, True)[1])``, bit for bit, by columns."""
-        relx, rely = self._targets_rel(x)
-        n_own, k, nx = self.n_own, len(self.v_all), len(x)
-        psi = float(x[2])
-        c, s = math.cos(psi), math.sin(psi)
-        scale = float(x[3]) if nx > 3 else 1.0
-        j0 = np.zeros((n_own, nx))  # d(misfit along x) / dx, as ``errors`` fills jac[:, 0]
-        j1 = np.zeros((n_own, nx))  # d(misfit along y) / dx
-        m = -scale * np.array([[c, s], [-s, c]])
-        j0[:, 0], j0[:, 1] = m[0, 0], m[0, 1]
-        j1[:, 0], j1[:, 1] = m[1, 0], m[1, 1]
-        j0[:, 2] = scale * (-s * relx + c * rely)
-        j1[:, 2] = scale * (-c * relx - s * rely)
-        if nx > 3:
-            j0[:, 3] = c * relx + s * rely
-            j1[:, 3] = -s * relx + c * rely
-            j0[:, 4] = 1.0
-            j1[:, 5] = 1.0
-        ux, uy = self.ux_all[:n_own, None], self.uy_all[:n_own, None]
-        out = np.empty((2 * k, nx))
-        out[:n_own] = (j0 * ux + j1 * uy) / self.s_r[:n_own, None]
-        out[k : k + n_own] = (j1 * ux - j0 * uy) / self.s_t[:n_own, None]
-        seen_along, seen_across = self._seen_jacobian(nx)
-        out[n_own:k], out[k + n_own :] = seen_along, seen_across
-        return out
-
-    def _seen_jacobian(self, nx: int) -> tuple[np.ndarray, np.ndarray]:
-        """The whitened Jacobian of the others' sightings of r (along, across), the same
-        at every x: they move with r's position only, by their owners' fixed headings."""
-        if nx not in self._seen_jac:
-            n_own, k = self.n_own, len(self.v_all)
-            j0, j1 = np.zeros((k - n_own, nx)), np.zeros((k - n_own, nx))
-            j0[:, 0], j0[:, 1] = self.c_obs, self.s_obs
-            j1[:, 0], j1[:, 1] = self.ms_obs, self.c_obs
-            ux, uy = self.ux_all[n_own:, None], self.uy_all[n_own:, None]
-            along = (j0 * ux + j1 * uy) / self.s_r[n_own:, None]
-            across = (j1 * ux - j0 * uy) / self.s_t[n_own:, None]
-            self._seen_jac[nx] = (along, across)
-        return self._seen_jac[nx]
-
-    def worst(self) -> tuple[np.ndarray, int]:
-        """H0's solution and the sighting (own, then seen) that fits worst under it (by its
-        whitened χ², the first of equal ones)."""
-        x_h0, _ = self._best(self.x0)
-        r, k = self.residuals(x_h0), len(self.v_all)
-        return x_h0, int(np.argmax(np.round(r[:k] ** 2 + r[k:] ** 2, 9)))
-
-    def fit(self, start: np.ndarray) -> _Fit:
-        """H0 from ``start`` (r's pose), H1 from H0's solution with no bias, and Λ."""
-        x_h0, cost0 = self._best(start)
-        x_h1, cost1 = self._best(np.concatenate([x_h0, [1.0, 0.0, 0.0]]))
-        return _Fit(max(0.0, 2.0 * (cost0 - cost1)), float(x_h1[3]),
-                    (float(x_h1[4]), float(x_h1[5])))  # fmt: skip
-
-
-#: Gauss-Newton iterations of :func:`_cauchy_fit` at most, and its relative stop.
+#: Gauss-Newton iterations of :meth:`_Batch.cauchy_fit` at most, and its relative stop.
 MAX_ITER = 30
 TOL = 1e-7
+#: Tries of a Gauss-Newton step at most: the full step, then halved, halved again, ...
+HALVINGS = 20
 
 
-def cauchy_cost(r: np.ndarray) -> float:
-    """½ Σ f² log(1 + (r/f)²), f = :data:`LOSS_SCALE` (scipy's ``loss="cauchy"``)."""
+def cauchy_cost(r: np.ndarray) -> np.ndarray:
+    """½ Σ f² log(1 + (r/f)²) over the last axis, f = :data:`LOSS_SCALE` (scipy's
+    ``loss="cauchy"``)."""
     f2 = LOSS_SCALE * LOSS_SCALE
-    return float(0.5 * f2 * np.log1p(r * r / f2).sum())
+    return np.asarray(0.5 * f2 * np.log1p(r * r / f2).sum(axis=-1))
 
 
-def _cauchy_fit(
-    residuals: Callable[[np.ndarray], np.ndarray],
-    jacobian: Callable[[np.ndarray], np.ndarray],
-    x0: np.ndarray,
-) -> tuple[np.ndarray, float]:
-    """Minimise :func:`cauchy_cost` of ``residuals`` from ``x0`` by iteratively reweighted
-    Gauss-Newton (weights ``1 / (1 + (r/f)²)``), halving a step that does not lower the
-    cost; returns (x, cost). A few small dense solves: a robot has tens of sightings."""
-    x = np.asarray(x0, dtype=np.float64).copy()
-    r = residuals(x)
-    cost = cauchy_cost(r)
-    f2 = LOSS_SCALE * LOSS_SCALE
-    ridge = 1e-9 * np.eye(len(x))
-    for _ in range(MAX_ITER):
-        j = jacobian(x)
-        w = 1.0 / (1.0 + r * r / f2)
-        jw = j * w[:, None]
-        try:
-            step = np.linalg.solve(jw.T @ j + ridge, -(jw.T @ r))
-        except np.linalg.LinAlgError:
-            break
-        for _ in range(20):
-            trial = x + step
-            r_trial = residuals(trial)
-            c_trial = cauchy_cost(r_trial)
-            if c_trial <= cost:
+class _Batch:
+    """The fits of several robots' :class:`_Sightings` side by side: each robot a row of
+    padded arrays (own sightings, the others' sightings of it, the places its sightings
+    may land), each step of each fit one array operation for every robot still fitting.
+    A robot's misfits and their Jacobian are :meth:`_Sightings.errors` whitened, element
+    for element (the same products and sums in the same order); only the sums over its
+    sightings (the cost, the normal equations) run over padded rows, so a robot's fit
+    may differ from its fit alone in the last bits."""
+
+    def __init__(self, fits: Sequence[_Sightings]) -> None:
+        self.size = len(fits)
+        self.ko = ko = max(f.n_own for f in fits)
+        self.ks = ks = max(len(f.v_all) - f.n_own for f in fits)
+        na = max(len(f.p_any) for f in fits)
+        self.n_own = np.array([f.n_own for f in fits])
+        self.n_seen = np.array([len(f.v_all) - f.n_own for f in fits])
+        self.n_paired = np.array([f.n_paired for f in fits])
+        self.x0 = np.array([f.x0 for f in fits])
+        # padded sightings: at the origin, unit σ, zero direction (their misfits are set to
+        # 0 by the masks); padded places far off (never the nearest)
+        self.own_mask = np.arange(ko)[None, :] < self.n_own[:, None]
+        self.seen_mask = np.arange(ks)[None, :] < self.n_seen[:, None]
+        self.paired = np.arange(ko)[None, :] < self.n_paired[:, None]
+        #: (vx, vy, ux, uy, σ_r, σ_t) of each robot's own sightings
+        self.own = np.zeros((6, self.size, ko))
+        self.own[4:] = 1.0
+        #: the same of the others' sightings of it, then each owner's cos ψ, sin ψ, −sin ψ,
+        #: x, y, then their whitened Jacobian (along x, along y, across x, across y): they
+        #: move with the robot's position only
+        self.seen = np.zeros((15, self.size, ks))
+        self.seen[4:6] = 1.0
+        self.places = np.full((2, self.size, na), 1e12)
+        self.paired_to = np.zeros((self.size, ko), dtype=np.intp)
+        for k, f in enumerate(fits):
+            o, n = f.n_own, len(f.v_all)
+            cols = (f.vx_all, f.vy_all, f.ux_all, f.uy_all, f.s_r, f.s_t)
+            for c, col in enumerate(cols):
+                self.own[c, k, :o] = col[:o]
+                self.seen[c, k, : n - o] = col[o:]
+            for c, col in enumerate((f.c_obs, f.s_obs, f.ms_obs, f.px_obs, f.py_obs)):
+                self.seen[6 + c, k, : n - o] = col
+            self.places[0, k, : len(f.pax)], self.places[1, k, : len(f.pay)] = f.pax, f.pay
+            self.paired_to[k, : f.n_paired] = f.paired_to
+        _, _, sux, suy, ssr, sst, c_obs, s_obs, ms_obs = self.seen[:9]
+        self.seen[11] = (c_obs * sux + ms_obs * suy) / ssr
+        self.seen[12] = (s_obs * sux + c_obs * suy) / ssr
+        self.seen[13] = (ms_obs * sux - c_obs * suy) / sst
+        self.seen[14] = (c_obs * sux - s_obs * suy) / sst
+
+    def _landing(self, sel: np.ndarray, x: np.ndarray, free: bool) -> np.ndarray:
+        """The rows of the places each own sighting of the robots ``sel`` lands on at
+        ``x`` (:meth:`_Sightings._matched`: nearest in σ, tie the first; ``free`` False:
+        the paired ones on the robot the fit paired them with)."""
+        vx, vy, ux, uy, sr, st = (a[:, :, None] for a in self.own[:, sel])
+        pax, pay = self.places[:, sel]
+        c, s = _cos_sin(x[:, 2])
+        scale, sx, sy = _bias(x)
+        relx = pax - x[:, 0:1]
+        rely = pay - x[:, 1:2]
+        px = ((c * relx + s * rely) * scale + sx)[:, None, :]
+        py = ((-s * relx + c * rely) * scale + sy)[:, None, :]
+        ex = px - vx  # (robots, sightings, places)
+        ey = py - vy
+        # along = (ex·ux + ey·uy) / σ_r, across = (ey·ux − ex·uy) / σ_t, in place
+        along = ex * ux
+        along += ey * uy
+        along /= sr
+        ey *= ux
+        ex *= uy
+        ey -= ex
+        ey /= st
+        np.square(along, out=along)
+        np.square(ey, out=ey)
+        along += ey
+        hit = np.asarray(along.round(9, out=along).argmin(axis=2), dtype=np.intp)
+        if not free:
+            hit = np.where(self.paired[sel], self.paired_to[sel], hit)
+        return hit
+
+    def residuals(
+        self, sel: np.ndarray, x: np.ndarray, free: bool
+    ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
+        """Whitened misfits of the robots ``sel`` at ``x`` (one row each: along own, along
+        seen, across own, across seen; padded entries 0), and where their own sightings
+        land less their position (for :meth:`jacobian` at the same point)."""
+        rows = self._landing(sel, x, free)
+        pax, pay = self.places[:, sel]
+        relx = np.take_along_axis(pax, rows, axis=1) - x[:, 0:1]
+        rely = np.take_along_axis(pay, rows, axis=1) - x[:, 1:2]
+        c, s = _cos_sin(x[:, 2])
+        ox, oy = c * relx + s * rely, -s * relx + c * rely
+        scale, sx, sy = _bias(x)
+        ox, oy = ox * scale + sx, oy * scale + sy
+        vx, vy, ux, uy, sr, st = self.own[:, sel]
+        ex, ey = ox - vx, oy - vy
+        keep = self.own_mask[sel]
+        own_al = np.where(keep, (ex * ux + ey * uy) / sr, 0.0)
+        own_ac = np.where(keep, (ey * ux - ex * uy) / st, 0.0)
+        vx, vy, ux, uy, sr, st, c_obs, s_obs, ms_obs, px_obs, py_obs = self.seen[:11, sel]
+        dx, dy = x[:, 0:1] - px_obs, x[:, 1:2] - py_obs
+        ex = c_obs * dx + s_obs * dy - vx
+        ey = ms_obs * dx + c_obs * dy - vy
+        keep = self.seen_mask[sel]
+        seen_al = np.where(keep, (ex * ux + ey * uy) / sr, 0.0)
+        seen_ac = np.where(keep, (ey * ux - ex * uy) / st, 0.0)
+        return np.concatenate([own_al, seen_al, own_ac, seen_ac], axis=1), (relx, rely)
+
+    def jacobian(
+        self, sel: np.ndarray, x: np.ndarray, rel: tuple[np.ndarray, np.ndarray]
+    ) -> np.ndarray:
+        """(robots, rows of :meth:`residuals`, len(x)): the whitened Jacobian at ``x``
+        (``rel`` from :meth:`residuals` at the same ``x``), as
+        :meth:`_Sightings.errors`' Jacobian whitened."""
+        relx, rely = rel
+        m, nx = len(sel), x.shape[1]
+        c, s = _cos_sin(x[:, 2])
+        scale = x[:, 3:4] if nx > 3 else np.ones((m, 1))
+        neg = -scale
+        j0 = np.zeros((m, self.ko, nx))  # d(misfit along x) / dx, as ``errors`` fills it
+        j1 = np.zeros((m, self.ko, nx))  # d(misfit along y) / dx
+        j0[:, :, 0], j0[:, :, 1] = neg * c, neg * s
+        j1[:, :, 0], j1[:, :, 1] = neg * -s, neg * c
+        j0[:, :, 2] = scale * (-s * relx + c * rely)
+        j1[:, :, 2] = scale * (-c * relx - s * rely)
+        if nx > 3:
+            j0[:, :, 3] = c * relx + s * rely
+            j1[:, :, 3] = -s * relx + c * rely
+            j0[:, :, 4] = 1.0
+            j1[:, :, 5] = 1.0
+        ux, uy, sr, st = (a[:, :, None] for a in self.own[2:, sel])
+        keep = self.own_mask[sel][:, :, None]
+        out = np.zeros((m, 2 * (self.ko + self.ks), nx))
+        ko, ks = self.ko, self.ks
+        out[:, :ko] = np.where(keep, (j0 * ux + j1 * uy) / sr, 0.0)
+        out[:, ko + ks : 2 * ko + ks] = np.where(keep, (j1 * ux - j0 * uy) / st, 0.0)
+        ax, ay, cx, cy = self.seen[11:, sel]
+        keep_s = self.seen_mask[sel]
+        out[:, ko : ko + ks, 0] = np.where(keep_s, ax, 0.0)
+        out[:, ko : ko + ks, 1] = np.where(keep_s, ay, 0.0)
+        out[:, 2 * ko + ks :, 0] = np.where(keep_s, cx, 0.0)
+        out[:, 2 * ko + ks :, 1] = np.where(keep_s, cy, 0.0)
+        return out
+
+    def cauchy_fit(
+        self, sel: np.ndarray, x0: np.ndarray, free: bool
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Minimise each robot's :func:`cauchy_cost` from ``x0`` by iteratively reweighted
+        Gauss-Newton (weights ``1 / (1 + (r/f)²)``), halving a step that does not lower
+        its cost (a robot whose step does not after 20 halvings, or whose normal equations
+        are singular, stops; the halvings are tried at once: the first that lowers the
+        cost is the one halving after halving finds); returns (x, cost) per robot."""
+        x = np.array(x0, dtype=np.float64)
+        r, (relx, rely) = self.residuals(sel, x, free)
+        cost = np.asarray(cauchy_cost(r))
+        f2 = LOSS_SCALE * LOSS_SCALE
+        ridge = 1e-9 * np.eye(x.shape[1])
+        halves = 0.5 ** np.arange(1, HALVINGS)[None, :, None]
+        going = np.arange(len(sel))
+        for _ in range(MAX_ITER):
+            if going.size == 0:
                 break
-            step = step / 2.0
-        else:
-            break
-        done = cost - c_trial <= TOL * max(cost, 1.0)
-        x, r, cost = trial, r_trial, c_trial
-        if done:
-            break
-    return x, cost
+            j = self.jacobian(sel[going], x[going], (relx[going], rely[going]))
+            rg = r[going]
+            jw = j * (1.0 / (1.0 + rg * rg / f2))[:, :, None]
+            normal = np.einsum("mki,mkj->mij", jw, j) + ridge
+            step, ok = _solve(normal, -np.einsum("mki,mk->mi", jw, rg))
+            going, step = going[ok], step[ok]
+            trial = x[going] + step
+            r_t, (rx_t, ry_t) = self.residuals(sel[going], trial, free)
+            c_t = np.asarray(cauchy_cost(r_t))
+            better = c_t <= cost[going]
+            if not better.all():
+                # the halved steps of those the full step did not lower, all at once
+                who = np.flatnonzero(~better)
+                tries = (x[going[who]][:, None, :] + step[who][:, None, :] * halves).reshape(
+                    -1, x.shape[1]
+                )
+                r_h, (rx_h, ry_h) = self.residuals(np.repeat(sel[going[who]], halves.shape[1]),
+                                                   tries, free)  # fmt: skip
+                c_h = np.asarray(cauchy_cost(r_h)).reshape(len(who), -1)
+                lower = c_h <= cost[going[who]][:, None]
+                found = lower.any(axis=1)
+                pick = who.size and (np.arange(len(who)) * halves.shape[1] + lower.argmax(axis=1))
+                pick = np.asarray(pick)[found]
+                into = who[found]
+                trial[into], r_t[into], c_t[into] = tries[pick], r_h[pick], c_h.reshape(-1)[pick]
+                rx_t[into], ry_t[into] = rx_h[pick], ry_h[pick]
+                better[into] = True
+            going, trial, r_t, c_t = going[better], trial[better], r_t[better], c_t[better]
+            done = cost[going] - c_t <= TOL * np.maximum(cost[going], 1.0)
+            x[going], r[going], cost[going] = trial, r_t, c_t
+            relx[going], rely[going] = rx_t[better], ry_t[better]
+            going = going[~done]
+        return x, cost
+
+    def _keeps_pairing(self, sel: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """Whether every paired sighting of each robot lands, at ``x``, on the robot the
+        fit paired it with (the loose ones are matched alike under both starts)."""
+        hit = self._landing(sel, x, True)
+        return np.asarray(np.all((hit == self.paired_to[sel]) | ~self.paired[sel], axis=1))
+
+    def best(self, start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """One hypothesis for every robot, every sighting matched where it lands, fitted
+        from ``start``; and, for a robot whose solution does not keep the fit's pairing,
+        from a second start as well: the solution with the fit's pairing kept (the loose
+        sightings matched). The lower cost wins (tie: the first). The matched cost is
+        never above the paired one at the same x, so the second start is a start of the
+        same problem, not another model; it is needed when the pairing holds the pose in
+        a basin the matching alone leaves."""
+        every = np.arange(self.size)
+        x_a, c_a = self.cauchy_fit(every, start, True)
+        other = np.flatnonzero(~self._keeps_pairing(every, x_a))
+        if other.size:
+            x_p, _ = self.cauchy_fit(other, start[other], False)
+            x_b, c_b = self.cauchy_fit(other, x_p, True)
+            second = c_b < c_a[other]
+            x_a[other[second]], c_a[other[second]] = x_b[second], c_b[second]
+        return x_a, c_a
+
+    def worst(self) -> tuple[np.ndarray, list[int]]:
+        """H0's solution of each robot and the sighting (own, then seen) that fits worst
+        under it (by its whitened χ², the first of equal ones)."""
+        x_h0, _ = self.best(self.x0)
+        r, _ = self.residuals(np.arange(self.size), x_h0, True)
+        ko, ks = self.ko, self.ks
+        chi = np.round(r[:, : ko + ks] ** 2 + r[:, ko + ks :] ** 2, 9)
+        out = []
+        for k in range(self.size):
+            n_own, n_seen = int(self.n_own[k]), int(self.seen_mask[k].sum())
+            row = np.concatenate([chi[k, :n_own], chi[k, ko : ko + n_seen]])
+            out.append(int(np.argmax(row)))
+        return x_h0, out
+
+    def fit(self, start: np.ndarray) -> list[_Fit]:
+        """H0 from ``start`` (each robot's pose), H1 from H0's solution with no bias, and
+        Λ, for every robot."""
+        x_h0, cost0 = self.best(start)
+        no_bias = np.tile([1.0, 0.0, 0.0], (self.size, 1))
+        x_h1, cost1 = self.best(np.concatenate([x_h0, no_bias], axis=1))
+        return [_Fit(max(0.0, 2.0 * float(c0 - c1)), float(x1[3]), (float(x1[4]), float(x1[5])))
+                for c0, c1, x1 in zip(cost0, cost1, x_h1, strict=True)]  # fmt: skip
+
+
+def _cos_sin(psi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """cos ψ and sin ψ of each robot as columns, by ``math`` (the floats of
+    :meth:`_Sightings.errors`)."""
+    values = [float(v) for v in psi]
+    c = np.array([math.cos(v) for v in values])[:, None]
+    s = np.array([math.sin(v) for v in values])[:, None]
+    return c, s
+
+
+def _bias(x: np.ndarray) -> tuple[np.ndarray | float, np.ndarray | float, np.ndarray | float]:
+    """(s, b_x, b_y) of each robot as columns: those of ``x`` under H1, none under H0."""
+    if x.shape[1] > 3:
+        return x[:, 3:4], x[:, 4:5], x[:, 5:6]
+    return 1.0, 0.0, 0.0
+
+
+def _solve(normal: np.ndarray, grad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each robot's Gauss-Newton step, and whether its normal equations could be solved
+    (a singular robot stops, the others go on)."""
+    try:
+        return np.linalg.solve(normal, grad[:, :, None])[:, :, 0], np.ones(len(grad), dtype=bool)
+    except np.linalg.LinAlgError:
+        step, ok = np.zeros_like(grad), np.ones(len(grad), dtype=bool)
+        for k in range(len(grad)):
+            try:
+                step[k] = np.linalg.solve(normal[k], grad[k])
+            except np.linalg.LinAlgError:
+                ok[k] = False
+        return step, ok

@@ -79,7 +79,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.special import chdtrc, chdtri
 
-from agent.core.formation.frame.bias_test import bias_fit
+from agent.core.formation.frame.bias_test import BiasFit, bias_fits
 from agent.core.formation.frame.multi_start import refit
 from agent.core.formation.frame.poses import PoseFrame, PoseMeasurement
 from agent.core.formation.frame.records import NeighborRecord
@@ -274,12 +274,12 @@ def strays(
 class _Evidence:
     """What the tests count, gathered once per fitted frame: each edge and whether it is
     rejected, each edge's base rate of rejection, each robot's strays (distance, lands) and
-    the distances of every sighting of each record."""
+    the rate ``p_stray`` of every sighting of each record."""
 
     edges: dict[tuple[int, int], bool]
     p_edge: dict[tuple[int, int], float]  #: p_reject at the edge's mean sighting distance
     stray: dict[int, list[tuple[float, bool]]]
-    sighted: dict[int, list[float]]
+    sighted: dict[int, list[float]]  #: p_stray at each sighting's distance, by record
     #: robots whose records carry stances: their masks are turned back to their start
     #: heading (records.mask_orientation), the others' are as recorded
     timed: frozenset[int] = frozenset()
@@ -299,7 +299,7 @@ def _evidence(
     for m in poses.measurements:
         dist.setdefault(_edge(m), []).append(float(np.hypot(*m.vector)))
     sighted = {
-        rec.robot_id: [float(d) for d in np.hypot(*np.asarray(rec.neighbours).reshape(-1, 2).T)]
+        rec.robot_id: [float(p) for p in noise.p_stray(np.hypot(*rec.neighbours.reshape(-1, 2).T))]
         for rec in records
         if rec.robot_id in poses.ids
     }
@@ -325,39 +325,45 @@ def _robot_tests(
     poses: PoseFrame, noise: SightingNoise, ev: _Evidence, bias: bool = True
 ) -> tuple[RobotTest, ...]:
     """Steps 2-4 from gathered evidence; ``bias`` False: without the bias test (step 4,
-    the costly one: p_bias 1)."""
-    return tuple(_robot_test(poses, noise, ev, r, bias) for r in poses.ids)
+    the costly one: p_bias 1). The robots' bias tests are fitted side by side
+    (:func:`bias_test.bias_fits`)."""
+    fits = _bias_fits(poses, noise, ev) if bias else {}
+    return tuple(_robot_test(poses, noise, ev, r, fits.get(r)) for r in poses.ids)
+
+
+def _bias_fits(poses: PoseFrame, noise: SightingNoise, ev: _Evidence) -> dict[int, BiasFit]:
+    """Step 4 for every robot of ``poses``."""
+    return bias_fits(poses, poses.ids, noise, noise.bias_scale, ev.loose, ev.elsewhere)
 
 
 def _robot_test(
-    poses: PoseFrame, noise: SightingNoise, ev: _Evidence, r: int, bias: bool
+    poses: PoseFrame, noise: SightingNoise, ev: _Evidence, r: int, fit: BiasFit | None
 ) -> RobotTest:
-    """Steps 2-4 for robot ``r`` (``bias`` as :func:`_robot_tests`)."""
+    """Steps 2-4 for robot ``r``, its bias test ``fit`` (None: without it, p_bias 1)."""
     mine = [e for e in ev.edges if r in e]
     own = ev.stray.get(r, [])
     probs = [ev.p_edge[e] for e in mine]
     # every sighting of r's own could have ended up a lost stray (step 2)
-    probs += [float(noise.p_stray(d)) for d in ev.sighted.get(r, [])]
+    probs += ev.sighted.get(r, [])
     k = sum(ev.edges[e] for e in mine)
     lost = sum(not lands for _, lands in own)
     deltas = mask_deltas(poses, r)
     offset, p_h = mask_test(deltas, noise)
     p_h = max(p_h, noise.rho if r in ev.timed else noise.rho_untimed) if deltas else p_h
     p_pos = tail_at_least(probs, k + lost)
-    stat, p_b = 0.0, 1.0
-    if bias:
-        fit = bias_fit(poses, r, noise, noise.bias_scale, ev.loose.get(r), ev.elsewhere)
-        stat, p_b = fit.statistic, fit.p
+    stat, p_b = (0.0, 1.0) if fit is None else (fit.statistic, fit.p)
     return RobotTest(r, len(mine), k, len(own), lost, p_pos, len(deltas), offset, p_h, stat, p_b)
 
 
 def _rejects_anyone(poses: PoseFrame, noise: SightingNoise, ev: _Evidence, alpha: float) -> bool:
     """Whether any robot's test (steps 2-4) rejects it at ``alpha``: the same answer as
-    :func:`_robot_tests`, the costly bias test run only while nobody is rejected yet (the
-    cheap tests of every robot first; a robot's p only falls when its bias test is added)."""
-    if any(_robot_test(poses, noise, ev, r, False).p < alpha for r in poses.ids):
+    :func:`_robot_tests`, the costly bias tests run only when nobody is rejected without
+    them (the cheap tests of every robot first; a robot's p only falls when its bias test
+    is added)."""
+    if any(_robot_test(poses, noise, ev, r, None).p < alpha for r in poses.ids):
         return True
-    return any(_robot_test(poses, noise, ev, r, True).p < alpha for r in poses.ids)
+    fits = _bias_fits(poses, noise, ev)
+    return any(_robot_test(poses, noise, ev, r, fits[r]).p < alpha for r in poses.ids)
 
 
 @dataclass(frozen=True)
@@ -374,7 +380,7 @@ class FleetCount:
 
 def _fleet_count(noise: SightingNoise, ev: _Evidence) -> FleetCount:
     probs = [ev.p_edge[e] for e in ev.edges]
-    probs += [float(noise.p_stray(d)) for r in sorted(ev.sighted) for d in ev.sighted[r]]
+    probs += [p for r in sorted(ev.sighted) for p in ev.sighted[r]]
     k = sum(ev.edges.values()) + sum(not lands for r in ev.stray for _, lands in ev.stray[r])
     return FleetCount(k, len(probs), tail_at_least(probs, k))
 
