@@ -10,6 +10,11 @@ format (``python -m tools.corpus``).
   the bias test, that one sighting among robot 2's three reads as a biased sensor
   (Λ 37) and leaves a sound robot out; the test sets the worst sighting aside. In ``_c``
   robot 2 kept the good picture.
+* ``n50_random_s1018``: fifty NAOs set down at random (``python -m tools.corpus build``).
+  The pose fit holds two sound robots half a turn off, 31 where it stands and 32 1.9 m
+  away; turning 31 round fits better, and so does turning 32 after it. Turning only the
+  first, the refined fit rejected 32 and the rest passed without it: a sound robot left
+  out.
 
 And fault runs of the corpus (``tests/data/frames``) where the faulty robot is named only
 because the frame's choice follows the model:

@@ -25,8 +25,11 @@ Candidate frames, cheapest first (each built only when the ones before it fail):
    direction. A mask gives a heading only modulo π, and the fit can hold a robot half a
    turn off (a local minimum of its cost): when its test rejects robots, each (in the
    test's order) is fitted again half turned round (:func:`multi_start.half_turned`), and
-   the first that fits better replaces the fit, which is tested again (candidate 4 then
-   builds on it). Without it, a sound robot of fifty fitted 172° off is left out.
+   the first that fits better replaces the fit, which is tested again; the robots it
+   still rejects are tried so in turn, each turned at most once (candidate 4 then builds
+   on the last fit). Without it, a sound robot of fifty fitted 172° off is left out; and
+   turning only the first, a fleet of fifty set down at random with two sound robots
+   held half a turn off had the second left out.
 4. **The pose fit with every sighting identified where it lands.**
 
 A frame with nobody named is preferred: the candidates are tried in order for one the
@@ -211,9 +214,9 @@ class _Candidate:
     general: bool
     build: Callable[[], tuple[PoseFrame, PoseFrame] | None]
     #: given the robots its test rejected (in the test's order), fits its poses again
-    #: with one of them half turned round, and says whether that fitted better (then the
-    #: candidate, and those built on it, build on the better fit)
-    turn: Callable[[Sequence[int]], bool] | None = None
+    #: with one of them half turned round, and says which robot fitted better so (None:
+    #: none did; else the candidate, and those built on it, build on the better fit)
+    turn: Callable[[Sequence[int]], int | None] | None = None
 
 
 def _candidates(
@@ -248,16 +251,16 @@ def _candidates(
 
     fitted = once("fit", fit)
 
-    def turn(rejected: Sequence[int]) -> bool:
+    def turn(rejected: Sequence[int]) -> int | None:
         base = fitted()
         if base is None:
-            return False
+            return None
         for robot in rejected:
             better = half_turned(base, robot)
             if better is not None:
                 memo["fit"] = better
-                return True
-        return False
+                return robot
+        return None
 
     def firm() -> PoseFrame | None:
         start = firm_start(graph) if aligned else None
@@ -395,11 +398,20 @@ def _first_passed(
         verdict = fault_test(test, model, records, search=search)
         rejected = [t.robot for t in sorted(verdict.tests, key=lambda t: (t.p, t.robot))
                     if t.p < ALPHA]  # fmt: skip
-        if rejected and cand.turn is not None and cand.turn(rejected):
+        turned: set[int] = set()  # each rejected robot is turned round at most once
+        while cand.turn is not None:
+            robot = cand.turn([r for r in rejected if r not in turned])
+            if robot is None:
+                break
+            turned.add(robot)
             built = cand.build()
             assert built is not None  # a better fit of the same robots
             fine, test = built
-            verdict = fault_test(test, model, records, search=search)
+            verdict = fault_test(test, model, records, search=False)
+            rejected = [t.robot for t in sorted(verdict.tests, key=lambda t: (t.p, t.robot))
+                        if t.p < ALPHA]  # fmt: skip
+        if turned and search:
+            verdict = fault_test(test, model, records, search=True)
         if suspects is not None and cand.general:
             for t in verdict.tests:
                 if t.p < ALPHA and (t.robot not in suspects or t.p < suspects[t.robot][0]):
