@@ -24,13 +24,18 @@ ZENOH_MODES = ("peer", "client", "router")
 #: (10 s lease, 10 s to open a TLS session, a client that gives up after its first
 #: failed connection) break at 30 % loss per direction, where TCP retransmission stalls
 #: for seconds. Measured with ``tools.eval_loss`` (README "Fault injection and
-#: containers"): a 30 s lease with a keep-alive every 5 s (lease / 6), 30 s to open or
-#: accept a session, and a client that keeps trying to connect for 60 s (retries from
-#: 0.5 s, backing off to 4 s). A session that still breaks reconnects; the agents'
-#: membership grace (``agent.core.grace.Grace``) bridges its vanished tokens.
+#: containers"): a 30 s lease, 30 s to open or accept a session, and a client that keeps
+#: trying to connect for 60 s (retries from 0.5 s, backing off to 4 s). A session that
+#: still breaks reconnects; the agents' membership grace (``agent.core.grace.Grace``)
+#: bridges its vanished tokens. Keep-alives: four per lease (zenoh's own ratio: a link
+#: counts as failed after four silent intervals, ITU-T G.8013/Y.1731 asks for 3.5), one
+#: every 7.5 s, and zenoh sends one only when nothing else was sent on the link for that
+#: long: a waiting fleet's statuses keep its links alive at 10 s apart, so each link
+#: carries one keep-alive between two statuses (six a lease cost an idle agent 0.03 % of
+#: a core more in the full mesh of ``python -m tools.bench idle``, 10 peers).
 LOSSY_LINK_SETTINGS: tuple[tuple[str, str], ...] = (
     ("transport/link/tx/lease", "30000"),
-    ("transport/link/tx/keep_alive", "6"),
+    ("transport/link/tx/keep_alive", "4"),
     ("transport/unicast/open_timeout", "30000"),
     ("transport/unicast/accept_timeout", "30000"),
     ("connect/timeout_ms", "{router: -1, peer: -1, client: 60000}"),
