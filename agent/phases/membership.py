@@ -212,8 +212,11 @@ class Membership:
         agr = self.agreement
         if ev.kind in ("alive", "gone"):
             peer = self.peers.setdefault(ev.robot_id, Peer())
+            back = not peer.alive or ev.robot_id in self.grace.pending()
             self.grace.token(ev.robot_id, ev.kind == "alive", now)
             if ev.kind == "alive":  # a vanished token counts as gone in expire
+                if ev.robot_id != me and back:  # new, or back from a cut session: it
+                    self.ctx.report.say_again()  # may have missed our (slow) status
                 peer.alive = peer.seen_alive = True
                 if agr is not None and ev.robot_id != me:
                     agr.member_joined(ev.robot_id, now)

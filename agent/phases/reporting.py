@@ -18,8 +18,9 @@ One :class:`Reporter` per agent owns:
 * the pace of the statuses. They go out on change, with a slow heartbeat: a new phase
   (or ``force``) at once; a changed status of the same phase (progress, detail, ...) at
   most every :func:`status_interval`; an unchanged one only every
-  :func:`heartbeat_interval` (well inside the membership grace, agent/core/grace.py, so
-  that a member out of reach still counts while it is heard). :meth:`Reporter.due` says
+  :func:`heartbeat_interval` (twice per membership grace, agent/core/grace.py, so
+  that a member out of reach still counts while it is heard); once more, as a changed
+  one, when a member (re)appears (:meth:`Reporter.say_again`). :meth:`Reporter.due` says
   when the next one is due, so that a waiting phase sleeps until then
   (agent/phases/membership.py);
 * the journal it writes at every phase change (:attr:`Reporter.journal`, a
@@ -209,6 +210,12 @@ class Reporter:
         """When the next status is due (on the agent's clock): a changed one held back by
         :attr:`interval`, else the heartbeat (module docstring)."""
         return self._last + (self.interval if self._pending else self.heartbeat)
+
+    def say_again(self) -> None:
+        """Repeat the status at the next chance, :attr:`interval` after the last one, not
+        a heartbeat: a member (re)appeared that may have missed it (a newcomer, or one
+        back from a cut session, where a status published meanwhile reached nobody)."""
+        self._said, self._pending = None, True
 
     def show_plan(self, digest: str, wave: int) -> None:
         """The agreed plan's digest and this robot's wave in it (-1: not in a wave); a
