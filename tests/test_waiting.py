@@ -25,7 +25,7 @@ from agent.phases.context import Context
 from agent.phases.membership import MAX_WAIT, Membership
 from agent.phases.reporting import Phase, heartbeat_interval, status_interval
 from agent.seams import Perception
-from agent.wire import NeighborRecordMsg, StatusMsg, canonical_digest, encode
+from agent.wire import LOSSY_LINK_SETTINGS, NeighborRecordMsg, StatusMsg, canonical_digest, encode
 
 
 class _Still:
@@ -71,9 +71,29 @@ def test_the_wait_returns_at_its_deadline_when_nothing_arrives(bus: Bus) -> None
     fleet.wait_until(t0 + 0.3)
     took = time.monotonic() - t0
     assert 0.29 <= took < 0.6
+
+
+def test_the_wait_sleeps_once_until_its_deadline_without_polling(
+    bus: Bus, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    fleet = Membership(_context(bus))
+    sleeps: list[float] = []
+    drain = bus.drain
+
+    def counted(timeout: float = 0.0) -> list[Event]:
+        sleeps.append(timeout)
+        return drain(timeout)
+
+    monkeypatch.setattr(bus, "drain", counted)
     t0 = time.monotonic()
-    fleet.wait_until(t0 + 60.0)  # a far deadline: the safety net wakes it
-    assert MAX_WAIT - 0.01 <= time.monotonic() - t0 < MAX_WAIT + 0.5
+    fleet.wait_until(t0 + 2.5)
+    assert 2.49 <= time.monotonic() - t0 < 3.0
+    assert len(sleeps) == 1 and sleeps[0] == pytest.approx(2.5, abs=0.05)  # one sleep
+    assert MAX_WAIT >= 30.0  # no safety poll: the waits name their deadlines
+    monkeypatch.setattr("agent.phases.membership.MAX_WAIT", 0.2)
+    t0 = time.monotonic()
+    fleet.wait_until(t0 + 60.0)  # a caller naming no near deadline: capped
+    assert 0.19 <= time.monotonic() - t0 < 0.6
 
 
 def test_the_wait_wakes_for_the_agreements_resend_and_a_members_grace(bus: Bus) -> None:
@@ -125,8 +145,10 @@ def test_statuses_go_out_on_change_with_a_slow_heartbeat(bus: Bus) -> None:
     ctx = _context(bus, clock=lambda: t[0], member_grace=20.0)
     report = ctx.report
     assert report.interval == status_interval(3) == 3.0
-    assert report.heartbeat == heartbeat_interval(3, 20.0) == pytest.approx(20.0 / 3)
+    assert report.heartbeat == heartbeat_interval(3, 20.0) == 10.0  # twice per grace
     assert heartbeat_interval(100, 20.0) == 10.0  # never more often than the fleet's budget
+    assert heartbeat_interval(300, 20.0) == 30.0
+    assert heartbeat_interval(3, 60.0) == 30.0
     sent = bus.stats.published_count
 
     def at(when: float, detail: str, phase: Phase = Phase.AGREE) -> int:
@@ -135,13 +157,34 @@ def test_statuses_go_out_on_change_with_a_slow_heartbeat(bus: Bus) -> None:
         return sent["status"]
 
     assert at(0.0, "a") == 1  # a new phase: at once
-    assert at(1.0, "a") == 1 and report.due() == pytest.approx(20.0 / 3)  # unchanged
+    assert at(1.0, "a") == 1 and report.due() == 10.0  # unchanged
     assert at(2.0, "b") == 1 and report.due() == 3.0  # changed: held back to 3 s
     assert at(3.0, "b") == 2  # ... and out then
-    assert at(6.0, "b") == 2 and at(9.6, "b") == 2  # unchanged: no sooner than 6.67 s
-    assert at(9.7, "b") == 3  # the heartbeat
-    assert at(10.0, "c", Phase.WAIT) == 4  # a new phase: at once again
-    assert at(10.5, "d", Phase.WAIT) == 4 and at(13.0, "d", Phase.WAIT) == 5
+    assert at(6.0, "b") == 2 and at(12.9, "b") == 2  # unchanged: no sooner than 10 s
+    assert at(13.0, "b") == 3  # the heartbeat
+    assert at(13.5, "c", Phase.WAIT) == 4  # a new phase: at once again
+    assert at(14.0, "d", Phase.WAIT) == 4 and at(16.5, "d", Phase.WAIT) == 5
+
+
+def test_a_wake_up_that_publishes_nothing_builds_no_message(
+    bus: Bus, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A waiting robot's status is compared as plain values; the wire message (checked
+    field by field) is built only when it goes out."""
+    t = [0.0]
+    report = _context(bus, clock=lambda: t[0]).report
+    built: list[StatusMsg] = []
+    make = report._message
+    monkeypatch.setattr(report, "_message", lambda *a: built.append(make(*a)) or built[-1])
+    report.status(Phase.AGREE, 0.5, "waiting")
+    for k in range(1, 10):
+        t[0] = float(k)
+        report.status(Phase.AGREE, 0.5, "waiting")
+    assert len(built) == 1 and bus.stats.published_count["status"] == 1
+    report.show_blocked_by(2)  # a changed figure is a changed status
+    t[0] = 9.5
+    report.status(Phase.AGREE, 0.5, "waiting")
+    assert len(built) == 2 and built[-1].blocked_by == 2 and built[-1].detail == "waiting"
 
 
 def test_grace_names_its_next_expiry() -> None:
@@ -151,3 +194,15 @@ def test_grace_names_its_next_expiry() -> None:
     g.token(2, False, 3.0)
     g.heard(1, 4.0)
     assert g.next_expiry() == 8.0
+
+
+def test_a_waiting_fleets_statuses_keep_its_links_alive() -> None:
+    """zenoh sends a keep-alive only on a link silent for lease / keep_alive seconds: a
+    waiting robot's heartbeat comes sooner, up to 100 NAOs (agent/wire/network.py)."""
+    zenoh = dict(LOSSY_LINK_SETTINGS)
+    lease = int(zenoh["transport/link/tx/lease"]) / 1000.0
+    keep_alive = lease / int(zenoh["transport/link/tx/keep_alive"])
+    grace = AgentConfig(robot_id=0).member_grace
+    for n in (3, 10, 100):
+        assert heartbeat_interval(n, grace) < keep_alive
+    assert lease / keep_alive >= 3.5  # ITU-T G.8013/Y.1731

@@ -23,8 +23,9 @@ what it knows of each member (:class:`Peer`):
   next deadline: the caller's (its phase's timeout, its next status), or this
   membership's own (an agreement's next re-send, timeout or settling,
   :meth:`agent.core.agreement.Agreement.next_wake`; a vanished member's grace,
-  :meth:`agent.core.grace.Grace.next_expiry`). No fixed short polls: an agent waiting
-  for a quiet fleet wakes a few times a minute (``python -m tools.bench idle``).
+  :meth:`agent.core.grace.Grace.next_expiry`). No polls: an agent waiting for a quiet
+  fleet wakes for the fleet's statuses and its own heartbeat, a few times a minute
+  (``python -m tools.bench idle``).
 
 It also serves the agreed record set (agent/phases/record_sets.py), and hands every
 record, digest and status it accepts to its :attr:`Membership.observers` (the check of
@@ -68,10 +69,12 @@ log = logging.getLogger("agent.phases.membership")
 
 #: phases of a member that has arrived
 ARRIVED = (Phase.HOLD, Phase.MARCH, Phase.DONE, Phase.FAILED)
-#: The longest sleep of :meth:`Membership.wait_until` (s): a safety net, so that a
-#: condition no deadline names is still looked at (one wake-up in 2 s costs ~0.005 % of
-#: a core).
-MAX_WAIT = 2.0
+#: The longest sleep of :meth:`Membership.wait_until` (s). What a wait looks at changes
+#: only when something arrives (the bus's queue wakes the sleeper) or at a deadline the
+#: wait names (its phase's, its next status, an agreement's, a grace's), so no poll is
+#: needed: every waiting phase names its next status (agent/phases/reporting.py, at most a
+#: heartbeat away), and this bound only caps a sleep whose caller names no deadline.
+MAX_WAIT = 60.0
 #: Plans an agent keeps the operator's newest reshape command for (each command names the
 #: plan it reshapes): a bound on what a flood of commands can make it hold.
 COMMANDS_KEPT = 8
@@ -188,8 +191,8 @@ class Membership:
 
     def wait_until(self, deadline: float) -> None:
         """Sleep until something arrives, ``deadline`` (the caller's, on ``ctx.clock``)
-        or this membership's own next deadline, whichever is first, at most
-        :data:`MAX_WAIT`; then pump (module docstring). What is due now is published
+        or this membership's own next deadline, whichever is first (no poll: at most
+        :data:`MAX_WAIT` when none is named); then pump (module docstring). What is due now is published
         before the sleep."""
         self.expire()
         self.publish_due()
@@ -209,8 +212,11 @@ class Membership:
         agr = self.agreement
         if ev.kind in ("alive", "gone"):
             peer = self.peers.setdefault(ev.robot_id, Peer())
+            back = not peer.alive or ev.robot_id in self.grace.pending()
             self.grace.token(ev.robot_id, ev.kind == "alive", now)
             if ev.kind == "alive":  # a vanished token counts as gone in expire
+                if ev.robot_id != me and back:  # new, or back from a cut session: it
+                    self.ctx.report.say_again()  # may have missed our (slow) status
                 peer.alive = peer.seen_alive = True
                 if agr is not None and ev.robot_id != me:
                     agr.member_joined(ev.robot_id, now)

@@ -18,8 +18,9 @@ One :class:`Reporter` per agent owns:
 * the pace of the statuses. They go out on change, with a slow heartbeat: a new phase
   (or ``force``) at once; a changed status of the same phase (progress, detail, ...) at
   most every :func:`status_interval`; an unchanged one only every
-  :func:`heartbeat_interval` (well inside the membership grace, agent/core/grace.py, so
-  that a member out of reach still counts while it is heard). :meth:`Reporter.due` says
+  :func:`heartbeat_interval` (twice per membership grace, agent/core/grace.py, so
+  that a member out of reach still counts while it is heard); once more, as a changed
+  one, when a member (re)appears (:meth:`Reporter.say_again`). :meth:`Reporter.due` says
   when the next one is due, so that a waiting phase sleeps until then
   (agent/phases/membership.py);
 * the journal it writes at every phase change (:attr:`Reporter.journal`, a
@@ -72,21 +73,27 @@ def status_interval(fleet_size: int | None) -> float:
     """Seconds between progress statuses (and waiting heartbeats) of one robot:
     :data:`STATUS_MIN_INTERVAL`, or ``fleet_size / HEARD_PER_S`` in a larger fleet, the
     agreement's budget (every member verifies every status; at 100 NAOs a 3 s cadence
-    was ~33 a second): 10 s at 100 NAOs, well inside the membership grace of 20 s."""
+    was ~33 a second): 10 s at 100 NAOs, half the membership grace of 20 s."""
     if fleet_size is None:
         return STATUS_MIN_INTERVAL
     return max(STATUS_MIN_INTERVAL, fleet_size / HEARD_PER_S)
 
 
-#: Heartbeats (unchanged statuses) per membership grace: a member whose token vanished is
-#: heard this many times before it would count as gone (agent/core/grace.py).
-HEARTBEATS_PER_GRACE = 3
+#: Heartbeats (unchanged statuses) per membership grace (agent/core/grace.py). A member's
+#: liveness is its zenoh liveliness token (a crashed process's links close at once, a
+#: vanished host's after the link lease, agent/wire/network.py); the heartbeat bridges a
+#: token that vanished while its member still publishes (heard every ``grace / 2`` s, its
+#: silence stays half the grace below the count) and repeats the robot's state for a
+#: member that missed a status in a cut session. Each one wakes every member of the fleet
+#: (the idle bench, docs/agent.md), so it is as slow as that allows: twice per grace, the
+#: pace of a 100-NAO fleet already (:func:`status_interval`).
+HEARTBEATS_PER_GRACE = 2
 
 
 def heartbeat_interval(fleet_size: int | None, grace: float) -> float:
     """Seconds between repeats of an unchanged status (the heartbeat of a waiting robot):
-    ``grace / HEARTBEATS_PER_GRACE`` (6.7 s with the default grace of 20 s), never more
-    often than :func:`status_interval` (10 s at 100 NAOs: twice per grace)."""
+    ``grace / HEARTBEATS_PER_GRACE`` (10 s with the default grace of 20 s), never more
+    often than :func:`status_interval` (10 s at 100 NAOs too)."""
     return max(status_interval(fleet_size), grace / HEARTBEATS_PER_GRACE)
 
 
@@ -172,7 +179,7 @@ class Reporter:
         self._last = -math.inf  # when the last status was published
         # what the last status published said (but its sim time and byte count), and
         # whether a later call said something else that is not out yet (due)
-        self._said: StatusMsg | None = None
+        self._said: tuple[Phase, float, str, str, Figures] | None = None
         self._pending = False
         self.timeline = Timeline()
         #: written at every phase change; motion and search write it too (set once by
@@ -203,6 +210,12 @@ class Reporter:
         """When the next status is due (on the agent's clock): a changed one held back by
         :attr:`interval`, else the heartbeat (module docstring)."""
         return self._last + (self.interval if self._pending else self.heartbeat)
+
+    def say_again(self) -> None:
+        """Repeat the status at the next chance, :attr:`interval` after the last one, not
+        a heartbeat: a member (re)appeared that may have missed it (a newcomer, or one
+        back from a cut session, where a status published meanwhile reached nobody)."""
+        self._said, self._pending = None, True
 
     def show_plan(self, digest: str, wave: int) -> None:
         """The agreed plan's digest and this robot's wave in it (-1: not in a wave); a
@@ -246,16 +259,33 @@ class Reporter:
         self._phase = phase
         if changed:
             self.journal.save()
+        progress, detail, error = min(1.0, max(0.0, progress)), detail[:500], error[:500]
+        # what it says (but its sim time and byte count), compared as plain values: the
+        # wire message is built (and checked) only when it goes out, so that a waiting
+        # robot's wake-ups cost no message they do not send
+        said = (phase, progress, detail, error, self._figures)
+        fresh = said != self._said
+        gap = now - self._last
+        if not (changed or force or gap >= (self.interval if fresh else self.heartbeat)):
+            self._pending = fresh
+            return
+        self._last = now
+        self._said, self._pending = said, False
+        msg = self._message(phase, progress, detail, error)
+        self._bus.publish(key_status(msg.sender), msg, "status")
+
+    def _message(self, phase: Phase, progress: float, detail: str, error: str) -> StatusMsg:
+        """The status to publish now: ``phase`` and the words given, the figures, the
+        body's sim time and the bytes this robot has published."""
         f = self._figures
-        me = self._cfg.robot_id
-        msg = StatusMsg(
-            sender=me,
+        return StatusMsg(
+            sender=self._cfg.robot_id,
             phase=phase.value,
-            progress=min(1.0, max(0.0, progress)),
-            detail=detail[:500],
+            progress=progress,
+            detail=detail,
             plan_digest=f.plan_digest,
             wave=f.wave,
-            error=error[:500],
+            error=error,
             t_sim=self._body.t_sim,
             bytes_sent=self._bus.stats.total_published,
             check_parent=-1 if f.check is None else f.check.parent,
@@ -267,12 +297,3 @@ class Reporter:
             shift_y=min(MAX_SHIFT, max(-MAX_SHIFT, f.shift[1])),
             calibration=self._cfg.calibration,
         )
-        said = replace(msg, t_sim=0.0, bytes_sent=0)
-        fresh = said != self._said
-        gap = now - self._last
-        if not (changed or force or gap >= (self.interval if fresh else self.heartbeat)):
-            self._pending = fresh
-            return
-        self._last = now
-        self._said, self._pending = said, False
-        self._bus.publish(key_status(me), msg, "status")

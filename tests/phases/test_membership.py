@@ -19,6 +19,7 @@ from agent.core.agreement import Agreement
 from agent.core.formation.params import PlanParams
 from agent.net.bus import Event
 from agent.phases.membership import Membership, Peer
+from agent.phases.reporting import Phase
 from agent.wire import (
     KEY_RECORD_ALL,
     DigestMsg,
@@ -181,3 +182,41 @@ def test_arrived_is_every_live_member_in_an_arrived_phase(
     assert m.arrived((1, 2, 3)) is arrived
     m.peers[1].alive = False  # out of reach: not waited for
     assert m.arrived((1, 2, 3)) is (phases[1] != "move")
+
+
+def test_a_member_that_appears_or_comes_back_hears_our_status_within_the_interval() -> None:
+    """Statuses repeat slowly (a heartbeat); a member new to us, or back from a cut
+    session, may have missed ours: it goes out again one status interval after the last."""
+    m, clock = membership(member_grace=20.0)
+    report, bus = m.ctx.report, m.ctx.bus
+    report.status(Phase.AGREE, 0.5, "waiting")
+    assert len(bus.statuses()) == 1 and report.due() == 10.0  # the heartbeat
+    clock.t = 1.0
+    m.handle(Event("alive", "nao/alive/1", robot_id=1))
+    assert report.due() == 3.0  # the status interval, not the heartbeat
+    clock.t = 2.9
+    report.status(Phase.AGREE, 0.5, "waiting")
+    assert len(bus.statuses()) == 1
+    clock.t = 3.0
+    report.status(Phase.AGREE, 0.5, "waiting")
+    assert len(bus.statuses()) == 2 and report.due() == 13.0
+    clock.t = 4.0
+    m.handle(Event("alive", "nao/alive/1", robot_id=1))  # still there: nothing new
+    m.handle(Event("alive", "nao/alive/3", robot_id=3))  # our own token
+    assert report.due() == 13.0
+    m.handle(Event("gone", "nao/alive/1", robot_id=1))
+    m.handle(Event("alive", "nao/alive/1", robot_id=1))  # back within its grace
+    assert report.due() == 6.0
+    report.status(Phase.AGREE, 0.5, "waiting")
+    assert len(bus.statuses()) == 2  # not before 6 s
+    clock.t = 6.0
+    report.status(Phase.AGREE, 0.5, "waiting")
+    assert len(bus.statuses()) == 3 and report.due() == 16.0
+    m.handle(Event("gone", "nao/alive/1", robot_id=1))
+    clock.t = 30.0  # its grace ran out
+    m.pump()
+    assert not m.peers[1].alive
+    m.handle(Event("alive", "nao/alive/1", robot_id=1))  # back
+    assert report.due() == 9.0  # 3 s after the last status: at once
+    report.status(Phase.AGREE, 0.5, "waiting")
+    assert len(bus.statuses()) == 4

@@ -18,12 +18,14 @@ sim time; the perception is never called), so the CPU measured is the waiting al
 the bus traffic, the wake-ups of the main thread and zenoh's own threads.
 
 Once every agent has published a status of the agreement (``exchange`` or ``agree``)
-and ``--settle`` seconds more have passed, each process's CPU time (user + system, all
-threads, from ``/proc/PID/stat``; and its main thread's, from ``/proc/PID/task/PID``)
-is sampled over ``--seconds`` s. Prints per agent % of one core (mean, max, the main
-thread's share) beside the load average (the machine may be shared: the CPU seconds
-of a process are its own, but a loaded host delays its wake-ups), and draws a PNG
-(``--out``).
+and ``--settle`` seconds more have passed, each thread's CPU time and wake-ups are
+sampled over ``--seconds`` s: the scheduler's own nanosecond count of the time it ran
+and the number of times it was put on a core (``/proc/PID/task/TID/schedstat``; the
+tick-sampled user + system time of ``/proc/PID/stat`` is printed beside it, its 10 ms
+tick is coarse next to a 0.1 % target). Prints per agent % of one core (mean, max, the
+main thread's share), by thread name with wake-ups per second, beside the load average
+(the machine may be shared: the CPU seconds of a process are its own, but a loaded host
+delays its wake-ups), and draws a PNG (``--out``).
 """
 
 from __future__ import annotations
@@ -53,14 +55,17 @@ def cpu_seconds(pid: int, tid: int | None = None) -> float:
     return (int(fields[11]) + int(fields[12])) / TICKS  # utime, stime (fields 14, 15)
 
 
-def threads(pid: int) -> dict[int, tuple[str, float]]:
-    """Thread id -> (name, CPU seconds) of every thread of ``pid``."""
-    out: dict[int, tuple[str, float]] = {}
+def threads(pid: int) -> dict[int, tuple[str, float, int]]:
+    """Thread id -> (name, CPU seconds, times put on a core) of every thread of ``pid``,
+    from the scheduler's ``schedstat`` (nanoseconds run, time waited, slices run)."""
+    out: dict[int, tuple[str, float, int]] = {}
     for tid in sorted(int(t) for t in os.listdir(f"/proc/{pid}/task")):
         try:
             with open(f"/proc/{pid}/task/{tid}/comm") as f:
                 name = f.read().strip()
-            out[tid] = (name, cpu_seconds(pid, tid))
+            with open(f"/proc/{pid}/task/{tid}/schedstat") as f:
+                ran_ns, _, slices = (int(x) for x in f.read().split())
+            out[tid] = (name, ran_ns / 1e9, slices)
         except OSError:  # the thread ended meanwhile
             continue
     return out
@@ -154,30 +159,52 @@ def measure(a: argparse.Namespace, procs: list[subprocess.Popen[bytes]], bus: Bu
     if any(pr.poll() is not None for pr in procs):
         print("an agent exited during the sampling window", file=sys.stderr)
         return 1
-    pct = [100.0 * (end[pid][0] - start[pid][0]) / wall for pid in sorted(start)]
-    main_pct = [100.0 * (end[pid][1] - start[pid][1]) / wall for pid in sorted(start)]
+    pids = sorted(start)
+    ran = {pid: spent(t_start[pid], t_end[pid]) for pid in pids}
+    pct = [100.0 * sum(c for c, _ in ran[pid].values()) / wall for pid in pids]
+    main_pct = [100.0 * ran[pid].get(pid, (0.0, 0))[0] / wall for pid in pids]
+    ticked = [100.0 * (end[pid][0] - start[pid][0]) / wall for pid in pids]
     mean = sum(pct) / len(pct)
     print(
-        f"idle agent: {mean:.2f} % of a core (mean), {max(pct):.2f} % (max) over {wall:.0f} s; "
-        f"main thread {sum(main_pct) / len(main_pct):.2f} %; {a.agents} agents, "
-        f"{sum(pct):.1f} % of a core together"
+        f"idle agent: {mean:.3f} % of a core (mean), {max(pct):.3f} % (max) over {wall:.0f} s; "
+        f"main thread {sum(main_pct) / len(main_pct):.3f} %; {a.agents} agents, "
+        f"{sum(pct):.2f} % of a core together"
     )
     print(
         f"load average: {load0[0]:.2f} at the start, {load1[0]:.2f} at the end "
-        f"({os.cpu_count()} cores); CPU tick {1000 / TICKS:.0f} ms "
-        f"(resolution {100.0 / TICKS / wall:.3f} % over the window)"
+        f"({os.cpu_count()} cores); tick-sampled user + system time "
+        f"{sum(ticked) / len(ticked):.2f} % (mean; {1000 / TICKS:.0f} ms tick, "
+        f"resolution {100.0 / TICKS / wall:.3f} % over the window)"
     )
-    by_name: dict[str, float] = {}
-    for pid, ts in t_end.items():
-        for tid, (name, cpu) in ts.items():
-            cpu0 = t_start[pid].get(tid, (name, 0.0))[1]
-            key = "main (Python)" if tid == pid else name
-            by_name[key] = by_name.get(key, 0.0) + 100.0 * (cpu - cpu0) / wall / len(procs)
-    top = sorted(by_name.items(), key=lambda kv: (-kv[1], kv[0]))[:6]
-    print("per agent, by thread: " + ", ".join(f"{n} {v:.3f} %" for n, v in top))
+    by_name: dict[str, tuple[float, float]] = {}
+    for pid in pids:
+        for tid, (cpu, slices) in ran[pid].items():
+            key = "main (Python)" if tid == pid else t_end[pid][tid][0]
+            old_pct, old_wakes = by_name.get(key, (0.0, 0.0))
+            by_name[key] = (
+                old_pct + 100.0 * cpu / wall / len(pids),
+                old_wakes + slices / wall / len(pids),
+            )
+    top = sorted(by_name.items(), key=lambda kv: (-kv[1][0], kv[0]))[:7]
+    print(
+        "per agent, by thread (% of a core, wake-ups a second): "
+        + ", ".join(f"{n} {v:.3f} % {w:.1f}/s" for n, (v, w) in top)
+    )
     print(f"statuses heard: {60.0 * heard / wall / len(procs):.1f} per agent per minute")
     draw(a.out, pct, main_pct, mean, load1[0], wall)
     return 0
+
+
+def spent(
+    t0: dict[int, tuple[str, float, int]], t1: dict[int, tuple[str, float, int]]
+) -> dict[int, tuple[float, int]]:
+    """Thread id -> (CPU seconds, times put on a core) between two :func:`threads`
+    samples of one process (a thread born meanwhile counts from zero)."""
+    out: dict[int, tuple[float, int]] = {}
+    for tid, (name, cpu, slices) in t1.items():
+        _, cpu0, slices0 = t0.get(tid, (name, 0.0, 0))
+        out[tid] = (cpu - cpu0, slices - slices0)
+    return out
 
 
 def draw(out: Path, pct: list[float], main_pct: list[float], mean: float, load: float,
