@@ -27,20 +27,14 @@ ZENOH_MODES = ("peer", "client", "router")
 #: containers"): a 30 s lease, 30 s to open or accept a session, and a client that keeps
 #: trying to connect for 60 s (retries from 0.5 s, backing off to 4 s). A session that
 #: still breaks reconnects; the agents' membership grace (``agent.core.grace.Grace``)
-#: bridges its vanished tokens.
-#:
-#: Lease and keep-alives: four keep-alives per lease (zenoh's own ratio: a link counts as
-#: failed after four silent intervals, ITU-T G.8013/Y.1731 asks for 3.5), and zenoh sends
-#: one only when nothing else was sent on the link for that long. Its interval is just
-#: above a waiting robot's status heartbeat (10 s, ``agent.phases.reporting``), so that
-#: the statuses keep a waiting fleet's links alive and the links carry no keep-alives of
-#: their own: 11.25 s, a 45 s lease. A crashed process's links close at once (its host
-#: resets them); the lease only bounds how long a vanished host (power, radio) counts as
-#: present, 45 s, and a TCP stall a link survives, 33 s. Measured with
-#: ``python -m tools.bench idle`` (10 peers in a full mesh): one keep-alive per link
-#: between two statuses cost each idle agent 0.05 % of a core.
+#: bridges its vanished tokens. Keep-alives: four per lease (zenoh's own ratio: a link
+#: counts as failed after four silent intervals, ITU-T G.8013/Y.1731 asks for 3.5), one
+#: every 7.5 s, and zenoh sends one only when nothing else was sent on the link for that
+#: long: a waiting fleet's statuses keep its links alive at 10 s apart, so each link
+#: carries one keep-alive between two statuses (six a lease cost an idle agent 0.03 % of
+#: a core more in the full mesh of ``python -m tools.bench idle``, 10 peers).
 LOSSY_LINK_SETTINGS: tuple[tuple[str, str], ...] = (
-    ("transport/link/tx/lease", "45000"),
+    ("transport/link/tx/lease", "30000"),
     ("transport/link/tx/keep_alive", "4"),
     ("transport/unicast/open_timeout", "30000"),
     ("transport/unicast/accept_timeout", "30000"),

@@ -227,7 +227,7 @@ def test_lossy_link_settings_are_accepted_by_zenoh() -> None:
     cfg = zenoh.Config()
     for key, value in p.LOSSY_LINK_SETTINGS:
         cfg.insert_json5(key, value)
-    assert json.loads(cfg.get_json("transport/link/tx/lease")) == 45000
+    assert json.loads(cfg.get_json("transport/link/tx/lease")) == 30000
     # a link fails after 3.5 silent keep-alive intervals at least (ITU-T G.8013/Y.1731)
     assert json.loads(cfg.get_json("transport/link/tx/keep_alive")) == 4
     assert json.loads(cfg.get_json("connect"))["timeout_ms"]["client"] == 60000
