@@ -52,15 +52,22 @@ def _fleet(seed: int, n: int, kind: str) -> tuple[PoseFrame, tuple[NeighborRecor
     return fit_from_graph(identify_pairs(recs, DEFAULT_EPSILON)), tuple(recs)
 
 
-def _sightings(
-    poses: PoseFrame, robot: int, loose: np.ndarray | None, elsewhere: np.ndarray | None = None
-) -> _Sightings | None:
+def _own_seen(
+    poses: PoseFrame, robot: int, loose: np.ndarray | None
+) -> tuple[list[PoseMeasurement | np.ndarray], list[PoseMeasurement]]:
+    """``robot``'s own sightings (its loose ones last) and the others' of it, by (owner, target)."""
     ms = sorted((m for m in poses.measurements if robot in (m.owner, m.target)),
                 key=lambda m: (m.owner, m.target))  # fmt: skip
     own: list[PoseMeasurement | np.ndarray] = [m for m in ms if m.owner == robot]
     if loose is not None:
         own += list(np.asarray(loose).reshape(-1, 2))
-    seen = [m for m in ms if m.target == robot]
+    return own, [m for m in ms if m.target == robot]
+
+
+def _sightings(
+    poses: PoseFrame, robot: int, loose: np.ndarray | None, elsewhere: np.ndarray | None = None
+) -> _Sightings | None:
+    own, seen = _own_seen(poses, robot, loose)
     if not own or not seen:
         return None
     return _Sightings(poses, robot, own, seen, NOISE, elsewhere)
@@ -127,12 +134,7 @@ def _ref_statistic(
     s.free = True
     r, k = s.whiten(s.errors(x_h0, False)[0]), len(s.v_all)
     worst = int(np.argmax(np.round(r[:k] ** 2 + r[k:] ** 2, 9)))
-    ms = sorted((m for m in poses.measurements if robot in (m.owner, m.target)),
-                key=lambda m: (m.owner, m.target))  # fmt: skip
-    own: list[PoseMeasurement | np.ndarray] = [m for m in ms if m.owner == robot]
-    if loose is not None:
-        own += list(np.asarray(loose).reshape(-1, 2))
-    seen = [m for m in ms if m.target == robot]
+    own, seen = _own_seen(poses, robot, loose)
     n_own = len(own)
     own = [m for i, m in enumerate(own) if i != worst]
     seen = [m for i, m in enumerate(seen) if i != worst - n_own]
