@@ -215,7 +215,7 @@ class Membership:
             back = not peer.alive or ev.robot_id in self.grace.pending()
             self.grace.token(ev.robot_id, ev.kind == "alive", now)
             if ev.kind == "alive":  # a vanished token counts as gone in expire
-                if ev.robot_id != me and back:  # new, or back from a cut session: it
+                if ev.robot_id != me and back:  # new, or back after its links were cut: it
                     self.ctx.report.say_again()  # may have missed our (slow) status
                 peer.alive = peer.seen_alive = True
                 if agr is not None and ev.robot_id != me:

@@ -84,7 +84,7 @@ def status_interval(fleet_size: int | None) -> float:
 #: vanished host's after the link lease, agent/wire/network.py); the heartbeat bridges a
 #: token that vanished while its member still publishes (heard every ``grace / 2`` s, its
 #: silence stays half the grace below the count) and repeats the robot's state for a
-#: member that missed a status in a cut session. Each one wakes every member of the fleet
+#: member that missed a status while its links were cut. Each one wakes every member of the fleet
 #: (the idle bench, docs/agent.md), so it is as slow as that allows: twice per grace, the
 #: pace of a 100-NAO fleet already (:func:`status_interval`).
 HEARTBEATS_PER_GRACE = 2
@@ -214,7 +214,7 @@ class Reporter:
     def say_again(self) -> None:
         """Repeat the status at the next chance, :attr:`interval` after the last one, not
         a heartbeat: a member (re)appeared that may have missed it (a newcomer, or one
-        back from a cut session, where a status published meanwhile reached nobody)."""
+        back after its links were cut, when a status published meanwhile reached nobody)."""
         self._said, self._pending = None, True
 
     def show_plan(self, digest: str, wave: int) -> None:

@@ -185,8 +185,8 @@ def test_arrived_is_every_live_member_in_an_arrived_phase(
 
 
 def test_a_member_that_appears_or_comes_back_hears_our_status_within_the_interval() -> None:
-    """Statuses repeat slowly (a heartbeat); a member new to us, or back from a cut
-    session, may have missed ours: it goes out again one status interval after the last."""
+    """Statuses repeat slowly (a heartbeat); a member new to us, or back after its links
+    were cut, may have missed ours: it goes out again one status interval after the last."""
     m, clock = membership(member_grace=20.0)
     report, bus = m.ctx.report, m.ctx.bus
     report.status(Phase.AGREE, 0.5, "waiting")

@@ -388,7 +388,7 @@ def _first_passed(
     general candidate's test rejects, with its smallest p and the poses it was tested on."""
     last = "no candidate frame connects every robot through identified neighbours"
     passed: list[tuple[float, bool, FleetFrame]] = []  # (global p, names a robot, frame)
-    for cand in _candidates(records, epsilon):
+    for cand in _candidates(records, epsilon, model):
         built = cand.build()
         if built is None:
             continue
@@ -396,8 +396,7 @@ def _first_passed(
         searched = any(named for _, named, _ in passed)
         search = suspects is not None and cand.general and not searched
         verdict = fault_test(test, model, records, search=search)
-        rejected = [t.robot for t in sorted(verdict.tests, key=lambda t: (t.p, t.robot))
-                    if t.p < ALPHA]  # fmt: skip
+        rejected = _rejected(verdict)
         turned: set[int] = set()  # each rejected robot is turned round at most once
         while cand.turn is not None:
             robot = cand.turn([r for r in rejected if r not in turned])
@@ -408,8 +407,7 @@ def _first_passed(
             assert built is not None  # a better fit of the same robots
             fine, test = built
             verdict = fault_test(test, model, records, search=False)
-            rejected = [t.robot for t in sorted(verdict.tests, key=lambda t: (t.p, t.robot))
-                        if t.p < ALPHA]  # fmt: skip
+            rejected = _rejected(verdict)
         if turned and search:
             verdict = fault_test(test, model, records, search=True)
         if suspects is not None and cand.general:
@@ -430,6 +428,12 @@ def _first_passed(
     if passed:
         return passed[0][2], last  # the first general candidate that names a robot
     return None, last
+
+
+def _rejected(verdict: FaultVerdict) -> list[int]:
+    """The robots ``verdict``'s tests reject at :data:`fault_test.ALPHA`, in the test's
+    order (smallest p first, tie: lowest id)."""
+    return [t.robot for t in sorted(verdict.tests, key=lambda t: (t.p, t.robot)) if t.p < ALPHA]
 
 
 def _without_record(
