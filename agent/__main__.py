@@ -142,6 +142,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         action="store_true",
         help="skip the final visual alignment to the parent (the papers' open-loop ending)",
     )
+    p.add_argument(
+        "--no-cp-tune",
+        action="store_true",
+        help="with --orientation cp: do not fine-tune the place on the circle from a look at "
+        "the centre robot (the AUV paper's 'no tune' rows)",
+    )
     march = p.add_mutually_exclusive_group()
     march.add_argument(
         "--march",
@@ -276,6 +282,7 @@ def agent_config(args: argparse.Namespace, rid: int) -> AgentConfig:
         wave_timeout=args.wave_timeout,
         member_grace=args.member_grace,
         correct=not args.no_correct,
+        cp_tune=not args.no_cp_tune,
         reshape_wait=args.reshape_wait,
         march=args.route,
         sensor_fault=args.sensor_fault,

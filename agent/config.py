@@ -16,8 +16,13 @@ from pathlib import Path
 
 from agent.core.agreed_params import ParamValue
 from agent.core.formation.frame.research import DEFAULT_STEP
-from agent.core.formation.params import D_E, PHI_E_DEG, PLAN_STRATEGIES, PlanParams
-from agent.core.formation.shape.pyramid import ORIENTATIONS
+from agent.core.formation.params import (
+    D_E,
+    ORIENTATIONS,
+    PHI_E_DEG,
+    PLAN_STRATEGIES,
+    PlanParams,
+)
 from agent.core.formation.shape.schema import parse_shape
 from agent.core.formation.shape.spec import BUILTIN, PYRAMID, Shape
 from agent.core.formation.view.route import Route
@@ -70,8 +75,9 @@ def add_plan_arguments(p: argparse.ArgumentParser) -> None:
         "--orientation",
         choices=ORIENTATIONS,
         default="pca",
-        help="pyramid orientation: pca (the fleet's principal axis, NAO paper eq. 12) or "
-        "cp (the AUV paper's fixed direction, north of the common frame)",
+        help="pyramid orientation: pca (the fleet's principal axis, NAO paper eq. 12), north "
+        "(the common frame's y axis) or cp (the AUV paper's circle pattern: walk to a circle "
+        "round the frame robot first; the robot at 90° leads a formation facing north)",
     )
     p.add_argument(
         "--strategy",
@@ -98,7 +104,7 @@ class AgentConfig:
     fleet_size: int | None = None
     d_e: float = D_E
     phi_e: float = math.radians(PHI_E_DEG)
-    orientation: str = "pca"  # pyramid orientation: "pca" (NAO eq. 12) | "cp" (AUV III.B)
+    orientation: str = "pca"  # one of formation.params.ORIENTATIONS (pca, north, cp)
     strategy: str = "default"  # assignment strategy, one of formation.params.PLAN_STRATEGIES
     shape: Shape = PYRAMID  # the formation's shape (agent/core/formation/shape/spec.py)
     timeout: float = 120.0  # s without news (a new record or digest) before agreement fails
@@ -114,10 +120,13 @@ class AgentConfig:
     # which re-arms us at once, so long waits (others still searching) need few re-sends.
     backoff_max: float = 16.0
     correct: bool = True  # final visual alignment to the parent (see Hold.correct)
+    # with the circle pattern (orientation cp): fine-tune the place on the circle from a
+    # look at the centre robot (AUV III.B.2.a and Tables 1-2's "tune")
+    cp_tune: bool = True
     max_correction: float = 0.3  # m
     march: Route | None = None  # march in formation after hold; None: stop at hold
     # s to stay once the fleet holds, listening for the operator's reshape command
-    # (agent/phases/commands/reshaping.py), again after each reshape; 0: exit at done
+    # (agent/phases/transitions/reshaping.py), again after each reshape; 0: exit at done
     reshape_wait: float = 0.0
     march_step: float = 0.1  # m per leader step: half a follower's 20 cm, so they keep up
     march_pause: float = 4.0  # the leader rests this many times each step's duration
@@ -172,6 +181,8 @@ class AgentConfig:
             argv += ["--shape", self.shape.source]
         if not self.correct:
             argv.append("--no-correct")
+        if not self.cp_tune:
+            argv.append("--no-cp-tune")
         if self.march is not None and self.march.distance is not None:
             argv.append(f"--march={self.march.distance!r}")
         elif self.march is not None and self.march.to is not None:
@@ -253,7 +264,8 @@ class AgentConfig:
 
 
 #: The settings written as ``FLAG=VALUE`` by :meth:`AgentConfig.to_argv` (the others:
-#: ``--id``, ``--fleet-size``, ``--phi-e-deg``, ``--shape``, ``--no-correct``, the route,
+#: ``--id``, ``--fleet-size``, ``--phi-e-deg``, ``--shape``, ``--no-correct``,
+#: ``--no-cp-tune``, the route,
 #: the sensor fault and ``--publish-camera``).
 FLAGS = {
     "d_e": "--d-e",

@@ -19,8 +19,7 @@ from hypothesis import strategies as st
 from agent.__main__ import agent_config, parse_args
 from agent.config import AgentConfig, add_plan_arguments, load_shape
 from agent.core.agreed_params import params_digest
-from agent.core.formation.params import D_E, PHI_E_DEG, PLAN_STRATEGIES
-from agent.core.formation.shape.pyramid import ORIENTATIONS
+from agent.core.formation.params import D_E, ORIENTATIONS, PHI_E_DEG, PLAN_STRATEGIES
 from agent.core.formation.shape.schema import parse_shape
 from agent.core.formation.shape.spec import BUILTIN, PYRAMID
 from agent.core.formation.view.route import Route

@@ -75,15 +75,20 @@ class Hold:
         self.steps = steps
         self.course = course
 
-    def run(self, march: bool = True) -> None:
-        """Arrived: correct against the parent, march if there is a route (and
-        ``march``: not after a reshape), report ``done`` and stay until all are."""
+    def run(self, march: bool = True, tune: bool | None = None) -> None:
+        """Arrived: correct against the parent, check the pair, march if there is a route
+        (and ``march``: not after a reshape), report ``done`` and stay until all are.
+
+        ``tune``: on the circle pattern's circle, whether to correct and check at all (the
+        fine tuning on the centre robot, ``--no-cp-tune``); None: every other hold, which
+        corrects unless ``--no-correct`` and always checks."""
         ctx, report, course = self.ctx, self.ctx.report, self.course
         where = ctx.beliefs.position.round(2).tolist()
         self._arrived_at = ctx.beliefs.position.copy()
         report.status(Phase.HOLD, 0.5, f"arrived at believed {where}", force=True)
-        self.correct()
-        self.verify()
+        if tune is None or tune:
+            self.correct(ctx.cfg.correct if tune is None else tune)
+            self.verify()
         if ctx.cfg.march is not None and march:
             report.status(Phase.MARCH, 0.0, "formation held; waiting for the fleet", force=True)
             self.wait_all((Phase.MARCH, Phase.DONE, Phase.FAILED), Phase.MARCH, "waiting for")
@@ -109,8 +114,9 @@ class Hold:
             self.verify()  # the march's end is checked the same way
         self.finish()
 
-    def correct(self) -> None:
-        """Visual alignment to the parent, once nobody may pass near (an addition).
+    def correct(self, enabled: bool = True) -> None:
+        """Visual alignment to the parent, once nobody may pass near (an addition; none
+        unless ``enabled``).
 
         The papers walk the plan open-loop; the residual error is dominated by the
         distance estimates of the search (~10 % at 1.2 m, better at d_e). The pyramid
@@ -127,7 +133,7 @@ class Hold:
         plan = self.course.plan
         rp = plan.robot(ctx.me)
         parent = int(rp.parent)
-        if parent < 0 or not ctx.cfg.correct:
+        if parent < 0 or not enabled:
             return
         why = self._wait_for_parent(parent)
         if why:
@@ -326,6 +332,12 @@ class Hold:
                     f"formation off: parent {parent} faces {math.degrees(off):+.0f}° from the "
                     "pyramid axis this robot believes in (its mask): a start heading misjudged"
                 )
+        # where this robot stands, as measured on its parent's planned place (its fixed
+        # frame, from its start): the belief a later plan's legs start from (a
+        # transition's goals, agent/adapters.py)
+        parent_at = np.asarray(plan.robot(parent).target, dtype=np.float64)
+        ctx.beliefs.position = parent_at - seen - np.asarray(rp.start, dtype=np.float64)
+        self._face_axis()
         report.status(report.phase, 0.9, f"own check: {check.text()}", force=True)
 
     def _find_parent(self, expected: np.ndarray, parent: int) -> np.ndarray | None:
@@ -335,6 +347,11 @@ class Hold:
         a NAO farther off is another robot, or a wrong match)."""
         ctx = self.ctx
         bearing = math.atan2(float(expected[1]), float(expected[0]))
+        turn = wrap_pi(bearing - ctx.beliefs.heading)
+        if abs(turn) > HEAD_YAW_LIMIT:  # behind the head's reach: the body turns to it
+            log.info("parent %d at %.0f° off the heading: turning to it", parent,
+                     math.degrees(turn))  # fmt: skip
+            self.motion.rotate(turn, PAPER_GAINS)
         nearest = math.inf
         for yaw in look_yaws(bearing, ctx.beliefs.heading, CAMERA_HFOV / 3.0, HEAD_YAW_LIMIT):
             frame = self.motion.look(yaw)
@@ -357,6 +374,13 @@ class Hold:
             log.warning("correction: parent %d not seen", parent)
         return None
 
+    def _face_axis(self) -> None:
+        """Turn back to the formation's axis after a look that turned the body
+        (:meth:`_find_parent`)."""
+        turn = wrap_pi(self.course.final_heading - self.ctx.beliefs.heading)
+        if abs(turn) > self.ctx.cfg.rotation_tolerance:
+            self.motion.rotate(turn, PAPER_GAINS)
+
     def finish(self) -> None:
         """``done``, and stay until every member is; a member that failed meanwhile
         leaves a hole: stop with the fleet's reason (module docstring)."""
@@ -374,7 +398,7 @@ class Hold:
     def _finished(self, peer: Peer, phases: tuple[Phase, ...], mine: Phase) -> bool:
         """Whether ``peer`` is in ``phases`` of this robot's plan; waiting to be ``done``,
         also when it shows a plan this robot never followed: a reshape's, which it
-        started only once it was done on this one (agent/phases/commands/reshaping.py)."""
+        started only once it was done on this one (agent/phases/transitions/reshaping.py)."""
         if on_plan(peer, phases, self.course.digest):
             return True
         ahead = bool(peer.plan_digest) and peer.plan_digest not in self.course.history

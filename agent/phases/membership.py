@@ -115,7 +115,7 @@ def on_plan(peer: Peer, phases: Collection[str], digest: str) -> bool:
     """Whether ``peer`` is in one of ``phases`` of the plan ``digest`` ("": of any plan).
     A failed member counts whatever its plan; one that shows no digest yet counts too.
     After a reshape the fleet's statuses name two plans for a while: a member ``done``
-    on the plan it held has not yet started the new one (agent/phases/commands/reshaping.py)."""
+    on the plan it held has not yet started the new one (agent/phases/transitions/reshaping.py)."""
     if peer.phase not in phases:
         return False
     return not digest or peer.phase == Phase.FAILED or peer.plan_digest in ("", digest)
@@ -141,7 +141,7 @@ class Membership:
         self.observers: list[Callable[[Event], None]] = []
         #: the operator's newest reshape command per plan it reshapes (its ``base``;
         #: the bus let through only the operator's signature on its key), at most
-        #: :data:`COMMANDS_KEPT`; agent/phases/commands/reshaping.py acts on the held plan's
+        #: :data:`COMMANDS_KEPT`; agent/phases/transitions/reshaping.py acts on the held plan's
         self.commands: dict[str, ReshapeMsg] = {}
 
     def start(self) -> None:
@@ -270,7 +270,7 @@ class Membership:
     def take_command(self, msg: ReshapeMsg) -> None:
         """Keep the operator's command ``msg`` if it is the newest for its plan (a retry
         repeats its number); it waits there until this robot holds that plan
-        (agent/phases/commands/reshaping.py; meanwhile it is deferred, and said so)."""
+        (agent/phases/transitions/reshaping.py; meanwhile it is deferred, and said so)."""
         old = self.commands.get(msg.base)
         if old is not None and old.command >= msg.command:
             return

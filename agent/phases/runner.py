@@ -23,11 +23,14 @@ RE-SEARCH        when the agreed records leave robots outside the connected flee
 PLAN/WAIT/MOVE   the formation core on the agreed records, identical on every agent; wait
                  for the earlier waves to hold; walk the legs in checked 20 cm steps
                  (agent/phases/waves.py, safe_steps.py, motion.py).
+CIRCLE           with ``--orientation cp`` that plan is the circle pattern's circle: hold
+                 it (fine-tuned on the centre robot unless ``--no-cp-tune``), then plan
+                 the formation from it and walk it (agent/phases/transitions/circle_pattern.py).
 HOLD/MARCH/DONE  correct against the parent, march the route if there is one, ``done``
                  and stay until all are (agent/phases/hold.py, march.py).
 RESHAPE          with ``--reshape-wait``: listen for the operator's command, plan the
                  transition to its shape and walk it as every plan (PLAN, WAIT, MOVE,
-                 HOLD, DONE; agent/phases/commands/reshaping.py).
+                 HOLD, DONE; agent/phases/transitions/reshaping.py).
 
 With ``--publish-camera`` (for viewers) the perception is wrapped by
 agent/phases/camera_feed.py, which publishes thumbnails of the analysed frames for viewers.
@@ -55,7 +58,6 @@ from agent.core.agreement import Decision
 from agent.net.bus import Bus
 from agent.phases.agreeing import Agreeing
 from agent.phases.camera_feed import CameraFeed
-from agent.phases.commands.reshaping import Reshaping
 from agent.phases.context import AgentFailure, Context
 from agent.phases.hold import Hold
 from agent.phases.march import MarchHalt
@@ -66,6 +68,8 @@ from agent.phases.research import Research
 from agent.phases.roles import Crew, Recovery
 from agent.phases.safe_steps import SafeSteps
 from agent.phases.search import Search
+from agent.phases.transitions.circle_pattern import CirclePattern
+from agent.phases.transitions.reshaping import Reshaping
 from agent.phases.waves import Itinerary, Waves
 from agent.seams import Formation, Perception
 from agent.wire import NeighborRecordMsg, StatusMsg, key_alive, key_status, reason
@@ -117,6 +121,7 @@ class Runner:
         self.waves = Waves(ctx, fleet, self.motion, self.safe_steps, course)
         self.hold = Hold(ctx, fleet, self.motion, self.safe_steps, course)
         self.reshaping = Reshaping(ctx, fleet, fleet.commands, course, self.walk_reshape)
+        self.circle = CirclePattern(ctx, fleet, course)
         crew = Crew(ctx, fleet, self.motion, self.waves, course, self.search)
         self.recovery: Recovery = Fresh() if recovery is None else recovery(crew)
         ctx.report.journal = self.recovery
@@ -163,6 +168,14 @@ class Runner:
             self.waves.wait_for_earlier_waves()  # WAIT
         if stage in (Phase.SEARCH, Phase.AGREE, Phase.WAIT, Phase.MOVE):
             self.waves.move()  # MOVE
+        if self.ctx.cfg.orientation == "cp" and len(self.course.plan.robots) > 1:
+            # the circle pattern's circle: fine-tune on the centre (or not), DONE; then
+            # the formation from it (PLAN, WAIT, MOVE, HOLD, (MARCH), DONE)
+            self.hold.run(march=False, tune=self.ctx.cfg.cp_tune)
+            self.circle.plan()
+            self.waves.wait_for_earlier_waves()
+            self.waves.move()
+            self.hold = Hold(self.ctx, self.membership, self.motion, self.safe_steps, self.course)
         self.hold.run()  # HOLD, CORRECT, (MARCH), DONE
         self.reshaping.run()  # (RESHAPE: PLAN, WAIT, MOVE, HOLD, DONE), as commanded
 

@@ -48,7 +48,7 @@ from typing import TypeVar
 
 from agent.core.agreement import Decision
 from agent.core.control import PAPER_GAINS, wrap_pi
-from agent.core.formation.plan import Plan
+from agent.core.formation.plan import Plan, first_shape
 from agent.core.formation.shape.spec import Shape
 from agent.core.formation.view.own_frame import in_own_frame
 from agent.core.formation.waves.jam import yields
@@ -209,7 +209,8 @@ class Waves:
             )
         # the common frame turned to this robot's fixed frame by its start heading ψ
         common, plan = plan, in_own_frame(plan, plan.psi_of(ctx.me))
-        self.course.follow(plan, common)
+        first = first_shape(ctx.cfg.plan_params(), len(plan.robots))  # cp: the circle
+        self.course.follow(plan, common, first)
         self.fleet.served = record_set(ctx.me, decision)
         self.fleet.pin_sessions({int(r) for r in ctx.formation.members(plan)}, digest)
         wave = int(plan.robot(ctx.me).wave)

@@ -40,7 +40,7 @@ def test_planning_parameters_default_and_choices(capsys: pytest.CaptureFixture[s
     assert (a.orientation, a.strategy) == ("pca", "default")
     a = parse_args(["--id", "2", "--orientation", "cp", "--strategy", "paper"])
     assert (a.orientation, a.strategy) == ("cp", "paper")
-    for bad in (["--orientation", "north"], ["--strategy", "fastest"]):
+    for bad in (["--orientation", "south"], ["--strategy", "fastest"]):
         with pytest.raises(SystemExit) as exc:
             parse_args(["--id", "2", *bad])
         assert exc.value.code == 2 and "invalid choice" in capsys.readouterr().err

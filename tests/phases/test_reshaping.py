@@ -1,4 +1,4 @@
-"""agent/phases/commands/reshaping.py and its parts in the membership, the itinerary and the hold:
+"""agent/phases/transitions/reshaping.py and its parts in the membership, the itinerary and the hold:
 the operator's command heard, kept, deferred or refused with the reason; the transition
 planned from the held plan and walked; waits that tell the old plan from the new. Against
 the fakes of tests/phases/fakes.py on a fake clock; the whole fleet, with real processes,
@@ -21,11 +21,11 @@ from agent.core.formation.reshape import transition_plan
 from agent.core.formation.shape.spec import BUILTIN
 from agent.core.formation.view.own_frame import in_own_frame
 from agent.net.bus import Event
-from agent.phases.commands.reshaping import Reshaping
 from agent.phases.context import AgentFailure, Context
 from agent.phases.hold import Hold
 from agent.phases.membership import COMMANDS_KEPT, Membership, Peer, on_plan
 from agent.phases.reporting import Phase
+from agent.phases.transitions.reshaping import Reshaping
 from agent.phases.waves import Itinerary
 from agent.wire import KEY_RESHAPE, ReshapeMsg, StatusMsg
 from tests.phases.fakes import Clock, FakeBus, FakeFleet, FakeMover, FakeStepper, context, records

@@ -142,7 +142,7 @@ def test_plan_params_carry_orientation_and_strategy() -> None:
 
 @pytest.mark.parametrize(
     "kwargs, match",
-    [({"orientation": "north"}, "orientation must be one of"), ({"strategy": "x"}, "strategy")],
+    [({"orientation": "south"}, "orientation must be one of"), ({"strategy": "x"}, "strategy")],
 )
 def test_config_rejects_unknown_orientation_and_strategy(
     kwargs: dict[str, str], match: str

@@ -142,7 +142,7 @@ def test_waits_pass_when_earlier_waves_hold() -> None:
 
 def test_an_earlier_wave_done_on_another_plan_does_not_hold_this_one() -> None:
     """After a reshape a member still ``done`` on the held plan has not started the new
-    one (agent/phases/commands/reshaping.py): it is waited for, until it holds this plan."""
+    one (agent/phases/transitions/reshaping.py): it is waited for, until it holds this plan."""
     r = waiting((1, 2))
     for i in (1, 2):
         r.fleet.peers[i] = Peer(alive=True, phase="done", seen_alive=True, plan_digest="cd" * 32)

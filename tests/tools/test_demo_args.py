@@ -72,7 +72,7 @@ def test_isolated_scenario_is_written_for_the_world(tmp_path: Path) -> None:
         (["--scenario", "{good}", "--batch", "3"], "no --batch"),
         (["--scenario", "{good}", "--isolated"], "not allowed with"),
         (["--robots", "1", "--isolated"], "at least 2 robots"),
-        (["--orientation", "north"], "invalid choice"),
+        (["--orientation", "south"], "invalid choice"),
         (["--d-e", "-1"], "d_e must be > 0"),
         (["--march", "0"], "march distance"),
         (["--march-to", "1"], "X,Y"),

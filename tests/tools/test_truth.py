@@ -13,7 +13,14 @@ from agent.core.formation.params import D_E, PHI_E_DEG
 from agent.core.formation.shape.pyramid import slot_positions
 from agent.core.formation.shape.spec import BUILTIN, PYRAMID, Shape
 from tools.harness.pairs import evaluate
-from tools.harness.truth import Link, check_shape, excursions, judge_shape, slot_links
+from tools.harness.truth import (
+    Link,
+    check_shape,
+    excursions,
+    judge_shape,
+    settled_at,
+    slot_links,
+)
 
 D, PHI = D_E, math.radians(PHI_E_DEG)
 
@@ -126,6 +133,20 @@ def test_excursions_from_the_reference_sample_on() -> None:
     assert far == {1: pytest.approx(0.3), 2: 0.0}  # the farthest, not the final; 3: no pose
     assert excursions(truth, [1], {})[1] == pytest.approx(math.hypot(2.0, 0.3))
     assert excursions([], [1], {1: 4}) == {}
+
+
+def test_settled_at_the_last_move_farther_than_2_cm_from_the_end() -> None:
+    truth = [
+        (0.0, {1: (0.0, 0.0, 0.0), 2: (5.0, 0.0, 0.0)}),
+        (1.0, {1: (1.0, 0.0, 0.0), 2: (5.0, 0.0, 0.0)}),
+        (2.0, {1: (1.99, 0.0, 0.0), 2: (5.0, 0.5, 0.0)}),  # 2 still 0.5 m off its end
+        (3.0, {1: (2.0, 0.0, 0.0), 2: (5.0, 0.01, 0.0)}),  # both within 2 cm from here
+        (4.0, {1: (2.0, 0.0, 1.0), 2: (5.0, 0.0, 0.0)}),  # 1 turns on the spot
+    ]
+    assert settled_at(truth, [1, 2]) == 3.0
+    assert settled_at(truth, [1]) == 2.0
+    assert settled_at(truth[:1], [1, 2]) == 0.0  # nobody moved
+    assert math.isnan(settled_at([], [1]))
 
 
 @pytest.mark.parametrize("name", sorted(BUILTIN))

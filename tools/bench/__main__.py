@@ -1,4 +1,4 @@
-"""``python -m tools.bench {plan,makespan,world,perception,agent,render,scale,idle}``: benchmarks that print numbers.
+"""``python -m tools.bench {plan,makespan,world,perception,agent,render,pictures,scale,idle}``: benchmarks that print numbers.
 
 Each sub-benchmark lives in its own module ``tools/bench/<name>.py`` with a
 ``main(argv) -> int``.
@@ -9,7 +9,17 @@ from __future__ import annotations
 import importlib
 import sys
 
-TARGETS = ("plan", "makespan", "world", "perception", "agent", "render", "scale", "idle")
+TARGETS = (
+    "plan",
+    "makespan",
+    "world",
+    "perception",
+    "agent",
+    "render",
+    "pictures",
+    "scale",
+    "idle",
+)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -81,6 +81,8 @@ def add_fleet_arguments(p: argparse.ArgumentParser) -> None:
     add("--timeout", type=float, default=FleetSpec.timeout, help="wall limit for the agents (s)")
     add("--auto-ids", action="store_true", help="agents claim robots (--id auto)")
     add("--no-correct", action="store_true", help="agents skip the final alignment")
+    add("--no-cp-tune", action="store_true",
+        help="with --orientation cp: agents do not fine-tune their places on the circle")  # fmt: skip
     add("--research-rounds", type=int, default=None, metavar="K",
         help="re-search rounds (NAO paper 4.1.3 rule 2) before the agents stop (agent default)")  # fmt: skip
     march = p.add_mutually_exclusive_group()
@@ -188,6 +190,7 @@ def fleet_spec(p: argparse.ArgumentParser, a: argparse.Namespace) -> FleetSpec:
             shape=a.shape,
             timeout=a.agree_timeout,
             correct=not a.no_correct,
+            cp_tune=not a.no_cp_tune,
             march=_route(a),
             publish_camera=a.publish_camera,
             reshape_wait=wait,

@@ -33,7 +33,7 @@ from agent.wire import PHASES
 from tools.harness.observe import AgentView, Observer
 from tools.harness.pairs import evaluate, plan_pairs
 from tools.harness.procs import rogue_reports
-from tools.harness.truth import MOVED_M, excursions, judge_shape
+from tools.harness.truth import MOVED_M, excursions, judge_shape, settled_at
 from tools.lib.frame_fit import common_frame_pose
 from tools.lib.reshape import final_shape_spec, judge_reshapes
 
@@ -66,16 +66,21 @@ def plan_from_agreed(
     shape: FormationShape = PYRAMID,
 ) -> Any:
     """The plan recomputed by the evaluator from the records the agents exchanged, with
-    the fleet's planning parameters."""
+    the fleet's planning parameters; with the orientation ``cp``, the formation's plan
+    from the circle the records give (agent/core/formation/reshape.py ``from_circle``)."""
     from agent.adapters import FormationAdapter
     from agent.core.formation.params import PlanParams
+    from agent.core.formation.reshape import from_circle
 
     fa = FormationAdapter()
     recs = tuple(obs.records[i] for i in sorted(obs.records))
     params = PlanParams(
         d_e=d_e, phi_e=phi_e, orientation=orientation, strategy=strategy, shape=shape
     )
-    return fa, fa.plan(recs, params)
+    plan = fa.plan(recs, params)
+    if orientation == "cp" and len(plan.robots) > 1:
+        plan = from_circle(plan, params)
+    return fa, plan
 
 
 def plan_params(result: dict[str, Any], d_e: float, phi_e: float, shape: FormationShape) -> Any:
@@ -412,6 +417,10 @@ def summarise(
             e["exchange"] for e in entered
         )
     result["t_sim_end"] = obs.truth[-1][0] if obs.truth else 0.0
+    # the building's sim time: from the last agent planning to every robot settled
+    planned = [views[i].phase_sim["plan"] for i in ids if "plan" in views[i].phase_sim]
+    result["t_sim_plan"] = max(planned) if planned else math.nan
+    result["t_sim_settled"] = settled_at(obs.truth, ids)
     result["pairs"] = []
     # the (re-)search round of each robot's last record (NAO 4.1.3 rule 2)
     result["record_rounds"] = {str(i): obs.records[i].round for i in ids if i in obs.records}

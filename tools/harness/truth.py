@@ -55,6 +55,31 @@ def excursions(truth: Truth, ids: Sequence[int], refs: Mapping[int, int]) -> dic
     return out
 
 
+#: A robot within this distance (m) of its final true position has settled there.
+SETTLED_M = 0.02
+
+
+def settled_at(truth: Truth, ids: Sequence[int]) -> float:
+    """The sim time (s) from which every robot of ``ids`` stays within :data:`SETTLED_M`
+    of its final true position to the end of the stream (its first sample's time when
+    nobody moved; nan for an empty stream)."""
+    if not truth:
+        return math.nan
+    final = truth[-1][1]
+    t = truth[0][0]
+    for k in range(len(truth) - 1, -1, -1):
+        poses = truth[k][1]
+        off = [
+            math.hypot(poses[i][0] - final[i][0], poses[i][1] - final[i][1])
+            for i in ids
+            if i in poses and i in final
+        ]
+        if off and max(off) > SETTLED_M:
+            t = truth[min(k + 1, len(truth) - 1)][0]
+            break
+    return float(t)
+
+
 def slot_links(
     shape: FormationShape, k: int, d_e: float, phi_e: float
 ) -> list[tuple[int, float, float]]:

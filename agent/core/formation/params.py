@@ -2,7 +2,8 @@
 5-7, the robot radius of the safety rule, the eq. 9 threshold epsilon of NAO paper
 4.1.2, the shape: the pyramid or another, :mod:`agent.core.formation.shape.spec`) and
 the choices a plan may name: assignment strategy (NAO paper 4.2 and
-Lemma 1, AUV III.C), pyramid orientation (NAO eqs. 12-13 or CP), common-frame method
+Lemma 1, AUV III.C), pyramid orientation (NAO eqs. 12-13, north, or the circle pattern
+walked first, AUV III.B.2.a), common-frame method
 (eq. 10 or least squares), placement, and obstacle method (NAO paper 5.1.2).
 
 The ``default`` strategy is a policy over fleet size, set by the thresholds below and
@@ -18,8 +19,13 @@ from agent.core.formation.frame.common_frame import METHODS
 from agent.core.formation.frame.neighbour_check import DEFAULT_EPSILON
 from agent.core.formation.paths.assignment import STRATEGIES
 from agent.core.formation.shape.layout import PLACEMENTS, closest_slots
-from agent.core.formation.shape.pyramid import ORIENTATIONS, check_geometry
+from agent.core.formation.shape.pyramid import AXES, check_geometry
 from agent.core.formation.shape.spec import PYRAMID, Shape
+
+#: The orientations a plan may name: an axis of :data:`pyramid.AXES` (``pca``, NAO eq. 12;
+#: ``north``), or ``cp``: the circle pattern of AUV III.B.2.a, walked first, whose
+#: formation then faces north (:mod:`agent.core.formation.shape.circle_pattern`).
+ORIENTATIONS = (*AXES, "cp")
 
 #: ``default`` strategy: exact min-sum (``optimal``, O(n³)) up to this many robots; the
 #: paper's O(n log n) strategy above. Whatever it starts with, ``default`` falls back to
@@ -66,7 +72,7 @@ class PlanParams:
     phi_e: float = math.radians(PHI_E_DEG)
     radius: float = 0.2
     strategy: str = "default"  # "paper" | "optimal" | "capt" | "banded" | "default"
-    orientation: str = "pca"  # "pca" | "cp"
+    orientation: str = "pca"  # one of ORIENTATIONS
     #: "bfs" (paper eq. 10) | "lsq" (least squares), both on the papers' aligned frames;
     #: "default": start poses (fleet_frame, docs/design.md §9), = lsq when starts are aligned
     frame_method: str = "default"
@@ -115,6 +121,12 @@ class PlanParams:
                     f"shape {self.shape.name!r}: slots {a} and {b} are {d:.3f} m apart, "
                     f"closer than two robots may stand (2·radius = {2.0 * self.radius:.3f} m)"
                 )
+
+    @property
+    def axis(self) -> str:
+        """How the shape's frame finds its axis (:data:`pyramid.AXES`): the orientation's,
+        north for the circle pattern."""
+        return "north" if self.orientation == "cp" else self.orientation
 
     def resolved_strategy(self, n: int) -> str:
         """The assignment strategy for n robots: ``default`` resolved by fleet size."""

@@ -54,9 +54,11 @@ from agent.core.formation.frame.obstacle_map import common_frame_obstacles
 from agent.core.formation.frame.records import NeighborRecord
 from agent.core.formation.params import PlanParams
 from agent.core.formation.paths.fallback import banded_plan
+from agent.core.formation.shape.circle_pattern import circle
 from agent.core.formation.shape.layout import shape_frame
-from agent.core.formation.shape.spec import PYRAMID
-from agent.core.formation.waves.choice import choose
+from agent.core.formation.shape.pyramid import PyramidFrame
+from agent.core.formation.shape.spec import PYRAMID, Shape
+from agent.core.formation.waves.choice import choose, choose_anchored
 from agent.core.formation.waves.obstacles import plan_around_obstacles, plan_near_obstacles
 from agent.core.formation.waves.scheduled import Scheduled, scheduled_plan
 from agent.core.perception.sighting_noise import SightingNoise
@@ -210,12 +212,18 @@ def plan_from_positions(
     params: PlanParams = PlanParams(),
     obstacles: np.ndarray | None = None,
     frame_robot: int = -1,
+    anchor: int | None = None,
 ) -> Plan:
     """Plan the shape of ``params`` (the pyramid by default) for robots at known
     positions (caller's frame).
 
     Wave 0 is the leader alone, unless the leader's slot lies within 2·radius of another
     robot's start: then the robots that must clear it go first (see :mod:`scheduler`).
+
+    ``anchor``: a robot id that takes the shape's slot 0 where it stands and does not
+    move; the shape frame's origin is its start, its axis the orientation's
+    (:func:`choice.choose_anchored`; the circle pattern, AUV III.B.2.a). Raises
+    ``ValueError`` for an anchor not among ``ids``, or no safe plan with it in place.
     """
     id_list, pos = _check_positions(ids, positions)
     order_idx = np.argsort(np.asarray(id_list), kind="stable")
@@ -228,7 +236,18 @@ def plan_from_positions(
         raise ValueError(f"obstacles must be a finite (M, 2) array, got shape {obs.shape}")
     n = len(sorted_ids)
     strategy = params.resolved_strategy(n + obs.shape[0])
-    if obs.shape[0]:
+    if anchor is not None:
+        if anchor not in sorted_ids:
+            raise ValueError(f"anchor {anchor!r} is not one of the robots {sorted_ids}")
+        row = sorted_ids.index(anchor)
+        beta = shape_frame(pos, params.axis, params.shape).beta
+        frame = PyramidFrame(origin=pos[row].copy(), beta=beta)
+        frame_origin = frame.origin
+        anchored = choose_anchored(pos, frame, row, obs, params)
+        if anchored is None:
+            raise ValueError(f"no safe plan with robot {anchor} holding slot 0 where it stands")
+        best = anchored
+    elif obs.shape[0]:
         if params.strategy == "banded":
             raise ValueError("strategy 'banded' takes no obstacles (see fallback)")
         near = None
@@ -243,7 +262,7 @@ def plan_from_positions(
             frame_origin, beta = op.origin, op.beta
             best = scheduled_plan(pos, op.targets, op.order, op.vias, obs, params, strategy)
     else:
-        frame = shape_frame(pos, params.orientation, params.shape)
+        frame = shape_frame(pos, params.axis, params.shape)
         starts_p = frame.to_pyramid(pos)
         frame_origin, beta = frame.origin, frame.beta
         chosen = choose(pos, frame, starts_p, params)
@@ -322,6 +341,15 @@ def plan_from_positions(
     )
 
 
+def first_shape(params: PlanParams, n: int) -> Shape:
+    """The shape the plan of :func:`plan_from_records` builds for ``n`` planned robots:
+    the circle pattern's circle with the orientation ``cp`` (n >= 2), else
+    ``params.shape``."""
+    if params.orientation == "cp" and n > 1:
+        return circle(n, params.d_e)
+    return params.shape
+
+
 def plan_from_records(
     records: Sequence[NeighborRecord],
     params: PlanParams = PlanParams(),
@@ -339,7 +367,10 @@ def plan_from_records(
     robot id to the obstacles it saw, in its fixed frame: they are placed in the common
     frame (turned by its ψ) and merged (:mod:`obstacle_map`), then planned around with the
     others. ``noise`` is the sighting noise the fault test rests on (default: the shipped
-    model of the rendered perception; synthetic records pass theirs). The digest of a plan
+    model of the rendered perception; synthetic records pass theirs). With the
+    orientation ``cp`` the plan is the circle pattern's circle round the frame robot, which
+    stands still (:mod:`agent.core.formation.shape.circle_pattern`); the formation is then
+    planned from the circle (:func:`agent.core.formation.reshape.from_circle`). The digest of a plan
     with aligned starts and nobody left out is the papers' plan's; otherwise it also
     covers every ψ, who is left out and why.
 
@@ -361,8 +392,18 @@ def plan_from_records(
         extra.append(seen)
     extra.append(ff.excluded_at.reshape(-1, 2))
     obs = np.vstack(extra)
+    anchor = None
+    first = first_shape(params, len(ff.ids))
+    if first != params.shape:  # the circle pattern's circle first, round the frame robot
+        params = replace(params, shape=first)
+        anchor = ff.frame_robot
     plan = plan_from_positions(
-        ff.ids, ff.positions, params, obs if len(obs) else obstacles, frame_robot=ff.frame_robot
+        ff.ids,
+        ff.positions,
+        params,
+        obs if len(obs) else obstacles,
+        frame_robot=ff.frame_robot,
+        anchor=anchor,
     )
     if ff.aligned and not ff.excluded:
         return plan

@@ -1,6 +1,7 @@
 """Reshaping on command: the plan from the shape a fleet holds to another (docs/formation.md
 "Reshaping", docs/design.md §11; the same planner as every plan, NAO paper 4.2 and
-5.2.2 (iii), AUV paper III.B–C for the slots).
+5.2.2 (iii), AUV paper III.B–C for the slots). The circle pattern's second plan, from
+its circle to the formation (AUV III.B.2.a), is such a transition (:func:`from_circle`).
 
 The fleet holds the plan every agent agreed on; an operator's command names that plan
 (its digest) and the new shape. Every agent plans the transition from data all of them
@@ -64,12 +65,17 @@ def command_shape(
     return shape
 
 
-def transition_plan(held: Plan, shape: Shape, params: PlanParams) -> Plan:
+def transition_plan(
+    held: Plan, shape: Shape, params: PlanParams, anchor: int | None = None
+) -> Plan:
     """The plan from the slots of ``held`` (the common frame) to ``shape`` with the
     agreed ``params`` (module docstring). The robots of ``held`` may come in any order.
+    ``anchor``: a robot that takes the new shape's slot 0 where it stands
+    (:func:`~agent.core.formation.plan.plan_from_positions`).
 
     Raises ``ValueError`` for a held plan without robots, a fleet the shape cannot hold,
-    slots of the shape closer than two robots, or no safe plan (obstacles only)."""
+    slots of the shape closer than two robots, or no safe plan (obstacles only, or
+    with the anchor in place)."""
     if not held.robots:
         raise ValueError("the held plan has no robots")
     robots = sorted(held.robots, key=lambda r: r.robot_id)
@@ -84,6 +90,7 @@ def transition_plan(held: Plan, shape: Shape, params: PlanParams) -> Plan:
         wanted,
         obstacles if len(obstacles) else None,
         frame_robot=held.frame_robot,
+        anchor=anchor,
     )
     psi = np.asarray(held.psi, dtype=np.float64)
     if len(psi):  # ψ in the robots' order: by id, as the plan's
@@ -97,3 +104,21 @@ def transition_plan(held: Plan, shape: Shape, params: PlanParams) -> Plan:
     return replace(
         plan, psi=psi, excluded=held.excluded, verdict=held.verdict, digest=h.hexdigest()
     )
+
+
+def circle_leader(circle: Plan) -> int:
+    """The robot at 90° of the common frame on the circle pattern's circle: the one on
+    slot 1, straight ahead of the centre (:mod:`~agent.core.formation.shape.circle_pattern`);
+    the centre itself in a fleet of one."""
+    on_slot_1 = [int(r.robot_id) for r in circle.robots if int(r.order) == 1]
+    return on_slot_1[0] if on_slot_1 else int(circle.leader)
+
+
+def from_circle(circle: Plan, params: PlanParams) -> Plan:
+    """The circle pattern's second plan (AUV III.B.2.a): from the circle ``circle`` (the
+    plan of ``plan_from_records`` with the orientation ``cp``) to the formation of
+    ``params.shape``, facing north, with the robot at 90° (:func:`circle_leader`) as its
+    leader where it stands; the digest chains the circle's, as every transition's."""
+    if params.orientation != "cp":
+        raise ValueError(f"the circle pattern's orientation is 'cp', got {params.orientation!r}")
+    return transition_plan(circle, params.shape, params, anchor=circle_leader(circle))

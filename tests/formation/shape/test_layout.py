@@ -36,9 +36,9 @@ def test_a_depth_shape_lies_as_the_pyramid_a_width_shape_across() -> None:
         # the fleet's principal axis is the shape's left-right axis (x_p)
         right = fr.to_common(np.array([1.0, 0.0])) - fr.origin
         assert abs(right[1]) < 0.2 * abs(right[0])
-        assert shape_frame(pts, "cp", BUILTIN[name]).beta == pytest.approx(math.pi / 2)
+        assert shape_frame(pts, "north", BUILTIN[name]).beta == pytest.approx(math.pi / 2)
     with pytest.raises(ValueError, match="orientation"):
-        shape_frame(pts, "north", BUILTIN["line"])
+        shape_frame(pts, "south", BUILTIN["line"])
 
 
 @pytest.mark.parametrize("n", [1, 2, 5, 21, 100])

@@ -88,7 +88,7 @@ def test_pca_axis_sign_points_to_sparse_tail() -> None:
     assert pca_axis(np.ones((3, 2))) == pytest.approx(math.pi / 2)
     # symmetric collinear distribution: tie -> +y half-plane
     assert pca_axis(np.array([[0.0, -1.0], [0.0, 0.0], [0.0, 1.0]])) == pytest.approx(math.pi / 2)
-    assert pyramid_frame(pts, "cp").beta == pytest.approx(math.pi / 2)
+    assert pyramid_frame(pts, "north").beta == pytest.approx(math.pi / 2)
 
 
 @pytest.mark.parametrize("strategy", ["paper", "optimal", "capt"])

@@ -6,7 +6,7 @@ import random
 
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agent.core.formation.plan import Plan, RobotPlan
@@ -84,6 +84,7 @@ def test_errors() -> None:
         passers_by(PLAN, 9, 0.7)
 
 
+@settings(deadline=None)  # a deadline fails under load, never on the answer
 @given(seed=st.integers(0, 2**32 - 1), margin=st.floats(0.0, 3.0))
 def test_the_answer_does_not_depend_on_the_order_of_the_robots(seed: int, margin: float) -> None:
     """Every agent computes the same set: shuffled inputs give the same sorted ids, and

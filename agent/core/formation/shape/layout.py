@@ -3,10 +3,10 @@ shape), its slots placed in that frame, and the step of its slot columns (for th
 :mod:`agent.core.formation.paths.lanes` and the columns of the banded plan).
 
 * Frame: origin o_p = the mean of the starts; the axis β is the pyramid's
-  (:func:`pyramid.pyramid_frame`: PCA with the skewness sign rule, or north for CP) for a
+  (:func:`pyramid.pyramid_frame`: PCA with the skewness sign rule, or north) for a
   ``depth`` shape. A ``width`` shape lays its left-right axis along the fleet's principal
   axis instead: with PCA, β is the principal axis (same sign rule) turned by +90°; with
-  CP it is north, as for every shape.
+  ``north`` it is north, as for every shape.
 * Placement: ``centroid`` (the slots' centroid at o_p, the translation that minimises
   Σ|slot − start|²) or ``front`` (moved along the axis until the rearmost slot is d_e
   ahead of the front-most start, so that no slot lies among the starts: used when the
@@ -22,7 +22,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from agent.core.formation.shape.pyramid import (
-    ORIENTATIONS,
+    AXES,
     PyramidFrame,
     pca_axis,
     pyramid_frame,
@@ -40,10 +40,10 @@ def shape_frame(positions: np.ndarray, orientation: str, shape: Shape = PYRAMID)
     if shape.orient == "depth":
         return pyramid_frame(positions, orientation)
     pts = np.asarray(positions, dtype=np.float64)
-    if orientation == "cp":
+    if orientation == "north":
         return PyramidFrame(origin=pts.mean(axis=0), beta=math.pi / 2)
     if orientation != "pca":
-        raise ValueError(f"orientation must be one of {ORIENTATIONS}, got {orientation!r}")
+        raise ValueError(f"orientation must be one of {AXES}, got {orientation!r}")
     beta = math.remainder(pca_axis(pts) + math.pi / 2, 2.0 * math.pi)
     return PyramidFrame(origin=pts.mean(axis=0), beta=beta)
 

@@ -22,9 +22,10 @@ facing direction): ``c = x_p·(sin β, -cos β) + y_p·(cos β, sin β) + o_p``.
   y_p so that the third central moment of the projections is >= 0. If that moment is
   ~0 (|m3| <= 1e-9·σ³), y_p points to the half-plane of positive common y (then +x).
   N = 1 or all starts equal: β = π/2.
-* ``cp`` (AUV III.B.2.a): with the circle pattern, the robot at 90° of the common frame
-  is the leader and its y axis (north: all fixed frames are parallel) is the pyramid
-  axis, so β = π/2. Plan side only: the intermediate circle is not walked.
+* ``north`` (AUV III.B.2.a): β = π/2, the common frame's y axis. It is the axis of the
+  circle pattern, where the robot at 90° of the common frame is the leader and its y axis
+  (all fixed frames are parallel) is the pyramid's; the circle itself is walked by
+  ``PlanParams.orientation == "cp"`` (:mod:`circle_pattern`).
 
 Placement (the papers give the leader's y only as ``y_min + layer_all·d·θ``, which is
 not dimensionally sound): the slots are translated so that their centroid is o_p,
@@ -38,7 +39,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-ORIENTATIONS = ("pca", "cp")
+#: How the frame's axis is chosen: the principal axis (NAO eq. 12) or the common frame's
+#: north (the circle pattern's axis, AUV III.B.2.a).
+AXES = ("pca", "north")
 
 
 def layer_of(order: int) -> int:
@@ -164,10 +167,10 @@ def pyramid_frame(positions: np.ndarray, orientation: str = "pca") -> PyramidFra
     pts = np.asarray(positions, dtype=np.float64)
     if orientation == "pca":
         beta = pca_axis(pts)
-    elif orientation == "cp":
+    elif orientation == "north":
         beta = math.pi / 2
     else:
-        raise ValueError(f"orientation must be one of {ORIENTATIONS}, got {orientation!r}")
+        raise ValueError(f"orientation must be one of {AXES}, got {orientation!r}")
     return PyramidFrame(origin=pts.mean(axis=0), beta=beta)
 
 

@@ -70,6 +70,86 @@ def _candidates(starts_p: np.ndarray, slots_p: np.ndarray) -> list[tuple[str, np
     return uniq
 
 
+def _scheduled(
+    pos: np.ndarray,
+    frame: PyramidFrame,
+    starts_p: np.ndarray,
+    slots_p: np.ndarray,
+    candidates: list[tuple[str, np.ndarray]],
+    obs: np.ndarray,
+    params: PlanParams,
+    slack: bool = True,
+) -> tuple[list[tuple[float, float, int, Scheduled]], float]:
+    """Each candidate assignment made safe and packed; those whose total path is within
+    ``PATH_SLACK`` of the first candidate's straight paths (min-sum's; every one without
+    ``slack``), as (makespan, total, candidate index, plan) sorted, and that bound."""
+    empty: list[tuple[np.ndarray, ...]] = [() for _ in range(pos.shape[0])]
+    good: list[tuple[float, float, int, Scheduled]] = []
+    bound = math.inf
+    for k, (strat, perm) in enumerate(candidates):
+        if k == 0 and slack:
+            straight = np.hypot(*(starts_p - slots_p[perm]).T)
+            bound = PATH_SLACK * float(straight.sum()) + 1e-9
+        try:
+            sc = scheduled_plan(
+                pos, frame.to_common(slots_p[perm]), perm, empty, obs, params, strat
+            )
+        except ValueError:
+            continue
+        if sc.total <= bound:
+            good.append((sc.makespan, sc.total, k, sc))
+    good.sort(key=lambda g: g[:3])
+    return good, bound
+
+
+def choose_anchored(
+    pos: np.ndarray, frame: PyramidFrame, row: int, obs: np.ndarray, params: PlanParams
+) -> Scheduled | None:
+    """The plan that lays the shape's slot 0 on the robot of ``row``, which stays where it
+    stands: ``frame``'s origin is that robot's start (the circle pattern's centre robot and
+    its leader, AUV III.B.2.a). The others take the rest of the slots by the
+    :func:`_candidates` assignments on them, made safe and packed (``obs``: obstacles,
+    (M, 2), common frame), those that keep the anchor in place; of those within the
+    path slack (every one when none is: a robot that must walk round the anchor), the
+    best by makespan, then total path, gets detours on its critical chain. No start sidesteps, lanes or other placements: they would move
+    the anchor or the slots. None: a slot within two radii of an obstacle, or no
+    candidate schedules with the anchor in place."""
+    n = pos.shape[0]
+    if not 0 <= row < n:
+        raise ValueError(f"anchor row must be in [0, {n}), got {row}")
+    starts_p = frame.to_pyramid(pos)
+    slots_p = params.shape.slots(n, params.d_e, params.phi_e).positions  # slot 0 at (0, 0)
+    if obs.shape[0]:  # a slot on an obstacle: no plan holds it
+        slots_c = frame.to_common(slots_p)
+        gap = np.hypot(*(slots_c[:, None, :] - obs[None, :, :]).transpose(2, 0, 1))
+        if float(gap.min()) < 2.0 * params.radius:
+            return None
+    rest = np.flatnonzero(np.arange(n) != row)
+    cands = []
+    subs = _candidates(starts_p[rest], slots_p[1:]) if n > 1 else [("optimal", rest)]
+    for strat, sub in subs:
+        perm = np.zeros(n, dtype=np.int64)
+        perm[rest] = np.asarray(sub, dtype=np.int64) + 1
+        cands.append((strat, perm))
+    every, _ = _scheduled(pos, frame, starts_p, slots_p, cands, obs, params, slack=False)
+    # the anchor in place (a slot swap of the repair may move it: that plan is dropped)
+    good = [g for g in every if g[3].order[row] == 0 and not g[3].vias[row]]
+    if not good:
+        return None
+    straight = np.hypot(*(starts_p - slots_p[cands[0][1]]).T)
+    bound = PATH_SLACK * float(straight.sum()) + 1e-9
+    within = [g for g in good if g[1] <= bound]
+    best = min(within or good, key=lambda g: g[:3])[3]
+    if within and not obs.shape[0]:  # detours on the critical chain, if the anchor stays
+        empty: list[tuple[np.ndarray, ...]] = [() for _ in range(n)]
+        better = scheduled_plan(
+            pos, best.targets, best.order, empty, obs, params, best.strategy, bound=bound
+        )
+        if better.order[row] == 0 and not better.vias[row]:
+            return better
+    return best
+
+
 def choose(
     pos: np.ndarray, frame: PyramidFrame, starts_p: np.ndarray, params: PlanParams
 ) -> Scheduled | None:
@@ -86,21 +166,9 @@ def choose(
     if exact and n <= CANDIDATES_MAX_N:
         slots_p = placed(params.shape, n, params.d_e, params.phi_e, starts_p, "centroid")
         step = column_step(params.shape, slots_p[:, 0], params.d_e, params.phi_e)
-        good: list[tuple[float, float, int, Scheduled]] = []
-        bound = math.inf
-        for k, (strat, perm) in enumerate(_candidates(starts_p, slots_p)):
-            if k == 0:
-                straight = np.hypot(*(starts_p - slots_p[perm]).T)
-                bound = PATH_SLACK * float(straight.sum()) + 1e-9
-            try:
-                sc = scheduled_plan(
-                    pos, frame.to_common(slots_p[perm]), perm, empty, _NO_OBS, params, strat
-                )
-            except ValueError:
-                continue
-            if sc.total <= bound:
-                good.append((sc.makespan, sc.total, k, sc))
-        good.sort(key=lambda g: g[:3])
+        good, bound = _scheduled(
+            pos, frame, starts_p, slots_p, _candidates(starts_p, slots_p), _NO_OBS, params
+        )
         axis = np.array([math.cos(frame.beta), math.sin(frame.beta)])
         kinked: list[tuple[float, float, int, Scheduled]] = []
         laned: list[tuple[float, float, int, Scheduled]] = []

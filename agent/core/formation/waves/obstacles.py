@@ -107,7 +107,7 @@ def plan_near_obstacles(
     candidate can be scheduled safely.
     """
     n = pos.shape[0]
-    frame = shape_frame(pos, params.orientation, params.shape)
+    frame = shape_frame(pos, params.axis, params.shape)
     starts_p = frame.to_pyramid(pos)
     slots = placed(params.shape, n, params.d_e, params.phi_e, starts_p, "centroid")
     obs_p = frame.to_pyramid(obs)
@@ -167,7 +167,7 @@ def plan_around_obstacles(
             f"slots of a {params.shape.name!r} of N + M are not its slots for N"
         )
     everyone = np.vstack([pos, obs])
-    frame = shape_frame(everyone, params.orientation, params.shape)
+    frame = shape_frame(everyone, params.axis, params.shape)
     slots_p = centred(params.shape, n + m, params.d_e, params.phi_e)
     perm = assign(frame.to_pyramid(everyone), slots_p, strategy, params.d_e, params.phi_e)
     robot_slot = perm[:n].copy()

@@ -1,7 +1,7 @@
-"""``python -m tools.compare_renderers``: EGL's pictures against TinyRenderer's
+"""``python -m tools.bench pictures``: EGL's pictures against TinyRenderer's
 (sim/camera/renderer.py).
 
-    python -m tools.compare_renderers --fleets 3,10 --seeds 1,2,3 --views 6
+    python -m tools.bench pictures --fleets 3,10 --seeds 1,2,3 --views 6
 
 For each fleet size and seed it builds the same generated scenario twice, once per
 renderer, draws ``--views`` pictures of each (observers and head yaws cycling) and
@@ -92,7 +92,7 @@ def compare(n: int, seed: int, views: int, png: Path | None) -> dict[str, float]
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m tools.compare_renderers", description=__doc__)
+    p = argparse.ArgumentParser(prog="python -m tools.bench pictures", description=__doc__)
     p.add_argument("--fleets", default="3,10", help="NAOs per generated scenario")
     p.add_argument("--seeds", default="1,2,3")
     p.add_argument("--views", type=int, default=6, help="pictures per scenario and renderer")

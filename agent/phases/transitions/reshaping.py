@@ -32,7 +32,9 @@ from collections.abc import Callable, Mapping
 
 import numpy as np
 
+from agent.core.formation.plan import Plan
 from agent.core.formation.reshape import command_shape, transition_plan
+from agent.core.formation.shape.spec import Shape
 from agent.core.formation.view.own_frame import in_own_frame
 from agent.phases.context import AgentFailure, Context
 from agent.phases.reporting import Phase
@@ -40,10 +42,25 @@ from agent.phases.roles import Course, Fleet
 from agent.phases.waves import while_pumping
 from agent.wire import ReshapeMsg
 
-log = logging.getLogger("agent.phases.commands.reshaping")
+log = logging.getLogger("agent.phases.transitions.reshaping")
 
 #: Seconds between two pumps of the bus while the transition is planned.
 PLAN_PUMP_S = 0.1
+
+
+def take(ctx: Context, course: Course, plan: Plan, shape: Shape) -> int:
+    """Follow the transition ``plan`` (common frame) to ``shape`` from the plan the course
+    holds: this robot's belief frame moves to the new plan's start, its held slot (the
+    plan's legs are goals from the start, agent/adapters.py ``goals``). Its wave."""
+    me = ctx.me
+    own = in_own_frame(plan, plan.psi_of(me))
+    mine = course.plan.robot(me)
+    rebase = np.asarray(mine.target, dtype=np.float64) - np.asarray(mine.start, dtype=np.float64)
+    ctx.beliefs.position = ctx.beliefs.position - rebase
+    course.follow(own, plan, shape)
+    wave = int(own.robot(me).wave)
+    ctx.report.show_plan(plan.digest, wave)
+    return wave
 
 
 class Reshaping:
@@ -117,7 +134,7 @@ class Reshaping:
         """Plan the transition of ``cmd`` and walk it (module docstring)."""
         ctx, report, course = self.ctx, self.ctx.report, self.course
         params = ctx.cfg.plan_params()
-        held, held_own = course.common, course.plan
+        held = course.common
         try:
             shape = command_shape(cmd.name, cmd.rule, cmd.orient, cmd.slots, cmd.shape_digest)
             report.status(Phase.PLAN, 0.0, f"reshape {cmd.command}: {shape.text()}", force=True)
@@ -129,17 +146,7 @@ class Reshaping:
         except ValueError as exc:
             self.refuse(cmd, str(exc))
             return
-        me = ctx.me
-        own = in_own_frame(plan, plan.psi_of(me))
-        # the belief frame moves to the new plan's start (this robot's held slot)
-        mine = held_own.robot(me)
-        rebase = np.asarray(mine.target, dtype=np.float64) - np.asarray(
-            mine.start, dtype=np.float64
-        )
-        ctx.beliefs.position = ctx.beliefs.position - rebase
-        course.follow(own, plan, shape)
-        wave = int(own.robot(me).wave)
-        report.show_plan(plan.digest, wave)
+        wave = take(ctx, course, plan, shape)
         log.info(
             "reshape %d: %s from plan %s, plan %s, wave %d, leader %d",
             cmd.command, shape.text(), held.digest[:12], plan.digest[:12], wave, plan.leader,
