@@ -23,7 +23,7 @@ from agent.core.formation.params import (
     PLAN_STRATEGIES,
     PlanParams,
 )
-from agent.core.formation.shape.schema import parse_shape
+from agent.core.formation.shape.schema import parse_shape, shape_from_dict
 from agent.core.formation.shape.spec import BUILTIN, PYRAMID, Shape
 from agent.core.formation.view.route import Route
 from agent.core.nao import HEAD_YAW_LIMIT
@@ -37,10 +37,26 @@ from agent.core.perception.sensor_fault import SensorFault
 SEARCH_YAWS = CameraModel().sweep_yaws(limit=HEAD_YAW_LIMIT)
 
 
+def _yaml(text: str) -> object:
+    """A YAML formation file's document (safe loading: plain data only); ``ValueError``
+    with the line and column of a syntax error."""
+    import yaml
+
+    try:
+        return yaml.safe_load(text)
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        raise ValueError(f"shape file: not YAML ({exc.problem}{where})") from exc
+    except yaml.YAMLError as exc:
+        raise ValueError(f"shape file: not YAML ({exc})") from exc
+
+
 def load_shape(spec: str) -> Shape:
     """The shape ``spec`` names: a built-in (``pyramid``, ``line``, ``column``, ``wedge``,
-    ``circle``, ``grid``) or the path of a formation file (JSON, docs/formation.md
-    "Shapes"). ``ValueError`` naming the file and the bad field, or the missing file."""
+    ``circle``, ``grid``) or the path of a formation file (JSON, or YAML for a ``.yaml``
+    or ``.yml`` file: the same fields, docs/formation.md "Shapes"). ``ValueError`` naming
+    the file and the bad field, or the missing file."""
     if spec in BUILTIN:
         return BUILTIN[spec]
     path = Path(spec)
@@ -53,7 +69,8 @@ def load_shape(spec: str) -> Shape:
     except (OSError, UnicodeDecodeError) as exc:
         raise ValueError(f"shape file {spec}: {exc}") from exc
     try:
-        shape = parse_shape(text)
+        yaml_file = path.suffix.lower() in (".yaml", ".yml")
+        shape = shape_from_dict(_yaml(text)) if yaml_file else parse_shape(text)
         PlanParams(shape=shape)  # its slots far enough apart for two robots
     except ValueError as exc:
         raise ValueError(f"shape file {spec}: {exc}") from exc

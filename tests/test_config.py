@@ -139,6 +139,34 @@ def test_a_formation_file(tmp_path: Path) -> None:
     assert load_shape(str(ROOT / "docs/examples/wedge.json")).name == "wedge"
 
 
+def test_a_yaml_formation_file_is_the_same_shape(tmp_path: Path) -> None:
+    """The YAML example defines the JSON example's slots: the same digest."""
+    from_yaml = load_shape(str(ROOT / "docs/examples/wedge.yaml"))
+    assert from_yaml.digest == load_shape(str(ROOT / "docs/examples/wedge.json")).digest
+    f = tmp_path / "pair.yml"
+    f.write_text("name: pair\nslots:\n  - {parent: 0, distance: 0.8, angle_deg: 180}\n")
+    assert load_shape(str(f)).capacity == 2
+
+
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [
+        ("name: [unclosed\n", r"not YAML \(.* at line 2, column 1\)"),
+        ("- 1\n- 2\n", r"expected an object"),
+        ("name: x\nslots:\n  - {parent: 3, distance: 0.8, angle_deg: 0}\n",
+         r"slots\[0\]\.parent: 3 is not an earlier slot"),
+        ("name: x\nslots:\n  - {parent: 0, distance: far, angle_deg: 0}\n",
+         r"slots\[0\]\.distance: expected a number"),
+        ("name: x\ncolour: red\nslots: []\n", r"unknown field 'colour'"),
+    ],
+)  # fmt: skip
+def test_yaml_file_errors_name_the_field(tmp_path: Path, text: str, match: str) -> None:
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(text)
+    with pytest.raises(ValueError, match=rf"^shape file {bad}: .*{match}"):
+        load_shape(str(bad))
+
+
 def test_file_errors_name_the_file_and_the_field(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match=r"shape 'nope': neither a built-in \(pyramid, line"):
         load_shape("nope")

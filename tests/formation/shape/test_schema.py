@@ -69,7 +69,7 @@ def _with(path: str, value: Any) -> dict[str, Any]:
 @pytest.mark.parametrize(
     ("doc", "match"),
     [
-        ([1, 2], r"^shape file: expected a JSON object"),
+        ([1, 2], r"^shape file: expected an object"),
         (_with("colour", "red"), r"^shape file: unknown field 'colour'"),
         (_with("name", ...), r"^name: expected a non-empty string, got None"),
         (_with("name", "  "), r"^name: expected a non-empty string"),

@@ -72,10 +72,10 @@ def _slot(k: int, item: Any) -> tuple[int, float, float]:
 
 
 def shape_from_dict(doc: Any) -> Shape:
-    """The shape a formation file's parsed JSON defines (module doc); ``ValueError``
-    naming the first bad field."""
+    """The shape a formation file's parsed document defines (JSON, or YAML read by the
+    caller: module doc); ``ValueError`` naming the first bad field."""
     if not isinstance(doc, dict):
-        raise ValueError("shape file: expected a JSON object with name and slots")
+        raise ValueError("shape file: expected an object (a mapping) with name and slots")
     _unknown(doc, _TOP, "shape file: ")
     name = doc.get("name")
     if not isinstance(name, str) or not name.strip():
