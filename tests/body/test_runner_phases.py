@@ -21,6 +21,8 @@ from agent.body.in_process import WorldBody
 from agent.config import AgentConfig
 from agent.core.control import wrap_pi
 from agent.core.formation.params import PlanParams
+from agent.core.formation.plan import first_shape
+from agent.core.formation.reshape import circle_leader
 from agent.core.formation.shape.spec import BUILTIN, PYRAMID, Shape
 from agent.net.bus import Bus
 from agent.phases.context import NORTH
@@ -372,3 +374,39 @@ def test_a_child_follows_the_steps_its_parent_announces(
     )
     r.hold._follow(parent)
     assert float(np.hypot(*(np.asarray(world.pose(child.robot_id)[:2]) - start - moved))) < 1e-9
+
+
+def test_a_robot_on_the_circle_turns_to_the_centre_behind_it_and_back(
+    world: World, bus: Bus, perception: PerceptionAdapter
+) -> None:
+    """The circle pattern's circle (AUV III.B.2.a): the robot straight north of the centre
+    has its parent behind it, out of its head's reach. It turns to it, judges the pair
+    against its circle edge, turns back to the axis, and then believes where it measured
+    itself: the centre's planned place minus the offset it saw."""
+    fa = FormationAdapter()
+    params = PlanParams(orientation="cp")
+    plan = fa.plan(_true_records(world), params)  # the circle round the frame robot
+    ring = first_shape(params, len(plan.robots))
+    origin = np.asarray(world.pose(plan.frame_robot)[:2]) - np.asarray(
+        plan.robot(plan.frame_robot).start
+    )
+    axis = fa.axis_angle(plan)
+    assert axis == pytest.approx(math.pi / 2)
+    for rp in plan.robots:
+        x, y = origin + np.asarray(rp.target)
+        world.set_pose(rp.robot_id, float(x), float(y), axis)
+    me = plan.robot(circle_leader(plan))
+    assert me.parent == plan.frame_robot
+    r = robot_for(me.robot_id, world, bus, perception)
+    r.course.follow(plan, plan, ring)
+    r.course.face(wrap_pi(axis))
+    r.ctx.beliefs.heading = wrap_pi(axis)
+    r.ctx.beliefs.position = np.asarray(me.target) - np.asarray(me.start) + [0.07, -0.05]
+    r.membership.peers[plan.frame_robot] = Peer(alive=True, phase="done", seen_alive=True)
+    r.hold.verify()
+    check = r.ctx.report.figures.check
+    assert check is not None and check.parent == plan.frame_robot and check.ok
+    assert abs(wrap_pi(world.pose(me.robot_id)[2] - axis)) < math.radians(10)  # back
+    measured = np.asarray(r.ctx.beliefs.position) + np.asarray(me.start)
+    assert float(np.hypot(*(measured - np.asarray(me.target)))) < 0.05  # not 8.6 cm off
+    assert world.locomotion.contacts == 0
