@@ -91,7 +91,7 @@ def test_shuffled_dense_records_give_the_same_frame() -> None:
     assert got.headings.tobytes() == want.headings.tobytes()
 
 
-@pytest.mark.slow  # 86–148 s a seed under load: CI's slow tier
+@pytest.mark.slow  # 5–11 CPU s a seed: CI's slow tier
 @pytest.mark.parametrize("seed", [0, 2])
 def test_a_dense_room_set_down_askew_is_never_planned_wrong(seed: int) -> None:
     """40 NAOs within ±20° of north: the fleet finds its true frame or stops. Before, the

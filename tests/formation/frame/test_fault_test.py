@@ -245,3 +245,24 @@ def test_whether_anyone_is_rejected_is_the_full_tests_answer(kind: str) -> None:
     for alpha in (ft.ALPHA, 0.5, min(t.p for t in full) * 1.5):
         want = any(t.p < alpha for t in full)
         assert ft._rejects_anyone(poses, NOISE, ev, alpha) == want
+
+
+def test_one_fault_explains_known_answers() -> None:
+    """At ALPHA = 1e-4: one or two robots rejected (the faulty one and at most one false
+    alarm) fit the single-fault model; three do not until C(n−1, 2)·ALPHA² reaches ALPHA
+    (n ≈ 143); a frame rejecting every robot never does."""
+    assert ft.ALPHA == 1e-4
+    for n in (3, 10, 40, 100):
+        assert ft.one_fault_explains(0, n) and ft.one_fault_explains(1, n)
+        assert ft.one_fault_explains(2, n)
+        assert not ft.one_fault_explains(3, n) and not ft.one_fault_explains(n, n)
+    assert ft.one_fault_explains(3, 200)
+    for k, n in ((2, 10), (3, 100), (3, 200), (4, 400)):  # the binomial tail by scipy.stats
+        want = binom.sf(k - 2, n - 1, ft.ALPHA) >= ft.ALPHA
+        assert ft.one_fault_explains(k, n) == want
+
+
+@pytest.mark.parametrize(("k", "n"), [(-1, 3), (4, 3), (0, -1)])
+def test_one_fault_explains_refuses_impossible_counts(k: int, n: int) -> None:
+    with pytest.raises(ValueError, match="rejected <= robots"):
+        ft.one_fault_explains(k, n)

@@ -77,7 +77,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.special import chdtrc, chdtri
+from scipy.special import bdtrc, chdtrc, chdtri
 
 from agent.core.formation.frame.bias_test import BiasFit, bias_fits
 from agent.core.formation.frame.multi_start import refit
@@ -88,6 +88,23 @@ from agent.core.perception.sighting_noise import SightingNoise
 #: The false-alarm rate of the per-robot test, per robot and run: a sound robot is
 #: rejected (and, if the rest then passes, left out) with at most this probability.
 ALPHA = 1e-4
+
+
+def one_fault_explains(rejected: int, robots: int) -> bool:
+    """Whether a frame whose test rejects ``rejected`` of its ``robots`` robots at
+    :data:`ALPHA` is consistent, at ALPHA itself, with the single-fault model: at most one
+    faulty robot, each sound robot rejected independently with probability ALPHA, so
+    P(Binomial(robots − 1, ALPHA) >= rejected − 1) >= ALPHA. A frame that fails it is a
+    wrong frame (a wrong model or pairing of the fleet), and its rejections say nothing
+    of any one robot (``fleet_frame``'s suspects). ``ValueError`` for negative counts or
+    more rejected robots than robots."""
+    if rejected < 0 or robots < 0 or rejected > robots:
+        raise ValueError(f"need 0 <= rejected <= robots, got {rejected} of {robots}")
+    if rejected <= 1:
+        return True
+    return float(bdtrc(rejected - 2, robots - 1, ALPHA)) >= ALPHA
+
+
 #: The level of one sighting's χ² test (step 1). Any level is sound, since ``p_reject``
 #: is measured at this same level; a small one rejects few sound pairs (the residuals'
 #: tail is heavier than a Gaussian's) while a faulty robot's misfits, tens of σ, are

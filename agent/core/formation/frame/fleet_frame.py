@@ -71,7 +71,10 @@ of ten, a robot whose distances read 1.4 times too long left a sound robot it ne
 11° off, and the rest, fitted again from those pairs, failed). So each robot a general
 candidate's test rejected at :data:`fault_test.ALPHA` (smallest p first, tie: lowest id)
 has its whole record set aside and the candidates run again on the others with nobody
-named (:func:`_without_record`); exactly one such robot whose rest passes is named,
+named (:func:`_without_record`), unless that test rejects more robots than one faulty
+robot and ALPHA's false alarms explain at ALPHA (:func:`fault_test.one_fault_explains`:
+in a fleet of 3–140 robots, three or more; the aligned model of a fleet set down askew
+rejects every robot, and a wrong pairing most of them); exactly one such robot whose rest passes is named,
 standing where the others saw it. None, or more than one, and :func:`fleet_frame` raises
 ``ValueError`` with the reason of the last candidate tried, the same on every agent
 (they hold the same records): nobody moves. A robot is so named only when its own test
@@ -95,7 +98,13 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from agent.core.formation.frame.common_frame import build_common_frame
-from agent.core.formation.frame.fault_test import ALPHA, FaultVerdict, fault_test, seen_by_others
+from agent.core.formation.frame.fault_test import (
+    ALPHA,
+    FaultVerdict,
+    fault_test,
+    one_fault_explains,
+    seen_by_others,
+)
 from agent.core.formation.frame.firm_pairs import firm_start
 from agent.core.formation.frame.multi_start import half_turned
 from agent.core.formation.frame.neighbour_check import NeighbourGraph, identify_neighbours
@@ -410,7 +419,8 @@ def _first_passed(
             rejected = _rejected(verdict)
         if turned and search:
             verdict = fault_test(test, model, records, search=True)
-        if suspects is not None and cand.general:
+        plausible = one_fault_explains(len(_rejected(verdict)), len(verdict.tests))
+        if suspects is not None and cand.general and plausible:
             for t in verdict.tests:
                 if t.p < ALPHA and (t.robot not in suspects or t.p < suspects[t.robot][0]):
                     suspects[t.robot] = (t.p, test)
