@@ -21,14 +21,14 @@ DATA = Path(__file__).resolve().parents[1] / "data"
 A, B = "a" * 64, "b" * 64
 
 
-def recorded() -> Observer:
-    """The observer of the recorded run, as tools.demo saw it (every message in order)."""
+def recorded(name: str = "demo-3-seed1.mcap") -> Observer:
+    """The observer of a recorded run, as tools.demo saw it (every message in order)."""
     from mcap.reader import make_reader
 
     from agent.wire import decode
 
     obs = Observer(0.0)
-    with (DATA / "demo-3-seed1.mcap").open("rb") as f:
+    with (DATA / name).open("rb") as f:
         for _, channel, message in make_reader(f).iter_messages(log_time_order=True):
             if channel.message_encoding == "msgpack":
                 obs.take(channel.topic, decode(message.data), None)
@@ -65,6 +65,22 @@ def test_complete_on_the_recorded_run(tmp_path: Path) -> None:
     # the same run with an agent that did not exit 0 is no success (its process says so)
     again = judged(recorded(), tmp_path, {1: 0, 2: 1, 3: 0})
     assert again["outcome"] == "safe_abort" and not again["success"]
+
+
+def test_complete_on_the_recorded_circle_pattern_run(tmp_path: Path) -> None:
+    """4 NAOs with ``--orientation cp`` (seed 1, aligned starts): the evaluator plans the
+    circle and the pyramid from it, and gets the agents' final digest; the truth's
+    pyramid faces north, led by the robot the circle put at 90°, and the frame robot did
+    not move while the circle was built."""
+    r = judged(recorded("demo-cp-4-seed1.mcap"), tmp_path, {1: 0, 2: 0, 3: 0, 4: 0},
+               orientation="cp")  # fmt: skip
+    assert r["outcome"] == "complete" and r["success"] and r["plan_matches_records"]
+    assert abs(r["axis_deg"] - 90.0) < 1.0 and abs(r["shape"]["facing_deg"] - 90.0) < 5.0
+    assert r["shape"]["leader"] == r["leader"] == 4
+    assert r["t_sim_settled"] > r["t_sim_plan"] > 0.0
+    # judged without the orientation, the records plan another formation: no match
+    other = judged(recorded("demo-cp-4-seed1.mcap"), tmp_path, {1: 0, 2: 0, 3: 0, 4: 0})
+    assert not other["plan_matches_records"]
 
 
 def fleet_with_one_left_out() -> Observer:

@@ -66,8 +66,10 @@ def plan_from_agreed(
     shape: FormationShape = PYRAMID,
 ) -> Any:
     """The plan recomputed by the evaluator from the records the agents exchanged, with
-    the fleet's planning parameters; with the orientation ``cp``, the formation's plan
-    from the circle the records give (agent/core/formation/reshape.py ``from_circle``)."""
+    the fleet's planning parameters: (the adapter, the plan, the plan the robots started
+    on). With the orientation ``cp`` the plan is the formation's from the circle the
+    records give (agent/core/formation/reshape.py ``from_circle``), and the robots
+    started on the circle's; else both are the same."""
     from agent.adapters import FormationAdapter
     from agent.core.formation.params import PlanParams
     from agent.core.formation.reshape import from_circle
@@ -77,10 +79,10 @@ def plan_from_agreed(
     params = PlanParams(
         d_e=d_e, phi_e=phi_e, orientation=orientation, strategy=strategy, shape=shape
     )
-    plan = fa.plan(recs, params)
-    if orientation == "cp" and len(plan.robots) > 1:
-        plan = from_circle(plan, params)
-    return fa, plan
+    first = fa.plan(recs, params)
+    if orientation == "cp" and len(first.robots) > 1:
+        return fa, from_circle(first, params), first
+    return fa, first, first
 
 
 def plan_params(result: dict[str, Any], d_e: float, phi_e: float, shape: FormationShape) -> Any:
@@ -431,7 +433,7 @@ def summarise(
     shape = load_shape(result.get("shape_spec", "pyramid"))
     if obs.truth and len(obs.records) == n:
         try:
-            fa, plan = plan_from_agreed(
+            fa, plan, first = plan_from_agreed(
                 obs,
                 d_e,
                 phi_e,
@@ -449,7 +451,7 @@ def summarise(
             result["leader_target"] = [float(v) for v in plan.robot(plan.leader).target]
             # the common frame is the frame robot's fixed frame: the world turned by that
             # robot's start heading off north (0 for the papers' aligned starts)
-            starts = {r.robot_id: r.start for r in plan.robots}
+            starts = {r.robot_id: r.start for r in first.robots}
             frame = common_frame_pose(starts, obs.truth[0][1])
             axis = fa.axis_angle(plan) + frame[2] - math.pi / 2
             result["axis_deg"] = math.degrees(axis)
