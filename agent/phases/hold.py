@@ -28,6 +28,7 @@ import numpy as np
 
 from agent.core.control import PAPER_GAINS, wrap_pi
 from agent.core.control.alignment import look_yaws, match_parent
+from agent.core.formation.plan import first_shape
 from agent.core.formation.shape.verdict import FACING_TOL, check_edge, facing_misfit
 from agent.core.formation.view.passers_by import passers_by
 from agent.core.formation.view.route import Route
@@ -314,7 +315,9 @@ class Hold:
         params = ctx.cfg.plan_params()
         axis = self.course.final_heading
         # this child's slot in the shape's tree: its distance and angle from its parent
-        shape = self.course.shape or params.shape  # a reshape's, else the agreed one
+        # a transition's shape, else the agreed plan's (the circle pattern's circle, after
+        # a restart too: the journal keeps the plan, not its shape)
+        shape = self.course.shape or first_shape(params, len(plan.robots))
         slots = shape.slots(len(plan.robots), params.d_e, params.phi_e)
         _, dist, ang = slots.edge(rp.order)
         check = check_edge(ctx.me, parent, seen, axis, dist, ang, params.phi_e)
