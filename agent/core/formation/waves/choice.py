@@ -10,8 +10,12 @@ critical chain, a copy with start sidesteps (:mod:`kinks`) and two copies with b
 lanes (:mod:`lanes`: the slots of each bundle re-paired per side and jointly, from the
 detoured plan's assignment; a shape with a single slot column has none), and the
 smallest makespan wins; a lane plan only when its makespan is
-strictly smaller than every other. Otherwise the paper's matching (NAO paper 4.2, Lemma 1) or the
-explicit strategy is tried per placement until one schedules safely.
+strictly smaller than every other. A ``width`` shape (its row along the fleet) also
+gets side-by-side candidates (:func:`_row_plans`): row lanes (:mod:`row_lanes`) and the
+slots moved across the row (:mod:`row_shift`); they are ranked with the others by
+makespan before detours, so that only the best SHORTENED of all get detours.
+Otherwise the paper's matching (NAO paper 4.2, Lemma 1) or the explicit strategy is
+tried per placement until one schedules safely.
 """
 
 from __future__ import annotations
