@@ -12,8 +12,8 @@ detoured plan's assignment; a shape with a single slot column has none), and the
 smallest makespan wins; a lane plan only when its makespan is
 strictly smaller than every other. A ``width`` shape (its row along the fleet) also
 gets side-by-side candidates (:func:`_row_plans`): row lanes (:mod:`row_lanes`) and the
-slots moved across the row (:mod:`row_shift`); they are ranked with the others by
-makespan before detours, so that only the best SHORTENED of all get detours.
+slots moved across the row (:mod:`row_shift`): extra candidates (every other one is
+made as without them), those among the best SHORTENED of all by makespan get detours.
 Otherwise the paper's matching (NAO paper 4.2, Lemma 1) or the explicit strategy is
 tried per placement until one schedules safely.
 """
@@ -172,8 +172,8 @@ def choose(
             if sc.total <= bound:
                 good.append((sc.makespan, sc.total, k, sc))
         good.sort(key=lambda g: g[:3])
-        # side by side (a wide shape's row lanes and shifts): ranked with the others by
-        # makespan; the best SHORTENED of all get detours
+        # side by side (a wide shape's row lanes and shifts): extra candidates; those that
+        # rank among the best SHORTENED of all by makespan get detours
         rowed = _row_plans(
             pos, frame, starts_p, slots_p, [(g[3].strategy, g[3].order) for g in good], params,
             (bound - 1e-9) / PATH_SLACK * ROW_LANES_SLACK + 1e-9,
@@ -191,8 +191,6 @@ def choose(
         laned: list[tuple[float, float, int, Scheduled]] = []
         clear = 2.0 * params.radius
         for j, (_, _, k, sc) in enumerate(good[:SHORTENED]):  # detours for the best
-            if not any(sc is b for b in best):
-                continue
             better = scheduled_plan(
                 pos, sc.targets, sc.order, empty, _NO_OBS, params, sc.strategy, bound=bound
             )
