@@ -2,8 +2,8 @@
 by hand, kept and re-paired; properties on line slots (lanes nest: the farther the slot,
 the farther its lane from the row; every lane clear of every slot; each bundle keeps its
 slots; bit-identical results for permuted rows); None when no slot lies beyond the fleet;
-the errors; and the whole plan of a wide shape from uniform starts: within 2× CAPT, safe
-under both rules, the same plan from shuffled input."""
+the errors; and the whole plan of a line and of a column from uniform starts: within 2×
+CAPT, safe under both rules, the same plan from shuffled input."""
 
 from __future__ import annotations
 
@@ -163,11 +163,15 @@ def _uniform(n: int, seed: int, d_e: float = 2.0) -> np.ndarray:
     return np.array(pts)
 
 
-@pytest.mark.parametrize("seed", [0, 1])
-def test_a_line_of_40_from_uniform_starts_within_2x_capt_safe_and_alike(seed: int) -> None:
+@pytest.mark.parametrize(("seed", "shape"), [(0, "line"), (1, "line"), (0, "column")])
+def test_a_line_or_column_of_40_from_uniform_starts_within_2x_capt_safe_and_alike(
+    seed: int, shape: str
+) -> None:
+    """The line (its row along the fleet's x) and the column (one slot column along its
+    y): the side-by-side plans in either frame."""
     n, d_e, phi = 40, 2.0, math.radians(30)
     pos = _uniform(n, seed)
-    params = PlanParams(d_e=d_e, phi_e=phi, radius=C / 2, shape=BUILTIN["line"])
+    params = PlanParams(d_e=d_e, phi_e=phi, radius=C / 2, shape=BUILTIN[shape])
     ids = list(range(1, n + 1))
     plan = plan_from_positions(ids, pos, params)
     paths, waves = plan.paths(), plan.wave_of()

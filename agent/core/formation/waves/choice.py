@@ -10,8 +10,9 @@ critical chain, a copy with start sidesteps (:mod:`kinks`) and two copies with b
 lanes (:mod:`lanes`: the slots of each bundle re-paired per side and jointly, from the
 detoured plan's assignment; a shape with a single slot column has none), and the
 smallest makespan wins; a lane plan only when its makespan is
-strictly smaller than every other. A ``width`` shape (its row along the fleet) also
-gets side-by-side candidates (:func:`_row_plans`): row lanes (:mod:`row_lanes`) and the
+strictly smaller than every other. A shape whose row lies along the fleet (a ``width``
+shape, or a ``depth`` shape of one slot column: the ``column``) also gets side-by-side
+candidates (:func:`_row_plans`): row lanes (:mod:`row_lanes`) and the
 slots moved across the row (:mod:`row_shift`): extra candidates (every other one is
 made as without them), those among the best SHORTENED of all by makespan get detours.
 Otherwise the paper's matching (NAO paper 4.2, Lemma 1) or the explicit strategy is
@@ -68,19 +69,24 @@ def _row_plans(
     orders: list[tuple[str, np.ndarray]],
     params: PlanParams,
     bound: float,
+    along: int = 0,
 ) -> list[tuple[float, float, int, Scheduled, float]]:
     """(makespan, total, rank, plan, bound on its total) of the side-by-side plans of a
-    ``width`` shape (its row along the fleet): the row-lane plans (:mod:`row_lanes`) of
-    each given (strategy, slot order), kept and re-paired, with a total path <=
-    ``bound``; then the straight min-sum plans to the slots moved across the row either
-    way (:mod:`row_shift`), whose bound is PATH_SLACK × their own straight total. Ranks from
-    ROW_RANK in that order; duplicates dropped; plans that cannot be scheduled left out."""
+    shape whose row lies along the fleet (its x axis, ``along=0``: a ``width`` shape;
+    its y axis, ``along=1``: a ``depth`` shape of one slot column): the row-lane plans
+    (:mod:`row_lanes`) of each given (strategy, slot order), kept and re-paired, with a
+    total path <= ``bound``; then the straight min-sum plans to the slots moved across
+    the row either way (:mod:`row_shift`), whose bound is PATH_SLACK × their own
+    straight total. Ranks from ROW_RANK in that order; duplicates dropped; plans that
+    cannot be scheduled left out."""
     out: list[tuple[float, float, int, Scheduled, float]] = []
     seen: set[bytes] = set()
     clear = 2.0 * params.radius
+    k = [1, 0] if along else [0, 1]  # the row's frame: x along the row (a swap for y)
+    rs, rt = starts_p[:, k], slots_p[:, k]
     for strat, perm in orders:
         for repair in (False, True):
-            got = row_lanes(starts_p, slots_p, perm, clear, repair)
+            got = row_lanes(rs, rt, perm, clear, repair)
             if got is None or got[0].tobytes() in seen:
                 continue
             seen.add(got[0].tobytes())
@@ -90,7 +96,7 @@ def _row_plans(
                     pos,
                     frame.to_common(slots_p[order]),
                     order,
-                    [tuple(frame.to_common(v) for v in vs) for vs in vias],
+                    [tuple(frame.to_common(v[k]) for v in vs) for vs in vias],
                     _NO_OBS,
                     params,
                     strat,
@@ -100,9 +106,9 @@ def _row_plans(
             if sc.total <= bound:
                 out.append((sc.makespan, sc.total, ROW_RANK + len(out), sc, bound))
     opt = assign(starts_p, slots_p, "optimal", params.d_e, params.phi_e)
-    shift = row_shift(starts_p, slots_p, opt, clear)
+    shift = row_shift(rs, rt, opt, clear)
     for sign in (1.0, -1.0) if shift is not None else ():
-        moved = slots_p + np.array([0.0, sign * float(shift or 0.0)])
+        moved = slots_p + np.array([0.0, sign * float(shift or 0.0)])[k]
         perm = assign(starts_p, moved, "optimal", params.d_e, params.phi_e)
         straight = float(np.sum(np.hypot(*(starts_p - moved[perm]).T)))
         empty: list[tuple[np.ndarray, ...]] = [() for _ in range(pos.shape[0])]
@@ -174,10 +180,11 @@ def choose(
         good.sort(key=lambda g: g[:3])
         # side by side (a wide shape's row lanes and shifts): extra candidates; those that
         # rank among the best SHORTENED of all by makespan get detours
+        along = 0 if params.shape.orient == "width" else 1 if not math.isfinite(step) else -1
         rowed = _row_plans(
             pos, frame, starts_p, slots_p, [(g[3].strategy, g[3].order) for g in good], params,
-            (bound - 1e-9) / PATH_SLACK * ROW_LANES_SLACK + 1e-9,
-        ) if params.shape.orient == "width" else []  # fmt: skip
+            (bound - 1e-9) / PATH_SLACK * ROW_LANES_SLACK + 1e-9, along,
+        ) if along >= 0 else []  # fmt: skip
         best = [g[3] for g in sorted(good + [r[:4] for r in rowed], key=lambda g: g[:3])]
         best = best[:SHORTENED]
         for j, (_, _, k, sc, own) in enumerate(rowed):
