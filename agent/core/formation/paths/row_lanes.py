@@ -1,8 +1,9 @@
 """Row lanes: robots whose slots lie beyond the fleet along a wide shape's row walk in
 nested lanes beside the row and step onto their slots from the side (our addition to NAO
-paper 4.2's straight paths, for the ``width`` shapes of docs/formation.md "Shapes"; kept to
-the safety rule of :mod:`agent.core.formation.waves.safety` by the scheduler as every via
-point is).
+paper 4.2's straight paths, for the ``width`` shapes of docs/formation.md "Shapes" and the
+``column``, whose row lies along the fleet too (:mod:`agent.core.formation.waves.choice`
+turns its frame so that the row is x); kept to the safety rule of
+:mod:`agent.core.formation.waves.safety` by the scheduler as every via point is).
 
 Why: a ``line`` of N robots is N·d_e long, far wider than the fleet it is laid on. The
 robots bound for its ends walk along the row, and a straight path to a far slot runs over

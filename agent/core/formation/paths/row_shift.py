@@ -1,8 +1,9 @@
 """Row shift: a wide shape laid beside a fleet that stands along its row, so that the
 robots walk to it side by side on straight paths (our addition to the placements of
 :mod:`agent.core.formation.shape.layout`, for the ``width`` shapes of docs/formation.md
-"Shapes"; kept to the safety rule of :mod:`agent.core.formation.waves.safety` by the
-scheduler).
+"Shapes" and the ``column``, in the frame :mod:`agent.core.formation.waves.choice` turns
+so that the row is x; kept to the safety rule of :mod:`agent.core.formation.waves.safety`
+by the scheduler).
 
 Why: a fleet standing in a line, laid on a ``line`` shape centred on it, stretches or
 shrinks along the row: every robot walks along the row over the starts and slots of its
