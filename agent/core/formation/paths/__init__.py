@@ -5,7 +5,9 @@ The segment geometry of the paths (:mod:`~agent.core.formation.paths.geometry`) 
 exact close-pair search (:mod:`~agent.core.formation.paths.close_pairs`), the
 assignment strategies (:mod:`~agent.core.formation.paths.assignment`), bent paths for
 the worst fleets (start sidesteps, :mod:`~agent.core.formation.paths.kinks`; bundle
-lanes, :mod:`~agent.core.formation.paths.lanes`), and the banded plan that always exists
+lanes, :mod:`~agent.core.formation.paths.lanes`; a wide shape's row lanes and row shift,
+:mod:`~agent.core.formation.paths.row_lanes`, :mod:`~agent.core.formation.paths.row_shift`),
+and the banded plan that always exists
 (:mod:`~agent.core.formation.paths.fallback`).
 
 Entry points: :func:`~agent.core.formation.paths.assignment.assign` (used by the choice

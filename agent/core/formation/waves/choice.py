@@ -10,8 +10,13 @@ critical chain, a copy with start sidesteps (:mod:`kinks`) and two copies with b
 lanes (:mod:`lanes`: the slots of each bundle re-paired per side and jointly, from the
 detoured plan's assignment; a shape with a single slot column has none), and the
 smallest makespan wins; a lane plan only when its makespan is
-strictly smaller than every other. Otherwise the paper's matching (NAO paper 4.2, Lemma 1) or the
-explicit strategy is tried per placement until one schedules safely.
+strictly smaller than every other. A shape whose row lies along the fleet (a ``width``
+shape, or a ``depth`` shape of one slot column: the ``column``) also gets side-by-side
+candidates (:func:`_row_plans`): row lanes (:mod:`row_lanes`) and the
+slots moved across the row (:mod:`row_shift`): extra candidates (every other one is
+made as without them), those among the best SHORTENED of all by makespan get detours.
+Otherwise the paper's matching (NAO paper 4.2, Lemma 1) or the explicit strategy is
+tried per placement until one schedules safely.
 """
 
 from __future__ import annotations
@@ -24,6 +29,8 @@ from agent.core.formation.params import CANDIDATES_MAX_N, PlanParams
 from agent.core.formation.paths.assignment import assign, bounded_assignment, min_bottleneck
 from agent.core.formation.paths.kinks import start_kinks
 from agent.core.formation.paths.lanes import bundle_lanes
+from agent.core.formation.paths.row_lanes import row_lanes
+from agent.core.formation.paths.row_shift import row_shift
 from agent.core.formation.shape.layout import column_step, placed
 from agent.core.formation.shape.pyramid import PyramidFrame
 from agent.core.formation.waves.scheduled import Scheduled, scheduled_plan
@@ -44,7 +51,77 @@ SHORTENED = 3
 #: smaller by more than this (path-length units: rounding).
 LANES_MARGIN = 1e-9
 
+#: A row-lane plan (:mod:`row_lanes`) may walk up to this many times the smallest total
+#: (its lanes lie beside the row: the price of walking side by side).
+ROW_LANES_SLACK = 1.25
+
+#: Row-lane and row-shift plans rank after every other plan of equal makespan and total.
+ROW_RANK = 1000
+
 _NO_OBS = np.zeros((0, 2))
+
+
+def _row_plans(
+    pos: np.ndarray,
+    frame: PyramidFrame,
+    starts_p: np.ndarray,
+    slots_p: np.ndarray,
+    orders: list[tuple[str, np.ndarray]],
+    params: PlanParams,
+    bound: float,
+    along: int = 0,
+) -> list[tuple[float, float, int, Scheduled, float]]:
+    """(makespan, total, rank, plan, bound on its total) of the side-by-side plans of a
+    shape whose row lies along the fleet (its x axis, ``along=0``: a ``width`` shape;
+    its y axis, ``along=1``: a ``depth`` shape of one slot column): the row-lane plans
+    (:mod:`row_lanes`) of each given (strategy, slot order), kept and re-paired, with a
+    total path <= ``bound``; then the straight min-sum plans to the slots moved across
+    the row either way (:mod:`row_shift`), whose bound is PATH_SLACK × their own
+    straight total. Ranks from ROW_RANK in that order; duplicates dropped; plans that
+    cannot be scheduled left out."""
+    out: list[tuple[float, float, int, Scheduled, float]] = []
+    seen: set[bytes] = set()
+    clear = 2.0 * params.radius
+    k = [1, 0] if along else [0, 1]  # the row's frame: x along the row (a swap for y)
+    rs, rt = starts_p[:, k], slots_p[:, k]
+    for strat, perm in orders:
+        for repair in (False, True):
+            got = row_lanes(rs, rt, perm, clear, repair)
+            if got is None or got[0].tobytes() in seen:
+                continue
+            seen.add(got[0].tobytes())
+            order, vias = got
+            try:
+                sc = scheduled_plan(
+                    pos,
+                    frame.to_common(slots_p[order]),
+                    order,
+                    [tuple(frame.to_common(v[k]) for v in vs) for vs in vias],
+                    _NO_OBS,
+                    params,
+                    strat,
+                )
+            except ValueError:
+                continue
+            if sc.total <= bound:
+                out.append((sc.makespan, sc.total, ROW_RANK + len(out), sc, bound))
+    opt = assign(starts_p, slots_p, "optimal", params.d_e, params.phi_e)
+    shift = row_shift(rs, rt, opt, clear)
+    for sign in (1.0, -1.0) if shift is not None else ():
+        moved = slots_p + np.array([0.0, sign * float(shift or 0.0)])[k]
+        perm = assign(starts_p, moved, "optimal", params.d_e, params.phi_e)
+        straight = float(np.sum(np.hypot(*(starts_p - moved[perm]).T)))
+        empty: list[tuple[np.ndarray, ...]] = [() for _ in range(pos.shape[0])]
+        try:
+            sc = scheduled_plan(
+                pos, frame.to_common(moved[perm]), perm, empty, _NO_OBS, params, "optimal"
+            )
+        except ValueError:
+            continue
+        own = PATH_SLACK * straight + 1e-9
+        if sc.total <= own:
+            out.append((sc.makespan, sc.total, ROW_RANK + len(out), sc, own))
+    return out
 
 
 def _candidates(starts_p: np.ndarray, slots_p: np.ndarray) -> list[tuple[str, np.ndarray]]:
@@ -169,6 +246,21 @@ def choose(
         good, bound = _scheduled(
             pos, frame, starts_p, slots_p, _candidates(starts_p, slots_p), _NO_OBS, params
         )
+        # side by side (a wide shape's row lanes and shifts): extra candidates; those that
+        # rank among the best SHORTENED of all by makespan get detours
+        along = 0 if params.shape.orient == "width" else 1 if not math.isfinite(step) else -1
+        rowed = _row_plans(
+            pos, frame, starts_p, slots_p, [(g[3].strategy, g[3].order) for g in good], params,
+            (bound - 1e-9) / PATH_SLACK * ROW_LANES_SLACK + 1e-9, along,
+        ) if along >= 0 else []  # fmt: skip
+        best = [g[3] for g in sorted(good + [r[:4] for r in rowed], key=lambda g: g[:3])]
+        best = best[:SHORTENED]
+        for j, (_, _, k, sc, own) in enumerate(rowed):
+            if any(sc is b for b in best):
+                sc = scheduled_plan(
+                    pos, sc.targets, sc.order, sc.vias, _NO_OBS, params, sc.strategy, bound=own
+                )
+                rowed[j] = (sc.makespan, sc.total, k, sc, own)
         axis = np.array([math.cos(frame.beta), math.sin(frame.beta)])
         kinked: list[tuple[float, float, int, Scheduled]] = []
         laned: list[tuple[float, float, int, Scheduled]] = []
@@ -213,7 +305,7 @@ def choose(
                     continue
                 if alt.total <= bound:
                     laned.append((alt.makespan, alt.total, 2 * k + m, alt))
-        good += kinked
+        good += kinked + [r[:4] for r in rowed]
         if good:
             win = min(good, key=lambda g: g[:3])
             if laned:  # kept only when its makespan is strictly smaller
