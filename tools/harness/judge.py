@@ -65,11 +65,10 @@ def plan_from_agreed(
     strategy: str = "default",
     shape: FormationShape = PYRAMID,
 ) -> Any:
-    """The plan recomputed by the evaluator from the records the agents exchanged, with
-    the fleet's planning parameters: (the adapter, the plan, the plan the robots started
-    on). With the orientation ``cp`` the plan is the formation's from the circle the
-    records give (agent/core/formation/reshape.py ``from_circle``), and the robots
-    started on the circle's; else both are the same."""
+    """(the adapter, the plan, the plan the robots started on), recomputed from the records
+    the agents exchanged with the fleet's parameters. With the orientation ``cp``: the
+    formation's from the records' circle (agent/core/formation/reshape.py), started on
+    the circle's; else both are the same."""
     from agent.adapters import FormationAdapter
     from agent.core.formation.params import PlanParams
     from agent.core.formation.reshape import from_circle
