@@ -209,7 +209,8 @@ def plot(rows: list[dict[str, Any]], path: Path) -> None:
     ax.legend(fontsize=7, ncol=3)
     ax.set_title("AUV Tables 1-2: final relative errors, with images", fontsize=10)
     bx.set_xticks(range(2 * len(every)), [f"{r['variant']}\n{s}" for r in every
-                                         for s in ("here", "paper")], fontsize=6)  # fmt: skip
+                                         for s in ("here", "paper")], fontsize=6,
+                  rotation=45)  # fmt: skip
     bx.set_ylabel("sim s")
     bx.set_title("Table 3: building time", fontsize=10)
     fig.tight_layout()
