@@ -134,6 +134,26 @@ def _pair(
     return out
 
 
+def checked_rows(
+    starts_p: np.ndarray, slots_p: np.ndarray, order: np.ndarray, clearance: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(starts, slots, order) as arrays, checked: (n, 2) starts and slots, ``order`` a
+    permutation of range(n), ``clearance`` a finite distance > 0 (``ValueError``
+    otherwise); the input check of every lane layout (:mod:`row_lanes`, :mod:`row_shift`
+    too)."""
+    p = np.asarray(starts_p, dtype=np.float64)
+    s = np.asarray(slots_p, dtype=np.float64)
+    perm = np.asarray(order)
+    if p.ndim != 2 or p.shape[1:] != (2,) or s.shape != p.shape:
+        raise ValueError(f"starts and slots must be (n, 2) arrays, got {p.shape} and {s.shape}")
+    n = p.shape[0]
+    if perm.shape != (n,) or not np.array_equal(np.sort(perm), np.arange(n)):
+        raise ValueError(f"order must be a permutation of range({n})")
+    if not (math.isfinite(clearance) and clearance > 0):
+        raise ValueError(f"clearance must be a finite distance > 0, got {clearance!r}")
+    return p, s, perm
+
+
 def bundle_lanes(
     starts_p: np.ndarray,
     slots_p: np.ndarray,
@@ -151,16 +171,8 @@ def bundle_lanes(
     (:func:`agent.core.formation.shape.layout.column_step`; h = step / 2 keeps every lane
     at >= h from every slot, whatever the columns' spacing); default the pyramid's
     d_e·sin φ_e."""
-    p = np.asarray(starts_p, dtype=np.float64)
-    s = np.asarray(slots_p, dtype=np.float64)
-    perm = np.asarray(order)
-    if p.ndim != 2 or p.shape[1:] != (2,) or s.shape != p.shape:
-        raise ValueError(f"starts and slots must be (n, 2) arrays, got {p.shape} and {s.shape}")
+    p, s, perm = checked_rows(starts_p, slots_p, order, clearance)
     n = p.shape[0]
-    if perm.shape != (n,) or not np.array_equal(np.sort(perm), np.arange(n)):
-        raise ValueError(f"order must be a permutation of range({n})")
-    if not (math.isfinite(clearance) and clearance > 0):
-        raise ValueError(f"clearance must be a finite distance > 0, got {clearance!r}")
     check_geometry(d_e, phi_e)
     out_order = perm.astype(np.int64).copy()
     if step is not None and not (math.isfinite(step) and step > 0):

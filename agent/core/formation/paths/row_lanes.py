@@ -38,9 +38,9 @@ bundle so that its diagonal legs nest as its lanes do: the robot farthest from t
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
+
+from agent.core.formation.paths.lanes import checked_rows
 
 #: Lanes are this many clearances apart (and the lowest this far beyond the bundle's
 #: outermost slot row); a slot is in a bundle when it lies this far beyond every start.
@@ -57,16 +57,8 @@ def row_lanes(
     """The row-lane plan of the module doc, in the shape frame: (slot per robot row, via
     points per row), or None when no slot lies beyond the fleet. ``order``: each row's
     slot (a permutation of the rows of ``slots_p``)."""
-    p = np.asarray(starts_p, dtype=np.float64)
-    s = np.asarray(slots_p, dtype=np.float64)
-    perm = np.asarray(order)
-    if p.ndim != 2 or p.shape[1:] != (2,) or s.shape != p.shape:
-        raise ValueError(f"starts and slots must be (n, 2) arrays, got {p.shape} and {s.shape}")
+    p, s, perm = checked_rows(starts_p, slots_p, order, clearance)
     n = p.shape[0]
-    if perm.shape != (n,) or not np.array_equal(np.sort(perm), np.arange(n)):
-        raise ValueError(f"order must be a permutation of range({n})")
-    if not (math.isfinite(clearance) and clearance > 0):
-        raise ValueError(f"clearance must be a finite distance > 0, got {clearance!r}")
     g = ROW_LANE_GAP * clearance
     out = perm.astype(np.int64).copy()
     vias: list[tuple[np.ndarray, ...]] = [() for _ in range(n)]

@@ -29,22 +29,16 @@ import math
 
 import numpy as np
 
+from agent.core.formation.paths.lanes import checked_rows
+
 
 def row_shift(
     starts_p: np.ndarray, slots_p: np.ndarray, order: np.ndarray, clearance: float
 ) -> float | None:
     """D of the module doc (m), or None. ``order``: each row's slot (a permutation of the
     rows of ``slots_p``)."""
-    p = np.asarray(starts_p, dtype=np.float64)
-    s = np.asarray(slots_p, dtype=np.float64)
-    perm = np.asarray(order)
-    if p.ndim != 2 or p.shape[1:] != (2,) or s.shape != p.shape:
-        raise ValueError(f"starts and slots must be (n, 2) arrays, got {p.shape} and {s.shape}")
+    p, s, perm = checked_rows(starts_p, slots_p, order, clearance)
     n = p.shape[0]
-    if perm.shape != (n,) or not np.array_equal(np.sort(perm), np.arange(n)):
-        raise ValueError(f"order must be a permutation of range({n})")
-    if not (math.isfinite(clearance) and clearance > 0):
-        raise ValueError(f"clearance must be a finite distance > 0, got {clearance!r}")
     if n < 2:
         return None
     dist = np.hypot(p[:, None, 0] - p[None, :, 0], p[:, None, 1] - p[None, :, 1])
