@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 
 from agent.core.formation.params import PlanParams
 from agent.core.formation.paths.row_lanes import ROW_LANE_GAP, row_lanes
-from agent.core.formation.plan import plan_from_positions
+from agent.core.formation.plan import Plan, plan_from_positions
 from agent.core.formation.shape.layout import centred, placed, shape_frame
 from agent.core.formation.shape.spec import BUILTIN
 from agent.core.formation.waves.execution import (
@@ -34,6 +34,31 @@ G = ROW_LANE_GAP * C  # 0.48 m
 # shape frame: the row is the x axis; four robots in a cluster round x = 0, slots on y = 0
 STARTS = np.array([[0.0, 1.0], [1.0, 2.0], [-1.0, -1.0], [0.5, -2.0]])
 SLOTS = np.array([[0.0, 0.0], [10.0, 0.0], [12.0, 0.0], [-10.0, 0.0]])
+
+
+def planned_within_twice_capt(pos: np.ndarray, params: PlanParams, seed: int) -> Plan:
+    """The plan of robots 1..n at ``pos``: safe under both checkers (release points and
+    whole paths), its dependency makespan within 2× CAPT on the centred slots, and the
+    same digest for the robots shuffled."""
+    n = pos.shape[0]
+    ids = list(range(1, n + 1))
+    plan = plan_from_positions(ids, pos, params)
+    paths, waves = plan.paths(), plan.wave_of()
+    row = {r.robot_id: k for k, r in enumerate(plan.robots)}
+    after = [[row[j] for j in r.after] for r in plan.robots]
+    at = [list(r.after_at) for r in plan.robots]
+    assert not check_safety(paths, waves, C / 2)
+    assert not check_dependencies(paths, after, waves, C / 2, after_at=at)
+    assert not check_dependencies(paths, after, waves, C / 2)
+    frame = shape_frame(pos, params.axis, params.shape)
+    starts_p = frame.to_pyramid(pos)
+    slots = frame.to_common(placed(params.shape, n, params.d_e, params.phi_e, starts_p, "centroid"))
+    ms = dependency_makespan(path_lengths(paths), after, waves, at)
+    assert ms <= 2.0 * capt_makespan(pos, slots)
+    perm = np.random.default_rng(seed).permutation(n)
+    again = plan_from_positions([ids[k] for k in perm], pos[perm], params)
+    assert again.digest == plan.digest
+    return plan
 
 
 def test_row_lanes_worked_by_hand() -> None:
@@ -172,21 +197,5 @@ def test_a_line_or_column_of_40_from_uniform_starts_within_2x_capt_safe_and_alik
     n, d_e, phi = 40, 2.0, math.radians(30)
     pos = _uniform(n, seed)
     params = PlanParams(d_e=d_e, phi_e=phi, radius=C / 2, shape=BUILTIN[shape])
-    ids = list(range(1, n + 1))
-    plan = plan_from_positions(ids, pos, params)
-    paths, waves = plan.paths(), plan.wave_of()
-    row = {r.robot_id: k for k, r in enumerate(plan.robots)}
-    after = [[row[j] for j in r.after] for r in plan.robots]
-    at = [list(r.after_at) for r in plan.robots]
-    assert not check_safety(paths, waves, C / 2)
-    assert not check_dependencies(paths, after, waves, C / 2, after_at=at)
-    assert not check_dependencies(paths, after, waves, C / 2)
-    frame = shape_frame(pos, params.orientation, params.shape)
-    slots = frame.to_common(placed(params.shape, n, d_e, phi, frame.to_pyramid(pos), "centroid"))
-    capt = capt_makespan(pos, slots)
-    ms = dependency_makespan(path_lengths(paths), after, waves, at)
-    assert ms <= 2.0 * capt
+    plan = planned_within_twice_capt(pos, params, seed)
     assert any(len(r.via) == 2 for r in plan.robots)  # the row lanes won
-    perm = np.random.default_rng(seed).permutation(n)
-    again = plan_from_positions([ids[k] for k in perm], pos[perm], params)
-    assert again.digest == plan.digest

@@ -12,18 +12,8 @@ import pytest
 
 from agent.core.formation.params import PlanParams
 from agent.core.formation.paths.row_shift import row_shift
-from agent.core.formation.plan import plan_from_positions
-from agent.core.formation.shape.layout import placed, shape_frame
 from agent.core.formation.shape.spec import BUILTIN
-from agent.core.formation.waves.execution import (
-    capt_makespan,
-    check_dependencies,
-    dependency_makespan,
-    path_lengths,
-)
-from agent.core.formation.waves.safety import check_safety
-
-C = 0.4
+from tests.formation.paths.test_row_lanes import C, planned_within_twice_capt
 
 
 def test_row_shift_worked_by_hand() -> None:
@@ -76,19 +66,4 @@ def test_a_line_shape_on_a_line_of_40_within_2x_capt_safe_and_alike(seed: int) -
     t = (np.arange(n) + rng.uniform(-0.05, 0.05, n)) * step
     pos = np.c_[t, 0.02 * (t - t.mean()) ** 2 / t[-1] + rng.uniform(-0.1, 0.1, n)]
     params = PlanParams(d_e=d_e, phi_e=phi, radius=C / 2, shape=BUILTIN["line"])
-    ids = list(range(1, n + 1))
-    plan = plan_from_positions(ids, pos, params)
-    paths, waves = plan.paths(), plan.wave_of()
-    row = {r.robot_id: k for k, r in enumerate(plan.robots)}
-    after = [[row[j] for j in r.after] for r in plan.robots]
-    at = [list(r.after_at) for r in plan.robots]
-    assert not check_safety(paths, waves, C / 2)
-    assert not check_dependencies(paths, after, waves, C / 2, after_at=at)
-    assert not check_dependencies(paths, after, waves, C / 2)
-    frame = shape_frame(pos, params.orientation, params.shape)
-    slots = frame.to_common(placed(params.shape, n, d_e, phi, frame.to_pyramid(pos), "centroid"))
-    ms = dependency_makespan(path_lengths(paths), after, waves, at)
-    assert ms <= 2.0 * capt_makespan(pos, slots)
-    perm = np.random.default_rng(seed).permutation(n)
-    again = plan_from_positions([ids[k] for k in perm], pos[perm], params)
-    assert again.digest == plan.digest
+    planned_within_twice_capt(pos, params, seed)

@@ -15,8 +15,8 @@ shape, or a ``depth`` shape of one slot column: the ``column``) also gets side-b
 candidates (:func:`_row_plans`): row lanes (:mod:`row_lanes`) and the
 slots moved across the row (:mod:`row_shift`): extra candidates (every other one is
 made as without them), those among the best SHORTENED of all by makespan get detours.
-Otherwise the paper's matching (NAO paper 4.2, Lemma 1) or the explicit strategy is
-tried per placement until one schedules safely.
+Otherwise each placement in turn gets the paper's matching (NAO paper 4.2, Lemma 1) or
+the explicit strategy, until one schedules safely.
 """
 
 from __future__ import annotations
@@ -110,7 +110,6 @@ def _row_plans(
     for sign in (1.0, -1.0) if shift is not None else ():
         moved = slots_p + np.array([0.0, sign * float(shift or 0.0)])[k]
         perm = assign(starts_p, moved, "optimal", params.d_e, params.phi_e)
-        straight = float(np.sum(np.hypot(*(starts_p - moved[perm]).T)))
         empty: list[tuple[np.ndarray, ...]] = [() for _ in range(pos.shape[0])]
         try:
             sc = scheduled_plan(
@@ -118,7 +117,7 @@ def _row_plans(
             )
         except ValueError:
             continue
-        own = PATH_SLACK * straight + 1e-9
+        own = _slack_bound(starts_p, moved, perm)
         if sc.total <= own:
             out.append((sc.makespan, sc.total, ROW_RANK + len(out), sc, own))
     return out
@@ -147,6 +146,12 @@ def _candidates(starts_p: np.ndarray, slots_p: np.ndarray) -> list[tuple[str, np
     return uniq
 
 
+def _slack_bound(starts_p: np.ndarray, slots_p: np.ndarray, perm: np.ndarray) -> float:
+    """PATH_SLACK × the total of the straight paths of the assignment ``perm``."""
+    straight = np.hypot(*(starts_p - slots_p[perm]).T)
+    return PATH_SLACK * float(straight.sum()) + 1e-9
+
+
 def _scheduled(
     pos: np.ndarray,
     frame: PyramidFrame,
@@ -165,8 +170,7 @@ def _scheduled(
     bound = math.inf
     for k, (strat, perm) in enumerate(candidates):
         if k == 0 and slack:
-            straight = np.hypot(*(starts_p - slots_p[perm]).T)
-            bound = PATH_SLACK * float(straight.sum()) + 1e-9
+            bound = _slack_bound(starts_p, slots_p, perm)
         try:
             sc = scheduled_plan(
                 pos, frame.to_common(slots_p[perm]), perm, empty, obs, params, strat
@@ -188,9 +192,10 @@ def choose_anchored(
     :func:`_candidates` assignments on them, made safe and packed (``obs``: obstacles,
     (M, 2), common frame), those that keep the anchor in place; of those within the
     path slack (every one when none is: a robot that must walk round the anchor), the
-    best by makespan, then total path, gets detours on its critical chain. No start sidesteps, lanes or other placements: they would move
-    the anchor or the slots. None: a slot within two radii of an obstacle, or no
-    candidate schedules with the anchor in place."""
+    best by makespan, then total path, gets detours on its critical chain. No start
+    sidesteps, lanes or other placements: they would move the anchor or the slots.
+    None: a slot within two radii of an obstacle, or no candidate schedules with the
+    anchor in place."""
     n = pos.shape[0]
     if not 0 <= row < n:
         raise ValueError(f"anchor row must be in [0, {n}), got {row}")
@@ -213,8 +218,7 @@ def choose_anchored(
     good = [g for g in every if g[3].order[row] == 0 and not g[3].vias[row]]
     if not good:
         return None
-    straight = np.hypot(*(starts_p - slots_p[cands[0][1]]).T)
-    bound = PATH_SLACK * float(straight.sum()) + 1e-9
+    bound = _slack_bound(starts_p, slots_p, cands[0][1])
     within = [g for g in good if g[1] <= bound]
     best = min(within or good, key=lambda g: g[:3])[3]
     if within and not obs.shape[0]:  # detours on the critical chain, if the anchor stays
