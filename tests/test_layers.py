@@ -26,6 +26,7 @@
 from __future__ import annotations
 
 import ast
+import functools
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -74,11 +75,19 @@ def _own(target: str) -> str | None:
     return target or None
 
 
-GRAPH = {
-    m: {t for t in (_own(i) for i in _imports(m, p)) if t and t != m and not m.startswith(t + ".")}
-    for m, p in MODULES.items()
-}
-RAW = {m: set(_imports(m, p)) for m, p in MODULES.items()}
+@functools.cache
+def _raw() -> dict[str, set[str]]:
+    """Every module's imports, parsed once, when a test first asks (not at collection)."""
+    return {m: set(_imports(m, p)) for m, p in MODULES.items()}
+
+
+@functools.cache
+def _graph() -> dict[str, set[str]]:
+    """The project's import graph: each module to the project modules it imports."""
+    return {
+        m: {t for t in map(_own, imps) if t and t != m and not m.startswith(t + ".")}
+        for m, imps in _raw().items()
+    }
 
 
 def _in(module: str, layer: str) -> bool:
@@ -88,7 +97,7 @@ def _in(module: str, layer: str) -> bool:
 def _violations(layer: str, allowed: tuple[str, ...], banned: frozenset[str]) -> list[str]:
     out = []
     for m in sorted(x for x in MODULES if _in(x, layer)):
-        for imp in sorted(RAW[m]):
+        for imp in sorted(_raw()[m]):
             top = imp.split(".")[0]
             if top in banned or (
                 top == "agent" and imp != "agent" and not any(_in(imp, a) for a in allowed)
@@ -135,16 +144,18 @@ def test_crash_recovery_builds_on_the_phases_never_the_reverse() -> None:
 
 def test_only_the_transport_imports_zenoh_and_only_naoqi_modules_import_qi() -> None:
     zenoh = sorted(
-        m for m in MODULES if _in(m, "agent") and "zenoh" in {i.split(".")[0] for i in RAW[m]}
+        m for m in MODULES if _in(m, "agent") and "zenoh" in {i.split(".")[0] for i in _raw()[m]}
     )
     assert zenoh and all(_in(m, "agent.net") for m in zenoh), zenoh
-    qi = sorted(m for m in MODULES if "qi" in {i.split(".")[0] for i in RAW[m]})
+    qi = sorted(m for m in MODULES if "qi" in {i.split(".")[0] for i in _raw()[m]})
     assert all("naoqi" in m.rpartition(".")[2] for m in qi), qi
 
 
 def _imports_of(layer: str, wrong: Callable[[str], bool]) -> list[str]:
     """``module imports name`` for every import of ``layer`` that ``wrong`` refuses."""
-    return sorted(f"{m} imports {i}" for m in MODULES if _in(m, layer) for i in RAW[m] if wrong(i))
+    return sorted(
+        f"{m} imports {i}" for m in MODULES if _in(m, layer) for i in _raw()[m] if wrong(i)
+    )
 
 
 def test_agent_never_imports_sim_or_tools() -> None:
@@ -163,18 +174,18 @@ def test_tools_never_import_the_phase_machine() -> None:
 
 def test_the_rules_catch_what_they_forbid() -> None:
     """The checks can fail: a forbidden import written into a module is found."""
-    RAW["sim.physics.world"].add("agent.phases.runner")
+    _raw()["sim.physics.world"].add("agent.phases.runner")
     try:
         assert _imports_of("sim", lambda i: not _in(i, "agent.wire") and i.startswith("agent"))
     finally:
-        RAW["sim.physics.world"].discard("agent.phases.runner")
-    RAW["agent.phases.runner"].add("agent.recovery.resume")
+        _raw()["sim.physics.world"].discard("agent.phases.runner")
+    _raw()["agent.phases.runner"].add("agent.recovery.resume")
     try:
         assert _imports_of("agent.phases", lambda i: _in(i, "agent.recovery")) == [
             "agent.phases.runner imports agent.recovery.resume"
         ]
     finally:
-        RAW["agent.phases.runner"].discard("agent.recovery.resume")
+        _raw()["agent.phases.runner"].discard("agent.recovery.resume")
 
 
 def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
@@ -229,7 +240,7 @@ def test_cycle_finder_finds_a_known_cycle() -> None:
 
 
 def test_no_import_cycles() -> None:
-    assert _cycles(GRAPH) == []
+    assert _cycles(_graph()) == []
 
 
 # The formation core (agent/core/formation), lowest tier first: its rooms (folders) and its
@@ -295,11 +306,11 @@ def test_every_formation_room_has_a_tier() -> None:
 
 
 def test_formation_rooms_are_layered() -> None:
-    assert _formation_violations(GRAPH) == []
+    assert _formation_violations(_graph()) == []
 
 
 def test_the_formation_order_catches_an_upward_import() -> None:
-    graph = {m: set(ts) for m, ts in GRAPH.items()}
+    graph = {m: set(ts) for m, ts in _graph().items()}
     graph[f"{FORMATION}.frame.poses"].add(f"{FORMATION}.paths.geometry")
     graph[f"{FORMATION}.shape.pyramid"].add(f"{FORMATION}.frame.records")
     assert _formation_violations(graph) == [
@@ -334,11 +345,11 @@ def test_every_sim_room_has_a_tier() -> None:
 
 def test_sim_rooms_are_layered() -> None:
     """No import cycle between the world's rooms: each imports only lower tiers."""
-    assert _layer_violations(GRAPH, "sim", SIM_TIERS) == []
+    assert _layer_violations(_graph(), "sim", SIM_TIERS) == []
 
 
 def test_the_sim_order_catches_an_upward_import() -> None:
-    graph = {m: set(ts) for m, ts in GRAPH.items()}
+    graph = {m: set(ts) for m, ts in _graph().items()}
     graph["sim.camera.picture"].add("sim.physics.world")
     graph["sim.physics.world"].add("sim.server.server")
     assert _layer_violations(graph, "sim", SIM_TIERS) == [
