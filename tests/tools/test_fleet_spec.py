@@ -18,7 +18,14 @@ from agent.core.formation.view.route import Route
 from sim import scenarios
 from tools import eval_loss
 from tools.harness import monitor
-from tools.harness.fleet import MAX_ROBOTS, Fleet, FleetSpec, march_room, route_length
+from tools.harness.fleet import (
+    MAX_ROBOTS,
+    Fleet,
+    FleetSpec,
+    march_room,
+    route_length,
+    shape_room,
+)
 from tools.harness.hosts import HostFleet, Hosts
 from tools.harness.judge import plan_meta
 from tools.harness.report import exit_status, run_matrix
@@ -90,6 +97,25 @@ def test_a_march_widens_the_room_and_a_world_arg_scenario_wins(tmp_path: Path) -
     assert flags[0] == "--scenario" and scenarios.load(flags[1]).room == base.room + 7.0
     assert march_room(replace(to, world_args=("--scenario=x.json",)), tmp_path) == []
     assert march_room(FleetSpec(headings=scenarios.Headings("random")), tmp_path) != []
+
+
+def test_the_room_holds_the_first_shape_a_wall_spacing_beyond_its_slots(tmp_path: Path) -> None:
+    """A line of 10 (seed 201) reaches 3.6 m from its middle: the 3.5 m room of its starts
+    grows until every slot stands d_e from a wall; the pyramid of 3 fits its room, and the
+    world keeps generating that scenario itself."""
+    line = FleetSpec(robots=10, seed=201, agent=AgentConfig(robot_id=0, shape=BUILTIN["line"]))
+    base = scenarios.generate(10, 201)
+    starts = [(r.x, r.y) for r in base.robots]
+    mean = math.hypot(*(sum(c) / len(c) for c in zip(*starts, strict=True)))
+    assert base.room == 3.5
+    assert shape_room(line, base) == math.ceil(2.0 * (mean + 3.6 + 0.8)) / 2.0
+    flags = march_room(line, tmp_path)
+    room = scenarios.load(flags[1]).room
+    assert room == shape_room(line, base) >= 3.6 + 0.8
+    assert scenarios.load(flags[1]).robots == base.robots  # the same starts, more floor
+    assert march_room(FleetSpec(robots=3, seed=1), tmp_path) == []
+    pyramid = FleetSpec(robots=3, seed=1)
+    assert shape_room(pyramid, scenarios.generate(3, 1)) <= scenarios.generate(3, 1).room
 
 
 def test_a_fleet_judged_before_it_started_has_no_result(tmp_path: Path) -> None:

@@ -224,24 +224,46 @@ def reshape_reach(spec: FleetSpec) -> float:
     return reach
 
 
+def shape_room(spec: FleetSpec, sc: scenarios.Scenario) -> float:
+    """The smallest room half-size (m, on the 0.5 m grid of generated rooms) whose walls
+    stand at least d_e (one formation spacing) beyond every slot of the run's first shape:
+    the fleet does not see walls, so the world gives it the free floor a lab must (docs/formation.md
+    "Shapes"). The slots stand round the starts' mean (o_p, eq. 13;
+    :func:`agent.core.formation.shape.layout.centred`), whichever way the shape faces, so
+    the room needs |o_p| plus the slots' reach from their mean plus d_e. A line of 10 at
+    d_e 0.8 reaches 3.6 m, beyond the 3.5 m room the starts of 10 robots get; the pyramid
+    fits the starts' room but for a few of the largest fleets."""
+    cfg = spec.agent
+    pos = cfg.shape.slots(spec.robots, cfg.d_e, cfg.phi_e).positions
+    reach = float(np.max(np.hypot(*(pos - pos.mean(axis=0)).T)))
+    starts = np.array([(r.x, r.y) for r in sc.robots], dtype=np.float64)
+    need = float(np.hypot(*starts.mean(axis=0))) + reach + cfg.d_e
+    return math.ceil(2.0 * need) / 2.0
+
+
 def march_room(spec: FleetSpec, out: Path) -> list[str]:
     """World flags for the run's scenario, written to ``out/scenario.json``: the file of
-    ``scenario``, or the seed's generated one (``isolated``, ``headings``); with a march,
-    its room's half-size enlarged by the route's length, with reshapes by the reach of
-    their shapes (:func:`reshape_reach`; sim/scenarios is not changed).
+    ``scenario``, or the seed's generated one (``isolated``, ``headings``), a generated
+    room enlarged to hold the first shape (:func:`shape_room`); with a march, its room's
+    half-size enlarged by the route's length, with reshapes by the reach of their shapes
+    (:func:`reshape_reach`; sim/scenarios is not changed).
     [] when the world generates the default scenario itself, or when the caller chose a
     scenario with ``world_args``."""
+    if any("--scenario" in a for a in spec.world_args):
+        return []
     extra = route_length(spec.agent) + reshape_reach(spec)
     turned = spec.headings.kind != "aligned"
-    if (extra <= 0.0 and spec.scenario is None and not spec.isolated and not turned) or any(
-        "--scenario" in a for a in spec.world_args
-    ):
-        return []
-    sc = scenarios.load(spec.scenario) if spec.scenario is not None else None
-    if sc is None:
+    if spec.scenario is not None:
+        sc = scenarios.load(spec.scenario)
+    else:
         sc = scenarios.generate(
             spec.robots, spec.seed, isolated=spec.isolated, headings=spec.headings
         )
+        held = shape_room(spec, sc)
+        if held > sc.room:
+            sc = replace(sc, room=min(100.0, held))
+        elif extra <= 0.0 and not spec.isolated and not turned:
+            return []  # the world's own scenario of the seed is this one
     if extra > 0.0:
         sc = replace(sc, room=min(100.0, math.ceil(2.0 * (sc.room + extra)) / 2.0))
     path = out / "scenario.json"
