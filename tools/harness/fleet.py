@@ -41,7 +41,14 @@ from sim import scenarios
 from sim.camera.look import Look
 from sim.physics.locomotion import MAX_NOISE_SCALE
 from tools.harness.judge import plan_meta, summarise
-from tools.harness.observe import AgentView, LiveView, Observer, Recorder, observe_for, observer_bus
+from tools.harness.observe import (
+    AgentView,
+    LiveView,
+    Observer,
+    Recorder,
+    observe_still,
+    observer_bus,
+)
 from tools.harness.procs import (
     FleetNet,
     Proc,
@@ -349,6 +356,15 @@ class Fleet:
         joins = ["--connect" if net.router else "--listen", net.endpoint, *net.flags]
         world = start_world(spec.robots, spec.seed, net.endpoint, out, self._world_flags(), joins)
         self._procs.append(world)
+        # Agents of known ids on the zenoh body start with the world, not after it: each
+        # loads its libraries while the world builds its scene, then waits for the world's
+        # services as it would on hosts of its own (agent/body/zenoh_world.py, retries
+        # while no world answers). A virtual NAO's address, a claimed id and the render
+        # workers' cameras come only with the world's ready line.
+        early = spec.body == "zenoh" and not spec.auto_ids and spec.render_workers == 0
+        if early:
+            for i in spec.scenario_ids or range(1, spec.robots + 1):
+                self.start_agent(i)
         wait_ready(world, spec.world_timeout, self._take)
         result["wall_world_ready"] = self.elapsed()
         if spec.render_workers > 0:  # cameras drawn by render workers, not the world
@@ -366,7 +382,9 @@ class Fleet:
             for ln in world.lines
             if ln.startswith("sim naoqi ")
         }
-        for i in self.ids:
+        if early and sorted(self.agents) != self.ids:
+            raise RuntimeError(f"the world serves robots {self.ids}, agents {sorted(self.agents)}")
+        for i in self.ids if not early else ():
             self.start_agent(i)
         if spec.rogue > 0:
             self._rogues = start_rogues(net, out, self.ids, spec.rogue, spec.rogue_replay)
@@ -423,8 +441,9 @@ class Fleet:
     def wait(self, busy: Callable[[float], bool] | None = None) -> None:
         """Observe until every agent has exited and ``busy`` (called after every look with
         the seconds since the start: a caller's injector) has nothing pending, or the
-        spec's ``timeout`` (``result["timeout"]``); then 1.5 s more for the last truth
-        after the motions, and the rogues' end."""
+        spec's ``timeout`` (``result["timeout"]``); then until the world stands still
+        (at most 1.5 s: the last truth after the motions, :func:`observe_still`), and the
+        rogues' end."""
         assert self._bus is not None, "the fleet has not started"
         deadline = time.monotonic() + self.spec.timeout
         while True:
@@ -435,7 +454,7 @@ class Fleet:
             if time.monotonic() > deadline:
                 self.result["timeout"] = f"agents still running after {self.spec.timeout:g} s"
                 break
-        observe_for(self._bus, self.obs, self._rec, 1.5)  # the last truth after the motions
+        observe_still(self._bus, self.obs, self._rec, 1.5)  # the last truth after the motions
         if self._live is not None:
             self._live.update(self.obs, self.elapsed(), force=True)
         self.result["wall_total"] = self.elapsed()

@@ -41,7 +41,7 @@ from agent.config import AgentConfig
 from agent.net.bus import Bus, BusConfig
 from agent.wire import CREDENTIALS_ENV, INSECURE_WARNING, PHASES
 from tools.harness.judge import plan_meta, print_table, summarise
-from tools.harness.observe import AgentView, Observer, Recorder, observe_for, watch
+from tools.harness.observe import AgentView, Observer, Recorder, observe_still, watch
 
 #: Phases an agent reaches only after agreement (its first one ends ``agree_s``).
 AGREED_PHASES = ("plan", "wait", "move", "hold", "march", "done")
@@ -75,9 +75,9 @@ def monitor(
     ``out/exits``; :func:`read_exits`), or N agents were alive and every liveliness token
     has been gone for 5 s, or ``timeout_s`` has passed; the robots are those of the
     ground truth (else those seen), each with the exit code of its record (none: it did
-    not finish). It then drains 1.5 s more and writes ``out/result.json`` (and
-    the formation figure) with ``tools.harness.judge.summarise``. Returns 0 when the run
-    succeeded.
+    not finish). It then waits until the world stands still (at most 1.5 s;
+    ``observe_still``) and writes ``out/result.json`` (and the formation figure) with
+    ``tools.harness.judge.summarise``. Returns 0 when the run succeeded.
     """
     out.mkdir(parents=True, exist_ok=True)
     lines: queue.Queue[str] = queue.Queue()
@@ -149,7 +149,7 @@ def monitor(
             with contextlib.suppress(queue.Empty):
                 line = lines.get_nowait()
                 order = json.loads(line) if line.strip() else {}
-        observe_for(bus, obs, rec, 1.5)
+        observe_still(bus, obs, rec, 1.5)
     finally:
         bus.close()
         rec.close()

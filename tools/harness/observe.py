@@ -327,9 +327,29 @@ def watch(bus: Bus) -> None:
     bus.watch_alive(KEY_ALIVE_ALL)
 
 
-def observe_for(bus: Bus, obs: Observer, rec: Recorder | None, seconds: float) -> None:
-    """Hand what arrives on ``bus`` to ``obs`` for ``seconds`` (polls, bounded)."""
-    end = time.monotonic() + seconds
+#: How far two truth samples' poses may differ for a world that stands still (m, rad):
+#: the world moves a robot only by its motions, far more than this in 0.1 s.
+STILL = 1e-4
+
+
+def observe_still(bus: Bus, obs: Observer, rec: Recorder | None, seconds: float) -> None:
+    """Hand what arrives to ``obs`` until the world stands still, or for ``seconds``: two
+    truth samples arrived here, the later one equal to the one before in every robot's
+    pose (within :data:`STILL`). Called once every agent has exited: the world publishes
+    each motion's last pose before it replies (sim/server/server.py), so the samples
+    after the exits show the end, unless a dead agent's motion is still being walked out,
+    which the next samples then show moving."""
+    end, first = time.monotonic() + seconds, len(obs.truth)
     while time.monotonic() < end:
         for ev in bus.drain(0.1):
             obs.take_event(ev, rec)
+        if len(obs.truth) >= first + 2 and _same_poses(obs.truth[-2][1], obs.truth[-1][1]):
+            return
+
+
+def _same_poses(
+    a: dict[int, tuple[float, float, float]], b: dict[int, tuple[float, float, float]]
+) -> bool:
+    return a.keys() == b.keys() and all(
+        max(abs(u - v) for u, v in zip(a[i], b[i], strict=True)) <= STILL for i in a
+    )
