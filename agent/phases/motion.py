@@ -14,6 +14,11 @@ Every command is journaled before it is sent, with the motion request id it is s
 (crashed agents resume, and survive a second crash: ``Reporter.journal``,
 ``Body.new_request_id``), so a restarted agent can ask for it again without the robot moving twice;
 the last head-yaw-0 image is kept as the next compass reference (:attr:`Motion.last_frame`).
+A step whose compass read failed keeps the reference it was read against, once: its drift,
+believed 0, is then in the next step's reading, which measures the rotation of both
+(:meth:`Motion._next_reference`). Failed reads are missing data; without this, each
+lets the heading belief drift by a step's real drift unseen (up to ~9°), and a robot
+whose check looks only at its parent cannot see its own heading off.
 """
 
 from __future__ import annotations
@@ -52,6 +57,7 @@ class Motion:
         self.ctx = ctx
         self.fleet = fleet
         self.last_frame: Frame | None = None  # the compass reference (head yaw 0)
+        self.carried = False  # last_frame is kept from before a step whose read failed
         self.compass_failures = 0
         self.compass_uses = 0
         self.drift_checks = 0  # implausible step drifts re-measured (_confirm_drift)
@@ -65,7 +71,23 @@ class Motion:
 
     def reference(self) -> Frame:
         """The compass reference: the last head-yaw-0 image, or a fresh one."""
-        return self.last_frame if self.last_frame is not None else self.look(0.0)
+        if self.last_frame is None:
+            self.carried = False
+            return self.look(0.0)
+        return self.last_frame
+
+    def _next_reference(self, before: Frame, after: Frame, read: bool) -> Frame:
+        """The reference after a step: ``after`` when its compass read, else ``before``,
+        once. The next step's reading is then against the image from before the failed
+        step, and holds that step's drift too (its heading was believed unchanged); the
+        images are then two steps (~40 cm) apart, which the walk's central band of
+        the image still matches. A second failure in a row takes ``after``: the image
+        before may be the one that does not match."""
+        if read or self.carried:
+            self.carried = False
+            return after
+        self.carried = True
+        return before
 
     def rotate(self, angle: float, gains: PidGains = PAPER_GAINS, label: str = "") -> float:
         """Turn the body by ``angle`` (rad, + CCW) with the rotation control (5.2.2 (1)).
@@ -92,7 +114,7 @@ class Motion:
                 report.status(report.phase, detail=f"{label}: {math.degrees(rc.error):+.1f}° to go")
             if rep.status == "contact":
                 log.warning("contact while turning")
-        self.last_frame = before
+        self.last_frame, self.carried = before, False
         return rc.completed
 
     def turn(self, angle: float) -> MotionResult:
@@ -107,13 +129,14 @@ class Motion:
     ) -> float:
         """The rotation between two head-yaw-0 frames; the command when the compass fails
         or its match is implausible (:meth:`_read`)."""
-        value, _ = self._read(before, after, commanded, walking)
+        value, _, _ = self._read(before, after, commanded, walking)
         return value
 
     def _read(
         self, before: Frame, after: Frame, commanded: float, walking: bool = False
-    ) -> tuple[float, float | None]:
-        """(rotation to believe, suspect): the compass between two head-yaw-0 frames.
+    ) -> tuple[float, float | None, bool]:
+        """(rotation to believe, suspect, read): the compass between two head-yaw-0 frames;
+        ``read`` is False when it failed.
 
         ``walking``: the frames are 20 cm apart, so only the central band of the image
         is matched (see :meth:`agent.adapters.PerceptionAdapter.measure_walk`). When the
@@ -132,7 +155,7 @@ class Motion:
                 res.reason, "drift" if walking else "command",
                 math.degrees(commanded),
             )  # fmt: skip
-            return commanded, None
+            return commanded, None, False
         dtheta = float(res.dtheta) * self.ctx.beliefs.compass_gain
         if not _plausible(dtheta, commanded, walking):
             self.compass_failures += 1
@@ -140,8 +163,8 @@ class Motion:
                 "compass %+.1f° implausible against %+.1f°: ignored",
                 math.degrees(dtheta), math.degrees(commanded),
             )  # fmt: skip
-            return commanded, dtheta
-        return dtheta, None
+            return commanded, dtheta, True
+        return dtheta, None, True
 
     def _confirm_drift(self, before: Frame, h0: float, suspect: float) -> tuple[Frame, float]:
         """Re-measure a step's drift that the compass reported implausibly large.
@@ -180,11 +203,11 @@ class Motion:
 
     def _step(
         self, command: str, distance: float, send: Callable[[float, int], MotionResult]
-    ) -> tuple[Frame, Frame, MotionResult, float, float | None]:
+    ) -> tuple[Frame, Frame, MotionResult, float, float | None, bool]:
         """What a straight step and a sidestep share: the command journaled with its
         request id and sent, then the compass between the yaw-0 images before and after
         (the walk's central band, :meth:`_read`). Returns (before, after, the body's
-        result, drift, suspect)."""
+        result, drift, suspect, whether the compass read)."""
         before = self.reference()
         rid = self.ctx.body.new_request_id()
         self.ctx.report.journal.save(command, distance, rid)
@@ -192,15 +215,15 @@ class Motion:
         self.steps += 1
         self.fleet.pump()
         after = self.look(0.0)
-        drift, suspect = self._read(before, after, 0.0, walking=True)
-        return before, after, rep, drift, suspect
+        drift, suspect, read = self._read(before, after, 0.0, walking=True)
+        return before, after, rep, drift, suspect, read
 
     def walk_step(self, distance: float) -> MotionResult:
         """One straight step, the compass's drift and dead reckoning (4.2, eq. 2); a
         drift too large to be plausible is re-measured (:meth:`_confirm_drift`)."""
         b = self.ctx.beliefs
         h0, p0 = b.heading, b.position
-        before, after, rep, drift, suspect = self._step("walk", distance, self.ctx.body.walk)
+        before, after, rep, drift, suspect, read = self._step("walk", distance, self.ctx.body.walk)
         turned = 0.0
         if suspect is not None and rep.status != "contact":
             # the step is over: believed (drift unknown yet) before the re-measuring
@@ -210,7 +233,7 @@ class Motion:
             turned = float(np.clip(-suspect, -MAX_TURN_STEP, MAX_TURN_STEP))
             drift = net - turned  # the turn taken as commanded, for dead reckoning
         b.heading = wrap_pi(h0 + drift + turned)
-        self.last_frame = after
+        self.last_frame = self._next_reference(before, after, read)
         b.position = advance(p0, h0, wrap_pi(h0 + drift), distance)
         log.debug(
             "walk t_sim %.2f %.3f m drift %+.2f° heading %.2f° position %s",
@@ -231,11 +254,11 @@ class Motion:
         cost a turn there and back (at 50 NAOs, ~20 s of turn steps for 4 cm)."""
         b = self.ctx.beliefs
         h0, p0 = b.heading, b.position
-        _, after, rep, drift, suspect = self._step("side", distance, self.ctx.body.side)
+        before, after, rep, drift, suspect, read = self._step("side", distance, self.ctx.body.side)
         if suspect is not None:
             drift = 0.0
         b.heading = wrap_pi(h0 + drift)
-        self.last_frame = after
+        self.last_frame = self._next_reference(before, after, read)
         across = math.pi / 2
         b.position = advance(p0, h0 + across, wrap_pi(h0 + drift) + across, distance)
         if rep.status == "contact":

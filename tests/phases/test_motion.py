@@ -10,6 +10,7 @@ import math
 import numpy as np
 import pytest
 
+from agent.body.base import Frame
 from agent.config import AgentConfig
 from agent.core.perception.compass import CompassResult
 from agent.phases.context import NORTH, AgentFailure, Context
@@ -96,3 +97,68 @@ def test_a_contact_while_walking_stops_the_robot_with_where_it_believes_it_is() 
     body.walk = lambda d, request_id=0: MotionResult("contact", 1.0, "robot 1")  # type: ignore[method-assign]
     with pytest.raises(AgentFailure, match=r"contact while walking at believed \[0.0, 0.2\]"):
         m.walk_step(0.2)
+
+
+class Scripted:
+    """A compass over images stamped with their sim time (``image[0, 0]``): it reads the
+    true rotation between them (``heading`` at each time), or fails for the pairs in
+    ``fails``; ``reads`` lists the (before, after) times it was asked."""
+
+    def __init__(self, heading: dict[int, float], fails: set[tuple[int, int]]) -> None:
+        self.heading, self.fails = heading, fails
+        self.reads: list[tuple[int, int]] = []
+
+    def measure_walk(self, before: np.ndarray, after: np.ndarray) -> CompassResult:
+        tb, ta = int(before[0, 0]), int(after[0, 0])
+        self.reads.append((tb, ta))
+        if (tb, ta) in self.fails:
+            return CompassResult(False, 0.0, 0, 0, 0.0, "matches disagree")
+        return CompassResult(True, self.heading[ta] - self.heading[tb], 50, 40, 0.8, "")
+
+    measure_turn = measure_walk
+
+
+def stamped(compass: Scripted) -> tuple[Motion, Context]:
+    ctx = context(AgentConfig(robot_id=3), perception=compass, clock=Clock())  # type: ignore[arg-type]
+    body = ctx.body
+    assert isinstance(body, FakeBody)
+    ctx.report.journal = Journal(body)
+    body.camera = lambda yaw: Frame(np.full((4, 4), body.t_sim), yaw, body.t_sim)  # type: ignore[method-assign]
+    return Motion(ctx, FakeFleet(Clock())), ctx  # type: ignore[arg-type]
+
+
+def test_a_failed_read_keeps_its_reference_and_the_next_step_measures_both_drifts() -> None:
+    """Steps drifting +3° then +2°: the first read fails (its drift believed 0); the second
+    reads against the image before the first step and the heading ends +5°, not +2°."""
+    compass = Scripted({0: 0.0, 1: math.radians(3.0), 2: math.radians(5.0)}, {(0, 1)})
+    m, ctx = stamped(compass)
+    m.walk_step(0.2)
+    assert ctx.beliefs.heading == NORTH and m.carried
+    m.walk_step(0.2)
+    assert compass.reads == [(0, 1), (0, 2)]
+    assert ctx.beliefs.heading == pytest.approx(NORTH + math.radians(5.0))
+    assert not m.carried and m.compass_failures == 1
+
+
+def test_two_failed_reads_in_a_row_take_the_newest_image() -> None:
+    """The image before may be the one that does not match: the reference is carried once."""
+    h = {0: 0.0, 1: 0.01, 2: 0.03, 3: 0.06}
+    compass = Scripted(h, {(0, 1), (0, 2)})
+    m, ctx = stamped(compass)
+    for _ in range(3):
+        m.side_step(0.05)
+    assert compass.reads == [(0, 1), (0, 2), (2, 3)]
+    assert ctx.beliefs.heading == pytest.approx(NORTH + 0.03)  # step 3's drift only
+
+
+def test_a_turn_after_a_failed_step_measures_the_step_drift_too() -> None:
+    """The rotation control reads from the carried image: the belief ends where the robot
+    faces, the failed step's drift included."""
+    h = {0: 0.0, 1: math.radians(4.0), 2: math.radians(4.0 + 10.0)}
+    compass = Scripted(h, {(0, 1)})
+    m, ctx = stamped(compass)
+    m.walk_step(0.2)
+    m.rotate(math.radians(14.0))
+    assert compass.reads[:2] == [(0, 1), (0, 2)]
+    assert ctx.beliefs.heading == pytest.approx(NORTH + math.radians(14.0))
+    assert not m.carried
