@@ -28,11 +28,13 @@ import numpy as np
 
 from agent.core.control import PAPER_GAINS, wrap_pi
 from agent.core.control.alignment import look_yaws, match_parent
+from agent.core.formation.frame.fault_test import ALPHA
 from agent.core.formation.plan import first_shape
-from agent.core.formation.shape.verdict import FACING_TOL, check_edge, facing_misfit
+from agent.core.formation.shape.verdict import check_edge, facing_misfit, facing_tolerance
 from agent.core.formation.view.passers_by import passers_by
 from agent.core.formation.view.route import Route
 from agent.core.nao import CAMERA_HFOV, HEAD_YAW_LIMIT
+from agent.core.perception.sighting_noise import shipped_noise
 from agent.phases.context import AgentFailure, Context
 from agent.phases.march import Marcher
 from agent.phases.membership import Peer, on_plan
@@ -285,9 +287,10 @@ class Hold:
         (:func:`agent.core.formation.shape.verdict.check_edge`: r_d, r_φ against its slot's
         distance and angle from its parent in the shape's tree). The figures travel in
         every later status. A parent not found within ``max_correction`` of its planned
-        place, a pair out of tolerance, or a parent whose mask says it faces more than
-        ``FACING_TOL`` from the axis this robot believes in (its own start heading
-        misjudged), stops this robot with the figure: the fleet never reports "formation
+        place, a pair out of tolerance, or a parent whose mask says it faces further from
+        the axis this robot believes in than a sound pair's mask error reaches at the
+        fault test's α (:func:`agent.core.formation.shape.verdict.facing_tolerance`: the
+        parent's heading or this robot's own is off), stops this robot with the figure: the fleet never reports "formation
         held" on a formation its own camera says is wrong. The leader has no parent to
         check.
         """
@@ -330,10 +333,10 @@ class Hold:
             log.info(
                 "own check: parent %d faces %.0f° off the axis (mask)", parent, math.degrees(off)
             )
-            if abs(off) > FACING_TOL:
+            if abs(off) > facing_tolerance(shipped_noise().sigma_mask, ALPHA):
                 raise AgentFailure(
                     f"formation off: parent {parent} faces {math.degrees(off):+.0f}° from the "
-                    "pyramid axis this robot believes in (its mask): a start heading misjudged"
+                    "axis this robot believes in (its mask): its heading or this robot's is off"
                 )
         # where this robot stands, as measured on its parent's planned place (its fixed
         # frame, from its start): the belief a later plan's legs start from (a

@@ -176,3 +176,19 @@ def test_edge_errors(
 
     with pytest.raises(ValueError, match=match):
         check_edge(2, 1, np.array(offset), axis, dist, angle, phi_e)
+
+
+def test_facing_tolerance_is_the_mask_error_bound_at_the_false_alarm_rate() -> None:
+    """z_{1−α/2} σ_m, worked by hand: α = 0.05 gives 1.96 σ_m; the shipped model at the
+    fault test's α = 10⁻⁴ gives 3.89 σ_m, about 26°; each bad input raises."""
+    from agent.core.formation.frame.fault_test import ALPHA
+    from agent.core.formation.shape.verdict import facing_tolerance
+    from agent.core.perception.sighting_noise import shipped_noise
+
+    assert facing_tolerance(0.1, 0.05) == pytest.approx(0.19600, abs=1e-5)
+    shipped = facing_tolerance(shipped_noise().sigma_mask, ALPHA)
+    assert shipped == pytest.approx(3.8906 * shipped_noise().sigma_mask, rel=1e-4)
+    assert math.radians(20.0) < shipped < math.radians(30.0)
+    for sigma, alpha in ((0.0, 0.01), (math.pi / 4, 0.01), (0.1, 0.0), (0.1, 1.0)):
+        with pytest.raises(ValueError, match="must be in"):
+            facing_tolerance(sigma, alpha)

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from statistics import NormalDist
 
 import numpy as np
 
@@ -30,9 +31,6 @@ import numpy as np
 R_D_MAX = 0.125
 #: Largest |r_φ| of a pair in tolerance.
 R_PHI_MAX = 0.30
-#: Largest misfit (rad, modulo π) between the parent's facing seen by its mask and the
-#: pyramid axis the child believes in (:func:`facing_misfit`).
-FACING_TOL = math.radians(35.0)
 #: The share of the tolerances a robot's own check allows itself (:attr:`PairCheck.sure`).
 OWN_MARGIN = 0.8
 
@@ -133,6 +131,20 @@ def check_edge(
     side = math.sin(angle)  # > 0: the child belongs on its parent's left
     sign = -1.0 if side > 1e-12 else 1.0
     return PairCheck(child, parent, d, seen, (d - distance) / distance, sign * delta / phi_e)
+
+
+def facing_tolerance(sigma_mask: float, alpha: float) -> float:
+    """The largest :func:`facing_misfit` (rad) of a sound pair at false-alarm rate
+    ``alpha``: both robots face the axis, so the misfit is the mask's own error, N(0, σ_m)
+    for a mask read right (the sighting noise model, docs/design.md §9), and
+    ``z_{1−α/2} σ_m`` bounds it two-sided. At the fault test's α = 10⁻⁴ and the shipped
+    σ_m of 6.7°: 26°. Raises ``ValueError`` for σ_m outside (0, π/4) or α outside (0, 1).
+    """
+    if not 0.0 < sigma_mask < math.pi / 4:
+        raise ValueError(f"sigma_mask must be in (0, π/4), got {sigma_mask}")
+    if not 0.0 < alpha < 1.0:
+        raise ValueError(f"alpha must be in (0, 1), got {alpha}")
+    return NormalDist().inv_cdf(1.0 - alpha / 2.0) * sigma_mask
 
 
 def facing_misfit(offset: np.ndarray, facing: float, axis: float) -> float:
