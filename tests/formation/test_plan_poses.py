@@ -83,13 +83,12 @@ def _same_pyramid_in_the_world(seed: int, turn: float, timed: bool) -> None:
 
 
 @settings(max_examples=10, deadline=None)
-@given(st.integers(0, 10_000), st.randoms(use_true_random=False))
-def test_shuffled_records_give_a_bit_identical_plan(seed: int, rnd) -> None:  # type: ignore[no-untyped-def]
+@given(st.integers(0, 10_000), st.randoms(use_true_random=False), st.booleans())
+def test_shuffled_records_give_a_bit_identical_plan(seed: int, rnd, timed: bool) -> None:  # type: ignore[no-untyped-def]
     rng = np.random.default_rng(seed)
     pos = sim_layout(rng, len(IDS))
-    recs = unaligned_records(
-        IDS, pos, rng.uniform(-math.pi, math.pi, len(IDS)), rng, 0.05, math.radians(3)
-    )
+    facing = rng.uniform(-math.pi, math.pi, len(IDS))
+    recs = unaligned_records(IDS, pos, facing, rng, 0.05, math.radians(3), timed=timed)
     shuffled = list(recs)
     rnd.shuffle(shuffled)
     try:
