@@ -9,7 +9,10 @@ used.
   robot's fixed frame is its start pose, facing +y) and matched to the nearest other
   robot (within ``GATE0 + GATE1·d``); the mask errors (modulo π) of the matched ones give
   ``σ_m`` (robust, of those within 20° of 0), ``w0`` (share within 3σ_m of 0) and
-  ``w90`` (share within 3σ_m of ±90°).
+  ``w90`` (share within 3σ_m of ±90°); of the masks turned back to their target's
+  start heading (records with times), ``w180`` is the share whose error modulo 2π is
+  beyond ±90° (the NAO read the other way round; a corpus without times keeps the
+  shipped figure).
 * Each fleet is fitted as the agents' general candidate fits it
   (:func:`agent.core.formation.frame.poses.fit_from_graph`), and only the fits that are
   right (every start within 0.15 m and 10° of the truth) are kept: the test's null model
@@ -78,6 +81,9 @@ class Matched:
     radial: np.ndarray  # |v| - d
     tangential: np.ndarray  # d · bearing error
     mask: np.ndarray  # mask error modulo π (nan: no mask)
+    #: 1 where a mask turned back by the records' times reads its target the other way
+    #: round (error modulo 2π beyond ±90°), 0 where not (nan: no such mask)
+    flip: np.ndarray
 
 
 def _wrap(a: np.ndarray) -> np.ndarray:
@@ -90,7 +96,7 @@ def _wrap_half(a: np.ndarray) -> np.ndarray:
 
 def match(runs: list[Run]) -> Matched:
     """Match every sighting of ``runs`` to the truth (module docstring)."""
-    cols: list[list[float]] = [[], [], [], [], []]
+    cols: list[list[float]] = [[], [], [], [], [], []]
     for run in runs:
         ids = sorted(run.truth)
         pos = np.array([run.truth[i][:2] for i in ids])
@@ -115,6 +121,7 @@ def match(runs: list[Run]) -> Matched:
                     cols[2].append(math.nan)
                     cols[3].append(math.nan)
                     cols[4].append(math.nan)
+                    cols[5].append(math.nan)
                     continue
                 beta_true = math.atan2(true_v[1], true_v[0]) - (
                     h - math.pi / 2
@@ -126,14 +133,20 @@ def match(runs: list[Run]) -> Matched:
                 cols[3].append(d * float(_wrap(np.array(beta - beta_true))))
                 # the mask as if its target stood at its start heading (nan: seen while
                 # it turned; records without times: as recorded)
-                theta = mask_orientation(core[rec.sender], n, core.get(ids[k]))
+                target = core.get(ids[k])
+                theta = mask_orientation(core[rec.sender], n, target)
                 if math.isfinite(theta):
                     hj = run.truth[ids[k]][2]
                     # h_j - h_i = β_ij + θ_ij - π/2 (modulo π) in the fixed frame of i
                     want = (hj - h) - beta_true + math.pi / 2
                     cols[4].append(float(_wrap_half(np.array(theta - want))))
+                    timed = core[rec.sender].seen_at is not None and target is not None \
+                        and target.stances is not None  # fmt: skip
+                    flip = abs(float(_wrap(np.array(theta - want)))) > math.pi / 2
+                    cols[5].append(float(flip) if timed else math.nan)
                 else:
                     cols[4].append(math.nan)
+                    cols[5].append(math.nan)
     a = [np.array(c) for c in cols]
     return Matched(*a)
 
@@ -229,8 +242,11 @@ def fit(m: Matched, runs: list[Run], corpus: str) -> tuple[SightingNoise, dict[s
     # (counted conservatively, (k + 1) / (n + 2))
     sc, sr_, sn = binned(sd, slost, np.mean)
     s0, s1 = (float(slost.sum()) + 1.0) / (float(sightings) + 2.0), 0.0
+    # front/back confusion, of the masks turned back by the records' times
+    flips = m.flip[np.isfinite(m.flip)]
+    w180 = float(flips.mean()) if flips.size else shipped.w180
     model = replace(base, g0=g0, g1=g1, rho=rho, rho_untimed=rho_untimed, mask_scale=mscale,
-                    s0=s0, s1=s1,
+                    s0=s0, s1=s1, w180=w180,
                     bias_scale=bias_scale(fits, replace(base, g0=g0, g1=g1),
                                           [r.records for r in runs_kept]))  # fmt: skip
     bins = {"d": x, "sr": np.array(sr), "st": np.array(st), "n": w, "dist": dist, "along": along,

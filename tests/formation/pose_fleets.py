@@ -10,6 +10,7 @@ search (random) and quantised to the masks' 5° when noisy (``rng`` given).
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -18,6 +19,10 @@ from agent.core.perception.sighting_noise import SightingNoise
 from tests.formation.conftest import random_fleet
 
 MASK_STEP = math.radians(5.0)
+#: A timed record's stances: stood at its start heading until 1 s, half turned round
+#: from 2 s (its search); and when a mask of it was seen, before or after its turn
+STANCES = np.array([[0.0, 1.0, 0.0], [2.0, 3.0, math.pi]])
+SEEN_AT = (0.5, 2.5)
 
 
 def rot(a: float) -> np.ndarray:
@@ -56,12 +61,16 @@ def unaligned_records(
     bearing_noise: float = 0.0,
     masks: bool = True,
     reach: tuple[float, float] = (0.5, 3.0),
+    timed: bool = False,
 ) -> list[NeighborRecord]:
-    """Records of robots at world ``pos`` with body headings ``headings`` (rad)."""
+    """Records of robots at world ``pos`` with body headings ``headings`` (rad);
+    ``timed``: with times, as today's agents send them (:data:`STANCES`: every robot
+    stood at its start heading, then half turned round in its search; each mask seen
+    before or after its target's turn, as its orientation says)."""
     recs = []
     for k, rid in enumerate(ids):
         psi = headings[k] - math.pi / 2
-        nb, ori = [], []
+        nb, ori, seen = [], [], []
         for j in range(len(ids)):
             w = pos[j] - pos[k]
             d = math.hypot(*w)
@@ -74,13 +83,17 @@ def unaligned_records(
                 b += rng.uniform(-bearing_noise, bearing_noise)
             nb.append([d * math.cos(b), d * math.sin(b)])
             turned = math.pi if (rng is not None and rng.random() < 0.5) else 0.0
+            seen.append(SEEN_AT[turned > 0.0])
             theta = (headings[j] + turned - los) % (2 * math.pi)
             if rng is not None:
                 theta += rng.uniform(-bearing_noise, bearing_noise)
                 theta = MASK_STEP * round(theta / MASK_STEP)  # the masks' 5° steps
             ori.append(theta % (2 * math.pi))
         arr = np.array(nb, dtype=np.float64).reshape(-1, 2)
-        recs.append(NeighborRecord(rid, arr, np.array(ori) if masks and nb else None))
+        rec = NeighborRecord(rid, arr, np.array(ori) if masks and nb else None)
+        if timed:
+            rec = replace(rec, seen_at=np.array(seen, dtype=np.float64), stances=STANCES)
+        recs.append(rec)
     return recs
 
 

@@ -47,12 +47,29 @@ def _to_world(plan: Plan, pos: np.ndarray, headings: np.ndarray) -> np.ndarray:
 @example(seed=35, turn=0.0)
 @example(seed=75, turn=0.0)
 def test_start_headings_leave_the_pyramid_in_the_world_unchanged(seed: int, turn: float) -> None:
+    _same_pyramid_in_the_world(seed, turn, timed=False)
+
+
+@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(0, 10_000), st.floats(-math.pi, math.pi))
+# hypothesis found it on the records without times: the aligned model fits three robots
+# half a turn off (the test below); with times, the masks together reject that frame
+@example(seed=2681, turn=0.0)
+def test_start_headings_leave_the_pyramid_in_the_world_unchanged_with_times(
+    seed: int, turn: float
+) -> None:
+    """The property above on records with times, as today's agents send them: every mask
+    turned back to its target's start heading (fleet_frame.half_turn_test weighs them)."""
+    _same_pyramid_in_the_world(seed, turn, timed=True)
+
+
+def _same_pyramid_in_the_world(seed: int, turn: float, timed: bool) -> None:
     rng = np.random.default_rng(seed)
     pos = sim_layout(rng, len(IDS))
     aligned = np.full(len(IDS), math.pi / 2)
     facing = rng.uniform(-math.pi, math.pi, len(IDS))
-    a = plan_from_records(unaligned_records(IDS, pos, aligned), PARAMS)
-    b = plan_from_records(unaligned_records(IDS, pos, facing), PARAMS)
+    a = plan_from_records(unaligned_records(IDS, pos, aligned, timed=timed), PARAMS)
+    b = plan_from_records(unaligned_records(IDS, pos, facing, timed=timed), PARAMS)
     assert a.excluded == b.excluded == ()
     assert [r.parent for r in a.robots] == [r.parent for r in b.robots]
     np.testing.assert_allclose(_to_world(a, pos, aligned), _to_world(b, pos, facing), atol=1e-6)
@@ -60,19 +77,18 @@ def test_start_headings_leave_the_pyramid_in_the_world_unchanged(seed: int, turn
     # plan in the common frame
     c, s = math.cos(turn), math.sin(turn)
     moved = pos @ np.array([[c, s], [-s, c]]) + np.array([3.0, -1.0])
-    again = plan_from_records(unaligned_records(IDS, moved, facing + turn), PARAMS)
+    again = plan_from_records(unaligned_records(IDS, moved, facing + turn, timed=timed), PARAMS)
     assert [r.parent for r in again.robots] == [r.parent for r in b.robots]
     np.testing.assert_allclose(again.targets(), b.targets(), atol=1e-6)
 
 
 @settings(max_examples=10, deadline=None)
-@given(st.integers(0, 10_000), st.randoms(use_true_random=False))
-def test_shuffled_records_give_a_bit_identical_plan(seed: int, rnd) -> None:  # type: ignore[no-untyped-def]
+@given(st.integers(0, 10_000), st.randoms(use_true_random=False), st.booleans())
+def test_shuffled_records_give_a_bit_identical_plan(seed: int, rnd, timed: bool) -> None:  # type: ignore[no-untyped-def]
     rng = np.random.default_rng(seed)
     pos = sim_layout(rng, len(IDS))
-    recs = unaligned_records(
-        IDS, pos, rng.uniform(-math.pi, math.pi, len(IDS)), rng, 0.05, math.radians(3)
-    )
+    facing = rng.uniform(-math.pi, math.pi, len(IDS))
+    recs = unaligned_records(IDS, pos, facing, rng, 0.05, math.radians(3), timed=timed)
     shuffled = list(recs)
     rnd.shuffle(shuffled)
     try:
@@ -112,13 +128,30 @@ def test_aligned_starts_plan_exactly_as_the_papers() -> None:
     assert ours.digest == papers.digest and len(ours.psi) == 0
 
 
-@pytest.mark.xfail(strict=True, reason="a known wrong frame, not yet fixed (docs/design.md §9)")
 def test_three_robots_of_five_half_a_turn_off_are_not_planned_on() -> None:
     """Found by hypothesis on the property above (seed 2681, no noise): the aligned model
     with its sightings identified where they land fits a frame in which robots 2, 4 and 5
     stand half a turn off their true headings, and every robot passes its test: their
-    masks, each 180° off, read as front/back confusions one by one. The plan is then
-    laid facing the other way in the world. Strict: once fixed, this test says so."""
+    masks, each 180° off, read as front/back confusions one by one. Together, ten masks
+    between {1, 3} and {2, 4, 5} all read the other way round reject that frame
+    (fleet_frame.half_turn_test, p 5·10⁻⁵ < ALPHA), and the pose fit is planned on."""
+    rng = np.random.default_rng(2681)
+    pos = sim_layout(rng, len(IDS))
+    aligned = np.full(len(IDS), math.pi / 2)
+    facing = rng.uniform(-math.pi, math.pi, len(IDS))
+    a = plan_from_records(unaligned_records(IDS, pos, aligned, timed=True), PARAMS)
+    b = plan_from_records(unaligned_records(IDS, pos, facing, timed=True), PARAMS)
+    np.testing.assert_allclose(_to_world(a, pos, aligned), _to_world(b, pos, facing), atol=1e-6)
+
+
+@pytest.mark.xfail(strict=True, reason="records without times: masks cannot tell front from back")
+def test_without_times_three_robots_of_five_half_a_turn_off_are_planned_on() -> None:
+    """The fleet above with records without times (older agents): a mask as recorded may
+    show its target after the half turn of its own search (52 % of them on the corpus
+    read the other way round), so the masks say nothing of front and back and the joint
+    test leaves them out; nothing else in the records rejects the aligned model's frame
+    (its global test p 0.19), and the plan is laid facing the other way. Strict: once
+    something does, this test says so."""
     rng = np.random.default_rng(2681)
     pos = sim_layout(rng, len(IDS))
     aligned = np.full(len(IDS), math.pi / 2)

@@ -1,13 +1,17 @@
 """tools/fit_noise.py's null scale of a test statistic (the bias test's, χ²₃, and the
-heading test's, χ²₁): known answers."""
+heading test's, χ²₁): known answers; and its count of masks read the other way round."""
 
 from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from tools.fit_noise import BIAS_QUANTILES, null_scale
+from tools.corpus import runs_of
+from tools.fit_noise import BIAS_QUANTILES, match, null_scale
 
 
 @pytest.mark.parametrize("dof", [1, 3])
@@ -37,3 +41,17 @@ def test_the_excess_rate_counts_only_what_the_model_does_not_put_there() -> None
     assert excess_rate(one) == 0.0
     many = np.concatenate([np.full(480, 0.5), np.full(20, 1e-5)])  # 20 of 500: a mechanism
     assert excess_rate(many) == pytest.approx((20 - 500 * TURNED_P) / 500)
+
+
+def test_the_front_back_share_is_counted_on_masks_turned_back_by_times() -> None:
+    """w180: of the masks turned back to their target's start heading, those read the
+    other way round; masks of records without times say nothing of it and are not
+    counted."""
+    runs = runs_of(Path("tests/data/frames/n10_random_s1024.json"))
+    flip = match(runs).flip
+    counted = flip[np.isfinite(flip)]
+    assert counted.size > 20 and set(np.unique(counted)) <= {0.0, 1.0}
+    assert 0.05 < float(counted.mean()) < 0.5
+    untimed = [replace(r, records=tuple(replace(m, seen_at=(), stances=()) for m in r.records))
+               for r in runs]  # fmt: skip
+    assert not np.isfinite(match(untimed).flip).any()

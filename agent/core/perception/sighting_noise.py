@@ -27,6 +27,14 @@ A sighting ``v_ij`` of robot i, in its fixed frame, at true distance d from j:
   its error modulo π is ``N(0, σ_m)`` with probability ``w0``, the side/front confusion
   ``N(±π/2, σ_m)`` with ``w90``, otherwise uniform (front/back, 180°, is folded away by
   the modulo);
+* **front/back confusion**: a mask turned back to its target's start heading (its record
+  carries times: docs/design.md §9 "Masks seen mid-turn") reads the NAO the other way
+  round, its error modulo 2π beyond ±90°, with probability ``w180``, independently of the
+  error modulo π above; over the full circle a mask error δ then has the density
+  ``f(δ)·(1 − w180)`` within ±90° and ``f(δ)·w180`` beyond, f the density modulo π. A
+  mask of a record without times says nothing of front and back (its target may have
+  turned half round in its own search: on the corpus, read as recorded, 52 % are the
+  other way round);
 * **a robot seen turned as a whole**: with probability ``rho`` the others' masks of a
   *sound* robot all agree on an offset that the per-mask model above cannot explain (a
   bias of the masks for that robot's aspect, say). A broken compass looks exactly the
@@ -94,6 +102,9 @@ class SightingNoise:
     #: the heading test's null scale: Wilks' statistic / mask_scale is χ²₁ in its tail on
     #: sound robots whose records carry times (measured; module docstring)
     mask_scale: float = 1.0
+    #: front/back confusion: the share of masks turned back to their target's start
+    #: heading that read it the other way round (module docstring); ½ says nothing
+    w180: float = 0.5
     sightings: int = 0  #: how many matched sightings it was fitted on
     corpus: str = ""  #: which corpus (and split) it was fitted on
 
@@ -120,7 +131,7 @@ class SightingNoise:
             raise ValueError("sighting noise: r0, t0 must be > 0 and r1, t1, r_lin, t_lin >= 0")
         if not 0 < self.sigma_mask < math.pi / 4:
             raise ValueError(f"sigma_mask must be in (0, π/4), got {self.sigma_mask}")
-        for name in ("rho", "rho_untimed"):
+        for name in ("rho", "rho_untimed", "w180"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"{name} must be in [0, 1], got {getattr(self, name)}")
         for name in ("bias_scale", "mask_scale"):
@@ -184,7 +195,7 @@ class SightingNoise:
         third = 1.0 / math.sqrt(3.0)
         return cls(r0=floor, r1=0.0, t0=floor, t1=0.0, g0=0.0, g1=0.0,
                    sigma_mask=shipped.sigma_mask, w0=shipped.w0, w90=shipped.w90, rho=shipped.rho,
-                   rho_untimed=shipped.rho_untimed,
+                   rho_untimed=shipped.rho_untimed, w180=shipped.w180,
                    r_lin=relative * third, t_lin=bearing * third, corpus="synthetic")  # fmt: skip
 
     def save(self, directory: Path = DATA_DIR, stem: str = "sighting_noise") -> Path:

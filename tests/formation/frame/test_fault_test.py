@@ -63,7 +63,7 @@ def test_rejection_rate_is_clipped() -> None:
     ("field", "value"),
     [("r0", 0.0), ("t0", -1.0), ("r1", -0.1), ("sigma_mask", 0.0), ("sigma_mask", 1.0),
      ("w0", 1.2), ("w90", -0.1), ("g0", math.nan), ("rho_untimed", 1.5), ("mask_scale", 0.0),
-     ("bias_scale", math.inf)],
+     ("bias_scale", math.inf), ("w180", -0.1), ("w180", 1.5), ("w180", math.nan)],
 )  # fmt: skip
 def test_model_refuses_each_bad_field(field: str, value: float) -> None:
     good = dict(r0=0.1, r1=0.0, t0=0.1, t1=0.0, g0=0.0, g1=0.0, sigma_mask=0.1, w0=0.5, w90=0.2)
