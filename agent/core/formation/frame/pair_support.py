@@ -57,7 +57,7 @@ import numpy as np
 #: Most (candidate, sighting of i) entries held at once by the brute force.
 CHUNK_ELEMENTS = 1 << 15
 #: Most (group, other sighting of i) blocks held at once by the windowed count.
-CHUNK_BLOCKS = 1 << 15
+CHUNK_BLOCKS = 1 << 12
 #: Width (m) of the distance bands that bound a window of j's sightings (a power of two,
 #: so that a distance divides by it exactly), and the most bands (wider for far sightings).
 BAND_WIDTH = 1.0 / 64.0
