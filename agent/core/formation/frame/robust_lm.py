@@ -103,7 +103,10 @@ class _Normal:
     ) -> tuple[csc_matrix, np.ndarray]:
         jw = j.data * w[self.rows]  # as _row_scaled
         live = jw != 0
-        prod = np.where(live[self.p], jw[self.p] * j.data[self.q], 0.0)
+        every = bool(live.all())
+        prod = jw[self.p] * j.data[self.q]
+        if not every:
+            prod[~live[self.p]] = 0.0
         sums = np.bincount(self.slot, weights=prod, minlength=self.slots)
         n = self.shape[1]
         keep = sums != 0
@@ -114,7 +117,9 @@ class _Normal:
             np.cumsum(np.bincount(self.h_cols[keep], minlength=n), out=indptr[1:])
             h = csc_matrix((sums[keep], self.h_rows[keep], indptr), shape=(n, n))
         h.has_sorted_indices = True
-        gw = np.where(live, jw * f[self.rows], 0.0)
+        gw = jw * f[self.rows]
+        if not every:
+            gw[~live] = 0.0
         g = np.bincount(self.indices, weights=gw, minlength=n)
         return h, g
 
