@@ -460,3 +460,46 @@ def test_the_residuals_are_those_of_the_unpacked_poses_bit_for_bit(
         want = np.concatenate([(prob._position_misfit(pos, psi) * prob.sp[:, None]).reshape(-1),
                                prob.sm * np.sin(2.0 * delta) / 2.0])  # fmt: skip
         assert prob.fun(x).tobytes() == want.tobytes()
+
+
+def _pair_rows_reference(measurements: Any, err: np.ndarray, turn: np.ndarray, dist: np.ndarray):  # type: ignore[no-untyped-def]
+    """One pair at a time: math.fsum and max over its sightings, in a dict by pair."""
+    from agent.core.formation.frame.poses import POS_TOL, POS_TOL_REL
+
+    acc: dict[tuple[int, int], list[tuple[float, float, float]]] = {}
+    for k, m in enumerate(measurements):
+        key = (min(m.owner, m.target), max(m.owner, m.target))
+        acc.setdefault(key, []).append((float(err[k]), float(turn[k]), float(dist[k])))
+    rows = []
+    for (i, j), vals in sorted(acc.items()):
+        position = math.fsum(v[0] for v in vals)
+        heading = max(v[1] for v in vals)
+        d = math.fsum(v[2] for v in vals) / len(vals)
+        rows.append((i, j, position, heading, d, position / (POS_TOL + POS_TOL_REL * d)))
+    return rows
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    links=st.lists(st.tuples(st.integers(0, 6), st.integers(0, 6)), min_size=1, max_size=40),
+    seed=st.integers(0, 2**16),
+    odd=st.sampled_from(["", "nan", "inf", "ties"]),
+)
+def test_the_pairs_rows_are_the_sums_one_pair_at_a_time(
+    links: list[tuple[int, int]], seed: int, odd: str
+) -> None:
+    from agent.core.formation.frame.poses import PoseMeasurement, _pair_rows
+
+    links = [(a, b) for a, b in links if a != b] or [(0, 1)]
+    rng = np.random.default_rng(seed)
+    meas = [PoseMeasurement(a, b, np.array([1.0, 0.0])) for a, b in links]
+    n = len(meas)
+    err, turn, dist = rng.exponential(size=n), rng.uniform(0, 1.5, n), rng.uniform(0.2, 4, n)
+    if odd == "ties":
+        err, turn, dist = np.round(err, 1), np.round(turn, 1), np.round(dist, 1)
+    elif odd:
+        err[rng.integers(n)] = math.nan if odd == "nan" else math.inf
+    got = _pair_rows(meas, err, turn, dist)
+    want = _pair_rows_reference(meas, err, turn, dist)
+    assert [r[:2] for r in got] == [r[:2] for r in want]
+    assert np.array([r[2:] for r in got]).tobytes() == np.array([r[2:] for r in want]).tobytes()
