@@ -345,49 +345,23 @@ def _residuals(
     e, delta = prob.misfit(pos, psi)
     err = np.hypot(e[:, 0], e[:, 1])
     dist = np.hypot(prob.v[:, 0], prob.v[:, 1])
-    pairs = [PairResidual(*row) for row in _pair_rows(measurements, err, np.abs(delta), dist)]
+    acc: dict[tuple[int, int], list[tuple[float, float, float]]] = {}
+    for k, m in enumerate(measurements):
+        key = (min(m.owner, m.target), max(m.owner, m.target))
+        acc.setdefault(key, []).append((float(err[k]), abs(float(delta[k])), float(dist[k])))
+    pairs = []
+    for (i, j), vals in sorted(acc.items()):
+        position = math.fsum(v[0] for v in vals)
+        heading = max(v[1] for v in vals)
+        d = math.fsum(v[2] for v in vals) / len(vals)
+        score = position / (POS_TOL + POS_TOL_REL * d)
+        pairs.append(PairResidual(i, j, position, heading, d, score))
     per: dict[int, list[float]] = {i: [] for i in ids}
     for p in pairs:
         per[p.i].append(p.score)
         per[p.j].append(p.score)
     scores = np.array([float(np.median(per[i])) if per[i] else 0.0 for i in ids])
     return tuple(pairs), scores
-
-
-def _pair_rows(
-    measurements: Sequence[PoseMeasurement], err: np.ndarray, turn: np.ndarray, dist: np.ndarray
-) -> list[tuple[int, int, float, float, float, float]]:
-    """(i, j, position, heading, distance, score) of each pair of robots i < j that
-    ``measurements`` join (ascending): the sum of their sightings' misfits ``err`` (as
-    ``math.fsum``: of one or two floats, their IEEE sum), the largest ``turn`` (the first
-    of equal ones, as ``max``), the mean distance and the score of :class:`PairResidual`.
-    One array operation for every pair of one or two sightings, ``math.fsum`` for more
-    (or for misfits not finite)."""
-    owner = np.array([m.owner for m in measurements], dtype=np.int64)
-    target = np.array([m.target for m in measurements], dtype=np.int64)
-    lo, hi = np.minimum(owner, target), np.maximum(owner, target)
-    order = np.lexsort((hi, lo))  # by pair, then in the measurements' order
-    lo, hi, err, turn, dist = lo[order], hi[order], err[order], turn[order], dist[order]
-    first = np.flatnonzero(np.concatenate(([True], (lo[1:] != lo[:-1]) | (hi[1:] != hi[:-1]))))
-    count = np.diff(np.append(first, lo.size))
-    two = count == 2
-    second = np.where(two, first + 1, first)
-    position = np.where(two, err[first] + err[second], err[first])
-    heading = np.where(two & (turn[second] > turn[first]), turn[second], turn[first])
-    d = np.where(two, (dist[first] + dist[second]) / 2, dist[first] / 1)
-    # more than two sightings, or a misfit not finite: math.fsum and max themselves
-    finite = np.isfinite(err) & np.isfinite(turn) & np.isfinite(dist)
-    many = np.flatnonzero((count > 2) | ~(finite[first] & finite[second]))
-    if many.size:
-        position, heading, d = position.copy(), heading.copy(), d.copy()
-        for g in many.tolist():
-            sl = slice(int(first[g]), int(first[g] + count[g]))
-            position[g] = math.fsum(err[sl].tolist())
-            heading[g] = max(turn[sl].tolist())
-            d[g] = math.fsum(dist[sl].tolist()) / int(count[g])
-    score = position / (POS_TOL + POS_TOL_REL * d)
-    return list(zip(lo[first].tolist(), hi[first].tolist(), position.tolist(), heading.tolist(),
-                    d.tolist(), score.tolist(), strict=True))  # fmt: skip
 
 
 def mask_offset(deltas: Sequence[float]) -> tuple[float, int]:
