@@ -246,3 +246,15 @@ def test_a_singular_robot_stops_and_the_others_go_on() -> None:
     step, ok = _solve(normal, np.ones((3, 3)))
     assert ok.tolist() == [True, False, True]
     assert step[0].tolist() == [1.0, 1.0, 1.0] and step[2].tolist() == [0.5, 0.5, 0.5]
+
+
+def test_the_batch_turns_by_the_floats_of_math() -> None:
+    # the batch's cos ψ and sin ψ are math.cos and math.sin of each ψ, as a robot's own
+    # fit (_Sightings.errors) takes them
+    from agent.core.formation.frame.bias_test import _cos_sin
+
+    psi = np.random.default_rng(4).uniform(-40.0, 40.0, 300)
+    c, s = _cos_sin(psi)
+    assert c.shape == s.shape == (300, 1)
+    assert c[:, 0].tolist() == [math.cos(v) for v in psi.tolist()]
+    assert s[:, 0].tolist() == [math.sin(v) for v in psi.tolist()]

@@ -8,10 +8,14 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from agent.core.formation.frame import multi_start as ms
+from agent.core.formation.frame import robust_lm
 from agent.core.formation.frame.poses import (
     PoseFrame,
+    _Problem,
     build_poses,
     evaluate_poses,
     fit_cost,
@@ -142,3 +146,84 @@ def test_a_turn_that_does_not_help_the_robot_tries_no_whole_fit(
     lonely = replace(good, measurements=tuple(m for m in good.measurements
                                               if robot not in (m.owner, m.target)))  # fmt: skip
     assert not ms._turn_helps(lonely, robot)  # no sighting of it: nothing to turn
+
+
+def _alone_reference(prob: _Problem, x: np.ndarray, c: int, k: int, turn: float) -> float:
+    """:func:`multi_start._alone` one entry of the normal equations at a time (each an
+    ``np.sum`` of its own products): the numbers the fast path must give, bit for bit."""
+    m = prob.m
+    sign = (prob.t == k).astype(np.float64) - (prob.o == k)
+    owner = prob.o == k
+
+    def fun(y: np.ndarray) -> np.ndarray:
+        z = x.copy()
+        z[c : c + 3] = y
+        return prob.fun(z)
+
+    def jac(y: np.ndarray) -> np.ndarray:
+        _, psi = prob.unpack(np.concatenate([x[:c], y, x[c + 3 :]]))
+        cs, sn = math.cos(float(y[2])), math.sin(float(y[2]))
+        delta = psi[prob.t] - psi[prob.o] - prob.mask_ref
+        j = np.zeros((3 * m, 3))
+        j[0 : 2 * m : 2, 0] = sign * prob.sp
+        j[1 : 2 * m : 2, 1] = sign * prob.sp
+        vx, vy = prob.v[:, 0], prob.v[:, 1]
+        j[0 : 2 * m : 2, 2] = np.where(owner, (sn * vx + cs * vy) * prob.sp, 0.0)
+        j[1 : 2 * m : 2, 2] = np.where(owner, -(cs * vx - sn * vy) * prob.sp, 0.0)
+        j[2 * m :, 2] = sign * prob.sm * np.cos(2.0 * delta)
+        return j
+
+    y = x[c : c + 3] + np.array([0.0, 0.0, turn])
+    f = fun(y)
+    cost = robust_lm.soft_l1_cost(f)
+    lam = robust_lm.LAMBDA0
+    for _ in range(ms.ALONE_ITER):
+        j = jac(y)
+        jw = j / np.sqrt(1.0 + f * f)[:, None]
+        h = np.array([[float(np.sum(jw[:, a] * j[:, b])) for b in range(3)] for a in range(3)])
+        g = np.array([float(np.sum(jw[:, a] * f)) for a in range(3)])
+        d = np.maximum(np.diag(h), 1e-12)
+        while True:
+            try:
+                step = -np.linalg.solve(h + np.diag(lam * d), g)
+            except np.linalg.LinAlgError:
+                step = None
+            if step is not None:
+                f_new = fun(y + step)
+                cost_new = robust_lm.soft_l1_cost(f_new)
+                if cost_new < cost:
+                    small = cost - cost_new <= ms.ALONE_FTOL * cost
+                    y, f, cost = y + step, f_new, cost_new
+                    lam = max(lam / 3.0, 1e-12)
+                    break
+            lam *= 4.0
+            if lam > robust_lm.LAMBDA_MAX:
+                return cost
+        if small:
+            break
+    return cost
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    seed=st.integers(0, 2**16),
+    n=st.integers(3, 12),
+    turn=st.sampled_from([math.pi, 0.0, 1.3, -2.5]),
+    kind=st.sampled_from(["", "rotate", "scale", "shift"]),
+)
+def test_one_robot_fitted_alone_is_the_reference_bit_for_bit(
+    seed: int, n: int, turn: float, kind: str
+) -> None:
+    poses = build_poses(fleet(seed, n, kind, victim=2))
+    for robot in poses.ids:
+        if robot == poses.frame_robot:
+            continue
+        k = poses.ids.index(robot)
+        mine = [m for m in poses.measurements if robot in (m.owner, m.target)]
+        if not mine:
+            continue
+        prob = _Problem(poses.ids, mine, poses.ids.index(poses.frame_robot))
+        x = prob.pack(poses.positions, poses.headings)
+        c = int(prob.col[k])
+        got, want = ms._alone(prob, x, c, k, turn), _alone_reference(prob, x, c, k, turn)
+        assert np.float64(got).tobytes() == np.float64(want).tobytes()

@@ -7,6 +7,7 @@ test per error branch."""
 from __future__ import annotations
 
 import math
+import random
 
 import numpy as np
 import pytest
@@ -220,6 +221,79 @@ def test_far_sightings_take_the_brute_force(scale: float) -> None:
     assert np.array_equal(got, brute_reference(src, dst, turn, owner, vecs, EPS, REL))
 
 
+@st.composite
+def free_sets(draw: st.DrawFn) -> tuple[np.ndarray, ...]:
+    """Any turns (also far outside (−π, π]), sightings at the origin or on top of each
+    other, candidates given twice, and robots of one sighting."""
+    n = draw(st.integers(1, 5))
+    counts = draw(st.lists(st.integers(1, 8), min_size=n, max_size=n))
+    counts[0] = max(counts[0], 2)  # two sightings at least: a candidate to draw
+    owner = np.repeat(np.arange(n), counts)
+    cell = st.one_of(st.integers(-8, 8).map(lambda c: 0.25 * c), st.floats(-4.0, 4.0))
+    flat = draw(st.lists(cell, min_size=2 * owner.size, max_size=2 * owner.size))
+    vecs = np.array(flat, dtype=np.float64).reshape(-1, 2)
+    pairs = [(a, b) for a in range(owner.size) for b in range(owner.size) if a != b]
+    chosen = draw(st.lists(st.sampled_from(pairs), min_size=1, max_size=30))
+    angle = st.one_of(
+        st.floats(-50.0, 50.0), st.sampled_from([0.0, math.pi, -math.pi, 2 * math.pi])
+    )
+    turns = draw(st.lists(angle, min_size=len(chosen), max_size=len(chosen)))
+    src = np.array([a for a, _ in chosen], dtype=np.int64)
+    dst = np.array([b for _, b in chosen], dtype=np.int64)
+    return src, dst, np.array(turns), owner, vecs
+
+
+@settings(max_examples=300, deadline=None)
+@given(free_sets(), st.sampled_from([0.05, 0.35, 2.0]), st.sampled_from([0.0, 0.08, 0.5]))
+def test_the_arc_count_is_the_brute_force_for_any_turn_and_tolerance(
+    case: tuple[np.ndarray, ...], epsilon: float, rel_tol: float
+) -> None:
+    src, dst, turn, owner, vecs = case
+    got = support_one_side(src, dst, turn, owner, vecs, epsilon, rel_tol)
+    assert np.array_equal(got, brute_reference(src, dst, turn, owner, vecs, epsilon, rel_tol))
+
+
+@settings(max_examples=50, deadline=None)
+@given(sighting_sets(), st.randoms(use_true_random=False))
+def test_shuffled_candidates_get_their_own_counts(
+    case: tuple[np.ndarray, ...], rnd: random.Random
+) -> None:
+    src, dst, turn, owner, vecs = case
+    whole = support_one_side(src, dst, turn, owner, vecs, EPS, REL)
+    order = list(range(src.size))
+    rnd.shuffle(order)
+    perm = np.array(order)
+    got = support_one_side(src[perm], dst[perm], turn[perm], owner, vecs, EPS, REL)
+    assert np.array_equal(got, whole[perm])
+
+
+def test_a_dense_fleet_of_fifty_counts_as_the_brute_force() -> None:
+    # fifty robots in a room, each seeing its neighbours within 3.5 m, turned at random:
+    # the windows and arcs of a real fleet, against the brute force (a sample of it)
+    rng = np.random.default_rng(7)
+    world = rng.uniform(0.0, 9.0, size=(50, 2))
+    psi = rng.uniform(-math.pi, math.pi, size=50)
+    rows, owner = [], []
+    for i in range(50):
+        for j in range(50):
+            d = world[j] - world[i]
+            if i != j and np.hypot(*d) < 3.5:
+                rows.append(rot(-psi[i], (d[0] + rng.normal(0, 0.03), d[1] + rng.normal(0, 0.03))))
+                owner.append(i)
+    vecs, own = np.array(rows), np.array(owner)
+    dist = np.hypot(vecs[:, 0], vecs[:, 1])
+    src, dst = np.nonzero(
+        (own[:, None] < own[None, :]) & (np.abs(dist[:, None] - dist[None, :]) < 0.3)
+    )
+    bearing = np.arctan2(vecs[:, 1], vecs[:, 0])
+    turn = np.pi - np.mod(np.pi - (bearing[src] - bearing[dst] + np.pi), 2 * np.pi)
+    got = support_one_side(src, dst, turn, own, vecs, EPS, REL)
+    assert got.sum() > 1000
+    pick = rng.choice(src.size, size=3000, replace=False)
+    want = brute_reference(src[pick], dst[pick], turn[pick], own, vecs, EPS, REL)
+    assert np.array_equal(got[pick], want)
+
+
 def test_a_non_finite_turn_takes_the_brute_force() -> None:
     owner, vecs = triangle(math.pi / 2)
     src, dst = np.array([0, 0]), np.array([2, 2])
@@ -253,7 +327,7 @@ def test_small_chunks_give_the_same_counts(monkeypatch: pytest.MonkeyPatch) -> N
     src, dst = np.nonzero(owner[:, None] != owner[None, :])
     turn = rng.uniform(-math.pi, math.pi, size=src.size)
     whole = support_one_side(src, dst, turn, owner, vecs, EPS, REL)
-    monkeypatch.setattr(pair_support, "CHUNK_ELEMENTS", 7)
+    monkeypatch.setattr(pair_support, "CHUNK_BLOCKS", 7)
     assert np.array_equal(support_one_side(src, dst, turn, owner, vecs, EPS, REL), whole)
     assert np.array_equal(whole, loop_reference(src, dst, turn, owner, vecs, EPS, REL))
     assert np.array_equal(whole, brute_reference(src, dst, turn, owner, vecs, EPS, REL))

@@ -439,3 +439,24 @@ def test_the_jacobian_is_the_coo_matrix_bit_for_bit(anchor: int, masks: bool) ->
             a, b = getattr(got, name), getattr(want, name)
             assert a.dtype == b.dtype and a.tobytes() == b.tobytes(), name
         assert got.has_canonical_format and want.has_canonical_format
+
+
+@pytest.mark.parametrize(("anchor", "masks"), [(0, True), (2, False), (5, True)])
+def test_the_residuals_are_those_of_the_unpacked_poses_bit_for_bit(
+    anchor: int, masks: bool
+) -> None:
+    # read from x directly, the residuals are the floats of the poses unpacked
+    from agent.core.formation.frame.poses import _Problem
+
+    rng = np.random.default_rng(10 + anchor)
+    heads = rng.uniform(-3, 3, 6)
+    recs = unaligned_records(list(range(1, 7)), sim_layout(rng, 6), heads, rng, masks=masks)
+    graph = identify_pairs(recs)
+    prob = _Problem(graph.ids, pair_measurements(graph), anchor)
+    for scale in (1e-3, 1.0, 1e3):
+        x = rng.normal(size=prob.nvar) * scale
+        pos, psi = prob.unpack(x)
+        delta = psi[prob.t] - psi[prob.o] - prob.mask_ref
+        want = np.concatenate([(prob._position_misfit(pos, psi) * prob.sp[:, None]).reshape(-1),
+                               prob.sm * np.sin(2.0 * delta) / 2.0])  # fmt: skip
+        assert prob.fun(x).tobytes() == want.tobytes()

@@ -17,7 +17,13 @@ from hypothesis import strategies as st
 from scipy.optimize import least_squares
 from scipy.sparse import csr_matrix, diags
 
-from agent.core.formation.frame.robust_lm import _Damped, _row_scaled, minimise, soft_l1_cost
+from agent.core.formation.frame.robust_lm import (
+    _Damped,
+    _row_scaled,
+    minimise,
+    normal_equations,
+    soft_l1_cost,
+)
 
 
 def _line(xs: np.ndarray, ys: np.ndarray):  # type: ignore[no-untyped-def]
@@ -178,3 +184,63 @@ def test_a_jacobian_with_an_entry_given_twice_is_weighted_as_the_product() -> No
     w = np.array([1.0 / 3.0, 0.9])
     got, want = _row_scaled(j, w), diags(w) @ j
     assert got.toarray().tobytes() == want.toarray().tobytes()
+
+
+def _products(j: Any, w: np.ndarray, f: np.ndarray) -> tuple[Any, np.ndarray]:
+    """``JᵀWJ`` (sorted) and ``JᵀWf`` by the sparse products themselves."""
+    jw = _row_scaled(j, w)
+    h = (j.T @ jw).tocsc()
+    h.sort_indices()
+    return h, np.asarray(jw.T @ f, dtype=np.float64).reshape(-1)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    rows=st.integers(1, 30),
+    cols=st.integers(1, 9),
+    zeros=st.booleans(),
+    whole=st.booleans(),
+)
+def test_the_normal_equations_are_the_products_bit_for_bit(
+    seed: int, rows: int, cols: int, zeros: bool, whole: bool
+) -> None:
+    """``JᵀWJ`` and ``JᵀWf`` without the sparse products: the same entries at the same
+    places (explicit zeros of J, rows weighted 0 and sums that cancel to 0 included), and
+    the pattern reused for a second Jacobian of the same places."""
+    rng = np.random.default_rng(seed)
+    dense = rng.normal(size=(rows, cols)) * (rng.random((rows, cols)) < 0.4)
+    if whole:
+        dense = np.round(dense)  # small integers: entries of JᵀWJ that cancel exactly
+    j = csr_matrix(dense)
+    if zeros and j.nnz:
+        j.data[rng.random(j.nnz) < 0.3] = 0.0  # explicit zeros, as a mask row's without a mask
+    w = rng.uniform(0.0, 1.0, rows) * (rng.random(rows) < 0.9)
+    f = rng.normal(size=rows)
+    h, g, pattern = normal_equations(j, w, f)
+    want_h, want_g = _products(j, w, f)
+    assert _same(h, want_h) and h.has_sorted_indices and g.tobytes() == want_g.tobytes()
+    j2 = j.copy()
+    j2.data = rng.normal(size=j.nnz)
+    h2, g2, again = normal_equations(j2, w, f, pattern)
+    want_h2, want_g2 = _products(j2, w, f)
+    assert again is pattern and _same(h2, want_h2) and g2.tobytes() == want_g2.tobytes()
+
+
+def test_a_jacobian_of_other_places_gets_its_own_pattern() -> None:
+    a = csr_matrix(np.array([[1.0, 0.0], [2.0, 3.0]]))
+    b = csr_matrix(np.array([[1.0, 4.0], [0.0, 3.0]]))
+    w, f = np.array([0.5, 0.25]), np.array([1.0, -2.0])
+    _, _, pattern = normal_equations(a, w, f)
+    h, g, other = normal_equations(b, w, f, pattern)
+    assert other is not pattern
+    want_h, want_g = _products(b, w, f)
+    assert _same(h, want_h) and g.tobytes() == want_g.tobytes()
+
+
+def test_a_jacobian_not_canonical_takes_the_products() -> None:
+    j = csr_matrix((np.array([0.1, 0.7, 0.3]), np.array([0, 0, 1]), np.array([0, 2, 3])), (2, 2))
+    w, f = np.array([1.0 / 3.0, 0.9]), np.array([0.5, 2.0])
+    h, g, pattern = normal_equations(j, w, f)
+    want_h, want_g = _products(j, w, f)
+    assert pattern is None and _same(h, want_h) and g.tobytes() == want_g.tobytes()

@@ -145,11 +145,16 @@ def bias_fits(
     loose = {} if loose is None else loose
     out: dict[int, BiasFit] = {}
     tried: list[tuple[int, list[PoseMeasurement | np.ndarray], list[PoseMeasurement]]] = []
+    # each robot's measurements (its own and the others' of it), in their order
+    of: dict[int, list[PoseMeasurement]] = {robot: [] for robot in robots}
+    for m in poses.measurements:
+        for robot in (m.owner, m.target) if m.owner != m.target else (m.owner,):
+            if robot in of:
+                of[robot].append(m)
     for robot in robots:
         # r's own and the others' of r, filtered, then sorted (stably): as the sorted
         # list filtered
-        mine = (m for m in poses.measurements if robot in (m.owner, m.target))
-        ms = sorted(mine, key=lambda m: (m.owner, m.target))
+        ms = sorted(of[robot], key=lambda m: (m.owner, m.target))
         own: list[PoseMeasurement | np.ndarray] = [
             m for m in ms if m.owner == robot and m.target != robot
         ]
@@ -234,8 +239,10 @@ class _Sightings:
         self.u_all = self.v_all / np.maximum(d_all, 1e-9)[:, None]
         self.s_r, self.s_t = noise.sigma_radial(d_all), noise.sigma_tangential(d_all)
         # the others' sightings of r, as seen from each owner: R(−ψ_o)(p_r − p_o)
-        self.rot_obs = np.stack([np.array([[c, s], [-s, c]]) for c, s in
-                                 zip(np.cos(psi_obs), np.sin(psi_obs), strict=True)])  # fmt: skip
+        cos_obs, sin_obs = np.cos(psi_obs), np.sin(psi_obs)
+        self.rot_obs = np.empty((len(o), 2, 2))
+        self.rot_obs[:, 0, 0], self.rot_obs[:, 0, 1] = cos_obs, sin_obs
+        self.rot_obs[:, 1, 0], self.rot_obs[:, 1, 1] = -sin_obs, cos_obs
         # the own sightings' columns, for :meth:`_matched`
         n_own = self.n_own
         self.vx, self.vy = self.v_all[:n_own, 0].copy(), self.v_all[:n_own, 1].copy()
@@ -561,9 +568,9 @@ class _Batch:
 def _cos_sin(psi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """cos ψ and sin ψ of each robot as columns, by ``math`` (the floats of
     :meth:`_Sightings.errors`)."""
-    values = [float(v) for v in psi]
-    c = np.array([math.cos(v) for v in values])[:, None]
-    s = np.array([math.sin(v) for v in values])[:, None]
+    values = np.asarray(psi, dtype=np.float64).tolist()
+    c = np.fromiter(map(math.cos, values), dtype=np.float64, count=len(values))[:, None]
+    s = np.fromiter(map(math.sin, values), dtype=np.float64, count=len(values))[:, None]
     return c, s
 
 

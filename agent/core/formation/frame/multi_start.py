@@ -146,11 +146,16 @@ def _alone(prob: _Problem, x: np.ndarray, c: int, k: int, turn: float) -> float:
     """The soft-L1 cost of ``prob`` (one robot's sightings) at the pose of robot ``k``
     (columns ``c``..``c + 2`` of ``x``) that fits them best from its pose turned by
     ``turn``, the others held: Levenberg-Marquardt on three unknowns (as
-    :func:`robust_lm.minimise`, its normal equations dense and summed element by
-    element)."""
+    :func:`robust_lm.minimise`, its normal equations dense: each entry the sum of one
+    contiguous row of products, as ``np.sum`` of that row alone adds it)."""
     m = prob.m
     sign = (prob.t == k).astype(np.float64) - (prob.o == k)  # +1 target, -1 owner
     owner = prob.o == k
+    vx, vy = prob.v[:, 0], prob.v[:, 1]
+    # the Jacobian's columns as rows: d/dx, d/dy, d/dψ of every residual
+    jt = np.zeros((3, 3 * m))
+    jt[0, 0 : 2 * m : 2] = sign * prob.sp
+    jt[1, 1 : 2 * m : 2] = sign * prob.sp
 
     def fun(y: np.ndarray) -> np.ndarray:
         z = x.copy()
@@ -161,14 +166,10 @@ def _alone(prob: _Problem, x: np.ndarray, c: int, k: int, turn: float) -> float:
         _, psi = prob.unpack(np.concatenate([x[:c], y, x[c + 3 :]]))
         cs, sn = math.cos(float(y[2])), math.sin(float(y[2]))
         delta = psi[prob.t] - psi[prob.o] - prob.mask_ref
-        j = np.zeros((3 * m, 3))
-        j[0 : 2 * m : 2, 0] = sign * prob.sp
-        j[1 : 2 * m : 2, 1] = sign * prob.sp
-        vx, vy = prob.v[:, 0], prob.v[:, 1]
-        j[0 : 2 * m : 2, 2] = np.where(owner, (sn * vx + cs * vy) * prob.sp, 0.0)
-        j[1 : 2 * m : 2, 2] = np.where(owner, -(cs * vx - sn * vy) * prob.sp, 0.0)
-        j[2 * m :, 2] = sign * prob.sm * np.cos(2.0 * delta)
-        return j
+        jt[2, 0 : 2 * m : 2] = np.where(owner, (sn * vx + cs * vy) * prob.sp, 0.0)
+        jt[2, 1 : 2 * m : 2] = np.where(owner, -(cs * vx - sn * vy) * prob.sp, 0.0)
+        jt[2, 2 * m :] = sign * prob.sm * np.cos(2.0 * delta)
+        return jt
 
     y = x[c : c + 3] + np.array([0.0, 0.0, turn])
     f = fun(y)
@@ -176,9 +177,9 @@ def _alone(prob: _Problem, x: np.ndarray, c: int, k: int, turn: float) -> float:
     lam = robust_lm.LAMBDA0
     for _ in range(ALONE_ITER):
         j = jac(y)
-        jw = j / np.sqrt(1.0 + f * f)[:, None]
-        h = np.array([[float(np.sum(jw[:, a] * j[:, b])) for b in range(3)] for a in range(3)])
-        g = np.array([float(np.sum(jw[:, a] * f)) for a in range(3)])
+        jw = j / np.sqrt(1.0 + f * f)[None, :]
+        h = (jw[:, None, :] * j[None, :, :]).sum(axis=-1)
+        g = (jw * f).sum(axis=-1)
         d = np.maximum(np.diag(h), 1e-12)
         while True:
             try:

@@ -14,26 +14,38 @@ distances the one of lower index, as ``np.argmin`` picks) lies within
 closes. :mod:`pose_pairing` adds the counts of both sides.
 
 This is the count of a brute force over all of j's sightings, computed without a Python
-loop over the candidates (a 50-NAO record set has ~3·10⁵ candidates and ~5·10⁶
-(candidate, sighting of i) entries a side, and every agent plans on the same records),
-looking only at the sightings of j that can be within tol:
+loop over the candidates and without moving every sighting of i for every candidate (a
+50-NAO record set has ~3·10⁵ candidates and ~5·10⁶ (candidate, sighting of i) entries a
+side, and every agent plans on the same records). Only the pairs (candidate, sighting h
+of j) that can be within tol are looked at, found from what does not depend on the
+candidate's turn:
 
-* **distance window**: a rotation keeps lengths, |m_k| = |v_k − v_src|, so a sighting h
-  of j within tol of m_k lies within tol of that distance from j (triangle inequality).
-  Each robot's sightings are kept sorted by distance (:class:`_Shelf`), and an entry
-  looks at the slice that bounds [|v_k − v_src| − tol, |v_k − v_src| + tol] from
-  outside (bands of :data:`BAND_WIDTH`, widened by :data:`SLACK` for rounding). The least
-  d² over the window is the least over all of j whenever either is within tol; outside
-  tol neither counts.
-* **the nearest is dst**: an entry whose least d² is within tol does not count when dst
-  is at that d² and no sighting of j of lower index is (those would be in the window
-  too), as the argmin over all of j decides.
+* **distance window**: a rotation keeps lengths, |m_k| = |v_k − v_src| = L, so a sighting
+  h of j within tol of m_k lies within tol of that distance from j (triangle inequality).
+  Each robot's sightings are kept sorted by distance (:class:`_Shelf`), and each
+  (src, k) looks at the slice of j's sightings that bounds [L − tol, L + tol] from
+  outside (bands of :data:`BAND_WIDTH`, tol widened by :data:`SLACK` for rounding).
+  This depends on src, k and j only: it is found once for all the candidates of src
+  with robot j (a *group*), not once per candidate.
+* **turn arc**: h at distance r and bearing α is within tol' (the widened tol) of
+  m_k, at bearing φ_k − turn, exactly when ``cos(φ_k − turn − α) ≥ C``,
+  ``C = (L² + r² − tol'²) / (2 L r)`` (the law of cosines), i.e. for the turns within
+  ``arccos C`` of ``φ_k − α``. The arc is widened by :data:`ARC_SLACK` (its rounding is
+  below 1e-7 rad once L and r exceed tol', else every turn is taken), and the group's
+  candidates are kept sorted into :data:`TURN_BINS` bins of their turn, so an arc
+  reads the candidates of the bins it touches, a slice.
+* **the exact test** on those pairs only: d² computed as the brute force computes it,
+  ``(mx − hx)² + (my − hy)²`` with ``m = (rx·c − ry·s, rx·s + ry·c)``,
+  ``c, s = cos(−turn), sin(−turn)``, in elementwise float64 operations (no BLAS, so no
+  host-dependent summation order: the same floats wherever an entry sits in an array).
+  Every h the brute force finds within tol is among them, so the nearest is too
+  whenever it is within tol (``√d² ≤ tol`` is monotone in d²), and (candidate, k)
+  counts when some h other than dst is within tol and dst is not the nearest (a smaller
+  d², or an equal one at a lower index).
 
-Every d² is computed as the brute force computes it, ``(mx − hx)² + (my − hy)²`` in
-elementwise float64 operations (no BLAS, so no host-dependent summation order, and the
-same floats wherever an entry sits in an array), so the counts are the brute force's
-exactly. Sightings so far away that squares could overflow (beyond :data:`HUGE` m), or
-non-finite input, take the brute force itself (:func:`_count_all`).
+So the counts are the brute force's exactly. Sightings so far away that squares could
+overflow (beyond :data:`HUGE` m), or non-finite input, take the brute force itself
+(:func:`_count_all`).
 """
 
 from __future__ import annotations
@@ -42,16 +54,24 @@ import math
 
 import numpy as np
 
-#: Most (candidate, sighting of i) entries held at once.
+#: Most (candidate, sighting of i) entries held at once by the brute force.
 CHUNK_ELEMENTS = 1 << 15
+#: Most (group, other sighting of i) blocks held at once by the windowed count.
+CHUNK_BLOCKS = 1 << 12
 #: Width (m) of the distance bands that bound a window of j's sightings (a power of two,
 #: so that a distance divides by it exactly), and the most bands (wider for far sightings).
 BAND_WIDTH = 1.0 / 64.0
 MAX_BANDS = 512
 #: Relative widening of a distance window, far above float rounding (~1e-15).
 SLACK = 1e-9
+#: Bins of a group's candidate turns over the full circle (an arc reads whole bins).
+TURN_BINS = 64
+#: Widening (rad) of a turn arc, far above the rounding of its ends (< 1e-7 rad).
+ARC_SLACK = 1e-6
 #: Largest sighting coordinate (m) of the windowed count: d² of up to ~1e201 is finite.
 HUGE = 1e100
+
+TWO_PI = 2.0 * math.pi
 
 
 def support_one_side(
@@ -113,7 +133,10 @@ def support_one_side(
     if live.size == 0:
         return out
     tame = bool(np.all(np.abs(vecs) <= HUGE) and np.all(np.isfinite(turn)))
-    shelf = _Shelf(owner, vecs, starts) if tame else None
+    if tame:
+        out[live] = _count_arcs(src[live], dst[live], turn[live], owner, vecs, starts, counts,
+                                epsilon, rel_tol)  # fmt: skip
+        return out
     # chunks of whole candidates, at most CHUNK_ELEMENTS (candidate, other sighting of i)
     # entries each (one candidate at least)
     ends = np.cumsum(counts[oi[live]] - 1)
@@ -123,10 +146,7 @@ def support_one_side(
         hi = max(lo + 1, int(np.searchsorted(ends, done + CHUNK_ELEMENTS, side="right")))
         cand = live[lo:hi]
         side = _Side(src[cand], dst[cand], turn[cand], oi[cand], oj[cand])
-        if shelf is None:
-            out[cand] = _count_all(side, starts, counts, vecs, epsilon, rel_tol)
-        else:
-            out[cand] = _count(side, starts, counts, shelf, epsilon, rel_tol)
+        out[cand] = _count_all(side, starts, counts, vecs, epsilon, rel_tol)
         lo = hi
     return out
 
@@ -143,7 +163,8 @@ class _Side:
 class _Shelf:
     """Every robot's sightings sorted by distance from it, and where each distance band
     starts: the sightings of robot j at distances in [low, high] are within a slice of
-    :attr:`order` that :meth:`window` gives."""
+    :attr:`order` that :meth:`window` gives (with their distances and bearings, in that
+    order)."""
 
     def __init__(self, owner: np.ndarray, vecs: np.ndarray, starts: np.ndarray) -> None:
         self.vx = np.ascontiguousarray(vecs[:, 0])
@@ -159,6 +180,8 @@ class _Shelf:
         self.bands = int(top / self.width) + 2  # bands · width > every distance
         edges = np.arange(self.bands + 1) * self.width
         sorted_norm = norm[self.order]
+        #: bearing of each sighting (in :attr:`order`), in turn bins
+        self.bin_of = np.arctan2(self.y, self.x) * (TURN_BINS / TWO_PI)
         robots = starts.size - 1
         # below[r, b]: position in order of robot r's first sighting at >= b · width m
         below = np.empty((robots, self.bands + 1), dtype=np.int64)
@@ -167,96 +190,200 @@ class _Shelf:
             below[r] = starts[r] + np.searchsorted(seg, edges, side="left")
         self.below = below.ravel()
 
-    def window(
-        self, robot: np.ndarray, low: np.ndarray, high: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """[lo, hi) positions in :attr:`order` holding every sighting of ``robot`` at a
-        distance in [low, high] (finite bounds), and possibly a few more."""
-        row = robot * (self.bands + 1)
+    def bands_of(self, low: np.ndarray, high: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Band edges (indices) bounding [low, high] from outside (finite bounds)."""
         inv = 1.0 / self.width
         # floor(low / width) (truncation is floor for >= 0): band edge <= low
         a = np.clip(low * inv, 0.0, self.bands).astype(np.int64)
         # floor(high / width) + 1: band edge > high
         b = np.clip(high * inv + 1.0, 0.0, self.bands).astype(np.int64)
-        return self.below[row + a], self.below[row + b]
+        return a, b
 
 
-def _count(
-    side: _Side,
+class _Levers:
+    """Every (src, k) of one robot, k ≠ src (by src, then k ascending): the lever
+    ``v_k − v_src`` (rx, ry), its tol, distance bands and turn arc (module docstring).
+    Shared by every candidate of src."""
+
+    def __init__(
+        self,
+        owner: np.ndarray,
+        starts: np.ndarray,
+        counts: np.ndarray,
+        shelf: _Shelf,
+        epsilon: float,
+        rel_tol: float,
+    ) -> None:
+        per = counts[owner] - 1
+        #: rows of sighting s: base[s] .. base[s + 1]
+        self.base = np.concatenate(([0], np.cumsum(per)))
+        n = int(self.base[-1])
+        src = np.repeat(np.arange(owner.size), per)
+        # every sighting of src's robot but src: its start + running index, skipping src
+        k = np.arange(n) - np.repeat(self.base[:-1], per) + np.repeat(starts[owner], per)
+        k += k >= src
+        self.rx = shelf.vx[k] - shelf.vx[src]
+        self.ry = shelf.vy[k] - shelf.vy[src]
+        length = np.sqrt(self.rx * self.rx + self.ry * self.ry)
+        self.tol = 0.5 * epsilon + rel_tol * length
+        wide = self.tol + SLACK * (1.0 + length + self.tol)
+        self.low, self.high = shelf.bands_of(length - wide, length + wide)
+        # the turn arc, in bins: every point within `wide` of the moved lever lies within
+        # asin(wide / length) of its bearing (the tangents from j); a lever shorter than
+        # `wide`, or an arc of nearly every turn, takes every bin
+        bins = TURN_BINS / TWO_PI
+        with np.errstate(divide="ignore", invalid="ignore"):
+            half = np.arcsin(np.minimum(wide / length, 1.0)) + ARC_SLACK
+        every = ~(length > wide) | (half >= math.pi - 2.0 * TWO_PI / TURN_BINS)
+        bearing = np.arctan2(self.ry, self.rx)
+        #: bin of the arc's ends, bearing of the sighting of j not yet subtracted
+        self.first = np.where(every, 0.0, (bearing - half) * bins)
+        self.last = np.where(every, 4.0 * TURN_BINS, (bearing + half) * bins)
+
+
+class _Groups:
+    """The candidates sorted by group (src, j), then turn bin: each group's slice
+    ``start[g]:start[g + 1]``, its src and j, and each candidate's rotation and dst."""
+
+    def __init__(
+        self, src: np.ndarray, dst: np.ndarray, turn: np.ndarray, owner: np.ndarray, robots: int
+    ) -> None:
+        c = np.cos(-turn)
+        s = np.sin(-turn)
+        # the turn each rotation stands for, in [0, 2π], and its bin
+        u = np.mod(np.arctan2(-s, c), TWO_PI)
+        tbin = np.minimum((u * (TURN_BINS / TWO_PI)).astype(np.int64), TURN_BINS - 1)
+        key = src * robots + owner[dst]
+        self.order = np.argsort(key * TURN_BINS + tbin, kind="stable")
+        key = key[self.order]
+        first = np.flatnonzero(np.concatenate(([True], key[1:] != key[:-1])))
+        self.start = np.append(first, self.order.size)
+        self.size = np.diff(self.start)
+        self.src = src[self.order[first]]
+        self.j = owner[dst[self.order[first]]]
+        self.c, self.s = c[self.order], s[self.order]
+        self.dst, self.bin = dst[self.order], tbin[self.order]
+
+
+def _count_arcs(
+    src: np.ndarray,
+    dst: np.ndarray,
+    turn: np.ndarray,
+    owner: np.ndarray,
+    vecs: np.ndarray,
     starts: np.ndarray,
     counts: np.ndarray,
-    shelf: _Shelf,
     epsilon: float,
     rel_tol: float,
 ) -> np.ndarray:
-    """Counts of a chunk (module docstring), one entry per (candidate, other sighting k
-    of i), looking at each entry's distance window of j's sightings only."""
-    per = counts[side.oi] - 1
-    n = int(per.sum())
-    row = np.repeat(np.arange(per.size), per)  # the entry's candidate
-    # every sighting of i but src: ki = start of i + running index, skipping src
-    ki = np.arange(n) + np.repeat(starts[side.oi] - (np.cumsum(per) - per), per)
-    ki += ki >= np.repeat(side.src, per)
-    rx = shelf.vx[ki] - np.repeat(shelf.vx[side.src], per)
-    ry = shelf.vy[ki] - np.repeat(shelf.vy[side.src], per)
-    c = np.repeat(np.cos(-side.turn), per)
-    s = np.repeat(np.sin(-side.turn), per)
-    mx = rx * c - ry * s  # (v_k − v_src) · [[c, s], [−s, c]], row vector times matrix
-    my = rx * s + ry * c
-    lever = np.sqrt(rx * rx + ry * ry)
-    tol = 0.5 * epsilon + rel_tol * lever
-    slack = tol + SLACK * (1.0 + lever + tol)
-    lo, hi = shelf.window(np.repeat(side.oj, per), lever - slack, lever + slack)
-    span = hi - lo
-    # entries by window length, longest first: the p-th sighting of the windows is then
-    # looked at for a prefix of the entries (a stable radix sort on small keys)
-    top = int(span.max())
-    key = (top - span).astype(np.uint16 if top < 1 << 16 else np.int64)
-    by_span = np.argsort(key, kind="stable")
-    lo_s, mx_s, my_s = lo[by_span], mx[by_span], my[by_span]
-    live = n - np.cumsum(np.bincount(span))  # live[p]: entries with span > p
-    best = np.full(n, np.inf)  # the least d² over the window
-    for p in range(top):
-        m = int(live[p])
-        pos = lo_s[:m] + p
-        dx = mx_s[:m] - shelf.x[pos]
-        dy = my_s[:m] - shelf.y[pos]
-        np.multiply(dx, dx, out=dx)
-        np.multiply(dy, dy, out=dy)
-        np.add(dx, dy, out=dx)  # dx² + dy², as the brute force computes it
-        np.minimum(best[:m], dx, out=best[:m])
-    least = np.empty(n)
-    least[by_span] = best
-    hit = np.flatnonzero(np.sqrt(least) <= tol)  # the nearest of j is within tol
-    # ... and is dst when dst is at that d² and no sighting of lower index is
-    d = side.dst[row[hit]]
-    dx = mx[hit] - shelf.vx[d]
-    dy = my[hit] - shelf.vy[d]
-    at_dst = dx * dx + dy * dy == least[hit]
-    tied = hit[at_dst]
-    at_dst[at_dst] = ~_lower_tie(tied, lo[tied], span[tied], d[at_dst], mx, my, least, shelf)
-    return np.bincount(row[hit[~at_dst]], minlength=per.size)
+    """Counts of candidates whose robots have two sightings or more (finite input within
+    :data:`HUGE`), by groups, distance windows and turn arcs (module docstring)."""
+    shelf = _Shelf(owner, vecs, starts)
+    levers = _Levers(owner, starts, counts, shelf, epsilon, rel_tol)
+    groups = _Groups(src, dst, turn, owner, counts.size)
+    blocks = counts[owner[groups.src]] - 1  # (group, other sighting of i) blocks
+    ends = np.cumsum(blocks)
+    hits = np.zeros(src.size, dtype=np.int64)
+    g0 = 0
+    while g0 < blocks.size:
+        done = int(ends[g0 - 1]) if g0 else 0
+        g1 = max(g0 + 1, int(np.searchsorted(ends, done + CHUNK_BLOCKS, side="right")))
+        lo, hi = int(groups.start[g0]), int(groups.start[g1])
+        hits[lo:hi] = _count_chunk(g0, g1, blocks, groups, levers, shelf)
+        g0 = g1
+    out = np.zeros(src.size, dtype=np.int64)
+    out[groups.order] = hits
+    return out
 
 
-def _lower_tie(
-    e: np.ndarray,
-    lo: np.ndarray,
-    span: np.ndarray,
-    d: np.ndarray,
-    mx: np.ndarray,
-    my: np.ndarray,
-    least: np.ndarray,
-    shelf: _Shelf,
+def _count_chunk(
+    g0: int, g1: int, blocks: np.ndarray, groups: _Groups, levers: _Levers, shelf: _Shelf
 ) -> np.ndarray:
-    """Whether a sighting of index below ``d`` is at d² ``least`` too, for the entries
-    ``e`` with windows ``[lo, lo + span)`` (each holds every sighting of j at that d²)."""
-    which = np.repeat(np.arange(e.size), span)
+    """Counts of the candidates of groups ``g0 .. g1 − 1`` (in the groups' order)."""
+    gs = np.arange(g0, g1)
+    per = blocks[gs]
+    nb = int(per.sum())
+    bg = np.repeat(gs, per)  # each block's group
+    row = np.repeat(levers.base[groups.src[gs]] - (np.cumsum(per) - per), per) + np.arange(nb)
+    # the distance window of j's sightings of each block: one triple per sighting in it
+    band = groups.j[bg] * (shelf.bands + 1)
+    lo = shelf.below[band + levers.low[row]]
+    span = shelf.below[band + levers.high[row]] - lo
+    tb = np.repeat(np.arange(nb), span)  # each triple's block
     pos = np.repeat(lo - (np.cumsum(span) - span), span) + np.arange(int(span.sum()))
-    f = e[which]
-    dx = mx[f] - shelf.x[pos]
-    dy = my[f] - shelf.y[pos]
-    tie = (dx * dx + dy * dy == least[f]) & (shelf.order[pos] < d[which])
-    return np.bincount(which[tie], minlength=e.size) > 0
+    tr = row[tb]
+    # each triple's arc, [a, a + n] in bins (a in [0, TURN_BINS), n < TURN_BINS)
+    at = shelf.bin_of[pos]
+    a = np.floor(levers.first[tr] - at).astype(np.int64)
+    n = np.minimum(np.floor(levers.last[tr] - at).astype(np.int64) - a, TURN_BINS - 1)
+    a &= TURN_BINS - 1
+    # the chunk's candidates, each group's twice over (bins 0 .. 2·TURN_BINS − 1), so
+    # that an arc across bin 0 is one slice
+    first = int(groups.start[g0])
+    size = groups.size[gs]
+    twice = 2 * size
+    grp = np.repeat(np.arange(gs.size), twice)
+    lap = np.arange(int(twice.sum())) - np.repeat(np.cumsum(twice) - twice, twice)
+    dbl = groups.start[gs][grp] - first + lap % np.repeat(size, twice)  # chunk candidate
+    key = (
+        grp * (2 * TURN_BINS)
+        + (lap >= np.repeat(size, twice)) * TURN_BINS
+        + groups.bin[dbl + first]
+    )
+    cum = np.concatenate(([0], np.cumsum(np.bincount(key, minlength=gs.size * 2 * TURN_BINS))))
+    base = (bg - g0)[tb] * (2 * TURN_BINS) + a
+    lo = cum[base]
+    n = cum[base + n + 1] - lo
+    pt = np.repeat(np.arange(tb.size), n)  # each pair's triple
+    q = dbl[np.repeat(lo - (np.cumsum(n) - n), n) + np.arange(int(n.sum()))] + first
+    # the exact test, as the brute force computes it
+    pr, pp = tr[pt], pos[pt]
+    rx, ry, c, s = levers.rx[pr], levers.ry[pr], groups.c[q], groups.s[q]
+    dx = (rx * c - ry * s) - shelf.x[pp]
+    dy = (rx * s + ry * c) - shelf.y[pp]
+    d2 = dx * dx + dy * dy
+    near = np.flatnonzero(np.sqrt(d2) <= levers.tol[pr])
+    d2, q, h, blk = d2[near], q[near], shelf.order[pp[near]], tb[pt[near]]
+    return _closed(d2, q, h, blk, bg, groups, first, int(groups.start[g1]) - first)
+
+
+def _closed(
+    d2: np.ndarray,
+    q: np.ndarray,
+    h: np.ndarray,
+    blk: np.ndarray,
+    bg: np.ndarray,
+    groups: _Groups,
+    first: int,
+    count: int,
+) -> np.ndarray:
+    """Per candidate ``first .. first + count − 1``, its entries (block, candidate) that
+    close a triangle, from the pairs within tol: candidate ``q``, sighting ``h`` of j at
+    ``d2``, in block ``blk`` (of group ``bg[blk]``). An entry closes when a sighting other
+    than dst is within tol and dst is not the nearest (a smaller d², or an equal one at a
+    lower index, as np.argmin)."""
+    size = groups.size[bg]
+    offset = np.cumsum(size) - size
+    entries = int(size.sum())
+    e = offset[blk] + q - groups.start[bg[blk]]
+    at_dst = h == groups.dst[q]
+    other = np.flatnonzero(~at_dst)
+    eo = e[other]
+    one = np.empty(entries, dtype=np.int64)
+    one[eo] = other  # one pair of each entry stands for it
+    keep = other[one[eo] == other]
+    if np.any(at_dst):
+        de = e[at_dst]
+        nearest = np.zeros(entries, dtype=bool)
+        nearest[de] = True
+        d_dst = np.empty(entries)
+        d_dst[de] = d2[at_dst]
+        o = other[nearest[eo]]
+        eo = e[o]
+        beats = (d2[o] < d_dst[eo]) | ((d2[o] == d_dst[eo]) & (h[o] < groups.dst[q[o]]))
+        nearest[eo[beats]] = False
+        keep = keep[~nearest[e[keep]]]
+    return np.bincount(q[keep] - first, minlength=count)
 
 
 def _count_all(

@@ -233,6 +233,16 @@ class _Problem:
         self.sm = np.where(self.has_mask, w / SIGMA_MASK, 0.0)
         self.m = len(measurements)
         self._layout: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._vals = np.zeros(0)
+        # where each measurement's owner and target read x, y and ψ in x with a 0 appended
+        # (the frame robot's pose, held at 0, reads that 0): what :meth:`unpack` gives
+        at = np.where(self.col >= 0, self.col, self.nvar)
+        step = np.where(self.col >= 0, 1, 0)
+        self._reads = tuple(
+            np.ascontiguousarray((at + k * step)[idx]) for idx in (self.o, self.t) for k in range(3)
+        )
+        self._vx = np.ascontiguousarray(self.v[:, 0])
+        self._vy = np.ascontiguousarray(self.v[:, 1])
 
     def unpack(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         pos = np.zeros((self.n, 2))
@@ -261,26 +271,42 @@ class _Problem:
         return np.asarray(pos[self.t] - pos[self.o] - rv)
 
     def fun(self, x: np.ndarray) -> np.ndarray:
-        pos, psi = self.unpack(x)
-        e = self._position_misfit(pos, psi)
-        delta = psi[self.t] - psi[self.o] - self.mask_ref
-        rm = self.sm * np.sin(2.0 * delta) / 2.0
-        return np.concatenate([(e * self.sp[:, None]).reshape(-1), rm])
+        """The residuals: each sighting's position misfit (x, y) times its weight, then
+        each mask's. The floats of ``pos[t] − pos[o] − R(ψ_o)v`` at :meth:`unpack`'s
+        poses, read from ``x`` directly."""
+        xe = np.empty(self.nvar + 1)
+        xe[:-1] = x
+        xe[-1] = 0.0
+        xo, yo, po, xt, yt, pt = (xe[r] for r in self._reads)
+        c, s = np.cos(po), np.sin(po)
+        m = self.m
+        out = np.empty(3 * m)
+        out[0 : 2 * m : 2] = ((xt - xo) - (c * self._vx - s * self._vy)) * self.sp
+        out[1 : 2 * m : 2] = ((yt - yo) - (s * self._vx + c * self._vy)) * self.sp
+        out[2 * m :] = self.sm * np.sin(2.0 * (pt - po - self.mask_ref)) / 2.0
+        return out
 
     def jac(self, x: np.ndarray) -> csr_matrix:
         """The Jacobian, sparse: each sighting touches its two robots' columns only."""
-        _, psi = self.unpack(x)
-        co, ct = self.col[self.o], self.col[self.t]
-        c, s = np.cos(psi[self.o]), np.sin(psi[self.o])
-        # d(R(ψ)v)/dψ = [-s vx - c vy, c vx - s vy]
-        dpx = -(-s * self.v[:, 0] - c * self.v[:, 1]) * self.sp
-        dpy = -(c * self.v[:, 0] - s * self.v[:, 1]) * self.sp
-        delta = psi[self.t] - psi[self.o] - self.mask_ref
-        dm = self.sm * np.cos(2.0 * delta)
-        vals = np.concatenate([1.0 * self.sp, 1.0 * self.sp, 1.0 * dm,
-                               -1.0 * self.sp, -1.0 * self.sp, -1.0 * dm, dpx, dpy])  # fmt: skip
+        xe = np.empty(self.nvar + 1)
+        xe[:-1] = x
+        xe[-1] = 0.0
+        po, pt = xe[self._reads[2]], xe[self._reads[5]]
+        c, s = np.cos(po), np.sin(po)
+        m = self.m
         if self._layout is None:
-            self._layout = self._jac_layout(co, ct)
+            self._layout = self._jac_layout(self.col[self.o], self.col[self.t])
+            # the values the layout takes: 1·sp twice, dm, −1·sp twice, −1·dm, then the
+            # ψ derivatives; those of sp stay
+            self._vals = np.concatenate([1.0 * self.sp, 1.0 * self.sp, np.zeros(m),
+                                         -1.0 * self.sp, -1.0 * self.sp, np.zeros(3 * m)])  # fmt: skip
+        vals = self._vals
+        # d(R(ψ)v)/dψ = [-s vx - c vy, c vx - s vy]
+        vals[6 * m : 7 * m] = -(-s * self._vx - c * self._vy) * self.sp
+        vals[7 * m :] = -(c * self._vx - s * self._vy) * self.sp
+        dm = self.sm * np.cos(2.0 * (pt - po - self.mask_ref))
+        vals[2 * m : 3 * m] = dm
+        vals[5 * m : 6 * m] = -1.0 * dm
         take, cols, indptr = self._layout
         out = csr_matrix((vals[take], cols.copy(), indptr.copy()), shape=(3 * self.m, self.nvar))
         out.has_canonical_format = True  # sorted, no duplicates: as tocsr() leaves it

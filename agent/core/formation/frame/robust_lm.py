@@ -20,7 +20,9 @@ is solved by SuperLU (``scipy.sparse.linalg.splu`` on the sparse damped system),
 calls no threaded BLAS. A dense LAPACK solve (``numpy.linalg.solve``) gave other last
 bits with one OpenBLAS thread than with two, and at 50 NAOs the agents (one thread each)
 and the harness's evaluator (two) planned different digests from the same records;
-agents on hosts with other thread settings would have too.
+agents on hosts with other thread settings would have too. ``JᵀWJ`` and ``JᵀWf`` are
+summed from the Jacobian's entries (:func:`normal_equations`): the very sums the sparse
+products add, in their order, without building the products.
 """
 
 from __future__ import annotations
@@ -52,6 +54,91 @@ def _row_scaled(j: csr_matrix, w: np.ndarray) -> csr_matrix:
     out = csr_matrix((j.data * w[rows], j.indices.copy(), j.indptr.copy()), shape=j.shape)
     out.eliminate_zeros()
     return out
+
+
+class _Normal:
+    """``JᵀWJ`` (sorted CSC) and ``JᵀWf`` for every Jacobian of one sparsity pattern, as
+    ``(j.T @ _row_scaled(j, w)).tocsc()`` and ``_row_scaled(j, w).T @ f`` leave them, to
+    the bit, without building the sparse products: each entry of ``JᵀWJ`` is the sum,
+    row by row of J in ascending order, of ``(jw)_rb · j_ra`` (what the product's SMMP
+    loop adds, from 0), kept only when it is not 0 (as the product keeps no zeros); each
+    of ``JᵀWf`` the sum, by row, of ``(jw)_rb · f_r``. ``np.bincount`` adds its weights
+    one after the other in that order. A weighted entry that is 0 (an explicit zero of J,
+    as a mask row's without a mask) adds nothing here either: those the product leaves
+    out are weighted 0 before they are summed."""
+
+    def __init__(self, j: csr_matrix) -> None:
+        self.shape = j.shape
+        self.indptr = j.indptr.copy()
+        self.indices = j.indices.copy()
+        n = j.shape[1]
+        per = np.diff(self.indptr).astype(np.int64)
+        self.rows = np.repeat(np.arange(j.shape[0]), per)
+        # every (p, q) of one row of J, rows ascending: p the entry of JW (column b), q of J
+        # (column a), for h[a, b]
+        sq = per * per
+        row = np.repeat(np.arange(per.size), sq)
+        k = np.arange(int(sq.sum())) - np.repeat(np.cumsum(sq) - sq, sq)
+        first = self.indptr[:-1].astype(np.int64)[row]
+        self.p = first + k // per[row]
+        self.q = first + k % per[row]
+        slot = self.indices[self.p].astype(np.int64) * n + self.indices[self.q]
+        uniq, self.slot = np.unique(slot, return_inverse=True)
+        self.slots = uniq.size
+        self.h_rows = (uniq % n).astype(np.int32)
+        self.h_cols = (uniq // n).astype(np.int64)
+        self.h_indptr = np.zeros(n + 1, dtype=np.int32)
+        np.cumsum(np.bincount(self.h_cols, minlength=n), out=self.h_indptr[1:])
+
+    def fits(self, j: csr_matrix) -> bool:
+        """Whether ``j`` has this pattern (canonical CSR, the same places)."""
+        return (
+            j.shape == self.shape
+            and np.array_equal(j.indptr, self.indptr)
+            and np.array_equal(j.indices, self.indices)
+        )
+
+    def __call__(
+        self, j: csr_matrix, w: np.ndarray, f: np.ndarray
+    ) -> tuple[csc_matrix, np.ndarray]:
+        jw = j.data * w[self.rows]  # as _row_scaled
+        live = jw != 0
+        every = bool(live.all())
+        prod = jw[self.p] * j.data[self.q]
+        if not every:
+            prod[~live[self.p]] = 0.0
+        sums = np.bincount(self.slot, weights=prod, minlength=self.slots)
+        n = self.shape[1]
+        keep = sums != 0
+        if keep.all():
+            h = csc_matrix((sums, self.h_rows.copy(), self.h_indptr.copy()), shape=(n, n))
+        else:
+            indptr = np.zeros(n + 1, dtype=np.int32)
+            np.cumsum(np.bincount(self.h_cols[keep], minlength=n), out=indptr[1:])
+            h = csc_matrix((sums[keep], self.h_rows[keep], indptr), shape=(n, n))
+        h.has_sorted_indices = True
+        gw = jw * f[self.rows]
+        if not every:
+            gw[~live] = 0.0
+        g = np.bincount(self.indices, weights=gw, minlength=n)
+        return h, g
+
+
+def normal_equations(
+    j: csr_matrix, w: np.ndarray, f: np.ndarray, normal: _Normal | None = None
+) -> tuple[csc_matrix, np.ndarray, _Normal | None]:
+    """(``JᵀWJ`` as CSC, ``JᵀWf``, the pattern to pass again): by :class:`_Normal` for a
+    canonical CSR ``j`` (``normal`` reused while ``j`` keeps its pattern), else by the
+    sparse products themselves; the same bits either way."""
+    if isinstance(j, csr_matrix) and j.has_canonical_format:
+        if normal is None or not normal.fits(j):
+            normal = _Normal(j)
+        h, g = normal(j, w, f)
+        return h, g, normal
+    jw = _row_scaled(j, w)
+    h = (j.T @ jw).tocsc()
+    g = np.asarray(jw.T @ f, dtype=np.float64).reshape(-1)
+    return h, g, None
 
 
 class _Damped:
@@ -100,12 +187,11 @@ def minimise(
     cost = soft_l1_cost(f)
     lam = LAMBDA0
     it = 0
+    normal: _Normal | None = None
     while it < MAX_ITER and x.size and f.size:
         j = jac(x)
         w = 1.0 / np.sqrt(1.0 + f * f)
-        jw = _row_scaled(j, w)
-        h = (j.T @ jw).tocsc()
-        g = np.asarray(jw.T @ f, dtype=np.float64).reshape(-1)
+        h, g, normal = normal_equations(j, w, f, normal)
         d = np.maximum(h.diagonal(), 1e-12)
         damp = _Damped(h)
         improved = False
