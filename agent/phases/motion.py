@@ -79,10 +79,11 @@ class Motion:
     def _next_reference(self, before: Frame, after: Frame, read: bool) -> Frame:
         """The reference after a step: ``after`` when its compass read, else ``before``,
         once. The next step's reading is then against the image from before the failed
-        step, and holds that step's drift too (its heading was believed unchanged); the
-        images are then two steps (~40 cm) apart, which the walk's central band of
-        the image still matches. A second failure in a row takes ``after``: the image
-        before may be the one that does not match."""
+        step, and holds that step's drift too (its heading was believed unchanged). The
+        images are then two steps (~40 cm) apart; the walk's central band looks along
+        the way walked, where that shift moves the view least, and a reading that does
+        not match fails as any other. A second failure in a row takes ``after``: the
+        image before may be the one that does not match."""
         if read or self.carried:
             self.carried = False
             return after

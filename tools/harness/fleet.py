@@ -234,8 +234,8 @@ def reshape_reach(spec: FleetSpec) -> float:
 def shape_room(spec: FleetSpec, sc: scenarios.Scenario) -> float:
     """The smallest room half-size (m, on the 0.5 m grid of generated rooms) whose walls
     stand at least d_e (one formation spacing) beyond every slot of the run's first shape:
-    the fleet does not see walls, so the world gives it the free floor a lab must (docs/formation.md
-    "Shapes"). The slots stand round the starts' mean (o_p, eq. 13;
+    the fleet does not see walls, so the world gives it the free floor a lab must
+    (docs/formation.md "Shapes"). The slots stand round the starts' mean (o_p, eq. 13;
     :func:`agent.core.formation.shape.layout.centred`), whichever way the shape faces, so
     the room needs |o_p| plus the slots' reach from their mean plus d_e. A line of 10 at
     d_e 0.8 reaches 3.6 m, beyond the 3.5 m room the starts of 10 robots get; the pyramid
