@@ -290,9 +290,9 @@ class Hold:
         place, a pair out of tolerance, or a parent whose mask says it faces further from
         the axis this robot believes in than a sound pair's mask error reaches at the
         fault test's α (:func:`agent.core.formation.shape.verdict.facing_tolerance`: the
-        parent's heading or this robot's own is off), stops this robot with the figure: the fleet never reports "formation
-        held" on a formation its own camera says is wrong. The leader has no parent to
-        check.
+        parent's heading or this robot's own is off), stops this robot with the figure:
+        the fleet never reports "formation held" on a formation its own camera says is
+        wrong. The leader has no parent to check.
         """
         ctx, report = self.ctx, self.ctx.report
         plan = self.course.plan
