@@ -4,7 +4,8 @@ fifth NAO, which runs no agent, stands on a slot of the fleet's plan
 honestly (agent/core/formation/waves/jam.py): every agent ends ``failed``, the robot of the
 slot naming why it cannot reach it and every other agent the same root, nobody reports
 the formation held, and ground truth agrees (the slot is still taken by the bystander,
-no contact).
+no contact). A fleet that refuses every candidate frame before anyone walks (the
+bystander's sightings pair with no member's) is the other honest stop, checked as such.
 """
 
 from __future__ import annotations
@@ -33,6 +34,9 @@ from tools.harness.procs import (
 from tools.jam_scenario import jam_scenario
 
 pytestmark = [pytest.mark.system, pytest.mark.slow]
+
+#: The refusal every agent reports when no candidate frame passes the fault test.
+REFUSED = "planning failed on the agreed records: no frame passes the fault test"
 
 FLEET = 4
 LIMIT = 900.0  # s for the whole run on a loaded 2-core machine
@@ -84,6 +88,15 @@ def test_a_slot_taken_by_a_bystander_stops_the_fleet_honestly(tmp_path: Path) ->
     final = {i: w.final[i] for i in range(1, FLEET + 1)}
     # nobody reports the formation held around the hole
     assert {s.phase for s in final.values()} == {"failed"}, final
+    starts = {r.id: (r.x, r.y) for r in sc.robots}
+    if all(REFUSED in s.error for s in final.values()):
+        # the other honest stop, before anyone moves: the bystander's sightings, which no
+        # member's record can pair, sometimes leave no candidate frame passing the fault
+        # test (seen in 1 of 4 quiet runs); every agent says so, and nobody walked
+        for i in range(1, FLEET + 1):
+            assert math.dist(w.last[i], starts[i]) < 0.02, (i, w.last[i], starts[i])
+        assert contacts == []
+        return
     # one root: the robot whose slot the bystander takes (by the agents' own plan; the
     # ground-truth plan names ``victim``)
     roots = [i for i, s in final.items() if FLEET_STOP not in s.error]
