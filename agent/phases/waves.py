@@ -302,4 +302,4 @@ class Waves:
 
             self.steps.walk_to(goal, progress)
         turn = wrap_pi(final_heading - ctx.beliefs.heading)
-        self.motion.rotate(turn, PAPER_GAINS, "turn to pyramid axis")
+        self.motion.rotate(turn, PAPER_GAINS, "turn to the formation axis")
