@@ -224,11 +224,15 @@ def reshape_reach(spec: FleetSpec) -> float:
     any shape (0 without reshapes): each new shape stands on the held slots' mean, which
     lies within the room, so a room this much larger holds it (a line of 8 at d_e 0.8
     spans 5.6 m; the room generated for 8 robots is 6–7 m wide)."""
-    cfg, reach = spec.agent, 0.0
-    for shape in spec.reshapes:
-        pos = shape.slots(spec.robots, cfg.d_e, cfg.phi_e).positions
-        reach = max(reach, float(np.max(np.hypot(*(pos - pos.mean(axis=0)).T))))
-    return reach
+    return max((slot_reach(spec, shape) for shape in spec.reshapes), default=0.0)
+
+
+def slot_reach(spec: FleetSpec, shape: Shape) -> float:
+    """How far (m) a slot of ``shape`` lies from the mean of its slots, at most, for the
+    spec's fleet size, d_e and φ_e."""
+    cfg = spec.agent
+    pos = shape.slots(spec.robots, cfg.d_e, cfg.phi_e).positions
+    return float(np.max(np.hypot(*(pos - pos.mean(axis=0)).T)))
 
 
 def shape_room(spec: FleetSpec, sc: scenarios.Scenario) -> float:
@@ -240,11 +244,9 @@ def shape_room(spec: FleetSpec, sc: scenarios.Scenario) -> float:
     the room needs |o_p| plus the slots' reach from their mean plus d_e. A line of 10 at
     d_e 0.8 reaches 3.6 m, beyond the 3.5 m room the starts of 10 robots get; the pyramid
     fits the starts' room but for a few of the largest fleets."""
-    cfg = spec.agent
-    pos = cfg.shape.slots(spec.robots, cfg.d_e, cfg.phi_e).positions
-    reach = float(np.max(np.hypot(*(pos - pos.mean(axis=0)).T)))
     starts = np.array([(r.x, r.y) for r in sc.robots], dtype=np.float64)
-    need = float(np.hypot(*starts.mean(axis=0))) + reach + cfg.d_e
+    reach = slot_reach(spec, spec.agent.shape)
+    need = float(np.hypot(*starts.mean(axis=0))) + reach + spec.agent.d_e
     return math.ceil(2.0 * need) / 2.0
 
 
@@ -382,10 +384,11 @@ class Fleet:
             for ln in world.lines
             if ln.startswith("sim naoqi ")
         }
-        if early and sorted(self.agents) != self.ids:
+        if not early:
+            for i in self.ids:
+                self.start_agent(i)
+        elif sorted(self.agents) != self.ids:
             raise RuntimeError(f"the world serves robots {self.ids}, agents {sorted(self.agents)}")
-        for i in self.ids if not early else ():
-            self.start_agent(i)
         if spec.rogue > 0:
             self._rogues = start_rogues(net, out, self.ids, spec.rogue, spec.rogue_replay)
         result["rogues_started"] = [r.name for r in self._rogues]
