@@ -13,9 +13,9 @@ import math
 
 import numpy as np
 
-from agent.core.formation.frame.obstacle_map import merge_sightings as merge_obstacle_sightings
 from agent.core.formation.frame.records import NeighborRecord
 from agent.core.formation.frame.research import Research, decide_research
+from agent.core.formation.obstacle_map import merge_sightings as merge_obstacle_sightings
 from agent.core.formation.params import PlanParams
 from agent.core.formation.plan import Plan, plan_from_records
 from agent.core.perception.calibration import Calibration, builtin

@@ -247,7 +247,8 @@ def test_no_import_cycles() -> None:
 # root modules. A module may import its own room and any room of a lower tier, never
 # one of its own tier or above:
 # - joined (robots joined by pairs: disjoint sets) stands below everything;
-# - frame (the common frame from the records) and shape (the pyramid) stand alone;
+# - frame (the common frame from the records), shape (the pyramid) and obstacle_map (the
+#   perceived obstacles in the common frame) stand alone;
 # - paths (assignment, straight and bent paths, their geometry) build on the shape;
 # - params names the choices of the rooms below it;
 # - waves (the safety rule, the schedule, the choice of plan, execution in time) build
@@ -258,7 +259,7 @@ def test_no_import_cycles() -> None:
 FORMATION = "agent.core.formation"
 FORMATION_TIERS: tuple[tuple[str, ...], ...] = (
     ("joined",),
-    ("frame", "shape"),
+    ("frame", "shape", "obstacle_map"),
     ("paths",),
     ("params",),
     ("waves",),
@@ -301,7 +302,7 @@ def test_every_formation_room_has_a_tier() -> None:
     """A new room (or root module) of the formation core must be placed in the order."""
     rooms = {_room(m) for m in MODULES if m.startswith(FORMATION + ".")}
     assert rooms == {r for tier in FORMATION_TIERS for r in tier}
-    for room in rooms - {"plan", "params", "reshape", "joined"}:
+    for room in rooms - {"plan", "params", "reshape", "joined", "obstacle_map"}:
         assert (ROOT / "agent/core/formation" / room / "__init__.py").is_file(), room
 
 

@@ -50,8 +50,8 @@ import numpy as np
 from agent.core.formation.frame.common_frame import build_common_frame
 from agent.core.formation.frame.fleet_frame import FleetFrame, fleet_frame
 from agent.core.formation.frame.neighbour_check import identify_neighbours
-from agent.core.formation.frame.obstacle_map import common_frame_obstacles
 from agent.core.formation.frame.records import NeighborRecord
+from agent.core.formation.obstacle_map import common_frame_obstacles
 from agent.core.formation.params import PlanParams
 from agent.core.formation.paths.fallback import banded_plan
 from agent.core.formation.shape.circle_pattern import circle

@@ -7,14 +7,14 @@ which robot (:mod:`~agent.core.formation.frame.neighbour_check`, eq. 9;
 ``reidentify`` without the papers' alignment), every start in one frame
 (:mod:`~agent.core.formation.frame.common_frame`, eq. 10; the pose fit of
 :mod:`~agent.core.formation.frame.poses` on ``robust_lm``), the consistency check that
-names a robot whose sightings do not fit, or nobody (``fault_test``), the re-search decision
-(:mod:`~agent.core.formation.frame.research`, 4.1.3 rule 2) and the perceived obstacles
-in the common frame (:mod:`~agent.core.formation.frame.obstacle_map`, 5.1.2).
+names a robot whose sightings do not fit, or nobody (``fault_test`` and
+``bias_test``), and the re-search decision (:mod:`~agent.core.formation.frame.research`, 4.1.3
+rule 2). The perceived obstacles are merged into the common frame beside this room
+(:mod:`agent.core.formation.obstacle_map`, 5.1.2).
 
 Entry points: :func:`~agent.core.formation.frame.fleet_frame.fleet_frame` (poses and the
 robot left out, used by :mod:`agent.core.formation.plan`);
 :func:`~agent.core.formation.frame.research.decide_research`,
-:class:`~agent.core.formation.frame.records.NeighborRecord` and
-:func:`~agent.core.formation.frame.obstacle_map.merge_sightings` (used by
+:class:`~agent.core.formation.frame.records.NeighborRecord` (used by
 ``agent/adapters.py``). The lowest room: it imports no other room of the formation.
 """

@@ -1,4 +1,4 @@
-"""Merging perceived obstacles into the common frame (agent/core/formation/frame/obstacle_map.py)
+"""Merging perceived obstacles into the common frame (agent/core/formation/obstacle_map.py)
 and planning around them from records (plan_from_records ``sightings``)."""
 
 from __future__ import annotations
@@ -10,12 +10,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent.core.formation.frame.obstacle_map import (
+from agent.core.formation.frame.records import NeighborRecord
+from agent.core.formation.obstacle_map import (
     MERGE_RADIUS,
     common_frame_obstacles,
     merge_sightings,
 )
-from agent.core.formation.frame.records import NeighborRecord
 from agent.core.formation.params import D_E, PlanParams
 from agent.core.formation.plan import plan_from_records
 
