@@ -26,6 +26,12 @@ is off by more than ``--psi-tol`` (default 10°), its position by more than ``--
 (0.15 m), a sound robot is left out, or planning stops where nobody carries a fault.
 Prints one line per run and a summary, writes the rows as JSON and draws the errors
 (PNG). Exit status 0 when no row is bad, 1 otherwise.
+
+``--corpus DIR --alone-null N`` measures instead the false alarms of the test of a robot
+alone against the rest (:mod:`agent.core.formation.frame.alone`, docs/design.md §9): in
+every fault-free fleet of at most N robots, each robot's record is set aside, the others
+framed without it, and the robot tested alone against them; it prints how many of those
+sound robots the test rejects below 10⁻², 10⁻³ and α, and the worst.
 """
 
 from __future__ import annotations
@@ -40,6 +46,7 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, replace
 from functools import partial
 from pathlib import Path
+from typing import TypeVar
 
 from agent.adapters import FormationAdapter
 from agent.core.formation.frame.fleet_frame import fleet_frame
@@ -48,6 +55,8 @@ from agent.wire import NeighborRecordMsg, decode
 from tools.harness.judge import injected_faults
 from tools.lib.frame_fit import frame_error
 from tools.lib.frames_report import FrameRow, draw, scores, summary
+
+T = TypeVar("T")
 
 
 def records_of(mcap: Path) -> tuple[NeighborRecordMsg, ...]:
@@ -115,7 +124,7 @@ def find_runs(roots: list[Path]) -> list[Path]:
     return sorted(p for p in found if (p / "result.json").exists())
 
 
-def _call(job: Callable[[], FrameRow]) -> FrameRow:
+def _call(job: Callable[[], T]) -> T:
     return job()
 
 
@@ -127,6 +136,58 @@ def _jobs(args: argparse.Namespace) -> list[Callable[[], FrameRow]]:
         return [partial(judge_records, r.name, r.records, r.truth, r.victim, r.fault, held_out(r.seed))
                 for r in load_corpus(args.corpus)]  # fmt: skip
     return [partial(judge_run, run) for run in find_runs(args.roots)]
+
+
+def alone_null(name: str, msgs: tuple[NeighborRecordMsg, ...]) -> list[tuple[str, int, float, str]]:
+    """Every robot of one fault-free fleet tested alone against the others framed without
+    its record (``--alone-null``): (fleet, robot, p, the test's words); p nan where the
+    rest does not pass."""
+    from agent.core.formation.frame.alone import alone_test
+    from agent.core.formation.frame.fleet_frame import frame_rest
+    from agent.core.formation.frame.poses import evaluate_poses
+    from agent.core.perception.sighting_noise import shipped_noise
+
+    records = FormationAdapter.records(msgs)
+    model = shipped_noise()
+    out = []
+    for robot in sorted(r.robot_id for r in records):
+        rest = [r for r in records if r.robot_id != robot]
+        inner = frame_rest(rest, DEFAULT_EPSILON, model)
+        if inner is None:
+            out.append((name, robot, math.nan, "the rest does not pass"))
+            continue
+        poses = evaluate_poses(inner.ids, (), inner.positions, inner.headings, inner.frame_robot)
+        alone = alone_test(poses, records, robot, model)
+        out.append((name, robot, alone.test.p, alone.describe()))
+    return out
+
+
+def _alone_null_main(args: argparse.Namespace) -> int:
+    from agent.core.formation.frame.fault_test import ALPHA
+    from tools.corpus import load_corpus
+
+    runs = [
+        r for r in load_corpus(args.corpus) if r.victim < 0 and len(r.records) <= args.alone_null
+    ]
+    jobs = [partial(alone_null, r.name, r.records) for r in runs]
+    pool = ProcessPoolExecutor(args.jobs) if args.jobs > 1 else None
+    rows: list[tuple[str, int, float, str]] = []
+    for k, out in enumerate(pool.map(_call, jobs) if pool else map(_call, jobs), 1):
+        rows += out
+        print(
+            f"[{k}/{len(jobs)}] {out[0][0]}: smallest p {min((r[2] for r in out), default=1.0):.1e}"
+        )
+    if pool is not None:
+        pool.shutdown()
+    ps = [r[2] for r in rows if not math.isnan(r[2])]
+    print(f"{len(rows)} sound robots of {len(runs)} fault-free fleets; {len(ps)} rests pass; "
+          + ", ".join(f"{sum(p < a for p in ps)} below {a:g}" for a in (1e-2, 1e-3, ALPHA)))  # fmt: skip
+    for row in sorted((r for r in rows if not math.isnan(r[2])), key=lambda r: r[2])[:3]:
+        print(f"  {row[0]} robot {row[1]}: p {row[2]:.1e} ({row[3]})")
+    if args.json is not None:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps({"alone_null": rows}, indent=2))
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -158,7 +219,14 @@ def main(argv: list[str] | None = None) -> int:
         default=1.0,
         help="fail above this share of fault-free runs where planning stops",
     )
+    ap.add_argument("--alone-null", type=int, default=0, metavar="N",
+                    help="with --corpus: the test alone's false alarms on fault-free fleets "
+                    "of at most N robots, instead")  # fmt: skip
     args = ap.parse_args(argv)
+    if args.alone_null:
+        if args.corpus is None:
+            ap.error("--alone-null needs --corpus")
+        return _alone_null_main(args)
     jobs = _jobs(args)
     if not jobs:
         print(f"no run folders (run.mcap + result.json) under {args.roots}", file=sys.stderr)

@@ -135,3 +135,29 @@ def test_the_corpus_gate(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> 
     out = capsys.readouterr().out
     assert rc == 0, out
     assert "without a fault: 0 with a sound robot left out" in out
+
+
+def test_the_test_alone_null_on_two_small_fleets(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--alone-null``: every robot of the fault-free fleets set aside and tested alone;
+    two rendered four-NAO fleets of the corpus, every sound robot's p above α."""
+    small = tmp_path / "corpus"
+    small.mkdir()
+    for name in ("n04_aligned_s1040.json", "n04_random_s1060.json"):
+        (small / name).write_text((CORPUS / name).read_text())
+    out = tmp_path / "null.json"
+    rc = eval_frames.main(["--corpus", str(small), "--alone-null", "4", "--jobs", "1",
+                           "--json", str(out)])  # fmt: skip
+    assert rc == 0
+    rows = json.loads(out.read_text())["alone_null"]
+    assert sorted((r[0], r[1]) for r in rows) == [
+        (f, k) for f in ("n04_aligned_s1040", "n04_random_s1060") for k in (1, 2, 3, 4)
+    ]
+    assert all(math.isnan(r[2]) or 1e-4 <= r[2] <= 1.0 for r in rows)
+    assert "8 sound robots of 2 fault-free fleets" in capsys.readouterr().out
+
+
+def test_the_test_alone_null_needs_a_corpus() -> None:
+    with pytest.raises(SystemExit):
+        eval_frames.main(["--alone-null", "4"])

@@ -50,6 +50,17 @@ because the frame's choice follows the model:
   Leaving only the pairs of either out, the rest still fails: robot 8's record had
   shaped the pairing. Framed again from scratch without robot 10's record the rest fails
   (robot 8 rejected); without robot 8's it passes: robot 8 is named, and robot 10 fits.
+* ``n07_random_s1159+scale:1.4@1``: in the fit of every record, robot 1 pulls the fit its
+  way: four of its six pairs rejected (p 10⁻³) and a bias Λ 21 (p 4·10⁻³), not enough at
+  α, and the dropped pairs leave it unconnected. Framed without its record, the rest
+  passes; alone against it, four of its five sightings land nowhere (p 5·10⁻⁹), and
+  robot 1 is named.
+* ``n06_aligned_s1301+shift:0.5@3``: robot 3's one rejected pair cut the fleet; alone
+  against the rest, all four of its sightings land nowhere (p 10⁻⁹).
+* ``n10_jitter20_s1164+rotate:40@3``: robot 3's masks say its compass is 40° off (p
+  5·10⁻¹¹), but the rest framed without its record failed its global test (p 8·10⁻⁵)
+  for the others' sightings of robot 3, lost strays. Counted as landing where robot 3
+  stands, they let the rest pass, and robot 3 is named.
 
 And one where nobody can be named, and nobody is:
 
@@ -84,6 +95,9 @@ NAMED = [
     "n10_random_s1144+scale:1.4@8",
     "n11_aligned_s1037+scale:1.4@5",
     "n07_random_s1105+shift:0.5@7",
+    "n07_random_s1159+scale:1.4@1",
+    "n06_aligned_s1301+shift:0.5@3",
+    "n10_jitter20_s1164+rotate:40@3",
 ]
 
 

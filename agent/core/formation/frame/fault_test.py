@@ -489,19 +489,25 @@ def fault_test(
     records: Sequence[NeighborRecord] = (),
     alpha: float = ALPHA,
     search: bool = True,
+    elsewhere: np.ndarray | None = None,
 ) -> FaultVerdict:
     """The test of the module docstring on a fitted :class:`PoseFrame`; ``search``
     False: a rejected robot is not sought to be named (no fit without it: a frame that may
-    not name anyone needs no search, and each fit costs ~1 CPU s at 100 NAOs).
+    not name anyone needs no search, and each fit costs ~1 CPU s at 100 NAOs);
+    ``elsewhere`` (k, 2): places, common frame, where robots stand that ``poses`` holds no
+    record of (:func:`alone.unrecorded_place`), as :func:`strays`, for the frame as tested
+    (a search fits the rest again, in a frame of its own: pass ``search`` False with it).
 
     Raises
     ------
     ValueError
-        ``alpha`` outside (0, 1).
+        ``alpha`` outside (0, 1), or ``elsewhere`` with ``search``.
     """
     if not 0.0 < alpha < 1.0:
         raise ValueError(f"alpha must be in (0, 1), got {alpha}")
-    ev = _evidence(poses, noise, records, None)
+    if elsewhere is not None and search:
+        raise ValueError("elsewhere holds for the frame as tested: a search needs it False")
+    ev = _evidence(poses, noise, records, elsewhere)
     whole = _fleet_count(noise, ev)
     if not search:
         # a frame that may not name anyone fails on the first rejection: the cheap tests

@@ -77,19 +77,22 @@ same test on a frame built from the others' records alone, paired and fitted fro
 scratch. Leaving out only the pairs a faulty robot's sightings made keeps what they did
 to the rest: pairings made around its false places, a neighbour pulled round (in a fleet
 of ten, a robot whose distances read 1.4 times too long left a sound robot it never saw
-11° off, and the rest, fitted again from those pairs, failed). So each robot a general
-candidate's test rejected at :data:`fault_test.ALPHA` (smallest p first, tie: lowest id)
-has its whole record set aside and the candidates run again on the others with nobody
-named (:func:`_without_record`), unless that test rejects more robots than one faulty
-robot and ALPHA's false alarms explain at ALPHA (:func:`fault_test.one_fault_explains`:
-in a fleet of 3–140 robots, three or more; the aligned model of a fleet set down askew
-rejects every robot, and a wrong pairing most of them); exactly one such robot whose rest passes is named,
-standing where the others saw it. None, or more than one, and :func:`fleet_frame` raises
-``ValueError`` with the reason of the last candidate tried, the same on every agent
-(they hold the same records): nobody moves. A robot is so named only when its own test
-rejects it (at ALPHA in one of the two general frames) and the rest passes: a sound
-robot is left out with at most 2·ALPHA per run. The search runs only where the fleet
-would otherwise stop, and costs one framing of the rest per suspect.
+11° off, and the rest, fitted again from those pairs, failed). So each *suspect* of a
+general candidate's failed test (:func:`alone.suspects_of`: the robots it rejects at
+:data:`fault_test.ALPHA`, unless more than one faulty robot and ALPHA's false alarms
+explain them, :func:`fault_test.one_fault_explains`; when it rejects nobody, the robots
+whose pairs failed it) has its whole record set aside, smallest p first, and the
+candidates run again on the others with nobody named (:func:`_without_record`), the
+suspect standing where the others' sightings that land on none of them agree
+(:func:`alone.unrecorded_place`: the rest is not blamed for seeing the robot set aside).
+A suspect whose rest passes is named when its own test rejects it at ALPHA, in a
+general candidate's frame or alone against the rest (:func:`alone.alone_test`: its
+record tested with the rest held fixed, where a faulty robot can no longer pull the fit
+its way); exactly one is named, standing where the others saw it. None, or more than
+one, and :func:`fleet_frame` raises ``ValueError`` with the reason of the last candidate
+tried, the same on every agent (they hold the same records): nobody moves. A sound robot
+is so left out with at most 3·ALPHA per run. The search runs only where the fleet would
+otherwise stop, and costs one framing of the rest per suspect.
 
 Every robot is then planned from its estimated start position, and walks in the common
 frame by turning its own plan by its estimated start heading ψ (:mod:`own_frame`).
@@ -106,12 +109,12 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from agent.core.formation.frame.alone import set_aside, suspects_of, unrecorded_place
 from agent.core.formation.frame.common_frame import build_common_frame
 from agent.core.formation.frame.fault_test import (
     ALPHA,
     FaultVerdict,
     fault_test,
-    one_fault_explains,
     seen_by_others,
 )
 from agent.core.formation.frame.firm_pairs import firm_start
@@ -487,11 +490,15 @@ def _first_passed(
     epsilon: float,
     model: SightingNoise,
     suspects: dict[int, tuple[float, PoseFrame]] | None,
+    unrecorded: bool = False,
 ) -> tuple[FleetFrame | None, str]:
     """The candidate loop of the module docstring: (the frame, None if none passes; the
     reason of the last candidate tried). ``suspects`` None: no robot may be named (the
-    general candidates are tested without a search); else it collects every robot a
-    general candidate's test rejects, with its smallest p and the poses it was tested on."""
+    general candidates are tested without a search); else it collects the suspects of
+    every general candidate's test (:func:`alone.suspects_of`), each with its smallest p and the
+    poses it was tested on. ``unrecorded``: one robot stands among ``records``' robots
+    without a record of its own (its record set aside), where the others' sightings that
+    land on none of them agree (:func:`alone.unrecorded_place`)."""
     last = "no candidate frame connects every robot through identified neighbours"
     passed: list[tuple[float, bool, FleetFrame]] = []  # (global p, names a robot, frame)
     for cand in _candidates(records, epsilon, model):
@@ -500,8 +507,12 @@ def _first_passed(
             continue
         fine, test = built
         searched = any(named for _, named, _ in passed)
-        search = suspects is not None and cand.general and not searched
-        verdict = fault_test(test, model, records, search=search)
+        search = suspects is not None and cand.general and not searched and not unrecorded
+        elsewhere = None
+        if unrecorded:
+            place, _ = unrecorded_place(test, records, model)
+            elsewhere = None if place is None else place.reshape(1, 2)
+        verdict = fault_test(test, model, records, search=search, elsewhere=elsewhere)
         rejected = _rejected(verdict)
         turned: set[int] = set()  # each rejected robot is turned round at most once
         while cand.turn is not None:
@@ -516,10 +527,9 @@ def _first_passed(
             rejected = _rejected(verdict)
         if turned and search:
             verdict = fault_test(test, model, records, search=True)
-        plausible = one_fault_explains(len(_rejected(verdict)), len(verdict.tests))
-        if suspects is not None and cand.general and plausible:
-            for t in verdict.tests:
-                if t.p < ALPHA and (t.robot not in suspects or t.p < suspects[t.robot][0]):
+        if suspects is not None and cand.general:
+            for t in suspects_of(verdict):
+                if t.robot not in suspects or t.p < suspects[t.robot][0]:
                     suspects[t.robot] = (t.p, test)
         last = f"{cand.name}: {verdict.reason}"
         if not verdict.ok or (verdict.named and not cand.general):
@@ -549,33 +559,32 @@ def _rejected(verdict: FaultVerdict) -> list[int]:
     return [t.robot for t in sorted(verdict.tests, key=lambda t: (t.p, t.robot)) if t.p < ALPHA]
 
 
+def frame_rest(
+    rest: Sequence[NeighborRecord], epsilon: float, noise: SightingNoise | None = None
+) -> FleetFrame | None:
+    """The others framed without a robot's record (module docstring, *framed again without
+    a record*): the candidates on ``rest`` with nobody named, one robot standing among
+    them without a record; None when no candidate passes with every robot of ``rest``."""
+    model = shipped_noise() if noise is None else noise
+    inner, _ = _first_passed(rest, epsilon, model, None, unrecorded=True)
+    return inner if inner is not None and len(inner.ids) == len(rest) else None
+
+
 def _without_record(
     records: Sequence[NeighborRecord],
     epsilon: float,
     model: SightingNoise,
     suspects: dict[int, tuple[float, PoseFrame]],
 ) -> FleetFrame | None:
-    """The last resort of the module docstring (*framed again without its record*): each
-    robot a general candidate's test rejected (smallest p first, tie: lowest id) is taken
-    as faulty, its whole record set aside, and the rest framed from scratch with nobody
-    named; exactly one such robot whose rest passes is named, standing where the others
-    saw it. None: no suspect, or none or more than one whose rest passes."""
-    found: list[tuple[int, FleetFrame, PoseFrame]] = []
-    for robot, (_, tested) in sorted(suspects.items(), key=lambda kv: (kv[1][0], kv[0])):
-        rest = [r for r in records if r.robot_id != robot]
-        inner, _ = _first_passed(rest, epsilon, model, None)
-        if inner is None or set(inner.ids) != {r.robot_id for r in rest}:
-            continue
-        found.append((robot, inner, tested))
-        if len(found) > 1:
-            return None  # ambiguous: nobody can be trusted
-    if not found:
+    """The last resort of the module docstring (*framed again without its record*,
+    :func:`alone.set_aside`): the frame of the others, with the robot named, or None."""
+
+    found = set_aside(records, suspects, model, lambda rest: frame_rest(rest, epsilon, model))
+    if found is None:
         return None
-    robot, inner, tested = found[0]
-    poses = evaluate_poses(inner.ids, (), inner.positions, inner.headings, inner.frame_robot)
-    at = seen_by_others(tested, poses, robot, model)
-    p = suspects[robot][0]
-    reason = (f"robot {robot} named: its sightings do not fit at p {p:.1e} < {ALPHA:g}, and "
-              f"the others, framed again without its record, pass ({inner.reason})")  # fmt: skip
+    inner = found.rest
+    reason = (f"robot {found.robot} named: {found.why}, and the others, framed again "
+              f"without its record, pass ({inner.reason})")  # fmt: skip
     return FleetFrame(inner.frame_robot, inner.ids, inner.positions, inner.headings, False,
-                      excluded=(robot,), excluded_at=at.reshape(1, 2), reason=reason)  # fmt: skip
+                      excluded=(found.robot,), excluded_at=found.place.reshape(1, 2),
+                      reason=reason)  # fmt: skip

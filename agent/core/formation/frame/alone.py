@@ -1,0 +1,307 @@
+"""A robot tested alone against the others' frame: "r is faulty" once r's record is set
+aside (docs/design.md §9, the fault test's last resort; the check the papers leave out:
+NAO paper 4.1.2 trusts every record).
+
+The fault test of :mod:`fault_test` tests each robot inside a frame fitted to every
+record, r's own included, so a faulty r pulls the fit towards its own sightings and
+hides behind the compromise: in a fleet of seven, a robot whose distances read 1.4 times
+too long had four of its six pairs rejected (p 10⁻³) and a bias Λ of 21 (p 4·10⁻³), not
+enough at α = 10⁻⁴, and the fleet stopped. When r's record is set aside and the rest is
+framed from the others' records alone, r is still *seen*: the others' sightings of it
+land where it stands. This module gives that place, and the test of r against the rest:
+
+1. **Where a robot without a record stands** (:func:`unrecorded_place`). The rest's
+   sightings that no measurement of the rest's fit uses and that land on no robot of the
+   rest (within the sighting gate of :data:`fault_test.ALPHA_SIGHTING`) are sightings of
+   something the rest does not hold: of r, or ghosts. r stands at the mean of the largest
+   set of them, one per owner, that agree within the gate, each error taken as large
+   again as the model's (two noisy sightings: χ² halved, as
+   :func:`fault_test.seen_by_others`); tie: the set around the first sighting in (owner,
+   record) order. The rest is tested with that place as one where a robot stands
+   (``elsewhere`` of :func:`fault_test.fault_test`), so its sightings of r are not held
+   against it as strays that land nowhere.
+2. **r against the rest** (:func:`alone_test`), the rest held at its fitted poses:
+
+   * r stands at that place; its heading ψ_r is the one, on a 1° grid, under which most
+     of r's own sightings land on a robot of the rest (χ² halved again: r's place
+     carries the others' errors), tie: the smaller sum of their χ² (each capped at the
+     gate), then the smaller angle;
+   * **position:** each of r's own sightings that lands on no robot at ψ_r is a lost
+     stray, which a sound robot's sighting is with the measured probability
+     ``p_stray(d)``; the p-value is the Poisson-binomial tail ``P(K ≥ lost)``, as step 2
+     of :mod:`fault_test`. The halved χ² makes a sound sighting land more easily than in
+     the fit where p_stray is measured, so the test errs on the side of a sound robot;
+   * **heading:** the others' masks of r (step 3 of :mod:`fault_test`, floored at ρ);
+   * **bias:** :mod:`bias_test` on r's own sightings, all unlabelled, with the others'
+     sightings of r pinning its position (step 4).
+
+   r is rejected when ``3·min(p_pos, p_head, p_bias) < α`` (Bonferroni over the three,
+   :data:`fault_test.ALPHA`), as in the fit. A robot fewer than :data:`MIN_WITNESSES` of
+   the others agree on is never rejected here: one sighting has no check, and a ghost,
+   or a sighting of r that a wrong rest paired elsewhere leaving one behind, would stand
+   for r (in five robots, the four framed without the faulty one's record 0.64 m off the
+   truth, every one passing, one stray sighting left for it).
+3. **The last resort** (:func:`set_aside`, what :func:`fleet_frame.fleet_frame` does when
+   no candidate frame passes). Each *suspect* of a general candidate's failed test
+   (:func:`suspects_of`: the robots it rejects, or, when it rejects nobody, those whose
+   pairs failed it) has its record set aside, smallest p first, and the others are
+   framed from scratch with nobody named, the suspect standing at its place of step 1.
+   A suspect whose rest passes is *found* when its test rejects it at α, in the
+   candidate's frame or alone (step 2). Exactly one found is named; none, or more than
+   one, and the fleet stops. A sound robot is so named only if one of its tests rejects
+   it at α (in one of the two general candidates, or alone) and the rest passes: at most
+   3α per robot and run. It costs one framing of the rest per suspect, only where the
+   fleet would otherwise stop.
+
+Deterministic: records and sightings in (owner, record) order, the first of equal sets,
+the smallest of equal angles.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Generic, Protocol, TypeVar
+
+import numpy as np
+from scipy.special import chdtri
+
+from agent.core.formation.frame.bias_test import bias_fit
+from agent.core.formation.frame.fault_test import (
+    ALPHA,
+    ALPHA_SIGHTING,
+    FaultVerdict,
+    RobotTest,
+    mask_deltas,
+    mask_test,
+    one_fault_explains,
+    seen_by_others,
+    tail_at_least,
+)
+from agent.core.formation.frame.poses import PoseFrame, PoseMeasurement, evaluate_poses
+from agent.core.formation.frame.records import NeighborRecord, mask_orientation
+from agent.core.perception.sighting_noise import SightingNoise
+
+#: The fewest of the others' sightings that must agree on where a robot without a record
+#: stands for it to be tested alone (step 2).
+MIN_WITNESSES = 2
+#: Headings tried for the robot tested alone (step 2): every degree of the circle.
+HEADING_GRID = np.radians(np.arange(0.0, 360.0, 1.0))
+
+
+@dataclass(frozen=True)
+class Alone:
+    """The test of a robot against the rest (module docstring, step 2)."""
+
+    test: RobotTest
+    #: (2,) where the others saw it, in the rest's frame; None: fewer than
+    #: :data:`MIN_WITNESSES` of them agree
+    place: np.ndarray | None
+    heading: float  #: ψ_r (rad) under which most of its sightings land
+
+    def describe(self) -> str:
+        return f"alone against the rest, {self.test.describe()}"
+
+
+def _gate() -> float:
+    return float(chdtri(2, ALPHA_SIGHTING))
+
+
+def _turn(psi: float, points: np.ndarray) -> np.ndarray:
+    """Points (k, 2) of a frame turned by ``psi`` written in it: R(−ψ)·p."""
+    c, s = math.cos(psi), math.sin(psi)
+    return np.stack([c * points[:, 0] + s * points[:, 1], -s * points[:, 0] + c * points[:, 1]], 1)
+
+
+def unrecorded_place(
+    poses: PoseFrame,
+    records: Sequence[NeighborRecord],
+    noise: SightingNoise,
+    robot: int = -1,
+) -> tuple[np.ndarray | None, tuple[PoseMeasurement, ...]]:
+    """Step 1 of the module docstring: where a robot without a record stands in ``poses``'
+    frame, and the sightings of it as measurements with target ``robot`` (their masks as
+    :func:`records.mask_orientation` turns them, when ``records`` holds ``robot``'s); (None,
+    ()) when no sighting lands off the robots of ``poses``."""
+    q = _gate()
+    by_id = {r.robot_id: r for r in records}
+    target = by_id.get(robot)
+    used = {(m.owner, float(m.vector[0]), float(m.vector[1])) for m in poses.measurements}
+    found: list[tuple[int, np.ndarray, np.ndarray, float]] = []  # owner, vector, at, psi
+    for k, rid in enumerate(poses.ids):
+        rec = by_id.get(rid)
+        if rec is None:
+            continue
+        psi = float(poses.headings[k])
+        others = _turn(psi, np.delete(poses.positions, k, axis=0) - poses.positions[k])
+        for a, v in enumerate(np.asarray(rec.neighbours, dtype=np.float64).reshape(-1, 2)):
+            if (rid, float(v[0]), float(v[1])) in used:
+                continue
+            if len(others):
+                x2 = noise.chi2(np.repeat(v[None], len(others), 0), others - v)
+                if float(x2.min()) <= q:
+                    continue
+            at = poses.positions[k] + _turn(-psi, v[None])[0]
+            theta = mask_orientation(rec, a, target)
+            found.append((rid, v, at, theta))
+    best: list[int] = []
+    for _, _, centre, _ in found:
+        agree: list[int] = []
+        owners: set[int] = set()
+        for j, (owner, v, at, _) in enumerate(found):
+            if owner in owners:
+                continue
+            err = _turn(float(poses.headings[poses.ids.index(owner)]), (centre - at)[None])
+            if 0.5 * float(noise.chi2(v[None], err)[0]) <= q:
+                agree.append(j)
+                owners.add(owner)
+        if len(agree) > len(best):
+            best = agree
+    if not best:
+        return None, ()
+    place = np.mean(np.array([found[j][2] for j in best]), axis=0)
+    seen = tuple(
+        PoseMeasurement(found[j][0], robot, found[j][1].copy(), orientation=found[j][3])
+        for j in best
+    )
+    return place, seen
+
+
+def alone_test(
+    rest: PoseFrame,
+    records: Sequence[NeighborRecord],
+    robot: int,
+    noise: SightingNoise,
+) -> Alone:
+    """Step 2 of the module docstring: ``robot``'s record (in ``records``) tested against
+    ``rest``, the frame of the others fitted without it.
+
+    Raises
+    ------
+    ValueError
+        ``robot`` is in ``rest``, or ``records`` holds no record of it.
+    """
+    if robot in rest.ids:
+        raise ValueError(f"robot {robot} is in the rest's frame: it must be left out")
+    mine = next((r for r in records if r.robot_id == robot), None)
+    if mine is None:
+        raise ValueError(f"no record of robot {robot}")
+    own = np.asarray(mine.neighbours, dtype=np.float64).reshape(-1, 2)
+    place, seen = unrecorded_place(rest, records, noise, robot)
+    if place is None or len(seen) < MIN_WITNESSES:
+        untested = RobotTest(robot, 0, 0, len(own), 0, 1.0, 0, 0.0, 1.0)
+        return Alone(untested, None, 0.0)
+    q = _gate()
+    heading, lands = _heading(rest.positions - place, own, noise, q)
+    lost = len(own) - lands
+    p_pos = tail_at_least([float(p) for p in noise.p_stray(np.hypot(*own.T))], lost)
+    ids = tuple(sorted((*rest.ids, robot)))
+    k = ids.index(robot)
+    positions = np.insert(rest.positions, k, place, axis=0)
+    headings = np.insert(rest.headings, k, heading)
+    joint = evaluate_poses(ids, (*rest.measurements, *seen), positions, headings,
+                           rest.frame_robot)  # fmt: skip
+    deltas = mask_deltas(joint, robot)
+    offset, p_h = mask_test(deltas, noise)
+    timed = mine.stances is not None and len(mine.stances) > 0
+    p_h = max(p_h, noise.rho if timed else noise.rho_untimed) if deltas else p_h
+    fit = bias_fit(joint, robot, noise, noise.bias_scale, own)
+    test = RobotTest(robot, len(seen), 0, len(own), lost, p_pos, len(deltas), offset, p_h,
+                     fit.statistic, fit.p)  # fmt: skip
+    return Alone(test, place, heading)
+
+
+def _heading(rel: np.ndarray, own: np.ndarray, noise: SightingNoise, q: float) -> tuple[float, int]:
+    """(ψ, how many of ``own`` land) of step 2: ``rel`` (n, 2) the rest's robots from the
+    place, common frame; ``own`` (k, 2) the sightings, in the robot's fixed frame."""
+    if not len(own) or not len(rel):
+        return 0.0, 0
+    c, s = np.cos(HEADING_GRID), np.sin(HEADING_GRID)
+    # every robot of the rest as seen from the place at every heading: (h, n, 2)
+    seen = np.stack([c[:, None] * rel[None, :, 0] + s[:, None] * rel[None, :, 1],
+                     -s[:, None] * rel[None, :, 0] + c[:, None] * rel[None, :, 1]], axis=2)  # fmt: skip
+    best = np.full((len(HEADING_GRID), len(own)), np.inf)
+    for j, v in enumerate(own):
+        err = (seen - v).reshape(-1, 2)
+        x2 = 0.5 * noise.chi2(np.repeat(v[None], len(err), 0), err)
+        best[:, j] = x2.reshape(len(HEADING_GRID), -1).min(axis=1)
+    lands = (best <= q).sum(axis=1)
+    cost = np.minimum(best, q).sum(axis=1)
+    order = np.lexsort((np.arange(len(HEADING_GRID)), cost, -lands))
+    h = int(order[0])
+    psi = float(HEADING_GRID[h])
+    return math.atan2(math.sin(psi), math.cos(psi)), int(lands[h])
+
+
+def suspects_of(verdict: FaultVerdict) -> list[RobotTest]:
+    """Step 3's suspects of a general candidate's test: the robots it rejects at
+    :data:`fault_test.ALPHA`, unless more than one faulty robot and ALPHA's false alarms
+    explain (:func:`fault_test.one_fault_explains`: a wrong frame, whose rejections say
+    nothing of any one robot); when it rejects nobody and fails, those with a rejected
+    pair or a lost stray (the frame failed on their pairs, or on the fleet's count of
+    them)."""
+    rejected = [t for t in verdict.tests if t.p < ALPHA]
+    if rejected:
+        return rejected if one_fault_explains(len(rejected), len(verdict.tests)) else []
+    if verdict.ok:
+        return []
+    return [t for t in verdict.tests if t.rejected_edges or t.lost]
+
+
+class RestFrame(Protocol):
+    """The frame of the others that :func:`set_aside` tests a robot against."""
+
+    @property
+    def frame_robot(self) -> int: ...
+    @property
+    def ids(self) -> tuple[int, ...]: ...
+    @property
+    def positions(self) -> np.ndarray: ...
+    @property
+    def headings(self) -> np.ndarray: ...
+
+
+R = TypeVar("R", bound=RestFrame)
+
+
+@dataclass(frozen=True)
+class SetAside(Generic[R]):
+    """The robot named by step 3, the others' frame, and where it stands in it."""
+
+    robot: int
+    rest: R
+    place: np.ndarray  #: (2,) in the rest's frame
+    why: str  #: which test rejects it
+
+
+def set_aside(
+    records: Sequence[NeighborRecord],
+    suspects: Mapping[int, tuple[float, PoseFrame]],
+    noise: SightingNoise,
+    frame_rest: Callable[[Sequence[NeighborRecord]], R | None],
+) -> SetAside[R] | None:
+    """Step 3 of the module docstring: each suspect (its smallest p in a general candidate's
+    test and the poses it was tested on; smallest p first, tie: lowest id) has its record
+    set aside and the others framed by ``frame_rest`` (None: they fail); it is *found*
+    when that frame passes and its test rejects it at :data:`fault_test.ALPHA`, in the
+    candidate's frame or alone against the rest (:func:`alone_test`). Exactly one found is
+    named; None when none is, or more than one (nobody can be trusted)."""
+    found: list[SetAside[R]] = []
+    for robot, (p, tested) in sorted(suspects.items(), key=lambda kv: (kv[1][0], kv[0])):
+        inner = frame_rest([r for r in records if r.robot_id != robot])
+        if inner is None:
+            continue
+        poses = evaluate_poses(inner.ids, (), inner.positions, inner.headings, inner.frame_robot)
+        alone = alone_test(poses, records, robot, noise)
+        if p < ALPHA:
+            why = f"its sightings do not fit at p {p:.1e} < {ALPHA:g}"
+        elif alone.test.p < ALPHA:
+            why = f"its record does not fit the others' frame ({alone.describe()})"
+        else:
+            continue
+        at = seen_by_others(tested, poses, robot, noise) if alone.place is None else alone.place
+        found.append(SetAside(robot, inner, np.asarray(at, dtype=np.float64).reshape(2), why))
+        if len(found) > 1:
+            return None
+    return found[0] if found else None
