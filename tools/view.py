@@ -120,12 +120,16 @@ def plan_params(a: argparse.Namespace) -> PlanParams:
             raise ValueError(f"{meta}: not a JSON object")
         known = {flag: result[key] for flag, key in PLAN_KEYS.items() if key in result}
     known.update({f: getattr(a, f) for f in PLAN_KEYS if getattr(a, f) is not None})
+    try:
+        shape = load_shape(_text(known, "shape", PYRAMID.name))
+    except ValueError as exc:
+        raise ValueError(f"{exc} (--shape NAME|FILE gives the fleet's)") from exc
     return PlanParams(
         d_e=_number(known, "d_e", D_E),
         phi_e=math.radians(_number(known, "phi_e_deg", PHI_E_DEG)),
         orientation=_text(known, "orientation", "pca"),
         strategy=_text(known, "strategy", "default"),
-        shape=load_shape(_text(known, "shape", PYRAMID.name)),
+        shape=shape,
     )
 
 

@@ -58,7 +58,7 @@ def test_a_replay_takes_them_from_the_runs_result_and_a_flag_wins(tmp_path: Path
         ({"phi_e_deg": True}, [], "phi_e_deg: True is not a number"),
         ({"shape_spec": 7}, [], "shape: 7 is not a string"),
         ({"orientation": None}, [], "orientation: None is not a string"),
-        ({"shape_spec": "hexagon"}, [], "shape 'hexagon'"),
+        ({"shape_spec": "hexagon"}, [], "(--shape NAME|FILE gives the fleet's)"),
         ({}, ["--shape", "no/such/file.json"], "no/such/file.json"),
         ({"strategy": "fastest"}, [], "strategy"),
         ({"d_e": -1.0}, [], "planning parameters: "),
