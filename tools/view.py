@@ -16,6 +16,13 @@ default 127.0.0.1:8765): the same scene builder as the recorder
 through the same scene builder at their recorded pace (``--speed K`` times faster),
 once or in a loop.
 
+The plan's targets are drawn when the scene's planning parameters are the fleet's (the
+plan is recomputed from the signed records and drawn when its digest is one an agent
+reported): ``--shape NAME|FILE``, ``--d-e``, ``--phi-e-deg``, ``--orientation`` and
+``--strategy``, as the agents were given them. A replay takes them from the run's
+``result.json`` beside the recording, where there is one; a flag given overrides it; the
+rest are the agents' defaults (the pyramid).
+
 ``--web [HOST:PORT]`` (default 127.0.0.1:8080) serves the page in the browser
 (:mod:`tools.harness.view.webpage`): top-down map, each robot's phase, camera views, log.
 Runs until Ctrl-C, or ``--for S`` seconds.
@@ -24,12 +31,17 @@ Runs until Ctrl-C, or ``--for S`` seconds.
 from __future__ import annotations
 
 import argparse
+import json
+import math
 import sys
 import threading
 import time
 from pathlib import Path
 from typing import Any
 
+from agent.config import load_shape
+from agent.core.formation.params import D_E, ORIENTATIONS, PHI_E_DEG, PLAN_STRATEGIES, PlanParams
+from agent.core.formation.shape.spec import PYRAMID
 from agent.wire import TruthPosesMsg, decode, reason
 from tools.harness.view.live import DEFAULT_LIVE, Fanout, LiveServer, check_live_argument, serve
 from tools.harness.view.scene import Scene
@@ -61,7 +73,17 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--screenshot-after", type=float, default=1.0, metavar="S",
         help="take the screenshot no sooner than S s after the page showed every robot",
     )  # fmt: skip
+    plan = p.add_argument_group("the fleet's planning parameters (default: a replay's result.json)")
+    plan.add_argument("--shape", default=None, metavar="NAME|FILE", help="the formation")
+    plan.add_argument("--d-e", type=float, default=None, help="the edge length d_e (m)")
+    plan.add_argument("--phi-e-deg", type=float, default=None, help="φ_e (deg)")
+    plan.add_argument("--orientation", choices=ORIENTATIONS, default=None)
+    plan.add_argument("--strategy", choices=PLAN_STRATEGIES, default=None)
     a = p.parse_args(argv)
+    try:
+        a.params = plan_params(a)
+    except ValueError as exc:
+        p.error(f"planning parameters: {exc}")
     if a.screenshot is not None and a.web is None:
         a.web = "127.0.0.1:0"
     check_live_argument(p, a.live)
@@ -72,18 +94,73 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return a
 
 
+#: the planning flags and the keys of a run's result.json that give them
+PLAN_KEYS = {
+    "shape": "shape_spec",
+    "d_e": "d_e",
+    "phi_e_deg": "phi_e_deg",
+    "orientation": "orientation",
+    "strategy": "strategy",
+}
+
+
+def plan_params(a: argparse.Namespace) -> PlanParams:
+    """The fleet's planning parameters: the flags given, else a replay's ``result.json``
+    (``tools.demo`` and the harness write it beside ``run.mcap``), else the defaults.
+    ``ValueError`` for a ``result.json`` that is no JSON object, a value of the wrong type,
+    a shape that does not load, parameters the planner refuses."""
+    known: dict[str, object] = {}
+    meta = a.replay.parent / "result.json" if a.replay is not None else None
+    if meta is not None and meta.is_file():
+        try:
+            result = json.loads(meta.read_text())
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise ValueError(f"{meta}: {reason(exc)}") from exc
+        if not isinstance(result, dict):
+            raise ValueError(f"{meta}: not a JSON object")
+        known = {flag: result[key] for flag, key in PLAN_KEYS.items() if key in result}
+    known.update({f: getattr(a, f) for f in PLAN_KEYS if getattr(a, f) is not None})
+    try:
+        shape = load_shape(_text(known, "shape", PYRAMID.name))
+    except ValueError as exc:
+        raise ValueError(f"{exc} (--shape NAME|FILE gives the fleet's)") from exc
+    return PlanParams(
+        d_e=_number(known, "d_e", D_E),
+        phi_e=math.radians(_number(known, "phi_e_deg", PHI_E_DEG)),
+        orientation=_text(known, "orientation", "pca"),
+        strategy=_text(known, "strategy", "default"),
+        shape=shape,
+    )
+
+
+def _number(known: dict[str, object], name: str, default: float) -> float:
+    v = known.get(name, default)
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise ValueError(f"{name}: {v!r} is not a number")
+    return float(v)
+
+
+def _text(known: dict[str, object], name: str, default: str) -> str:
+    v = known.get(name, default)
+    if not isinstance(v, str):
+        raise ValueError(f"{name}: {v!r} is not a string")
+    return v
+
+
 class Feed:
     """The scene builder fed message by message, its channels to ``live`` (and to the
     recording of ``record``), world time from the ground truth as the recorder keeps it."""
 
-    def __init__(self, live: LiveServer, record: Path | None, scenario: Path | None) -> None:
+    def __init__(
+        self, live: LiveServer, record: Path | None, scenario: Path | None, params: PlanParams
+    ) -> None:
         from tools.harness.observe import Recorder
 
-        self.rec = Recorder(record, sinks=[live]) if record is not None else None
+        self.rec = Recorder(record, params=params, sinks=[live]) if record is not None else None
         self.scene = (
             self.rec.scene
             if self.rec is not None
-            else Scene(Fanout(live.emit, []), scenario=scenario, since_ns=0)
+            else Scene(Fanout(live.emit, []), params=params, scenario=scenario, since_ns=0)
         )
         self.world_ns = 0
         self.rejected = 0
@@ -141,7 +218,7 @@ def replay(args: argparse.Namespace, live: LiveServer, stop: Stop) -> None:
     rounds = 0
     while True:
         rounds += 1
-        feed = Feed(live, None, args.replay.parent / "scenario.json")
+        feed = Feed(live, None, args.replay.parent / "scenario.json", args.params)
         t0_rec, t0 = msgs[0][0], time.monotonic()
         print(f"view: replaying {args.replay} ({len(msgs)} messages), round {rounds}", flush=True)
         for t_ns, key, data in msgs:
@@ -180,7 +257,7 @@ def watch_fleet(args: argparse.Namespace, live: LiveServer, stop: Stop) -> None:
             identity="observer" if secure else "",
         )
     )
-    feed = Feed(live, args.record, None)
+    feed = Feed(live, args.record, None, args.params)
     try:
         watch(bus)
         print("view: watching the fleet", flush=True)

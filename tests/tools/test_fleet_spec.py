@@ -197,3 +197,20 @@ def test_the_matrix_reports_after_every_run_and_rereads_earlier_files(
     again = run_matrix([], _run, report=lambda rs: seen.append(-len(rs)), progress="t",
                        label=lambda s, r: "", earlier=[path, path], row=Run)  # fmt: skip
     assert again == runs + runs and seen[-1] == -6
+
+
+@pytest.mark.parametrize("shape", sorted(BUILTIN))
+def test_the_runs_recording_plans_with_the_agents_parameters(shape: str, tmp_path: Path) -> None:
+    """The recorder's scene (and so the live view of ``tools.demo --view``) recomputes the
+    plan with the agents' parameters: with the pyramid's, a fleet of another shape reports
+    a digest the scene never computes, and the page draws no target."""
+    from tools.harness.fleet_flags import parse_fleet_spec
+
+    flags = ["--robots", "6", "--shape", shape, "--d-e", "0.9", "--orientation", "north"]
+    spec = parse_fleet_spec(flags)
+    rec = Fleet(spec, tmp_path).recorder()
+    try:
+        assert rec.scene.params == spec.agent.plan_params()
+        assert rec.scene.params.shape == BUILTIN[shape] and rec.scene.params.d_e == 0.9
+    finally:
+        rec.close()

@@ -6,6 +6,8 @@ through the scene builder into the live Foxglove WebSocket server, which the pag
 The page must show the three robots (one card per robot with its phase, drawn on the
 map from the ground truth), and a robot's move must reach the page within 1 s of the
 truth sample that carried it. The screenshot is kept: ``out/artifacts/view.png``.
+Fed the fleet of six of tests/tools/fleet6.py, the page draws the targets of the plan
+the agents reported, for every built-in shape (``out/artifacts/view-targets.png``).
 
 Without chromium or Playwright the tests are skipped on a developer's machine and fail
 in CI (``CI`` set): .ci/run installs chromium, ``.[dev]`` installs Playwright.
@@ -13,6 +15,7 @@ in CI (``CI`` set): .ci/run installs chromium, ``.[dev]`` installs Playwright.
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import shutil
@@ -27,7 +30,11 @@ from typing import Any
 
 import pytest
 
+from agent.core.formation.params import PlanParams
+from agent.core.formation.shape.spec import BUILTIN
 from agent.wire import TruthPosesMsg, decode
+from tests.tools import fleet6
+from tools.harness.observe import Recorder
 from tools.harness.procs import free_port
 from tools.harness.view import foxglove as fg
 from tools.harness.view.live import Fanout, LiveServer
@@ -248,3 +255,89 @@ def test_a_robots_moves_reach_the_page(new_page: Callable[[], Any]) -> None:
         f"\npage latency over {len(lat)} of {len(moved)} moves: median "
         f"{statistics.median(lat) * 1000:.0f} ms, p95 {p95 * 1000:.0f} ms, max {lat[-1] * 1000:.0f} ms"
     )
+
+
+#: the plan's targets the page drew at its latest draw, by robot: [x, y] (world m)
+TARGETS = "() => Object.fromEntries(window.naoView.targets.map(t => [t[0], [t[1], t[2]]]))"
+
+
+def _the_targets_of(page: Any, plan: Any) -> None:
+    """The page draws one target marker per robot of ``plan``, where the plan puts it."""
+    page.wait_for_function(
+        f"() => window.naoView.targets.length === {len(plan.robots)}", timeout=30_000
+    )
+    drawn = {int(k): v for k, v in page.evaluate(TARGETS).items()}
+    want = fleet6.targets(plan)
+    assert sorted(drawn) == sorted(want)
+    for rid, xy in want.items():
+        assert drawn[rid] == pytest.approx(list(xy), abs=1e-3)
+
+
+def test_the_page_draws_the_targets_of_every_shapes_plan(new_page: Callable[[], Any]) -> None:
+    """The scene fed a fleet whose agents report the plan of one shape, with that shape's
+    parameters, to a live server and its page: the page draws the six targets."""
+    page = new_page()
+    for name in sorted(BUILTIN):
+        params = PlanParams(shape=BUILTIN[name])
+        plan = fleet6.plan(params)
+        live = LiveServer("127.0.0.1", 0)
+        web = PageServer("127.0.0.1:0", live.url)
+        try:
+            page.goto(web.url)
+            page.wait_for_function("() => window.naoView && window.naoView.connected")
+            scene = Scene(Fanout(live.emit, []), params=params)
+            world_ns = 0
+            for key, msg in fleet6.run(str(plan.digest)):
+                if isinstance(msg, TruthPosesMsg):
+                    world_ns = round(msg.t_sim * 1e9)
+                scene.take(key, msg, world_ns)
+            deadline = time.monotonic() + 30.0
+            while not page.evaluate(f"window.naoView.targets.length === {len(plan.robots)}"):
+                assert time.monotonic() < deadline, name
+                world_ns += 100_000_000  # the world goes on: the plan is sent again (latched)
+                scene.take("world/truth/poses", fleet6.truth(world_ns / 1e9), world_ns)
+                time.sleep(0.2)
+            _the_targets_of(page, plan)
+        finally:
+            web.close()
+            live.close()
+
+
+def test_a_replay_draws_the_targets_of_its_runs_shape(
+    new_page: Callable[[], Any], tmp_path: Path
+) -> None:
+    """``tools.view --replay`` of a wedge fleet's recording: the planning parameters come
+    from the run's ``result.json`` beside it, and the page draws the wedge's targets (with
+    the pyramid's parameters the plan's digest is not the one the agents reported, and
+    the page draws none)."""
+    params = PlanParams(shape=BUILTIN["wedge"])
+    plan = fleet6.plan(params)
+    rec = Recorder(tmp_path / "run.mcap")
+    for key, msg in fleet6.run(str(plan.digest)):
+        rec.record(key, msg)
+    rec.close()
+    (tmp_path / "result.json").write_text(json.dumps({"shape_spec": "wedge", "d_e": 0.8}))
+    live, web = free_port(), free_port()
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    cmd = [sys.executable, "-m", "tools.view", "--replay", str(tmp_path / "run.mcap"), "--loop"]
+    cmd += ["--live", f"127.0.0.1:{live}", "--web", f"127.0.0.1:{web}", "--for", "90"]
+    log = (tmp_path / "view.log").open("w")
+    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT)
+    page = new_page()
+    try:
+        deadline = time.monotonic() + 60.0
+        while True:  # the page's server may still be starting
+            try:
+                page.goto(f"http://127.0.0.1:{web}/", timeout=10_000)
+                break
+            except Exception:
+                if time.monotonic() > deadline or proc.poll() is not None:
+                    raise
+                time.sleep(0.3)
+        _the_targets_of(page, plan)
+        page.wait_for_function("() => Object.keys(window.naoView.robots).length === 6")
+        ARTIFACTS.mkdir(parents=True, exist_ok=True)
+        page.screenshot(path=str(ARTIFACTS / "view-targets.png"))
+    finally:
+        proc.terminate()
+        proc.wait(30)

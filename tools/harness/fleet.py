@@ -338,6 +338,13 @@ class Fleet:
         """Seconds since the run began."""
         return time.monotonic() - self.t0
 
+    def recorder(self) -> Recorder:
+        """The run's recording ``out/run.mcap`` and its live view (``spec.live``), whose
+        scene plans with the agents' planning parameters: the plan it draws is the one
+        whose digest the agents report, for every shape, orientation and strategy."""
+        params = self.spec.agent.plan_params()
+        return Recorder(self.out / "run.mcap", params=params, sinks=live_sinks(self.spec.live))
+
     def _start(self) -> None:
         spec, out, result = self.spec, self.out, self.result
         out.mkdir(parents=True, exist_ok=True)
@@ -349,7 +356,7 @@ class Fleet:
             credentials=spec.credentials,
             plain_links=spec.plain_links,
         )
-        self._rec = Recorder(out / "run.mcap", sinks=live_sinks(spec.live))
+        self._rec = self.recorder()
         result["secure"] = bool(net.credentials)
         result["tls"] = net.router
         if net.router:

@@ -92,7 +92,7 @@ def monitor(
     exits = out / "exits" if exits is None else exits
     since = time.time() - 1.0  # exit records of earlier runs are older
     deadline = time.monotonic() + timeout_s
-    rec = Recorder(out / "run.mcap")
+    rec = Recorder(out / "run.mcap", params=agent.plan_params())  # the plan the agents report
     obs = Observer(time.monotonic())
     bus = Bus(
         BusConfig(

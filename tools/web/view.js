@@ -32,6 +32,7 @@
     robots: {}, // id -> {x, y, h, phase, wave}
     entities: {}, // layer -> id -> entity
     draws: [], // [log time ns of the /scene drawn, Date.now() when drawn]
+    targets: [], // the plan's targets on the map at the latest draw: [robot id, x, y] (world m)
     error: "",
   };
   window.naoView = view;
@@ -400,6 +401,7 @@
     const X = (x) => ox + s * (x - x0);
     const Y = (y) => H - oy - s * (y - y0);
     grid(g, X, Y, x0, y0, x1, y1);
+    const targets = [];
     for (const r of Object.values(view.robots)) {
       if (!r.trail || r.trail.length < 2) continue; // the track walked (ground truth)
       g.strokeStyle = r.colour || "#888";
@@ -447,6 +449,7 @@
             g.strokeStyle = rgba(c.color, 1);
             g.lineWidth = 2;
             g.stroke();
+            targets.push([Number(id.slice(11)), c.pose.position.x, c.pose.position.y]);
           } else {
             g.fillStyle = rgba(c.color);
             g.fill();
@@ -476,6 +479,7 @@
         }
       }
     }
+    view.targets = targets;
     if (sceneNs) {
       view.draws.push([sceneNs, Date.now()]);
       if (view.draws.length > 2000) view.draws.splice(0, 1000);

@@ -335,8 +335,12 @@ def entity(t_ns: int, ident: str, frame: str = "world", **primitives: list[JSON]
     }
 
 
-def scene_update(entities: list[JSON]) -> JSON:
-    return {"deletions": [], "entities": entities}
+def scene_update(entities: list[JSON], clear_at: int | None = None) -> JSON:
+    """A ``SceneUpdate`` of ``entities``; ``clear_at`` (world time, ns): first delete every
+    entity of the topic (a deletion of type ``ALL``, which a viewer applies before the
+    entities), so that the update replaces the topic's whole drawing."""
+    gone = [] if clear_at is None else [{"timestamp": stamp(clear_at), "type": 1, "id": ""}]
+    return {"deletions": gone, "entities": entities}
 
 
 def log(t_ns: int, level: int, name: str, message: str) -> JSON:

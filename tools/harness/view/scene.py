@@ -12,13 +12,20 @@ digests, contacts) and emits JSON messages of Foxglove's well-known schemas
   harness wrote beside the recording during this run).
 * ``/scene/plan``, once the plan is known: each robot's target (a disc, an arrow of the
   final heading), its path (start, via points, target), the links child → parent of the
-  pyramid, the obstacles the fleet planned around. The plan is the evaluator's (as
+  shape's tree, the obstacles the fleet planned around. The plan is the evaluator's (as
   :func:`tools.harness.judge.plan_from_agreed`): recomputed from the records the robots
-  signed, drawn only when its digest is one an agent reported; its common frame is placed
-  in the world by the frame robot's first ground-truth pose (``judge.summarise``'s
-  ``turn``). It is computed when an agent first reports a plan digest (so that the live
-  view shows it while the fleet walks) and again when the recording closes, drawn once
-  per plan, stamped with the world time of the first status that reported that digest.
+  signed with the fleet's planning parameters (``params``: d_e, φ_e, orientation,
+  strategy and shape, as the agents were given them; with other parameters the digest
+  differs and nothing is drawn), drawn only when its digest is one an agent reported;
+  with the orientation ``cp`` the formation's plan from the circle counts too, and the
+  newest the agents reported is drawn. Its common frame is placed in the world by the
+  frame robot's first ground-truth pose (``judge.summarise``'s ``turn``). It is computed
+  when an agent reports a plan digest not drawn yet and the records, the ground truth or
+  the reported digests changed since the last try (so that the live view shows it while
+  the fleet walks, also when a record reaches the observer after the first status that
+  names the plan), and again when the recording closes; each drawing replaces the
+  topic's earlier one, stamped with the world time of the first status that reported
+  that digest.
 * ``/tf`` (``foxglove.FrameTransform``): world → ``robot/{id}`` per truth sample, and
   world → ``common`` with the plan.
 * ``/log`` (``foxglove.Log``): every change of a robot's phase, wave or error (the
@@ -142,6 +149,10 @@ class Scene:
         #: each plan digest an agent reported → world time (ns) of its first report
         self.claimed: dict[str, int] = {}
         self.plan_drawn = ""
+        #: bumped by every record that changes what the planner is given
+        self.records_seen = 0
+        #: (records seen, robots with a start, digests reported) at the last live try
+        self.plan_tried: tuple[int, int, int] = (-1, -1, -1)
         self.now_ns = 0  # the latest world time seen (ns)
 
     # ----------------------------------------------------------------- intake
@@ -155,8 +166,9 @@ class Scene:
             self._status(msg, t_ns)
         elif isinstance(msg, NeighborRecordMsg):
             old = self.records.get(msg.sender)
-            if old is None or old.round <= msg.round:  # the newest (re-)search round
+            if (old is None or old.round <= msg.round) and old != msg:  # the newest round
                 self.records[msg.sender] = msg
+                self.records_seen += 1
             if old is None or old.round != msg.round:
                 text = f"record round {msg.round}: {len(msg.neighbours)} neighbours"
                 self._log(t_ns, fg.DEBUG, msg.sender, text + f", {len(msg.obstacles)} obstacles")
@@ -185,9 +197,12 @@ class Scene:
     def _status(self, msg: StatusMsg, t_ns: int) -> None:
         self.emit(f"/robots/{msg.sender}/status", STATUS, asdict(msg), t_ns)
         self.phase[msg.sender] = msg
-        if msg.plan_digest and msg.plan_digest not in self.claimed:
-            self.claimed[msg.plan_digest] = t_ns
-            self._plan(quiet=True)  # drawn as soon as it is known, for the live view
+        if msg.plan_digest:
+            self.claimed.setdefault(msg.plan_digest, t_ns)
+            state = (self.records_seen, len(self.starts), len(self.claimed))
+            if msg.plan_digest != self.plan_drawn and state != self.plan_tried:
+                self.plan_tried = state
+                self._plan(quiet=True)  # drawn as soon as it is known, for the live view
         change = (msg.phase, msg.wave, msg.error)
         if self.changes.get(msg.sender) == change:
             return
@@ -299,27 +314,31 @@ class Scene:
         fa = FormationAdapter()
         records = tuple(self.records[i] for i in sorted(self.records))
         try:
-            plan = fa.plan(records, self.params)
+            plans = self._plans(fa, records)
         except (ValueError, KeyError, IndexError, ArithmeticError) as exc:
             if not quiet:
                 self._note(t_ns, fg.WARNING, f"plan not drawn: {reason(exc)}")
             return
-        if plan.digest == self.plan_drawn:
-            return
-        if plan.digest not in self.claimed:
+        first = plans[0]
+        known = [p for p in plans if p.digest in self.claimed]
+        if not known:
             if quiet:
                 return
+            given = ", ".join(p.digest[:12] for p in plans)
             reported = ", ".join(sorted(d[:12] for d in self.claimed))
             self._note(
                 t_ns,
                 fg.WARNING,
-                f"plan not drawn: the signed records give plan {plan.digest[:12]}, the agents "
+                f"plan not drawn: the signed records give plan {given}, the agents "
                 f"reported {reported} (other planning parameters than the recorder's?)",
             )
             return
+        plan = max(known, key=lambda p: self.claimed[p.digest])  # the newest reported
+        if plan.digest == self.plan_drawn:
+            return
         t_ns = self.claimed[plan.digest]
-        try:
-            frame = common_frame_pose({r.robot_id: r.start for r in plan.robots}, self.starts)
+        try:  # the first plan starts where the robots stood (a plan from the circle: on it)
+            frame = common_frame_pose({r.robot_id: r.start for r in first.robots}, self.starts)
         except ValueError as exc:
             if not quiet:
                 self._note(t_ns, fg.WARNING, f"plan not drawn: {reason(exc)}")
@@ -352,7 +371,7 @@ class Scene:
                 for ox, oy in seen
             ]
             ents.append(fg.entity(t_ns, "plan/obstacles", cylinders=cyl))
-        self.emit("/scene/plan", fg.SCENE_UPDATE, fg.scene_update(ents), t_ns)
+        self.emit("/scene/plan", fg.SCENE_UPDATE, fg.scene_update(ents, clear_at=t_ns), t_ns)
         self.plan_drawn = str(plan.digest)
         self._note(
             t_ns,
@@ -360,6 +379,16 @@ class Scene:
             f"plan {plan.digest[:12]} drawn: leader {plan.leader}, frame robot {plan.frame_robot}, "
             f"{len(plan.waves)} waves, excluded {list(plan.excluded)}",
         )
+
+    def _plans(self, fa: Any, records: tuple[NeighborRecordMsg, ...]) -> list[Plan]:
+        """The plans the fleet may report from ``records``: the plan of ``params``, and with
+        the orientation ``cp`` also the formation's from its circle (AUV III.B.2.a)."""
+        from agent.core.formation.reshape import from_circle
+
+        first = fa.plan(records, self.params)
+        if self.params.orientation == "cp" and len(first.robots) > 1:
+            return [first, from_circle(first, self.params)]
+        return [first]
 
     def _plan_robot(
         self, t_ns: int, plan: Plan, rp: RobotPlan, frame: tuple[float, float, float], axis: float
