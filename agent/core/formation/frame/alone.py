@@ -128,7 +128,7 @@ def unrecorded_place(
     by_id = {r.robot_id: r for r in records}
     target = by_id.get(robot)
     used = {(m.owner, float(m.vector[0]), float(m.vector[1])) for m in poses.measurements}
-    found: list[tuple[int, np.ndarray, np.ndarray, float]] = []  # owner, vector, at, psi
+    found: list[tuple[int, np.ndarray, np.ndarray, float]] = []  # owner, vector, at, mask θ
     for k, rid in enumerate(poses.ids):
         rec = by_id.get(rid)
         if rec is None:
