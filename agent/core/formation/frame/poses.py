@@ -24,7 +24,7 @@ fixed budget), started from the spanning tree: breadth-first from the frame robo
 over mutual pairs, neighbours in ascending id, ``ψ_v = ψ_u + (β_uv − β_vu + π)``,
 ``p_v = p_u + R(ψ_u) v_uv``. No randomness: every agent gets bit-identical poses from the
 same records (canonical order, :mod:`records`). One-way sightings are attached after a
-first fit and the fit is run once more from the spanning tree.
+first fit, and the fit runs once more from its poses (the start nearest the minimum).
 
 **Aligned starts stay exactly as good as today.** The papers' model —
 :func:`neighbour_check.identify_neighbours` + :func:`common_frame.lsq_positions`, ψ ≡ 0 —
@@ -554,14 +554,15 @@ def build_poses(records: Sequence[NeighborRecord], epsilon: float = DEFAULT_EPSI
 
 
 def fit_from_graph(graph: NeighbourGraph) -> PoseFrame:
-    """The robust SE(2) fit of a pairing's sightings, with the one-way sightings attached
-    after a first fit (:func:`one_way_measurements`): never the aligned model.
+    """The robust SE(2) fit of a pairing's sightings, the one-way sightings attached after a
+    first fit (:func:`one_way_measurements`) and fitted again from it: never the aligned model.
 
     Raises ``ValueError`` as :func:`fit_poses` (a fleet the mutual pairs do not connect)."""
     meas = pair_measurements(graph)
     pf = fit_poses(graph.ids, meas)
     extra = one_way_measurements(graph, pf)
-    return fit_poses(graph.ids, [*meas, *extra]) if extra else pf
+    start = (pf.positions, pf.headings)
+    return fit_poses(graph.ids, [*meas, *extra], pf.frame_robot, start) if extra else pf
 
 
 def poses_from_graph(graph: NeighbourGraph, records: Sequence[NeighborRecord]) -> PoseFrame:
