@@ -308,9 +308,12 @@ class _Sightings:
         return np.concatenate([along, across])
 
 
-#: Gauss-Newton iterations of :meth:`_Batch.cauchy_fit` at most, and its relative stop.
+#: Gauss-Newton iterations of :meth:`_Batch.cauchy_fit` at most, and its relative stop:
+#: Λ moves by at most 0.04 from its value at 1e-7 on the 50-NAO runs of
+#: ``tests/data/runs/n50_random_s1018.json`` (a robot is rejected from Λ ≈ 23·bias_scale
+#: on), for a third less time.
 MAX_ITER = 30
-TOL = 1e-7
+TOL = 1e-5
 #: Tries of a Gauss-Newton step at most: the full step, then halved, halved again, ...
 HALVINGS = 20
 
