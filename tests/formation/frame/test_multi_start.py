@@ -173,15 +173,48 @@ def _alone_reference(prob: _Problem, x: np.ndarray, c: int, k: int, turn: float)
         j[2 * m :, 2] = sign * prob.sm * np.cos(2.0 * delta)
         return j
 
+    def entries(jw: np.ndarray, j: np.ndarray) -> np.ndarray:
+        return np.array([[float(np.sum(jw[:, a] * j[:, b])) for b in range(3)] for a in range(3)])
+
+    def bend(y: np.ndarray, u: np.ndarray, f: np.ndarray) -> float:
+        # Σ u ∂²f/∂ψ² of robot k's ψ: its own position rows bend, and every mask row (−4f)
+        cs, sn = math.cos(float(y[2])), math.sin(float(y[2]))
+        vx, vy = prob.v[:, 0], prob.v[:, 1]
+        pos = u[0 : 2 * m : 2] * (cs * vx - sn * vy) + u[1 : 2 * m : 2] * (sn * vx + cs * vy)
+        return float(np.sum(np.where(owner, pos * prob.sp, 0.0)) + np.sum(-4.0 * u[2 * m :]
+                                                                           * f[2 * m :]))  # fmt: skip
+
     y = x[c : c + 3] + np.array([0.0, 0.0, turn])
     f = fun(y)
     cost = robust_lm.soft_l1_cost(f)
     lam = robust_lm.LAMBDA0
+    near, switch = False, robust_lm.NEAR
     for _ in range(ms.ALONE_ITER):
         j = jac(y)
+        w = 1.0 / np.sqrt(1.0 + f * f)
         jw = j / np.sqrt(1.0 + f * f)[:, None]
-        h = np.array([[float(np.sum(jw[:, a] * j[:, b])) for b in range(3)] for a in range(3)])
+        h = entries(jw, j)
         g = np.array([float(np.sum(jw[:, a] * f)) for a in range(3)])
+        if near:
+            exact = entries(j * (w * w * w)[:, None], j)
+            exact[2, 2] += bend(y, w * f, f)
+            try:
+                step = -np.linalg.solve(exact, g)
+            except np.linalg.LinAlgError:
+                step = None
+            if step is not None:
+                f_new = fun(y + step)
+                cost_new = robust_lm.soft_l1_cost(f_new)
+                if cost_new < cost:
+                    small = cost - cost_new <= ms.ALONE_FTOL * cost
+                    near = cost - cost_new <= switch * cost
+                    y, f, cost = y + step, f_new, cost_new
+                    if small:
+                        break
+                    continue
+                if 0.0 < -0.5 * float(np.sum(g * step)) <= ms.ALONE_FTOL * cost:
+                    break
+            near, switch = False, switch * robust_lm.NEAR_TIGHTEN
         d = np.maximum(np.diag(h), 1e-12)
         while True:
             try:
@@ -193,6 +226,7 @@ def _alone_reference(prob: _Problem, x: np.ndarray, c: int, k: int, turn: float)
                 cost_new = robust_lm.soft_l1_cost(f_new)
                 if cost_new < cost:
                     small = cost - cost_new <= ms.ALONE_FTOL * cost
+                    near = cost - cost_new <= switch * cost
                     y, f, cost = y + step, f_new, cost_new
                     lam = max(lam / 3.0, 1e-12)
                     break

@@ -460,3 +460,23 @@ def test_the_residuals_are_those_of_the_unpacked_poses_bit_for_bit(
         want = np.concatenate([(prob._position_misfit(pos, psi) * prob.sp[:, None]).reshape(-1),
                                prob.sm * np.sin(2.0 * delta) / 2.0])  # fmt: skip
         assert prob.fun(x).tobytes() == want.tobytes()
+
+
+@pytest.mark.parametrize(("anchor", "masks"), [(0, True), (3, False)])
+def test_the_curvature_is_the_jacobians_derivative(anchor: int, masks: bool) -> None:
+    # Σ u_k ∇²f_k is the derivative of Jᵀu (u held): central differences of the Jacobian
+    from agent.core.formation.frame.poses import _Problem
+
+    rng = np.random.default_rng(20 + anchor)
+    heads = rng.uniform(-3, 3, 6)
+    recs = unaligned_records(list(range(1, 7)), sim_layout(rng, 6), heads, rng, masks=masks)
+    graph = identify_pairs(recs)
+    prob = _Problem(graph.ids, pair_measurements(graph), anchor)
+    x = rng.normal(size=prob.nvar)
+    u = rng.normal(size=3 * prob.m)
+    got = prob.curvature(x, u).toarray()
+    h = 1e-6
+    want = np.stack([(prob.jac(x + h * e).T @ u - prob.jac(x - h * e).T @ u) / (2 * h)
+                     for e in np.eye(prob.nvar)], axis=1)  # fmt: skip
+    assert np.allclose(got, want, atol=1e-5)
+    assert np.array_equal(got, got.T)

@@ -308,9 +308,13 @@ class _Sightings:
         return np.concatenate([along, across])
 
 
-#: Gauss-Newton iterations of :meth:`_Batch.cauchy_fit` at most, and its relative stop.
+#: Gauss-Newton iterations of :meth:`_Batch.cauchy_fit` at most, and its relative stop:
+#: every robot's Λ of the 50-NAO runs of ``tests/data/runs/n50_random_s1018.json`` stays
+#: within 0.04 of its value at 1e-7 (a robot is rejected from Λ ≈ 23·bias_scale on), for a
+#: third less time; on the corpus a faulty robot's Λ of 57-716 moves by up to 31 (its
+#: matched sightings stop elsewhere), every verdict the same.
 MAX_ITER = 30
-TOL = 1e-7
+TOL = 1e-5
 #: Tries of a Gauss-Newton step at most: the full step, then halved, halved again, ...
 HALVINGS = 20
 

@@ -15,7 +15,7 @@ known reason:
   fitted 172° off was rejected, and the rest passed without it: a sound robot left out).
   :func:`half_turned` fits again with one robot turned half round, when that robot,
   turned, fits its own sightings and the others' of it better (its pose alone refitted,
-  the others held: some 10 ms, where a whole fit of fifty costs ~0.5 CPU s and the
+  the others held: some 10 ms, where a whole fit of fifty costs ~0.2 CPU s and the
   fault test of a fleet with a faulty robot may reject thirty robots, each tried).
 
 Of fits of the same measurements, the one with the lowest robust cost
@@ -122,7 +122,7 @@ def _turn_helps(poses: PoseFrame, robot: int) -> bool:
     than where it stands (the soft-L1 cost of the fit, over its sightings; ``poses`` is a
     minimum of it): a robot held half a turn off by its own position misfits fits them
     better turned, whatever its neighbours. Only then is the whole fleet fitted again
-    from the turned start (at 50 NAOs ~0.5 CPU s a fit, this some 10 ms)."""
+    from the turned start (at 50 NAOs ~0.2 CPU s a fit, this some 10 ms)."""
     if robot == poses.frame_robot:
         return True  # every other robot turns about it: only the whole fit can tell
     k = poses.ids.index(robot)
@@ -146,8 +146,10 @@ def _alone(prob: _Problem, x: np.ndarray, c: int, k: int, turn: float) -> float:
     """The soft-L1 cost of ``prob`` (one robot's sightings) at the pose of robot ``k``
     (columns ``c``..``c + 2`` of ``x``) that fits them best from its pose turned by
     ``turn``, the others held: Levenberg-Marquardt on three unknowns (as
-    :func:`robust_lm.minimise`, its normal equations dense: each entry the sum of one
-    contiguous row of products, as ``np.sum`` of that row alone adds it)."""
+    :func:`robust_lm.minimise`, with its Newton steps near the minimum, the residuals'
+    curvature in ψ alone as :meth:`poses._Problem.curvature` gives it; its normal
+    equations dense: each entry the sum of one contiguous row of products, as ``np.sum``
+    of that row alone adds it)."""
     m = prob.m
     sign = (prob.t == k).astype(np.float64) - (prob.o == k)  # +1 target, -1 owner
     owner = prob.o == k
@@ -171,15 +173,45 @@ def _alone(prob: _Problem, x: np.ndarray, c: int, k: int, turn: float) -> float:
         jt[2, 2 * m :] = sign * prob.sm * np.cos(2.0 * delta)
         return jt
 
+    def bend(y: np.ndarray, u: np.ndarray) -> float:
+        """``Σ u_k ∂²f_k/∂ψ²`` (:meth:`_Problem.curvature`'s, robot k's ψ alone)."""
+        cs, sn = math.cos(float(y[2])), math.sin(float(y[2]))
+        pos = u[0 : 2 * m : 2] * (cs * vx - sn * vy) + u[1 : 2 * m : 2] * (sn * vx + cs * vy)
+        mask = -4.0 * u[2 * m :] * f[2 * m :]
+        return float(np.sum(np.where(owner, pos * prob.sp, 0.0)) + np.sum(mask))
+
     y = x[c : c + 3] + np.array([0.0, 0.0, turn])
     f = fun(y)
     cost = robust_lm.soft_l1_cost(f)
     lam = robust_lm.LAMBDA0
+    near, switch = False, robust_lm.NEAR  # Newton's steps near the minimum, as minimise's
     for _ in range(ALONE_ITER):
         j = jac(y)
+        w = 1.0 / np.sqrt(1.0 + f * f)
         jw = j / np.sqrt(1.0 + f * f)[None, :]
         h = (jw[:, None, :] * j[None, :, :]).sum(axis=-1)
         g = (jw * f).sum(axis=-1)
+        if near:
+            jw3 = j * (w * w * w)[None, :]
+            exact = (jw3[:, None, :] * j[None, :, :]).sum(axis=-1)
+            exact[2, 2] += bend(y, w * f)
+            try:
+                step = -np.linalg.solve(exact, g)
+            except np.linalg.LinAlgError:
+                step = None
+            if step is not None:
+                f_new = fun(y + step)
+                cost_new = robust_lm.soft_l1_cost(f_new)
+                if cost_new < cost:
+                    small = cost - cost_new <= ALONE_FTOL * cost
+                    near = cost - cost_new <= switch * cost
+                    y, f, cost = y + step, f_new, cost_new
+                    if small:
+                        break
+                    continue
+                if 0.0 < -0.5 * float(np.sum(g * step)) <= ALONE_FTOL * cost:
+                    break  # the model's decrease is below the rounding of the cost
+            near, switch = False, switch * robust_lm.NEAR_TIGHTEN
         d = np.maximum(np.diag(h), 1e-12)
         while True:
             try:
@@ -191,6 +223,7 @@ def _alone(prob: _Problem, x: np.ndarray, c: int, k: int, turn: float) -> float:
                 cost_new = robust_lm.soft_l1_cost(f_new)
                 if cost_new < cost:
                     small = cost - cost_new <= ALONE_FTOL * cost
+                    near = cost - cost_new <= switch * cost
                     y, f, cost = y + step, f_new, cost_new
                     lam = max(lam / 3.0, 1e-12)
                     break

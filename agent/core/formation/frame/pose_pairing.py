@@ -35,6 +35,9 @@ aligned start), then lower owner (record order, ascending id), then lower detect
 index in the canonical record. A candidate is accepted when neither of its detections
 is used and the two robots are not already a pair. With parallel frames this gives the
 pairs of Algorithm 2 on the neighbour-check test cases.
+
+The masks' other reading sits here too: :func:`mask_offset`, the offset most of a robot's
+mask misfits agree on (how :mod:`poses` finds a robot turned as a whole).
 """
 
 from __future__ import annotations
@@ -62,6 +65,8 @@ PAIR_REL_TOL = 0.3
 SUPPORT_REL_TOL = 0.08
 #: Mask disagreement (rad) that costs as much as a distance disagreement of ε + ρ·d.
 MASK_SCALE = math.radians(30.0)
+#: Mask misfits within this of an offset agree with it (:func:`mask_offset`).
+TURN_WINDOW = math.radians(30.0)
 #: Most sighting pairs considered at once when the candidates are built.
 BLOCK_ELEMENTS = 1 << 20
 
@@ -321,3 +326,25 @@ def _mask_cost(
     n = have.sum(axis=0)
     total = np.where(have, both, 0.0).sum(axis=0)
     return np.where(n > 0, total / np.maximum(n, 1), 0.0)
+
+
+def mask_offset(deltas: Sequence[float]) -> tuple[float, int]:
+    """The offset (rad, modulo π) most of a robot's mask misfits agree on, and how many.
+
+    ``deltas`` are the signed misfits δ = ψ_t − ψ_o − (β + θ − π/2), wrapped to
+    (−π/2, π/2], of the others' mask sightings of one robot t. Each δ is tried as the
+    centre; the one with the most misfits within :data:`TURN_WINDOW` wins (ties: the
+    smaller sum of squared distances, then the smaller |centre|, then input order); the
+    offset is the circular mean, modulo π, of the misfits that agree with it.
+    """
+    d = np.asarray(deltas, dtype=np.float64)
+    if d.size == 0:
+        return 0.0, 0
+    diff = wrap_half(d[None, :] - d[:, None])
+    near = np.abs(diff) <= TURN_WINDOW
+    count = near.sum(axis=1)
+    spread = np.round(np.where(near, diff**2, 0.0).sum(axis=1), 12)
+    best = int(np.lexsort((np.abs(d), spread, -count))[0])
+    agree = d[near[best]]
+    mean = 0.5 * math.atan2(float(np.sin(2 * agree).sum()), float(np.cos(2 * agree).sum()))
+    return float(wrap_half(mean)), int(count[best])

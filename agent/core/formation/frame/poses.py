@@ -18,12 +18,13 @@ placed from their owner's pose, fall within ε of exactly one robot. Each gives
   (:func:`pose_pairing.mask_relative_heading`), weak (:data:`SIGMA_MASK`).
 
 Robust least squares (soft-L1 loss, :func:`robust_lm.minimise`: Levenberg–Marquardt on
-the sparse normal equations, with the analytic sparse Jacobian, fixed tolerances and a
+the sparse normal equations, with the analytic sparse Jacobian, Newton steps near the
+minimum (the residuals' curvature: :meth:`_Problem.curvature`), fixed tolerances and a
 fixed budget), started from the spanning tree: breadth-first from the frame robot
 over mutual pairs, neighbours in ascending id, ``ψ_v = ψ_u + (β_uv − β_vu + π)``,
 ``p_v = p_u + R(ψ_u) v_uv``. No randomness: every agent gets bit-identical poses from the
 same records (canonical order, :mod:`records`). One-way sightings are attached after a
-first fit and the fit is run once more from the spanning tree.
+first fit, and the fit runs once more from its poses (the start nearest the minimum).
 
 **Aligned starts stay exactly as good as today.** The papers' model —
 :func:`neighbour_check.identify_neighbours` + :func:`common_frame.lsq_positions`, ψ ≡ 0 —
@@ -52,7 +53,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.sparse import csr_matrix
+from scipy.sparse import coo_matrix, csc_matrix, csr_matrix
 from scipy.spatial import cKDTree
 
 from agent.core.formation.frame import robust_lm
@@ -62,7 +63,12 @@ from agent.core.formation.frame.neighbour_check import (
     NeighbourGraph,
     identify_neighbours,
 )
-from agent.core.formation.frame.pose_pairing import identify_pairs, wrap_angle, wrap_half
+from agent.core.formation.frame.pose_pairing import (
+    identify_pairs,
+    mask_offset,
+    wrap_angle,
+    wrap_half,
+)
 from agent.core.formation.frame.records import NeighborRecord, mask_orientation
 
 SIGMA_POS = 0.05  #: σ₀ (m) of a sighting's position
@@ -71,7 +77,8 @@ SIGMA_MASK = math.radians(15.0)  #: σ_m of a mask's relative heading (5° masks
 POS_TOL = 0.12  #: consistency: a pair's position misfit (m) allowed at distance 0 ...
 POS_TOL_REL = 0.15  #: ... plus this per metre of distance
 ALIGNED_MAX_HEADING = math.radians(10.0)  #: |ψ| within which the aligned model is kept
-#: A robot is *turned* when the others' masks of it agree (within :data:`TURN_WINDOW`,
+#: A robot is *turned* when the others' masks of it agree (within
+#: :data:`pose_pairing.TURN_WINDOW`,
 #: at least :data:`TURN_SIGHTINGS` of them and more than half) on an offset of its ψ of at
 #: least this much. Measured on the simulator's runs: sound robots' offsets reach 29°
 #: (masks biased as a whole, ψ right to 2°), a 40° broken compass shows 37-45°.
@@ -79,7 +86,6 @@ TURN_MIN = math.radians(33.0)
 #: ... and at most this much: wrong mask matches cluster near ±90° (a NAO seen from the
 #: side matched to a mask of its front or back), so an agreement there says nothing.
 TURN_MAX = math.radians(65.0)
-TURN_WINDOW = math.radians(30.0)  #: masks within this of the offset agree with it
 TURN_SIGHTINGS = 3  #: agreeing sightings (distinct owners) needed to call a robot turned
 _TOL = 1e-12
 
@@ -312,6 +318,25 @@ class _Problem:
         out.has_canonical_format = True  # sorted, no duplicates: as tocsr() leaves it
         return out
 
+    def curvature(self, x: np.ndarray, u: np.ndarray) -> csc_matrix:
+        """``Σ_k u_k ∇²f_k`` at ``x`` (the Newton term of :func:`robust_lm.minimise`): a
+        position residual bends in its owner's ψ alone (``∂²/∂ψ_o²`` of ``−R(ψ_o)v·sp``
+        is ``R(ψ_o)v·sp``), a mask residual ``sm·sin(2δ)/2`` in δ = ψ_t − ψ_o − ref
+        (second derivative −4 times itself)."""
+        xe = np.append(x, 0.0)
+        po, pt = xe[self._reads[2]], xe[self._reads[5]]
+        c, s, m = np.cos(po), np.sin(po), self.m
+        bend = (u[0 : 2 * m : 2] * (c * self._vx - s * self._vy) + u[1 : 2 * m : 2]
+                * (s * self._vx + c * self._vy)) * self.sp  # fmt: skip
+        mask = -4.0 * u[2 * m :] * (self.sm * np.sin(2.0 * (pt - po - self.mask_ref)) / 2.0)
+        co, ct = self.col[self.o] + 2, self.col[self.t] + 2  # the ψ columns (1: none)
+        rows = np.concatenate([co, ct, co, ct])
+        cols = np.concatenate([co, ct, ct, co])
+        vals = np.concatenate([bend + mask, mask, -mask, -mask])
+        keep = (rows >= 2) & (cols >= 2)
+        shape = (self.nvar, self.nvar)
+        return coo_matrix((vals[keep], (rows[keep], cols[keep])), shape=shape).tocsc()
+
     def _jac_layout(
         self, co: np.ndarray, ct: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -362,28 +387,6 @@ def _residuals(
         per[p.j].append(p.score)
     scores = np.array([float(np.median(per[i])) if per[i] else 0.0 for i in ids])
     return tuple(pairs), scores
-
-
-def mask_offset(deltas: Sequence[float]) -> tuple[float, int]:
-    """The offset (rad, modulo π) most of a robot's mask misfits agree on, and how many.
-
-    ``deltas`` are the signed misfits δ = ψ_t − ψ_o − (β + θ − π/2), wrapped to
-    (−π/2, π/2], of the others' mask sightings of one robot t. Each δ is tried as the
-    centre; the one with the most misfits within :data:`TURN_WINDOW` wins (ties: the
-    smaller sum of squared distances, then the smaller |centre|, then input order); the
-    offset is the circular mean, modulo π, of the misfits that agree with it.
-    """
-    d = np.asarray(deltas, dtype=np.float64)
-    if d.size == 0:
-        return 0.0, 0
-    diff = wrap_half(d[None, :] - d[:, None])
-    near = np.abs(diff) <= TURN_WINDOW
-    count = near.sum(axis=1)
-    spread = np.round(np.where(near, diff**2, 0.0).sum(axis=1), 12)
-    best = int(np.lexsort((np.abs(d), spread, -count))[0])
-    agree = d[near[best]]
-    mean = 0.5 * math.atan2(float(np.sin(2 * agree).sum()), float(np.cos(2 * agree).sum()))
-    return float(wrap_half(mean)), int(count[best])
 
 
 def turn_offsets(
@@ -482,7 +485,7 @@ def fit_poses(
     anchor = rid.index(frame)
     prob = _Problem(rid, measurements, anchor)
     if prob.nvar and prob.m:
-        x, _ = robust_lm.minimise(prob.fun, prob.jac, prob.pack(pos0, psi0))
+        x, _ = robust_lm.minimise(prob.fun, prob.jac, prob.pack(pos0, psi0), prob.curvature)
         pos, psi = prob.unpack(x)
     else:
         pos, psi = pos0, psi0
@@ -551,14 +554,15 @@ def build_poses(records: Sequence[NeighborRecord], epsilon: float = DEFAULT_EPSI
 
 
 def fit_from_graph(graph: NeighbourGraph) -> PoseFrame:
-    """The robust SE(2) fit of a pairing's sightings, with the one-way sightings attached
-    after a first fit (:func:`one_way_measurements`): never the aligned model.
+    """The robust SE(2) fit of a pairing's sightings, the one-way sightings attached after a
+    first fit (:func:`one_way_measurements`) and fitted again from it: never the aligned model.
 
     Raises ``ValueError`` as :func:`fit_poses` (a fleet the mutual pairs do not connect)."""
     meas = pair_measurements(graph)
     pf = fit_poses(graph.ids, meas)
     extra = one_way_measurements(graph, pf)
-    return fit_poses(graph.ids, [*meas, *extra]) if extra else pf
+    start = (pf.positions, pf.headings)
+    return fit_poses(graph.ids, [*meas, *extra], pf.frame_robot, start) if extra else pf
 
 
 def poses_from_graph(graph: NeighbourGraph, records: Sequence[NeighborRecord]) -> PoseFrame:
