@@ -11,11 +11,19 @@ to the smaller index) rejects wrong matches, and Δθ is the median of the inlie
 When the view has too few features, the step was too large, or the votes do not agree,
 the result is ``ok=False`` with a reason and Δθ = 0, never a wrong angle (the paper's
 Figure 22 failure cases).
+
+Cost, with the same answers: a robot measures each new picture against the one before
+it, so the features of the last few pictures are kept (:data:`FEATURE_CACHE`, keyed by
+a digest of the picture's bytes: a picture's features are a function of its bytes alone),
+and each vote's inliers are counted from the votes sorted, each candidate window checked
+with the very comparison ``|v_j − v_i| ≤ tol`` (O(m log m) instead of an m×m table).
 """
 
 from __future__ import annotations
 
+import hashlib
 import math
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import cv2
@@ -35,6 +43,11 @@ class CompassResult:
     inliers: int
     inlier_ratio: float
     reason: str
+
+
+#: Pictures whose ORB features a compass keeps (module docstring): the one before and the
+#: one after a measurement, and a reference a robot keeps across steps.
+FEATURE_CACHE = 4
 
 
 class VisualCompass:
@@ -71,12 +84,27 @@ class VisualCompass:
             & (self._map_y <= h - 1)
         ).astype(np.uint8)
         self._valid = cv2.erode(valid * 255, np.ones((33, 33), np.uint8))
+        self._cache: OrderedDict[bytes, tuple[list[cv2.KeyPoint], np.ndarray | None]] = (
+            OrderedDict()
+        )
 
     def _features(self, image_bgr: np.ndarray) -> tuple[list[cv2.KeyPoint], np.ndarray | None]:
-        gray = cv2.cvtColor(image_bgr, cv2.COLOR_BGR2GRAY)
+        img = np.ascontiguousarray(image_bgr)
+        key = hashlib.blake2b(f"{img.shape} {img.dtype}".encode(), digest_size=16)
+        key.update(img.data)
+        digest = key.digest()
+        hit = self._cache.get(digest)
+        if hit is not None:
+            self._cache.move_to_end(digest)
+            return hit
+        gray = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
         cyl = cv2.remap(gray, self._map_x, self._map_y, cv2.INTER_LINEAR)
         kps, desc = self._orb.detectAndCompute(cyl, self._valid)
-        return list(kps), desc
+        out = (list(kps), desc)
+        self._cache[digest] = out
+        while len(self._cache) > FEATURE_CACHE:
+            self._cache.popitem(last=False)
+        return out
 
     def _fail(self, reason: str, matches: int = 0, inliers: int = 0) -> CompassResult:
         ratio = inliers / matches if matches else 0.0
@@ -109,11 +137,10 @@ class VisualCompass:
         ub = np.array([kp_b[m.trainIdx].pt for m in good])
         votes = (ub[:, 0] - ua[:, 0]) / self.camera.fx
         level = np.abs(ub[:, 1] - ua[:, 1]) <= self.max_dv
-        agree = (np.abs(votes[:, None] - votes[None, :]) <= self.tol) & level[None, :]
-        counts = np.where(level, agree.sum(axis=1), -1)
+        counts = np.where(level, _within(votes, level, self.tol), -1)
         order = np.lexsort((np.arange(len(votes)), np.abs(votes), -counts))
         best = int(order[0])
-        inl = agree[best]
+        inl = (np.abs(votes - votes[best]) <= self.tol) & level
         n_in = int(inl.sum())
         ratio = n_in / len(good)
         if n_in < self.min_matches:
@@ -126,3 +153,30 @@ class VisualCompass:
             )
         dtheta = float(np.median(votes[inl]))
         return CompassResult(True, dtheta, len(good), n_in, ratio, "ok")
+
+
+def _within(votes: np.ndarray, level: np.ndarray, tol: float) -> np.ndarray:
+    """For each vote i, how many level votes j have ``|v_j − v_i| ≤ tol`` (module
+    docstring), the m×m table's counts. Rounding is monotone, so ``v_j − v_i`` computed
+    grows with v_j and the j that pass are one run of the sorted level votes; its ends,
+    first found by a search on ``v_i ∓ tol``, are moved until the comparison itself holds
+    inside and fails outside (an empty run: the ends cross, and the count is 0)."""
+    lv = np.sort(votes[level])
+    n = len(lv)
+
+    def ok(j: np.ndarray) -> np.ndarray:
+        inside = (j >= 0) & (j < n)
+        d = lv[np.clip(j, 0, max(n - 1, 0))] - votes if n else np.zeros(len(votes))
+        return inside & (np.abs(d) <= tol)
+
+    lo = np.searchsorted(lv, votes - tol, side="left")
+    hi = np.searchsorted(lv, votes + tol, side="right")  # one past the run
+    while True:  # a few steps at most: rounding moves an end by an element or so
+        down = ok(lo - 1)
+        up = ~ok(lo) & (lo < hi)
+        grow = ok(hi)
+        shrink = ~ok(hi - 1) & (hi > lo)
+        if not (down.any() or up.any() or grow.any() or shrink.any()):
+            return np.maximum(hi - lo, 0).astype(np.int64)  # no vote passes: the ends cross
+        lo = lo - down + (up & ~down)
+        hi = hi + grow - (shrink & ~grow)
