@@ -6,6 +6,7 @@ and the usage errors."""
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -28,8 +29,11 @@ def test_a_family_is_seeded_and_spaced(family: str) -> None:
 
 
 def test_the_held_out_set_shares_no_seed_and_holds_a_family_back() -> None:
-    tuned, held = mk.SETS["tuned"], mk.SETS["held-out"]
+    tuned, held, fresh = mk.SETS["tuned"], mk.SETS["held-out"], mk.SETS["fresh"]
     assert not set(tuned["seeds"]) & set(held["seeds"])
+    # the second held-out set: the held-out families on seeds of no other set
+    assert not set(fresh["seeds"]) & (set(tuned["seeds"]) | set(held["seeds"]))
+    assert fresh["families"] == held["families"]
     assert set(held["families"]) - set(tuned["families"]) == {"clusters"}
     with pytest.raises(ValueError, match="unknown family"):
         mk.starts("spiral", 5, 0)
@@ -41,6 +45,8 @@ def test_one_fleet_measured(tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
     assert r["ms_capt"] == pytest.approx(r["makespan"] / r["capt"])
     # the critical chain adds up to the makespan, its last robot walks its whole path
     assert sum(x for _, _, x in r["chain"]) == pytest.approx(r["makespan"])
+    # holding only where needed never ends later than waiting at the start
+    assert r["gated"] <= r["makespan"] + 1e-9
     assert r["chain"][-1][1] == r["chain"][-1][2]
     rows = tmp_path / "rows.jsonl"
     assert mk.main(["--set", "held-out", "--families", "nao", "--sizes", "4", "--seeds", "1",
@@ -50,6 +56,20 @@ def test_one_fleet_measured(tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
     assert mk.main(["--summary", str(rows)]) == 0
     out = capsys.readouterr().out
     assert "shape wedge" in out and "all" in out and "unsafe: none" in out
+
+
+def test_gated_makespan_holds_only_where_the_paths_meet() -> None:
+    # robot 1 crosses robot 0's path at right angles, both at arc 10, and waits for it
+    # (start-only: until 0 is 2r past the crossing, then 1 walks its 20 m: 30.4);
+    # gated, 1 walks at once and holds 2r/sqrt(2) before 0's path until 0 is as far past
+    # the crossing (the latest of the points whose distance is 2r), then walks on: it
+    # ends 2r·sqrt(2) after its 20 m
+    paths = [np.array([[0.0, 0.0], [20.0, 0.0]]), np.array([[10.0, -10.0], [10.0, 10.0]])]
+    after, waves = [[], [0]], np.array([0, 1])
+    gated = mk.gated_makespan(paths, after, waves, 0.4, step=0.01)
+    assert gated == pytest.approx(20.0 + 0.4 * math.sqrt(2.0), abs=0.03)
+    # nobody to wait for: each robot's own length
+    assert mk.gated_makespan(paths, [[], []], np.array([0, 0]), 0.4) == pytest.approx(20.0)
 
 
 @pytest.mark.parametrize(
