@@ -177,6 +177,6 @@ def _within(votes: np.ndarray, level: np.ndarray, tol: float) -> np.ndarray:
         grow = ok(hi)
         shrink = ~ok(hi - 1) & (hi > lo)
         if not (down.any() or up.any() or grow.any() or shrink.any()):
-            return np.maximum(hi - lo, 0).astype(np.int64)  # no vote passes: the ends cross
+            return np.asarray(np.maximum(hi - lo, 0), dtype=np.int64)  # empty: the ends cross
         lo = lo - down + (up & ~down)
         hi = hi + grow - (shrink & ~grow)
