@@ -145,10 +145,12 @@ class Membership:
         self.commands: dict[str, ReshapeMsg] = {}
 
     def start(self) -> None:
-        """Subscribe to the fleet, declare our token, serve the agreed record set."""
+        """Subscribe to the fleet (what others publish: our own records, digests and
+        statuses are never delivered back, :meth:`agent.net.bus.Bus.subscribe`), declare
+        our token, serve the agreed record set."""
         bus, me = self.ctx.bus, self.ctx.me
         for key in (KEY_RECORD_ALL, KEY_DIGEST_ALL, KEY_STATUS_ALL, KEY_RESHAPE):
-            bus.subscribe(key)
+            bus.subscribe(key, remote_only=True)  # our own come back only to be dropped
         bus.watch_alive(KEY_ALIVE_ALL)
         bus.declare_alive(key_alive(me))
         bus.serve(key_records(me), lambda req: answer(self.served, req))

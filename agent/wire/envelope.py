@@ -114,7 +114,11 @@ class Verifier:
     (:mod:`agent.wire.revocation`): they are never trusted, even when also in ``roster``,
     and their envelopes are refused, including ones captured before the revocation.
     Replay state is kept only for roster members (bounded by the roster), each a set of
-    at most :data:`REPLAY_WINDOW` sequence numbers.
+    at most twice :data:`REPLAY_WINDOW` sequence numbers: the numbers at or below the
+    window's floor are refused by the floor itself, so the set is pruned to the window only
+    once it holds twice as many, which costs a message O(1) on average (pruning it at
+    every message past the window would cost each message of a member that has sent
+    1024 a pass over 1024 numbers, ~0.2 ms of CPU).
     """
 
     def __init__(
@@ -187,6 +191,6 @@ class Verifier:
             st.seen.add(seq)
             if seq > st.top:
                 st.top = seq
-                if len(st.seen) > self.window:
+                if len(st.seen) > 2 * self.window:  # amortised: see the class docstring
                     floor = st.top - self.window
                     st.seen = {x for x in st.seen if x > floor}

@@ -87,6 +87,24 @@ def test_publish_subscribe_round_trip_counts_bytes(pair: tuple[Bus, Bus, str]) -
     assert a.stats.total_published == a.stats.published_bytes["status"]
 
 
+def test_a_remote_only_subscription_hears_others_but_not_its_own_session(
+    pair: tuple[Bus, Bus, str],
+) -> None:
+    a, b, _ = pair
+    b.subscribe("nao/*/status", remote_only=True)
+    a.subscribe("nao/*/status")  # a hears everything: its own too
+    end = time.monotonic() + 10
+    got: list[Event] = []
+    while time.monotonic() < end and not got:
+        a.publish(key_status(4), StatusMsg(sender=4, phase="search"))
+        b.publish(key_status(5), StatusMsg(sender=5, phase="agree"))
+        got = [e for e in b.drain(0.2) if e.kind == "msg"]
+    assert got and {e.msg.sender for e in got} == {4}  # b's own status 5 never came back
+    time.sleep(0.3)
+    assert {e.msg.sender for e in b.drain() if e.kind == "msg"} <= {4}
+    assert 4 in {e.msg.sender for e in a.drain() if e.kind == "msg"}  # its own, delivered
+
+
 def test_malformed_payload_is_rejected_and_the_bus_goes_on(pair: tuple[Bus, Bus, str]) -> None:
     # The garbage may go out before the route exists and be lost: keep sending all three
     # until both the good message and the rejections have been seen (deadline, no sleep).

@@ -104,7 +104,7 @@ class FakeBus:
             raise QueryTimeout(f"{key}: no reply within {timeout:g} s")
         return self.answer(key, msg, expect, timeout, accept)
 
-    def subscribe(self, key: str, max_bytes: int = 0) -> None:
+    def subscribe(self, key: str, max_bytes: int = 0, remote_only: bool = False) -> None:
         self.subscribed.append(key)
 
     def watch_alive(self, key: str) -> None:

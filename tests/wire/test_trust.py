@@ -343,3 +343,20 @@ def test_network_spec_from_flags_is_secure_by_default(
     assert spec.secure and spec.mode == "client" and spec.identity == "robot-1"
     plain = P.network_spec(_args("--connect", "tcp/127.0.0.1:7447", "--plain-links"), "robot-1")
     assert plain.secure and not plain.tls and plain.mode == "peer"
+
+
+def test_the_replay_window_is_pruned_seldom_and_stays_bounded(fleet: T.Credentials) -> None:
+    s = signer(fleet, "robot-1")
+    v = verifier(fleet, window=4)
+    msgs = [s.seal("nao/1/status", bytes([k % 256])) for k in range(40)]
+    sizes = []
+    for m in msgs:
+        v.open("nao/1/status", m)
+        (state,) = v._state[T.Identity.robot(1)].values()
+        sizes.append(len(state.seen))
+    # grows to twice the window, then is pruned to the window (top - 4, top] and grows again
+    assert sizes[:12] == [1, 2, 3, 4, 5, 6, 7, 8, 4, 5, 6, 7] and max(sizes) == 8
+    with pytest.raises(T.TrustError, match="too old"):
+        v.open("nao/1/status", msgs[35])  # 36 <= top(40) - window(4)
+    with pytest.raises(T.TrustError, match="already seen"):
+        v.open("nao/1/status", msgs[37])

@@ -1,10 +1,23 @@
-"""``python -m tools.bench idle --agents N --seconds S``: what an idle agent costs its host.
+"""``python -m tools.bench idle --agents N --seconds S [--deployment secure|mesh]``: what an
+idle agent costs its host.
 
 An agent that waits for the fleet (agreement, waves, hold, done) should cost next to
 nothing (docs/design.md §1, §8: every wait hears the fleet). This benchmark starts N
 real agent processes (``python -m agent.idle``: the real phase machine on a real zenoh
-session; insecure, peers over loopback TCP meeting at this process's listener, no
-multicast) that have nothing to do but wait:
+session, given the flags of ``python -m agent``) that have nothing to do but wait, in
+one of two deployments:
+
+* ``secure`` (the default: the deployment users run, ``tools.demo``, ``docker compose``,
+  ``python -m agent`` on hosts): a throwaway fleet's credentials made as the harness
+  makes them (:func:`tools.harness.procs.fleet_network`), the real TLS router
+  (``python -m tools.router --credentials DIR``, :func:`~tools.harness.procs.start_router`)
+  on a loopback port, every agent a zenoh client of it over mutual TLS, every message
+  signed and every signature checked (docs/design.md §8). The router's own CPU is
+  printed apart: it is one process for the whole fleet, not a cost of each agent.
+* ``mesh``: insecure zenoh peers over loopback TCP meeting at this process's listener
+  (no multicast) and finding each other into a full mesh (N - 1 links each).
+
+In both:
 
 * each agent enters the phase machine at the agreement (``Runner.phases("agree", ...)``)
   with an empty record of its own, as a robot does once its search is over;
@@ -15,7 +28,7 @@ multicast) that have nothing to do but wait:
 
 No world is started: the agents never look or move (the body only answers its id and
 sim time; the perception is never called), so the CPU measured is the waiting alone:
-the bus traffic, the wake-ups of the main thread and zenoh's own threads.
+the bus traffic, the signatures, the wake-ups of the main thread and zenoh's own threads.
 
 Once every agent has published a status of the agreement (``exchange`` or ``agree``)
 and ``--settle`` seconds more have passed, each thread's CPU time and wake-ups are
@@ -34,11 +47,12 @@ import argparse
 import os
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from tools.harness.procs import ROOT, free_port
+from tools.harness.procs import ROOT, Proc, fleet_network, free_port, start_router, stop
 
 if TYPE_CHECKING:
     from agent.net.bus import Bus
@@ -87,12 +101,41 @@ def wait_settled(bus: Bus, n: int, timeout: float) -> bool:
     return False
 
 
+#: Agreement timeout of a waiting agent (s): beyond any benchmark.
+NEVER = 1e6
+DEPLOYMENTS = ("secure", "mesh")
+
+
+def agent_commands(n: int, joins: list[str], ids: list[int]) -> list[list[str]]:
+    """The argv of each waiting agent (``python -m agent.idle`` with the flags of
+    ``python -m agent``: :meth:`AgentConfig.to_argv` and the join flags ``joins``),
+    robots ``ids`` of a fleet of ``n`` + 1 whose last member never comes."""
+    from agent.config import AgentConfig
+
+    return [
+        [sys.executable, "-m", "agent.idle",
+         *AgentConfig(robot_id=i, fleet_size=n + 1, timeout=NEVER).to_argv(), *joins]
+        for i in ids
+    ]  # fmt: skip
+
+
 def main(argv: list[str] | None = None) -> int:
     args = list(sys.argv[1:] if argv is None else argv)
-    p = argparse.ArgumentParser(prog="python -m tools.bench idle", description=__doc__)
+    p = argparse.ArgumentParser(
+        prog="python -m tools.bench idle",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("--agents", type=int, default=10, help="agent processes (default 10)")
     p.add_argument("--seconds", type=float, default=30.0, help="sampling window (s)")
     p.add_argument("--settle", type=float, default=10.0, help="s after all wait, then sample")
+    p.add_argument(
+        "--deployment",
+        choices=DEPLOYMENTS,
+        default="secure",
+        help="secure: clients of a TLS router, signed messages (what users run; default); "
+        "mesh: insecure peers in a full mesh",
+    )
     p.add_argument(
         "--start-timeout", type=float, default=300.0, help="s for all agents to start waiting"
     )
@@ -100,31 +143,39 @@ def main(argv: list[str] | None = None) -> int:
     a = p.parse_args(args)
     if a.agents < 2 or a.seconds <= 0:
         p.error("need --agents >= 2 and --seconds > 0")
-    port = free_port()
-    endpoint = f"tcp/127.0.0.1:{port}"
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    with tempfile.TemporaryDirectory(prefix="bench_idle_") as tmp:
+        return run(a, Path(tmp))
+
+
+def run(a: argparse.Namespace, tmp: Path) -> int:
+    """Start the deployment (its credentials and router log in ``tmp``), the agents, and
+    :func:`measure` them."""
     from agent.net.bus import Bus, BusConfig
     from agent.wire import KEY_STATUS_ALL
 
-    # the meeting point (as the world is in a demo): it listens, the agents connect and
-    # find each other through it; it hears their statuses to know when all of them wait
-    bus = Bus(BusConfig(listen=(endpoint,), multicast_scouting=False))
-    bus.subscribe(KEY_STATUS_ALL)
-
-    def command(i: int) -> list[str]:
-        return [sys.executable, "-m", "agent.idle", "--id", str(i),
-                "--fleet-size", str(a.agents + 1), "--connect", endpoint]  # fmt: skip
-
-    procs = [
-        subprocess.Popen(
-            command(i), cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
-        )
-        for i in range(a.agents)
-    ]
+    ids = list(range(1, a.agents + 1))
+    router: Proc | None = None
+    if a.deployment == "secure":
+        net = fleet_network(tmp, a.agents, ids)  # a throwaway fleet CA and keys in tmp/fleet
+        router = start_router(net.endpoint, tmp, net.flags)
+        joins = ["--connect", net.endpoint, *net.flags]
+        config = net.observer()  # the fleet's observer: hears the statuses through the router
+    else:  # the meeting point (as the world is in an insecure demo): it listens, the agents
+        endpoint = f"tcp/127.0.0.1:{free_port()}"  # connect and find each other through it
+        joins = ["--connect", endpoint, "--no-multicast-scouting", "--insecure"]
+        config = BusConfig(listen=(endpoint,), multicast_scouting=False)
+    procs: list[subprocess.Popen[bytes]] = []
     try:
-        return measure(a, procs, bus)
+        bus = Bus(config)  # hears the agents' statuses to know when all of them wait
+        try:
+            bus.subscribe(KEY_STATUS_ALL)
+            for cmd in agent_commands(a.agents, joins, ids):
+                out = subprocess.DEVNULL
+                procs.append(subprocess.Popen(cmd, cwd=ROOT, stdout=out, stderr=out))
+            return measure(a, procs, bus, router)
+        finally:
+            bus.close()
     finally:
-        bus.close()
         for proc in procs:
             proc.terminate()
         for proc in procs:
@@ -132,10 +183,15 @@ def main(argv: list[str] | None = None) -> int:
                 proc.wait(10.0)
             except subprocess.TimeoutExpired:
                 proc.kill()
+        if router is not None:
+            stop(router)
 
 
-def measure(a: argparse.Namespace, procs: list[subprocess.Popen[bytes]], bus: Bus) -> int:
-    """Wait for the agents to settle, sample their CPU, print and draw (module docstring)."""
+def measure(
+    a: argparse.Namespace, procs: list[subprocess.Popen[bytes]], bus: Bus, router: Proc | None
+) -> int:
+    """Wait for the agents to settle, sample their CPU (and the ``router``'s), print and
+    draw (module docstring)."""
     t0 = time.monotonic()
     if not wait_settled(bus, a.agents, a.start_timeout):
         print(
@@ -149,11 +205,13 @@ def measure(a: argparse.Namespace, procs: list[subprocess.Popen[bytes]], bus: Bu
     load0 = os.getloadavg()
     start = {pr.pid: (cpu_seconds(pr.pid), cpu_seconds(pr.pid, pr.pid)) for pr in procs}
     t_start = {pr.pid: threads(pr.pid) for pr in procs}
+    r_start = threads(router.popen.pid) if router is not None else {}
     w0 = time.monotonic()
     time.sleep(a.seconds)
     wall = time.monotonic() - w0
     end = {pr.pid: (cpu_seconds(pr.pid), cpu_seconds(pr.pid, pr.pid)) for pr in procs}
     t_end = {pr.pid: threads(pr.pid) for pr in procs}
+    r_end = threads(router.popen.pid) if router is not None else {}
     load1 = os.getloadavg()
     heard = len(bus.drain())  # the agents' statuses during the window
     if any(pr.poll() is not None for pr in procs):
@@ -164,10 +222,12 @@ def measure(a: argparse.Namespace, procs: list[subprocess.Popen[bytes]], bus: Bu
     pct = [100.0 * sum(c for c, _ in ran[pid].values()) / wall for pid in pids]
     main_pct = [100.0 * ran[pid].get(pid, (0.0, 0))[0] / wall for pid in pids]
     ticked = [100.0 * (end[pid][0] - start[pid][0]) / wall for pid in pids]
+    wakes = [sum(n for _, n in ran[pid].values()) / wall for pid in pids]
     mean = sum(pct) / len(pct)
     print(
-        f"idle agent: {mean:.3f} % of a core (mean), {max(pct):.3f} % (max) over {wall:.0f} s; "
-        f"main thread {sum(main_pct) / len(main_pct):.3f} %; {a.agents} agents, "
+        f"idle agent ({a.deployment}): {mean:.3f} % of a core (mean), {max(pct):.3f} % (max) "
+        f"over {wall:.0f} s; main thread {sum(main_pct) / len(main_pct):.3f} %; "
+        f"{sum(wakes) / len(wakes):.1f} wake-ups/s; {a.agents} agents, "
         f"{sum(pct):.2f} % of a core together"
     )
     print(
@@ -190,8 +250,16 @@ def measure(a: argparse.Namespace, procs: list[subprocess.Popen[bytes]], bus: Bu
         "per agent, by thread (% of a core, wake-ups a second): "
         + ", ".join(f"{n} {v:.3f} % {w:.1f}/s" for n, (v, w) in top)
     )
+    if router is not None:
+        r_ran = spent(r_start, r_end)
+        r_cpu = 100.0 * sum(c for c, _ in r_ran.values()) / wall
+        r_wakes = sum(n for _, n in r_ran.values()) / wall
+        print(
+            f"the router (one for the fleet): {r_cpu:.3f} % of a core, {r_wakes:.1f} wake-ups/s "
+            f"({r_cpu / len(pids):.3f} % per agent)"
+        )
     print(f"statuses heard: {60.0 * heard / wall / len(procs):.1f} per agent per minute")
-    draw(a.out, pct, main_pct, mean, load1[0], wall)
+    draw(a.out, pct, main_pct, mean, load1[0], wall, a.deployment)
     return 0
 
 
@@ -208,7 +276,7 @@ def spent(
 
 
 def draw(out: Path, pct: list[float], main_pct: list[float], mean: float, load: float,
-         wall: float) -> None:  # fmt: skip
+         wall: float, deployment: str) -> None:  # fmt: skip
     """Bars: each agent's % of a core (all threads, and its main thread)."""
     import matplotlib
 
@@ -223,7 +291,10 @@ def draw(out: Path, pct: list[float], main_pct: list[float], mean: float, load: 
     ax.axhline(0.1, color="tab:green", lw=1, ls=":", label="target 0.1 %")
     ax.set_xlabel("agent")
     ax.set_ylabel("% of one core")
-    ax.set_title(f"idle agents waiting in the agreement, {wall:.0f} s; load average {load:.1f}")
+    ax.set_title(
+        f"idle agents ({deployment}) waiting in the agreement, {wall:.0f} s; "
+        f"load average {load:.1f}"
+    )
     ax.legend(fontsize=8)
     fig.tight_layout()
     out.parent.mkdir(parents=True, exist_ok=True)
