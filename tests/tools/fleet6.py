@@ -25,16 +25,24 @@ WORLD = {
 }
 
 
-def records() -> tuple[NeighborRecordMsg, ...]:
-    """Each robot sees every other where it stands (the common frame is robot 1's)."""
+def ideal_records(
+    world: dict[int, tuple[float, float]],
+) -> tuple[NeighborRecordMsg, ...]:
+    """Ideal records of an aligned fleet standing at ``world`` (m): each robot sees every
+    other where it stands."""
     return tuple(
         NeighborRecordMsg(
             sender=i,
             round=0,
-            neighbours=tuple((wx - x, wy - y) for j, (wx, wy) in WORLD.items() if j != i),
+            neighbours=tuple((wx - x, wy - y) for j, (wx, wy) in world.items() if j != i),
         )
-        for i, (x, y) in WORLD.items()
+        for i, (x, y) in world.items()
     )
+
+
+def records() -> tuple[NeighborRecordMsg, ...]:
+    """The six's records (the common frame is robot 1's)."""
+    return ideal_records(WORLD)
 
 
 def plan(params: PlanParams) -> Plan:

@@ -25,6 +25,7 @@ from agent.wire import (
     TruthPosesMsg,
     encode,
 )
+from tests.tools.fleet6 import ideal_records
 from tools.harness.observe import Observer, Recorder
 from tools.harness.view import foxglove as fg
 from tools.harness.view.scene import Scene, to_world
@@ -35,14 +36,7 @@ WORLD = {1: (1.0, 2.0), 2: (2.0, 2.2), 3: (1.4, 3.1)}  # aligned starts (world m
 
 def records() -> tuple[NeighborRecordMsg, ...]:
     """Ideal records of the aligned fleet WORLD: each robot sees every other."""
-    return tuple(
-        NeighborRecordMsg(
-            sender=i,
-            round=0,
-            neighbours=tuple((wx - x, wy - y) for j, (wx, wy) in WORLD.items() if j != i),
-        )
-        for i, (x, y) in WORLD.items()
-    )
+    return ideal_records(WORLD)
 
 
 def truth(t: float, dx: float = 0.0) -> TruthPosesMsg:

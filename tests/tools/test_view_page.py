@@ -102,23 +102,31 @@ def test_the_page_shows_the_three_robots_of_a_real_run(
     _three_robots(new_page(), tmp_path)
 
 
-def _three_robots(page: Any, tmp_path: Path) -> None:
+def _replay(page: Any, tmp_path: Path, run: Path, *extra: str) -> subprocess.Popen[bytes]:
+    """``tools.view --replay run`` looping for the test (``extra``: more of its flags), its
+    page opened in ``page`` once its server answers; the caller stops the process."""
     live, web = free_port(), free_port()
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    cmd = [sys.executable, "-m", "tools.view", "--replay", str(RUN), "--speed", "3", "--loop"]
-    cmd += ["--live", f"127.0.0.1:{live}", "--web", f"127.0.0.1:{web}", "--for", "150"]
+    cmd = [sys.executable, "-m", "tools.view", "--replay", str(run), "--loop", *extra]
+    cmd += ["--live", f"127.0.0.1:{live}", "--web", f"127.0.0.1:{web}"]
     log = (tmp_path / "view.log").open("w")
     proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT)
+    deadline = time.monotonic() + 60.0
+    while True:  # the page's server may still be starting
+        try:
+            page.goto(f"http://127.0.0.1:{web}/", timeout=10_000)
+            return proc
+        except Exception:
+            if time.monotonic() > deadline or proc.poll() is not None:
+                proc.terminate()
+                proc.wait(30)
+                raise
+            time.sleep(0.3)
+
+
+def _three_robots(page: Any, tmp_path: Path) -> None:
+    proc = _replay(page, tmp_path, RUN, "--speed", "3", "--for", "150")
     try:
-        deadline = time.monotonic() + 60.0
-        while True:  # the page's server may still be starting
-            try:
-                page.goto(f"http://127.0.0.1:{web}/", timeout=10_000)
-                break
-            except Exception:
-                if time.monotonic() > deadline or proc.poll() is not None:
-                    raise
-                time.sleep(0.3)
         # three cards with a phase, three robots on the map from the ground truth, the plan
         page.wait_for_function(
             """() => {
@@ -317,23 +325,9 @@ def test_a_replay_draws_the_targets_of_its_runs_shape(
         rec.record(key, msg)
     rec.close()
     (tmp_path / "result.json").write_text(json.dumps({"shape_spec": "wedge", "d_e": 0.8}))
-    live, web = free_port(), free_port()
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    cmd = [sys.executable, "-m", "tools.view", "--replay", str(tmp_path / "run.mcap"), "--loop"]
-    cmd += ["--live", f"127.0.0.1:{live}", "--web", f"127.0.0.1:{web}", "--for", "90"]
-    log = (tmp_path / "view.log").open("w")
-    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT)
     page = new_page()
+    proc = _replay(page, tmp_path, tmp_path / "run.mcap", "--for", "90")
     try:
-        deadline = time.monotonic() + 60.0
-        while True:  # the page's server may still be starting
-            try:
-                page.goto(f"http://127.0.0.1:{web}/", timeout=10_000)
-                break
-            except Exception:
-                if time.monotonic() > deadline or proc.poll() is not None:
-                    raise
-                time.sleep(0.3)
         _the_targets_of(page, plan)
         page.wait_for_function("() => Object.keys(window.naoView.robots).length === 6")
         ARTIFACTS.mkdir(parents=True, exist_ok=True)
