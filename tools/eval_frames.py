@@ -49,8 +49,11 @@ from pathlib import Path
 from typing import TypeVar
 
 from agent.adapters import FormationAdapter
-from agent.core.formation.frame.fleet_frame import fleet_frame
+from agent.core.formation.frame.alone import alone_test
+from agent.core.formation.frame.fleet_frame import fleet_frame, frame_rest
 from agent.core.formation.frame.neighbour_check import DEFAULT_EPSILON
+from agent.core.formation.frame.poses import evaluate_poses
+from agent.core.perception.sighting_noise import shipped_noise
 from agent.wire import NeighborRecordMsg, decode
 from tools.harness.judge import injected_faults
 from tools.lib.frame_fit import frame_error
@@ -142,11 +145,6 @@ def alone_null(name: str, msgs: tuple[NeighborRecordMsg, ...]) -> list[tuple[str
     """Every robot of one fault-free fleet tested alone against the others framed without
     its record (``--alone-null``): (fleet, robot, p, the test's words); p nan where the
     rest does not pass."""
-    from agent.core.formation.frame.alone import alone_test
-    from agent.core.formation.frame.fleet_frame import frame_rest
-    from agent.core.formation.frame.poses import evaluate_poses
-    from agent.core.perception.sighting_noise import shipped_noise
-
     records = FormationAdapter.records(msgs)
     model = shipped_noise()
     out = []

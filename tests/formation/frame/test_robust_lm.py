@@ -300,4 +300,4 @@ def test_a_singular_newton_hessian_gives_way_to_the_damped_step() -> None:
 
     x, _ = minimise(fun, jac, np.zeros(2), cancel)
     assert np.allclose(x, plain, atol=1e-6)
-    assert calls  # Newton was tried
+    assert calls  # Newton steps were taken

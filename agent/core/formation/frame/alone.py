@@ -86,7 +86,7 @@ from agent.core.perception.sighting_noise import SightingNoise
 #: The fewest of the others' sightings that must agree on where a robot without a record
 #: stands for it to be tested alone (step 2).
 MIN_WITNESSES = 2
-#: Headings tried for the robot tested alone (step 2): every degree of the circle.
+#: Headings searched for the robot tested alone (step 2): every degree of the circle.
 HEADING_GRID = np.radians(np.arange(0.0, 360.0, 1.0))
 
 

@@ -87,10 +87,10 @@ suspect standing where the others' sightings that land on none of them agree
 (:func:`alone.unrecorded_place`: the rest is not blamed for seeing the robot set aside).
 A suspect whose rest passes is named when its own test rejects it at ALPHA, in a
 general candidate's frame or alone against the rest (:func:`alone.alone_test`: its
-record tested with the rest held fixed, where a faulty robot can no longer pull the fit
+record tested with the rest held fixed, where a faulty robot cannot pull the fit
 its way); exactly one is named, standing where the others saw it. None, or more than
 one, and :func:`fleet_frame` raises ``ValueError`` with the reason of the last candidate
-tried, the same on every agent (they hold the same records): nobody moves. A sound robot
+built, the same on every agent (they hold the same records): nobody moves. A sound robot
 is so left out with at most 3·ALPHA per run. The search runs only where the fleet would
 otherwise stop, and costs one framing of the rest per suspect.
 

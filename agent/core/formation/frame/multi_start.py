@@ -180,6 +180,19 @@ def _alone(prob: _Problem, x: np.ndarray, c: int, k: int, turn: float) -> float:
         mask = -4.0 * u[2 * m :] * f[2 * m :]
         return float(np.sum(np.where(owner, pos * prob.sp, 0.0)) + np.sum(mask))
 
+    def step_of(a: np.ndarray, g: np.ndarray) -> np.ndarray | None:
+        """The step −a⁻¹·g; None when ``a`` is singular."""
+        try:
+            return np.asarray(-np.linalg.solve(a, g))
+        except np.linalg.LinAlgError:
+            return None
+
+    def lowered(step: np.ndarray) -> tuple[np.ndarray, float] | None:
+        """The residuals and cost at ``y + step`` when it lowers the cost, else None."""
+        f_new = fun(y + step)
+        cost_new = robust_lm.soft_l1_cost(f_new)
+        return (f_new, cost_new) if cost_new < cost else None
+
     y = x[c : c + 3] + np.array([0.0, 0.0, turn])
     f = fun(y)
     cost = robust_lm.soft_l1_cost(f)
@@ -195,17 +208,13 @@ def _alone(prob: _Problem, x: np.ndarray, c: int, k: int, turn: float) -> float:
             jw3 = j * (w * w * w)[None, :]
             exact = (jw3[:, None, :] * j[None, :, :]).sum(axis=-1)
             exact[2, 2] += bend(y, w * f)
-            try:
-                step = -np.linalg.solve(exact, g)
-            except np.linalg.LinAlgError:
-                step = None
+            step = step_of(exact, g)
             if step is not None:
-                f_new = fun(y + step)
-                cost_new = robust_lm.soft_l1_cost(f_new)
-                if cost_new < cost:
-                    small = cost - cost_new <= ALONE_FTOL * cost
-                    near = cost - cost_new <= switch * cost
-                    y, f, cost = y + step, f_new, cost_new
+                better = lowered(step)
+                if better is not None:
+                    small = cost - better[1] <= ALONE_FTOL * cost
+                    near = cost - better[1] <= switch * cost
+                    y, (f, cost) = y + step, better
                     if small:
                         break
                     continue
@@ -214,19 +223,14 @@ def _alone(prob: _Problem, x: np.ndarray, c: int, k: int, turn: float) -> float:
             near, switch = False, switch * robust_lm.NEAR_TIGHTEN
         d = np.maximum(np.diag(h), 1e-12)
         while True:
-            try:
-                step = -np.linalg.solve(h + np.diag(lam * d), g)
-            except np.linalg.LinAlgError:
-                step = None
-            if step is not None:
-                f_new = fun(y + step)
-                cost_new = robust_lm.soft_l1_cost(f_new)
-                if cost_new < cost:
-                    small = cost - cost_new <= ALONE_FTOL * cost
-                    near = cost - cost_new <= switch * cost
-                    y, f, cost = y + step, f_new, cost_new
-                    lam = max(lam / 3.0, 1e-12)
-                    break
+            step = step_of(h + np.diag(lam * d), g)
+            better = None if step is None else lowered(step)
+            if step is not None and better is not None:
+                small = cost - better[1] <= ALONE_FTOL * cost
+                near = cost - better[1] <= switch * cost
+                y, (f, cost) = y + step, better
+                lam = max(lam / 3.0, 1e-12)
+                break
             lam *= 4.0
             if lam > robust_lm.LAMBDA_MAX:
                 return cost

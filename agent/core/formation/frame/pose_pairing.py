@@ -332,7 +332,7 @@ def mask_offset(deltas: Sequence[float]) -> tuple[float, int]:
     """The offset (rad, modulo π) most of a robot's mask misfits agree on, and how many.
 
     ``deltas`` are the signed misfits δ = ψ_t − ψ_o − (β + θ − π/2), wrapped to
-    (−π/2, π/2], of the others' mask sightings of one robot t. Each δ is tried as the
+    (−π/2, π/2], of the others' mask sightings of one robot t. Each δ is taken as the
     centre; the one with the most misfits within :data:`TURN_WINDOW` wins (ties: the
     smaller sum of squared distances, then the smaller |centre|, then input order); the
     offset is the circular mean, modulo π, of the misfits that agree with it.

@@ -19,7 +19,7 @@ undamped, on the exact Hessian ``JᵀW³J + Σ_k ρ′_k f_k ∇²f_k``
 to the minimum the Gauss–Newton steps head for (the 50-NAO fits of
 ``tests/data/runs/n50_random_s1018.json``: the same minima, the frames planned on within
 10⁻⁷ m of the damped steps' alone, in half the iterations). A Newton step that does not
-lower the cost gives way to the damped step, and Newton is tried again only once a step lowers the cost by
+lower the cost gives way to the damped step, and Newton is taken up again only once a step lowers the cost by
 :data:`NEAR_TIGHTEN` times less; a refused Newton step whose model predicts a decrease
 below :data:`FTOL` of the cost ends the fit (the cost cannot resolve it). Begun at 1e-3
 of the cost, Newton leaves the basin of that fleet's sound fit from a plateau of small
