@@ -59,7 +59,7 @@ def test_start_headings_leave_the_pyramid_in_the_world_unchanged_with_times(
     seed: int, turn: float
 ) -> None:
     """The property above on records with times, as today's agents send them: every mask
-    turned back to its target's start heading (fleet_frame.half_turn_test weighs them)."""
+    turned back to its target's start heading (multi_start.half_turn_test weighs them)."""
     _same_pyramid_in_the_world(seed, turn, timed=True)
 
 
@@ -134,7 +134,7 @@ def test_three_robots_of_five_half_a_turn_off_are_not_planned_on() -> None:
     stand half a turn off their true headings, and every robot passes its test: their
     masks, each 180° off, read as front/back confusions one by one. Together, ten masks
     between {1, 3} and {2, 4, 5} all read the other way round reject that frame
-    (fleet_frame.half_turn_test, p 5·10⁻⁵ < ALPHA), and the pose fit is planned on."""
+    (multi_start.half_turn_test, p 5·10⁻⁵ < ALPHA), and the pose fit is planned on."""
     rng = np.random.default_rng(2681)
     pos = sim_layout(rng, len(IDS))
     aligned = np.full(len(IDS), math.pi / 2)

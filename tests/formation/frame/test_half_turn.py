@@ -1,5 +1,5 @@
 """The joint test of the fleet's masks: robots half a turn off together
-(fleet_frame.half_turn_test, docs/design.md §9): a known answer by hand, each branch,
+(multi_start.half_turn_test, docs/design.md §9): a known answer by hand, each branch,
 its false-alarm bound and its use in the candidate loop."""
 
 from __future__ import annotations
@@ -14,7 +14,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agent.core.formation.frame.fault_test import ALPHA
-from agent.core.formation.frame.fleet_frame import fleet_frame, half_turn_test
+from agent.core.formation.frame.fleet_frame import fleet_frame
+from agent.core.formation.frame.multi_start import half_turn_test
 from agent.core.formation.frame.neighbour_check import DEFAULT_EPSILON
 from agent.core.formation.frame.poses import PoseFrame, PoseMeasurement, evaluate_poses
 from agent.core.formation.frame.records import NeighborRecord

@@ -118,7 +118,7 @@ from agent.core.formation.frame.fault_test import (
     seen_by_others,
 )
 from agent.core.formation.frame.firm_pairs import firm_start
-from agent.core.formation.frame.multi_start import half_turned
+from agent.core.formation.frame.multi_start import half_turn_test, half_turned
 from agent.core.formation.frame.neighbour_check import NeighbourGraph, identify_neighbours
 from agent.core.formation.frame.pose_pairing import identify_pairs
 from agent.core.formation.frame.poses import (
@@ -221,94 +221,6 @@ def alignment_log_ratio(deltas: np.ndarray, noise: SightingNoise) -> float:
     wide = replace(noise, sigma_mask=min(spread, math.pi / 4 - 1e-9))
     g = 0.5 / math.pi + 0.5 * wide.mask_density(d)
     return float(np.log(g / noise.mask_density(d)).sum())
-
-
-@dataclass(frozen=True)
-class HalfTurn:
-    """The joint test of the fleet's masks (:func:`half_turn_test`): the robots the masks
-    would rather see turned half round (the side of the split without the frame robot;
-    none: no split fits them better), ``log L_S`` of that alternative and its p-value
-    ``min(1, 1/(w_S·L_S))``."""
-
-    robots: tuple[int, ...]
-    log_ratio: float
-    p: float
-
-    def describe(self) -> str:
-        return (f"robots {list(self.robots)} read half a turn off by the others' masks "
-                f"(log L {self.log_ratio:.1f}, p {self.p:.1e})")  # fmt: skip
-
-
-def half_turn_test(
-    poses: PoseFrame, noise: SightingNoise, records: Sequence[NeighborRecord]
-) -> HalfTurn:
-    """Whether the masks of several robots together say that some of them stand half a
-    turn off in ``poses`` (docs/design.md §9): the test of all masks at once that no
-    robot's own test makes, since each mask off by π is alone a front/back confusion.
-
-    A mask turned back to its target's start heading (its owner's record carries
-    ``seen_at`` and its target's ``stances``: :func:`records.mask_orientation`) misses
-    ψ_t − ψ_o by ``δ = ψ_t − ψ_o − (β + θ − π/2)`` modulo 2π, and reads its target the
-    other way round (|δ| > π/2) with probability q = ``noise.w180`` when the frame is
-    right, independently of the others. Turning a set S of robots half round changes only
-    the masks between S and the rest, each by π, so its likelihood ratio is
-    ``L_S = ((1 − q)/q)^(F_S − C_S)``, F_S and C_S those masks read the other way round
-    and the right way. Each S (the frame robot outside it, 1 ≤ |S| ≤ n − 1) gets the
-    weight ``w_S = 1 / ((n − 1)·C(n − 1, |S|))``, so ``Σ_S w_S·L_S`` has expectation 1 when
-    the frame is right and exceeds 1/α with probability at most α (Markov's inequality);
-    ``w_S·L_S ≥ 1/α`` for one S implies it, so the p-value ``1/(w_S·L_S)`` of any S is
-    valid, whichever way S is found. S is sought by local search over the splits
-    (toggle the robot that gains most, tie: the lowest id, while one gains), from no
-    split and from each robot alone; the best S visited is kept (tie: the first). Masks
-    of records without times are left out (their target may have turned half round in
-    its own search; so are those of a record with no stances), and so is every mask when
-    q is not below ½. Deterministic: integer counts summed over the measurements, robots
-    in ascending id."""
-    ids, n, q = poses.ids, len(poses.ids), noise.w180
-    none = HalfTurn((), 0.0, 1.0)
-    if n < 2 or not 0.0 < q < 0.5:
-        return none
-    index = {rid: k for k, rid in enumerate(ids)}
-    recs = {r.robot_id: r for r in records}
-    votes = np.zeros((n, n), dtype=np.int64)  # +1 a mask the other way round, −1 right
-    for m in poses.measurements:
-        owner, target = recs.get(m.owner), recs.get(m.target)
-        if owner is None or owner.seen_at is None or target is None:
-            continue
-        if target.stances is None or not len(target.stances) or not math.isfinite(m.orientation):
-            continue  # as recorded (no stances: records.heading_at), or none
-        o, t = index[m.owner], index[m.target]
-        ref = math.atan2(float(m.vector[1]), float(m.vector[0])) + m.orientation - math.pi / 2
-        miss = math.remainder(float(poses.headings[t] - poses.headings[o]) - ref, 2 * math.pi)
-        vote = 1 if abs(miss) > math.pi / 2 else -1
-        votes[o, t] += vote
-        votes[t, o] += vote
-    if not votes.any():
-        return none
-    per_mask = math.log((1.0 - q) / q)
-    anchor = ids.index(poses.frame_robot)
-    best, score = none, 0.0  # score: log(w_S·L_S) of the best S
-    for start in range(-1, n):
-        side = np.ones(n, dtype=np.int64)  # ±1: the two sides of the split
-        if start >= 0:
-            side[start] = -1
-        while True:
-            turned = side != side[anchor]
-            size = int(turned.sum())
-            cut = int(votes[np.ix_(turned, ~turned)].sum())  # F_S − C_S
-            # log(1/w_S) = log((n − 1)·C(n − 1, |S|))
-            log_w = math.log(n - 1) + math.lgamma(n) - math.lgamma(size + 1)
-            log_w -= math.lgamma(n - size)
-            if size and per_mask * cut - log_w > score:
-                score = per_mask * cut - log_w
-                robots = tuple(i for i, x in zip(ids, turned, strict=True) if x)
-                best = HalfTurn(robots, per_mask * cut, math.exp(-score))
-            toggle = side * (votes @ side)  # what toggling each robot adds to F_S − C_S
-            k = int(np.argmax(toggle))
-            if toggle[k] <= 0:
-                break
-            side[k] = -side[k]
-    return best
 
 
 @dataclass(frozen=True)
