@@ -25,6 +25,10 @@ used.
   that σ: the share of their pairs rejected, binned by distance and fitted by a line in
   d, is ``p_reject``; lost strays per sighting, ``p_stray`` (no fault was injected, so
   every rejection is a false one).
+* ``a0``, the rate of a sound robot's sightings lost when it is tested alone against the
+  others at their fitted poses (:func:`alone_losses`, the test of
+  :func:`agent.core.formation.frame.alone.alone_test`), counted conservatively as
+  ``(k + 1) / (n + 2)``;
 * ``bias_scale``, the bias test's null scale (:func:`bias_scale`: its statistic over sound
   robots against χ²₃, at the 90th and 99th percentiles);
 * ``mask_scale``, the heading test's null scale (:func:`null_scale`: Wilks' statistic
@@ -245,8 +249,10 @@ def fit(m: Matched, runs: list[Run], corpus: str) -> tuple[SightingNoise, dict[s
     # front/back confusion, of the masks turned back by the records' times
     flips = m.flip[np.isfinite(m.flip)]
     w180 = float(flips.mean()) if flips.size else shipped.w180
+    sent, lost = alone_losses(fits, replace(base, g0=g0, g1=g1), [r.records for r in runs_kept])
+    a0 = (float(lost) + 1.0) / (float(sent) + 2.0)
     model = replace(base, g0=g0, g1=g1, rho=rho, rho_untimed=rho_untimed, mask_scale=mscale,
-                    s0=s0, s1=s1, w180=w180,
+                    s0=s0, s1=s1, a0=a0, w180=w180,
                     bias_scale=bias_scale(fits, replace(base, g0=g0, g1=g1),
                                           [r.records for r in runs_kept]))  # fmt: skip
     bins = {"d": x, "sr": np.array(sr), "st": np.array(st), "n": w, "dist": dist, "along": along,
@@ -298,6 +304,29 @@ def bias_scale(
         loose = unpaired(f, FormationAdapter.records(recs))
         stats += [bias_fit(f, r, model, 1.0, loose.get(r)).statistic for r in f.ids]
     return null_scale(np.array(stats), 3)
+
+
+def alone_losses(
+    fits: list[PoseFrame], model: SightingNoise, records: list[tuple[NeighborRecordMsg, ...]]
+) -> tuple[int, int]:
+    """(sightings, lost) of every robot of the fault-free fleets tested alone against the
+    others held at their fitted poses (:func:`agent.core.formation.frame.alone.alone_test`),
+    over the robots enough of the others' sightings place (the test's own rule)."""
+    from agent.core.formation.frame.alone import alone_test
+    from agent.core.formation.frame.poses import evaluate_poses
+
+    sent = lost = 0
+    for f, recs in zip(fits, records, strict=True):
+        own = FormationAdapter.records(recs)
+        for k, rid in enumerate(f.ids):
+            keep = [j for j in range(len(f.ids)) if j != k]
+            ids = tuple(f.ids[j] for j in keep)
+            rest = evaluate_poses(ids, (), f.positions[keep], f.headings[keep], ids[0])
+            alone = alone_test(rest, own, rid, model)
+            if alone.place is not None:
+                sent += alone.test.strays
+                lost += alone.test.lost
+    return sent, lost
 
 
 def fitted(runs: list[Run]) -> tuple[list[PoseFrame], list[Run]]:

@@ -104,6 +104,21 @@ def test_the_shipped_model_was_fitted_on_the_corpus() -> None:
     assert "held-out fleets excluded" in m.corpus and m.sightings > 1000
     assert 0.0 <= m.rho < 0.2 and 0.0 < m.rho_untimed < 0.2 and math.isfinite(m.r1)
     assert m.mask_scale >= 1.0 and m.bias_scale >= 1.0
+    # a sighting tested alone counts whether it paired in the fit or not: a higher rate
+    assert m.s0 < m.a0 < 0.1
+
+
+def test_a_fault_the_frame_absorbed_is_named_by_the_screen() -> None:
+    """Twelve rendered NAOs, robot 5's distances 1.4 times too long: the aligned model,
+    its sightings identified where they land, passes with everyone (five pairs called
+    wrong pairings); the screen of that frame sets robot 5 aside, and its test alone
+    against the others framed again names it."""
+    (run,) = [
+        r for r in corpus.runs_of(CORPUS / "n12_aligned_s1106.json") if r.fault == "scale:1.4"
+    ]
+    row = eval_frames.judge_records(run.name, run.records, run.truth, run.victim, run.fault)
+    assert row.named and row.excluded == (5,) and "alone against the rest" in row.reason
+    assert row.pos_err < 0.15 and row.psi_err < 10.0
 
 
 @pytest.mark.slow

@@ -23,6 +23,14 @@ A sighting ``v_ij`` of robot i, in its fixed frame, at true distance d from j:
   that lands on no robot within the χ² gate of the fitted frame (a ghost or merged
   detection) with probability ``p_stray(d) = clip(s0 + s1·d, P_MIN, P_MAX)`` per
   sighting, measured like ``p_reject``;
+* **lost when tested alone**: a sound robot's sighting lands on no other robot, once the
+  robot is placed where the others saw it and turned to the heading under which most of
+  its sightings land, with the others held at their fitted poses
+  (:func:`agent.core.formation.frame.alone.alone_test`), with probability
+  ``p_alone(d) = clip(a0, P_MIN, P_MAX)`` per sighting, measured with that very test on
+  fault-free fleets. It is not ``p_stray``: a sighting that pairs in the fit (a wrong
+  pairing, a merged detection counted among the rejected pairs) is tested here like any
+  other, so this rate holds both kinds (on the shipped corpus, four times ``p_stray``);
 * **mask orientation** θ_ij (the relative orientation of the matched mask, known modulo π):
   its error modulo π is ``N(0, σ_m)`` with probability ``w0``, the side/front confusion
   ``N(±π/2, σ_m)`` with ``w90``, otherwise uniform (front/back, 180°, is folded away by
@@ -94,6 +102,8 @@ class SightingNoise:
     rho_untimed: float = 0.0
     s0: float = 0.0
     s1: float = 0.0
+    #: the rate of a sound robot's sightings lost when it is tested alone (module docstring)
+    a0: float = 0.0
     r_lin: float = 0.0
     t_lin: float = 0.0
     #: the bias test's null scale: Λ / bias_scale is χ²₃ in its tail on sound robots
@@ -123,6 +133,7 @@ class SightingNoise:
             "rho_untimed",
             "s0",
             "s1",
+            "a0",
         ):
             v = getattr(self, name)
             if not math.isfinite(v):
@@ -159,6 +170,12 @@ class SightingNoise:
     def p_stray(self, d: np.ndarray | float) -> np.ndarray:
         """Probability that a sound robot's sighting at ``d`` ends up a lost stray."""
         p = self.s0 + self.s1 * np.asarray(d, dtype=np.float64)
+        return np.asarray(np.clip(p, P_MIN, P_MAX))
+
+    def p_alone(self, d: np.ndarray | float) -> np.ndarray:
+        """Probability that a sound robot's sighting at ``d`` lands on no robot when the
+        robot is tested alone against the others (module docstring)."""
+        p = self.a0 + 0.0 * np.asarray(d, dtype=np.float64)
         return np.asarray(np.clip(p, P_MIN, P_MAX))
 
     def chi2(self, vector: np.ndarray, error: np.ndarray) -> np.ndarray:

@@ -239,3 +239,43 @@ def test_a_place_elsewhere_holds_only_for_the_frame_as_tested() -> None:
     poses = build_poses(recs)
     with pytest.raises(ValueError, match="search"):
         ft.fault_test(poses, NOISE, recs, search=True, elsewhere=np.zeros((1, 2)))
+
+
+# ------------------------------------------------------------ the screen of a frame that passes
+IDS = tuple(range(1, 9))
+
+
+def test_a_sound_fleet_at_its_true_poses_screens_nobody() -> None:
+    for seed in range(1, 6):
+        recs, pos, psi = truth_fleet(seed)
+        assert al.absorbed(IDS, pos, psi, recs, NOISE) == []
+
+
+@pytest.mark.parametrize("kind", ["scale", "shift", "rotate"])
+def test_a_faulty_robot_at_its_true_pose_is_screened(kind: str) -> None:
+    recs, pos, psi = truth_fleet(4, kind=kind)
+    got = al.absorbed(IDS, pos, psi, recs, NOISE)
+    assert [r for r, _ in got] == [3] and got[0][1] < ALPHA
+
+
+def test_a_heading_that_absorbed_a_turned_compass_is_screened_by_the_masks() -> None:
+    recs, pos, psi = truth_fleet(4, kind="rotate")
+    turned = psi.copy()
+    turned[2] += math.radians(40.0)  # the fit turns robot 3 with its sightings: they all land
+    got = al.absorbed(IDS, pos, turned, recs, NOISE)
+    assert [r for r, _ in got] == [3] and got[0][1] < ALPHA
+
+
+def test_a_robot_nobody_saw_is_never_screened() -> None:
+    recs, pos, psi = truth_fleet(1, kind="scale")
+    blind = [NeighborRecord(r.robot_id, np.zeros((0, 2))) if r.robot_id != 3 else r for r in recs]
+    assert 3 not in [r for r, _ in al.absorbed(IDS, pos, psi, blind, NOISE)]
+    assert al.absorbed((1,), pos[:1], psi[:1], recs[:1], NOISE) == []
+
+
+def test_the_screen_is_the_same_for_records_in_any_order() -> None:
+    recs, pos, psi = truth_fleet(5, kind="shift")
+    first = al.absorbed(IDS, pos, psi, recs, NOISE)
+    shuffled = list(recs)
+    random.Random(3).shuffle(shuffled)
+    assert al.absorbed(IDS, pos, psi, shuffled, NOISE) == first and first
