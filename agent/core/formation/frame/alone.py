@@ -86,6 +86,7 @@ from agent.core.formation.frame.fault_test import (
     FaultVerdict,
     RobotTest,
     mask_deltas,
+    mask_deltas_of,
     mask_test,
     one_fault_explains,
     seen_by_others,
@@ -296,14 +297,14 @@ def absorbed(
         own = np.asarray(rec.neighbours, dtype=np.float64).reshape(-1, 2)
         lands = _lands(_turn(float(psi[k]), pos - pos[k]), own, noise, q)
         lands[:, k] = False
+        at = pos[k] + _turn(-float(psi[k]), own)
         for a in np.flatnonzero(lands.sum(axis=1) == 1):
             target = ids[int(np.argmax(lands[a]))]
             if rid in seen.setdefault(target, {}):
                 continue
-            seen[target][rid] = pos[k] + _turn(-float(psi[k]), own[a][None])[0]
+            seen[target][rid] = at[a]
             theta = mask_orientation(rec, int(a), by_id.get(target))
             masks.append(PoseMeasurement(rid, target, own[a].copy(), orientation=theta))
-    joint = evaluate_poses(ids, masks, pos, psi, ids[0])
     out = []
     for k, rid in enumerate(ids):
         rec, witnesses = by_id.get(rid), seen.get(rid, {})
@@ -314,7 +315,7 @@ def absorbed(
         others = np.delete(pos, k, axis=0) - place
         lost = int((~_lands(_turn(float(psi[k]), others), own, noise, q).any(axis=1)).sum())
         p_pos = tail_at_least([float(x) for x in noise.p_alone(np.hypot(*own.T))], lost)
-        deltas = mask_deltas(joint, rid)
+        deltas = mask_deltas_of(ids, psi, masks, rid)
         p_head = mask_test(deltas, noise)[1] if deltas else 1.0
         timed = rec.stances is not None and len(rec.stances) > 0
         if deltas:

@@ -216,15 +216,22 @@ def mask_test(deltas: Sequence[float], noise: SightingNoise) -> tuple[float, flo
 
 def mask_deltas(poses: PoseFrame, target: int) -> list[float]:
     """δ = ψ_t − ψ_o − (β + θ − π/2) of the others' masks of ``target`` (by owner id)."""
-    index = {rid: k for k, rid in enumerate(poses.ids)}
+    return mask_deltas_of(poses.ids, poses.headings, poses.measurements, target)
+
+
+def mask_deltas_of(
+    ids: Sequence[int], headings: np.ndarray, measurements: Sequence[PoseMeasurement], target: int
+) -> list[float]:
+    """:func:`mask_deltas` of ``measurements`` between robots ``ids`` at ``headings``."""
+    index = {rid: k for k, rid in enumerate(ids)}
     out = []
     # filtered, then sorted (stably): the order of the sorted list, filtered
-    of_it = (m for m in poses.measurements if m.target == target)
+    of_it = (m for m in measurements if m.target == target)
     for m in sorted(of_it, key=lambda m: (m.owner, m.target)):
         if not math.isfinite(m.orientation):
             continue
         ref = math.atan2(float(m.vector[1]), float(m.vector[0])) + m.orientation - math.pi / 2
-        out.append(float(poses.headings[index[target]] - poses.headings[index[m.owner]] - ref))
+        out.append(float(headings[index[target]] - headings[index[m.owner]] - ref))
     return out
 
 
