@@ -7,11 +7,13 @@
   demo (the operator, with the run's operator key) commands the line once every robot
   holds; every robot plans the same transition (the evaluator recomputes its digest from
   the signed records), walks it without a contact or a second search, and the ground
-  truth holds a line in tolerance.
+  truth holds a line in tolerance; the recording's scene, which heard the command, draws
+  the line's plan.
 """
 
 from __future__ import annotations
 
+import json
 import queue
 import subprocess
 import sys
@@ -98,6 +100,17 @@ def test_four_robots_reshape_a_pyramid_into_a_line(tmp_path: Path) -> None:
     assert r["contacts"] == 0
     assert r["success"] is True and res.returncode == 0
     assert "reshape 1 to line: held" in res.stdout
+    # the recording heard the operator's command, and its scene drew the line's plan
+    from mcap.reader import make_reader
+
+    topics, notes = set(), []
+    with (tmp_path / "demo" / "run.mcap").open("rb") as f:
+        for _, channel, message in make_reader(f).iter_messages():
+            topics.add(channel.topic)
+            if channel.topic == "/log":
+                notes.append(json.loads(message.data)["message"])
+    assert P.KEY_RESHAPE in topics
+    assert any(n.startswith(f"plan {t['plan'][:12]} drawn") for n in notes), notes[-20:]
 
 
 def test_the_operator_cli_commands_a_holding_fleet_over_real_sessions(tmp_path: Path) -> None:

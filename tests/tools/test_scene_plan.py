@@ -10,13 +10,14 @@ from typing import Any
 import pytest
 
 from agent.core.formation.params import PlanParams
-from agent.core.formation.reshape import from_circle
+from agent.core.formation.reshape import from_circle, transition_plan
 from agent.core.formation.shape.spec import BUILTIN
 from agent.wire import StatusMsg, TruthPosesMsg
 from tests.tools import fleet6
 from tests.tools.test_foxglove import conforms
 from tools.harness.view import foxglove as fg
 from tools.harness.view.scene import Scene
+from tools.lib.reshape import command_of
 
 Drawn = list[tuple[int, dict[str, Any]]]
 
@@ -123,3 +124,36 @@ def test_with_the_circle_pattern_the_formation_from_the_circle_replaces_the_circ
         for rid, xy in want.items():
             assert got[rid] == pytest.approx(xy, abs=1e-4)
     assert second["deletions"][0]["type"] == 1  # the circle's targets are gone
+
+
+
+
+def _reshaped(held: str, after: str, base: str = "") -> list[tuple[str, Any]]:
+    """The six report the plan ``held``, the operator commands the line from ``base``
+    (default ``held``), and the six report the plan ``after``."""
+    msgs = fleet6.run(held, after)
+    at = next(k for k, (_, m) in enumerate(msgs) if getattr(m, "plan_digest", "") == after)
+    msgs.insert(at, ("fleet/reshape", command_of(BUILTIN["line"], base or held, 1)))
+    return msgs
+
+
+def test_a_reshape_the_operator_commanded_replaces_the_held_shapes_targets() -> None:
+    params = PlanParams()  # the pyramid
+    held = fleet6.plan(params)
+    after = transition_plan(held, BUILTIN["line"], params)
+    [(t1, first), (t2, second)] = watch(params, _reshaped(str(held.digest), str(after.digest)))
+    assert (t1, t2) == (1_000_000_000, 2_000_000_000)
+    for update, plan in ((first, held), (second, after)):
+        got, want = drawn_targets(update), fleet6.targets(plan, held)
+        assert sorted(got) == sorted(want)
+        for rid, xy in want.items():
+            assert got[rid] == pytest.approx(xy, abs=1e-4)
+    assert second["deletions"][0]["type"] == 1  # the pyramid's targets are gone
+
+
+def test_a_reshape_from_a_plan_nobody_holds_draws_nothing_new() -> None:
+    params = PlanParams()
+    held = fleet6.plan(params)
+    after = transition_plan(held, BUILTIN["line"], params)
+    msgs = _reshaped(str(held.digest), str(after.digest), base="ab" * 32)
+    assert len(watch(params, msgs, finish=True)) == 1  # the held plan only

@@ -23,6 +23,7 @@ from agent.wire import (
     KEY_CAMERA_FEED_ALL,
     KEY_DIGEST_ALL,
     KEY_RECORD_ALL,
+    KEY_RESHAPE,
     KEY_STATUS_ALL,
     KEY_WORLD_TRUTH_ALL,
     MAX_CAMERA_PUBLICATION_BYTES,
@@ -318,10 +319,10 @@ def observer_bus(net: FleetNet) -> Bus:
 
 
 def watch(bus: Bus) -> None:
-    """Subscribe ``bus`` to what an observer sees: statuses, records, digests, camera
-    frames (agents with ``--publish-camera``; bounded before the copy), ground truth and
-    membership."""
-    for key in (KEY_STATUS_ALL, KEY_RECORD_ALL, KEY_DIGEST_ALL, KEY_WORLD_TRUTH_ALL):
+    """Subscribe ``bus`` to what an observer sees: statuses, records, digests, the
+    operator's reshape commands, camera frames (agents with ``--publish-camera``; bounded
+    before the copy), ground truth and membership."""
+    for key in (KEY_STATUS_ALL, KEY_RECORD_ALL, KEY_DIGEST_ALL, KEY_RESHAPE, KEY_WORLD_TRUTH_ALL):
         bus.subscribe(key)
     bus.subscribe(KEY_CAMERA_FEED_ALL, MAX_CAMERA_PUBLICATION_BYTES)
     bus.watch_alive(KEY_ALIVE_ALL)

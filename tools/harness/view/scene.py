@@ -17,7 +17,9 @@ digests, contacts) and emits JSON messages of Foxglove's well-known schemas
   signed with the fleet's planning parameters (``params``: d_e, φ_e, orientation,
   strategy and shape, as the agents were given them; with other parameters the digest
   differs and nothing is drawn), drawn only when its digest is one an agent reported;
-  with the orientation ``cp`` the formation's plan from the circle counts too, and the
+  with the orientation ``cp`` the formation's plan from the circle counts too, and so
+  does each reshape an operator commanded (the transition from the plan it names, as
+  every agent plans it: :func:`agent.core.formation.reshape.transition_plan`); the
   newest the agents reported is drawn. Its common frame is placed in the world by the
   frame robot's first ground-truth pose (``judge.summarise``'s ``turn``). It is computed
   when an agent reports a plan digest not drawn yet and the records, the ground truth or
@@ -62,6 +64,7 @@ from agent.wire import (
     ContactMsg,
     DigestMsg,
     NeighborRecordMsg,
+    ReshapeMsg,
     StatusMsg,
     TruthPosesMsg,
     id_from_key,
@@ -149,7 +152,9 @@ class Scene:
         #: each plan digest an agent reported → world time (ns) of its first report
         self.claimed: dict[str, int] = {}
         self.plan_drawn = ""
-        #: bumped by every record that changes what the planner is given
+        #: the operator's reshape commands seen, by command number (the newest of each)
+        self.commands: dict[int, ReshapeMsg] = {}
+        #: bumped by every record or reshape command that changes what the planner is given
         self.records_seen = 0
         #: (records seen, robots with a start, digests reported) at the last live try
         self.plan_tried: tuple[int, int, int] = (-1, -1, -1)
@@ -179,6 +184,12 @@ class Scene:
                 self._log(t_ns, fg.DEBUG, msg.sender, text)
         elif isinstance(msg, CameraMsg):
             self._camera(key, msg, t_ns)
+        elif isinstance(msg, ReshapeMsg):
+            if self.commands.get(msg.command) != msg:
+                self.commands[msg.command] = msg
+                self.records_seen += 1  # the planner is given something new
+                text = f"reshape {msg.command} to {msg.name} from plan {msg.base[:12]}"
+                self.emit("/log", fg.LOG, fg.log(t_ns, fg.INFO, "operator", text), t_ns)
         elif isinstance(msg, ContactMsg):
             other = f"robot {msg.b}" if msg.b >= 0 else "an obstacle or a wall"
             text = f"CONTACT: robot {msg.a} touched {other} at t_sim {msg.t_sim:.2f} s"
@@ -386,9 +397,32 @@ class Scene:
         from agent.core.formation.reshape import from_circle
 
         first = fa.plan(records, self.params)
+        plans = [first]
         if self.params.orientation == "cp" and len(first.robots) > 1:
-            return [first, from_circle(first, self.params)]
-        return [first]
+            plans.append(from_circle(first, self.params))
+        return plans + self._transitions(plans)
+
+    def _transitions(self, plans: list[Plan]) -> list[Plan]:
+        """The plans of the reshape commands seen, each from the plan it names (one of
+        ``plans`` or an earlier transition), in command order; a command that names no
+        such plan, or that the planner refuses, gives none (the agents refuse it too)."""
+        from agent.core.formation.reshape import command_shape, transition_plan
+
+        by_digest = {str(p.digest): p for p in plans}
+        out: list[Plan] = []
+        for number in sorted(self.commands):
+            cmd = self.commands[number]
+            held = by_digest.get(cmd.base)
+            if held is None:
+                continue
+            try:
+                shape = command_shape(cmd.name, cmd.rule, cmd.orient, cmd.slots, cmd.shape_digest)
+                plan = transition_plan(held, shape, self.params)
+            except ValueError:
+                continue
+            by_digest[str(plan.digest)] = plan
+            out.append(plan)
+        return out
 
     def _plan_robot(
         self, t_ns: int, plan: Plan, rp: RobotPlan, frame: tuple[float, float, float], axis: float
