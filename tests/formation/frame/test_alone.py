@@ -279,3 +279,11 @@ def test_the_screen_is_the_same_for_records_in_any_order() -> None:
     shuffled = list(recs)
     random.Random(3).shuffle(shuffled)
     assert al.absorbed(IDS, pos, psi, shuffled, NOISE) == first and first
+
+
+def test_the_screen_refuses_poses_that_are_not_one_per_robot() -> None:
+    recs, pos, psi = truth_fleet(1)
+    with pytest.raises(ValueError, match="positions"):
+        al.absorbed(IDS, pos[:-1], psi, recs, NOISE)
+    with pytest.raises(ValueError, match="headings"):
+        al.absorbed(IDS, pos, psi[:, None], recs, NOISE)

@@ -280,10 +280,21 @@ def absorbed(
     Where the others saw robot r is the median, per axis, of their sightings that land on r
     and on no other robot (the halved gate of step 1), the first of each owner: a faulty
     owner's sighting that lands on r by chance does not drag it; fewer than
-    :data:`MIN_WITNESSES` owners, and r is not screened."""
+    :data:`MIN_WITNESSES` owners, and r is not screened.
+
+    Raises
+    ------
+    ValueError
+        ``positions`` or ``headings`` not one per robot of ``ids``.
+    """
     ids = tuple(int(i) for i in ids)
-    pos = np.asarray(positions, dtype=np.float64).reshape(len(ids), 2)
-    psi = np.asarray(headings, dtype=np.float64).reshape(len(ids))
+    pos = np.asarray(positions, dtype=np.float64)
+    psi = np.asarray(headings, dtype=np.float64)
+    if pos.shape != (len(ids), 2) or psi.shape != (len(ids),):
+        raise ValueError(
+            f"need positions (n, 2) and headings (n,) for n = {len(ids)} robots, got "
+            f"{pos.shape} and {psi.shape}"
+        )
     if len(ids) < 2:
         return []
     q = _gate()
