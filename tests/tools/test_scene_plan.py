@@ -126,8 +126,6 @@ def test_with_the_circle_pattern_the_formation_from_the_circle_replaces_the_circ
     assert second["deletions"][0]["type"] == 1  # the circle's targets are gone
 
 
-
-
 def _reshaped(held: str, after: str, base: str = "") -> list[tuple[str, Any]]:
     """The six report the plan ``held``, the operator commands the line from ``base``
     (default ``held``), and the six report the plan ``after``."""
