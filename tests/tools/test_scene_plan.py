@@ -10,6 +10,7 @@ from typing import Any
 import pytest
 
 from agent.core.formation.params import PlanParams
+from agent.core.formation.plan import Plan
 from agent.core.formation.reshape import from_circle, transition_plan
 from agent.core.formation.shape.spec import BUILTIN
 from agent.wire import StatusMsg, TruthPosesMsg
@@ -116,14 +117,20 @@ def test_with_the_circle_pattern_the_formation_from_the_circle_replaces_the_circ
     circle = fleet6.plan(params)
     formation = from_circle(circle, params)
     plans = watch(params, fleet6.run(str(circle.digest), str(formation.digest)), finish=True)
-    [(t1, first), (t2, second)] = plans
+    drawn_one_then_the_other(plans, circle, formation)  # the circle's targets are gone
+
+
+def drawn_one_then_the_other(plans: Drawn, first: Plan, then: Plan) -> None:
+    """Two drawings, at the first status naming each plan: ``first``'s targets, then
+    ``then``'s in their place (the common frame: ``first``'s frame robot's start)."""
+    [(t1, one), (t2, other)] = plans
     assert (t1, t2) == (1_000_000_000, 2_000_000_000)
-    for update, plan in ((first, circle), (second, formation)):
-        got, want = drawn_targets(update), fleet6.targets(plan, circle)
+    for update, plan in ((one, first), (other, then)):
+        got, want = drawn_targets(update), fleet6.targets(plan, first)
         assert sorted(got) == sorted(want)
         for rid, xy in want.items():
             assert got[rid] == pytest.approx(xy, abs=1e-4)
-    assert second["deletions"][0]["type"] == 1  # the circle's targets are gone
+    assert other["deletions"][0]["type"] == 1  # the drawing replaces the first
 
 
 def _reshaped(held: str, after: str, base: str = "") -> list[tuple[str, Any]]:
@@ -139,14 +146,8 @@ def test_a_reshape_the_operator_commanded_replaces_the_held_shapes_targets() -> 
     params = PlanParams()  # the pyramid
     held = fleet6.plan(params)
     after = transition_plan(held, BUILTIN["line"], params)
-    [(t1, first), (t2, second)] = watch(params, _reshaped(str(held.digest), str(after.digest)))
-    assert (t1, t2) == (1_000_000_000, 2_000_000_000)
-    for update, plan in ((first, held), (second, after)):
-        got, want = drawn_targets(update), fleet6.targets(plan, held)
-        assert sorted(got) == sorted(want)
-        for rid, xy in want.items():
-            assert got[rid] == pytest.approx(xy, abs=1e-4)
-    assert second["deletions"][0]["type"] == 1  # the pyramid's targets are gone
+    plans = watch(params, _reshaped(str(held.digest), str(after.digest)))
+    drawn_one_then_the_other(plans, held, after)  # the pyramid's targets are gone
 
 
 def test_a_reshape_from_a_plan_nobody_holds_draws_nothing_new() -> None:
