@@ -33,7 +33,7 @@ land where it stands. This module gives that place, and the test of r against th
      rate of lost strays, ``p_stray``, is a quarter of it: a sighting that pairs in the
      fit, rightly or as a wrong pairing, never counts there, and here every sighting
      does; with p_stray, a sound robot of thirty with four of its fifteen sightings landing
-     nowhere was rejected at p 10⁻⁶.);
+     nowhere would be rejected at p 10⁻⁶.);
    * **heading:** the others' masks of r (step 3 of :mod:`fault_test`, floored at ρ);
    * **bias:** :mod:`bias_test` on r's own sightings, all unlabelled, with the others'
      sightings of r pinning its position (step 4).
