@@ -87,7 +87,7 @@ def test_a_record_that_comes_after_the_plans_first_status_still_draws_it_live() 
 
 def test_statuses_without_news_do_not_plan_again() -> None:
     """A plan not drawable from what the scene holds is planned again only when a record,
-    a robot's start or a reported digest came since the last attempt."""
+    a robot's start or a reported digest came since the scene last planned."""
     tries: list[int] = []
 
     class Counting(Scene):

@@ -184,6 +184,23 @@ def _alone_reference(prob: _Problem, x: np.ndarray, c: int, k: int, turn: float)
         return float(np.sum(np.where(owner, pos * prob.sp, 0.0)) + np.sum(-4.0 * u[2 * m :]
                                                                            * f[2 * m :]))  # fmt: skip
 
+    def solved(a: np.ndarray, g: np.ndarray) -> np.ndarray | None:
+        try:
+            return np.asarray(-np.linalg.solve(a, g))
+        except np.linalg.LinAlgError:
+            return None
+
+    def better(
+        y: np.ndarray, step: np.ndarray, cost: float, switch: float
+    ) -> tuple[np.ndarray, np.ndarray, float, bool, bool] | None:
+        """(y + step, its residuals, its cost, small, near) when the step lowers the cost."""
+        f_new = fun(y + step)
+        cost_new = robust_lm.soft_l1_cost(f_new)
+        if not cost_new < cost:
+            return None
+        small = cost - cost_new <= ms.ALONE_FTOL * cost
+        return y + step, f_new, cost_new, small, cost - cost_new <= switch * cost
+
     y = x[c : c + 3] + np.array([0.0, 0.0, turn])
     f = fun(y)
     cost = robust_lm.soft_l1_cost(f)
@@ -198,17 +215,11 @@ def _alone_reference(prob: _Problem, x: np.ndarray, c: int, k: int, turn: float)
         if near:
             exact = entries(j * (w * w * w)[:, None], j)
             exact[2, 2] += bend(y, w * f, f)
-            try:
-                step = -np.linalg.solve(exact, g)
-            except np.linalg.LinAlgError:
-                step = None
+            step = solved(exact, g)
             if step is not None:
-                f_new = fun(y + step)
-                cost_new = robust_lm.soft_l1_cost(f_new)
-                if cost_new < cost:
-                    small = cost - cost_new <= ms.ALONE_FTOL * cost
-                    near = cost - cost_new <= switch * cost
-                    y, f, cost = y + step, f_new, cost_new
+                taken = better(y, step, cost, switch)
+                if taken is not None:
+                    y, f, cost, small, near = taken
                     if small:
                         break
                     continue
@@ -217,17 +228,11 @@ def _alone_reference(prob: _Problem, x: np.ndarray, c: int, k: int, turn: float)
             near, switch = False, switch * robust_lm.NEAR_TIGHTEN
         d = np.maximum(np.diag(h), 1e-12)
         while True:
-            try:
-                step = -np.linalg.solve(h + np.diag(lam * d), g)
-            except np.linalg.LinAlgError:
-                step = None
+            step = solved(h + np.diag(lam * d), g)
             if step is not None:
-                f_new = fun(y + step)
-                cost_new = robust_lm.soft_l1_cost(f_new)
-                if cost_new < cost:
-                    small = cost - cost_new <= ms.ALONE_FTOL * cost
-                    near = cost - cost_new <= switch * cost
-                    y, f, cost = y + step, f_new, cost_new
+                taken = better(y, step, cost, switch)
+                if taken is not None:
+                    y, f, cost, small, near = taken
                     lam = max(lam / 3.0, 1e-12)
                     break
             lam *= 4.0

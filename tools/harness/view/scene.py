@@ -23,7 +23,7 @@ digests, contacts) and emits JSON messages of Foxglove's well-known schemas
   newest the agents reported is drawn. Its common frame is placed in the world by the
   frame robot's first ground-truth pose (``judge.summarise``'s ``turn``). It is computed
   when an agent reports a plan digest not drawn yet and the records, the ground truth or
-  the reported digests changed since the last attempt (so that the live view shows it while
+  the reported digests changed since it last planned (so that the live view shows it while
   the fleet walks, also when a record reaches the observer after the first status that
   names the plan), and again when the recording closes; each drawing replaces the
   topic's earlier one, stamped with the world time of the first status that reported

@@ -225,13 +225,9 @@ def minimise(
             newton = _newton_step(j, w, f, normal, curvature(x, w * f), g)
             if newton is not None:
                 step, predicted = newton
-                x_new = x + step
-                f_new = fun(x_new)
-                cost_new = soft_l1_cost(f_new) if np.all(np.isfinite(f_new)) else np.inf
-                if cost_new < cost:
-                    done = _small(cost, cost_new, step, x)
-                    near = cost - cost_new <= switch * cost
-                    x, f, cost = x_new, f_new, cost_new
+                better = _better(fun, x, step, cost, switch)
+                if better is not None:
+                    x, f, cost, done, near = better
                     if done:
                         return x, it
                     continue
@@ -253,13 +249,9 @@ def minimise(
                 if lam > LAMBDA_MAX:
                     return x, it
                 continue
-            x_new = x + step
-            f_new = fun(x_new)
-            cost_new = soft_l1_cost(f_new) if np.all(np.isfinite(f_new)) else np.inf
-            if cost_new < cost:
-                done = _small(cost, cost_new, step, x)
-                near = cost - cost_new <= switch * cost
-                x, f, cost = x_new, f_new, cost_new
+            better = _better(fun, x, step, cost, switch)
+            if better is not None:
+                x, f, cost, done, near = better
                 lam = max(lam / 3.0, 1e-12)
                 improved = True
                 if done:
@@ -271,6 +263,25 @@ def minimise(
         if not improved:
             break
     return x, it
+
+
+def _better(
+    fun: Callable[[np.ndarray], np.ndarray],
+    x: np.ndarray,
+    step: np.ndarray,
+    cost: float,
+    switch: float,
+) -> tuple[np.ndarray, np.ndarray, float, bool, bool] | None:
+    """A step taken, Newton's or damped: ``(x + step, its residuals, its cost, whether it
+    ends the fit (:func:`_small`), whether it lowered the cost by at most ``switch`` of
+    it)`` when it lowers the cost (a residual not finite costs ∞); None when it does not."""
+    x_new = x + step
+    f_new = fun(x_new)
+    cost_new = soft_l1_cost(f_new) if np.all(np.isfinite(f_new)) else np.inf
+    if not cost_new < cost:
+        return None
+    done = _small(cost, cost_new, step, x)
+    return x_new, f_new, cost_new, done, cost - cost_new <= switch * cost
 
 
 def _small(cost: float, cost_new: float, step: np.ndarray, x: np.ndarray) -> bool:
