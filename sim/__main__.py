@@ -24,7 +24,7 @@ import sys
 from dataclasses import replace
 from typing import Any
 
-from agent.wire import add_network_arguments, network_spec
+from agent.wire import add_network_arguments, network_spec, picture
 from sim import scenarios
 from sim.camera import renderer
 from sim.camera.look import HELP as LOOK_HELP
@@ -128,6 +128,12 @@ def build_parser() -> argparse.ArgumentParser:
         default=renderer.DEFAULT,
         help=renderer.RENDERER_HELP,
     )
+    p.add_argument(
+        "--camera-encoding",
+        choices=picture.ENCODINGS,
+        default=picture.DEFAULT_ENCODING,
+        help=picture.ENCODING_HELP,
+    )
     p.add_argument("--gui", action="store_true", help="open the PyBullet GUI (needs a display)")
     p.add_argument("--dump-scenario", metavar="FILE", help="write the scenario used to FILE")
     return p
@@ -187,6 +193,7 @@ def main(argv: list[str] | None = None) -> int:
                 reply_delay=args.reply_delay,
                 reply_delay_seed=sc.seed,
                 free_looks=args.free_looks,
+                camera_encoding=args.camera_encoding,
             )
         except ValueError as exc:
             print(f"sim: {exc}", file=sys.stderr)

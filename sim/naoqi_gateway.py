@@ -36,8 +36,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-import cv2
-import numpy as np
 import qi
 
 from agent.wire import (
@@ -54,6 +52,7 @@ from agent.wire import (
     key_turn,
     key_walk,
     nao,
+    picture,
 )
 from sim.server.server import WorldServer
 
@@ -240,9 +239,7 @@ class ALVideoDevice:
 
         def image(rep: Message) -> list[Any]:
             assert isinstance(rep, CameraReply)
-            img = cv2.imdecode(np.frombuffer(rep.data, dtype=np.uint8), cv2.IMREAD_COLOR)
-            if img is None:
-                raise ValueError("undecodable render")
+            img = picture.picture_of(rep.encoding, rep.width, rep.height, rep.data)
             sec = math.floor(rep.t_sim)
             usec = round((rep.t_sim - sec) * 1e6)
             h, w = img.shape[:2]

@@ -119,7 +119,7 @@ def run_remote(args: argparse.Namespace, out: Path) -> int:
     import zenoh
 
     from agent.wire import CameraReply, CameraRequest, key_camera, network_spec
-    from sim.server.client import Link, WorldError, ask, truth
+    from sim.server.client import Link, WorldError, ask, save_picture, truth
 
     spec = network_spec(args, "observer" if args.top_down else f"robot-{args.robot}")
     cfg = zenoh.Config()
@@ -145,7 +145,11 @@ def run_remote(args: argparse.Namespace, out: Path) -> int:
     if not isinstance(rep, CameraReply):
         print(f"snapshot: unexpected reply {type(rep).__name__}", file=sys.stderr)
         return 1
-    out.write_bytes(rep.data)
+    try:
+        save_picture(rep, out)
+    except ValueError as exc:
+        print(f"snapshot: {exc}", file=sys.stderr)
+        return 1
     return 0
 
 

@@ -35,9 +35,6 @@ import time
 from collections.abc import Callable
 from typing import TypeVar
 
-import cv2
-import numpy as np
-
 from agent.body.base import BodyError, Frame, MotionResult
 from agent.core.nao import HEAD_YAW_LIMIT
 from agent.net.bus import Bus, BusError, Busy, NoRoute, QueryTimeout
@@ -56,6 +53,7 @@ from agent.wire import (
     key_camera,
     key_turn,
     key_walk,
+    picture,
 )
 
 #: Former name of :class:`~agent.seams.BodyError` (kept for callers of the old API).
@@ -199,10 +197,10 @@ class ZenohBody:
             raise ValueError(f"head yaw {yaw} rad outside ±{math.degrees(HEAD_YAW_LIMIT):.1f}°")
         what = f"camera at yaw {math.degrees(yaw):.1f}°"
         rep = self._fresh_frame(CameraRequest(yaw=yaw), what)
-        buf = np.frombuffer(rep.data, dtype=np.uint8)
-        img = cv2.imdecode(buf, cv2.IMREAD_COLOR)
-        if img is None or img.shape != (rep.height, rep.width, 3):
-            raise BodyError(what, "undecodable image")
+        try:
+            img = picture.picture_of(rep.encoding, rep.width, rep.height, rep.data)
+        except ValueError as exc:  # a ProtocolError
+            raise BodyError(what, f"undecodable image: {exc}") from None
         self._t_sim = max(self._t_sim, rep.t_sim)
         return Frame(img, rep.yaw, rep.t_sim)
 

@@ -30,6 +30,8 @@ MAX_MEMBERS = 1024
 MAX_SHAPE_SLOTS = MAX_MEMBERS - 1
 MAX_TEXT = 512
 MAX_IMAGE_BYTES = 8 * 1024 * 1024
+#: How a camera reply may carry its picture (:mod:`agent.wire.picture`), the default first.
+PICTURE_ENCODINGS = ("bgr8", "png")
 MAX_MESSAGE_BYTES = MAX_IMAGE_BYTES + 4096
 #: Publications (records, digests, statuses, clock, truth for 1024 robots: ~40 KB) are
 #: small; only camera replies carry an image. Subscribers reject bigger payloads unread.

@@ -31,6 +31,7 @@ from agent.wire.fields import (
     MAX_THUMBNAIL_HEIGHT,
     MAX_THUMBNAIL_WIDTH,
     MAX_WALKED,
+    PICTURE_ENCODINGS,
     SCHEMA_VERSION,
     ProtocolError,
     _bytes,
@@ -356,7 +357,7 @@ class CameraReply(Message):
         "t_sim": _float("t_sim", 0.0),
         "width": _int("width", 1, 8192),
         "height": _int("height", 1, 8192),
-        "encoding": _str("encoding", 8, ("png",)),
+        "encoding": _str("encoding", 8, PICTURE_ENCODINGS),
         "data": _bytes("data", MAX_IMAGE_BYTES),
     }
 

@@ -13,13 +13,13 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from agent.wire import BUSY, CameraReply, ErrorReply, Message, reason
+from agent.wire import BUSY, CameraReply, ErrorReply, Message, picture, reason
 from sim.camera import camera
 from sim.camera.picture import Shot
 from sim.physics.world import World
 from sim.server.glances import Glances, LookTiming
 from sim.server.pending_pictures import Admission, PendingPictures
-from sim.server.render_pool import Job, RenderPool, Result, png_bytes
+from sim.server.render_pool import Job, RenderPool, Result
 from sim.server.requests import Request
 
 #: ``answer(query, message)``: a camera reply (held for its delay in a slow world).
@@ -44,6 +44,7 @@ class CameraDesk:
         *,
         free_looks: bool = False,
         timing: LookTiming | None = None,
+        encoding: str = picture.DEFAULT_ENCODING,
     ) -> None:
         self.world = world
         self._answer = answer
@@ -54,6 +55,8 @@ class CameraDesk:
         self.pool: RenderPool | None = None
         self.errors = 0
         self._next_job = 0
+        #: How replies carry pictures (:mod:`agent.wire.picture`); the pool's workers too.
+        self.encoding = encoding
 
     @property
     def looking(self) -> bool:
@@ -125,8 +128,8 @@ class CameraDesk:
             t_sim=t_sim,
             width=img.shape[1],
             height=img.shape[0],
-            encoding="png",
-            data=png_bytes(img),
+            encoding=self.encoding,
+            data=picture.picture_data(img, self.encoding),
         )
 
     def rendered(self, res: Result) -> None:
@@ -143,7 +146,7 @@ class CameraDesk:
             else:
                 msg = CameraReply(
                     robot_id=rid, yaw=yaw, t_sim=t_sim, width=camera.WIDTH,
-                    height=camera.HEIGHT, encoding="png", data=res.png,
+                    height=camera.HEIGHT, encoding=self.encoding, data=res.data,
                 )  # fmt: skip
                 self._answer(q, msg)
         if res.dead:

@@ -30,6 +30,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+import cv2
 import zenoh
 
 from agent.wire import (
@@ -57,6 +58,7 @@ from agent.wire import (
     key_turn,
     key_walk,
     network_spec,
+    picture,
     take_payload,
     trust,
 )
@@ -110,6 +112,17 @@ class Link:
         if opened.who not in signers:
             raise trust.TrustError(f"{opened.who.cn} is not the world")
         return opened.payload
+
+
+def save_picture(rep: CameraReply, path: str | Path) -> None:
+    """Write the picture ``rep`` carries to ``path`` as an image file (PNG for ``.png``).
+
+    Raises ``ValueError`` for a picture that does not decode or a file that cannot be
+    written.
+    """
+    img = picture.picture_of(rep.encoding, rep.width, rep.height, rep.data)
+    if not cv2.imwrite(str(path), img):
+        raise ValueError(f"cannot write the picture to {path}")
 
 
 def ask(link: Link, key: str, msg: Message, timeout: float) -> Any:
@@ -181,7 +194,7 @@ def run(args: argparse.Namespace, session: Link) -> int:
     if args.cmd == "camera":
         rep = ask(session, key_camera(args.robot), CameraRequest(yaw=math.radians(args.yaw)), t)
         assert isinstance(rep, CameraReply)
-        Path(args.out).write_bytes(rep.data)
+        save_picture(rep, args.out)
         print(
             f"robot {rep.robot_id} yaw {math.degrees(rep.yaw):+.1f}° t_sim {rep.t_sim:.2f}: {args.out}"
         )

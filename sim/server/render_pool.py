@@ -24,26 +24,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-import cv2
-import numpy as np
-
+from agent.wire.picture import DEFAULT_ENCODING, picture_data
 from sim.camera.picture import Shot
 from sim.scenarios import Scenario, from_dict, to_dict
-
-PNG_PARAMS = [
-    cv2.IMWRITE_PNG_COMPRESSION,
-    1,
-    cv2.IMWRITE_PNG_STRATEGY,
-    cv2.IMWRITE_PNG_STRATEGY_RLE,
-]
-
-
-def png_bytes(img: np.ndarray) -> bytes:
-    """A rendered BGR picture as the PNG bytes a ``CameraReply`` carries."""
-    ok, png = cv2.imencode(".png", img, PNG_PARAMS)
-    if not ok:
-        raise ValueError("PNG encoding failed")
-    return bytes(png.tobytes())
 
 
 @dataclass(frozen=True)
@@ -63,12 +46,14 @@ class Job:
 class Result:
     job_id: int
     worker: int
-    png: bytes = b""
+    data: bytes = b""  # the picture in the pool's encoding (agent.wire.picture)
     error: str = ""
     dead: bool = False  # the worker exited: it takes no more jobs
 
 
-def _worker(index: int, scenario: dict[str, Any], renderer: str, jobs: Any, results: Any) -> None:
+def _worker(
+    index: int, scenario: dict[str, Any], renderer: str, encoding: str, jobs: Any, results: Any
+) -> None:
     from sim.physics.world import World
 
     try:
@@ -92,7 +77,7 @@ def _worker(index: int, scenario: dict[str, Any], renderer: str, jobs: Any, resu
                     if rid != job.robot_id:
                         world.set_head_yaw(rid, h)
                 img = world.render(job.robot_id, job.yaw, job.shot)
-                results.send(Result(job.job_id, index, png=png_bytes(img)))
+                results.send(Result(job.job_id, index, data=picture_data(img, encoding)))
             except Exception as exc:
                 results.send(Result(job.job_id, index, error=f"{type(exc).__name__}: {exc}"))
 
@@ -101,7 +86,8 @@ class RenderPool:
     """K worker processes rendering camera jobs; results go to ``on_result``.
 
     ``renderer``: the world's (``tiny`` or ``egl``, :mod:`sim.camera.renderer`), so a worker's
-    picture is the one the world would draw."""
+    picture is the one the world would draw; ``encoding``: how a result carries it (the
+    world's camera encoding, :mod:`agent.wire.picture`)."""
 
     def __init__(
         self,
@@ -111,6 +97,7 @@ class RenderPool:
         *,
         start_timeout: float = 120.0,
         renderer: str = "tiny",
+        encoding: str = DEFAULT_ENCODING,
     ) -> None:
         if isinstance(workers, bool) or not isinstance(workers, int) or not 1 <= workers <= 16:
             raise ValueError(f"render workers {workers!r} must be an int in [1, 16]")
@@ -128,7 +115,9 @@ class RenderPool:
         for i in range(workers):
             job_r, job_w = ctx.Pipe(duplex=False)
             res_r, res_w = ctx.Pipe(duplex=False)
-            p = ctx.Process(target=_worker, args=(i, data, renderer, job_r, res_w), daemon=True)
+            p = ctx.Process(
+                target=_worker, args=(i, data, renderer, encoding, job_r, res_w), daemon=True
+            )
             p.start()
             job_r.close()
             res_w.close()

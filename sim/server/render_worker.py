@@ -66,6 +66,7 @@ from agent.wire import (
     decode,
     key_camera,
     network_spec,
+    picture,
     reason,
     take_payload,
     trust,
@@ -74,7 +75,6 @@ from sim.camera import camera, renderer
 from sim.physics.world import World
 from sim.scenarios import Scenario, from_dict
 from sim.server.client import Link, WorldError, ask
-from sim.server.render_pool import png_bytes
 from sim.server.requests import CheckedRequest, Query, Request, check, payload_size
 from sim.server.server import MALFORMED_MAX_BYTES, zenoh_config
 
@@ -135,7 +135,11 @@ class RenderWorker:
         *,
         stop: threading.Event | None = None,
         log: Any = None,
+        encoding: str = picture.DEFAULT_ENCODING,
     ) -> None:
+        if encoding not in picture.ENCODINGS:
+            raise ValueError(f"camera encoding {encoding!r} not one of {picture.ENCODINGS}")
+        self.encoding = encoding
         self.world = world
         self.robots = frozenset(robots)
         self.session = session
@@ -272,8 +276,8 @@ class RenderWorker:
                 t_sim=msg.t_sim,
                 width=img.shape[1],
                 height=img.shape[0],
-                encoding="png",
-                data=png_bytes(img),
+                encoding=self.encoding,
+                data=picture.picture_data(img, self.encoding),
             )
         except ValueError as exc:
             self.errors += 1
@@ -357,6 +361,12 @@ def build_parser() -> argparse.ArgumentParser:
         default=renderer.DEFAULT,
         help=renderer.RENDERER_HELP,
     )
+    p.add_argument(
+        "--camera-encoding",
+        choices=picture.ENCODINGS,
+        default=picture.DEFAULT_ENCODING,
+        help=picture.ENCODING_HELP,
+    )
     return p
 
 
@@ -379,7 +389,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"render: cannot open the zenoh session: {exc}", file=sys.stderr)
         return 1
     try:
-        return _run(session, spec, shard, args.wait, stop, args.renderer)
+        return _run(session, spec, shard, args.wait, stop, args.renderer, args.camera_encoding)
     finally:
         with contextlib.suppress(Exception):
             session.close()
@@ -392,6 +402,7 @@ def _run(
     wait: float,
     stop: threading.Event,
     kind: str = renderer.DEFAULT,
+    encoding: str = picture.DEFAULT_ENCODING,
 ) -> int:
     try:
         sc = fetch_scenario(Link(session, spec), wait)
@@ -412,7 +423,7 @@ def _run(
         return 1
     print(f"render: renderer {world.renderer} ({world.renderer_why})", file=sys.stderr, flush=True)
     with world:
-        worker = RenderWorker(world, robots, spec, session, stop=stop)
+        worker = RenderWorker(world, robots, spec, session, stop=stop, encoding=encoding)
         worker.follow()
         if not worker.poses.wait(wait) or stop.is_set():
             print("render: no poses from the world", file=sys.stderr)

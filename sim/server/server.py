@@ -93,6 +93,7 @@ from agent.wire import (
     WalkRequest,
     encode,
     id_from_key,
+    picture,
     reason,
     trust,
 )
@@ -146,12 +147,15 @@ class WorldServer:
         reply_delay: float = 0.0,
         reply_delay_seed: int = 0,
         free_looks: bool = False,
+        camera_encoding: str = picture.DEFAULT_ENCODING,
         log: Any = None,
     ) -> None:
         if not (math.isfinite(speed) and speed >= 0):
             raise ValueError(f"speed {speed} must be >= 0 (0: as fast as possible)")
         if not (math.isfinite(truth_rate) and truth_rate > 0):
             raise ValueError(f"truth rate {truth_rate} must be > 0")
+        if camera_encoding not in picture.ENCODINGS:
+            raise ValueError(f"camera encoding {camera_encoding!r} not one of {picture.ENCODINGS}")
         self.world = world
         self.net = net or NetConfig()
         self.speed = speed
@@ -159,7 +163,12 @@ class WorldServer:
         self.log = log if log is not None else sys.stderr
         self.robot_ids = frozenset(world.robot_ids)  # read by the zenoh callbacks
         self.cameras = CameraDesk(
-            world, self._answer, self._reply, self._log, free_looks=free_looks
+            world,
+            self._answer,
+            self._reply,
+            self._log,
+            free_looks=free_looks,
+            encoding=camera_encoding,
         )
         cap = self.cameras.pending.capacity
         caps = {**INBOX_CAPS, "rendered": max(INBOX_CAPS["rendered"], cap)}
@@ -201,6 +210,7 @@ class WorldServer:
                 self.render_workers,
                 self.guard.wrap(lambda r: self._queue("rendered", r), "render result"),
                 renderer=self.world.renderer,
+                encoding=self.cameras.encoding,
             )
         self.session = zenoh.open(zenoh_config(self.net))
         s = self.session

@@ -128,9 +128,13 @@ class RenderedBus:
     """Motions end at ``motion_t``; camera replies carry the pose times of ``frames``
     in turn (the last one repeated); every camera query must ask for the best match."""
 
-    def __init__(self, frames: list[float], motion_t: float = 5.0) -> None:
+    def __init__(
+        self, frames: list[float], motion_t: float = 5.0, encoding: str = "png", data: bytes = b""
+    ) -> None:
         self.frames = frames
         self.motion_t = motion_t
+        self.encoding = encoding
+        self.data = data or _png()
         self.status = "done"
         self.camera_asks = 0
 
@@ -144,7 +148,13 @@ class RenderedBus:
             self.camera_asks += 1
             t = self.frames.pop(0) if len(self.frames) > 1 else self.frames[0]
             return CameraReply(
-                robot_id=3, yaw=0.0, t_sim=t, width=6, height=4, encoding="png", data=_png()
+                robot_id=3,
+                yaw=0.0,
+                t_sim=t,
+                width=6,
+                height=4,
+                encoding=self.encoding,
+                data=self.data,
             )
         return CommandReply(robot_id=3, status=self.status, t_sim=self.motion_t)
 
@@ -158,6 +168,30 @@ def test_a_frame_older_than_the_last_motion_is_asked_for_again() -> None:
     assert body.motion_end == 5.0
     frame = body.camera(0.3)
     assert frame.t_sim == 5.0 and bus.camera_asks == 4 and body.stale_frames == 2
+
+
+@pytest.mark.parametrize(
+    ("encoding", "data"),
+    [("bgr8", bytes(range(72))), ("png", b"")],  # png: RenderedBus's 6 x 4 picture
+)
+def test_a_picture_is_decoded_from_either_encoding(encoding: str, data: bytes) -> None:
+    import numpy as np
+
+    body = ZenohBody(RenderedBus([1.0], encoding=encoding, data=data), 3)  # type: ignore[arg-type]
+    img = body.camera(0.0).image
+    assert img.shape == (4, 6, 3) and img.dtype == np.uint8 and img.flags.writeable
+    if encoding == "bgr8":  # row after row, B G R a pixel
+        assert img[1, 0].tolist() == [18, 19, 20]
+
+
+@pytest.mark.parametrize(
+    ("encoding", "data"),
+    [("bgr8", bytes(71)), ("png", b"\x89PNG not really")],
+)
+def test_a_picture_that_does_not_decode_is_a_body_error(encoding: str, data: bytes) -> None:
+    body = ZenohBody(RenderedBus([1.0], encoding=encoding, data=data), 3)  # type: ignore[arg-type]
+    with pytest.raises(BodyError, match="undecodable image"):
+        body.camera(0.0)
 
 
 def test_a_contact_ends_a_motion_too() -> None:

@@ -1,9 +1,10 @@
 """``python -m tools.bench world``: camera latency over zenoh and sim speed.
 
 1. Starts ``python -m sim`` (3 robots) listening on a loopback port, connects a zenoh
-   session and times ``--requests`` camera queries at varying head yaws: render + PNG
-   encode + transfer + decode of the reply (target: median under 100 ms at 640 x 480).
-   The in-process render and PNG-encode times are measured too, for the breakdown.
+   session and times ``--requests`` camera queries at varying head yaws: render + encode
+   (the world's default, :mod:`agent.wire.picture`) + transfer + decode of the reply
+   (target: median under 100 ms at 640 x 480). The in-process render time and each
+   encoding's encode time are measured too, for the breakdown.
 2. For each fleet size (``--fleets``, default 3, 15, 50) keeps every robot busy
    (alternating 0.2 m walks and 15° turns, as the agents do) for ``--sim-seconds`` of
    sim time and prints how many times faster than real time the clock advanced (target:
@@ -31,9 +32,9 @@ import time
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 
+from agent.wire import picture
 from tools.harness.procs import free_port, start_world, stop, wait_ready
 
 
@@ -82,10 +83,10 @@ def camera_latency(requests: int, seed: int) -> list[float]:
                         time.sleep(0.2)
                         continue
                     raise RuntimeError("camera query got no reply")
-                img = cv2.imdecode(np.frombuffer(rep.data, np.uint8), cv2.IMREAD_COLOR)
+                img = picture.picture_of(rep.encoding, rep.width, rep.height, rep.data)
                 dt = time.perf_counter() - t0
-                if img is None or img.shape != (480, 640, 3):
-                    raise RuntimeError("camera reply is not a 640x480 PNG")
+                if img.shape != (480, 640, 3):
+                    raise RuntimeError(f"camera reply is {img.shape}, not a 640x480 picture")
                 if i >= 3:
                     times.append(dt)
                     print(f"  camera {i - 2}/{requests}: {dt * 1000:.0f} ms", file=sys.stderr)
@@ -180,23 +181,32 @@ def sim_speed_bus(n: int, seed: int, sim_seconds: float) -> float:
         world.stop()
 
 
-def render_breakdown(n: int, seed: int) -> tuple[float, float, float]:
+def render_breakdown(n: int, seed: int) -> tuple[float, float, dict[str, float]]:
+    """Median render wall and CPU seconds of ``n`` pictures, and each encoding's median
+    encode seconds."""
     from sim.physics.world import World
     from sim.scenarios import generate
-    from sim.server.render_pool import PNG_PARAMS
 
     with World(generate(3, seed)) as w:
-        tr, te, tc = [], [], []
+        tr: list[float] = []
+        tc: list[float] = []
+        te: dict[str, list[float]] = {e: [] for e in picture.ENCODINGS}
         for i in range(n):
             c0 = time.process_time()
             t0 = time.perf_counter()
             img = w.render(1, math.radians(-119.5 + (i * 37.0) % 239.0))
             t1 = time.perf_counter()
             tc.append(time.process_time() - c0)
-            cv2.imencode(".png", img, PNG_PARAMS)
-            te.append(time.perf_counter() - t1)
+            for enc, times in te.items():
+                t2 = time.perf_counter()
+                picture.picture_data(img, enc)
+                times.append(time.perf_counter() - t2)
             tr.append(t1 - t0)
-    return float(np.median(tr)), float(np.median(tc)), float(np.median(te))
+    return (
+        float(np.median(tr)),
+        float(np.median(tc)),
+        {e: float(np.median(v)) for e, v in te.items()},
+    )
 
 
 def sim_speed(n: int, seed: int, sim_seconds: float) -> tuple[float, float]:
@@ -310,13 +320,14 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError:
         print("--fleets: comma-separated robot counts", file=sys.stderr)
         return 2
-    print("camera over zenoh (loopback, 640x480 PNG) ...", file=sys.stderr)
+    print(f"camera over zenoh (loopback, 640x480 {picture.DEFAULT_ENCODING}) ...", file=sys.stderr)
     lat = np.array(camera_latency(args.requests, args.seed)) * 1000
-    render_ms, render_cpu_ms, encode_ms = (v * 1000 for v in render_breakdown(10, args.seed))
+    render_s, render_cpu_s, encode_s = render_breakdown(10, args.seed)
+    encodes = ", ".join(f"{e} encode {t * 1000:.1f} ms" for e, t in encode_s.items())
     print(
         f"camera request: median {np.median(lat):.1f} ms, p95 {np.percentile(lat, 95):.1f} ms "
-        f"(n={lat.size}; in-process render {render_ms:.1f} ms wall / {render_cpu_ms:.1f} ms CPU, "
-        f"PNG encode {encode_ms:.1f} ms)"
+        f"(n={lat.size}; in-process render {render_s * 1000:.1f} ms wall / "
+        f"{render_cpu_s * 1000:.1f} ms CPU, {encodes})"
     )
     for workers in (0, 2):
         print(f"camera throughput, render workers {workers} ...", file=sys.stderr)

@@ -13,6 +13,7 @@ import cv2
 import numpy as np
 import pytest
 
+from agent.wire.picture import picture_of
 from sim import scenarios
 from sim.camera.look import Look
 from sim.camera.picture import Shot
@@ -137,14 +138,14 @@ def test_render_workers_develop_the_worlds_look() -> None:
             res = results.get(timeout=120.0)
             pool.worker_done(res)
             assert res.error == ""
-            got[res.job_id] = res.png
+            got[res.job_id] = res.data
     finally:
         pool.close()
     with World(sc, noise=False) as w:
         for job in jobs:
             want = w.render(1, job.yaw, job.shot)
-            img = cv2.imdecode(np.frombuffer(got[job.job_id], np.uint8), cv2.IMREAD_COLOR)
-            assert img is not None and np.array_equal(img, want)
+            img = picture_of("bgr8", 640, 480, got[job.job_id])
+            assert np.array_equal(img, want)
 
 
 @pytest.mark.parametrize("hue", [0.0, 167.0, -90.0])

@@ -9,7 +9,6 @@ from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
 
-import cv2
 import numpy as np
 import pytest
 
@@ -27,6 +26,7 @@ from agent.wire import (
     key_camera,
     trust,
 )
+from agent.wire.picture import picture_of
 from sim import scenarios
 from sim.physics.world import World
 from sim.server.render_worker import RenderWorker, parse_shard, shard_robots
@@ -116,7 +116,7 @@ def test_a_picture_is_the_worlds_at_the_poses_it_follows(room: World) -> None:
         for rid, x, y, th in poses_msg(4.5, moved=0.1).poses:
             ref.set_pose(rid, x, y, th)
         want = ref.render(2, 0.4)
-    got = cv2.imdecode(np.frombuffer(rep.data, np.uint8), cv2.IMREAD_COLOR)
+    got = picture_of(rep.encoding, rep.width, rep.height, rep.data)
     assert np.array_equal(got, want)
     assert w.served == 1 and w.t_poses == 4.5
 

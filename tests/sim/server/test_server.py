@@ -37,6 +37,7 @@ from agent.wire import (
     key_turn,
     key_walk,
 )
+from agent.wire.picture import picture_of
 from sim import scenarios
 from sim.physics.locomotion import DT
 from sim.server.glances import LookTiming
@@ -47,8 +48,9 @@ NORTH = math.pi / 2
 
 
 def png(data: bytes) -> np.ndarray:
+    """The picture of a PNG file's bytes (what ``sim.server.client camera`` writes)."""
     img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
-    assert img is not None, "reply data is not a PNG"
+    assert img is not None, "not a PNG"
     return img
 
 
@@ -97,12 +99,17 @@ class Client:
         self.session.close()
 
 
-@pytest.fixture(scope="module", params=[0, 2], ids=["render-in-process", "render-workers-2"])
+@pytest.fixture(
+    scope="module",
+    params=[(0, "bgr8"), (2, "png")],
+    ids=["render-in-process-bgr8", "render-workers-2-png"],
+)
 def world(
     request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
-) -> Iterator[tuple[subprocess.Popen[bytes], str]]:
-    # The whole module runs twice: camera images rendered by the world process itself,
-    # and by a pool of two render workers (python -m sim --render-workers 2).
+) -> Iterator[tuple[subprocess.Popen[bytes], str, str]]:
+    # The whole module runs twice: camera images rendered by the world process itself and
+    # carried as raw pixels (the defaults), and rendered by a pool of two render workers
+    # and carried as PNG (python -m sim --render-workers 2 --camera-encoding png).
     # Robots 1 and 2 face each other 0.7 m apart (contact test); robot 3 stands apart.
     sc = scenarios.Scenario(
         robots=(
@@ -116,18 +123,20 @@ def world(
     path = tmp_path_factory.mktemp("sim") / "scenario.json"
     scenarios.dump(sc, path)
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    extra = ["--scenario", str(path), "--speed", "4", "--render-workers", str(request.param)]
+    workers, encoding = request.param
+    extra = ["--scenario", str(path), "--speed", "4", "--render-workers", str(workers)]
+    extra += ["--camera-encoding", encoding]
     world = start_world(3, sc.seed, endpoint, path.parent, extra)  # the file sets the robots
     try:
         ready = wait_ready(world, 60.0)
         assert "robots=1,2,3" in ready, f"world did not start: {ready!r}"
-        yield world.popen, endpoint
+        yield world.popen, endpoint, encoding
     finally:
         stop(world, 20.0)
 
 
 @pytest.fixture(scope="module")
-def client(world: tuple[subprocess.Popen[bytes], str]) -> Iterator[Client]:
+def client(world: tuple[subprocess.Popen[bytes], str, str]) -> Iterator[Client]:
     c = Client(world[1])
     # Poll until the link is up: a register query answered.
     deadline = time.monotonic() + 20.0
@@ -141,13 +150,13 @@ def client(world: tuple[subprocess.Popen[bytes], str]) -> Iterator[Client]:
     c.close()
 
 
-def test_camera_round_trip(client: Client) -> None:
+def test_camera_round_trip(world: tuple[subprocess.Popen[bytes], str, str], client: Client) -> None:
     for yaw in (0.0, math.radians(45.0), -math.radians(119.5)):
         rep = client.ask(key_camera(3), CameraRequest(yaw=yaw))
         assert isinstance(rep, CameraReply)
         assert rep.robot_id == 3 and rep.yaw == pytest.approx(yaw)
-        assert (rep.width, rep.height, rep.encoding) == (640, 480, "png")
-        img = png(rep.data)
+        assert (rep.width, rep.height, rep.encoding) == (640, 480, world[2])
+        img = picture_of(rep.encoding, rep.width, rep.height, rep.data)
         assert img.shape == (480, 640, 3)
         assert img.std() > 10  # a textured room, not a blank picture
 
@@ -171,7 +180,7 @@ def test_camera_yaw_as_selector_parameter(client: Client) -> None:
 
 def test_robot_1_sees_robot_2(client: Client) -> None:
     rep = client.ask(key_camera(1), CameraRequest(yaw=0.0))
-    img = png(rep.data)
+    img = picture_of(rep.encoding, rep.width, rep.height, rep.data)
     mask = cv2.inRange(cv2.cvtColor(img, cv2.COLOR_BGR2HSV), (2, 170, 50), (10, 255, 255))
     n, _, stats, _ = cv2.connectedComponentsWithStats(mask)
     assert sum(1 for i in range(1, n) if stats[i][4] > 30) == 3
@@ -336,7 +345,7 @@ def test_two_robots_walking_into_each_other_get_contact(client: Client) -> None:
 
 
 def test_snapshot_joins_a_running_world(
-    world: tuple[subprocess.Popen[bytes], str], client: Client, tmp_path: Path
+    world: tuple[subprocess.Popen[bytes], str, str], client: Client, tmp_path: Path
 ) -> None:
     from tools import snapshot
 
@@ -351,7 +360,7 @@ def test_snapshot_joins_a_running_world(
 
 
 def test_client_cli(
-    world: tuple[subprocess.Popen[bytes], str],
+    world: tuple[subprocess.Popen[bytes], str, str],
     client: Client,
     tmp_path: Path,
     capsys: pytest.CaptureFixture[str],

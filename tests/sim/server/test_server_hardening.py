@@ -290,7 +290,7 @@ def test_a_repeated_camera_query_is_answered_by_the_picture_in_the_works(server:
     assert isinstance(gone, ErrorReply) and "superseded" in gone.reason
     (busy,) = other.replies
     assert isinstance(busy, ErrorReply) and busy.reason.startswith(BUSY)
-    server.cameras.rendered(Result(jobs[0].job_id, 0, png=b"png"))
+    server.cameras.rendered(Result(jobs[0].job_id, 0, data=b"picture"))
     (pic,) = again.replies
     assert isinstance(pic, CameraReply) and pic.robot_id == 3 and pic.yaw == 0.5
     assert len(server.cameras.pending) == 0 and len(first.replies) == 1
