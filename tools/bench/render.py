@@ -17,7 +17,8 @@ workers; CPU-seconds per frame is the number that carries to a machine with more
 (there frames per second should scale with the workers, up to one core per worker).
 Writes ``render_bench.json`` and ``render_bench.png`` into ``--out`` if given.
 
-``--renderer`` is passed to the world and the workers (:mod:`sim.camera.renderer`). With
+``--renderer`` and ``--camera-encoding`` are passed to the world and the workers
+(:mod:`sim.camera.renderer`, :mod:`agent.wire.picture`). With
 ``--in-process`` it instead times ``World.render`` itself, no processes, no PNG, no bus:
 for each renderer of ``--renderers`` and each fleet size of ``--fleets`` it draws
 ``--frames`` pictures (observers and head yaws cycling, after 2 untimed ones) and prints
@@ -41,6 +42,7 @@ from typing import Any
 import zenoh
 
 from agent.wire import CameraReply, CameraRequest, decode, encode, key_camera
+from agent.wire.picture import DEFAULT_ENCODING, ENCODINGS
 from sim.camera.renderer import RENDERERS, check
 from tools.harness.procs import ROOT, Proc, free_port, stop
 from tools.harness.render import served, start_render_workers
@@ -148,6 +150,7 @@ def measure(
     warmup: int,
     out: Path,
     renderer: str | None = None,
+    encoding: str = DEFAULT_ENCODING,
 ) -> dict[str, Any]:
     out.mkdir(parents=True, exist_ok=True)
     endpoint = f"tcp/127.0.0.1:{free_port()}"
@@ -159,10 +162,12 @@ def measure(
         procs.append(_start("router", router, out, "router ready"))
         kind = ["--renderer", renderer] if renderer else []
         world = [sys.executable, "-m", "sim", "--robots", str(robots), "--seed", str(seed), *net,
-                 *kind]  # fmt: skip
+                 *kind, "--camera-encoding", encoding]  # fmt: skip
         procs.append(_start("world", world, out, "sim ready"))
         if workers:
-            procs.extend(start_render_workers(workers, net, out, renderer=renderer))
+            procs.extend(
+                start_render_workers(workers, net, out, renderer=renderer, encoding=encoding)
+            )
         time.sleep(1.0)  # let the router learn every queryable
         before = {p.name: cpu_s(p.popen.pid) for p in procs}
         t_wall, t_client, lat = sweep(endpoint, robots, frames, warmup)
@@ -180,6 +185,7 @@ def measure(
             world_cam = int(part.split("=")[1])
     return {
         "workers": workers,
+        "camera_encoding": encoding,
         "load_average_1min": os.getloadavg()[0],
         "frames": len(lat),
         "wall_s": t_wall,
@@ -255,6 +261,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", type=Path, default=Path("out/bench_render"))
     p.add_argument("--warmup", type=int, default=1, help="untimed pictures per robot first")
     p.add_argument("--renderer", choices=RENDERERS, default=None, help="the world's and workers'")
+    p.add_argument(
+        "--camera-encoding",
+        choices=ENCODINGS,
+        default=DEFAULT_ENCODING,
+        help="the world's and workers' (agent/wire/picture.py)",
+    )
     p.add_argument("--in-process", action="store_true", help="time World.render itself")
     p.add_argument("--renderers", default="tiny,egl", help="with --in-process: renderers")
     p.add_argument("--fleets", default="3,10,50", help="with --in-process: NAOs per world")
@@ -263,10 +275,11 @@ def main(argv: list[str] | None = None) -> int:
         return in_process_table(a.renderers.split(","), a.fleets.split(","), a.seed, a.frames)
     rows = []
     for k in (int(x) for x in a.modes.split(",")):
-        r = measure(k, a.robots, a.seed, a.frames, a.warmup, a.out / f"workers-{k}", a.renderer)
+        out = a.out / f"workers-{k}"
+        r = measure(k, a.robots, a.seed, a.frames, a.warmup, out, a.renderer, a.camera_encoding)
         rows.append(r)
         print(
-            f"workers={k}: {r['frames']} frames in {r['wall_s']:.1f} s wall "
+            f"workers={k} {a.camera_encoding}: {r['frames']} frames in {r['wall_s']:.1f} s wall "
             f"({r['frames_per_s']:.2f}/s, median {1000 * r['latency_median_s']:.0f} ms); "
             f"serving CPU {r['serving_cpu_s']:.1f} s -> {r['frames_per_cpu_s']:.2f} frames per "
             f"CPU-second, {1000 * r['cpu_s_per_frame']:.0f} CPU-ms per frame; served {r['served']}",

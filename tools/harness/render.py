@@ -22,26 +22,38 @@ READY_S = 180.0
 
 
 def render_command(
-    net: list[str], shard: tuple[int, int], renderer: str | None = None
+    net: list[str],
+    shard: tuple[int, int],
+    renderer: str | None = None,
+    encoding: str | None = None,
 ) -> list[str]:
     """The argv of ``python -m sim.server.render_worker`` (``net``: its join flags; ``renderer``:
-    its ``--renderer``, None for the worker's default)."""
+    its ``--renderer``, ``encoding`` its ``--camera-encoding``; None for the worker's default)."""
     kind = ["--renderer", renderer] if renderer else []
+    enc = ["--camera-encoding", encoding] if encoding else []
     return [
         sys.executable, "-m", "sim.server.render_worker", *net, "--shard", f"{shard[0]}/{shard[1]}",
-        *kind,
+        *kind, *enc,
     ]  # fmt: skip
 
 
 def start_render_workers(
-    k: int, net: list[str], out: Path, ready_s: float = READY_S, renderer: str | None = None
+    k: int,
+    net: list[str],
+    out: Path,
+    ready_s: float = READY_S,
+    renderer: str | None = None,
+    encoding: str | None = None,
 ) -> list[Proc]:
     """K render workers (shards 1/K..K/K) joining with ``net``; waits for every ready line."""
     procs: list[Proc] = []
     for i in range(1, k + 1):
         log = (out / f"render-{i}.log").open("wb")
         p = subprocess.Popen(
-            render_command(net, (i, k), renderer), cwd=ROOT, stdout=log, stderr=subprocess.STDOUT
+            render_command(net, (i, k), renderer, encoding),
+            cwd=ROOT,
+            stdout=log,
+            stderr=subprocess.STDOUT,
         )
         procs.append(Proc(f"render {i}", p, log))
     deadline = time.monotonic() + ready_s

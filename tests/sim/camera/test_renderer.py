@@ -107,6 +107,23 @@ def test_the_renderer_flag_on_every_command() -> None:
         bench_main(["--renderer", "vulkan"])
 
 
+def test_the_camera_encoding_flag_on_the_world_its_workers_and_the_bench() -> None:
+    from sim.__main__ import build_parser as sim_parser
+    from sim.server.render_worker import build_parser as worker_parser
+    from tools.bench.render import main as bench_main
+    from tools.harness.render import render_command
+
+    for parser in (sim_parser(), worker_parser()):
+        assert parser.parse_args([]).camera_encoding == "bgr8"
+        assert parser.parse_args(["--camera-encoding", "png"]).camera_encoding == "png"
+        with pytest.raises(SystemExit):
+            parser.parse_args(["--camera-encoding", "jpeg"])
+    assert render_command([], (1, 2), None, "png")[-2:] == ["--camera-encoding", "png"]
+    assert "--camera-encoding" not in render_command([], (1, 2), "egl")
+    with pytest.raises(SystemExit):
+        bench_main(["--camera-encoding", "jpeg"])
+
+
 # ------------------------------------------------------------------ TinyRenderer
 
 

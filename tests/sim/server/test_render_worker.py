@@ -243,3 +243,23 @@ def test_the_world_hands_out_its_scenario(tmp_path: Path) -> None:
     srv.admit("scenario", q)
     srv._drain(block=False)
     assert isinstance(q.replies[0], ErrorReply)
+
+
+def test_a_world_or_worker_with_an_unknown_camera_encoding_refuses_to_start(room: World) -> None:
+    from sim.server.server import WorldServer
+
+    world = SimpleNamespace(robot_ids=(1, 2, 3), t_sim=0.0, scenario=SCENARIO)
+    with pytest.raises(ValueError, match="camera encoding 'jpeg' not one of"):
+        WorldServer(world, camera_encoding="jpeg")  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="camera encoding 'jpeg' not one of"):
+        RenderWorker(room, (1,), NetworkSpec(), FakeSession(), encoding="jpeg")
+
+
+def test_a_worker_draws_png_when_asked(room: World) -> None:
+    w = RenderWorker(room, (1, 2, 3), NetworkSpec(), FakeSession(), encoding="png")
+    w.follow()
+    publish(w, encode(poses_msg(2.0)))
+    (rep,) = ask(w, 1, encode(CameraRequest(yaw=0.0))).replies
+    assert isinstance(rep, CameraReply) and rep.encoding == "png"
+    assert rep.data[:4] == b"\x89PNG"
+    assert picture_of("png", rep.width, rep.height, rep.data).shape == (480, 640, 3)
