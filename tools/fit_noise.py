@@ -12,7 +12,8 @@ used.
   ``w90`` (share within 3σ_m of ±90°); of the masks turned back to their target's
   start heading (records with times), ``w180`` is the share whose error modulo 2π is
   beyond ±90° (the NAO read the other way round; a corpus without times keeps the
-  shipped figure).
+  shipped figure); ``w180_view`` the same share by the bin of |θ| as the camera read
+  it (:func:`reversal_by_view`).
 * Each fleet is fitted as the agents' general candidate fits it
   (:func:`agent.core.formation.frame.poses.fit_from_graph`), and only the fits that are
   right (every start within 0.15 m and 10° of the truth) are kept: the test's null model
@@ -62,8 +63,14 @@ from scipy.stats import chi2
 
 from agent.adapters import FormationAdapter
 from agent.core.formation.frame.poses import PoseFrame
-from agent.core.formation.frame.records import mask_orientation
-from agent.core.perception.sighting_noise import SightingNoise, shipped_noise, split
+from agent.core.formation.frame.records import mask_orientation, mask_view
+from agent.core.perception.sighting_noise import (
+    VIEW_BINS,
+    SightingNoise,
+    shipped_noise,
+    split,
+    view_bin,
+)
 from agent.wire import NeighborRecordMsg
 from tools.corpus import Run, held_out, load_corpus
 from tools.lib.frame_fit import frame_error
@@ -88,6 +95,8 @@ class Matched:
     #: 1 where a mask turned back by the records' times reads its target the other way
     #: round (error modulo 2π beyond ±90°), 0 where not (nan: no such mask)
     flip: np.ndarray
+    #: the mask's θ as the camera read it, before the turn-back (nan: no mask)
+    view: np.ndarray
 
 
 def _wrap(a: np.ndarray) -> np.ndarray:
@@ -100,7 +109,7 @@ def _wrap_half(a: np.ndarray) -> np.ndarray:
 
 def match(runs: list[Run]) -> Matched:
     """Match every sighting of ``runs`` to the truth (module docstring)."""
-    cols: list[list[float]] = [[], [], [], [], [], []]
+    cols: list[list[float]] = [[], [], [], [], [], [], []]
     for run in runs:
         ids = sorted(run.truth)
         pos = np.array([run.truth[i][:2] for i in ids])
@@ -126,6 +135,7 @@ def match(runs: list[Run]) -> Matched:
                     cols[3].append(math.nan)
                     cols[4].append(math.nan)
                     cols[5].append(math.nan)
+                    cols[6].append(math.nan)
                     continue
                 beta_true = math.atan2(true_v[1], true_v[0]) - (
                     h - math.pi / 2
@@ -151,8 +161,22 @@ def match(runs: list[Run]) -> Matched:
                 else:
                     cols[4].append(math.nan)
                     cols[5].append(math.nan)
+                cols[6].append(mask_view(core[rec.sender], n))
     a = [np.array(c) for c in cols]
     return Matched(*a)
+
+
+def reversal_by_view(flip: np.ndarray, view: np.ndarray, overall: float) -> tuple[float, ...]:
+    """The front/back confusion rate of each bin of a mask's reading (``w180_view``): of
+    the timed masks (``flip`` 0 or 1, nan: none) whose ``view`` falls in the bin, the
+    share read the other way round, counted as ``(k + 1) / (n + 2)``; ``overall`` for a
+    bin without a mask."""
+    out = []
+    for b in range(VIEW_BINS):
+        bins = np.array([view_bin(float(v)) == b for v in view], dtype=bool)
+        mine = flip[bins & np.isfinite(flip)]
+        out.append((float(mine.sum()) + 1.0) / (mine.size + 2.0) if mine.size else overall)
+    return tuple(out)
 
 
 def _robust_sigma(e: np.ndarray) -> float:
@@ -249,10 +273,11 @@ def fit(m: Matched, runs: list[Run], corpus: str) -> tuple[SightingNoise, dict[s
     # front/back confusion, of the masks turned back by the records' times
     flips = m.flip[np.isfinite(m.flip)]
     w180 = float(flips.mean()) if flips.size else shipped.w180
+    w180_view = reversal_by_view(m.flip, m.view, w180)
     sent, lost = alone_losses(fits, replace(base, g0=g0, g1=g1), [r.records for r in runs_kept])
     a0 = (float(lost) + 1.0) / (float(sent) + 2.0)
     model = replace(base, g0=g0, g1=g1, rho=rho, rho_untimed=rho_untimed, mask_scale=mscale,
-                    s0=s0, s1=s1, a0=a0, w180=w180,
+                    s0=s0, s1=s1, a0=a0, w180=w180, w180_view=w180_view,
                     bias_scale=bias_scale(fits, replace(base, g0=g0, g1=g1),
                                           [r.records for r in runs_kept]))  # fmt: skip
     bins = {"d": x, "sr": np.array(sr), "st": np.array(st), "n": w, "dist": dist, "along": along,

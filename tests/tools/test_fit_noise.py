@@ -3,6 +3,7 @@ heading test's, χ²₁): known answers; and its count of masks read the other w
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 from pathlib import Path
 
@@ -11,7 +12,7 @@ import pytest
 from scipy.stats import chi2
 
 from tools.corpus import runs_of
-from tools.fit_noise import BIAS_QUANTILES, match, null_scale
+from tools.fit_noise import BIAS_QUANTILES, match, null_scale, reversal_by_view
 
 
 @pytest.mark.parametrize("dof", [1, 3])
@@ -55,3 +56,14 @@ def test_the_front_back_share_is_counted_on_masks_turned_back_by_times() -> None
     untimed = [replace(r, records=tuple(replace(m, seen_at=(), stances=()) for m in r.records))
                for r in runs]  # fmt: skip
     assert not np.isfinite(match(untimed).flip).any()
+
+
+def test_the_front_back_share_by_reading_is_counted_per_bin() -> None:
+    """reversal_by_view: per 30° bin of |θ| as read, (k + 1) / (n + 2) of the timed masks
+    read the other way round; masks without times (nan) and without a reading left out;
+    a bin without a mask keeps the overall rate."""
+    deg = math.radians
+    view = np.array([deg(10), deg(-20), deg(10), deg(100), deg(-170), math.pi, math.nan, deg(5)])
+    flip = np.array([0.0, 1.0, 0.0, 1.0, 1.0, 1.0, 1.0, math.nan])
+    got = reversal_by_view(flip, view, 0.25)
+    assert got == pytest.approx((2 / 5, 0.25, 0.25, 2 / 3, 0.25, 3 / 4))

@@ -37,12 +37,19 @@ A sighting ``v_ij`` of robot i, in its fixed frame, at true distance d from j:
   the modulo);
 * **front/back confusion**: a mask turned back to its target's start heading (its record
   carries times: docs/design.md §9 "Masks seen mid-turn") reads the NAO the other way
-  round, its error modulo 2π beyond ±90°, with probability ``w180``, independently of the
-  error modulo π above; over the full circle a mask error δ then has the density
-  ``f(δ)·(1 − w180)`` within ±90° and ``f(δ)·w180`` beyond, f the density modulo π. A
-  mask of a record without times says nothing of front and back (its target may have
-  turned half round in its own search: on the corpus, read as recorded, 52 % are the
-  other way round);
+  round, its error modulo 2π beyond ±90°, with a probability that depends on what the
+  mask itself read: ``reversal(θ)``, the rate ``w180_view`` measured among the masks whose
+  |θ| as the camera read it (before the turn-back) falls in the same 30° bin. A NAO read
+  from the front is seldom read the other way round (5 % within 30° of facing the
+  camera, on the shipped corpus); one read from behind is more often a front view than
+  not (59 % beyond 150°): the shape of a NAO's back and of its front differ less than
+  the caps' layout. ``w180`` is the rate over every mask (22 %), used for a mask with
+  no reading and by a model without bins. Masks are independent given their readings;
+  over the full circle a mask error δ then has the density ``f(δ)·(1 − q)`` within
+  ±90° and ``f(δ)·q`` beyond, f the density modulo π and q its reversal rate. A mask of
+  a record without times says nothing of front and back (its target may have turned
+  half round in its own search: on the corpus, read as recorded, 52 % are the other way
+  round);
 * **a robot seen turned as a whole**: with probability ``rho`` the others' masks of a
   *sound* robot all agree on an offset that the per-mask model above cannot explain (a
   bias of the masks for that robot's aspect, say). A broken compass looks exactly the
@@ -81,6 +88,9 @@ from agent.core.perception.mbase import DATA_DIR
 
 FORMAT = 1
 P_MIN = 1e-3  #: the smallest rejection rate the model admits (a pair can always be wrong)
+#: The bins of a mask's reading |θ| (rad) for its front/back confusion (``w180_view``)
+VIEW_BIN = math.pi / 6
+VIEW_BINS = 6
 P_MAX = 0.5  #: the largest (beyond it a sighting carries no information)
 
 
@@ -115,6 +125,10 @@ class SightingNoise:
     #: front/back confusion: the share of masks turned back to their target's start
     #: heading that read it the other way round (module docstring); ½ says nothing
     w180: float = 0.5
+    #: front/back confusion by the mask's own reading: the share read the other way round
+    #: among the masks whose |θ| as read falls in each :data:`VIEW_BIN` (0–30°, …,
+    #: 150–180°); empty: ``w180`` for every mask (module docstring)
+    w180_view: tuple[float, ...] = ()
     sightings: int = 0  #: how many matched sightings it was fitted on
     corpus: str = ""  #: which corpus (and split) it was fitted on
 
@@ -145,6 +159,13 @@ class SightingNoise:
         for name in ("rho", "rho_untimed", "w180"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"{name} must be in [0, 1], got {getattr(self, name)}")
+        object.__setattr__(self, "w180_view", tuple(float(q) for q in self.w180_view))
+        if len(self.w180_view) not in (0, VIEW_BINS):
+            raise ValueError(
+                f"w180_view holds {len(self.w180_view)} rates, expected 0 or {VIEW_BINS}"
+            )
+        if not all(0.0 <= q <= 1.0 for q in self.w180_view):
+            raise ValueError(f"w180_view rates must be in [0, 1], got {self.w180_view}")
         for name in ("bias_scale", "mask_scale"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0.0):
@@ -187,6 +208,15 @@ class SightingNoise:
             (along / self.sigma_radial(d)) ** 2 + (across / self.sigma_tangential(d)) ** 2
         )
 
+    def reversal(self, view: float) -> float:
+        """The probability that a sound mask read as ``view`` (rad, θ as the camera read
+        it, before any turn-back) reads its target the other way round: ``w180_view`` of
+        its bin of |θ|, or ``w180`` for a mask without a reading (nan) or a model without
+        bins; clipped to [P_MIN, 1 − P_MIN], so that no one mask is ever certain."""
+        k = view_bin(view)
+        q = self.w180_view[k] if self.w180_view and k is not None else self.w180
+        return min(max(q, P_MIN), 1.0 - P_MIN)
+
     def mask_density(self, delta: np.ndarray | float) -> np.ndarray:
         """Density (per radian, over a period of π) of a mask error ``delta`` modulo π."""
         x = np.asarray(delta, dtype=np.float64)
@@ -213,6 +243,7 @@ class SightingNoise:
         return cls(r0=floor, r1=0.0, t0=floor, t1=0.0, g0=0.0, g1=0.0,
                    sigma_mask=shipped.sigma_mask, w0=shipped.w0, w90=shipped.w90, rho=shipped.rho,
                    rho_untimed=shipped.rho_untimed, w180=shipped.w180,
+                   w180_view=shipped.w180_view,
                    r_lin=relative * third, t_lin=bearing * third, corpus="synthetic")  # fmt: skip
 
     def save(self, directory: Path = DATA_DIR, stem: str = "sighting_noise") -> Path:
@@ -233,6 +264,14 @@ class SightingNoise:
             )
         doc.pop("format")
         return cls(**doc)
+
+
+def view_bin(view: float) -> int | None:
+    """The bin (0 … VIEW_BINS − 1) of a mask read as ``view`` (rad): its |θ| folded into
+    [0, π] in steps of :data:`VIEW_BIN`, π itself in the last; None for no reading (nan)."""
+    if not math.isfinite(view):
+        return None
+    return min(int(abs(math.remainder(view, 2 * math.pi)) / VIEW_BIN), VIEW_BINS - 1)
 
 
 def split(vector: np.ndarray, error: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

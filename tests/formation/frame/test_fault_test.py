@@ -15,7 +15,7 @@ from scipy.stats import binom, chi2
 
 from agent.core.formation.frame import fault_test as ft
 from agent.core.formation.frame.poses import PoseFrame, build_poses
-from agent.core.perception.sighting_noise import SightingNoise
+from agent.core.perception.sighting_noise import P_MIN, SightingNoise, view_bin
 from tests.formation.pose_fleets import fault, sim_layout, unaligned_records
 
 #: A model matching the synthetic records below (±2 % distance, ±1° bearing, uniform).
@@ -63,7 +63,9 @@ def test_rejection_rate_is_clipped() -> None:
     ("field", "value"),
     [("r0", 0.0), ("t0", -1.0), ("r1", -0.1), ("sigma_mask", 0.0), ("sigma_mask", 1.0),
      ("w0", 1.2), ("w90", -0.1), ("g0", math.nan), ("rho_untimed", 1.5), ("mask_scale", 0.0),
-     ("bias_scale", math.inf), ("w180", -0.1), ("w180", 1.5), ("w180", math.nan)],
+     ("bias_scale", math.inf), ("w180", -0.1), ("w180", 1.5), ("w180", math.nan),
+     ("w180_view", (0.1,) * 5), ("w180_view", (0.1,) * 7), ("w180_view", (0.1,) * 5 + (1.2,)),
+     ("w180_view", (math.nan,) * 6)],
 )  # fmt: skip
 def test_model_refuses_each_bad_field(field: str, value: float) -> None:
     good = dict(r0=0.1, r1=0.0, t0=0.1, t1=0.0, g0=0.0, g1=0.0, sigma_mask=0.1, w0=0.5, w90=0.2)
@@ -71,9 +73,28 @@ def test_model_refuses_each_bad_field(field: str, value: float) -> None:
         SightingNoise(**{**good, field: value})
 
 
+def test_a_masks_reversal_rate_is_that_of_its_reading() -> None:
+    """Bins of 30° of |θ| as read (0–30°, …, 150–180°, π itself in the last); no reading
+    or no bins: the overall rate; clipped so that no mask is ever certain."""
+    rates = (0.05, 0.1, 0.2, 0.3, 0.4, 0.6)
+    m = replace(NOISE, w180=0.22, w180_view=rates)
+    cases = [(0.0, 0), (math.radians(29.9), 0), (math.radians(-30.1), 1), (math.radians(95), 3),
+             (math.radians(-170), 5), (math.pi, 5), (-math.pi, 5), (2 * math.pi + 0.1, 0)]  # fmt: skip
+    for view, k in cases:
+        assert view_bin(view) == k
+        assert m.reversal(view) == rates[k]
+    assert view_bin(math.nan) is None and m.reversal(math.nan) == 0.22
+    assert replace(m, w180_view=()).reversal(math.pi) == 0.22
+    edges = replace(m, w180_view=(0.0, 1.0, 0.5, 0.5, 0.5, 0.5))
+    assert edges.reversal(0.0) == P_MIN and edges.reversal(math.radians(45)) == 1.0 - P_MIN
+
+
 def test_model_round_trip_and_format(tmp_path: Path) -> None:
     NOISE.save(tmp_path)
     assert SightingNoise.load(tmp_path) == NOISE
+    viewed = replace(NOISE, w180_view=(0.05, 0.1, 0.2, 0.3, 0.4, 0.6))
+    viewed.save(tmp_path)
+    assert SightingNoise.load(tmp_path) == viewed  # the JSON list comes back a tuple
     (tmp_path / "sighting_noise.json").write_text('{"format": 99}')
     with pytest.raises(ValueError, match="format"):
         SightingNoise.load(tmp_path)

@@ -272,11 +272,14 @@ def half_turn_test(
     A mask turned back to its target's start heading (its owner's record carries
     ``seen_at`` and its target's ``stances``: :func:`records.mask_orientation`) misses
     ψ_t − ψ_o by ``δ = ψ_t − ψ_o − (β + θ − π/2)`` modulo 2π, and reads its target the
-    other way round (|δ| > π/2) with probability q = ``noise.w180`` when the frame is
-    right, independently of the others. Turning a set S of robots half round changes only
-    the masks between S and the rest, each by π, so its likelihood ratio is
-    ``L_S = ((1 − q)/q)^(F_S − C_S)``, F_S and C_S those masks read the other way round
-    and the right way. Each S (the frame robot outside it, 1 ≤ |S| ≤ n − 1) gets the
+    other way round (|δ| > π/2) with probability ``q_k = noise.reversal(view_k)`` when the
+    frame is right, q_k set by what the mask read (its target from the front or from
+    behind: :meth:`SightingNoise.reversal`), independently of the other masks given their
+    readings. Turning a set S of robots half round changes only the masks between S and
+    the rest, each by π, so its likelihood ratio is ``L_S = Π_k ((1 − q_k)/q_k)^(±1)``
+    over those masks, + for a mask read the other way round in the frame, − for one read
+    the right way; each factor has expectation 1 when the frame is right, so L_S has too.
+    Each S (the frame robot outside it, 1 ≤ |S| ≤ n − 1) gets the
     weight ``w_S = 1 / ((n − 1)·C(n − 1, |S|))``, so ``Σ_S w_S·L_S`` has expectation 1 when
     the frame is right and exceeds 1/α with probability at most α (Markov's inequality);
     ``w_S·L_S ≥ 1/α`` for one S implies it, so the p-value ``1/(w_S·L_S)`` of any S is
@@ -285,15 +288,16 @@ def half_turn_test(
     split and from each robot alone; the best S visited is kept (tie: the first). Masks
     of records without times are left out (their target may have turned half round in
     its own search; so are those of a record with no stances), and so is every mask when
-    q is not below ½. Deterministic: integer counts summed over the measurements, robots
-    in ascending id."""
-    ids, n, q = poses.ids, len(poses.ids), noise.w180
+    no mask says anything (``noise.w180`` not below ½). Deterministic: the masks' log
+    ratios summed in the order of the measurements, robots in ascending id."""
+    ids, n = poses.ids, len(poses.ids)
     none = HalfTurn((), 0.0, 1.0)
-    if n < 2 or not 0.0 < q < 0.5:
+    if n < 2 or not 0.0 < noise.w180 < 0.5:
         return none
     index = {rid: k for k, rid in enumerate(ids)}
     recs = {r.robot_id: r for r in records}
-    votes = np.zeros((n, n), dtype=np.int64)  # +1 a mask the other way round, −1 right
+    # log((1 − q)/q) of a mask the other way round, its negative for one the right way
+    votes = np.zeros((n, n), dtype=np.float64)
     for m in poses.measurements:
         owner, target = recs.get(m.owner), recs.get(m.target)
         if owner is None or owner.seen_at is None or target is None:
@@ -303,12 +307,12 @@ def half_turn_test(
         o, t = index[m.owner], index[m.target]
         ref = math.atan2(float(m.vector[1]), float(m.vector[0])) + m.orientation - math.pi / 2
         miss = math.remainder(float(poses.headings[t] - poses.headings[o]) - ref, 2 * math.pi)
-        vote = 1 if abs(miss) > math.pi / 2 else -1
+        q = noise.reversal(m.view)
+        vote = math.log((1.0 - q) / q) * (1.0 if abs(miss) > math.pi / 2 else -1.0)
         votes[o, t] += vote
         votes[t, o] += vote
     if not votes.any():
         return none
-    per_mask = math.log((1.0 - q) / q)
     anchor = ids.index(poses.frame_robot)
     best, score = none, 0.0  # score: log(w_S·L_S) of the best S
     for start in range(-1, n):
@@ -318,15 +322,15 @@ def half_turn_test(
         while True:
             turned = side != side[anchor]
             size = int(turned.sum())
-            cut = int(votes[np.ix_(turned, ~turned)].sum())  # F_S − C_S
+            cut = float(votes[np.ix_(turned, ~turned)].sum())  # log L_S
             # log(1/w_S) = log((n − 1)·C(n − 1, |S|))
             log_w = math.log(n - 1) + math.lgamma(n) - math.lgamma(size + 1)
             log_w -= math.lgamma(n - size)
-            if size and per_mask * cut - log_w > score:
-                score = per_mask * cut - log_w
+            if size and cut - log_w > score:
+                score = cut - log_w
                 robots = tuple(i for i, x in zip(ids, turned, strict=True) if x)
-                best = HalfTurn(robots, per_mask * cut, math.exp(-score))
-            toggle = side * (votes @ side)  # what toggling each robot adds to F_S − C_S
+                best = HalfTurn(robots, cut, math.exp(-score))
+            toggle = side * (votes @ side)  # what toggling each robot adds to log L_S
             k = int(np.argmax(toggle))
             if toggle[k] <= 0:
                 break

@@ -69,7 +69,7 @@ from agent.core.formation.frame.pose_pairing import (
     wrap_angle,
     wrap_half,
 )
-from agent.core.formation.frame.records import NeighborRecord, mask_orientation
+from agent.core.formation.frame.records import NeighborRecord, mask_orientation, mask_view
 
 SIGMA_POS = 0.05  #: σ₀ (m) of a sighting's position
 SIGMA_REL = 0.05  #: σ₁: σ per metre of distance (±5 % distance, ±3° bearing)
@@ -100,6 +100,7 @@ class PoseMeasurement:
     weight: float = 1.0  # confidence λ (1 if unknown)
     orientation: float = math.nan  # mask relative orientation θ (nan: none)
     mutual: bool = True  # part of a mutual pair (False: attached one-way sighting)
+    view: float = math.nan  # θ as the camera read it, before the turn-back (nan: none)
 
 
 @dataclass(frozen=True)
@@ -159,8 +160,8 @@ def pair_measurements(graph: NeighbourGraph) -> list[PoseMeasurement]:
     out: list[PoseMeasurement] = []
     for p in graph.pairs:
         for o, t, idx, v, w in ((p.i, p.j, p.a, p.v_ij, p.w_ij), (p.j, p.i, p.b, p.v_ji, p.w_ji)):
-            theta = mask_orientation(recs[o], idx, recs.get(t))
-            out.append(PoseMeasurement(o, t, np.array(v, dtype=np.float64), w, theta, True))
+            theta, view = mask_orientation(recs[o], idx, recs.get(t)), mask_view(recs[o], idx)
+            out.append(PoseMeasurement(o, t, np.array(v, dtype=np.float64), w, theta, True, view))
     return out
 
 
@@ -521,8 +522,8 @@ def one_way_measurements(graph: NeighbourGraph, frame: PoseFrame) -> list[PoseMe
             continue
         w = 1.0 if rec.confidences is None else float(rec.confidences[a])
         target = frame.ids[hits[0]]
-        theta = mask_orientation(rec, a, recs.get(target))
-        out.append(PoseMeasurement(rid, target, rec.neighbours[a].copy(), w, theta, False))
+        theta, view = mask_orientation(rec, a, recs.get(target)), mask_view(rec, a)
+        out.append(PoseMeasurement(rid, target, rec.neighbours[a].copy(), w, theta, False, view))
         linked.add((rid, target))
     return out
 
@@ -590,11 +591,6 @@ def _aligned_model(records: Sequence[NeighborRecord], epsilon: float) -> PoseFra
     except ValueError:
         return None
     cand = evaluate_poses(
-        cf.ids,
-        pair_measurements(today),
-        cf.positions,
-        np.zeros(len(cf.ids)),
-        cf.frame_robot,
-        True,
+        cf.ids, pair_measurements(today), cf.positions, np.zeros(len(cf.ids)), cf.frame_robot, True
     )
     return cand if cand.consistent else None

@@ -178,6 +178,14 @@ def heading_at(stances: np.ndarray | None, t: float, margin: float = 0.0) -> flo
     return math.nan
 
 
+def mask_view(owner: NeighborRecord, a: int) -> float:
+    """Detection ``a`` of ``owner``'s record: its mask orientation θ as the camera read it
+    (3.1.2; before any turn-back), nan when the record carries none. What the mask saw of
+    its target, front or back, sets how often it reads the target the other way round
+    (:meth:`SightingNoise.reversal`)."""
+    return math.nan if owner.orientations is None else float(owner.orientations[a])
+
+
 def mask_orientation(owner: NeighborRecord, a: int, target: NeighborRecord | None) -> float:
     """Detection ``a`` of ``owner``'s record: its mask orientation θ (3.1.2) as if
     ``target`` stood at its start heading, θ − h_target(t_a) (module docstring), in

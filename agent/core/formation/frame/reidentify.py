@@ -70,7 +70,7 @@ from scipy.spatial import cKDTree
 
 from agent.core.formation.frame.pose_pairing import wrap_angle
 from agent.core.formation.frame.poses import PoseFrame, PoseMeasurement, fit_poses
-from agent.core.formation.frame.records import NeighborRecord, mask_orientation
+from agent.core.formation.frame.records import NeighborRecord, mask_orientation, mask_view
 
 #: Gate (m) within which a placed sighting lands on a robot, at distance 0 ...
 GATE = 0.12
@@ -492,7 +492,8 @@ def _measurements(
         rec = records[o]
         w = 1.0 if rec.confidences is None else float(rec.confidences[a])
         theta = mask_orientation(rec, a, records.get(t))
-        out.append(PoseMeasurement(o, t, rec.neighbours[a].copy(), w, theta, (t, o) in links))
+        v, view = rec.neighbours[a].copy(), mask_view(rec, a)
+        out.append(PoseMeasurement(o, t, v, w, theta, (t, o) in links, view))
     return out
 
 
