@@ -27,6 +27,7 @@ DEFAULT_ENCODING = ENCODINGS[0]
 #: PNG settings of the ``png`` encoding: fastest deflate, run-length strategy (rendered
 #: pictures have long runs of one colour).
 PNG_COMPRESSION = 1
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 #: The ``--camera-encoding`` help of the world and its render workers.
 ENCODING_HELP = (
     "how camera replies carry pictures: bgr8 (raw pixels, the default: agents on this host "
@@ -65,8 +66,8 @@ def picture_of(encoding: str, width: int, height: int, data: bytes) -> np.ndarra
     """The BGR picture (``height`` x ``width`` x 3, uint8, writable) that ``data`` carries.
 
     Raises :class:`~agent.wire.fields.ProtocolError` for an unknown encoding, ``bgr8``
-    data whose length is not ``width * height * 3``, or PNG data that does not decode to
-    a picture of the stated size.
+    data whose length is not ``width * height * 3``, or PNG data whose header states
+    another size (checked before it is decoded) or that does not decode.
     """
     if encoding == "bgr8":
         if len(data) != width * height * 3:
@@ -75,6 +76,13 @@ def picture_of(encoding: str, width: int, height: int, data: bytes) -> np.ndarra
     if encoding == "png":
         import cv2
 
+        # the header's size is checked before anything is decompressed: a PNG may claim
+        # any size, and decoding it would allocate what it claims
+        if len(data) < 24 or data[:8] != PNG_SIGNATURE or data[12:16] != b"IHDR":
+            raise ProtocolError("png data without a PNG header")
+        stated = (int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big"))
+        if stated != (width, height):
+            raise ProtocolError(f"png data is not a {width} x {height} picture")
         img = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_COLOR)
         if img is None or img.shape != (height, width, 3):
             raise ProtocolError(f"png data is not a {width} x {height} picture")

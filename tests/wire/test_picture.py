@@ -57,11 +57,21 @@ def test_a_reply_with_another_encoding_is_refused_by_the_schema() -> None:
     [
         ("bgr8", bytes(6 * 4 * 3 - 1), "not 6 x 4 x 3"),
         ("bgr8", bytes(6 * 4 * 3 + 3), "not 6 x 4 x 3"),
-        ("png", b"\x89PNG\r\n\x1a\n broken", "not a 6 x 4 picture"),
+        ("png", b"\x89PNG\r\n\x1a\n broken", "without a PNG header"),
+        ("png", b"GIF89a" + bytes(30), "without a PNG header"),
+        ("png", picture_data(np.zeros((4, 6, 3), np.uint8), "png")[:40], "not a 6 x 4 picture"),
         ("png", picture_data(np.zeros((5, 6, 3), np.uint8), "png"), "not a 6 x 4 picture"),
         ("jpeg", bytes(72), "not one of"),
     ],
-    ids=["bgr8-short", "bgr8-long", "png-broken", "png-other-size", "unknown"],
+    ids=[
+        "bgr8-short",
+        "bgr8-long",
+        "png-broken",
+        "not-png",
+        "png-cut",
+        "png-other-size",
+        "unknown",
+    ],
 )
 def test_a_picture_that_does_not_match_its_size_is_refused(
     encoding: str, data: bytes, match: str
