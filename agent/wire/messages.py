@@ -2,8 +2,8 @@
 
 Every message on the wire is a msgpack map ``{"v": SCHEMA_VERSION, "t": <type tag>,
 ...fields}``; each class declares its fields' validators (:mod:`agent.wire.fields`).
-Images are encoded (PNG) bytes of a BGR uint8 picture, as OpenCV writes them; the
-camera frames agents publish for viewers (:class:`CameraMsg`) are JPEG thumbnails.
+A camera reply carries a BGR uint8 picture as raw pixels or PNG (:mod:`agent.wire.picture`);
+the camera frames agents publish for viewers (:class:`CameraMsg`) are JPEG thumbnails.
 """
 
 from __future__ import annotations

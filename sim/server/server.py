@@ -6,10 +6,10 @@ is authenticated and checked: :mod:`sim.server.requests`):
 - ``world/register``: ``RegisterRequest(want)`` -> ``RegisterReply(robot_id)``: the lowest
   free robot id of the scenario (or ``want`` if it is free); who may claim or drive which
   robot, and how long: :mod:`sim.server.bindings`.
-- ``world/robot/{id}/camera``: ``CameraRequest(yaw)`` -> ``CameraReply`` (PNG). Declared
-  not complete: where render workers serve a robot's camera (:mod:`sim.server.render_worker`,
-  complete queryables), a best-matching query goes to one of them, and to the world
-  only when none is left.
+- ``world/robot/{id}/camera``: ``CameraRequest(yaw)`` -> ``CameraReply`` (raw pixels or
+  PNG: ``--camera-encoding``). Declared not complete: where render workers serve a
+  robot's camera (:mod:`sim.server.render_worker`, complete queryables), a best-matching
+  query goes to one of them, and to the world only when none is left.
 - ``world/scenario``: ``ScenarioRequest`` -> ``ScenarioReply`` (the scenario as JSON, for
   render workers building their copy of the room; secure: to the ``render`` key only).
 - ``world/robot/{id}/walk`` / ``turn``: ``WalkRequest`` (a walk, or a sidestep with

@@ -19,7 +19,7 @@ Writes ``render_bench.json`` and ``render_bench.png`` into ``--out`` if given.
 
 ``--renderer`` and ``--camera-encoding`` are passed to the world and the workers
 (:mod:`sim.camera.renderer`, :mod:`agent.wire.picture`). With
-``--in-process`` it instead times ``World.render`` itself, no processes, no PNG, no bus:
+``--in-process`` it instead times ``World.render`` itself, no processes, no encoding, no bus:
 for each renderer of ``--renderers`` and each fleet size of ``--fleets`` it draws
 ``--frames`` pictures (observers and head yaws cycling, after 2 untimed ones) and prints
 frames per CPU-second of this process (every thread: llvmpipe's too) and per wall
