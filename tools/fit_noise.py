@@ -171,10 +171,10 @@ def reversal_by_view(flip: np.ndarray, view: np.ndarray, overall: float) -> tupl
     the timed masks (``flip`` 0 or 1, nan: none) whose ``view`` falls in the bin, the
     share read the other way round, counted as ``(k + 1) / (n + 2)``; ``overall`` for a
     bin without a mask."""
+    bins = np.array([view_bin(float(v)) for v in view], dtype=object)
     out = []
     for b in range(VIEW_BINS):
-        bins = np.array([view_bin(float(v)) == b for v in view], dtype=bool)
-        mine = flip[bins & np.isfinite(flip)]
+        mine = flip[(bins == b) & np.isfinite(flip)]
         out.append((float(mine.sum()) + 1.0) / (mine.size + 2.0) if mine.size else overall)
     return tuple(out)
 

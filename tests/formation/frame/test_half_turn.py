@@ -26,7 +26,7 @@ from agent.core.formation.frame.poses import (
     evaluate_poses,
 )
 from agent.core.formation.frame.records import NeighborRecord
-from agent.core.perception.sighting_noise import SightingNoise, shipped_noise
+from agent.core.perception.sighting_noise import P_MIN, SightingNoise, shipped_noise
 from tests.formation.pose_fleets import STANCES, sim_layout, unaligned_records
 from tools.corpus import runs_of
 
@@ -122,12 +122,22 @@ def test_masks_without_an_orientation_are_left_out() -> None:
     assert half_turn_test(blind, NOISE, recs).p == 1.0
 
 
-@pytest.mark.parametrize("w180", [0.5, 0.7, 0.0])
+@pytest.mark.parametrize("w180", [0.5, 0.7])
 def test_a_model_whose_masks_cannot_tell_front_from_back_says_nothing(w180: float) -> None:
-    """q ≥ ½: a mask the other way round is no evidence; q = 0 (no measured rate) is not
-    a model the ratio is defined for."""
+    """q = ½: a mask the other way round weighs nothing; q > ½: the four masks across
+    {2, 3} read the other way round count against that split, and no split beats none."""
     poses, recs = _fleet(TRIANGLE, AGAINST_1)
     assert half_turn_test(poses, replace(NOISE, w180=w180), recs).p == 1.0
+
+
+def test_a_rate_of_zero_is_taken_at_the_floor() -> None:
+    """A model whose masks never read the other way round (q = 0) is clipped to P_MIN, so
+    each of the four masks across {2, 3} weighs log((1 − P_MIN)/P_MIN), finite:
+    p = 1/(w·L) = 2 · (P_MIN/(1 − P_MIN))⁴."""
+    poses, recs = _fleet(TRIANGLE, AGAINST_1)
+    got = half_turn_test(poses, replace(NOISE, w180=0.0), recs)
+    assert got.robots == (2, 3)
+    assert got.p == pytest.approx(2.0 * (P_MIN / (1.0 - P_MIN)) ** 4, rel=1e-9)
 
 
 #: rates by reading: a mask read from behind (|θ| ≥ 150°) is the other way round four

@@ -287,12 +287,14 @@ def half_turn_test(
     (toggle the robot that gains most, tie: the lowest id, while one gains), from no
     split and from each robot alone; the best S visited is kept (tie: the first). Masks
     of records without times are left out (their target may have turned half round in
-    its own search; so are those of a record with no stances), and so is every mask when
-    no mask says anything (``noise.w180`` not below ½). Deterministic: the masks' log
-    ratios summed in the order of the measurements, robots in ascending id."""
+    its own search; so are those of a record with no stances). A mask whose rate is ½
+    weighs nothing, one above ½ counts against the split it crosses the other way round;
+    rates are clipped away from 0 and 1 (:meth:`SightingNoise.reversal`), so every weight
+    is finite. Deterministic: the masks' log ratios summed in the order of the
+    measurements, robots in ascending id."""
     ids, n = poses.ids, len(poses.ids)
     none = HalfTurn((), 0.0, 1.0)
-    if n < 2 or not 0.0 < noise.w180 < 0.5:
+    if n < 2:
         return none
     index = {rid: k for k, rid in enumerate(ids)}
     recs = {r.robot_id: r for r in records}
