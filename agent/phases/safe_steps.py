@@ -202,8 +202,11 @@ class SafeSteps:
             by = ""
             if via and waited >= patience(now_rank, cp):  # patience spent: name the blocker
                 blocker = self._blocker(v.blockers[0])
-                phase = self.fleet.peer(blocker).phase if blocker >= 0 else ""
-                jv = jam_verdict(self.ctx.me, blocker, phase, waited, cp.max_polls, long_polls)
+                peer = self.fleet.peer(blocker) if blocker >= 0 else None
+                phase, walked = ("", 0.0) if peer is None else (peer.phase, peer.walked)
+                jv = jam_verdict(
+                    self.ctx.me, blocker, phase, waited, cp.max_polls, long_polls, walked
+                )
                 if jv.action == STOP:
                     self._claim(-1)
                     raise AgentFailure(
@@ -256,6 +259,7 @@ class SafeSteps:
             {i: plan.robot(i).start for i in others},
             {i: plan.robot(i).target for i in others},
             {i: "start" if i in left_out else self.fleet.peer(i).phase for i in others},
+            {i: self.fleet.peer(i).walked for i in others if i not in left_out},
         )
         return blocker_of(seen + rel, places, BLOCKER_MATCH)
 

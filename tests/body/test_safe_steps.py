@@ -128,12 +128,14 @@ def _plan_with_robot_2_on_the_goal() -> Plan:
     )  # fmt: skip
 
 
-def _jammed(world: World, bus: Bus, perception: PerceptionAdapter, phase: str) -> Robot:
+def _jammed(
+    world: World, bus: Bus, perception: PerceptionAdapter, phase: str, walked: float = 0.0
+) -> Robot:
     cfg = AgentConfig(robot_id=1, wave_timeout=1.0)  # 10 polls for a robot not moved yet
     r = parts(WorldBody(world, 1), cfg, perception, bus)
     r.safe_steps.corridor = CorridorParams(poll=0.01, max_polls=3)
     r.course.follow(_plan_with_robot_2_on_the_goal())
-    r.membership.peers[2] = Peer(alive=True, phase=phase, seen_alive=True)
+    r.membership.peers[2] = Peer(alive=True, phase=phase, seen_alive=True, walked=walked)
     return r
 
 
@@ -163,20 +165,25 @@ def test_a_jammed_robot_names_its_blocker_and_goes_on_once_it_yields(
 
 
 @pytest.mark.parametrize(
-    ("phase", "who"),
+    ("phase", "walked", "who"),
     [
-        ("wait", "robot 2 \\(wait\\) in its way for 10 polls"),
+        ("wait", 0.0, "robot 2 \\(wait\\) in its way for 10 polls"),
+        # in its move phase with nothing walked (turning, or waiting for its own way):
+        # still at its start, named, and waited for as long as one not moved yet
+        ("move", 0.0, "robot 2 \\(move\\) in its way for 10 polls"),
+        # once its status says it has walked, it is expected nowhere: one walking past
+        ("move", 0.5, "a NAO not in the plan \\(or one walking\\) in its way for 3 polls"),
         # a robot that holds is expected on its slot, (1.5, 0): the NAO on the goal is
         # none of the plan's, and no yield will come
-        ("hold", "a NAO not in the plan \\(or one walking\\) in its way for 3 polls"),
+        ("hold", 0.0, "a NAO not in the plan \\(or one walking\\) in its way for 3 polls"),
     ],
 )
 def test_a_jammed_robot_stops_naming_its_blocker(
-    blocked: World, bus: Bus, perception: PerceptionAdapter, phase: str, who: str
+    blocked: World, bus: Bus, perception: PerceptionAdapter, phase: str, walked: float, who: str
 ) -> None:
     """It waits the wave timeout's worth of polls for a robot that has not moved, the
     corridor's ``max_polls`` for any other NAO, then stops with a reason naming it."""
-    r = _jammed(blocked, bus, perception, phase)
+    r = _jammed(blocked, bus, perception, phase, walked)
     with pytest.raises(AgentFailure, match=f"robot 1 cannot reach its slot: {who}"):
         r.safe_steps.walk_to(np.array([0.0, 0.75]), lambda p: None)
     assert blocked.locomotion.contacts == 0 and blocked.pose(2)[:2] == (0.0, 0.0)

@@ -12,6 +12,7 @@ from agent.core.formation.waves.jam import (
     FLEET_STOP,
     STOP,
     WAIT,
+    at_start,
     blocker_of,
     expected_places,
     jam_verdict,
@@ -31,12 +32,22 @@ def _shuffled(d: dict, seed: int) -> dict:
 
 
 def test_expected_places_follow_the_phases() -> None:
-    places = expected_places(STARTS, TARGETS, {1: "hold", 2: "move", 3: "wait"})
+    places = expected_places(STARTS, TARGETS, {1: "hold", 2: "move", 3: "wait"}, {2: 0.2})
     assert sorted(places) == [1, 3]  # the walking robot has no expected place
     assert places[1].tolist() == [0.0, 1.0] and places[3].tolist() == [2.0, 0.0]
     # nothing heard yet: still where it started; failed: unknown
     places = expected_places(STARTS, TARGETS, {1: "failed"})
     assert sorted(places) == [2, 3] and places[2].tolist() == [1.0, 0.0]
+
+
+def test_a_robot_in_its_move_phase_that_has_walked_nothing_is_at_its_start() -> None:
+    # robot 2 turns towards its path, or waits for its own way: still where it started
+    places = expected_places(STARTS, TARGETS, {1: "hold", 2: "move", 3: "move"}, {3: 0.4})
+    assert sorted(places) == [1, 2] and places[2].tolist() == [1.0, 0.0]
+    assert blocker_of(np.array([1.1, 0.05]), places, 0.3) == 2
+    assert blocker_of(np.array([2.0, 0.1]), places, 0.3) == -1  # robot 3 walks: unknown
+    assert at_start("move") and at_start("move", 0.0) and at_start("wait", 3.0)
+    assert at_start("") and not at_start("move", 0.01) and not at_start("hold")
 
 
 def test_expected_places_need_the_same_robots() -> None:
@@ -108,6 +119,16 @@ def test_jam_verdict_waits_longer_for_a_robot_that_has_not_moved() -> None:
     unknown = jam_verdict(4, -1, "", 60, 60, 600)
     assert unknown.action == STOP and "a NAO not in the plan" in unknown.reason
     assert jam_verdict(4, -1, "", 59, 60, 600).action == WAIT
+
+
+def test_jam_verdict_waits_long_for_a_moving_robot_still_at_its_start() -> None:
+    # named at its start in its move phase: it walks on once its own way clears
+    assert jam_verdict(4, 2, "move", 60, 60, 600).action == WAIT
+    assert jam_verdict(4, 2, "move", 599, 60, 600, 0.0).action == WAIT
+    v = jam_verdict(4, 2, "move", 600, 60, 600)
+    assert v.action == STOP and "robot 2 (move)" in v.reason
+    # once it has walked, it is one walking past: the short wait
+    assert jam_verdict(4, 2, "move", 60, 60, 600, 0.3).action == STOP
 
 
 def test_jam_verdict_rejects_bad_bounds() -> None:

@@ -13,7 +13,13 @@ from what every agent knows alike, the agreed plan and the statuses each robot p
 1. **Who blocks.** The blocked robot names its blocker (:func:`blocker_of`): the member
    whose expected place (:func:`expected_places`: its start while it has not moved, its
    slot once it holds, none while it walks) is nearest the NAO it sees on its way, within
-   ``tolerance``; -1 if none (a NAO not in the plan, or one walking). It publishes the
+   ``tolerance``; -1 if none (a NAO not in the plan, or one walking). A robot *has not
+   moved* (:func:`at_start`) while its phase is one before walking (:data:`UNMOVED`), and
+   also in its move phase for as long as its status says it has walked nothing of its
+   path (``walked`` 0): it is turning towards its path, or waiting for its own way to
+   clear. (In a dense fleet the NAO on a robot's way is often such a member, itself
+   waiting for its way and walking on a moment later: taken for "a NAO not in the
+   plan", it would stop the robot after ``max_polls``.) It publishes the
    name in its status (``blocked_by``) once its rank-based patience is spent: that claim
    is what every agent then knows.
 2. **Who yields.** A robot that has not moved yet and is named by such a claim starts at
@@ -47,26 +53,38 @@ import numpy as np
 UNMOVED = ("start", "search", "exchange", "agree", "plan", "wait")
 #: phases of a robot that has walked its path and stands on its slot
 HOLDING = ("hold", "march", "done")
+#: the phase of a robot walking its path (it stands at its start until it has walked)
+MOVING = "move"
 #: the prefix of a stop caused by another member's failure (rule 4)
 FLEET_STOP = "formation incomplete: "
 WAIT, STOP = "wait", "stop"
+
+
+def at_start(phase: str, walked: float = 0.0) -> bool:
+    """Whether a robot whose last status gave ``phase`` and ``walked`` (m along its
+    path) has not moved yet (rule 1): a phase before walking (:data:`UNMOVED`), nothing
+    heard yet (``""``), or its move phase with nothing walked."""
+    return phase in UNMOVED or phase == "" or (phase == MOVING and not walked > 0.0)
 
 
 def expected_places(
     starts: Mapping[int, np.ndarray],
     targets: Mapping[int, np.ndarray],
     phases: Mapping[int, str],
+    walked: Mapping[int, float] | None = None,
 ) -> dict[int, np.ndarray]:
-    """Where each robot of the plan is expected to stand (rule 1): its start while its
-    phase is in :data:`UNMOVED` (or unknown: nothing heard yet), its target while in
-    :data:`HOLDING`; robots walking, failed or of an unknown phase are left out. Ids
-    ascending; ``ValueError`` when the starts and targets name different robots."""
+    """Where each robot of the plan is expected to stand (rule 1): its start while it has
+    not moved (:func:`at_start`, ``walked``: how far each robot's last status says it has
+    walked along its path, 0 when not given), its target while in :data:`HOLDING`; robots
+    walking, failed or of an unknown phase are left out. Ids ascending; ``ValueError``
+    when the starts and targets name different robots."""
     if set(starts) != set(targets):
         raise ValueError("starts and targets must name the same robots")
+    walked = {} if walked is None else walked
     out: dict[int, np.ndarray] = {}
     for rid in sorted(starts):
         phase = phases.get(rid, "")
-        if phase in UNMOVED or phase == "":
+        if at_start(phase, walked.get(rid, 0.0)):
             out[rid] = _point(starts[rid], f"start of {rid}")
         elif phase in HOLDING:
             out[rid] = _point(targets[rid], f"target of {rid}")
@@ -147,16 +165,18 @@ def jam_verdict(
     polls: int,
     max_polls: int,
     long_polls: int,
+    blocker_walked: float = 0.0,
 ) -> JamVerdict:
     """Rule 3: robot ``me``, blocked for ``polls`` polls by ``blocker`` (-1: a NAO not
-    named) whose last phase is ``blocker_phase``, waits or stops. ``long_polls`` bounds
-    the wait for a blocker that has not moved yet, ``max_polls`` every other."""
+    named) whose last status gave ``blocker_phase`` and ``blocker_walked``, waits or
+    stops. ``long_polls`` bounds the wait for a blocker that has not moved yet
+    (:func:`at_start`), ``max_polls`` every other."""
     if polls < 0 or max_polls < 0 or long_polls < max_polls:
         raise ValueError(
             f"need polls >= 0 and 0 <= max_polls <= long_polls, got {polls}, {max_polls}, "
             f"{long_polls}"
         )
-    unmoved = blocker >= 0 and (blocker_phase in UNMOVED or blocker_phase == "")
+    unmoved = blocker >= 0 and at_start(blocker_phase, blocker_walked)
     limit = long_polls if unmoved else max_polls
     if polls < limit:
         return JamVerdict(WAIT)
