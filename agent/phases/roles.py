@@ -126,7 +126,11 @@ class Stepper(Protocol):
     their planned corridors)."""
 
     def walk_to(
-        self, goal: np.ndarray, progress: Callable[[float], None], backward_within: float = 0.0
+        self,
+        goal: np.ndarray,
+        progress: Callable[[float], None],
+        backward_within: float = 0.0,
+        gate: Callable[[float], None] | None = None,
     ) -> None: ...
 
     def forget(self) -> None: ...

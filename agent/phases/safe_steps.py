@@ -54,6 +54,7 @@ from agent.core.control.corridor import (
 )
 from agent.core.formation.waves.jam import (
     HOLDING,
+    MOVING,
     STOP,
     UNMOVED,
     blocker_of,
@@ -92,11 +93,17 @@ class SafeSteps:
         self.seen = []
 
     def walk_to(
-        self, goal: np.ndarray, progress: Callable[[float], None], backward_within: float = 0.0
+        self,
+        goal: np.ndarray,
+        progress: Callable[[float], None],
+        backward_within: float = 0.0,
+        gate: Callable[[float], None] | None = None,
     ) -> None:
         """Distance control to ``goal`` (fixed frame, m) from the dead-reckoned position,
-        each step checked first (:meth:`clear_way`): a blocked step waits, then detours by
-        tangent steps round the blocker until the way to the goal is clear again."""
+        each step checked first: ``gate(walk)`` before a step forward (it returns once the
+        robot may walk it: agent/phases/waves.py), then :meth:`clear_way` (a blocked step
+        waits, then detours by tangent steps round the blocker until the way to the goal
+        is clear again)."""
         b = self.ctx.beliefs
         total = float(np.hypot(*(goal - b.position))) or 1.0
         cp = self.corridor
@@ -124,6 +131,8 @@ class SafeSteps:
                 self.motion.rotate(
                     leg.turn, STEP_GAINS if abs(leg.turn) < math.radians(15) else PAPER_GAINS
                 )
+            if gate is not None and leg.walk > 0:
+                gate(leg.walk)
             v = self.clear_way(leg.walk, goal=goal, ahead=ahead)
             if v.action == VIA:
                 side = v.side if self._via_step(v) else 0
@@ -202,11 +211,8 @@ class SafeSteps:
             by = ""
             if via and waited >= patience(now_rank, cp):  # patience spent: name the blocker
                 blocker = self._blocker(v.blockers[0])
-                peer = self.fleet.peer(blocker) if blocker >= 0 else None
-                phase, walked = ("", 0.0) if peer is None else (peer.phase, peer.walked)
-                jv = jam_verdict(
-                    self.ctx.me, blocker, phase, waited, cp.max_polls, long_polls, walked
-                )
+                phase = self.fleet.peer(blocker).phase if blocker >= 0 else ""
+                jv = jam_verdict(self.ctx.me, blocker, phase, waited, cp.max_polls, long_polls)
                 if jv.action == STOP:
                     self._claim(-1)
                     raise AgentFailure(
@@ -260,15 +266,16 @@ class SafeSteps:
             {i: plan.robot(i).target for i in others},
             {i: "start" if i in left_out else self.fleet.peer(i).phase for i in others},
             {i: self.fleet.peer(i).walked for i in others if i not in left_out},
+            {i: plan.robot(i).path() for i in others},
         )
         return blocker_of(seen + rel, places, BLOCKER_MATCH)
 
     def _stands(self, blocker: int) -> bool:
         """Whether waiting for member ``blocker`` to walk on is no use: it holds its slot,
-        the plan left it out (it stands at its start), or it has not moved and waits,
-        through the plan's ``after`` lists, for this robot (it moves only once this robot
-        is past it, or yields once claimed: jam.py rule 2); False for -1 (no member
-        named)."""
+        the plan left it out (it stands at its start), or it has not moved, or holds on its
+        way, and waits, through the plan's ``after`` lists, for this robot (it moves only
+        once this robot is past it, or yields once claimed: jam.py rule 2); False for -1
+        (no member named)."""
         plan = self.course.planned
         if blocker < 0 or plan is None:
             return False
@@ -276,7 +283,7 @@ class SafeSteps:
         if blocker in plan.excluded or phase in HOLDING:
             return True
         after = {int(r.robot_id): tuple(int(j) for j in r.after) for r in plan.robots}
-        return phase in UNMOVED and waits_for(after, blocker, self.ctx.me)
+        return (phase in UNMOVED or phase == MOVING) and waits_for(after, blocker, self.ctx.me)
 
     def _claim(self, blocker: int) -> None:
         """Publish that this robot's way is blocked by ``blocker`` (-1: no longer)."""

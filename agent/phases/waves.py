@@ -8,19 +8,22 @@ PLAN  the formation core on the agreed records (identical on every agent): this
       fleet's check left out stands still and stops with the reason. From then on the agreed
       record set is served (agent/phases/record_sets.py) and only the agreed sessions
       count (agent/phases/membership.py).
-WAIT  for every robot of this robot's ``after`` list to walk past its release point
-      (the plan's ``after_at``: that robot's published ``walked`` along its path, or it
-      holds its slot, so that it need not wait for the whole walk; agent/core/formation/waves/release.py),
-      leader first (agent/core/formation/waves/execution.py): an event, never a time; but yield (start
-      now) when the robots it still waits for are blocked by it, or wait for one that is (dense
-      fleets never jam for good, agent/core/formation/waves/jam.py rule 2); stop with the fleet's reason
-      once a member of the plan has failed (rule 4).
+WAIT  until its first step's gate is open: every robot it waits for (the plan's ``after``
+      lists, agent/core/formation/waves/execution.py) whose path comes near that step is
+      past the last point of its path near it (agent/core/formation/waves/gates.py: that
+      robot's published ``walked`` along its path, or it holds its slot), leader first:
+      an event, never a time; but yield (start now) when the robots it still waits for are
+      blocked by it, or wait for one that is (dense fleets never jam for good,
+      agent/core/formation/waves/jam.py rule 2); stop with the fleet's reason once a member
+      of the plan has failed (rule 4).
 MOVE  rotation control to face each leg's goal, distance control in 20 cm steps with
-      the heading corrected after each (4.2, 5.2.2), every step checked first
-      (agent/phases/safe_steps.py), then the turn to the pyramid axis. A robot restarted
-      mid-move (a crash) goes on from its journaled leg. While it walks it publishes
-      how far along its planned path it is (``walked``, :func:`~agent.core.formation.waves.release.walked_along`), at once
-      when it passes a release point that a robot waits for.
+      the heading corrected after each (4.2, 5.2.2), every step checked first: its gate
+      (held at, as at the start, until the robots it waits for are past the stretch; the
+      same yield and stop) and its corridor (agent/phases/safe_steps.py); then the turn to
+      the pyramid axis. A robot restarted mid-move (a crash) goes on from its journaled
+      leg. While it walks it publishes how far along its planned path it is (``walked``,
+      :func:`~agent.core.formation.waves.release.walked_along`), at once when it passes
+      a milestone of its path that robots gated on it wait for (gates.py).
 
 The agreed plan and this robot's way through it (the leg it is on, the pyramid axis it
 faces at the end) are the :class:`Itinerary`'s, which the waves write and the hold, the
@@ -47,10 +50,11 @@ from concurrent.futures import TimeoutError as Pending
 from typing import TypeVar
 
 from agent.core.agreement import Decision
-from agent.core.control import PAPER_GAINS, wrap_pi
+from agent.core.control import PAPER_GAINS, STEP_LENGTH, wrap_pi
 from agent.core.formation.plan import Plan, first_shape
 from agent.core.formation.shape.spec import Shape
 from agent.core.formation.view.own_frame import in_own_frame
+from agent.core.formation.waves.gates import STEP_SLACK, Gates, milestones, predecessors
 from agent.core.formation.waves.jam import yields
 from agent.core.formation.waves.release import walked_along
 from agent.phases.context import NORTH, AgentFailure, Context
@@ -191,6 +195,8 @@ class Waves:
         self.motion = motion
         self.steps = steps
         self.course = course
+        #: this robot's gates in the plan of the digest they were made for
+        self._gates: tuple[str, Gates | None] = ("", None)
 
     def make_plan(self, decision: Decision[NeighborRecordMsg]) -> Plan:
         """The plan of the agreed ``decision``; AgentFailure if the core refuses it."""
@@ -218,56 +224,95 @@ class Waves:
         report.status(Phase.PLAN, 1.0, f"wave {wave}, leader {plan.leader}", force=True)
         return plan
 
-    def wait_for_earlier_waves(self) -> None:
-        """Start once every robot of this robot's ``after`` list holds its slot (the plan's
-        execution rule, ``agent/core/formation/waves/execution.py``; the leader's list is empty),
-        or once the robots still pending are jammed on this one (module docstring)."""
+    def _rows(self) -> tuple[tuple[int, ...], list[list[int]], list[list[float]]]:
+        """The plan's ids by row, its ``after`` lists and release points by row (a robot
+        named without release points must hold its slot: its whole length)."""
+        plan = self.course.plan
+        ids = plan.ids
+        row = {rid: k for k, rid in enumerate(ids)}
+        after = [[row[int(j)] for j in r.after if int(j) in row] for r in plan.robots]
+        at = [
+            [float(x) for j, x in zip(r.after, r.after_at, strict=True) if int(j) in row]
+            if len(r.after_at) == len(r.after)
+            else [plan.robot(int(j)).length() for j in r.after if int(j) in row]
+            for r in plan.robots
+        ]
+        return ids, after, at
+
+    def gates(self) -> Gates:
+        """This robot's gates in the agreed plan (own frame; made once per plan)."""
+        plan = self.course.plan
+        key, made = self._gates
+        if made is None or key != plan.digest:
+            ids, after, at = self._rows()
+            clearance = 2.0 * self.ctx.cfg.radius
+            made = Gates(plan.paths(), after, ids.index(self.ctx.me), clearance, at)
+            self._gates = (str(plan.digest), made)
+        return made
+
+    def _pending(self, y0: float, y1: float) -> list[int]:
+        """The members this robot still waits for before it walks the stretch ``[y0, y1]``
+        of its path (gates.py); AgentFailure when one of them left or failed."""
+        plan = self.course.plan
+        members = set(self.ctx.formation.members(plan))
+        ids = plan.ids
+        pending = []
+        for row, at in self.gates().needs(y0, y1):
+            i = ids[row]
+            if i not in members or i == self.ctx.me:
+                continue
+            peer = self.fleet.peer(i)
+            if on_plan(peer, (Phase.HOLD, Phase.MARCH, Phase.DONE), self.course.digest):
+                continue
+            same_plan = peer.plan_digest == self.course.digest
+            if peer.phase == Phase.MOVE and _released(peer.walked, at, same_plan):
+                continue
+            if peer.seen_alive and not peer.alive:
+                raise AgentFailure(f"robot {i} of wave {plan.robot(i).wave} left before holding")
+            if peer.phase == Phase.FAILED:
+                raise AgentFailure(f"robot {i} of wave {plan.robot(i).wave} failed")
+            pending.append(i)
+        return pending
+
+    def _until_open(self, y0: float, y1: float, phase: Phase, progress: float) -> None:
+        """Hold until the gate of the stretch ``[y0, y1]`` is open (module docstring: WAIT,
+        and before each step of MOVE), or the robots still pending are jammed on this one
+        (yield); AgentFailure with the fleet's reason, or when they do not pass in time."""
         ctx, report = self.ctx, self.ctx.report
         plan = self.course.plan
         members = set(ctx.formation.members(plan))
-        mine = plan.robot(ctx.me)
-        earlier = sorted(int(i) for i in mine.after if int(i) in members and int(i) != ctx.me)
-        # release points (plan arc lengths); none given: each must hold its slot
-        at = (
-            {int(i): float(x) for i, x in zip(mine.after, mine.after_at, strict=True)}
-            if len(mine.after_at) == len(mine.after)
-            else {}
-        )
         after = {int(r.robot_id): tuple(int(j) for j in r.after) for r in plan.robots}
         deadline = ctx.clock() + ctx.cfg.wave_timeout
+        held = False
         self.fleet.pump()
         while True:
             why = self.fleet.fleet_stop(plan)
             if why:
                 raise AgentFailure(why)
-            pending = []
-            for i in earlier:
-                peer = self.fleet.peer(i)
-                if on_plan(peer, (Phase.HOLD, Phase.MARCH, Phase.DONE), self.course.digest):
-                    continue
-                same_plan = peer.plan_digest == self.course.digest
-                released = i in at and _released(peer.walked, at[i], same_plan)
-                if peer.phase == Phase.MOVE and released:
-                    continue
-                if peer.seen_alive and not peer.alive:
-                    raise AgentFailure(
-                        f"robot {i} of wave {plan.robot(i).wave} left before holding"
-                    )
-                if peer.phase == Phase.FAILED:
-                    raise AgentFailure(f"robot {i} of wave {plan.robot(i).wave} failed")
-                pending.append(i)
+            pending = self._pending(y0, y1)
             if not pending:
                 return
             claims = {i: self.fleet.peer(i).blocked_by for i in sorted(members - {ctx.me})}
             to = yields(after, ctx.me, pending, claims)
             if to:
-                log.info("yielding to robot(s) %s, blocked by this robot: starting now", to)
-                report.status(Phase.WAIT, 1.0, f"yielding to robot(s) {to}", force=True)
+                log.info("yielding to robot(s) %s, blocked by this robot: going on", to)
+                report.status(phase, progress, f"yielding to robot(s) {to}", force=True)
                 return
             if ctx.clock() > deadline:
-                raise AgentFailure(f"robots {pending} of earlier waves did not hold in time")
-            report.status(Phase.WAIT, 0.0, f"waiting for wave(s) of {pending}")
+                raise AgentFailure(f"robots {pending} of earlier waves did not pass in time")
+            if phase == Phase.WAIT:
+                report.status(phase, 0.0, f"waiting for wave(s) of {pending}")
+            else:  # at once: those gated on this robot place it by its progress
+                detail = f"holding at {y0:.2f} m of the path for robot(s) {pending}"
+                report.status(phase, progress, detail, force=not held)
+                held = True
             self.fleet.wait_until(min(deadline, report.due()))  # or news
+
+    def wait_for_earlier_waves(self) -> None:
+        """Start once the gate of the first step is open (module docstring; the plan's
+        execution rule, ``agent/core/formation/waves/gates.py``; the leader waits for
+        nobody), or once the robots still pending are jammed on this one."""
+        self._until_open(0.0, STEP_LENGTH + STEP_SLACK, Phase.WAIT, 0.0)
 
     def move(self) -> None:
         """Walk the plan's legs from the journaled one on, then face the pyramid axis."""
@@ -277,13 +322,14 @@ class Waves:
         self.steps.forget()  # and the NAOs seen before are elsewhere now
         goals, final_heading = ctx.formation.goals(plan, ctx.me)
         course.face(final_heading)
-        # the release points others wait for on this robot's path: passing one is news
-        releases = sorted(
-            x
-            for r in plan.robots
-            if len(r.after_at) == len(r.after)
-            for i, x in zip(r.after, r.after_at, strict=True)
-            if int(i) == ctx.me
+        # the milestones of this robot's path that robots gated on it wait for: passing
+        # one is news (gates.py)
+        ids, after, at = self._rows()
+        me = ids.index(ctx.me)
+        gated = [b for b in range(len(ids)) if me in predecessors(after, b)]
+        releases = milestones(
+            plan.robot(ctx.me).length() if gated else 0.0,
+            [x for b in gated for j, x in zip(after[b], at[b], strict=True) if j == me],
         )
         report.show_walked(walked_along(goals, course.leg, ctx.beliefs.position))
         report.status(Phase.MOVE, 0.0, f"{len(goals)} leg(s)")
@@ -300,6 +346,10 @@ class Waves:
                 news = any(before < x <= walked for x in releases)
                 report.status(Phase.MOVE, (k + p) / n, f"leg {k + 1}/{n}", force=news)
 
-            self.steps.walk_to(goal, progress)
+            def gate(walk: float, k: int = k) -> None:
+                y0 = report.figures.walked
+                self._until_open(y0, y0 + abs(walk) + STEP_SLACK, Phase.MOVE, k / n)
+
+            self.steps.walk_to(goal, progress, gate=gate)
         turn = wrap_pi(final_heading - ctx.beliefs.heading)
         self.motion.rotate(turn, PAPER_GAINS, "turn to the formation axis")

@@ -318,8 +318,14 @@ class FakeStepper:
         self.forgotten = 0
 
     def walk_to(
-        self, goal: np.ndarray, progress: Callable[[float], None], backward_within: float = 0.0
+        self,
+        goal: np.ndarray,
+        progress: Callable[[float], None],
+        backward_within: float = 0.0,
+        gate: Callable[[float], None] | None = None,
     ) -> None:
+        if gate is not None:  # the whole leg as one step
+            gate(float(np.hypot(*(np.asarray(goal) - self.beliefs.position))))
         self.goals.append(np.asarray(goal, dtype=np.float64))
         self.beliefs.position = np.asarray(goal, dtype=np.float64).copy()
         progress(1.0)

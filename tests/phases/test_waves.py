@@ -146,7 +146,7 @@ def test_an_earlier_wave_done_on_another_plan_does_not_hold_this_one() -> None:
     r = waiting((1, 2))
     for i in (1, 2):
         r.fleet.peers[i] = Peer(alive=True, phase="done", seen_alive=True, plan_digest="cd" * 32)
-    with pytest.raises(AgentFailure, match=r"robots \[1, 2\] of earlier waves did not hold"):
+    with pytest.raises(AgentFailure, match=r"robots \[1, 2\] of earlier waves did not pass"):
         r.waves.wait_for_earlier_waves()
     for i in (1, 2):
         r.fleet.peers[i] = Peer(alive=True, phase="hold", seen_alive=True, plan_digest="ab" * 32)
@@ -193,7 +193,7 @@ def test_a_robot_blocked_by_us_makes_us_yield() -> None:
     assert (said.phase, said.detail) == ("wait", "yielding to robot(s) [1]")
     # the claim of robot 1 on somebody else: we wait our turn
     r.fleet.peers[1] = Peer(alive=True, phase="move", seen_alive=True, blocked_by=2)
-    with pytest.raises(AgentFailure, match=r"robots \[1\] of earlier waves did not hold"):
+    with pytest.raises(AgentFailure, match=r"robots \[1\] of earlier waves did not pass"):
         r.waves.wait_for_earlier_waves()
 
 
@@ -201,7 +201,7 @@ def test_no_yield_while_an_independent_robot_is_pending() -> None:
     r = waiting((1, 2))
     r.fleet.peers[1] = Peer(alive=True, phase="move", seen_alive=True, blocked_by=3)
     r.fleet.peers[2] = Peer(alive=True, phase="move", seen_alive=True)
-    with pytest.raises(AgentFailure, match=r"robots \[1, 2\] of earlier waves did not hold"):
+    with pytest.raises(AgentFailure, match=r"robots \[1, 2\] of earlier waves did not pass"):
         r.waves.wait_for_earlier_waves()
 
 
@@ -229,7 +229,7 @@ def test_a_robot_short_of_its_release_point_is_waited_for(
     r.fleet.peers[1] = Peer(
         alive=True, phase=phase, seen_alive=True, plan_digest=digest, walked=walked
     )
-    with pytest.raises(AgentFailure, match=r"robots \[1\] of earlier waves did not hold"):
+    with pytest.raises(AgentFailure, match=r"robots \[1\] of earlier waves did not pass"):
         r.waves.wait_for_earlier_waves()
 
 
@@ -238,7 +238,7 @@ def test_earlier_wave_that_never_holds_times_out() -> None:
     r.fleet.peers[1] = Peer(alive=True, phase="move", seen_alive=True)
     r.fleet.peers[2] = Peer(alive=True, phase="hold", seen_alive=True)
     start = r.ctx.clock()
-    with pytest.raises(AgentFailure, match=r"robots \[1\] of earlier waves did not hold"):
+    with pytest.raises(AgentFailure, match=r"robots \[1\] of earlier waves did not pass"):
         r.waves.wait_for_earlier_waves()
     assert r.ctx.clock() - start > r.ctx.cfg.wave_timeout  # waited the whole timeout
     said = r.ctx.bus.statuses()[-1]  # type: ignore[attr-defined]

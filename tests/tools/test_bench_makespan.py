@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from scipy.spatial.distance import pdist
 
+from agent.core.formation.waves.gates import gated_makespan
 from tools.bench import makespan as mk
 
 
@@ -43,10 +44,10 @@ def test_one_fleet_measured(tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
     r = mk.evaluate("nao", 5, 0, "line")
     assert r["safe"] and r["lb"] <= r["capt"] + 1e-9 and r["makespan"] >= r["lb"] - 1e-9
     assert r["ms_capt"] == pytest.approx(r["makespan"] / r["capt"])
-    # the critical chain adds up to the makespan, its last robot walks its whole path
-    assert sum(x for _, _, x in r["chain"]) == pytest.approx(r["makespan"])
-    # holding only where needed never ends later than waiting at the start
-    assert r["gated"] <= r["makespan"] + 1e-9
+    # the critical chain adds up to the start-only makespan, its last robot walks its
+    # whole path; holding only where needed never ends later than waiting at the start
+    assert sum(x for _, _, x in r["chain"]) == pytest.approx(r["start_only"])
+    assert r["makespan"] <= r["start_only"] + 1e-9
     assert r["chain"][-1][1] == r["chain"][-1][2]
     rows = tmp_path / "rows.jsonl"
     assert mk.main(["--set", "held-out", "--families", "nao", "--sizes", "4", "--seeds", "1",
@@ -58,18 +59,16 @@ def test_one_fleet_measured(tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
     assert "shape wedge" in out and "all" in out and "unsafe: none" in out
 
 
-def test_gated_makespan_holds_only_where_the_paths_meet() -> None:
+def test_the_makespan_is_the_gated_one() -> None:
     # robot 1 crosses robot 0's path at right angles, both at arc 10, and waits for it
-    # (start-only: until 0 is 2r past the crossing, then 1 walks its 20 m: 30.4);
-    # gated, 1 walks at once and holds 2r/sqrt(2) before 0's path until 0 is as far past
-    # the crossing (the latest of the points whose distance is 2r), then walks on: it
-    # ends 2r·sqrt(2) after its 20 m
+    # (start-only: until 0 is 2r past the crossing, then 1 walks its 20 m: 30.4); gated,
+    # 1 walks at once and holds before 0's path until 0 is past the crossing's milestone
     paths = [np.array([[0.0, 0.0], [20.0, 0.0]]), np.array([[10.0, -10.0], [10.0, 10.0]])]
     after, waves = [[], [0]], np.array([0, 1])
-    gated = mk.gated_makespan(paths, after, waves, 0.4, step=0.01)
-    assert gated == pytest.approx(20.0 + 0.4 * math.sqrt(2.0), abs=0.03)
+    gated = gated_makespan(paths, after, waves, 0.4, 0.2, [[], [10.4]])
+    assert 20.0 < gated <= 20.0 + 0.5 + 0.4 * math.sqrt(2.0) + 0.2 + 1e-9
     # nobody to wait for: each robot's own length
-    assert mk.gated_makespan(paths, [[], []], np.array([0, 0]), 0.4) == pytest.approx(20.0)
+    assert gated_makespan(paths, [[], []], np.array([0, 0]), 0.4, 0.2) == pytest.approx(20.0)
 
 
 @pytest.mark.parametrize(

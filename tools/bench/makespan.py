@@ -20,19 +20,21 @@ the held-out set's families) is a second held-out set, run only once, after a ch
 the planner is made, and reported as it comes out.
 
 Per fleet (one line each, ``--json FILE`` appends the rows): the plan of ``default``
-(``plan_from_positions``), its makespan under the dependency rule with the plan's release
-points (what agents execute; unit walking speed, so metres), CAPT's (the longest straight
-path of the min-sum-of-squares assignment to the shape's centred slots), the lower bound
-B* (the bottleneck assignment's longest straight path to the same slots, ÷ the walking
-speed: no assignment to these slots finishes sooner), the ratios ``ms/capt`` and ``ms/lb``,
-``safe`` (the wave checker and the dependency checker, with the release points and
-waiting until the robots waited for hold their slots: timing-robust 2·radius clearance),
-the plan's seconds, its critical chain (:func:`critical_chain`: who waits for
-whom along the path that ends last; ``--chain`` prints it), and ``gated/capt``: the
-makespan the same plan would reach if each robot walked at once and held only where its
-path meets the rest of a robot it waits for (:func:`gated_makespan`; the agents wait at
-their start instead). The summary gives per family and over the set the median and
-worst ``ms/capt`` and ``gated/capt``, and the fleets that failed the clearance.
+(``plan_from_positions``), its makespan as agents execute it (each robot walks at once
+and holds before a step until its gates are open:
+:func:`agent.core.formation.waves.gates.gated_makespan`; unit walking speed, so
+metres), CAPT's (the longest straight path of the min-sum-of-squares assignment to the
+shape's centred slots), the lower bound B* (the bottleneck assignment's longest straight
+path to the same slots, ÷ the walking speed: no assignment to these slots finishes
+sooner), the ratios ``ms/capt`` and ``ms/lb``, ``safe`` (the wave checker and the
+dependency checker, with the release points and waiting until the robots waited for
+hold their slots: timing-robust 2·radius clearance), the plan's seconds, its critical
+chain under the start-only rule (:func:`critical_chain`: who waits for whom along the
+path that ends last; ``--chain`` prints it), and ``start/capt``: the makespan if every
+robot held at its start until the robots it waits for are past their release points
+(the dependency rule of :mod:`agent.core.formation.waves.execution`). The summary gives
+per family and over the set the median and worst ``ms/capt`` and ``start/capt``, and the
+fleets that failed the clearance.
 
 The runs are single-process and CPU-light but a plan of 100 robots in two blobs takes up
 to a minute on a loaded machine: ``--families``, ``--sizes`` and ``--shapes`` cut a set
@@ -52,6 +54,7 @@ from typing import Any
 
 import numpy as np
 
+from agent.core.control import STEP_LENGTH
 from agent.core.formation.params import D_E as D_NAO
 from agent.core.formation.params import PHI_E_DEG, PlanParams
 from agent.core.formation.paths.assignment import min_bottleneck
@@ -66,11 +69,9 @@ from agent.core.formation.waves.execution import (
     path_lengths,
     release_points,
 )
+from agent.core.formation.waves.gates import gated_makespan
 from agent.core.formation.waves.safety import check_safety
 from tools.bench.plan import _rows_after, _rows_at, nao_group
-
-#: The arc step (m) of :func:`gated_makespan`'s samples.
-GATE_STEP = 0.1
 
 #: The paper's simulation spacing (m) of every family but ``nao``.
 D_SIM = 2.0
@@ -170,8 +171,8 @@ def evaluate(family: str, n: int, seed: int, shape: str, radius: float = 0.2) ->
     slots = frame.to_common(placed(params.shape, n, d_e, PHI_E, frame.to_pyramid(s_c), "centroid"))
     capt = capt_makespan(s_c, slots)
     lb = min_bottleneck(s_c, slots)
-    ms = _makespan(plan)
-    gated = gated_makespan(plan.paths(), _rows_after(plan), plan.wave_of(), 2.0 * radius)
+    ms = _makespan(plan, radius)
+    start_only = _start_only(plan)
     return {
         "family": family,
         "n": n,
@@ -186,21 +187,28 @@ def evaluate(family: str, n: int, seed: int, shape: str, radius: float = 0.2) ->
         "ms_capt": ms / capt if capt > 1e-9 else 1.0,
         "ms_lb": ms / lb if lb > 1e-9 else 1.0,
         "lb_capt": lb / capt if capt > 1e-9 else 1.0,
-        "gated": gated,
-        "gated_capt": gated / capt if capt > 1e-9 else 1.0,
+        "start_only": start_only,
+        "start_capt": start_only / capt if capt > 1e-9 else 1.0,
         "safe": _safe(plan, radius),
         "plan_s": dt,
         "chain": critical_chain(plan),
     }
 
 
-def _makespan(plan: Plan) -> float:
+def _makespan(plan: Plan, radius: float) -> float:
+    """The plan's makespan as agents execute it: walked at once, held at its gates."""
+    return gated_makespan(plan.paths(), _rows_after(plan), plan.wave_of(), 2.0 * radius,
+                          STEP_LENGTH, _rows_at(plan))  # fmt: skip
+
+
+def _start_only(plan: Plan) -> float:
+    """The makespan if every robot held at its start until its release points."""
     lengths = path_lengths(plan.paths())
     return dependency_makespan(lengths, _rows_after(plan), plan.wave_of(), _rows_at(plan))
 
 
 def critical_chain(plan: Plan) -> list[tuple[int, float, float]]:
-    """What the makespan is made of: from the first robot to start to the last to hold,
+    """What the start-only makespan is made of: from the first robot to start to the last to hold,
     per robot of the waiting chain (robot id, its path length m, how far along it the
     next robot of the chain waits for it: its release point; the last robot: its whole
     length). The makespan is the sum of the last column (unit speed)."""
@@ -216,51 +224,6 @@ def critical_chain(plan: Plan) -> list[tuple[int, float, float]]:
         chain.append((plan.robots[j].robot_id, float(lengths[j]), float(rel[i][k])))
         i = j
     return chain[::-1]
-
-
-def _samples(path: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
-    """(arc lengths, points) every ``step`` m along a polyline, its end included."""
-    seg = np.diff(path, axis=0)
-    cum = np.r_[0.0, np.cumsum(np.hypot(*seg.T))]
-    s = np.unique(np.r_[np.arange(0.0, cum[-1], step), cum[-1]])
-    k = np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(seg) - 1)
-    span = np.where(cum[k + 1] > cum[k], cum[k + 1] - cum[k], 1.0)
-    return s, path[k] + ((s - cum[k]) / span)[:, None] * seg[k]
-
-
-def gated_makespan(
-    paths: Sequence[np.ndarray],
-    after: Sequence[Sequence[int]],
-    waves: np.ndarray,
-    clearance: float,
-    step: float = GATE_STEP,
-) -> float:
-    """The makespan of the same paths and ``after`` lists (unit speed) if every robot
-    walked at once and only held where needed: it may stand at arc y of its path once
-    every robot it waits for is past the last point of its own path within
-    ``clearance`` of that point (then that robot never comes near it again, whatever
-    the speeds). Not what agents execute (they wait at their start, :mod:`execution`):
-    the bound such progress-gated execution would reach on these plans. Paths are
-    sampled every ``step`` m and points count as close within clearance + step, so the
-    estimate errs late."""
-    reach = clearance + step
-    samples = [_samples(np.asarray(p, dtype=np.float64), step) for p in paths]
-    times: list[np.ndarray] = [np.zeros(0)] * len(paths)
-    for v in np.argsort(np.asarray(waves), kind="stable").tolist():
-        sv, pv = samples[v]
-        gate = np.full(sv.size, -math.inf)
-        for u in after[v]:
-            su, pu = samples[u]
-            close = (
-                np.hypot(pv[:, None, 0] - pu[None, :, 0], pv[:, None, 1] - pu[None, :, 1]) < reach
-            )
-            hit = close.any(axis=1)
-            last = su.size - 1 - np.argmax(close[:, ::-1], axis=1)
-            past = times[u][np.minimum(last + 1, su.size - 1)]  # u at its next sample
-            gate = np.maximum(gate, np.where(hit, past, -math.inf))
-        t = np.maximum.accumulate(gate - sv) + sv  # walk on, hold at each gate
-        times[v] = np.maximum(t, sv)
-    return float(max((t[-1] for t in times), default=0.0))
 
 
 def _safe(plan: Plan, radius: float) -> bool:
@@ -288,15 +251,15 @@ def summary(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
 
 def _stats(sel: Sequence[dict[str, Any]]) -> dict[str, Any]:
     worst = max(sel, key=lambda r: r["ms_capt"])
-    gated = [float(r["gated_capt"]) for r in sel if "gated_capt" in r]
+    start = [float(r["start_capt"]) for r in sel if "start_capt" in r]
     return {
         "fleets": len(sel),
         "median": float(np.median([r["ms_capt"] for r in sel])),
         "worst": float(worst["ms_capt"]),
         "worst_fleet": f"{worst['family']} n={worst['n']} seed={worst['seed']}",
         "median_ms_lb": float(np.median([r["ms_lb"] for r in sel])),
-        "gated_median": float(np.median(gated)) if gated else math.nan,
-        "gated_worst": max(gated, default=math.nan),
+        "start_median": float(np.median(start)) if start else math.nan,
+        "start_worst": max(start, default=math.nan),
         "unsafe": [f"{r['family']} n={r['n']} seed={r['seed']}" for r in sel if not r["safe"]],
         "plan_s_max": float(max(r["plan_s"] for r in sel)),
     }
@@ -311,8 +274,8 @@ def print_summary(summ: dict[str, Any], file: Any = None) -> None:
             print(
                 f"  {name:9s} {s['fleets']:3d} fleets  ms/capt median {s['median']:.2f} worst "
                 f"{s['worst']:.2f} ({s['worst_fleet']})  ms/lb median {s['median_ms_lb']:.2f}  "
-                f"unsafe: {unsafe}  slowest plan {s['plan_s_max']:.1f} s  gated/capt median "
-                f"{s['gated_median']:.2f} worst {s['gated_worst']:.2f}",
+                f"unsafe: {unsafe}  slowest plan {s['plan_s_max']:.1f} s  start/capt median "
+                f"{s['start_median']:.2f} worst {s['start_worst']:.2f}",
                 file=file,
             )
 
@@ -380,7 +343,7 @@ def main(argv: list[str] | None = None) -> int:
                         f"{r['ms_lb']:.2f}  makespan {r['makespan']:.1f} m  capt "
                         f"{r['capt']:.1f} m  lb {r['lb']:.1f} m  "
                         f"{'safe' if r['safe'] else 'UNSAFE'}  {r['plan_s']:.1f} s  "
-                        f"gated/capt {r['gated_capt']:.2f}",
+                        f"start/capt {r['start_capt']:.2f}",
                         flush=True,
                     )
                     if a.chain:

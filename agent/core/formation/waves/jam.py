@@ -17,8 +17,10 @@ from what every agent knows alike, the agreed plan and the statuses each robot p
    moved* (:func:`at_start`) while its phase is one before walking (:data:`UNMOVED`), and
    also in its move phase for as long as its status says it has walked nothing of its
    path (``walked`` 0): it is turning towards its path, or waiting for its own way to
-   clear. (In a dense fleet the NAO on a robot's way is often such a member, itself
-   waiting for its way and walking on a moment later: taken for "a NAO not in the
+   clear. In its move phase with some of its path walked it is expected at that point of
+   its path: it publishes its progress at once when it holds at a gate (:mod:`gates`),
+   where it may stand a while. (In a dense fleet the NAO on a robot's way is often such a
+   member, itself waiting and walking on a moment later: taken for "a NAO not in the
    plan", it would stop the robot after ``max_polls``.) It publishes the
    name in its status (``blocked_by``) once its rank-based patience is spent: that claim
    is what every agent then knows.
@@ -27,10 +29,11 @@ from what every agent knows alike, the agreed plan and the statuses each robot p
    the plan's ``after`` lists) for a claimant blocked by it (:func:`yields`): the two
    would otherwise wait for each other forever. Its own path was planned with the
    claimant holding; the safe steps check every step anyway.
-3. **How long the blocked robot waits** (:func:`jam_verdict`): for a blocker that has not
-   moved yet, up to ``long_polls`` (it yields or moves in its turn); for any other (one
-   walking past, one holding, a NAO not in the plan), ``max_polls``; then it stops with a
-   reason that names the blocker.
+3. **How long the blocked robot waits** (:func:`jam_verdict`): for a member named that has
+   not moved yet or is in its move phase, up to ``long_polls`` (it yields, or moves in its
+   turn, or walks on once those it waits for have passed; one that cannot fails, and rule
+   4 stops everyone); for any other (one holding its slot, a NAO not named),
+   ``max_polls``; then it stops with a reason that names the blocker.
 4. **The fleet stops with one reason** (:func:`stop_reason`): once a member of the plan
    has failed, every agent stops, naming the failure that started it, so that no agent
    reports a finished formation around a hole. A failure that is itself such a stop
@@ -48,6 +51,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+
+from agent.core.formation.waves.release import tail
 
 #: phases of a robot that stands where it started (it has not walked yet)
 UNMOVED = ("start", "search", "exchange", "agree", "plan", "wait")
@@ -72,20 +77,27 @@ def expected_places(
     targets: Mapping[int, np.ndarray],
     phases: Mapping[int, str],
     walked: Mapping[int, float] | None = None,
+    paths: Mapping[int, np.ndarray] | None = None,
 ) -> dict[int, np.ndarray]:
     """Where each robot of the plan is expected to stand (rule 1): its start while it has
     not moved (:func:`at_start`, ``walked``: how far each robot's last status says it has
-    walked along its path, 0 when not given), its target while in :data:`HOLDING`; robots
-    walking, failed or of an unknown phase are left out. Ids ascending; ``ValueError``
-    when the starts and targets name different robots."""
+    walked along its path, 0 when not given), the point of its path (``paths``) at that
+    arc length while it is in its move phase beyond its start, its target while in
+    :data:`HOLDING`; robots failed, of an unknown phase, or walking without a path given
+    are left out. Ids ascending; ``ValueError`` when the starts and targets name
+    different robots."""
     if set(starts) != set(targets):
         raise ValueError("starts and targets must name the same robots")
     walked = {} if walked is None else walked
+    paths = {} if paths is None else paths
     out: dict[int, np.ndarray] = {}
     for rid in sorted(starts):
         phase = phases.get(rid, "")
-        if at_start(phase, walked.get(rid, 0.0)):
+        w = walked.get(rid, 0.0)
+        if at_start(phase, w):
             out[rid] = _point(starts[rid], f"start of {rid}")
+        elif phase == MOVING and rid in paths and math.isfinite(w):
+            out[rid] = _point(tail(paths[rid], w)[0], f"path of {rid} at {w}")
         elif phase in HOLDING:
             out[rid] = _point(targets[rid], f"target of {rid}")
     return out
@@ -165,18 +177,17 @@ def jam_verdict(
     polls: int,
     max_polls: int,
     long_polls: int,
-    blocker_walked: float = 0.0,
 ) -> JamVerdict:
     """Rule 3: robot ``me``, blocked for ``polls`` polls by ``blocker`` (-1: a NAO not
-    named) whose last status gave ``blocker_phase`` and ``blocker_walked``, waits or
-    stops. ``long_polls`` bounds the wait for a blocker that has not moved yet
-    (:func:`at_start`), ``max_polls`` every other."""
+    named) whose last phase is ``blocker_phase``, waits or stops. ``long_polls`` bounds
+    the wait for a blocker that has not moved yet or is in its move phase, ``max_polls``
+    every other."""
     if polls < 0 or max_polls < 0 or long_polls < max_polls:
         raise ValueError(
             f"need polls >= 0 and 0 <= max_polls <= long_polls, got {polls}, {max_polls}, "
             f"{long_polls}"
         )
-    unmoved = blocker >= 0 and at_start(blocker_phase, blocker_walked)
+    unmoved = blocker >= 0 and (at_start(blocker_phase) or blocker_phase == MOVING)
     limit = long_polls if unmoved else max_polls
     if polls < limit:
         return JamVerdict(WAIT)
