@@ -326,11 +326,13 @@ class Waves:
         # one is news (gates.py)
         ids, after, at = self._rows()
         me = ids.index(ctx.me)
+        # (none beyond the last release point: past it nobody waits for news of this one;
+        # a robot gated on it only through others waits for its hold)
         gated = [b for b in range(len(ids)) if me in predecessors(after, b)]
-        releases = milestones(
-            plan.robot(ctx.me).length() if gated else 0.0,
-            [x for b in gated for j, x in zip(after[b], at[b], strict=True) if j == me],
-        )
+        direct = [x for b in gated for j, x in zip(after[b], at[b], strict=True) if j == me]
+        through = any(me not in after[b] for b in gated)
+        top = plan.robot(ctx.me).length() if through else max(direct, default=0.0)
+        releases = milestones(top, direct)
         report.show_walked(walked_along(goals, course.leg, ctx.beliefs.position))
         report.status(Phase.MOVE, 0.0, f"{len(goals)} leg(s)")
         n = len(goals)
