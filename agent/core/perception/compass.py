@@ -47,7 +47,11 @@ picture's bytes: a picture's features are a function of its bytes alone); the gu
 match compares a feature with the few dozen features of its band instead of all of
 them; and each vote's inliers are counted from the votes sorted, each candidate window
 checked with the very comparison ``|v_j − v_i| ≤ tol`` (O(m log m) instead of an m×m
-table).
+table). The ORB pyramid has :data:`ORB_LEVELS` levels, not OpenCV's 8: a turn in place
+does not change the scale of the view, and a 20–40 cm step scales what is 2 m away by
+1.1–1.25, about one level's factor 1.2; with 2 levels the measured answers of the turn and walk
+compasses (turns, steps, double steps, sidesteps, views away from the reference) are
+those of 8 levels, at half the ORB time.
 """
 
 from __future__ import annotations
@@ -84,6 +88,8 @@ FEATURE_CACHE = 4
 RATIO = 0.75
 #: The share of the band matches that must agree (module docstring).
 MIN_INLIER_RATIO = 0.5
+#: Levels of the ORB pyramid, a factor 1.2 apart (module docstring).
+ORB_LEVELS = 2
 #: Features of ``before``, in row order, matched against their bands in one call: their
 #: bands overlap, so one call covers a few rows more than each needs.
 _CHUNK = 64
@@ -179,7 +185,7 @@ class VisualCompass:
         self.min_inlier_ratio = min_inlier_ratio
         self.tol = tol
         self.max_dv = max_dv
-        self._orb = cv2.ORB.create(nfeatures=n_features, fastThreshold=10)
+        self._orb = cv2.ORB.create(nfeatures=n_features, nlevels=ORB_LEVELS, fastThreshold=10)
         self._map_x, self._map_y = self.camera.cylindrical_maps()
         w, h = self.camera.width, self.camera.height
         valid = (
@@ -193,7 +199,7 @@ class VisualCompass:
 
     def _features(self, image_bgr: np.ndarray) -> Features:
         img = np.ascontiguousarray(image_bgr)
-        key = hashlib.blake2b(f"{img.shape} {img.dtype}".encode(), digest_size=16)
+        key = hashlib.sha256(f"{img.shape} {img.dtype}".encode())
         key.update(img.data)
         digest = key.digest()
         hit = self._cache.get(digest)
