@@ -145,6 +145,11 @@ def test_the_guided_match_is_the_brute_force_match_in_the_band(
     got = cp.guided_matches(v_a, d_a, v_b, d_b, 6.0)
     want = _brute(v_a, d_a, v_b, d_b, 6.0)
     assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+    # the same pairs from the features in any order
+    rng = np.random.default_rng(seed + 1)
+    pa, pb = rng.permutation(n_a), rng.permutation(n_b)
+    qi, tj = cp.guided_matches(v_a[pa], d_a[pa], v_b[pb], d_b[pb], 6.0)
+    assert sorted(zip(pa[qi].tolist(), pb[tj].tolist())) == list(zip(*(w.tolist() for w in want)))
 
 
 def test_the_guided_match_on_a_real_picture_pair(pano: np.ndarray) -> None:

@@ -112,6 +112,11 @@ def guided_matches(
     :data:`_CHUNK` at a time, compared with the run of ``after``'s features whose rows can
     be in any of their bands (a pixel more each side than the bands, so that rounding in
     ``v ± max_dv`` loses none), and that comparison is masked to each band exactly.
+
+    Ties: a kept match is its feature's unique nearest candidate (with two equally near,
+    ``d1 < RATIO·d1`` is false), so which of equal candidates comes first never changes
+    the answer; it equals the brute-force match that breaks ties to the lower index of
+    ``after`` (tests), and any order of the inputs gives the same pairs.
     """
     if d_a.ndim != 2 or d_b.ndim != 2 or d_a.dtype != np.uint8 or d_b.dtype != np.uint8:
         raise ValueError("descriptors must be 2-D uint8 arrays")
