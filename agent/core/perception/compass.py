@@ -135,36 +135,29 @@ def guided_matches(
     if n_a == 0 or n_b < 2:
         return none, none
     ob = np.lexsort((np.arange(n_b), v_b))
-    vb = v_b[ob]
-    db = np.ascontiguousarray(d_b[ob])
+    vb, db = v_b[ob], d_b[ob]
     oa = np.lexsort((np.arange(n_a), v_a))
-    va = v_a[oa]
+    va, da = v_a[oa], d_a[oa]
     lo = np.searchsorted(vb, va - max_dv - 1.0, side="left")
     hi = np.searchsorted(vb, va + max_dv + 1.0, side="right")
-    queries, trains = [], []
+    dist = np.zeros((n_a, 2), dtype=np.int32)
+    nearest = np.full((n_a, 2), -1, dtype=np.int32)  # positions in ``vb``; -1: none
     for s in range(0, n_a, _CHUNK):
         e = min(s + _CHUNK, n_a)
         first, last = int(lo[s]), int(hi[e - 1])  # rows sorted: the chunk's run of ``after``
         if last - first < 2:
             continue
-        q = oa[s:e]
-        band = np.abs(vb[None, first:last] - v_a[q][:, None]) <= max_dv
-        dist, nearest = cv2.batchDistance(
-            np.ascontiguousarray(d_a[q]),
-            db[first:last],
-            cv2.CV_32S,
-            normType=cv2.NORM_HAMMING,
-            K=2,
-            mask=band.astype(np.uint8),
-        )
-        keep = (nearest[:, 1] >= 0) & (dist[:, 0] < RATIO * dist[:, 1])
-        queries.append(q[keep])
-        trains.append(ob[first + nearest[keep, 0]])
-    if not queries:
-        return none, none
-    qi = np.concatenate(queries)
+        band = np.abs(vb[first:last] - va[s:e, None]) <= max_dv
+        d, j = cv2.batchDistance(
+            da[s:e], db[first:last], cv2.CV_32S, normType=cv2.NORM_HAMMING, K=2,
+            mask=band.view(np.uint8),
+        )  # fmt: skip
+        dist[s:e] = d
+        nearest[s:e] = np.where(j >= 0, j + first, -1)
+    keep = (nearest[:, 1] >= 0) & (dist[:, 0] < RATIO * dist[:, 1])
+    qi, tj = oa[keep], ob[nearest[keep, 0]]
     order = np.argsort(qi, kind="stable")
-    return qi[order].astype(np.intp), np.concatenate(trains)[order].astype(np.intp)
+    return qi[order].astype(np.intp), tj[order].astype(np.intp)
 
 
 class VisualCompass:
