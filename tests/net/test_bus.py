@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import logging
 import math
+import queue
 import time
 from collections.abc import Iterator
 from dataclasses import replace
@@ -15,9 +16,11 @@ import msgpack
 import pytest
 import zenoh
 
+import agent.net.bus as bus_module
 from agent.net.bus import (
     EVENT_CAPS,
     EVENT_MAX_BYTES,
+    MAX_REPLIES,
     Bus,
     BusConfig,
     BusError,
@@ -27,6 +30,7 @@ from agent.net.bus import (
     QueryTimeout,
     SessionUnavailable,
     open_retrying,
+    reply_stream,
 )
 from agent.wire import (
     BUSY,
@@ -417,7 +421,13 @@ def test_a_good_reply_after_bad_ones_is_taken_and_reasons_are_capped(
     rep = CommandReply(robot_id=3, status="done", t_sim=1.0)
     bad = [ok_reply(b"junk"), ok_reply(encode(ClockMsg(t_sim=1.0)))]
     replies: list[Any] = [*bad, ok_reply(encode(rep))]
-    monkeypatch.setattr(b, "session", SimpleNamespace(get=lambda *a, **k: replies))
+
+    def get(key: str, handler: Any, **kw: Any) -> None:  # zenoh's get: replies, then the end
+        for r in replies:
+            handler.callback(r)
+        handler.drop()
+
+    monkeypatch.setattr(b, "session", SimpleNamespace(get=get))
     assert b.query(key_walk(3), WalkRequest(distance=0.1), CommandReply) == rep
     assert b.stats.rejected == 2
     replies = [ok_reply(b"\xc1" * (i + 1)) for i in range(6)]
@@ -443,6 +453,36 @@ def test_reply_checks_without_a_network(pair: tuple[Bus, Bus, str]) -> None:
     errors = []
     assert b._first_reply("k", broken(), CommandReply, errors) is None
     assert errors[-1] == "reply stream failed: RuntimeError: link gone"
+
+
+def test_a_reply_stream_that_never_ends_ends_at_its_deadline(
+    pair: tuple[Bus, Bus, str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """zenoh ends a get's replies at its timeout; a stream it leaves open (no reply, no
+    end) ends REPLY_GRACE s past the query's timeout, as a timeout, and a flood of
+    replies is kept to MAX_REPLIES."""
+    _, b, _ = pair
+    monkeypatch.setattr(bus_module, "REPLY_GRACE", 0.3)
+    monkeypatch.setattr(b, "session", SimpleNamespace(get=lambda key, handler, **kw: None))
+    t0 = time.monotonic()
+    with pytest.raises(QueryTimeout, match=r"no reply within 0\.2 s"):
+        b.query(key_walk(3), WalkRequest(distance=0.1), CommandReply, timeout=0.2)
+    assert 0.45 <= time.monotonic() - t0 < 5.0
+    box: queue.SimpleQueue[Any] = queue.SimpleQueue()
+    for k in range(3):
+        box.put(k)
+    assert list(reply_stream(box, time.monotonic() + 0.1)) == [0, 1, 2]  # then the deadline
+
+    def flood(key: str, handler: Any, **kw: Any) -> None:
+        for _ in range(MAX_REPLIES + 50):
+            handler.callback(ok_reply(b"junk"))
+        handler.drop()
+
+    monkeypatch.setattr(b, "session", SimpleNamespace(get=flood))
+    before = b.stats.rejected
+    with pytest.raises(BusError):
+        b.query(key_walk(3), WalkRequest(distance=0.1), CommandReply, timeout=0.2)
+    assert b.stats.rejected - before == MAX_REPLIES
 
 
 def test_query_on_a_bad_key_is_a_bus_error(pair: tuple[Bus, Bus, str]) -> None:
