@@ -30,12 +30,13 @@ import queue
 import threading
 import time
 from collections import Counter
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
 import zenoh
 
+from agent.net.replies import REPLY_GRACE, ReplyInbox
 from agent.wire import (
     BUSY,
     KEY_RESHAPE,
@@ -85,38 +86,10 @@ EVENT_MAX_BYTES = {"record": 2 * 1024 * 1024, "msg": 4 * 1024 * 1024}
 RECORD_SUFFIX = "/record"
 #: A query's reasons for failing: at most this many are kept (the rest are counted).
 MAX_REPLY_ERRORS = 4
-#: Replies a query keeps at most (the first usable one is what it wants; more are
-#: dropped, so that a flood of replies cannot grow memory).
-MAX_REPLIES = 64
-#: Seconds a query's reply stream may stay open past the query's own timeout. zenoh ends
-#: the stream at the timeout; one that does not end (at 100 NAOs under a load of 90, a
-#: camera query's stream stayed open 20 minutes, and the agent's main thread with it) is
-#: ended here, as a timeout.
-REPLY_GRACE = 5.0
 
 
 #: What :meth:`Bus.query` records of zenoh's own error reply when a get's timeout runs out.
 ZENOH_TIMEOUT = "error reply: b'Timeout' (zenoh: the query's timeout ran out)"
-
-
-#: The end of a query's replies (zenoh dropped its handler: the query is over).
-_END = object()
-
-
-def reply_stream(box: queue.SimpleQueue[Any], deadline: float) -> Iterator[Any]:
-    """The replies put in ``box`` until the end marker, or until ``deadline``
-    (``time.monotonic()``) passes, whichever comes first (:data:`REPLY_GRACE`)."""
-    while True:
-        left = deadline - time.monotonic()
-        if left <= 0:
-            return
-        try:
-            item = box.get(timeout=left)
-        except queue.Empty:
-            return
-        if item is _END:
-            return
-        yield item
 
 
 class BusError(RuntimeError):
@@ -509,16 +482,10 @@ class Bus:
             # With ``best``, one complete queryable (in a routed fleet the router's access
             # control lets only the world and the render workers declare them on world/**).
             target = zenoh.QueryTarget.BEST_MATCHING if best else zenoh.QueryTarget.ALL
-            box: queue.SimpleQueue[Any] = queue.SimpleQueue()
-            taken = iter(range(MAX_REPLIES))
-
-            def on_reply(reply: Any) -> None:  # zenoh's thread: never blocks, never raises
-                if next(taken, None) is not None:
-                    box.put(reply)
-
+            inbox = ReplyInbox()  # bounded, read with a deadline (agent/net/replies.py)
             self.session.get(
                 key,
-                zenoh.handlers.Callback(on_reply, lambda: box.put(_END)),
+                zenoh.handlers.Callback(inbox.put, inbox.end),
                 payload=data,
                 timeout=timeout,
                 target=target,
@@ -527,7 +494,7 @@ class Bus:
         except Exception as exc:  # zenoh refused the query (bad key, closed session)
             raise BusError(f"{key}: query failed: {reason(exc)}") from None
         errors: list[str] = []
-        replies = reply_stream(box, started + timeout + REPLY_GRACE)
+        replies = inbox.stream(started + timeout + REPLY_GRACE)
         out = self._first_reply(key, replies, expect, errors, nonce, accept)
         if out is not None:
             return out

@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import logging
 import math
-import queue
 import time
 from collections.abc import Iterator
 from dataclasses import replace
@@ -20,7 +19,6 @@ import agent.net.bus as bus_module
 from agent.net.bus import (
     EVENT_CAPS,
     EVENT_MAX_BYTES,
-    MAX_REPLIES,
     Bus,
     BusConfig,
     BusError,
@@ -30,8 +28,8 @@ from agent.net.bus import (
     QueryTimeout,
     SessionUnavailable,
     open_retrying,
-    reply_stream,
 )
+from agent.net.replies import MAX_REPLIES, ReplyInbox
 from agent.wire import (
     BUSY,
     MAX_MESSAGE_BYTES,
@@ -468,10 +466,14 @@ def test_a_reply_stream_that_never_ends_ends_at_its_deadline(
     with pytest.raises(QueryTimeout, match=r"no reply within 0\.2 s"):
         b.query(key_walk(3), WalkRequest(distance=0.1), CommandReply, timeout=0.2)
     assert 0.45 <= time.monotonic() - t0 < 5.0
-    box: queue.SimpleQueue[Any] = queue.SimpleQueue()
+    inbox = ReplyInbox(limit=2)
     for k in range(3):
-        box.put(k)
-    assert list(reply_stream(box, time.monotonic() + 0.1)) == [0, 1, 2]  # then the deadline
+        inbox.put(k)  # the third is dropped
+    assert list(inbox.stream(time.monotonic() + 0.1)) == [0, 1]  # then the deadline
+    inbox.end()
+    assert list(inbox.stream(time.monotonic() + 60.0)) == []  # the end comes at once
+    with pytest.raises(ValueError, match="limit"):
+        ReplyInbox(limit=0)
 
     def flood(key: str, handler: Any, **kw: Any) -> None:
         for _ in range(MAX_REPLIES + 50):
