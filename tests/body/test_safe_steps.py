@@ -171,7 +171,8 @@ def test_a_jammed_robot_names_its_blocker_and_goes_on_once_it_yields(
         # in its move phase with nothing walked (turning, or waiting for its own way):
         # still at its start, named, and waited for as long as one not moved yet
         ("move", 0.0, "robot 2 \\(move\\) in its way for 10 polls"),
-        # once its status says it has walked, it is expected nowhere: one walking past
+        # once its status says it has walked 0.5 m, it is expected there, on its path: the
+        # NAO at its start is none of the plan's
         ("move", 0.5, "a NAO not in the plan \\(or one walking\\) in its way for 3 polls"),
         # a robot that holds is expected on its slot, (1.5, 0): the NAO on the goal is
         # none of the plan's, and no yield will come

@@ -138,7 +138,7 @@ def test_liveliness_alive_and_gone(pair: tuple[Bus, Bus, str]) -> None:
     c.declare_alive("nao/alive/7")
     got = wait_for(b, lambda g: any(e.kind == "alive" and e.robot_id == 7 for e in g))
     c.close()
-    # A closed session's tokens go at once when its close reaches the router, and at the
+    # A peer's tokens go at once when its close reaches the router, and at the
     # latest when its link's lease (zenoh's default, 10 s) runs out: wait past the lease.
     got = wait_for(
         b, lambda g: any(e.kind == "gone" and e.robot_id == 7 for e in g), LEASE_S + 10.0

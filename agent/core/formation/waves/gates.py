@@ -184,7 +184,7 @@ class Gates:
         return sorted(out)
 
 
-def _reach(path: np.ndarray, times: np.ndarray, arcs: np.ndarray, s: float) -> float:
+def _reach(times: np.ndarray, arcs: np.ndarray, s: float) -> float:
     """When a robot whose arrival times at ``arcs`` are ``times`` has walked past arc
     ``s`` (it then holds at its end)."""
     k = int(np.searchsorted(arcs, s - 1e-12, side="left"))
@@ -218,7 +218,7 @@ def gated_makespan(
             for a, s in g.needs(y0, min(g.length, y1 + STEP_SLACK)):
                 if not arcs[a].size:
                     raise ValueError(f"robot row {b} waits for row {a} of the same or a later wave")
-                t = max(t, _reach(paths[a], times[a], arcs[a], s))
+                t = max(t, _reach(times[a], arcs[a], s))
             t += y1 - y0
             ts[k] = t
         arcs[b], times[b] = ys, ts

@@ -187,8 +187,8 @@ def jam_verdict(
             f"need polls >= 0 and 0 <= max_polls <= long_polls, got {polls}, {max_polls}, "
             f"{long_polls}"
         )
-    unmoved = blocker >= 0 and (at_start(blocker_phase) or blocker_phase == MOVING)
-    limit = long_polls if unmoved else max_polls
+    will_move = blocker >= 0 and (blocker_phase in (*UNMOVED, "", MOVING))
+    limit = long_polls if will_move else max_polls
     if polls < limit:
         return JamVerdict(WAIT)
     if blocker < 0:
