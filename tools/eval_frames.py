@@ -32,6 +32,14 @@ alone against the rest (:mod:`agent.core.formation.frame.alone`, docs/design.md 
 every fault-free fleet of at most N robots, each robot's record is set aside, the others
 framed without it, and the robot tested alone against them; it prints how many of those
 sound robots the test rejects below 10⁻², 10⁻³ and α, and the worst.
+
+``--corpus DIR --ceiling`` adds what the records hold: each fault run's faulty robot
+tested alone against the others held at their *true* start poses (a perfect frame of
+the rest, which no fleet has), standing where the others' sightings put it, at the
+heading its own sightings choose. A miss the fleet shares with that test is beyond the
+records at α: its faulty robot's sightings, and the others' of it, are as likely from a
+sound robot as the false-alarm rate allows (a compass turned 40° that one mask sees, a
+robot seen by two others in a fleet of four).
 """
 
 from __future__ import annotations
@@ -56,7 +64,7 @@ from agent.core.formation.frame.poses import evaluate_poses
 from agent.core.perception.sighting_noise import shipped_noise
 from agent.wire import NeighborRecordMsg, decode
 from tools.harness.judge import injected_faults
-from tools.lib.frame_fit import frame_error
+from tools.lib.frame_fit import frame_error, truth_in_frame
 from tools.lib.frames_report import FrameRow, draw, scores, summary
 
 T = TypeVar("T")
@@ -160,6 +168,44 @@ def alone_null(name: str, msgs: tuple[NeighborRecordMsg, ...]) -> list[tuple[str
     return out
 
 
+def ceiling_p(
+    msgs: tuple[NeighborRecordMsg, ...], truth: dict[int, tuple[float, float, float]], faulty: int
+) -> float:
+    """p of the faulty robot's record tested alone (:func:`alone.alone_test`) against the
+    others held at their *true* start poses (``--ceiling``): what the test alone could
+    say of it with a perfect frame of the rest, which no fleet has. The faulty robot
+    still stands where the others' sightings put it, at the heading its own sightings
+    choose, as in the fleet."""
+    records = FormationAdapter.records(msgs)
+    ids = sorted(r.robot_id for r in records if r.robot_id != faulty)
+    positions, headings = truth_in_frame(truth, ids, ids[0])
+    rest = evaluate_poses(tuple(ids), (), positions, headings, ids[0])
+    return alone_test(rest, records, faulty, shipped_noise()).test.p
+
+
+def _ceiling(rows: list[FrameRow], jobs: int, corpus: Path) -> None:
+    """``--ceiling``: the fault runs whose faulty robot the test alone rejects at α against
+    the others' true poses, beside the fleet's own naming."""
+    from agent.core.formation.frame.fault_test import ALPHA
+    from tools.corpus import load_corpus
+
+    runs = {r.name: r for r in load_corpus(corpus) if r.victim >= 0}
+    names = sorted(runs)
+    calls = [partial(ceiling_p, runs[n].records, runs[n].truth, runs[n].victim) for n in names]
+    pool = ProcessPoolExecutor(jobs) if jobs > 1 else None
+    ps = dict(zip(names, pool.map(_call, calls) if pool else map(_call, calls), strict=True))
+    if pool is not None:
+        pool.shutdown()
+    missed = [r.run for r in rows if r.faulty >= 0 and not r.named]
+    beyond = [n for n in missed if ps.get(n, 1.0) >= ALPHA]
+    rejected = sum(p < ALPHA for p in ps.values())
+    print(f"ceiling: the test alone against the others' true poses rejects the faulty robot "
+          f"in {rejected}/{len(ps)} fault runs; of the {len(missed)} the fleet does not name, "
+          f"{len(beyond)} are not rejected even so (α {ALPHA:g})")  # fmt: skip
+    for n in beyond:
+        print(f"  beyond the records at α: {n} (p {ps[n]:.1e})")
+
+
 def _alone_null_main(args: argparse.Namespace) -> int:
     from agent.core.formation.frame.fault_test import ALPHA
     from tools.corpus import load_corpus
@@ -220,7 +266,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--alone-null", type=int, default=0, metavar="N",
                     help="with --corpus: the test alone's false alarms on fault-free fleets "
                     "of at most N robots, instead")  # fmt: skip
+    ap.add_argument("--ceiling", action="store_true",
+                    help="with --corpus: also each faulty robot tested alone against the "
+                    "others' true poses (what the records hold at α)")  # fmt: skip
     args = ap.parse_args(argv)
+    if args.ceiling and args.corpus is None:
+        ap.error("--ceiling needs --corpus")
     if args.alone_null:
         if args.corpus is None:
             ap.error("--alone-null needs --corpus")
@@ -258,6 +309,8 @@ def main(argv: list[str] | None = None) -> int:
         failed = True
     if pool is not None:
         pool.shutdown()
+    if args.ceiling:
+        _ceiling(rows, args.jobs, args.corpus)
     draw(rows, args.png, args.psi_tol)
     print(f"figure: {args.png}")
     if args.json is not None:

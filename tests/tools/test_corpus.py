@@ -176,3 +176,36 @@ def test_the_test_alone_null_on_two_small_fleets(
 def test_the_test_alone_null_needs_a_corpus() -> None:
     with pytest.raises(SystemExit):
         eval_frames.main(["--alone-null", "4"])
+
+
+def test_the_ceiling_on_a_small_fleet(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--ceiling``: each faulty robot tested alone against the others' true poses. In a
+    four-NAO fleet, robot 4's distances read 1.4 times too long are seen by two robots
+    only: even so its p stays above α (known from the corpus), and the fleet, which does
+    not name it, is told apart from a miss the records could explain."""
+    small = tmp_path / "corpus"
+    small.mkdir()
+    (small / "n04_random_s1060.json").write_text((CORPUS / "n04_random_s1060.json").read_text())
+    rc = eval_frames.main(["--corpus", str(small), "--ceiling", "--jobs", "1",
+                           "--png", str(tmp_path / "f.png")])  # fmt: skip
+    out = capsys.readouterr().out
+    assert rc == 0, out
+    assert "the faulty robot in 1/3 fault runs" in out
+    assert "beyond the records at α: n04_random_s1060+scale:1.4@4" in out
+
+
+def test_the_ceiling_of_a_sound_robot_and_a_faulty_one() -> None:
+    """Against the truth a sound robot passes alone, and a robot whose distances read 1.4
+    times too long among twenty is rejected far below α."""
+    from agent.core.formation.frame.fault_test import ALPHA
+
+    runs = {r.name: r for r in corpus.runs_of(CORPUS / "n20_aligned_s1031.json")}
+    clean = runs["n20_aligned_s1031"]
+    assert eval_frames.ceiling_p(clean.records, clean.truth, 5) > 1e-2
+    faulty = next(r for r in runs.values() if r.fault.startswith("scale"))
+    assert eval_frames.ceiling_p(faulty.records, faulty.truth, faulty.victim) < ALPHA
+
+
+def test_the_ceiling_needs_a_corpus() -> None:
+    with pytest.raises(SystemExit):
+        eval_frames.main(["--ceiling"])

@@ -11,7 +11,7 @@ scale) that takes the plan's start positions to the planned robots' true starts.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -61,3 +61,26 @@ def frame_error(
         abs(math.remainder(true_starts[i][2] - (h + estimated[i][1]), 2 * math.pi)) for i in ids
     )
     return pos, psi
+
+
+def truth_in_frame(
+    true_starts: Mapping[int, tuple[float, float, float]], ids: Sequence[int], frame: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """True start poses of ``ids`` in robot ``frame``'s fixed frame, as the fleet's common
+    frame writes poses (the inverse of :func:`common_frame_pose` with the frame robot's
+    true start): positions (n, 2) and headings ψ (n,), ψ of ``frame`` 0.
+
+    Raises
+    ------
+    ValueError
+        ``frame`` or a robot of ``ids`` has no true start.
+    """
+    missing = [i for i in (frame, *ids) if i not in true_starts]
+    if missing:
+        raise ValueError(f"no true start for robots {sorted(set(missing))}")
+    xf, yf, hf = true_starts[frame]
+    c, s = math.cos(hf - math.pi / 2), math.sin(hf - math.pi / 2)
+    rel = np.array([true_starts[i][:2] for i in ids], dtype=np.float64) - (xf, yf)
+    pos = np.stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]], axis=1)
+    psi = np.array([math.remainder(true_starts[i][2] - hf, 2 * math.pi) for i in ids])
+    return pos.reshape(-1, 2), psi
