@@ -33,13 +33,15 @@ every fault-free fleet of at most N robots, each robot's record is set aside, th
 framed without it, and the robot tested alone against them; it prints how many of those
 sound robots the test rejects below 10⁻², 10⁻³ and α, and the worst.
 
-``--corpus DIR --ceiling`` adds what the records hold: each fault run's faulty robot
+``--corpus DIR --ceiling [--min-revealed SHARE]`` adds what the records hold: each fault run's faulty robot
 tested alone against the others held at their *true* start poses (a perfect frame of
 the rest, which no fleet has), standing where the others' sightings put it, at the
 heading its own sightings choose. A miss the fleet shares with that test is beyond the
 records at α: its faulty robot's sightings, and the others' of it, are as likely from a
 sound robot as the false-alarm rate allows (a compass turned 40° that one mask sees, a
-robot seen by two others in a fleet of four).
+robot seen by two others in a fleet of four). The runs the records reveal (the faulty
+robot rejected so) are the ones a fleet must name: ``--min-revealed`` fails below that
+share of them named.
 """
 
 from __future__ import annotations
@@ -183,9 +185,10 @@ def ceiling_p(
     return alone_test(rest, records, faulty, shipped_noise()).test.p
 
 
-def _ceiling(rows: list[FrameRow], jobs: int, corpus: Path) -> None:
+def _ceiling(rows: list[FrameRow], jobs: int, corpus: Path) -> float:
     """``--ceiling``: the fault runs whose faulty robot the test alone rejects at α against
-    the others' true poses, beside the fleet's own naming."""
+    the others' true poses (the records *reveal* it), beside the fleet's own naming; the
+    share of the revealed runs the fleet names (1 with none)."""
     from agent.core.formation.frame.fault_test import ALPHA
     from tools.corpus import load_corpus
 
@@ -198,12 +201,16 @@ def _ceiling(rows: list[FrameRow], jobs: int, corpus: Path) -> None:
         pool.shutdown()
     missed = [r.run for r in rows if r.faulty >= 0 and not r.named]
     beyond = [n for n in missed if ps.get(n, 1.0) >= ALPHA]
-    rejected = sum(p < ALPHA for p in ps.values())
+    revealed = {n for n, p in ps.items() if p < ALPHA}
+    named = sum(r.named for r in rows if r.run in revealed)
+    share = named / len(revealed) if revealed else 1.0
     print(f"ceiling: the test alone against the others' true poses rejects the faulty robot "
-          f"in {rejected}/{len(ps)} fault runs; of the {len(missed)} the fleet does not name, "
-          f"{len(beyond)} are not rejected even so (α {ALPHA:g})")  # fmt: skip
+          f"in {len(revealed)}/{len(ps)} fault runs (α {ALPHA:g}); the fleet names it in "
+          f"{named} of them ({share:.1%}); of the {len(missed)} runs the fleet does not "
+          f"name, {len(beyond)} are beyond the records")  # fmt: skip
     for n in beyond:
         print(f"  beyond the records at α: {n} (p {ps[n]:.1e})")
+    return share
 
 
 def _alone_null_main(args: argparse.Namespace) -> int:
@@ -269,9 +276,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--ceiling", action="store_true",
                     help="with --corpus: also each faulty robot tested alone against the "
                     "others' true poses (what the records hold at α)")  # fmt: skip
+    ap.add_argument("--min-revealed", type=float, default=0.0, metavar="SHARE",
+                    help="with --ceiling: fail below this share of the fault runs whose "
+                    "records reveal the faulty robot at α with it named")  # fmt: skip
     args = ap.parse_args(argv)
-    if args.ceiling and args.corpus is None:
+    if (args.ceiling or args.min_revealed) and args.corpus is None:
         ap.error("--ceiling needs --corpus")
+    if args.min_revealed and not args.ceiling:
+        ap.error("--min-revealed needs --ceiling")
     if args.alone_null:
         if args.corpus is None:
             ap.error("--alone-null needs --corpus")
@@ -310,7 +322,11 @@ def main(argv: list[str] | None = None) -> int:
     if pool is not None:
         pool.shutdown()
     if args.ceiling:
-        _ceiling(rows, args.jobs, args.corpus)
+        share = _ceiling(rows, args.jobs, args.corpus)
+        if share < args.min_revealed:
+            print(f"FAIL: faulty robot named in {share:.1%} of the runs the records reveal "
+                  f"< {args.min_revealed:.0%}")  # fmt: skip
+            failed = True
     draw(rows, args.png, args.psi_tol)
     print(f"figure: {args.png}")
     if args.json is not None:

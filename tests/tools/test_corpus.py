@@ -13,7 +13,7 @@ import pytest
 from agent.core.perception.sensor_fault import SensorFault
 from agent.wire import NeighborRecordMsg
 from tools import corpus, eval_frames, fit_noise
-from tools.lib.frames_report import NAMED_FLOOR
+from tools.lib.frames_report import NAMED_FLOOR, REVEALED_TARGET
 
 CORPUS = Path(__file__).resolve().parents[1] / "data" / "frames"
 
@@ -143,9 +143,11 @@ def test_the_shipped_model_is_what_its_fleets_measure() -> None:
 @pytest.mark.slow
 def test_the_corpus_gate(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """No sound robot left out, the faulty robot named in at least the share the
-    estimator holds today, planning refused on at most 1 % of fault-free runs."""
+    estimator holds today and in 98 % of the runs whose records reveal it at α, planning
+    refused on at most 1 % of fault-free runs."""
     rc = eval_frames.main(["--corpus", str(CORPUS), "--png", str(tmp_path / "f.png"),
                            "--min-named", str(NAMED_FLOOR), "--max-refused", "0.01",
+                           "--ceiling", "--min-revealed", str(REVEALED_TARGET),
                            "--jobs", "2"])  # fmt: skip
     out = capsys.readouterr().out
     assert rc == 0, out
@@ -190,8 +192,27 @@ def test_the_ceiling_on_a_small_fleet(tmp_path: Path, capsys: pytest.CaptureFixt
                            "--png", str(tmp_path / "f.png")])  # fmt: skip
     out = capsys.readouterr().out
     assert rc == 0, out
-    assert "the faulty robot in 1/3 fault runs" in out
+    assert "rejects the faulty robot in 1/3 fault runs" in out
+    assert "the fleet names it in 1 of them (100.0%)" in out
     assert "beyond the records at α: n04_random_s1060+scale:1.4@4" in out
+
+
+def test_a_revealed_fault_missed_fails_the_gate(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--min-revealed``: in ten NAOs the records reveal robot 7's distances read 1.4
+    times too long (and robot 10's sightings shifted 0.5 m), but the rest, framed without
+    either record, fails and the fleet stops: two revealed faults missed."""
+    small = tmp_path / "corpus"
+    small.mkdir()
+    name = "n10_jitter20_s1164.json"
+    (small / name).write_text((CORPUS / name).read_text())
+    rc = eval_frames.main(["--corpus", str(small), "--ceiling", "--min-revealed", "0.98",
+                           "--jobs", "1", "--png", str(tmp_path / "f.png")])  # fmt: skip
+    out = capsys.readouterr().out
+    assert rc == 1, out
+    assert "the fleet names it in 1 of them (33.3%)" in out
+    assert "FAIL: faulty robot named in 33.3% of the runs the records reveal < 98%" in out
 
 
 def test_the_ceiling_of_a_sound_robot_and_a_faulty_one() -> None:
@@ -209,3 +230,8 @@ def test_the_ceiling_of_a_sound_robot_and_a_faulty_one() -> None:
 def test_the_ceiling_needs_a_corpus() -> None:
     with pytest.raises(SystemExit):
         eval_frames.main(["--ceiling"])
+
+
+def test_the_revealed_share_needs_the_ceiling() -> None:
+    with pytest.raises(SystemExit):
+        eval_frames.main(["--corpus", str(CORPUS), "--min-revealed", "0.98"])
