@@ -207,3 +207,16 @@ def test_the_calibration_goes_to_every_agent_and_a_bad_folder_is_refused(
     assert stop.value.code == 2
     err = capsys.readouterr().err
     assert f"--calibration {folder}" in err and "orange.json" in err
+
+
+def test_the_wall_limit_follows_the_fleet_unless_given() -> None:
+    """The agents' wall limit is the harness's last resort: 600 s up to 30 robots, 20 s a
+    robot beyond (100 NAOs on two cores agreed after 456 s and were cut at 600 s), and
+    ``--timeout`` wins."""
+    from tools.harness.fleet import wall_limit
+
+    assert parse_args([]).spec.wall == 600.0
+    assert parse_args(["--robots", "100"]).spec.wall == 2000.0 == wall_limit(100)
+    assert parse_args(["--robots", "100", "--timeout", "90"]).spec.wall == 90.0
+    with pytest.raises(SystemExit):
+        parse_args(["--timeout", "0"])

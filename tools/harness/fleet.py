@@ -73,6 +73,19 @@ from tools.harness.view.live import live_sinks
 MAX_ROBOTS = 128
 #: The most render workers a run has (``python -m sim.server.render_worker --shard i/K``).
 MAX_RENDER_WORKERS = 8
+#: The agents' wall limit when none is given: at least WALL_MIN_S, WALL_PER_ROBOT_S a robot.
+#: On the two-core machine every agent of a simulated fleet computes the plan on the same
+#: cores: 100 NAOs agreed after 456 s and were cut at 600 s in their waves (seed 62), where
+#: each agent's own timeouts would have ended the run; the limit is the harness's last
+#: resort, never the fleet's clock.
+WALL_MIN_S = 600.0
+WALL_PER_ROBOT_S = 20.0
+
+
+def wall_limit(robots: int) -> float:
+    """The default wall limit (s) of a fleet of ``robots`` agents (600 s up to 30, 2 000 s
+    at 100)."""
+    return max(WALL_MIN_S, WALL_PER_ROBOT_S * robots)
 
 
 @dataclass(frozen=True)
@@ -93,8 +106,9 @@ class FleetSpec:
     agent's recogniser: the ``calibration`` folder (``python -m agent --calibration DIR``,
     built by ``python -m tools.calibrate``), else the built-in one. The
     network: secure by default (a throwaway fleet in ``OUT/fleet`` unless ``credentials``),
-    ``plain_links`` (tests), ``insecure``. Limits: ``timeout`` for the agents, wall s;
-    ``world_timeout`` for the world's start. ``rogue`` S > 0: attackers for S s
+    ``plain_links`` (tests), ``insecure``. Limits: ``timeout`` for the agents, wall s
+    (None: :func:`wall_limit` of the fleet's size, :attr:`wall`); ``world_timeout`` for the
+    world's start. ``rogue`` S > 0: attackers for S s
     (``rogue_replay``: also replaying a capture); ``live``: serve the run to Foxglove.
     """
 
@@ -121,12 +135,17 @@ class FleetSpec:
     insecure: bool = False
     credentials: Path | None = None
     plain_links: bool = False
-    timeout: float = 600.0
+    timeout: float | None = None
     world_timeout: float = 120.0
     rogue: float = 0.0
     rogue_replay: Path | None = None
     live: str | None = None
     reshapes: tuple[Shape, ...] = ()
+
+    @property
+    def wall(self) -> float:
+        """The agents' wall limit (s): ``timeout``, else :func:`wall_limit` of the fleet."""
+        return wall_limit(self.robots) if self.timeout is None else self.timeout
 
     def __post_init__(self) -> None:
         if not 1 <= self.robots <= MAX_ROBOTS:
@@ -144,7 +163,7 @@ class FleetSpec:
             raise ValueError(f"--noise-scale must be in [0, {MAX_NOISE_SCALE:g}]")
         if naoqi and self.auto_ids:
             raise ValueError("--body naoqi drives the robot at a fixed URL: no --auto-ids")
-        if not (self.timeout > 0 and self.world_timeout > 0 and self.obstacles >= 0):
+        if not (self.wall > 0 and self.world_timeout > 0 and self.obstacles >= 0):
             raise ValueError("the timeouts must be > 0 and the obstacles >= 0")
         # a formation file with fewer slots than robots: refused before anything starts
         self.agent.shape.check_fleet(self.robots)
@@ -455,14 +474,14 @@ class Fleet:
         (at most 1.5 s: the last truth after the motions, :func:`observe_still`), and the
         rogues' end."""
         assert self._bus is not None, "the fleet has not started"
-        deadline = time.monotonic() + self.spec.timeout
+        deadline = time.monotonic() + self.spec.wall
         while True:
             self.step()
             pending = busy(self.elapsed()) if busy is not None else False
             if not pending and self.all_exited():
                 break
             if time.monotonic() > deadline:
-                self.result["timeout"] = f"agents still running after {self.spec.timeout:g} s"
+                self.result["timeout"] = f"agents still running after {self.spec.wall:g} s"
                 break
         observe_still(self._bus, self.obs, self._rec, 1.5)  # the last truth after the motions
         if self._live is not None:

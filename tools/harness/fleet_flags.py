@@ -78,7 +78,8 @@ def add_fleet_arguments(p: argparse.ArgumentParser) -> None:
                        help="generated scenario with one robot 2-3 m from every other")  # fmt: skip
     add("--headings", type=scenarios.Headings.parse, default=scenarios.Headings(), metavar="KIND",
         help=scenarios.HEADINGS_HELP + " (a generated scenario; the world gets its file)")  # fmt: skip
-    add("--timeout", type=float, default=FleetSpec.timeout, help="wall limit for the agents (s)")
+    add("--timeout", type=float, default=None,
+        help="wall limit for the agents (s; default max(600, 20 s a robot))")  # fmt: skip
     add("--auto-ids", action="store_true", help="agents claim robots (--id auto)")
     add("--no-correct", action="store_true", help="agents skip the final alignment")
     add("--no-cp-tune", action="store_true",

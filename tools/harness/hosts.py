@@ -349,8 +349,8 @@ class HostFleet:
             pending = busy(now) if busy is not None else False
             if not pending and self.all_exited():
                 return
-            if now > self.spec.timeout:
-                self.cut = f"agents still running after {self.spec.timeout:g} s"
+            if now > self.spec.wall:
+                self.cut = f"agents still running after {self.spec.wall:g} s"
                 return
             time.sleep(period)  # polling the agents' exits, bounded by the timeout
 
