@@ -74,7 +74,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.special import bdtrc, chdtrc, chdtri
@@ -195,8 +195,12 @@ def tail_at_least(p: Sequence[float], k: int) -> float:
         return 1.0
     dist = np.zeros(len(p) + 1)
     dist[0] = 1.0
-    for q in p:
-        dist[1:] = dist[1:] * (1.0 - q) + dist[:-1] * q
+    # after i trials only counts 0 .. i can be non-zero: with finite probabilities the
+    # rest stays exactly 0 (0·(1 − q) + 0·q), so it is left out of the step
+    finite = all(math.isfinite(q) for q in p)
+    for i, q in enumerate(p):
+        top = i + 2 if finite else len(dist)
+        dist[1:top] = dist[1:top] * (1.0 - q) + dist[: top - 1] * q
         dist[0] *= 1.0 - q
     return float(min(1.0, max(0.0, dist[k:].sum())))
 
@@ -311,6 +315,8 @@ class _Evidence:
     loose: dict[int, np.ndarray] = field(default_factory=dict)
     #: places (common frame) where a robot the frame leaves out stands
     elsewhere: np.ndarray | None = None
+    #: each robot's tests without its bias test (steps 2-3), as first asked for
+    cheap: dict[int, RobotTest] = field(default_factory=dict)
 
 
 def _evidence(
@@ -320,14 +326,20 @@ def _evidence(
     elsewhere: np.ndarray | None,
 ) -> _Evidence:
     dist: dict[tuple[int, int], list[float]] = {}
-    for m in poses.measurements:
-        dist.setdefault(_edge(m), []).append(float(np.hypot(*m.vector)))
+    vectors = np.array([m.vector for m in poses.measurements], dtype=np.float64).reshape(-1, 2)
+    for m, d in zip(
+        poses.measurements, np.hypot(vectors[:, 0], vectors[:, 1]).tolist(), strict=True
+    ):
+        dist.setdefault(_edge(m), []).append(d)
     sighted = {
-        rec.robot_id: [float(p) for p in noise.p_stray(np.hypot(*rec.neighbours.reshape(-1, 2).T))]
+        rec.robot_id: noise.p_stray(np.hypot(*rec.neighbours.reshape(-1, 2).T)).tolist()
         for rec in records
         if rec.robot_id in poses.ids
     }
-    p_edge = {e: float(noise.p_reject(float(np.mean(d)))) for e, d in sorted(dist.items())}
+    # np.mean of one or two distances is d₀ and (d₀ + d₁) / 2, bit for bit
+    mean = [d[0] if len(d) == 1 else (d[0] + d[1]) / 2 if len(d) == 2 else float(np.mean(d))
+            for d in (dist[e] for e in sorted(dist))]  # fmt: skip
+    p_edge = dict(zip(sorted(dist), noise.p_reject(np.array(mean)).tolist(), strict=True))
     timed = frozenset(r.robot_id for r in records if r.stances is not None and len(r.stances))
     return _Evidence(rejected_edges(poses, noise), p_edge,
                      strays(poses, records, noise, elsewhere), sighted, timed,
@@ -364,6 +376,14 @@ def _robot_test(
     poses: PoseFrame, noise: SightingNoise, ev: _Evidence, r: int, fit: BiasFit | None
 ) -> RobotTest:
     """Steps 2-4 for robot ``r``, its bias test ``fit`` (None: without it, p_bias 1)."""
+    test = ev.cheap.get(r)
+    if test is None:
+        test = ev.cheap[r] = _cheap_test(poses, noise, ev, r)
+    return test if fit is None else replace(test, bias=fit.statistic, p_bias=fit.p)
+
+
+def _cheap_test(poses: PoseFrame, noise: SightingNoise, ev: _Evidence, r: int) -> RobotTest:
+    """Steps 2-3 for robot ``r`` (p_bias 1)."""
     mine = [e for e in ev.edges if r in e]
     own = ev.stray.get(r, [])
     probs = [ev.p_edge[e] for e in mine]
@@ -375,8 +395,7 @@ def _robot_test(
     offset, p_h = mask_test(deltas, noise)
     p_h = max(p_h, noise.rho if r in ev.timed else noise.rho_untimed) if deltas else p_h
     p_pos = tail_at_least(probs, k + lost)
-    stat, p_b = (0.0, 1.0) if fit is None else (fit.statistic, fit.p)
-    return RobotTest(r, len(mine), k, len(own), lost, p_pos, len(deltas), offset, p_h, stat, p_b)
+    return RobotTest(r, len(mine), k, len(own), lost, p_pos, len(deltas), offset, p_h)
 
 
 def _rejects_anyone(poses: PoseFrame, noise: SightingNoise, ev: _Evidence, alpha: float) -> bool:

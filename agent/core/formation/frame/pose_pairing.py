@@ -211,13 +211,11 @@ def identify_pairs(
         ra, rb, key_cost, key_turn, support = _scored_candidates(
             owner, vecs, ori, dist, bearing, epsilon
         )
-        order = np.lexsort((rb, ra, key_turn, key_cost, -support))
         used: set[int] = set()
         linked: set[tuple[int, int]] = set()
         paired: set[int] = set()  # robots (record index) paired by supported candidates
-        first = support[order] > 0
         taken = _Taken(owner, ra, rb, len(recs))
-        for t in taken.open(np.concatenate((order[first], order[~first]))):
+        for t in taken.ordered(support, key_cost, key_turn):
             da, db = int(ra[t]), int(rb[t])
             oa, ob = int(owner[da]), int(owner[db])
             if da in used or db in used or (oa, ob) in linked:
@@ -304,14 +302,33 @@ class _Taken:
         self.used[da] = self.used[db] = True
         self.linked[oa, ob] = True
 
+    def ordered(self, support: np.ndarray, cost: np.ndarray, turn: np.ndarray) -> Iterator[int]:
+        """The candidates in the greedy order (more support, lower cost, smaller |turn|,
+        lower ``ra``, lower ``rb``), as :meth:`open` passes them. The candidates come
+        sorted by (``ra``, ``rb``) (:func:`_scored_candidates`), so a stable sort on the
+        other keys breaks the last ties alike; each level of support is sorted only when
+        it is reached, without the candidates an earlier acceptance already rules out
+        (most of them, in a dense fleet)."""
+        by_support = np.argsort(-support.astype(np.int64), kind="stable")
+        cuts = np.flatnonzero(np.diff(support[by_support])) + 1
+        for level in np.split(by_support, cuts):
+            level = level[self._free(level)]
+            yield from self.open(level[np.lexsort((turn[level], cost[level]))])
+
+    def _free(self, t: np.ndarray) -> np.ndarray:
+        """Whether each candidate of ``t`` has both sightings unused and its robots unlinked."""
+        a, b = self.ra[t], self.rb[t]
+        free: np.ndarray = ~(
+            self.used[a] | self.used[b] | self.linked[self.owner[a], self.owner[b]]
+        )
+        return free
+
     def open(self, order: np.ndarray, size: int = 1 << 12) -> Iterator[int]:
         """The candidates of ``order`` as Python ints, but those whose sightings are used
         or whose robots are linked when their slice is reached."""
         for lo in range(0, order.size, size):
             t = order[lo : lo + size]
-            a, b = self.ra[t], self.rb[t]
-            free = ~(self.used[a] | self.used[b] | self.linked[self.owner[a], self.owner[b]])
-            yield from t[free].tolist()
+            yield from t[self._free(t)].tolist()
 
 
 def _mask_cost(

@@ -372,9 +372,9 @@ def _residuals(
     err = np.hypot(e[:, 0], e[:, 1])
     dist = np.hypot(prob.v[:, 0], prob.v[:, 1])
     acc: dict[tuple[int, int], list[tuple[float, float, float]]] = {}
-    for k, m in enumerate(measurements):
+    for m, e, dl, d in zip(measurements, err.tolist(), delta.tolist(), dist.tolist(), strict=True):
         key = (min(m.owner, m.target), max(m.owner, m.target))
-        acc.setdefault(key, []).append((float(err[k]), abs(float(delta[k])), float(dist[k])))
+        acc.setdefault(key, []).append((e, abs(dl), d))
     pairs = []
     for (i, j), vals in sorted(acc.items()):
         position = math.fsum(v[0] for v in vals)
@@ -396,12 +396,15 @@ def turn_offsets(
     """Robots whose ψ the others' masks agree is off by :data:`TURN_MIN` to :data:`TURN_MAX`,
     with that offset (rad, modulo π: :func:`mask_offset`), by ascending id."""
     index = {rid: k for k, rid in enumerate(ids)}
+    masked = [m for m in sorted(measurements, key=lambda m: (m.target, m.owner))
+              if math.isfinite(m.orientation)]  # fmt: skip
+    ref = [math.atan2(float(m.vector[1]), float(m.vector[0])) + m.orientation - math.pi / 2
+           for m in masked]  # fmt: skip
+    t = np.array([index[m.target] for m in masked], dtype=np.intp)
+    o = np.array([index[m.owner] for m in masked], dtype=np.intp)
+    head = np.asarray(psi, dtype=np.float64)
     seen: dict[int, list[float]] = {}
-    for m in sorted(measurements, key=lambda m: (m.target, m.owner)):
-        if not math.isfinite(m.orientation):
-            continue
-        ref = math.atan2(float(m.vector[1]), float(m.vector[0])) + m.orientation - math.pi / 2
-        delta = float(wrap_half(psi[index[m.target]] - psi[index[m.owner]] - ref))
+    for m, delta in zip(masked, wrap_half(head[t] - head[o] - np.array(ref)).tolist(), strict=True):
         seen.setdefault(m.target, []).append(delta)
     out = {}
     for rid, deltas in sorted(seen.items()):
