@@ -193,11 +193,18 @@ def tail_at_least(p: Sequence[float], k: int) -> float:
     probabilities ``p`` (Poisson-binomial, exact by dynamic programming)."""
     if k <= 0:
         return 1.0
-    dist = np.zeros(len(p) + 1)
-    dist[0] = 1.0
     # after i trials only counts 0 .. i can be non-zero: with finite probabilities the
     # rest stays exactly 0 (0·(1 − q) + 0·q), so it is left out of the step
     finite = all(math.isfinite(q) for q in p)
+    if len(p) <= 64:  # a robot's few dozen: the same products and sums, as floats
+        d = [1.0] + [0.0] * len(p)
+        for i, q in enumerate(p):
+            for j in range(i + 1 if finite else len(p), 0, -1):
+                d[j] = d[j] * (1.0 - q) + d[j - 1] * q
+            d[0] *= 1.0 - q
+        return float(min(1.0, max(0.0, np.array(d[k:]).sum())))
+    dist = np.zeros(len(p) + 1)
+    dist[0] = 1.0
     for i, q in enumerate(p):
         top = i + 2 if finite else len(dist)
         dist[1:top] = dist[1:top] * (1.0 - q) + dist[: top - 1] * q
@@ -327,9 +334,7 @@ def _evidence(
 ) -> _Evidence:
     dist: dict[tuple[int, int], list[float]] = {}
     vectors = np.array([m.vector for m in poses.measurements], dtype=np.float64).reshape(-1, 2)
-    for m, d in zip(
-        poses.measurements, np.hypot(vectors[:, 0], vectors[:, 1]).tolist(), strict=True
-    ):
+    for m, d in zip(poses.measurements, np.hypot(*vectors.T).tolist(), strict=True):
         dist.setdefault(_edge(m), []).append(d)
     sighted = {
         rec.robot_id: noise.p_stray(np.hypot(*rec.neighbours.reshape(-1, 2).T)).tolist()
@@ -375,27 +380,23 @@ def _bias_fits(poses: PoseFrame, noise: SightingNoise, ev: _Evidence) -> dict[in
 def _robot_test(
     poses: PoseFrame, noise: SightingNoise, ev: _Evidence, r: int, fit: BiasFit | None
 ) -> RobotTest:
-    """Steps 2-4 for robot ``r``, its bias test ``fit`` (None: without it, p_bias 1)."""
-    test = ev.cheap.get(r)
-    if test is None:
-        test = ev.cheap[r] = _cheap_test(poses, noise, ev, r)
+    """Steps 2-4 for robot ``r``, its bias test ``fit`` (None: without it, p_bias 1);
+    steps 2-3 once per evidence (``ev.cheap``)."""
+    if r not in ev.cheap:
+        mine = [e for e in ev.edges if r in e]
+        own = ev.stray.get(r, [])
+        probs = [ev.p_edge[e] for e in mine]
+        # every sighting of r's own could have ended up a lost stray (step 2)
+        probs += ev.sighted.get(r, [])
+        k = sum(ev.edges[e] for e in mine)
+        lost = sum(not lands for _, lands in own)
+        deltas = mask_deltas(poses, r)
+        offset, p_h = mask_test(deltas, noise)
+        p_h = max(p_h, noise.rho if r in ev.timed else noise.rho_untimed) if deltas else p_h
+        p_pos = tail_at_least(probs, k + lost)
+        ev.cheap[r] = RobotTest(r, len(mine), k, len(own), lost, p_pos, len(deltas), offset, p_h)
+    test = ev.cheap[r]
     return test if fit is None else replace(test, bias=fit.statistic, p_bias=fit.p)
-
-
-def _cheap_test(poses: PoseFrame, noise: SightingNoise, ev: _Evidence, r: int) -> RobotTest:
-    """Steps 2-3 for robot ``r`` (p_bias 1)."""
-    mine = [e for e in ev.edges if r in e]
-    own = ev.stray.get(r, [])
-    probs = [ev.p_edge[e] for e in mine]
-    # every sighting of r's own could have ended up a lost stray (step 2)
-    probs += ev.sighted.get(r, [])
-    k = sum(ev.edges[e] for e in mine)
-    lost = sum(not lands for _, lands in own)
-    deltas = mask_deltas(poses, r)
-    offset, p_h = mask_test(deltas, noise)
-    p_h = max(p_h, noise.rho if r in ev.timed else noise.rho_untimed) if deltas else p_h
-    p_pos = tail_at_least(probs, k + lost)
-    return RobotTest(r, len(mine), k, len(own), lost, p_pos, len(deltas), offset, p_h)
 
 
 def _rejects_anyone(poses: PoseFrame, noise: SightingNoise, ev: _Evidence, alpha: float) -> bool:
