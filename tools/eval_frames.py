@@ -33,10 +33,10 @@ every fault-free fleet of at most N robots, each robot's record is set aside, th
 framed without it, and the robot tested alone against them; it prints how many of those
 sound robots the test rejects below 10⁻², 10⁻³ and α, and the worst.
 
-``--corpus DIR --ceiling [--min-revealed SHARE]`` adds what the records hold: each fault run's faulty robot
-tested alone against the others held at their *true* start poses (a perfect frame of
-the rest, which no fleet has), standing where the others' sightings put it, at the
-heading its own sightings choose. A miss the fleet shares with that test is beyond the
+``--corpus DIR --ceiling [--min-revealed SHARE]`` adds what the records hold: each fault
+run's faulty robot tested alone against the others held at their *true* start poses (a
+perfect frame of the rest, which no fleet has), standing where the others' sightings put
+it, at the heading its own sightings choose. A miss the fleet shares with that test is beyond the
 records at α: its faulty robot's sightings, and the others' of it, are as likely from a
 sound robot as the false-alarm rate allows (a compass turned 40° that one mask sees, a
 robot seen by two others in a fleet of four). The runs the records reveal (the faulty

@@ -75,7 +75,7 @@ MAX_ROBOTS = 128
 MAX_RENDER_WORKERS = 8
 #: The agents' wall limit when none is given: at least WALL_MIN_S, WALL_PER_ROBOT_S a robot.
 #: On the two-core machine every agent of a simulated fleet computes the plan on the same
-#: cores: 100 NAOs agreed after 456 s and were cut at 600 s in their waves (seed 62), where
+#: cores: 100 NAOs agreed after 456 s and were cut at 600 s while they planned (seed 62), where
 #: each agent's own timeouts would have ended the run; the limit is the harness's last
 #: resort, never the fleet's clock.
 WALL_MIN_S = 600.0
