@@ -4,25 +4,23 @@ docs/design.md §8 "Faults"; NAO paper 4.1.2).
 Once agreed, every agent serves the records it agreed on at ``nao/{id}/records``
 (:func:`record_set`, :func:`answer`), so that an agent restarted after a crash can fetch
 them by their digest (agent/recovery/resume.py) instead of searching again. The asker
-trusts no server: :func:`records_of` checks that a reply is the set asked for, decodes,
+trusts no server: :func:`records_of` (agent/wire/codec.py) checks that a reply is the set asked for, decodes,
 holds one record per member sorted by sender, and hashes to the agreed digest.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-
 from agent.core.agreement import Decision
 from agent.wire import (
     Message,
     NeighborRecordMsg,
-    ProtocolError,
     RecordSetReply,
     RecordSetRequest,
-    canonical_digest,
-    decode,
     encode,
+    records_of,
 )
+
+__all__ = ["answer", "record_set", "records_of"]
 
 
 def record_set(me: int, decision: Decision[NeighborRecordMsg]) -> RecordSetReply:
@@ -38,23 +36,3 @@ def answer(served: RecordSetReply | None, request: Message) -> RecordSetReply | 
     if not isinstance(request, RecordSetRequest) or served is None:
         return None
     return served if request.digest in ("", served.digest) else None
-
-
-def records_of(
-    reply: RecordSetReply, digest: str, members: Sequence[int]
-) -> tuple[NeighborRecordMsg, ...]:
-    """The records of ``reply`` once checked: the digest asked for, records that decode,
-    one per member, sorted by sender, hashing to ``digest``. ``ValueError`` otherwise."""
-    if reply.digest != digest:
-        raise ValueError(f"record set {reply.digest[:12]} is not the one asked for")
-    try:
-        recs = tuple(decode(r, NeighborRecordMsg) for r in reply.records)
-    except ProtocolError as exc:
-        raise ValueError(f"record set from robot {reply.sender}: {exc}") from None
-    senders = [r.sender for r in recs]
-    if senders != sorted(set(senders)) or tuple(senders) != tuple(members):
-        raise ValueError(f"record set covers {senders}, the agreement {list(members)}")
-    got = canonical_digest(recs)
-    if got != digest:
-        raise ValueError(f"record set hashes to {got[:12]}, not {digest[:12]}")
-    return recs

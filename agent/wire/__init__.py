@@ -25,6 +25,7 @@ from agent.wire.codec import (
     decode,
     encode,
     message_types,
+    records_of,
     take_payload,
     unpack_bounded,
 )
@@ -228,6 +229,7 @@ __all__ = [
     "nao",
     "network_spec",
     "reason",
+    "records_of",
     "take_payload",
     "trust",
     "unpack_bounded",

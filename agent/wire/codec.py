@@ -27,7 +27,7 @@ from agent.wire.fields import (
     ProtocolError,
     _short,
 )
-from agent.wire.messages import _REGISTRY, M, Message, NeighborRecordMsg
+from agent.wire.messages import _REGISTRY, M, Message, NeighborRecordMsg, RecordSetReply
 
 # --------------------------------------------------------------------------- codec
 
@@ -257,3 +257,25 @@ def canonical_digest(records: Sequence[NeighborRecordMsg]) -> str:
         h.update(len(data).to_bytes(4, "big"))
         h.update(data)
     return h.hexdigest()
+
+
+def records_of(
+    reply: RecordSetReply, digest: str, members: Sequence[int]
+) -> tuple[NeighborRecordMsg, ...]:
+    """The records of an agreed record set (``nao/{i}/records``) once checked: the digest
+    asked for, records that decode, one per member, sorted by sender, hashing to
+    ``digest`` (:func:`canonical_digest`): the asker trusts no server, only the digest the
+    members agreed on. ``ValueError`` otherwise."""
+    if reply.digest != digest:
+        raise ValueError(f"record set {reply.digest[:12]} is not the one asked for")
+    try:
+        recs = tuple(decode(r, NeighborRecordMsg) for r in reply.records)
+    except ProtocolError as exc:
+        raise ValueError(f"record set from robot {reply.sender}: {exc}") from None
+    senders = [r.sender for r in recs]
+    if senders != sorted(set(senders)) or tuple(senders) != tuple(members):
+        raise ValueError(f"record set covers {senders}, the agreement {list(members)}")
+    got = canonical_digest(recs)
+    if got != digest:
+        raise ValueError(f"record set hashes to {got[:12]}, not {digest[:12]}")
+    return recs

@@ -46,6 +46,7 @@ from tools.harness.observe import (
     LiveView,
     Observer,
     Recorder,
+    fetch_agreed_records,
     observe_still,
     observer_bus,
 )
@@ -462,8 +463,11 @@ class Fleet:
             self.obs.take_event(ev, self._rec)
 
     def step(self) -> None:
-        """Hand what the bus brings within 0.1 s to the observer; repaint the status lines."""
+        """Hand what the bus brings within 0.1 s to the observer (and the agreed records it
+        missed, :func:`fetch_agreed_records`); repaint the status lines."""
         self._take()
+        if self._bus is not None:
+            fetch_agreed_records(self._bus, self.obs)
         if self._live is not None:
             self._live.update(self.obs, self.elapsed())
 

@@ -7,6 +7,7 @@ An evaluator's view: it reads ground truth (``world/truth/**``); agents never do
 from __future__ import annotations
 
 import json
+import math
 import sys
 import threading
 import time
@@ -17,7 +18,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from agent.core.formation.params import PlanParams
-from agent.net.bus import Bus
+from agent.net.bus import Bus, BusError
 from agent.wire import (
     KEY_ALIVE_ALL,
     KEY_CAMERA_FEED_ALL,
@@ -32,10 +33,14 @@ from agent.wire import (
     DigestMsg,
     Guard,
     NeighborRecordMsg,
+    RecordSetReply,
+    RecordSetRequest,
     StatusMsg,
     TruthPosesMsg,
     encode,
     id_from_key,
+    key_records,
+    records_of,
 )
 from tools.harness.procs import FleetNet
 from tools.harness.view.foxglove import JSON
@@ -192,6 +197,9 @@ class Observer:
     #: where it stood when it published the start its plan is built from
     record_sample: dict[int, int] = field(default_factory=dict)
     digests: dict[int, DigestMsg] = field(default_factory=dict)
+    #: per agreed digest, how often its record set was asked of the members and when
+    #: last (``time.monotonic()``; :func:`fetch_agreed_records`)
+    fetches: dict[str, tuple[int, float]] = field(default_factory=dict)
     #: events whose handling failed (counted, reason logged, the observer goes on)
     rejected: int = 0
     guard: Guard = field(
@@ -326,6 +334,52 @@ def watch(bus: Bus) -> None:
         bus.subscribe(key)
     bus.subscribe(KEY_CAMERA_FEED_ALL, MAX_CAMERA_PUBLICATION_BYTES)
     bus.watch_alive(KEY_ALIVE_ALL)
+
+
+#: Times the observer asks the members for an agreed record set it missed part of, the
+#: pause between two asks (s: a member serves the set once it has agreed) and how long it
+#: waits for each answer (s).
+FETCH_TRIES = 3
+FETCH_GAP = 2.0
+FETCH_TIMEOUT = 2.0
+
+
+def fetch_agreed_records(bus: Bus, obs: Observer) -> bool:
+    """The records of the fleet's agreement that ``obs`` missed, asked of the members.
+
+    A record is published once; under a flood (a rogue's 10 000 forged messages on a
+    robot's record key, plain links) the router dropped the observer's copy of robot 1's,
+    while the agents had agreed on it, and the judge could not recompute their plan. Once
+    every member's digest names one record set and ``obs`` holds no record of some of its
+    members, the set is asked of the members by that digest (``nao/{i}/records``, lowest
+    id first, the answer sealed by the robot that serves it), at most
+    :data:`FETCH_TRIES` times :data:`FETCH_GAP` s apart, and taken only if
+    :func:`records_of` finds it the set the digest names: one record per member, hashing
+    to it. True when records were added."""
+    digests = {d.digest for d in obs.digests.values()}
+    if len(digests) != 1:
+        return False
+    (digest,) = digests
+    members = tuple(sorted(min(obs.digests.values(), key=lambda d: d.sender).members))
+    tries, last = obs.fetches.get(digest, (0, -math.inf))
+    now = time.monotonic()
+    if all(m in obs.records for m in members) or tries >= FETCH_TRIES or now - last < FETCH_GAP:
+        return False
+    obs.fetches[digest] = (tries + 1, now)
+    for rid in members:
+        try:
+            reply = bus.query(key_records(rid), RecordSetRequest(digest=digest), RecordSetReply,
+                              timeout=FETCH_TIMEOUT)  # fmt: skip
+            records = records_of(reply, digest, members)
+        except (BusError, ValueError) as exc:
+            obs.guard.reject(f"record set from robot {rid}", exc)
+            continue
+        for r in records:
+            old = obs.records.get(r.sender)
+            if old is None or old.round <= r.round:
+                obs.records[r.sender] = r
+        return True
+    return False
 
 
 #: How far two truth samples' poses may differ for a world that stands still (m, rad):
