@@ -68,16 +68,16 @@ def test_a_missed_record_is_fetched_by_the_agreed_digest() -> None:
 
 def test_a_set_that_is_not_the_agreed_one_is_refused(monkeypatch: pytest.MonkeyPatch) -> None:
     """A set whose records do not hash to the digest (a record changed) is not taken, and
-    the members are asked at most FETCH_TRIES times, FETCH_GAP s apart."""
+    the members are asked at most FETCH_ASKS times, FETCH_GAP s apart."""
     forged = (RECORDS[0].__class__(sender=1, round=0, neighbours=((9.0, 9.0),)), *RECORDS[1:])
     obs = _observer()
     bus = FakeBus(lambda robot: _set(robot, forged))
     monkeypatch.setattr(observe, "FETCH_GAP", 0.0)
-    for _ in range(observe.FETCH_TRIES + 2):
+    for _ in range(observe.FETCH_ASKS + 2):
         assert not fetch_agreed_records(bus, obs)  # type: ignore[arg-type]
     assert 1 not in obs.records
-    assert len(bus.asked) == 3 * observe.FETCH_TRIES  # every member, each try
-    assert obs.fetches[DIGEST][0] == observe.FETCH_TRIES
+    assert len(bus.asked) == 3 * observe.FETCH_ASKS  # every member, each ask
+    assert obs.fetches[DIGEST][0] == observe.FETCH_ASKS
 
 
 def test_nothing_is_asked_before_the_members_agree_or_too_soon() -> None:

@@ -339,7 +339,7 @@ def watch(bus: Bus) -> None:
 #: Times the observer asks the members for an agreed record set it missed part of, the
 #: pause between two asks (s: a member serves the set once it has agreed) and how long it
 #: waits for each answer (s).
-FETCH_TRIES = 3
+FETCH_ASKS = 3
 FETCH_GAP = 2.0
 FETCH_TIMEOUT = 2.0
 
@@ -353,7 +353,7 @@ def fetch_agreed_records(bus: Bus, obs: Observer) -> bool:
     every member's digest names one record set and ``obs`` holds no record of some of its
     members, the set is asked of the members by that digest (``nao/{i}/records``, lowest
     id first, the answer sealed by the robot that serves it), at most
-    :data:`FETCH_TRIES` times :data:`FETCH_GAP` s apart, and taken only if
+    :data:`FETCH_ASKS` times :data:`FETCH_GAP` s apart, and taken only if
     :func:`records_of` finds it the set the digest names: one record per member, hashing
     to it. True when records were added."""
     digests = {d.digest for d in obs.digests.values()}
@@ -361,11 +361,11 @@ def fetch_agreed_records(bus: Bus, obs: Observer) -> bool:
         return False
     (digest,) = digests
     members = tuple(sorted(min(obs.digests.values(), key=lambda d: d.sender).members))
-    tries, last = obs.fetches.get(digest, (0, -math.inf))
+    asks, last = obs.fetches.get(digest, (0, -math.inf))
     now = time.monotonic()
-    if all(m in obs.records for m in members) or tries >= FETCH_TRIES or now - last < FETCH_GAP:
+    if all(m in obs.records for m in members) or asks >= FETCH_ASKS or now - last < FETCH_GAP:
         return False
-    obs.fetches[digest] = (tries + 1, now)
+    obs.fetches[digest] = (asks + 1, now)
     for rid in members:
         try:
             reply = bus.query(key_records(rid), RecordSetRequest(digest=digest), RecordSetReply,
