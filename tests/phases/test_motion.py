@@ -16,7 +16,7 @@ from agent.core.perception.compass import CompassResult
 from agent.phases.context import NORTH, AgentFailure, Context
 from agent.phases.motion import Motion
 from agent.phases.reporting import Phase
-from tests.phases.fakes import Clock, FakeBody, FakeFleet, context
+from tests.phases.fakes import Clock, FakeBody, FakeBus, FakeFleet, context
 
 
 class Compass:
@@ -88,6 +88,20 @@ def test_rotate_follows_the_compass_and_says_how_far_is_left() -> None:
     assert ctx.beliefs.heading == pytest.approx(NORTH + math.radians(30.0))
     # the phase stays; the detail says how far is left (statuses held back meanwhile)
     assert ctx.report.phase is Phase.MOVE and m.last_frame is not None
+
+
+def test_a_labelled_turn_is_said_as_it_starts_and_an_unlabelled_one_is_not() -> None:
+    """Within the status pace of the phase's first status, the labelled turn is said at
+    once, before the body is asked to turn; its progress is then held back."""
+    m, ctx, _, _ = motion(dtheta=math.radians(10.0))
+    bus = ctx.bus
+    assert isinstance(bus, FakeBus)
+    ctx.report.status(Phase.SEARCH, 0.0, "sweep at θ = 0°")
+    m.rotate(math.radians(30.0))
+    assert [s.detail for s in bus.statuses()] == ["sweep at θ = 0°"]
+    m.rotate(math.radians(30.0), label="turn to θ = 180°")
+    said = [s.detail for s in bus.statuses()]
+    assert said == ["sweep at θ = 0°", "turn to θ = 180°: +30.0° to go"], said
 
 
 def test_a_contact_while_walking_stops_the_robot_with_where_it_believes_it_is() -> None:

@@ -497,14 +497,8 @@ def summarise(
     rogues = rogue_reports(out)
     if result.get("rogues_started"):
         result["rogues"] = rogues
-        trusted = (
-            result["plan_matches_records"]
-            and len(rogues) == len(result["rogues_started"])
-            and all(
-                r.get("commands_executed", 0) == 0 and r.get("claims_granted", 0) == 0
-                for r in rogues.values()
-            )
-        )
+        result["untrusted"] = untrusted_because(result, rogues)
+        trusted = not result["untrusted"]
         result["rogue_defeated"] = trusted
     marched = result.get("march_ok", True) and result.get("reshape_ok", True)
     result["outcome"], result["outcome_detail"] = outcome(result)
@@ -522,6 +516,25 @@ def summarise(
     if not quiet:
         print_table(result)
     return result
+
+
+def untrusted_because(result: dict[str, Any], rogues: dict[str, Any]) -> list[str]:
+    """Why a run with rogues cannot be called defended, in words (empty: it can): the plan
+    recomputed from the signed records differs, a rogue's report is missing, or a rogue had
+    a command executed or a claim granted."""
+    why = []
+    if not result["plan_matches_records"]:
+        why.append(
+            "the plan recomputed from the signed records the observer holds "
+            f"(robots {sorted(result.get('record_rounds', {}), key=int)}) differs from the agents'"
+        )
+    missing = sorted(set(result["rogues_started"]) - set(rogues))
+    if missing:
+        why.append(f"no report from rogue {', '.join(missing)}")
+    for name, rep in sorted(rogues.items()):
+        if rep.get("commands_executed", 0) or rep.get("claims_granted", 0):
+            why.append(f"rogue {name} had a command executed or a claim granted")
+    return why
 
 
 def print_table(r: dict[str, Any]) -> None:
@@ -554,6 +567,8 @@ def print_table(r: dict[str, Any]) -> None:
     if "rogues" in r:
         p(f"plan digest recomputed from the signed records: "
           f"{'same' if r['plan_matches_records'] else 'DIFFERENT'}")  # fmt: skip
+    for why in r.get("untrusted", []):
+        p(f"not defended: {why}")
     if r.get("route"):
         if "march_distance" in r:
             p(f"march: leader displaced {r['march_distance']:.2f} m for a route of "
