@@ -90,3 +90,23 @@ def test_nothing_is_asked_before_the_members_agree_or_too_soon() -> None:
     assert not fetch_agreed_records(bus, obs)  # type: ignore[arg-type]
     assert not fetch_agreed_records(bus, obs)  # type: ignore[arg-type]  # within FETCH_GAP
     assert len(bus.asked) == 3
+
+
+def test_a_record_of_another_round_is_replaced_by_the_agreed_one() -> None:
+    """Every member's record is held, one of another round than the agreed set's: the held
+    records do not hash to the digest, so the set is asked and taken as it is; once held,
+    nothing more is asked."""
+    obs = _observer(missing=0)
+    obs.records[2] = NeighborRecordMsg(sender=2, round=1, neighbours=((7.0, 1.0),))
+    bus = FakeBus(lambda robot: _set(robot))
+    assert fetch_agreed_records(bus, obs)  # type: ignore[arg-type]
+    assert obs.records == {r.sender: r for r in RECORDS}
+    assert not fetch_agreed_records(bus, obs)  # type: ignore[arg-type]
+    assert bus.asked == [("nao/1/records", DIGEST)]
+
+
+def test_records_that_hash_to_the_digest_are_not_asked_for() -> None:
+    obs = _observer(missing=0)
+    bus = FakeBus(lambda robot: _set(robot))
+    assert not fetch_agreed_records(bus, obs)  # type: ignore[arg-type]
+    assert bus.asked == [] and obs.held_digest == DIGEST

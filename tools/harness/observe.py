@@ -37,6 +37,7 @@ from agent.wire import (
     RecordSetRequest,
     StatusMsg,
     TruthPosesMsg,
+    canonical_digest,
     encode,
     id_from_key,
     key_records,
@@ -200,6 +201,9 @@ class Observer:
     #: per agreed digest, how often its record set was asked of the members and when
     #: last (``time.monotonic()``; :func:`fetch_agreed_records`)
     fetches: dict[str, tuple[int, float]] = field(default_factory=dict)
+    #: the agreed digest the records held were last found to hash to ("": not checked
+    #: since a record arrived; :func:`fetch_agreed_records`)
+    held_digest: str = ""
     #: events whose handling failed (counted, reason logged, the observer goes on)
     rejected: int = 0
     guard: Guard = field(
@@ -268,6 +272,7 @@ class Observer:
             old = self.records.get(msg.sender)
             if old is None or old.round <= msg.round:  # the newest (re-)search round
                 self.records[msg.sender] = msg
+                self.held_digest = ""
             if old is None or old.round < msg.round:
                 self.record_sample[msg.sender] = max(len(self.truth) - 1, 0)
         elif isinstance(msg, DigestMsg):
@@ -350,20 +355,26 @@ def fetch_agreed_records(bus: Bus, obs: Observer) -> bool:
     A record is published once; under a flood (a rogue's 10 000 forged messages on a
     robot's record key, plain links) the router dropped the observer's copy of robot 1's,
     while the agents had agreed on it, and the judge could not recompute their plan. Once
-    every member's digest names one record set and ``obs`` holds no record of some of its
-    members, the set is asked of the members by that digest (``nao/{i}/records``, lowest
-    id first, the answer sealed by the robot that serves it), at most
-    :data:`FETCH_ASKS` times :data:`FETCH_GAP` s apart, and taken only if
-    :func:`records_of` finds it the set the digest names: one record per member, hashing
-    to it. True when records were added."""
+    every member's digest names one record set and the records ``obs`` holds of its
+    members do not hash to it (one is missing, or of another round), the set is asked of
+    the members by that digest (``nao/{i}/records``, lowest id first, the answer sealed by
+    the robot that serves it), at most :data:`FETCH_ASKS` times :data:`FETCH_GAP` s
+    apart, and taken only if :func:`records_of` finds it the set the digest names: one
+    record per member, hashing to it. True when records were added."""
     digests = {d.digest for d in obs.digests.values()}
     if len(digests) != 1:
         return False
     (digest,) = digests
+    if obs.held_digest == digest:
+        return False
     members = tuple(sorted(min(obs.digests.values(), key=lambda d: d.sender).members))
+    held = [obs.records[m] for m in members if m in obs.records]
+    if len(held) == len(members) and canonical_digest(held) == digest:
+        obs.held_digest = digest
+        return False
     asks, last = obs.fetches.get(digest, (0, -math.inf))
     now = time.monotonic()
-    if all(m in obs.records for m in members) or asks >= FETCH_ASKS or now - last < FETCH_GAP:
+    if asks >= FETCH_ASKS or now - last < FETCH_GAP:
         return False
     obs.fetches[digest] = (asks + 1, now)
     for rid in members:
@@ -374,10 +385,9 @@ def fetch_agreed_records(bus: Bus, obs: Observer) -> bool:
         except (BusError, ValueError) as exc:
             obs.guard.reject(f"record set from robot {rid}", exc)
             continue
-        for r in records:
-            old = obs.records.get(r.sender)
-            if old is None or old.round <= r.round:
-                obs.records[r.sender] = r
+        for r in records:  # the agreed set: taken as it is, whatever round was held
+            obs.records[r.sender] = r
+        obs.held_digest = digest
         return True
     return False
 
