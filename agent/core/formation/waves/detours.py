@@ -63,6 +63,10 @@ MAX_EVALS = 2000
 #: nearest to its own (then by row).
 SWAPS = 8
 
+#: Combinations of two bent paths measured at a time (:func:`_pair_detours`, shortest
+#: first): the search stops at the first chunk that completes ``TRIES`` clear ones.
+PAIR_CHUNK = 32
+
 #: The wide neighbourhood's sidesteps: via points ``along`` clearances from either end
 #: of the path and ``off`` clearances beside it (a lane taken at a fixed distance, not a
 #: fraction of a long path: 7-56 degrees off the straight line).
@@ -129,26 +133,29 @@ def _pair_detours(
     su = _stack(starts[u], targets[u], paths[u], c)
     sv = _stack(starts[v], targets[v], paths[v], c)
     ku, kv = su.shape[0], sv.shape[0]
-    d = (
-        seg_seg_dist(
-            su[:, None, :-1, None, :],
-            su[:, None, 1:, None, :],
-            sv[None, :, None, :-1, :],
-            sv[None, :, None, 1:, :],
-        )
-        .reshape(ku, kv, -1)
-        .min(axis=2)
-    )
     lu = np.sum(np.hypot(*np.diff(su, axis=1).transpose(2, 0, 1)), axis=1)
     lv = np.sum(np.hypot(*np.diff(sv, axis=1).transpose(2, 0, 1)), axis=1)
-    tot = lu[:, None] + lv[None, :]
-    ok = d >= req
-    ok[0, :] = False
-    ok[:, 0] = False
-    iu, iv = np.nonzero(ok)
-    flat = iu * kv + iv
-    pick = flat[np.lexsort((flat, tot[iu, iv]))][:TRIES]
-    return [(su[f // kv], sv[f % kv]) for f in pick.tolist()]
+    tot = (lu[:, None] + lv[None, :]).reshape(-1)
+    # the combinations without either current path, shortest first (then listed); their
+    # distances are measured in that order, a chunk at a time, until TRIES are clear
+    flat = (np.arange(1, ku)[:, None] * kv + np.arange(1, kv)[None, :]).reshape(-1)
+    flat = flat[np.lexsort((flat, tot[flat]))]
+    pick: list[int] = []
+    for lo in range(0, flat.size, PAIR_CHUNK):
+        f = flat[lo : lo + PAIR_CHUNK]
+        a, b = su[f // kv], sv[f % kv]
+        d = (
+            seg_seg_dist(
+                a[:, :-1, None, :], a[:, 1:, None, :], b[:, None, :-1, :], b[:, None, 1:, :]
+            )
+            .reshape(f.size, -1)
+            .min(axis=1)
+        )
+        pick.extend(f[d >= req].tolist())
+        if len(pick) >= TRIES:
+            break
+    pick = pick[:TRIES]
+    return [(su[f // kv], sv[f % kv]) for f in pick]
 
 
 def _path(start: np.ndarray, via: Sequence[np.ndarray], target: np.ndarray) -> np.ndarray:
