@@ -37,7 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agent.core.formation.paths.close_pairs import path_segments, segment_pairs
+from agent.core.formation.paths.close_pairs import close_segment_pairs, path_segments
 from agent.core.formation.paths.geometry import point_seg_dist, seg_seg_dist
 from agent.core.formation.waves.release import arc_offsets, segment_releases
 
@@ -85,8 +85,10 @@ def _flags_from_pairs(
     s: np.ndarray,
     t: np.ndarray,
     clearance: float,
+    d_st: np.ndarray | None = None,
 ) -> PairFlags:
-    """Per robot pair flags from its segment pairs (s, t), owner[s] < owner[t]."""
+    """Per robot pair flags from its segment pairs (s, t), owner[s] < owner[t] (``d_st``:
+    their distances, if known)."""
     n = starts.shape[0]
     if s.size == 0:
         z = np.zeros(0, dtype=np.int64)
@@ -94,7 +96,7 @@ def _flags_from_pairs(
         zb = np.zeros(0, dtype=bool)
         return PairFlags(z, z, zb, zb, zb, zf, zf, zf, zf, zf, zf)
     i, k = owner[s], owner[t]
-    d_ss = seg_seg_dist(seg_a[s], seg_b[s], seg_a[t], seg_b[t])
+    d_ss = seg_seg_dist(seg_a[s], seg_b[s], seg_a[t], seg_b[t]) if d_st is None else d_st
     d_i_sk = point_seg_dist(starts[k], seg_a[s], seg_b[s])
     d_k_ti = point_seg_dist(targets[i], seg_a[t], seg_b[t])
     d_k_si = point_seg_dist(starts[i], seg_a[t], seg_b[t])
@@ -156,8 +158,8 @@ def pair_flags(paths: Sequence[np.ndarray], clearance: float) -> PairFlags:
     pairs farther apart can share a wave and go in either order)."""
     starts, targets = _ends(paths)
     seg_a, seg_b, owner = path_segments(paths)
-    s, t = segment_pairs(seg_a, seg_b, owner, clearance)
-    return _flags_from_pairs(starts, targets, seg_a, seg_b, owner, s, t, clearance)
+    s, t, d = close_segment_pairs(seg_a, seg_b, owner, clearance)
+    return _flags_from_pairs(starts, targets, seg_a, seg_b, owner, s, t, clearance, d)
 
 
 def update_flags(
@@ -174,8 +176,8 @@ def update_flags(
     seg_a, seg_b, owner = path_segments(paths)
     moved = np.zeros(n, dtype=bool)
     moved[np.asarray(changed, dtype=np.int64)] = True
-    s, t = segment_pairs(seg_a, seg_b, owner, clearance, query=moved[owner])
-    new = _flags_from_pairs(starts, targets, seg_a, seg_b, owner, s, t, clearance)
+    s, t, d = close_segment_pairs(seg_a, seg_b, owner, clearance, query=moved[owner])
+    new = _flags_from_pairs(starts, targets, seg_a, seg_b, owner, s, t, clearance, d)
     keep = ~(moved[flags.a] | moved[flags.b])
     parts = [(getattr(flags, f)[keep], getattr(new, f)) for f in PairFlags.__dataclass_fields__]
     merged = {
