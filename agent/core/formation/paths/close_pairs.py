@@ -10,7 +10,8 @@ length / c + close pairs) · log. A query mask restricts the search to the pairs
 segments (the robots whose path changed), so that pair flags are updated, not redone; a
 small query (query segments x segments <= ``_DIRECT``) is measured pair by pair without the
 grid, which gives the same pairs. :func:`close_segment_pairs` also returns the distances
-measured, so that :mod:`safety` does not measure them again.
+measured, so that :mod:`safety` does not measure them again, and :func:`replace_paths`
+the segments of paths of which a few changed, from those before the change.
 """
 
 from __future__ import annotations
@@ -36,6 +37,36 @@ def path_segments(paths: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray, 
     ia = first[owner] + (np.arange(owner.size) - np.repeat(np.cumsum(nseg) - nseg, nseg))
     ib = ia + (lens[owner] > 1)
     return pts[ia], pts[ib], owner
+
+
+def replace_paths(
+    segments: tuple[np.ndarray, np.ndarray, np.ndarray],
+    rows: Sequence[int],
+    paths: Sequence[np.ndarray],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`path_segments` of ``paths`` from ``segments``, those of paths that differ
+    only in ``rows`` (the other paths' segments are copied, not rebuilt)."""
+    seg_a, seg_b, owner = segments
+    rows = sorted(set(rows))
+    los = np.searchsorted(owner, rows, side="left").tolist()
+    his = np.searchsorted(owner, rows, side="right").tolist()
+    pa: list[np.ndarray] = []
+    pb: list[np.ndarray] = []
+    po: list[np.ndarray] = []
+    prev = 0
+    for r, lo, hi in zip(rows, los, his, strict=True):
+        p = np.asarray(paths[r], dtype=np.float64).reshape(-1, 2)
+        if p.shape[0] == 0:
+            raise ValueError("a path has no points")
+        a, b = (p[:-1], p[1:]) if p.shape[0] > 1 else (p, p)
+        pa += [seg_a[prev:lo], a]
+        pb += [seg_b[prev:lo], b]
+        po += [owner[prev:lo], np.full(a.shape[0], r, dtype=owner.dtype)]
+        prev = hi
+    pa.append(seg_a[prev:])
+    pb.append(seg_b[prev:])
+    po.append(owner[prev:])
+    return np.concatenate(pa), np.concatenate(pb), np.concatenate(po)
 
 
 def sorted_unique(a: np.ndarray) -> np.ndarray:

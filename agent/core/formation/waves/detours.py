@@ -47,6 +47,7 @@ from typing import Any
 
 import numpy as np
 
+from agent.core.formation.paths.close_pairs import path_segments, replace_paths
 from agent.core.formation.paths.geometry import seg_seg_dist
 from agent.core.formation.waves.packing import pack
 from agent.core.formation.waves.safety import PairFlags, update_flags
@@ -220,6 +221,7 @@ def shorten(
             for a, b, q in zip(flags.a, flags.b, flags.required, strict=True)
         }
         chain = _chain(st, st + lengths, after, rel)
+        segments = path_segments(paths)  # a candidate replaces the segments of its rows
         # (makespan, total, tried, changed rows, paths, targets, order, flags, lengths)
         trial: tuple[Any, ...] | None = None
         tried = 0
@@ -232,6 +234,7 @@ def shorten(
             lengths: np.ndarray = lengths,
             flags: PairFlags = flags,
             best: float = best,
+            segments: tuple[np.ndarray, np.ndarray, np.ndarray] = segments,
         ) -> None:
             nonlocal trial, tried, evals
             if evals >= MAX_EVALS:
@@ -242,7 +245,9 @@ def shorten(
                 new_len[r] = _length(new_paths[r])
             if float(new_len.sum()) > bound:
                 return
-            f2 = update_flags(flags, new_paths, rows, c, (starts, new_t))
+            f2 = update_flags(
+                flags, new_paths, rows, c, (starts, new_t), replace_paths(segments, rows, new_paths)
+            )
             try:
                 s2, _, _, _ = pack(f2, new_len, leader_of(new_o), new_o, times_only=True)
             except ValueError:

@@ -168,12 +168,14 @@ def update_flags(
     changed: Sequence[int],
     clearance: float,
     ends: tuple[np.ndarray, np.ndarray] | None = None,
+    segments: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> PairFlags:
     """:func:`pair_flags` after the paths of ``changed`` robots changed (same result).
-    ``ends``: the (starts, targets) of the paths, if known."""
+    ``ends``: the (starts, targets) of the paths, ``segments``: their
+    :func:`close_pairs.path_segments`, if known."""
     n = len(paths)
     starts, targets = _ends(paths) if ends is None else ends
-    seg_a, seg_b, owner = path_segments(paths)
+    seg_a, seg_b, owner = path_segments(paths) if segments is None else segments
     moved = np.zeros(n, dtype=bool)
     moved[np.asarray(changed, dtype=np.int64)] = True
     s, t, d = close_segment_pairs(seg_a, seg_b, owner, clearance, query=moved[owner])
