@@ -97,23 +97,24 @@ def _flags_from_pairs(
         return PairFlags(z, z, zb, zb, zb, zf, zf, zf, zf, zf, zf)
     i, k = owner[s], owner[t]
     d_ss = seg_seg_dist(seg_a[s], seg_b[s], seg_a[t], seg_b[t]) if d_st is None else d_st
-    d_i_sk = point_seg_dist(starts[k], seg_a[s], seg_b[s])
-    d_k_ti = point_seg_dist(targets[i], seg_a[t], seg_b[t])
-    d_k_si = point_seg_dist(starts[i], seg_a[t], seg_b[t])
-    d_i_tk = point_seg_dist(targets[k], seg_a[s], seg_b[s])
+    # start k to segment s, target i to t, start i to t, target k to s: one array
+    seg = np.concatenate((s, t, t, s))
+    d_pt = point_seg_dist(
+        np.concatenate((starts[k], targets[i], starts[i], targets[k])), seg_a[seg], seg_b[seg]
+    )
     pk = i * n + k
     order = np.argsort(pk, kind="stable")
     pk = pk[order]
     first = np.flatnonzero(np.r_[True, pk[1:] != pk[:-1]])
     a = pk[first] // n
     b = pk[first] % n
-    d_path = np.minimum.reduceat(d_ss[order], first)
-    d_ab = np.minimum(
-        np.minimum.reduceat(d_i_sk[order], first), np.minimum.reduceat(d_k_ti[order], first)
+    # per robot pair: the least of each distance over its segment pairs
+    low = np.minimum.reduceat(
+        np.concatenate((d_ss[None], d_pt.reshape(4, -1)))[:, order], first, axis=1
     )
-    d_ba = np.minimum(
-        np.minimum.reduceat(d_k_si[order], first), np.minimum.reduceat(d_i_tk[order], first)
-    )
+    d_path = low[0]
+    d_ab = np.minimum(low[1], low[2])
+    d_ba = np.minimum(low[3], low[4])
     d_start = np.hypot(*(starts[a] - starts[b]).T)
     d_target = np.hypot(*(targets[a] - targets[b]).T)
     # release points against the clearance without the rounding slack (see release)
