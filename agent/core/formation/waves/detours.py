@@ -64,8 +64,9 @@ MAX_EVALS = 2000
 #: nearest to its own (then by row).
 SWAPS = 8
 
-#: Combinations of two bent paths measured at a time (:func:`_pair_detours`, shortest
-#: first): the search stops at the first chunk that completes ``TRIES`` clear ones.
+#: Combinations of two bent paths measured first (:func:`_pair_detours`, shortest first),
+#: then twice as many each time: the search stops at the chunk that completes ``TRIES``
+#: clear ones.
 PAIR_CHUNK = 32
 
 #: The wide neighbourhood's sidesteps: via points ``along`` clearances from either end
@@ -138,12 +139,14 @@ def _pair_detours(
     lv = np.sum(np.hypot(*np.diff(sv, axis=1).transpose(2, 0, 1)), axis=1)
     tot = (lu[:, None] + lv[None, :]).reshape(-1)
     # the combinations without either current path, shortest first (then listed); their
-    # distances are measured in that order, a chunk at a time, until TRIES are clear
+    # distances are measured in that order, in growing chunks, until TRIES are clear
     flat = (np.arange(1, ku)[:, None] * kv + np.arange(1, kv)[None, :]).reshape(-1)
     flat = flat[np.lexsort((flat, tot[flat]))]
     pick: list[int] = []
-    for lo in range(0, flat.size, PAIR_CHUNK):
-        f = flat[lo : lo + PAIR_CHUNK]
+    lo, size = 0, PAIR_CHUNK
+    while lo < flat.size:
+        f = flat[lo : lo + size]
+        lo, size = lo + size, 2 * size
         a, b = su[f // kv], sv[f % kv]
         d = (
             seg_seg_dist(
