@@ -7,7 +7,11 @@ entered in the cells (side 3c) that its c/2-dilation may meet - two segments wit
 share such a cell - so only same-cell pairs are candidates; they are deduplicated by one
 int64 key, then measured (:func:`geometry.seg_seg_dist`). The cost is ~ (total path
 length / c + close pairs) · log. A query mask restricts the search to the pairs of some
-segments (the robots whose path changed), so that pair flags are updated, not redone.
+segments (the robots whose path changed), so that pair flags are updated, not redone; a
+small query (query segments x segments <= ``_DIRECT``) is measured pair by pair without the
+grid, which gives the same pairs. :func:`close_segment_pairs` also returns the distances
+measured, so that :mod:`safety` does not measure them again, and :func:`replace_paths`
+the segments of paths of which a few changed, from those before the change.
 """
 
 from __future__ import annotations
@@ -35,6 +39,36 @@ def path_segments(paths: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray, 
     return pts[ia], pts[ib], owner
 
 
+def replace_paths(
+    segments: tuple[np.ndarray, np.ndarray, np.ndarray],
+    rows: Sequence[int],
+    paths: Sequence[np.ndarray],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`path_segments` of ``paths`` from ``segments``, those of paths that differ
+    only in ``rows`` (the other paths' segments are copied, not rebuilt)."""
+    seg_a, seg_b, owner = segments
+    rows = sorted(set(rows))
+    los = np.searchsorted(owner, rows, side="left").tolist()
+    his = np.searchsorted(owner, rows, side="right").tolist()
+    pa: list[np.ndarray] = []
+    pb: list[np.ndarray] = []
+    po: list[np.ndarray] = []
+    prev = 0
+    for r, lo, hi in zip(rows, los, his, strict=True):
+        p = np.asarray(paths[r], dtype=np.float64).reshape(-1, 2)
+        if p.shape[0] == 0:
+            raise ValueError("a path has no points")
+        a, b = (p[:-1], p[1:]) if p.shape[0] > 1 else (p, p)
+        pa += [seg_a[prev:lo], a]
+        pb += [seg_b[prev:lo], b]
+        po += [owner[prev:lo], np.full(a.shape[0], r, dtype=owner.dtype)]
+        prev = hi
+    pa.append(seg_a[prev:])
+    pb.append(seg_b[prev:])
+    po.append(owner[prev:])
+    return np.concatenate(pa), np.concatenate(pb), np.concatenate(po)
+
+
 def sorted_unique(a: np.ndarray) -> np.ndarray:
     """The distinct values of ``a``, ascending."""
     if a.size == 0:
@@ -48,6 +82,9 @@ _CELL_PER_C = 3.0
 #: Raw same-cell pairs handled per chunk (bounds memory at 10^5 robots).
 _CHUNK = 1 << 22
 _OFF = 1 << 30
+#: Query segments x segments up to which a query is measured pair by pair, without the
+#: grid (a few changed robots among a few hundred segments: the grid costs more).
+_DIRECT = 1 << 12
 
 
 def _register(
@@ -83,6 +120,33 @@ def _register(
     return (col[idx] + _OFF) * (1 << 31) + (cy + _OFF), sc[idx]
 
 
+def _query_pairs(
+    seg_a: np.ndarray,
+    seg_b: np.ndarray,
+    owner: np.ndarray,
+    c: float,
+    query: np.ndarray,
+    cross_only: bool,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`close_segment_pairs` of a query by measuring every pair with a query segment (the
+    same pairs as the grid, which only skips pairs farther apart than c)."""
+    m = seg_a.shape[0]
+    q = np.flatnonzero(query)
+    other = np.flatnonzero(~query) if cross_only else np.arange(m)
+    s, t = np.repeat(q, other.size), np.tile(other, q.size)
+    os_, ot = owner[s], owner[t]
+    keep = os_ != ot
+    if not cross_only:  # two query segments: once
+        keep &= ~query[t] | (s < t)
+    flip = os_ > ot
+    s, t = np.where(flip, t, s)[keep], np.where(flip, s, t)[keep]
+    u = np.sort(s * m + t)
+    s, t = u // m, u % m
+    d = seg_seg_dist(seg_a[s], seg_b[s], seg_a[t], seg_b[t])
+    near = d <= c
+    return s[near], t[near], d[near]
+
+
 def segment_pairs(
     seg_a: np.ndarray,
     seg_b: np.ndarray,
@@ -93,14 +157,30 @@ def segment_pairs(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Segment pairs (s, t), owner[s] < owner[t], within c; with ``query`` (bool per
     segment) only the pairs with at least one query segment (``cross_only``: exactly one)."""
+    s, t, _ = close_segment_pairs(seg_a, seg_b, owner, c, query, cross_only)
+    return s, t
+
+
+def close_segment_pairs(
+    seg_a: np.ndarray,
+    seg_b: np.ndarray,
+    owner: np.ndarray,
+    c: float,
+    query: np.ndarray | None = None,
+    cross_only: bool = False,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`segment_pairs` (s, t) with their distances (:func:`geometry.seg_seg_dist`
+    of segments s and t, in that order)."""
     m = seg_a.shape[0]
     empty = np.zeros(0, dtype=np.int64)
     if m == 0 or (query is not None and not np.any(query)):
-        return empty, empty
+        return empty, empty, np.zeros(0)
     lim = float(np.max(np.abs(np.concatenate([seg_a, seg_b]))))
     h = _CELL_PER_C * c
     if not (math.isfinite(lim) and c > 0 and lim / h < _OFF / 4):
         raise ValueError("segments must be finite and c > 0 (and coordinates / c < 2^26)")
+    if query is not None and int(np.count_nonzero(query)) * m <= _DIRECT:
+        return _query_pairs(seg_a, seg_b, owner, c, query, cross_only)
     key, seg = _register(seg_a, seg_b, 0.5 * c * (1 + 1e-6) + 1e-9, h)
     # within a cell: ascending segment (query: the other segments first)
     order = np.argsort(key, kind="stable") if query is None else np.lexsort((query[seg], key))
@@ -123,6 +203,7 @@ def segment_pairs(
         first = np.repeat(gend - gsize, gsize)[ent]
     csum = np.cumsum(cnt)
     out: list[np.ndarray] = []
+    out_d: list[np.ndarray] = []
     lo = 0
     while lo < ent.size:
         base = int(csum[lo - 1]) if lo else 0
@@ -140,13 +221,20 @@ def segment_pairs(
             s, t = np.where(flip, t, s)[keep], np.where(flip, s, t)[keep]
             u = sorted_unique(s * m + t)
             s, t = u // m, u % m
-            near = seg_seg_dist(seg_a[s], seg_b[s], seg_a[t], seg_b[t]) <= c
+            d = seg_seg_dist(seg_a[s], seg_b[s], seg_a[t], seg_b[t])
+            near = d <= c
             out.append(u[near])
+            out_d.append(d[near])
         lo = hi
     if not out:
-        return empty, empty
-    u = sorted_unique(np.concatenate(out))
-    return u // m, u % m
+        return empty, empty, np.zeros(0)
+    u, d = np.concatenate(out), np.concatenate(out_d)
+    if len(out) > 1 and u.size > 1:  # a pair met in two chunks: once (the same distance)
+        order = np.argsort(u, kind="stable")
+        u, d = u[order], d[order]
+        first = np.r_[True, u[1:] != u[:-1]]
+        u, d = u[first], d[first]
+    return u // m, u % m, d
 
 
 def candidate_segment_pairs(

@@ -17,13 +17,14 @@ import numpy as np
 def point_seg_dist(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Distance from points p to segments [a, b] (broadcast over leading axes)."""
     ax, ay = a[..., 0], a[..., 1]
+    px, py = p[..., 0], p[..., 1]
     abx, aby = b[..., 0] - ax, b[..., 1] - ay
-    apx, apy = p[..., 0] - ax, p[..., 1] - ay
+    apx, apy = px - ax, py - ay
     den = abx * abx + aby * aby
     pos = den > 0
     t = np.where(pos, (apx * abx + apy * aby) / np.where(pos, den, 1.0), 0.0)
-    t = np.clip(t, 0.0, 1.0)
-    return np.asarray(np.hypot(p[..., 0] - (ax + t * abx), p[..., 1] - (ay + t * aby)))
+    t = np.minimum(np.maximum(t, 0.0), 1.0)  # clipped to [0, 1]
+    return np.asarray(np.hypot(px - (ax + t * abx), py - (ay + t * aby)))
 
 
 def _cross(o: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -47,6 +47,7 @@ from typing import Any
 
 import numpy as np
 
+from agent.core.formation.paths.close_pairs import path_segments, replace_paths
 from agent.core.formation.paths.geometry import seg_seg_dist
 from agent.core.formation.waves.packing import pack
 from agent.core.formation.waves.safety import PairFlags, update_flags
@@ -62,6 +63,11 @@ MAX_EVALS = 2000
 #: Slot swaps tried per robot of the critical chain: with the robots whose slots are the
 #: nearest to its own (then by row).
 SWAPS = 8
+
+#: Combinations of two bent paths measured first (:func:`_pair_detours`, shortest first),
+#: then twice as many each time: the search stops at the chunk that completes ``TRIES``
+#: clear ones.
+PAIR_CHUNK = 32
 
 #: The wide neighbourhood's sidesteps: via points ``along`` clearances from either end
 #: of the path and ``off`` clearances beside it (a lane taken at a fixed distance, not a
@@ -129,26 +135,31 @@ def _pair_detours(
     su = _stack(starts[u], targets[u], paths[u], c)
     sv = _stack(starts[v], targets[v], paths[v], c)
     ku, kv = su.shape[0], sv.shape[0]
-    d = (
-        seg_seg_dist(
-            su[:, None, :-1, None, :],
-            su[:, None, 1:, None, :],
-            sv[None, :, None, :-1, :],
-            sv[None, :, None, 1:, :],
-        )
-        .reshape(ku, kv, -1)
-        .min(axis=2)
-    )
     lu = np.sum(np.hypot(*np.diff(su, axis=1).transpose(2, 0, 1)), axis=1)
     lv = np.sum(np.hypot(*np.diff(sv, axis=1).transpose(2, 0, 1)), axis=1)
-    tot = lu[:, None] + lv[None, :]
-    ok = d >= req
-    ok[0, :] = False
-    ok[:, 0] = False
-    iu, iv = np.nonzero(ok)
-    flat = iu * kv + iv
-    pick = flat[np.lexsort((flat, tot[iu, iv]))][:TRIES]
-    return [(su[f // kv], sv[f % kv]) for f in pick.tolist()]
+    tot = (lu[:, None] + lv[None, :]).reshape(-1)
+    # the combinations without either current path, shortest first (then listed); their
+    # distances are measured in that order, in growing chunks, until TRIES are clear
+    flat = (np.arange(1, ku)[:, None] * kv + np.arange(1, kv)[None, :]).reshape(-1)
+    flat = flat[np.lexsort((flat, tot[flat]))]
+    pick: list[int] = []
+    lo, size = 0, PAIR_CHUNK
+    while lo < flat.size:
+        f = flat[lo : lo + size]
+        lo, size = lo + size, 2 * size
+        a, b = su[f // kv], sv[f % kv]
+        d = (
+            seg_seg_dist(
+                a[:, :-1, None, :], a[:, 1:, None, :], b[:, None, :-1, :], b[:, None, 1:, :]
+            )
+            .reshape(f.size, -1)
+            .min(axis=1)
+        )
+        pick.extend(f[d >= req].tolist())
+        if len(pick) >= TRIES:
+            break
+    pick = pick[:TRIES]
+    return [(su[f // kv], sv[f % kv]) for f in pick]
 
 
 def _path(start: np.ndarray, via: Sequence[np.ndarray], target: np.ndarray) -> np.ndarray:
@@ -213,6 +224,7 @@ def shorten(
             for a, b, q in zip(flags.a, flags.b, flags.required, strict=True)
         }
         chain = _chain(st, st + lengths, after, rel)
+        segments = path_segments(paths)  # a candidate replaces the segments of its rows
         # (makespan, total, tried, changed rows, paths, targets, order, flags, lengths)
         trial: tuple[Any, ...] | None = None
         tried = 0
@@ -225,6 +237,7 @@ def shorten(
             lengths: np.ndarray = lengths,
             flags: PairFlags = flags,
             best: float = best,
+            segments: tuple[np.ndarray, np.ndarray, np.ndarray] = segments,
         ) -> None:
             nonlocal trial, tried, evals
             if evals >= MAX_EVALS:
@@ -235,7 +248,9 @@ def shorten(
                 new_len[r] = _length(new_paths[r])
             if float(new_len.sum()) > bound:
                 return
-            f2 = update_flags(flags, new_paths, rows, c, (starts, new_t))
+            f2 = update_flags(
+                flags, new_paths, rows, c, (starts, new_t), replace_paths(segments, rows, new_paths)
+            )
             try:
                 s2, _, _, _ = pack(f2, new_len, leader_of(new_o), new_o, times_only=True)
             except ValueError:

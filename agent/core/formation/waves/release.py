@@ -98,10 +98,16 @@ def last_within(
 ) -> np.ndarray:
     """Largest u in [0, 1] with d(p0 + u·(p1 - p0), [a, b]) < r, per row (NONE: none)."""
     d = p1 - p0
-    out = np.maximum(
-        np.maximum(_disc_upper(p0, d, a, r), _disc_upper(p0, d, b, r)),
-        _band_upper(p0, d, a, b, r),
+    k = p0.shape[0]
+    rr = np.broadcast_to(r, (k,))
+    # the two discs (around a, around b) in one array
+    disc = _disc_upper(
+        np.concatenate((p0, p0)),
+        np.concatenate((d, d)),
+        np.concatenate((a, b)),
+        np.concatenate((rr, rr)),
     )
+    out = np.maximum(np.maximum(disc[:k], disc[k:]), _band_upper(p0, d, a, b, rr))
     return np.asarray(out)
 
 
@@ -116,11 +122,13 @@ def segment_releases(
     """Per segment pair (s, t): the last arc length of s's path within ``radius`` of
     segment t, and of t's path within ``radius`` of segment s (NONE: not within)."""
     seg_len = np.hypot(*(seg_b - seg_a).T)
-    u_s = last_within(seg_a[s], seg_b[s], seg_a[t], seg_b[t], radius)
-    u_t = last_within(seg_a[t], seg_b[t], seg_a[s], seg_b[s], radius)
-    arc_s = np.where(u_s > NONE, arc0[s] + np.maximum(u_s, 0.0) * seg_len[s], NONE)
-    arc_t = np.where(u_t > NONE, arc0[t] + np.maximum(u_t, 0.0) * seg_len[t], NONE)
-    return arc_s, arc_t
+    k = s.size
+    # both directions in one array: rows (s, t), then rows (t, s)
+    own, other = np.concatenate((s, t)), np.concatenate((t, s))
+    rr = np.broadcast_to(radius, (k,))
+    u = last_within(seg_a[own], seg_b[own], seg_a[other], seg_b[other], np.concatenate((rr, rr)))
+    arc = np.where(u > NONE, arc0[own] + np.maximum(u, 0.0) * seg_len[own], NONE)
+    return arc[:k], arc[k:]
 
 
 def tail(path: np.ndarray, s: float) -> np.ndarray:

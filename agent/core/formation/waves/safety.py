@@ -37,7 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agent.core.formation.paths.close_pairs import path_segments, segment_pairs
+from agent.core.formation.paths.close_pairs import close_segment_pairs, path_segments
 from agent.core.formation.paths.geometry import point_seg_dist, seg_seg_dist
 from agent.core.formation.waves.release import arc_offsets, segment_releases
 
@@ -85,8 +85,10 @@ def _flags_from_pairs(
     s: np.ndarray,
     t: np.ndarray,
     clearance: float,
+    d_st: np.ndarray | None = None,
 ) -> PairFlags:
-    """Per robot pair flags from its segment pairs (s, t), owner[s] < owner[t]."""
+    """Per robot pair flags from its segment pairs (s, t), owner[s] < owner[t] (``d_st``:
+    their distances, if known)."""
     n = starts.shape[0]
     if s.size == 0:
         z = np.zeros(0, dtype=np.int64)
@@ -94,24 +96,25 @@ def _flags_from_pairs(
         zb = np.zeros(0, dtype=bool)
         return PairFlags(z, z, zb, zb, zb, zf, zf, zf, zf, zf, zf)
     i, k = owner[s], owner[t]
-    d_ss = seg_seg_dist(seg_a[s], seg_b[s], seg_a[t], seg_b[t])
-    d_i_sk = point_seg_dist(starts[k], seg_a[s], seg_b[s])
-    d_k_ti = point_seg_dist(targets[i], seg_a[t], seg_b[t])
-    d_k_si = point_seg_dist(starts[i], seg_a[t], seg_b[t])
-    d_i_tk = point_seg_dist(targets[k], seg_a[s], seg_b[s])
+    d_ss = seg_seg_dist(seg_a[s], seg_b[s], seg_a[t], seg_b[t]) if d_st is None else d_st
+    # start k to segment s, target i to t, start i to t, target k to s: one array
+    seg = np.concatenate((s, t, t, s))
+    d_pt = point_seg_dist(
+        np.concatenate((starts[k], targets[i], starts[i], targets[k])), seg_a[seg], seg_b[seg]
+    )
     pk = i * n + k
     order = np.argsort(pk, kind="stable")
     pk = pk[order]
     first = np.flatnonzero(np.r_[True, pk[1:] != pk[:-1]])
     a = pk[first] // n
     b = pk[first] % n
-    d_path = np.minimum.reduceat(d_ss[order], first)
-    d_ab = np.minimum(
-        np.minimum.reduceat(d_i_sk[order], first), np.minimum.reduceat(d_k_ti[order], first)
+    # per robot pair: the least of each distance over its segment pairs
+    low = np.minimum.reduceat(
+        np.concatenate((d_ss[None], d_pt.reshape(4, -1)))[:, order], first, axis=1
     )
-    d_ba = np.minimum(
-        np.minimum.reduceat(d_k_si[order], first), np.minimum.reduceat(d_i_tk[order], first)
-    )
+    d_path = low[0]
+    d_ab = np.minimum(low[1], low[2])
+    d_ba = np.minimum(low[3], low[4])
     d_start = np.hypot(*(starts[a] - starts[b]).T)
     d_target = np.hypot(*(targets[a] - targets[b]).T)
     # release points against the clearance without the rounding slack (see release)
@@ -156,8 +159,8 @@ def pair_flags(paths: Sequence[np.ndarray], clearance: float) -> PairFlags:
     pairs farther apart can share a wave and go in either order)."""
     starts, targets = _ends(paths)
     seg_a, seg_b, owner = path_segments(paths)
-    s, t = segment_pairs(seg_a, seg_b, owner, clearance)
-    return _flags_from_pairs(starts, targets, seg_a, seg_b, owner, s, t, clearance)
+    s, t, d = close_segment_pairs(seg_a, seg_b, owner, clearance)
+    return _flags_from_pairs(starts, targets, seg_a, seg_b, owner, s, t, clearance, d)
 
 
 def update_flags(
@@ -166,16 +169,18 @@ def update_flags(
     changed: Sequence[int],
     clearance: float,
     ends: tuple[np.ndarray, np.ndarray] | None = None,
+    segments: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> PairFlags:
     """:func:`pair_flags` after the paths of ``changed`` robots changed (same result).
-    ``ends``: the (starts, targets) of the paths, if known."""
+    ``ends``: the (starts, targets) of the paths, ``segments``: their
+    :func:`close_pairs.path_segments`, if known."""
     n = len(paths)
     starts, targets = _ends(paths) if ends is None else ends
-    seg_a, seg_b, owner = path_segments(paths)
+    seg_a, seg_b, owner = path_segments(paths) if segments is None else segments
     moved = np.zeros(n, dtype=bool)
     moved[np.asarray(changed, dtype=np.int64)] = True
-    s, t = segment_pairs(seg_a, seg_b, owner, clearance, query=moved[owner])
-    new = _flags_from_pairs(starts, targets, seg_a, seg_b, owner, s, t, clearance)
+    s, t, d = close_segment_pairs(seg_a, seg_b, owner, clearance, query=moved[owner])
+    new = _flags_from_pairs(starts, targets, seg_a, seg_b, owner, s, t, clearance, d)
     keep = ~(moved[flags.a] | moved[flags.b])
     parts = [(getattr(flags, f)[keep], getattr(new, f)) for f in PairFlags.__dataclass_fields__]
     merged = {
