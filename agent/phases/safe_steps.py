@@ -16,6 +16,8 @@ out of the image but still there):
   spent, a tangent step round the blocker, until the way to the goal is clear again;
   a tangent step whose own corridor the image after the turn shows blocked is planned
   again from that image once the patience is spent (:meth:`SafeSteps._via_step`).
+  Off the plan, a via step clears the members the plan and their statuses say stand
+  still (:meth:`SafeSteps._standing`) as it clears the NAOs seen.
   A blocker taken for a member that holds its slot, that the plan left out, or that
   has not moved and waits (through the plan) for this robot will not walk on before
   this one passes: the patience is then the first rank's (one poll), whatever this
@@ -57,6 +59,7 @@ from agent.core.formation.waves.jam import (
     MOVING,
     STOP,
     UNMOVED,
+    at_start,
     blocker_of,
     expected_places,
     jam_verdict,
@@ -119,8 +122,9 @@ class SafeSteps:
                 wait = patience(self._rank(), cp)
                 rel = self._remembered()
                 v = check_step(
-                    leg.walk, to_goal, rel, cp, wait, side=side, goal=goal - b.position, ahead=ahead
-                )
+                    leg.walk, to_goal, rel, cp, wait, side=side, goal=goal - b.position,
+                    ahead=ahead, standing=self._standing(),
+                )  # fmt: skip
                 if v.action == VIA and self._via_step(v):
                     continue
                 side = 0
@@ -198,6 +202,7 @@ class SafeSteps:
             v = check_step(
                 walk, b.heading, self._remembered(), cp, waited if via else 0, now_rank,
                 goal=None if goal is None else goal - b.position, ahead=ahead,
+                standing=self._standing() if via else None,
             )  # fmt: skip
             if v.action == GO or (v.action == VIA and via):
                 if waited:
@@ -250,25 +255,49 @@ class SafeSteps:
                 shown = in_view(rel, b.heading, CAMERA_HFOV)
                 self.seen = [e for e, gone in zip(self.seen, shown, strict=True) if not gone]
 
-    def _blocker(self, rel: np.ndarray) -> int:
-        """The member taken for the NAO at ``rel`` (relative, fixed frame): the one whose
-        expected place, by the plan and the phases heard, is nearest (jam.py rule 1);
-        -1 without a plan or a match. A robot the plan left out stands at its start."""
+    def _places(self, standing: bool = False) -> tuple[np.ndarray, dict[int, np.ndarray]]:
+        """(where this robot is believed, in the plan's frame; where the other members are
+        expected, by the plan and the phases heard: jam.py rule 1), or ``standing``: only
+        those that stand still (not moved yet, holding their slots, left out: a robot the
+        plan left out stands at its start). Nothing without a plan."""
         plan = self.course.planned
         if plan is None:
-            return -1
+            return np.zeros(2), {}
         me = self.ctx.me
-        seen = np.asarray(plan.robot(me).start, dtype=np.float64) + self.ctx.beliefs.position
+        here = np.asarray(plan.robot(me).start, dtype=np.float64) + self.ctx.beliefs.position
         others = [int(i) for i in self.ctx.formation.members(plan) if int(i) != me]
         left_out = set(plan.excluded)
+        phases = {i: "start" if i in left_out else self.fleet.peer(i).phase for i in others}
+        walked = {i: self.fleet.peer(i).walked for i in others if i not in left_out}
         places = expected_places(
             {i: plan.robot(i).start for i in others},
             {i: plan.robot(i).target for i in others},
-            {i: "start" if i in left_out else self.fleet.peer(i).phase for i in others},
-            {i: self.fleet.peer(i).walked for i in others if i not in left_out},
+            phases,
+            walked,
             {i: plan.robot(i).path() for i in others},
         )
-        return blocker_of(seen + rel, places, BLOCKER_MATCH)
+        if standing:
+            places = {
+                i: p
+                for i, p in places.items()
+                if at_start(phases[i], walked.get(i, 0.0)) or phases[i] in HOLDING
+            }
+        return here, places
+
+    def _blocker(self, rel: np.ndarray) -> int:
+        """The member taken for the NAO at ``rel`` (relative, fixed frame): the one whose
+        expected place is nearest (:meth:`_places`); -1 without a plan or a match."""
+        here, places = self._places()
+        return blocker_of(here + rel, places, BLOCKER_MATCH) if places else -1
+
+    def _standing(self) -> np.ndarray:
+        """Where the members that stand still are expected (:meth:`_places`), relative to
+        this robot (fixed frame), seen or not: what a via step, off the plan, must clear
+        too (agent/core/control/corridor.py ``check_step``)."""
+        here, places = self._places(standing=True)
+        if not places:
+            return np.zeros((0, 2))
+        return np.asarray([places[i] - here for i in sorted(places)], dtype=np.float64)
 
     def _stands(self, blocker: int) -> bool:
         """Whether waiting for member ``blocker`` to walk on is no use: it holds its slot,

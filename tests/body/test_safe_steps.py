@@ -298,3 +298,63 @@ def test_a_via_step_blocked_after_the_turn_is_planned_again(
         assert math.hypot(x, y - 1.6) < 0.15
         assert r.safe_steps.refused >= 1 and r.safe_steps.vias >= 1
         assert world.locomotion.contacts == 0
+
+
+def test_a_via_step_clears_a_member_standing_where_the_plan_says(
+    bus: Bus, perception: PerceptionAdapter
+) -> None:
+    """The scene above, with robot 3 a member of the plan that has not moved (``wait``,
+    at its start): the via step, off the plan, clears where robot 3 stands by the plan
+    though no image has shown it, so the detour goes round the left at once, and no via
+    step is found blocked after its turn (at 100 NAOs a detour's tangent steps passed
+    0.39 m from a member standing at its start, unseen, which then walked into it)."""
+    spot = (0.62 * math.cos(0.81), -0.8 + 0.62 * math.sin(0.81))
+    hidden = Scenario(
+        robots=(
+            RobotSpec(1, 0.0, -0.8, math.pi / 2),
+            RobotSpec(2, 0.0, 0.0, -math.pi / 2),
+            RobotSpec(3, *spot, math.pi),
+        ),
+        seed=5,
+        room=4.0,
+    )
+
+    def rp(i: int, start: tuple[float, float], target: tuple[float, float], wave: int) -> RobotPlan:
+        s, t = np.array(start), np.array(target)
+        d = t - s
+        return RobotPlan(
+            robot_id=i, start=s, target=t, order=i, parent=-1 if i == 1 else 1,
+            heading=math.atan2(d[1], d[0]), distance=float(np.hypot(*d)), wave=wave,
+            after=(1,) if i == 3 else (),
+        )  # fmt: skip
+
+    robots = (rp(1, (0.0, -0.8), (0.0, 1.6), 1), rp(2, (3.0, 3.0), (0.0, 0.0), 0),
+              rp(3, spot, (3.0, -3.0), 2))  # fmt: skip
+    plan = Plan(
+        frame_robot=1, leader=1, axis=math.pi / 2, origin=np.zeros(2), robots=robots,
+        waves=((2,), (1,), (3,)), digest="00",
+    )  # fmt: skip
+    with World(hidden) as world:
+        r = _runner(world, bus, perception)
+        r.safe_steps.corridor = CorridorParams(poll=0.01, max_polls=8)
+        r.course.follow(plan)
+        r.membership.peers[2] = Peer(alive=True, phase="hold", seen_alive=True)
+        r.membership.peers[3] = Peer(alive=True, phase="wait", seen_alive=True)
+        assert r.safe_steps._standing() == pytest.approx(
+            np.array([[0.0, 0.8], [spot[0], spot[1] + 0.8]])
+        )
+        xs: list[float] = []
+        walk_step = r.motion.walk_step
+
+        def step(distance: float) -> object:
+            rep = walk_step(distance)
+            xs.append(world.pose(1)[0])
+            return rep
+
+        r.motion.walk_step = step  # type: ignore[method-assign,assignment]
+        r.safe_steps.walk_to(np.array([0.0, 2.4]), lambda p: None)  # 0.8 m past robot 2
+        x, y, _ = world.pose(1)
+        assert math.hypot(x, y - 1.6) < 0.15
+        assert r.safe_steps.refused == 0 and r.safe_steps.vias >= 1
+        assert min(xs) < -0.2 and max(xs) < 0.1, xs  # round the left, never to the right
+        assert world.locomotion.contacts == 0

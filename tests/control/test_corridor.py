@@ -100,6 +100,30 @@ def test_a_detour_keeps_its_side_and_falls_back_to_the_other() -> None:
     assert check_step(0.2, NORTH, walled, CP, waited=5).action == WAIT
 
 
+def test_a_via_step_clears_the_members_standing_unseen() -> None:
+    """A NAO ahead, a little left: the right tangent round it passes a member standing by
+    the plan at (0.2, 0.55), unseen, within the clearance, so the tangent widens round
+    it too (to 90° off the way, the most a via step turns); one standing where even that
+    is blocked sends the via to the left; walled in on both sides: wait."""
+    ahead = np.array([[-0.2, 0.6]])
+    plain = check_step(0.2, NORTH, ahead, CP, waited=5)
+    assert plain.action == VIA and plain.side == RIGHT
+    assert plain.heading == pytest.approx(
+        NORTH + math.atan2(0.2, 0.6) - math.asin(0.55 / math.hypot(0.2, 0.6))
+    )
+    member = np.array([[0.2, 0.55]])
+    assert blocking(0.2, plain.heading, member, CP.clearance).any()
+    v = check_step(0.2, NORTH, ahead, CP, waited=5, standing=member)
+    assert v.action == VIA and v.side == RIGHT and v.heading == pytest.approx(0.0, abs=1e-9)
+    assert not blocking(0.2, v.heading, np.vstack([ahead, member]), CP.clearance).any()
+    v = check_step(0.2, NORTH, ahead, CP, waited=5, standing=np.array([[0.45, 0.1]]))
+    assert v.action == VIA and v.side == LEFT
+    # standing members never make a planned step wait
+    assert check_step(0.2, NORTH, np.zeros((0, 2)), CP, standing=ahead).action == GO
+    walled = np.array([[0.45, 0.1], [-0.45, 0.1]])
+    assert check_step(0.2, NORTH, ahead, CP, waited=5, standing=walled).action == WAIT
+
+
 def test_a_nao_on_the_goal_is_waited_for_not_walked_round() -> None:
     ahead = np.array([[0.0, 0.6]])
     v = check_step(0.2, NORTH, ahead, CP, waited=5, goal=np.array([0.0, 0.9]))
@@ -191,16 +215,28 @@ points = st.lists(st.tuples(coord, coord), min_size=0, max_size=6)
     pts=points,
     waited=st.integers(0, 10),
     rank=st.integers(0, 9),
+    still=points,
 )
 def test_invariants(
-    walk: float, heading: float, pts: list[tuple[float, float]], waited: int, rank: int
+    walk: float,
+    heading: float,
+    pts: list[tuple[float, float]],
+    waited: int,
+    rank: int,
+    still: list[tuple[float, float]],
 ) -> None:
     others = np.array(pts, dtype=np.float64).reshape(-1, 2)
-    v = check_step(walk, heading, others, CP, waited, rank)
+    standing = np.array(still, dtype=np.float64).reshape(-1, 2)
+    v = check_step(walk, heading, others, CP, waited, rank, standing=standing)
     # deterministic
-    again = check_step(walk, heading, others.copy(), CP, waited, rank)
+    again = check_step(walk, heading, others.copy(), CP, waited, rank, standing=standing.copy())
     assert (again.action, again.heading, again.side) == (v.action, v.heading, v.side)
     c = CP.clearance
+    if v.action == VIA:  # a via step clears the standing members as it clears the NAOs seen
+        assert not blocking(walk, v.heading, standing, c).any()
+    # the standing members change no verdict but a via step's
+    plain = check_step(walk, heading, others, CP, waited, rank)
+    assert (plain.action == GO) == (v.action == GO)
     if v.action in (GO, VIA):
         # the step taken never comes within the clearance of a NAO unless it moves away
         h = heading if v.action == GO else v.heading
