@@ -8,9 +8,10 @@ from pathlib import Path
 import pytest
 
 from agent.core.formation.params import D_E, PHI_E_DEG
-from tools.harness.judge import evaluate, judge_march, min_separation, moved, plot, summarise
+from tools.harness.judge import evaluate, judge_march, min_separation, summarise
 from tools.harness.observe import AgentView, Observer
 from tools.harness.procs import robot_ids
+from tools.harness.run_report import moved, plot
 
 
 def test_evaluate_perfect_pyramid_facing_north() -> None:

@@ -40,8 +40,9 @@ from typing import Any
 from agent.config import AgentConfig
 from agent.net.bus import Bus, BusConfig
 from agent.wire import CREDENTIALS_ENV, INSECURE_WARNING, PHASES
-from tools.harness.judge import plan_meta, print_table, summarise
+from tools.harness.judge import plan_meta, summarise
 from tools.harness.observe import AgentView, Observer, Recorder, observe_still, watch
+from tools.harness.run_report import print_table
 
 #: Phases an agent reaches only after agreement (its first one ends ``agree_s``).
 AGREED_PHASES = ("plan", "wait", "move", "hold", "march", "done")
