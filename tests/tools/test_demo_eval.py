@@ -247,3 +247,19 @@ def test_a_robot_the_fleet_left_out_only_stands_still() -> None:
     )
     r["excluded"] = []
     assert outcome(r)[0] == "safe_abort"
+
+
+def test_a_run_with_rogues_is_defended_only_with_every_report_and_the_same_plan() -> None:
+    from tools.harness.judge import untrusted_because
+
+    ok = {"stranger": {"commands_executed": 0}, "observer": {"claims_granted": 0}}
+    base = {"plan_matches_records": True, "rogues_started": ["stranger", "observer"]}
+    assert untrusted_because(base, ok) == []
+    assert untrusted_because(base, {"stranger": {}}) == ["no report from rogue observer"]
+    why = untrusted_because({**base, "plan_matches_records": False, "record_rounds": {"2": 0}}, ok)
+    assert why == ["the plan recomputed from the signed records the observer holds (robots "
+                   "['2']) differs from the agents'"]  # fmt: skip
+    bad = {**ok, "observer": {"claims_granted": 1}}
+    assert untrusted_because(base, bad) == [
+        "rogue observer had a command executed or a claim granted"
+    ]

@@ -418,7 +418,7 @@ class Fleet:
             raise RuntimeError(f"the world serves robots {self.ids}, agents {sorted(self.agents)}")
         if spec.rogue > 0:
             self._rogues = start_rogues(net, out, self.ids, spec.rogue, spec.rogue_replay)
-        result["rogues_started"] = [r.name for r in self._rogues]
+        result["rogues_started"] = [r.name.removeprefix("rogue ") for r in self._rogues]
         self._live = LiveView(sys.stderr, self.ids) if not self.quiet else None
 
     def _world_flags(self) -> list[str]:
