@@ -27,7 +27,8 @@ authentication) it cannot even open a link, and says so. With ``--credentials DI
 it); with ``--plain-links`` it reaches a fleet whose links are plain TCP (as behind a
 compromised router), where only the end-to-end signatures stand between it and the
 robots. It prints one JSON report: per attack what it sent and what came back (a
-``done`` reply to a command means a robot was moved by the rogue).
+``done`` reply to a command means a robot was moved by the rogue), also when it is
+stopped before its ``--duration`` (SIGINT or SIGTERM; ``cut_short`` true).
 """
 
 from __future__ import annotations
@@ -36,11 +37,13 @@ import argparse
 import contextlib
 import json
 import os
+import signal
 import sys
 import threading
 import time
 from collections import Counter
 from pathlib import Path
+from types import FrameType
 from typing import Any
 
 import msgpack
@@ -214,6 +217,10 @@ def classify(reply: Any) -> str:
     return type(msg).__name__
 
 
+def _interrupted(signum: int, frame: FrameType | None) -> None:
+    raise KeyboardInterrupt
+
+
 def run(args: argparse.Namespace) -> dict[str, Any]:
     who = args.identity if args.credentials else "stranger"
     report: dict[str, Any] = {"target": args.target, "identity": who}
@@ -250,10 +257,12 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         for line in Path(args.replay_file).read_text().splitlines():
             k, h = json.loads(line)
             old.append((k, bytes.fromhex(h)))
+    report["cut_short"] = False
     try:
         rogue.capture()
         rogue.fake_world()
         end = time.monotonic() + args.duration
+        print(f"rogue: attacking as {who} for {args.duration:g} s", file=sys.stderr, flush=True)
         flooded = False
         while time.monotonic() < end:
             with rogue._lock:
@@ -263,6 +272,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                 rogue.flood(args.flood)
                 flooded = True
             time.sleep(0.5)  # pacing between attack rounds, bounded by --duration
+    except KeyboardInterrupt:  # stopped before its end (SIGINT, SIGTERM): report so far
+        report["cut_short"] = True
     finally:
         rogue.close()
         session.close()
@@ -297,6 +308,7 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     if not args.duration > 0:
         p.error("--duration must be > 0")
+    signal.signal(signal.SIGTERM, _interrupted)  # a harness that stops it still gets a report
     report = run(args)
     text = json.dumps(report, indent=2, sort_keys=True)
     print(text, flush=True)
