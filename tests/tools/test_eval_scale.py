@@ -58,6 +58,10 @@ def test_a_judged_result_becomes_a_row() -> None:
     failed = row_of({"errors": {"demo": "world not ready"}, "contacts": 0}, 100, 1, [9.0], 300)
     assert failed.outcome == "safe_abort" and "world not ready" in failed.detail
     assert failed.phases == {} and failed.agreement_s is None and failed.exchange_bytes_max == 0
+    # the real-time factor: the NAOs' own time over the wall time, unknown without it
+    assert r.sim_s is None and r.realtime is None
+    timed = row_of(result(t_sim_end=113.5), 3, 11, [20.0], 150.0)
+    assert timed.sim_s == 113.5 and timed.realtime == pytest.approx(0.25)
 
 
 def runs() -> list[Run]:
@@ -71,7 +75,7 @@ def runs() -> list[Run]:
 
 def test_markdown_tables_hold_every_run_and_phase() -> None:
     text = markdown(runs())
-    assert "| 50 | 11 | complete | 0 | 454 | 4.2 | 3.0 / 2.0 | no | 25 / 30 / 35 | 7 |" in text
+    assert "| 50 | 11 | complete | 0 | 454 | - | 4.2 | 3.0 / 2.0 | no | 25 / 30 / 35 | 7 |" in text
     assert "| 100 | 1 | unsafe | 1 |" in text and "| yes |" in text
     head = next(ln for ln in text.splitlines() if ln.startswith("| N | seed | world start"))
     assert head.split(" | ")[3:-1] == [p for p in PHASES if p in PHASE_WALLS]

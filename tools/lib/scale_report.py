@@ -51,6 +51,14 @@ class Run:
     load_start: float = 0.0
     load_mean: float = 0.0
     load_end: float = 0.0
+    #: the NAOs' own time at the run's end (s; the world's clock, which charges every
+    #: motion and every picture's head turn, settling and capture)
+    sim_s: float | None = None
+
+    @property
+    def realtime(self) -> float | None:
+        """The real-time factor: the NAOs' own time over the wall time (None unknown)."""
+        return None if self.sim_s is None or self.wall_s <= 0 else self.sim_s / self.wall_s
 
     @property
     def name(self) -> str:
@@ -95,6 +103,7 @@ def row_of(
         load_end=load[-1] if load else 0.0,
         agree_timeout_s=agree_timeout_s,
         wave_timeout_s=wave_timeout_s,
+        sim_s=_finite(r.get("t_sim_end")),
     )
 
 
@@ -114,6 +123,7 @@ def table_rows(runs: Sequence[Run]) -> list[list[str]]:
             r.outcome,
             str(r.contacts),
             f"{r.wall_s:.0f}",
+            _s(r.realtime, ".2f"),
             _s(r.agreement_s, ".1f"),
             f"{r.exchange_bytes_max / 1000:.1f} / {r.exchange_bytes_median / 1000:.1f}",
             "yes" if r.silent_wrong else "no",
@@ -131,6 +141,7 @@ HEADER = [
     "outcome",
     "contacts",
     "wall (s)",
+    "sim / wall",
     "agreement (s)",
     "exchange kB/agent (max / median)",
     "silent wrong",
