@@ -16,8 +16,10 @@ out of the image but still there):
   spent, a tangent step round the blocker, until the way to the goal is clear again;
   a tangent step whose own corridor the image after the turn shows blocked is planned
   again from that image once the patience is spent (:meth:`SafeSteps._via_step`).
-  Off the plan, a via step clears the members the plan and their statuses say stand
-  still (:meth:`SafeSteps._standing`) as it clears the NAOs seen.
+  Off the plan, a via step clears the members where the plan and their statuses put
+  them (standing, or the next stretch of a walking member's path:
+  :meth:`SafeSteps._members`) as it clears the NAOs seen; once a via step is walked,
+  every later step towards that goal treats them as NAOs seen (they block it).
   A blocker taken for a member that holds its slot, that the plan left out, or that
   has not moved and waits (through the plan) for this robot will not walk on before
   this one passes: the patience is then the first rank's (one poll), whatever this
@@ -54,6 +56,7 @@ from agent.core.control.corridor import (
     patience,
     plan_rank,
 )
+from agent.core.formation.waves.gates import MILESTONE
 from agent.core.formation.waves.jam import (
     HOLDING,
     MOVING,
@@ -65,6 +68,7 @@ from agent.core.formation.waves.jam import (
     jam_verdict,
     waits_for,
 )
+from agent.core.formation.waves.release import tail
 from agent.core.nao import CAMERA_HFOV, HEAD_YAW_LIMIT
 from agent.phases.context import AgentFailure, Context
 from agent.phases.roles import Course, Fleet, Mover
@@ -74,6 +78,11 @@ log = logging.getLogger("agent.phases.safe_steps")
 #: m: a NAO seen this near a member's expected place is taken for that member (rule 1 of
 #: agent/core/formation/waves/jam.py): the detector's range error at 1 m and a step's drift
 BLOCKER_MATCH = 0.3
+#: m of a walking member's path, beyond the arc its last status gave, that a step off the
+#: plan clears: the progress said at each milestone (gates.py), so about one lag
+STRETCH = MILESTONE
+#: the arcs beyond the status's of the points that stand for that stretch (0.1 m apart)
+STRETCH_POINTS = tuple(0.1 * k for k in range(round(STRETCH / 0.1) + 1))
 
 
 class SafeSteps:
@@ -90,6 +99,9 @@ class SafeSteps:
         #: polls spent on via steps found blocked after the turn (not walked), this goal
         self.refused = 0
         self.seen: list[tuple[np.ndarray, int]] = []  # (NAO seen, fixed frame; at step)
+        #: a via step was walked towards this goal: the robot is off its planned path, and
+        #: every step clears the members where the plan and their statuses put them
+        self.off_plan = False
 
     def forget(self) -> None:
         """Forget the NAOs seen: they have moved meanwhile (a new move begins)."""
@@ -111,6 +123,7 @@ class SafeSteps:
         total = float(np.hypot(*(goal - b.position))) or 1.0
         cp = self.corridor
         self.refused = 0
+        self.off_plan = False
         side = 0  # the side of the detour under way (0: none)
         for _ in range(200):
             leg = next_leg(b.position, b.heading, goal, backward_within=backward_within)
@@ -123,7 +136,7 @@ class SafeSteps:
                 rel = self._remembered()
                 v = check_step(
                     leg.walk, to_goal, rel, cp, wait, side=side, goal=goal - b.position,
-                    ahead=ahead, standing=self._standing(),
+                    ahead=ahead, members=self._members(),
                 )  # fmt: skip
                 if v.action == VIA and self._via_step(v):
                     continue
@@ -158,6 +171,7 @@ class SafeSteps:
         if self.clear_way(v.walk, via=False).action != GO:
             return False
         self.vias += 1
+        self.off_plan = True
         self.motion.walk_step(v.walk)
         return True
 
@@ -199,10 +213,14 @@ class SafeSteps:
             )
             for p in np.asarray(seen, dtype=np.float64).reshape(-1, 2):
                 self.seen.append((b.position + p, self.motion.steps))
+            members = self._members() if via or self.off_plan else None
+            others = self._remembered()
+            if self.off_plan and members is not None:  # off the plan: they block as seen
+                others = np.vstack([others, members])
             v = check_step(
-                walk, b.heading, self._remembered(), cp, waited if via else 0, now_rank,
+                walk, b.heading, others, cp, waited if via else 0, now_rank,
                 goal=None if goal is None else goal - b.position, ahead=ahead,
-                standing=self._standing() if via else None,
+                members=members if via else None,
             )  # fmt: skip
             if v.action == GO or (v.action == VIA and via):
                 if waited:
@@ -284,20 +302,31 @@ class SafeSteps:
             }
         return here, places
 
+    def _members(self) -> np.ndarray:
+        """Where the other members are by the plan and their statuses, relative to this
+        robot (fixed frame), seen or not: the expected place of each that stands still
+        (:meth:`_places`), and for each walking member its path from the arc its status
+        last gave to :data:`STRETCH` m beyond (its status may lag its walk by about a
+        milestone). What a step off the plan must clear (corridor.py ``check_step``)."""
+        here, places = self._places(standing=True)
+        plan = self.course.planned
+        pts = [places[i] for i in sorted(places)]
+        if plan is not None:
+            for i in sorted(int(r) for r in self.ctx.formation.members(plan)):
+                peer = self.fleet.peer(i) if i != self.ctx.me and i not in places else None
+                if peer is None or peer.phase != MOVING or not peer.walked > 0.0:
+                    continue
+                path = plan.robot(i).path()
+                pts.extend(tail(path, peer.walked + d)[0] for d in STRETCH_POINTS)
+        if not pts:
+            return np.zeros((0, 2))
+        return np.asarray([np.asarray(p, dtype=np.float64) - here for p in pts])
+
     def _blocker(self, rel: np.ndarray) -> int:
         """The member taken for the NAO at ``rel`` (relative, fixed frame): the one whose
         expected place is nearest (:meth:`_places`); -1 without a plan or a match."""
         here, places = self._places()
         return blocker_of(here + rel, places, BLOCKER_MATCH) if places else -1
-
-    def _standing(self) -> np.ndarray:
-        """Where the members that stand still are expected (:meth:`_places`), relative to
-        this robot (fixed frame), seen or not: what a via step, off the plan, must clear
-        too (agent/core/control/corridor.py ``check_step``)."""
-        here, places = self._places(standing=True)
-        if not places:
-            return np.zeros((0, 2))
-        return np.asarray([places[i] - here for i in sorted(places)], dtype=np.float64)
 
     def _stands(self, blocker: int) -> bool:
         """Whether waiting for member ``blocker`` to walk on is no use: it holds its slot,

@@ -340,7 +340,7 @@ def test_a_via_step_clears_a_member_standing_where_the_plan_says(
         r.course.follow(plan)
         r.membership.peers[2] = Peer(alive=True, phase="hold", seen_alive=True)
         r.membership.peers[3] = Peer(alive=True, phase="wait", seen_alive=True)
-        assert r.safe_steps._standing() == pytest.approx(
+        assert r.safe_steps._members() == pytest.approx(
             np.array([[0.0, 0.8], [spot[0], spot[1] + 0.8]])
         )
         xs: list[float] = []
@@ -358,3 +358,21 @@ def test_a_via_step_clears_a_member_standing_where_the_plan_says(
         assert r.safe_steps.refused == 0 and r.safe_steps.vias >= 1
         assert min(xs) < -0.2 and max(xs) < 0.1, xs  # round the left, never to the right
         assert world.locomotion.contacts == 0
+
+
+def test_a_walking_member_is_expected_on_the_next_stretch_of_its_path(
+    blocked: World, bus: Bus, perception: PerceptionAdapter
+) -> None:
+    """Robot 2 walks its planned path from (3, 3) to (0, 0) and said 1.0 m walked: a step
+    off the plan clears its path from 1.0 to 1.5 m (its status may lag by a milestone);
+    the 20 far robots still at their starts stand there. Relative to robot 1 at its start
+    (0, -0.8) in the plan's frame."""
+    r = _runner(blocked, bus, perception)
+    r.course.follow(_ranked_plan_with_robot_2_in_the_way())
+    r.membership.peers[2] = Peer(alive=True, phase="move", seen_alive=True, walked=1.0)
+    pts = r.safe_steps._members()
+    u = np.array([-1.0, -1.0]) / math.sqrt(2.0)
+    stretch = [np.array([3.0, 3.0]) + (1.0 + 0.1 * k) * u - np.array([0.0, -0.8]) for k in range(6)]
+    far = [np.array([20.0 + i, 20.8]) for i in range(3, 23)]
+    np.testing.assert_allclose(pts, np.array(far + stretch), atol=1e-9)
+    assert not r.safe_steps.off_plan  # no via step walked yet: planned steps ignore them

@@ -113,15 +113,15 @@ def test_a_via_step_clears_the_members_standing_unseen() -> None:
     )
     member = np.array([[0.2, 0.55]])
     assert blocking(0.2, plain.heading, member, CP.clearance).any()
-    v = check_step(0.2, NORTH, ahead, CP, waited=5, standing=member)
+    v = check_step(0.2, NORTH, ahead, CP, waited=5, members=member)
     assert v.action == VIA and v.side == RIGHT and v.heading == pytest.approx(0.0, abs=1e-9)
     assert not blocking(0.2, v.heading, np.vstack([ahead, member]), CP.clearance).any()
-    v = check_step(0.2, NORTH, ahead, CP, waited=5, standing=np.array([[0.45, 0.1]]))
+    v = check_step(0.2, NORTH, ahead, CP, waited=5, members=np.array([[0.45, 0.1]]))
     assert v.action == VIA and v.side == LEFT
     # standing members never make a planned step wait
-    assert check_step(0.2, NORTH, np.zeros((0, 2)), CP, standing=ahead).action == GO
+    assert check_step(0.2, NORTH, np.zeros((0, 2)), CP, members=ahead).action == GO
     walled = np.array([[0.45, 0.1], [-0.45, 0.1]])
-    assert check_step(0.2, NORTH, ahead, CP, waited=5, standing=walled).action == WAIT
+    assert check_step(0.2, NORTH, ahead, CP, waited=5, members=walled).action == WAIT
 
 
 def test_a_nao_on_the_goal_is_waited_for_not_walked_round() -> None:
@@ -227,9 +227,9 @@ def test_invariants(
 ) -> None:
     others = np.array(pts, dtype=np.float64).reshape(-1, 2)
     standing = np.array(still, dtype=np.float64).reshape(-1, 2)
-    v = check_step(walk, heading, others, CP, waited, rank, standing=standing)
+    v = check_step(walk, heading, others, CP, waited, rank, members=standing)
     # deterministic
-    again = check_step(walk, heading, others.copy(), CP, waited, rank, standing=standing.copy())
+    again = check_step(walk, heading, others.copy(), CP, waited, rank, members=standing.copy())
     assert (again.action, again.heading, again.side) == (v.action, v.heading, v.side)
     c = CP.clearance
     if v.action == VIA:  # a via step clears the standing members as it clears the NAOs seen

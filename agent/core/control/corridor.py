@@ -277,7 +277,7 @@ def check_step(
     side: int = 0,
     goal: np.ndarray | None = None,
     ahead: float = 0.0,
-    standing: np.ndarray | None = None,
+    members: np.ndarray | None = None,
 ) -> Verdict:
     """Go, wait or via for a step of ``walk`` m along ``heading`` (believed, fixed frame)
     with NAOs at ``others`` (k, 2; relative to the robot, fixed-frame axes), after
@@ -287,13 +287,14 @@ def check_step(
     wait. ``ahead`` (m, >= 0): the way beyond the step checked as well (the caller's
     ``lookahead``, cut at the goal); a via step itself is checked over its own length.
 
-    ``standing`` (m, 2; relative): where members stand still by the plan and their
-    statuses (at their starts, holding their slots, left out), seen or not. A planned
-    step needs no such check (the plan keeps its corridor clear of them); a via step is
-    off the plan, so it must clear them as it clears the NAOs seen: a standing member in
-    its way widens the tangent round it too (at most :data:`MAX_VIA_TURN` off the way).
-    At 100 NAOs a detour's tangent steps passed 0.39 m from a member standing at its
-    start, too near and too far aside to be in any image, which then walked into it."""
+    ``members`` (m, 2; relative): where the members are by the plan and their statuses,
+    seen or not (standing at their starts or slots, left out, or the next stretch of a
+    walking member's path). A planned step needs no such check (the plan keeps its
+    corridor clear of them in time); a via step is off the plan, so it must clear them
+    as it clears the NAOs seen: a member in its way widens the tangent round it too (at
+    most :data:`MAX_VIA_TURN` off the way). At 100 NAOs a detour's tangent steps passed
+    0.39 m from a member standing at its start, too near and too far aside to be in any
+    image, which then walked into it."""
     _finite("walk", walk, -1.0, 1.0)
     _finite("heading", heading)
     _finite("ahead", ahead, 0.0, 2.0)
@@ -319,10 +320,10 @@ def check_step(
         x, y = blockers[0]
         lateral = -math.sin(heading) * x + math.cos(heading) * y  # > 0: on the left
         side = LEFT if lateral < -params.tie else RIGHT
-    members = np.zeros((0, 2)) if standing is None else _points(standing)
+    known = np.zeros((0, 2)) if members is None else _points(members)
     for s in (side, -side):
-        avoid, still = blockers, members
-        for _ in range(1 + len(members)):  # each pass adds a standing member in the way
+        avoid, still = blockers, known
+        for _ in range(1 + len(known)):  # each pass adds a member in the way
             h = _tangent(heading, avoid, c + params.via_extra, s)
             if abs(wrap_pi(h - heading)) > MAX_VIA_TURN:
                 break  # not a step round the blocker but away from the way
