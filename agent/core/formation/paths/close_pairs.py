@@ -147,20 +147,6 @@ def _query_pairs(
     return s[near], t[near], d[near]
 
 
-def segment_pairs(
-    seg_a: np.ndarray,
-    seg_b: np.ndarray,
-    owner: np.ndarray,
-    c: float,
-    query: np.ndarray | None = None,
-    cross_only: bool = False,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Segment pairs (s, t), owner[s] < owner[t], within c; with ``query`` (bool per
-    segment) only the pairs with at least one query segment (``cross_only``: exactly one)."""
-    s, t, _ = close_segment_pairs(seg_a, seg_b, owner, c, query, cross_only)
-    return s, t
-
-
 def close_segment_pairs(
     seg_a: np.ndarray,
     seg_b: np.ndarray,
@@ -169,8 +155,10 @@ def close_segment_pairs(
     query: np.ndarray | None = None,
     cross_only: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`segment_pairs` (s, t) with their distances (:func:`geometry.seg_seg_dist`
-    of segments s and t, in that order)."""
+    """Segment pairs (s, t), owner[s] < owner[t], within c, with their distances
+    (:func:`geometry.seg_seg_dist` of segments s and t, in that order); with ``query``
+    (bool per segment) only the pairs with at least one query segment (``cross_only``:
+    exactly one)."""
     m = seg_a.shape[0]
     empty = np.zeros(0, dtype=np.int64)
     if m == 0 or (query is not None and not np.any(query)):
@@ -247,4 +235,5 @@ def candidate_segment_pairs(
     c share such a cell - so only same-cell pairs are candidates; they are deduplicated
     with one int64 key, then measured. Cost ~ total path length / c + candidates.
     """
-    return segment_pairs(seg_a, seg_b, owner, c)
+    s, t, _ = close_segment_pairs(seg_a, seg_b, owner, c)
+    return s, t

@@ -20,8 +20,8 @@ import numpy as np
 
 from agent.core.formation.paths.close_pairs import (
     candidate_segment_pairs,
+    close_segment_pairs,
     path_segments,
-    segment_pairs,
     sorted_unique,
 )
 from agent.core.formation.paths.geometry import point_seg_dist, seg_seg_dist
@@ -128,7 +128,7 @@ def near_sets(
         seg_b = np.concatenate([pb, sb])
         owner = np.concatenate([po, total + so])
         query = np.r_[np.zeros(pa.shape[0], dtype=bool), np.ones(sa.shape[0], dtype=bool)]
-        s, t = segment_pairs(seg_a, seg_b, owner, dist, query=query, cross_only=True)
+        s, t, _ = close_segment_pairs(seg_a, seg_b, owner, dist, query=query, cross_only=True)
         found.append((owner[t] - total) * total + owner[s])
 
     cross(qa, qb, np.arange(m), (_MAX_OFFSET + 1.0) * c)
