@@ -93,17 +93,16 @@ class Motion:
     def rotate(self, angle: float, gains: PidGains = PAPER_GAINS, label: str = "") -> float:
         """Turn the body by ``angle`` (rad, + CCW) with the rotation control (5.2.2 (1)).
 
-        A ``label`` names the turn in the robot's status: said at once as the turn starts
-        (a labelled turn is a change of what the body does, a few per run, like a phase
-        change: a fault injector waits for it), then as progress at the status pace.
+        A ``label`` names the turn in the robot's status: said at once after its first
+        step, the turn under way and journaled (a labelled turn is a change of what the
+        body does, a few per run, like a phase change: a fault injector waits for it to
+        kill a robot whose heading is in doubt), then as progress at the status pace.
 
         Returns the rotation completed according to the compass (rad)."""
         b = self.ctx.beliefs
         rc = RotationControl(angle, gains=gains, tolerance=self.ctx.cfg.rotation_tolerance)
         report = self.ctx.report
-        if label:
-            report.status(report.phase, detail=f"{label}: {math.degrees(angle):+.1f}° to go",
-                          force=True)  # fmt: skip
+        said = False
         before = self.reference()
         while not (rc.done or rc.exhausted):
             u = rc.next_step()
@@ -119,7 +118,9 @@ class Motion:
             )  # fmt: skip
             before = after
             if label:
-                report.status(report.phase, detail=f"{label}: {math.degrees(rc.error):+.1f}° to go")
+                left = f"{label}: {math.degrees(rc.error):+.1f}° to go"
+                report.status(report.phase, detail=left, force=not said)
+                said = True
             if rep.status == "contact":
                 log.warning("contact while turning")
         self.last_frame, self.carried = before, False

@@ -90,9 +90,10 @@ def test_rotate_follows_the_compass_and_says_how_far_is_left() -> None:
     assert ctx.report.phase is Phase.MOVE and m.last_frame is not None
 
 
-def test_a_labelled_turn_is_said_as_it_starts_and_an_unlabelled_one_is_not() -> None:
+def test_a_labelled_turn_is_said_once_under_way_and_an_unlabelled_one_is_not() -> None:
     """Within the status pace of the phase's first status, the labelled turn is said at
-    once, before the body is asked to turn; its progress is then held back."""
+    once after its first step (journaled, sent: the heading in doubt); its progress is
+    then held back."""
     m, ctx, _, _ = motion(dtheta=math.radians(10.0))
     bus = ctx.bus
     assert isinstance(bus, FakeBus)
@@ -101,7 +102,8 @@ def test_a_labelled_turn_is_said_as_it_starts_and_an_unlabelled_one_is_not() -> 
     assert [s.detail for s in bus.statuses()] == ["sweep at θ = 0°"]
     m.rotate(math.radians(30.0), label="turn to θ = 180°")
     said = [s.detail for s in bus.statuses()]
-    assert said == ["sweep at θ = 0°", "turn to θ = 180°: +30.0° to go"], said
+    # said after its first 10° step, the next two held back
+    assert said == ["sweep at θ = 0°", "turn to θ = 180°: +20.0° to go"], said
 
 
 def test_a_contact_while_walking_stops_the_robot_with_where_it_believes_it_is() -> None:
