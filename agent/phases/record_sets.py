@@ -4,8 +4,9 @@ docs/design.md §8 "Faults"; NAO paper 4.1.2).
 Once agreed, every agent serves the records it agreed on at ``nao/{id}/records``
 (:func:`record_set`, :func:`answer`), so that an agent restarted after a crash can fetch
 them by their digest (agent/recovery/resume.py) instead of searching again. The asker
-trusts no server: :func:`records_of` (agent/wire/codec.py) checks that a reply is the set asked for, decodes,
-holds one record per member sorted by sender, and hashes to the agreed digest.
+trusts no server: ``records_of`` (agent/wire/codec.py) checks that a reply is the set
+asked for, decodes, holds one record per member sorted by sender, and hashes to the
+agreed digest.
 """
 
 from __future__ import annotations
@@ -17,10 +18,7 @@ from agent.wire import (
     RecordSetReply,
     RecordSetRequest,
     encode,
-    records_of,
 )
-
-__all__ = ["answer", "record_set", "records_of"]
 
 
 def record_set(me: int, decision: Decision[NeighborRecordMsg]) -> RecordSetReply:

@@ -273,11 +273,10 @@ class SafeSteps:
                 shown = in_view(rel, b.heading, CAMERA_HFOV)
                 self.seen = [e for e, gone in zip(self.seen, shown, strict=True) if not gone]
 
-    def _places(self, standing: bool = False) -> tuple[np.ndarray, dict[int, np.ndarray]]:
+    def _places(self) -> tuple[np.ndarray, dict[int, np.ndarray]]:
         """(where this robot is believed, in the plan's frame; where the other members are
-        expected, by the plan and the phases heard: jam.py rule 1), or ``standing``: only
-        those that stand still (not moved yet, holding their slots, left out: a robot the
-        plan left out stands at its start). Nothing without a plan."""
+        expected, by the plan and the phases heard: jam.py rule 1; a robot the plan left
+        out stands at its start). Nothing without a plan."""
         plan = self.course.planned
         if plan is None:
             return np.zeros(2), {}
@@ -285,39 +284,32 @@ class SafeSteps:
         here = np.asarray(plan.robot(me).start, dtype=np.float64) + self.ctx.beliefs.position
         others = [int(i) for i in self.ctx.formation.members(plan) if int(i) != me]
         left_out = set(plan.excluded)
-        phases = {i: "start" if i in left_out else self.fleet.peer(i).phase for i in others}
-        walked = {i: self.fleet.peer(i).walked for i in others if i not in left_out}
         places = expected_places(
             {i: plan.robot(i).start for i in others},
             {i: plan.robot(i).target for i in others},
-            phases,
-            walked,
+            {i: "start" if i in left_out else self.fleet.peer(i).phase for i in others},
+            {i: self.fleet.peer(i).walked for i in others if i not in left_out},
             {i: plan.robot(i).path() for i in others},
         )
-        if standing:
-            places = {
-                i: p
-                for i, p in places.items()
-                if at_start(phases[i], walked.get(i, 0.0)) or phases[i] in HOLDING
-            }
         return here, places
 
     def _members(self) -> np.ndarray:
         """Where the other members are by the plan and their statuses, relative to this
-        robot (fixed frame), seen or not: the expected place of each that stands still
-        (:meth:`_places`), and for each walking member its path from the arc its status
-        last gave to :data:`STRETCH` m beyond (its status may lag its walk by about a
-        milestone). What a step off the plan must clear (corridor.py ``check_step``)."""
-        here, places = self._places(standing=True)
+        robot (fixed frame), seen or not: the expected place of each (:meth:`_places`),
+        and for one walking, its path from that place to :data:`STRETCH` m beyond (its
+        status may lag its walk by about a milestone). Ids ascending. What a step off the
+        plan must clear (corridor.py ``check_step``)."""
+        here, places = self._places()
         plan = self.course.planned
-        pts = [places[i] for i in sorted(places)]
-        if plan is not None:
-            for i in sorted(int(r) for r in self.ctx.formation.members(plan)):
-                peer = self.fleet.peer(i) if i != self.ctx.me and i not in places else None
-                if peer is None or peer.phase != MOVING or not peer.walked > 0.0:
-                    continue
-                path = plan.robot(i).path()
-                pts.extend(tail(path, peer.walked + d)[0] for d in STRETCH_POINTS)
+        pts: list[np.ndarray] = []
+        for i in sorted(places):
+            peer = self.fleet.peer(i)
+            assert plan is not None  # places come from a plan
+            if i in plan.excluded or at_start(peer.phase, peer.walked) or peer.phase != MOVING:
+                pts.append(places[i])  # standing: at its start, on its slot
+                continue
+            path = plan.robot(i).path()
+            pts.extend(tail(path, peer.walked + d)[0] for d in STRETCH_POINTS)
         if not pts:
             return np.zeros((0, 2))
         return np.asarray([np.asarray(p, dtype=np.float64) - here for p in pts])

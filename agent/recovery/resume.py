@@ -24,7 +24,7 @@ the robot starts afresh. A journal of a run still going is resumed (:class:`Resu
   that holds its own record exactly as journaled.
 * **After agreement**: the agreed record set by its digest (every agent serves
   ``nao/{id}/records``: agent/phases/record_sets.py; the run check fetched it), checked
-  against the digest and the members (:func:`~agent.phases.record_sets.records_of`); it
+  against the digest and the members (:func:`~agent.wire.codec.records_of`); it
   recomputes the plan (identical: the same bit-identical inputs) and checks it against
   the journaled plan digest, then goes on: waiting for earlier waves, the move from the
   journaled leg (after re-measuring its heading), or holding. The others accept its new

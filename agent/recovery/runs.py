@@ -42,7 +42,6 @@ from dataclasses import dataclass
 from agent.body.zenoh_world import retry_no_route
 from agent.net.bus import Bus, BusError, Event
 from agent.phases.context import Context
-from agent.phases.record_sets import records_of
 from agent.phases.reporting import Phase
 from agent.phases.roles import Hearing, Listening
 from agent.recovery.journal import JournalState
@@ -55,6 +54,7 @@ from agent.wire import (
     RecordSetRequest,
     StatusMsg,
     decode,
+    records_of,
 )
 
 log = logging.getLogger("agent.recovery.runs")

@@ -374,5 +374,5 @@ def test_a_walking_member_is_expected_on_the_next_stretch_of_its_path(
     u = np.array([-1.0, -1.0]) / math.sqrt(2.0)
     stretch = [np.array([3.0, 3.0]) + (1.0 + 0.1 * k) * u - np.array([0.0, -0.8]) for k in range(6)]
     far = [np.array([20.0 + i, 20.8]) for i in range(3, 23)]
-    np.testing.assert_allclose(pts, np.array(far + stretch), atol=1e-9)
+    np.testing.assert_allclose(pts, np.array(stretch + far), atol=1e-9)
     assert not r.safe_steps.off_plan  # no via step walked yet: planned steps ignore them

@@ -21,7 +21,7 @@ import pytest
 
 from agent.core.agreement import Agreement
 from agent.net.bus import Bus, BusConfig, BusError
-from agent.phases.record_sets import answer, record_set, records_of
+from agent.phases.record_sets import answer, record_set
 from agent.recovery.runs import agreed_by_others
 from agent.wire import (
     KEY_RECORDS_ALL,
@@ -32,6 +32,7 @@ from agent.wire import (
     canonical_digest,
     encode,
     key_records,
+    records_of,
 )
 from agent.wire.trust import Identity, TrustError, create_fleet
 from tests.fakes import zb
