@@ -18,6 +18,15 @@ records with one robot's record corrupted by the agent's own sensor-fault test t
 exactly where ``python -m agent --sensor-fault`` applies it): rotate 40°, scale 1.4,
 shift 0.5 m, each on its own seeded victim.
 
+A second family, the *bystander* fleets (:func:`bystander_cases`), has NAOs in the room
+that run no agent (switched off, or another team's): ``bystanders`` more robots of the
+scenario, either anywhere (``generate``) or one on a slot of the fleet's plan
+(:func:`tools.jam_scenario.jam_scenario`, the dense-jam case). Their sightings are in the
+members' records and pair with no member's: a fleet must neither leave a sound member
+out for seeing them nor refuse every frame. Their ids follow the members' and are listed
+in the file's ``bystanders``; the truth holds them too. They are kept apart
+(``tests/data/bystanders``) and judged apart: another population than the fleets alone.
+
 The corpus is split (:func:`held_out`): fleets whose seed is 3 modulo 4 are *held out*:
 the estimator is never tuned on them, and ``tools.eval_frames --corpus`` reports both
 parts apart.
@@ -34,7 +43,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -63,10 +72,31 @@ class FleetCase:
     robots: int
     seed: int
     headings: str
+    #: NAOs in the room that run no agent, ids ``robots + 1`` on
+    bystanders: int = 0
+    #: where they stand: "room" (anywhere, as ``generate`` places robots) or "slot" (one
+    #: on a slot of the fleet's plan: :func:`tools.jam_scenario.jam_scenario`)
+    place: str = "room"
 
     @property
     def name(self) -> str:
-        return f"n{self.robots:02d}_{self.headings.replace(':', '')}_s{self.seed}"
+        tail = f"_b{self.bystanders}{self.place}" if self.bystanders else ""
+        return f"n{self.robots:02d}_{self.headings.replace(':', '')}_s{self.seed}{tail}"
+
+    def scenario(self) -> scenarios.Scenario:
+        """The world's scenario: the members, then the bystanders."""
+        heads = scenarios.Headings.parse(self.headings)
+        if not self.bystanders:
+            return scenarios.generate(self.robots, self.seed, headings=heads)
+        if self.place == "slot":
+            if self.bystanders != 1:
+                raise ValueError(f"a slot takes one bystander, got {self.bystanders}")
+            from tools.jam_scenario import jam_scenario
+
+            return jam_scenario(self.robots, self.seed)[0]
+        if self.place != "room":
+            raise ValueError(f"bystanders stand in the 'room' or on a 'slot', got {self.place!r}")
+        return scenarios.generate(self.robots + self.bystanders, self.seed, headings=heads)
 
 
 def fleet_cases(count: int, first: int = 0) -> list[FleetCase]:
@@ -78,6 +108,28 @@ def fleet_cases(count: int, first: int = 0) -> list[FleetCase]:
         FleetCase(SIZES[k % len(SIZES)], FIRST_SEED + k, HEADINGS[k % len(HEADINGS)])
         for k in range(first, first + count)
     ]
+
+
+#: Bystander fleets: (members, bystanders, where) in the order they are drawn.
+#: Nine (prime to the held-out modulus 4): every kind has fleets held out.
+BYSTANDER_SIZES = ((4, 1, "slot"), (6, 1, "room"), (5, 2, "room"), (8, 1, "slot"),
+                   (10, 2, "room"), (4, 1, "room"), (6, 1, "slot"), (12, 3, "room"),
+                   (20, 2, "room"))  # fmt: skip
+FIRST_BYSTANDER_SEED = 3000
+
+
+def bystander_cases(count: int, first: int = 0) -> list[FleetCase]:
+    """Bystander fleets ``first`` .. ``first + count - 1``: fleet k is
+    ``BYSTANDER_SIZES[k % 9]`` with headings ``HEADINGS[k % 3]`` (a slot's scenario keeps
+    ``jam_scenario``'s own) and seed ``FIRST_BYSTANDER_SEED + k``."""
+    if count < 0 or first < 0:
+        raise ValueError(f"count and first must be >= 0, got {count}, {first}")
+    out = []
+    for k in range(first, first + count):
+        n, b, place = BYSTANDER_SIZES[k % len(BYSTANDER_SIZES)]
+        heads = "aligned" if place == "slot" else HEADINGS[k % len(HEADINGS)]
+        out.append(FleetCase(n, FIRST_BYSTANDER_SEED + k, heads, b, place))
+    return out
 
 
 def held_out(seed: int) -> bool:
@@ -97,6 +149,8 @@ class Run:
     records: tuple[NeighborRecordMsg, ...]
     victim: int = -1
     fault: str = ""
+    #: NAOs of the truth that run no agent (bystander fleets)
+    bystanders: tuple[int, ...] = ()
 
     @property
     def name(self) -> str:
@@ -154,14 +208,16 @@ def runs_of(path: Path) -> list[Run]:
         raise ValueError(f"{path}: corpus format {d.get('format')!r}, expected {FORMAT}")
     truth = {int(k): (float(v[0]), float(v[1]), float(v[2])) for k, v in d["truth"].items()}
     recs = tuple(sorted((_record(r) for r in d["records"]), key=lambda r: r.sender))
-    base = Run(path.stem, int(d["robots"]), int(d["seed"]), str(d["headings"]), truth, recs)
+    by = tuple(int(i) for i in d.get("bystanders", ()))
+    base = Run(path.stem, int(d["robots"]), int(d["seed"]), str(d["headings"]), truth, recs,
+               bystanders=by)  # fmt: skip
     out = [base]
     ids = [r.sender for r in recs]
     for k, text in enumerate(FAULTS):
         victim = ids[int(np.random.default_rng([base.seed, k]).integers(len(ids)))]
         fault = SensorFault.parse(text)
         bad = tuple(corrupt(r, fault) if r.sender == victim else r for r in recs)
-        out.append(Run(base.fleet, base.robots, base.seed, base.headings, truth, bad, victim, text))
+        out.append(replace(base, records=bad, victim=victim, fault=text))
     return out
 
 
@@ -195,9 +251,14 @@ def _agent_argv(rid: int, n: int, endpoint: str) -> list[str]:
 def render_fleet(case: FleetCase, log_dir: Path, timeout: float) -> dict[str, Any]:
     """Start the world and ``case.robots`` agents, collect every robot's record, stop them."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    heads = scenarios.Headings.parse(case.headings)
-    sc = scenarios.generate(case.robots, case.seed, headings=heads)
-    world = start_world(case.robots, case.seed, endpoint, log_dir, ["--headings", case.headings])
+    sc = case.scenario()
+    if case.bystanders:
+        path = log_dir / "scenario.json"
+        scenarios.dump(sc, path)
+        extra = ["--scenario", str(path)]
+    else:
+        extra = ["--headings", case.headings]
+    world = start_world(len(sc.robots), case.seed, endpoint, log_dir, extra)
     agents: list[subprocess.Popen[bytes]] = []
     last: dict[int, NeighborRecordMsg] = {}
     at_record: dict[int, list[float]] = {}  # each robot's true pose when its record came
@@ -237,6 +298,7 @@ def render_fleet(case: FleetCase, log_dir: Path, timeout: float) -> dict[str, An
         "headings": case.headings,
         "commit": _commit(),
         "truth": {str(r.id): [r.x, r.y, r.heading] for r in sc.robots},
+        "bystanders": [r.id for r in sc.robots if r.id > case.robots],
         # the true pose of each robot when its record arrived (the search over: a robot
         # has turned through its search, and its body may face another way than at start)
         "at_record": {str(k): v for k, v in sorted(at_record.items())},
@@ -274,15 +336,21 @@ def main(argv: list[str] | None = None) -> int:
     )
     sub = ap.add_subparsers(dest="cmd", required=True)
     b = sub.add_parser("build", help="render fleets into DIR (resumable)")
-    b.add_argument("--out", type=Path, default=Path("tests/data/frames"))
+    b.add_argument("--out", type=Path, default=None,
+                   help="default: tests/data/frames, or tests/data/bystanders for that family")  # fmt: skip
     b.add_argument("--fleets", type=int, default=200, help="fleets of the fixed list to render")
+    b.add_argument("--family", choices=("fleets", "bystanders"), default="fleets",
+                   help="the fixed list to draw from: fleets, or fleets with bystanders")  # fmt: skip
     b.add_argument("--first", type=int, default=0, help="index of the first fleet")
     b.add_argument("--every", type=int, default=1, help="render every K-th fleet (with --offset)")
     b.add_argument("--offset", type=int, default=0)
     b.add_argument("--max-robots", type=int, default=50)
     b.add_argument("--logs", type=Path, default=Path("out/corpus-logs"))
     a = ap.parse_args(argv)
-    cases = [c for k, c in enumerate(fleet_cases(a.fleets, a.first))
+    family = bystander_cases if a.family == "bystanders" else fleet_cases
+    if a.out is None:
+        a.out = Path("tests/data/bystanders" if a.family == "bystanders" else "tests/data/frames")
+    cases = [c for k, c in enumerate(family(a.fleets, a.first))
              if k % a.every == a.offset and c.robots <= a.max_robots]  # fmt: skip
     bar = Progress(len(cases), "corpus")
     failed = 0

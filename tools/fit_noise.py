@@ -22,13 +22,13 @@ used.
   median |residual| (robust: the gross errors are what ``p_reject`` counts);
   ``σ(d)² = a² + (b·d²)²`` is fitted to them in relative terms (least squares on log σ,
   weighted by the bin's count): ``σ_r(d)``, ``σ_t(d)``.
-* The χ² test of :mod:`agent.core.formation.frame.fault_test` is run on those fits with
+* The χ² test of :mod:`agent.core.formation.frame.faults.fault_test` is run on those fits with
   that σ: the share of their pairs rejected, binned by distance and fitted by a line in
   d, is ``p_reject``; lost strays per sighting, ``p_stray`` (no fault was injected, so
   every rejection is a false one).
 * ``a0``, the rate of a sound robot's sightings lost when it is tested alone against the
   others at their fitted poses (:func:`alone_losses`, the test of
-  :func:`agent.core.formation.frame.alone.alone_test`), counted conservatively as
+  :func:`agent.core.formation.frame.faults.alone.alone_test`), counted conservatively as
   ``(k + 1) / (n + 2)``;
 * ``bias_scale``, the bias test's null scale (:func:`bias_scale`: its statistic over sound
   robots against χ²₃, at the 90th and 99th percentiles);
@@ -321,8 +321,8 @@ def bias_scale(
 ) -> float:
     """The bias test's null scale (:func:`null_scale`, χ²₃) over every robot of the
     fault-free fleets, each with its unpaired sightings as the agents test it."""
-    from agent.core.formation.frame.bias_test import bias_fit
-    from agent.core.formation.frame.fault_test import unpaired
+    from agent.core.formation.frame.faults.bias_test import bias_fit
+    from agent.core.formation.frame.faults.fault_test import unpaired
 
     stats = []
     for f, recs in zip(fits, records, strict=True):
@@ -335,9 +335,9 @@ def alone_losses(
     fits: list[PoseFrame], model: SightingNoise, records: list[tuple[NeighborRecordMsg, ...]]
 ) -> tuple[int, int]:
     """(sightings, lost) of every robot of the fault-free fleets tested alone against the
-    others held at their fitted poses (:func:`agent.core.formation.frame.alone.alone_test`),
+    others held at their fitted poses (:func:`agent.core.formation.frame.faults.alone.alone_test`),
     over the robots enough of the others' sightings place (the test's own rule)."""
-    from agent.core.formation.frame.alone import alone_test
+    from agent.core.formation.frame.faults.alone import alone_test
     from agent.core.formation.frame.poses import evaluate_poses
 
     sent = lost = 0
@@ -378,7 +378,7 @@ def fitted(runs: list[Run]) -> tuple[list[PoseFrame], list[Run]]:
 def residuals(fits: list[PoseFrame]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Every sighting's measured distance and its fit residual along and across its line
     of sight (owner's fixed frame)."""
-    from agent.core.formation.frame.fault_test import misfits
+    from agent.core.formation.frame.faults.fault_test import misfits
 
     parts = [split(*misfits(poses)) for poses in fits]
     d, along, across = (
@@ -394,7 +394,8 @@ def pair_rejections(
     it under ``noise``; every robot's heading-test p-value (Wilks') and whether its record
     carries times (stances); every stray sighting's distance and whether it is lost (lands
     on no robot)."""
-    from agent.core.formation.frame.fault_test import mask_deltas, mask_test, rejected_edges, strays
+    from agent.core.formation.frame.faults.fault_test import rejected_edges, strays
+    from agent.core.formation.frame.faults.heading_test import mask_deltas, mask_test
 
     dist, bad, wilks, timed, sd, slost = [], [], [], [], [], []
     for poses, recs in zip(fits, records, strict=True):

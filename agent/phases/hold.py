@@ -28,7 +28,7 @@ import numpy as np
 
 from agent.core.control import PAPER_GAINS, wrap_pi
 from agent.core.control.alignment import look_yaws, match_parent
-from agent.core.formation.frame.fault_test import ALPHA
+from agent.core.formation.frame.faults.fault_test import ALPHA
 from agent.core.formation.plan import first_shape
 from agent.core.formation.shape.verdict import check_edge, facing_misfit, facing_tolerance
 from agent.core.formation.view.passers_by import passers_by

@@ -16,6 +16,7 @@ from tools import corpus, eval_frames, fit_noise
 from tools.lib.frames_report import NAMED_FLOOR, REVEALED_TARGET
 
 CORPUS = Path(__file__).resolve().parents[1] / "data" / "frames"
+BYSTANDERS = CORPUS.parent / "bystanders"
 
 
 def test_fleet_cases_are_a_fixed_list() -> None:
@@ -26,6 +27,48 @@ def test_fleet_cases_are_a_fixed_list() -> None:
     assert a[0].seed == corpus.FIRST_SEED and a[0].name == "n04_random_s1000"
     with pytest.raises(ValueError, match=">= 0"):
         corpus.fleet_cases(-1)
+
+
+def test_bystander_cases_are_a_fixed_list_with_every_kind_held_out() -> None:
+    a = corpus.bystander_cases(36)
+    assert a == corpus.bystander_cases(36) and a[4:6] == corpus.bystander_cases(2, first=4)
+    assert a[0].name == "n04_aligned_s3000_b1slot" and a[1].name == "n06_aligned_s3001_b1room"
+    kinds = {(c.robots, c.bystanders, c.place) for c in a if corpus.held_out(c.seed)}
+    assert kinds == set(corpus.BYSTANDER_SIZES)  # every kind has fleets held out
+    with pytest.raises(ValueError, match=">= 0"):
+        corpus.bystander_cases(-1)
+
+
+def test_a_bystander_fleets_scenario_has_its_members_first() -> None:
+    room = corpus.FleetCase(5, 3002, "jitter:20", 2, "room").scenario()
+    assert [r.id for r in room.robots] == list(range(1, 8))
+    slot = corpus.FleetCase(4, 3000, "aligned", 1, "slot").scenario()
+    assert [r.id for r in slot.robots] == [1, 2, 3, 4, 5]
+    with pytest.raises(ValueError, match="one bystander"):
+        corpus.FleetCase(4, 3000, "aligned", 2, "slot").scenario()
+    with pytest.raises(ValueError, match="'room' or on a 'slot'"):
+        corpus.FleetCase(4, 3000, "aligned", 1, "roof").scenario()
+
+
+def test_a_bystander_fleet_file_keeps_its_bystanders(tmp_path: Path) -> None:
+    path = _fleet_file(tmp_path)
+    doc = json.loads(path.read_text())
+    doc["truth"]["4"] = [2, 2, 0.0]
+    path.write_text(json.dumps({**doc, "bystanders": [4]}))
+    runs = corpus.runs_of(path)
+    assert all(r.bystanders == (4,) for r in runs)
+    assert all(r.victim in (1, 2, 3) for r in runs[1:])  # a bystander is never the victim
+
+
+def test_a_robot_left_out_whose_record_the_truth_rejects_is_not_counted_sound() -> None:
+    """Six NAOs beside a bystander, no fault injected: robot 5's record reads its
+    neighbours 3-29 % too far and one of them twice; the fleet leaves it out, and even
+    against the others' true poses its record is rejected at α: a fault perception made,
+    counted apart from a sound robot left out."""
+    (run,) = corpus.runs_of(BYSTANDERS / "n06_aligned_s3082_b1room.json")[:1]
+    row = eval_frames.judge_records(run.name, run.records, run.truth, run.victim)
+    assert row.excluded == (5,) and row.record_wrong == (5,)
+    assert not row.sound_left_out and not row.bad(0.15, 10.0)
 
 
 def test_held_out_is_a_quarter_by_seed() -> None:
@@ -154,6 +197,18 @@ def test_the_corpus_gate(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> 
     assert "without a fault: 0 with a sound robot left out" in out
 
 
+@pytest.mark.slow
+def test_the_bystander_gate(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Fleets beside NAOs that run no agent (``tests/data/bystanders``): no sound robot
+    left out, none refused, the faulty robot named in at least today's share (91 %) less
+    a margin."""
+    rc = eval_frames.main(["--corpus", str(BYSTANDERS), "--png", str(tmp_path / "f.png"),
+                           "--max-refused", "0.01",
+                           "--min-named", "0.88", "--jobs", "2"])  # fmt: skip
+    out = capsys.readouterr().out
+    assert rc == 0, out
+
+
 def test_the_test_alone_null_on_two_small_fleets(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -218,7 +273,7 @@ def test_a_revealed_fault_missed_fails_the_gate(
 def test_the_ceiling_of_a_sound_robot_and_a_faulty_one() -> None:
     """Against the truth a sound robot passes alone, and a robot whose distances read 1.4
     times too long among twenty is rejected far below α."""
-    from agent.core.formation.frame.fault_test import ALPHA
+    from agent.core.formation.frame.faults.fault_test import ALPHA
 
     runs = {r.name: r for r in corpus.runs_of(CORPUS / "n20_aligned_s1031.json")}
     clean = runs["n20_aligned_s1031"]

@@ -26,7 +26,7 @@ A sighting ``v_ij`` of robot i, in its fixed frame, at true distance d from j:
 * **lost when tested alone**: a sound robot's sighting lands on no other robot, once the
   robot is placed where the others saw it and turned to the heading under which most of
   its sightings land, with the others held at their fitted poses
-  (:func:`agent.core.formation.frame.alone.alone_test`), with probability
+  (:func:`agent.core.formation.frame.faults.alone.alone_test`), with probability
   ``p_alone(d) = clip(a0, P_MIN, P_MAX)`` per sighting, measured with that very test on
   fault-free fleets. It is not ``p_stray``: a sighting that pairs in the fit (a wrong
   pairing, a merged detection counted among the rejected pairs) is tested here like any
@@ -61,12 +61,12 @@ A sighting ``v_ij`` of robot i, in its fixed frame, at true distance d from j:
   the rate for records without times, where a robot seen mid-turn is seen turned as a
   whole (measured on the corpus of such records at 7.7 %);
 * **a sensor bias** (a robot's distances scaled, or its sightings shifted, all alike):
-  the likelihood-ratio statistic Λ of :mod:`agent.core.formation.frame.bias_test` over a
+  the likelihood-ratio statistic Λ of :mod:`agent.core.formation.frame.faults.bias_test` over a
   sound robot's sightings, divided by ``bias_scale``, follows χ² with three degrees of
   freedom in its tail (Wilks, for a model this one describes): ``bias_scale`` is that
   ratio, measured on fault-free fleets and never below 1.
 
-The fault test of the common frame (:mod:`agent.core.formation.frame.fault_test`) uses
+The fault test of the common frame (:mod:`agent.core.formation.frame.faults.fault_test`) uses
 it: a sighting's normalised residual is χ² with two degrees of freedom under this model,
 and ``p_reject`` is the base rate of its per-robot count of rejected pairs.
 

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from agent.core.formation.frame.fault_test import FaultVerdict, FleetCount, RobotTest
+from agent.core.formation.frame.faults.fault_test import FaultVerdict, FleetCount, RobotTest
 from agent.core.formation.frame.fleet_frame import DOUBT, fleet_frame, surprise
 from agent.core.formation.frame.neighbour_check import DEFAULT_EPSILON
 from agent.core.perception.sighting_noise import SightingNoise

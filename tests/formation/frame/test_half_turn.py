@@ -15,7 +15,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agent.adapters import FormationAdapter
-from agent.core.formation.frame.fault_test import ALPHA
+from agent.core.formation.frame.faults.fault_test import ALPHA
 from agent.core.formation.frame.fleet_frame import fleet_frame
 from agent.core.formation.frame.multi_start import half_turn_test
 from agent.core.formation.frame.neighbour_check import DEFAULT_EPSILON

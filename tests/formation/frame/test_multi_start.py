@@ -21,7 +21,7 @@ from agent.core.formation.frame.poses import (
     fit_cost,
     fit_poses,
 )
-from tests.formation.frame.test_fault_test import fleet
+from tests.formation.frame.faults.test_fault_test import fleet
 
 
 def _turned_start(good: PoseFrame, robot: int) -> tuple[np.ndarray, np.ndarray]:

@@ -11,7 +11,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from agent.core.formation.frame.common_frame import build_common_frame
-from agent.core.formation.frame.fault_test import fault_test
+from agent.core.formation.frame.faults.fault_test import fault_test
 from agent.core.formation.frame.neighbour_check import identify_neighbours
 from agent.core.formation.frame.pose_pairing import (
     identify_pairs,

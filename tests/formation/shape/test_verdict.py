@@ -181,7 +181,7 @@ def test_edge_errors(
 def test_facing_tolerance_is_the_mask_error_bound_at_the_false_alarm_rate() -> None:
     """z_{1−α/2} σ_m, worked by hand: α = 0.05 gives 1.96 σ_m; the shipped model at the
     fault test's α = 10⁻⁴ gives 3.89 σ_m, about 26°; each bad input raises."""
-    from agent.core.formation.frame.fault_test import ALPHA
+    from agent.core.formation.frame.faults.fault_test import ALPHA
     from agent.core.formation.shape.verdict import facing_tolerance
     from agent.core.perception.sighting_noise import shipped_noise
 

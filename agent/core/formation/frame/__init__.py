@@ -7,8 +7,8 @@ which robot (:mod:`~agent.core.formation.frame.neighbour_check`, eq. 9;
 ``reidentify`` without the papers' alignment), every start in one frame
 (:mod:`~agent.core.formation.frame.common_frame`, eq. 10; the pose fit of
 :mod:`~agent.core.formation.frame.poses` on ``robust_lm``), the consistency check that
-names a robot whose sightings do not fit, or nobody (``fault_test`` and
-``bias_test``), and the re-search decision (:mod:`~agent.core.formation.frame.research`, 4.1.3
+names a robot whose sightings do not fit, or nobody (the sub-room
+:mod:`~agent.core.formation.frame.faults`), and the re-search decision (:mod:`~agent.core.formation.frame.research`, 4.1.3
 rule 2). The perceived obstacles are merged into the common frame beside this room
 (:mod:`agent.core.formation.obstacle_map`, 5.1.2).
 

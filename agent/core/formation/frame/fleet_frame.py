@@ -60,8 +60,11 @@ robot, every sighting of it re-identified (p 10⁻³), where the pose fit names 
 rest fits (p 0.4); or with a robot's sightings all shifted 0.5 m re-identified onto its
 neighbours, every robot passing (the worst at p 3·10⁻⁴ of seven, its global test not
 surprised) and one start 0.47 m off, where the pose fit names that robot.
-Only if none passes so is the first general candidate (3, 4) that names a robot taken
-(a poor fit of a sound fleet must not blame a robot a better fit clears): fitted again
+Only if none passes so is the first general candidate (3, 4) that names a robot taken,
+(a poor fit of a sound fleet must not blame a robot a better fit clears), and only if
+that robot's record, tested alone against the rest the candidate fitted without it
+(:func:`alone.alone_test`), does not pass there too (a rejection the record alone does not
+confirm may be another robot's pull): fitted again
 without it, the named robot standing still where the *others* saw it (where most of their
 sightings of it agree, in the rest's frame: :func:`fault_test.seen_by_others`) and
 planned around like an obstacle. The aligned model (1, 2) never names anyone: it would
@@ -113,9 +116,15 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from agent.core.formation.frame.alone import absorbed, set_aside, suspects_of, unrecorded_place
 from agent.core.formation.frame.common_frame import build_common_frame
-from agent.core.formation.frame.fault_test import (
+from agent.core.formation.frame.faults.alone import (
+    absorbed,
+    alone_test,
+    set_aside,
+    suspects_of,
+    unrecorded_place,
+)
+from agent.core.formation.frame.faults.fault_test import (
     ALPHA,
     FaultVerdict,
     fault_test,
@@ -460,6 +469,14 @@ def _first_passed(
             continue
         judged = verdict.poses if verdict.named else test  # the named robot left out
         assert judged is not None  # a passed verdict carries its poses
+        if verdict.named:
+            # its record against the rest held fixed: a robot whose record fits the rest
+            # was rejected for another's fault pulling the fit (alone.py, step 2)
+            (robot,) = verdict.named
+            alone = alone_test(judged, records, robot, model)
+            if alone.place is not None and alone.test.p >= ALPHA:
+                last = f"{cand.name}: robot {robot} not named: its record fits the rest ({alone.describe()})"
+                continue
         half = half_turn_test(judged, model, records)
         if half.p < ALPHA:
             last = f"{cand.name}: {half.describe()}"

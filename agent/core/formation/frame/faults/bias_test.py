@@ -55,7 +55,7 @@ one array operation for every robot still fitting at each Gauss-Newton step
 (:class:`_Batch`): fitted one at a time, the robots of a 50-NAO fleet cost mostly
 numpy's overhead per call on arrays of tens of numbers. Each robot's misfits and Jacobian are its own, element for
 element; only the sums over its sightings run over padded rows, so its Λ is its fit
-alone's up to rounding (``tests/formation/frame/test_bias_batch.py``).
+alone's up to rounding (``tests/formation/frame/faults/test_bias_batch.py``).
 
 Only r's own sightings carry the bias, so the test needs others who see r (they pin its
 position) and at least two sightings of r's own, after the worst is set aside; with

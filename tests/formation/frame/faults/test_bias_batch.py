@@ -16,7 +16,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent.core.formation.frame.bias_test import (
+from agent.core.formation.frame.faults.bias_test import (
     HALVINGS,
     LOSS_SCALE,
     MAX_ITER,
@@ -30,7 +30,7 @@ from agent.core.formation.frame.bias_test import (
     bias_fits,
     cauchy_cost,
 )
-from agent.core.formation.frame.fault_test import unpaired
+from agent.core.formation.frame.faults.fault_test import unpaired
 from agent.core.formation.frame.neighbour_check import DEFAULT_EPSILON
 from agent.core.formation.frame.pose_pairing import identify_pairs
 from agent.core.formation.frame.poses import PoseFrame, PoseMeasurement, fit_from_graph
@@ -251,7 +251,7 @@ def test_a_singular_robot_stops_and_the_others_go_on() -> None:
 def test_the_batch_turns_by_the_floats_of_math() -> None:
     # the batch's cos ψ and sin ψ are math.cos and math.sin of each ψ, as a robot's own
     # fit (_Sightings.errors) takes them
-    from agent.core.formation.frame.bias_test import _cos_sin
+    from agent.core.formation.frame.faults.bias_test import _cos_sin
 
     psi = np.random.default_rng(4).uniform(-40.0, 40.0, 300)
     c, s = _cos_sin(psi)

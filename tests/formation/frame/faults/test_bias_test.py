@@ -1,4 +1,4 @@
-"""The bias test per robot (agent/core/formation/frame/bias_test.py, docs/design.md §9)
+"""The bias test per robot (agent/core/formation/frame/faults/bias_test.py, docs/design.md §9)
 and the fleet's global test (fault_test.fleet_count): known answers on synthetic
 fleets, and a test per error branch."""
 
@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from agent.core.formation.frame.bias_test import bias_fit
-from agent.core.formation.frame.fault_test import fault_test, fleet_count
+from agent.core.formation.frame.faults.bias_test import bias_fit
+from agent.core.formation.frame.faults.fault_test import fault_test, fleet_count
 from agent.core.formation.frame.neighbour_check import DEFAULT_EPSILON
 from agent.core.formation.frame.pose_pairing import identify_pairs
 from agent.core.formation.frame.poses import PoseFrame, fit_from_graph

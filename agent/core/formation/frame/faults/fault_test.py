@@ -15,7 +15,8 @@ sight, σ_r(d) and σ_t(d)). Then:
    detection: gross errors happen).
 2. **Per robot, its position test.** Robot r has ``n_r`` edges, ``k_r`` of them rejected,
    and ``s_r`` *lost strays* among its ``m_r`` own sightings (a sighting no pair of the
-   fit uses that lands on no robot within the χ² gate of the fitted frame). If r is
+   fit uses that lands on no robot, nor on a NAO without a record where several owners'
+   loose sightings agree (:mod:`outsiders`), within the χ² gate of the fitted frame). If r is
    sound, its edges are rejected independently with probabilities ``p_reject(d)`` (a
    faulty neighbour explains its one shared edge) and each of its sightings ends up a
    lost stray with ``p_stray(d)`` (a ghost or merged detection), both measured on
@@ -23,7 +24,7 @@ sight, σ_r(d) and σ_t(d)). Then:
    and the p-value is ``P(K ≥ k_r + s_r)``.
    A robot with wrong distances or a lying record has its own sightings off: those that
    pair are rejected, those that do not pair land nowhere.
-3. **Per robot, its heading test.** A robot whose compass is broken has its own
+3. **Per robot, its heading test** (:mod:`heading_test`). A robot whose compass is broken has its own
    sightings turned: its estimated ψ absorbs the turn, positions all fit, and only the
    others' masks of it (modulo π) disagree, all by one offset Δ. With the mask model's
    density f (the correct mask, the side/front confusion at ±90°, uniform otherwise),
@@ -77,9 +78,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy.special import bdtrc, chdtrc, chdtri
+from scipy.special import bdtrc, chdtri
 
-from agent.core.formation.frame.bias_test import BiasFit, bias_fits
+from agent.core.formation.frame.faults.bias_test import BiasFit, bias_fits
+from agent.core.formation.frame.faults.heading_test import mask_deltas, mask_test
+from agent.core.formation.frame.faults.outsiders import outsider_places
 from agent.core.formation.frame.multi_start import refit
 from agent.core.formation.frame.poses import PoseFrame, PoseMeasurement
 from agent.core.formation.frame.records import NeighborRecord
@@ -110,8 +113,6 @@ def one_fault_explains(rejected: int, robots: int) -> bool:
 #: tail is heavier than a Gaussian's) while a faulty robot's misfits, tens of σ, are
 #: rejected anyway.
 ALPHA_SIGHTING = 1e-6
-#: Mask offsets tried by the heading test (step 3): every degree of the half circle.
-MASK_GRID = np.radians(np.arange(0.0, 180.0, 1.0))
 
 
 @dataclass(frozen=True)
@@ -210,40 +211,6 @@ def tail_at_least(p: Sequence[float], k: int) -> float:
         dist[1:top] = dist[1:top] * (1.0 - q) + dist[: top - 1] * q
         dist[0] *= 1.0 - q
     return float(min(1.0, max(0.0, dist[k:].sum())))
-
-
-def mask_test(deltas: Sequence[float], noise: SightingNoise) -> tuple[float, float]:
-    """(Δ, p-value) of the heading test of step 3 over mask misfits ``deltas`` (rad): Wilks'
-    statistic divided by the measured null scale ``noise.mask_scale``, against χ²₁."""
-    d = np.asarray(deltas, dtype=np.float64)
-    if d.size == 0:
-        return 0.0, 1.0
-    logf = np.log(noise.mask_density(d[None, :] - MASK_GRID[:, None])).sum(axis=1)
-    best = int(np.argmax(np.round(logf, 12)))  # the first (smallest Δ) of equal maxima
-    stat = max(0.0, 2.0 * float(logf[best] - logf[0]))
-    offset = float((MASK_GRID[best] + math.pi / 2) % math.pi - math.pi / 2)
-    return offset, float(chdtrc(1, stat / noise.mask_scale))
-
-
-def mask_deltas(poses: PoseFrame, target: int) -> list[float]:
-    """δ = ψ_t − ψ_o − (β + θ − π/2) of the others' masks of ``target`` (by owner id)."""
-    return mask_deltas_of(poses.ids, poses.headings, poses.measurements, target)
-
-
-def mask_deltas_of(
-    ids: Sequence[int], headings: np.ndarray, measurements: Sequence[PoseMeasurement], target: int
-) -> list[float]:
-    """:func:`mask_deltas` of ``measurements`` between robots ``ids`` at ``headings``."""
-    index = {rid: k for k, rid in enumerate(ids)}
-    out = []
-    # filtered, then sorted (stably): the order of the sorted list, filtered
-    of_it = (m for m in measurements if m.target == target)
-    for m in sorted(of_it, key=lambda m: (m.owner, m.target)):
-        if not math.isfinite(m.orientation):
-            continue
-        ref = math.atan2(float(m.vector[1]), float(m.vector[0])) + m.orientation - math.pi / 2
-        out.append(float(headings[index[target]] - headings[index[m.owner]] - ref))
-    return out
 
 
 def rejected_edges(poses: PoseFrame, noise: SightingNoise) -> dict[tuple[int, int], bool]:
@@ -346,6 +313,13 @@ def _evidence(
             for d in (dist[e] for e in sorted(dist))]  # fmt: skip
     p_edge = dict(zip(sorted(dist), noise.p_reject(np.array(mean)).tolist(), strict=True))
     timed = frozenset(r.robot_id for r in records if r.stances is not None and len(r.stances))
+    # NAOs without a record where loose sightings of several owners agree (bystanders):
+    # their sightings land (:mod:`outsiders`)
+    found = outsider_places(poses, records, noise, float(chdtri(2, ALPHA_SIGHTING)), elsewhere)
+    if len(found):
+        elsewhere = (
+            found if elsewhere is None else np.vstack([np.reshape(elsewhere, (-1, 2)), found])
+        )
     return _Evidence(rejected_edges(poses, noise), p_edge,
                      strays(poses, records, noise, elsewhere), sighted, timed,
                      unpaired(poses, records), elsewhere)  # fmt: skip

@@ -39,7 +39,7 @@ land where it stands. This module gives that place, and the test of r against th
      sightings of r pinning its position (step 4).
 
    r is rejected when ``3·min(p_pos, p_head, p_bias) < α`` (Bonferroni over the three,
-   :data:`fault_test.ALPHA`), as in the fit. A robot fewer than :data:`MIN_WITNESSES` of
+   :data:`fault_test.ALPHA`), as in the fit. A robot fewer than :data:`outsiders.WITNESSES` of
    the others agree on is never rejected here: one sighting has no check, and a ghost,
    or a sighting of r that a wrong rest paired elsewhere leaving one behind, would stand
    for r (in five robots, the four framed without the faulty one's record 0.64 m off the
@@ -71,7 +71,6 @@ the smallest of equal angles.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Generic, Protocol, TypeVar
@@ -79,28 +78,30 @@ from typing import Generic, Protocol, TypeVar
 import numpy as np
 from scipy.special import chdtri
 
-from agent.core.formation.frame.bias_test import bias_fit
-from agent.core.formation.frame.fault_test import (
+from agent.core.formation.frame.faults.bias_test import bias_fit
+from agent.core.formation.frame.faults.fault_test import (
     ALPHA,
     ALPHA_SIGHTING,
     FaultVerdict,
     RobotTest,
-    mask_deltas,
-    mask_deltas_of,
-    mask_test,
     one_fault_explains,
     seen_by_others,
     tail_at_least,
 )
+from agent.core.formation.frame.faults.heading_test import mask_deltas, mask_deltas_of, mask_test
+from agent.core.formation.frame.faults.outsiders import (
+    WITNESSES,
+    agreeing_sets,
+    agreement,
+    best_heading,
+    largest_set,
+    loose_sightings,
+    outsider_places,
+    turn,
+)
 from agent.core.formation.frame.poses import PoseFrame, PoseMeasurement, evaluate_poses
 from agent.core.formation.frame.records import NeighborRecord, mask_orientation
 from agent.core.perception.sighting_noise import SightingNoise
-
-#: The fewest of the others' sightings that must agree on where a robot without a record
-#: stands for it to be tested alone (step 2).
-MIN_WITNESSES = 2
-#: Headings searched for the robot tested alone (step 2): every degree of the circle.
-HEADING_GRID = np.radians(np.arange(0.0, 360.0, 1.0))
 
 
 @dataclass(frozen=True)
@@ -109,7 +110,7 @@ class Alone:
 
     test: RobotTest
     #: (2,) where the others saw it, in the rest's frame; None: fewer than
-    #: :data:`MIN_WITNESSES` of them agree
+    #: :data:`outsiders.WITNESSES` of them agree
     place: np.ndarray | None
     heading: float  #: ψ_r (rad) under which most of its sightings land
 
@@ -119,12 +120,6 @@ class Alone:
 
 def _gate() -> float:
     return float(chdtri(2, ALPHA_SIGHTING))
-
-
-def _turn(psi: float, points: np.ndarray) -> np.ndarray:
-    """Points (k, 2) of a frame turned by ``psi`` written in it: R(−ψ)·p."""
-    c, s = math.cos(psi), math.sin(psi)
-    return np.stack([c * points[:, 0] + s * points[:, 1], -s * points[:, 0] + c * points[:, 1]], 1)
 
 
 def unrecorded_place(
@@ -139,58 +134,17 @@ def unrecorded_place(
     ()) when no sighting lands off the robots of ``poses``."""
     q = _gate()
     by_id = {r.robot_id: r for r in records}
-    target = by_id.get(robot)
-    used = {(m.owner, float(m.vector[0]), float(m.vector[1])) for m in poses.measurements}
-    found: list[tuple[int, np.ndarray, np.ndarray, float]] = []  # owner, vector, at, mask θ
-    for k, rid in enumerate(poses.ids):
-        rec = by_id.get(rid)
-        if rec is None:
-            continue
-        psi = float(poses.headings[k])
-        others = _turn(psi, np.delete(poses.positions, k, axis=0) - poses.positions[k])
-        own = np.asarray(rec.neighbours, dtype=np.float64).reshape(-1, 2)
-        lands = np.zeros(len(own), dtype=bool)
-        if len(others) and len(own):  # every sighting against every other robot at once
-            err = (others[None, :, :] - own[:, None, :]).reshape(-1, 2)
-            x2 = noise.chi2(np.repeat(own, len(others), axis=0), err)
-            lands = x2.reshape(len(own), len(others)).min(axis=1) <= q
-        for a, v in enumerate(own):
-            if lands[a] or (rid, float(v[0]), float(v[1])) in used:
-                continue
-            at = poses.positions[k] + _turn(-psi, v[None])[0]
-            theta = mask_orientation(rec, a, target)
-            found.append((rid, v, at, theta))
-    if not found:
-        return None, ()
-    # agree[i, j]: sighting j lands on sighting i's place within the halved gate
-    row = {rid: k for k, rid in enumerate(poses.ids)}
-    turn = np.array([[math.cos(float(poses.headings[row[o]])), math.sin(float(poses.headings[row[o]]))]
-                     for o, _, _, _ in found])  # fmt: skip
-    at = np.array([f[2] for f in found])
-    vec = np.array([f[1] for f in found])
-    gap = at[:, None, :] - at[None, :, :]  # centre i minus place j
-    err = np.stack([turn[None, :, 0] * gap[..., 0] + turn[None, :, 1] * gap[..., 1],
-                    -turn[None, :, 1] * gap[..., 0] + turn[None, :, 0] * gap[..., 1]], -1)  # fmt: skip
-    n = len(found)
-    x2 = noise.chi2(np.tile(vec, (n, 1)), err.reshape(-1, 2)).reshape(n, n)
-    agree_at = 0.5 * x2 <= q
-    best: list[int] = []
-    for i in range(n):
-        agree: list[int] = []
-        owners: set[int] = set()
-        for j in np.flatnonzero(agree_at[i]):
-            if found[j][0] not in owners:
-                agree.append(int(j))
-                owners.add(found[j][0])
-        if len(agree) > len(best):
-            best = agree
+    found = loose_sightings(poses, records, noise, q)
+    best = largest_set(agreement(found, noise, q), found) if found else []
     if not best:
         return None, ()
-    place = np.mean(np.array([found[j][2] for j in best]), axis=0)
+    place = np.mean(np.array([found[j].at for j in best]), axis=0)
+    target = by_id.get(robot)
     seen = tuple(
-        PoseMeasurement(found[j][0], robot, found[j][1].copy(), orientation=found[j][3])
+        PoseMeasurement(found[j].owner, robot, found[j].vector.copy(),
+                        orientation=mask_orientation(by_id[found[j].owner], found[j].index, target))
         for j in best
-    )
+    )  # fmt: skip
     return place, seen
 
 
@@ -214,12 +168,31 @@ def alone_test(
     if mine is None:
         raise ValueError(f"no record of robot {robot}")
     own = np.asarray(mine.neighbours, dtype=np.float64).reshape(-1, 2)
-    place, seen = unrecorded_place(rest, records, noise, robot)
-    if place is None or len(seen) < MIN_WITNESSES:
+    q = _gate()
+    found = loose_sightings(rest, records, noise, q)
+    sets = agreeing_sets(found, noise, q)  # NAOs the rest sees and holds no record of
+    if not sets:
         untested = RobotTest(robot, 0, 0, len(own), 0, 1.0, 0, 0.0, 1.0)
         return Alone(untested, None, 0.0)
-    q = _gate()
-    heading, lands = _heading(rest.positions - place, own, noise, q)
+    places = np.array([np.mean(np.array([found[j].at for j in s]), axis=0) for s in sets])
+    # it stands at the one its own record fits best (most of its sightings landing on the
+    # rest and the others; tie: the first, the largest set): a bystander seen by more of
+    # the rest than it is must not take its place
+    choice: tuple[int, float, int] | None = None
+    for i in range(len(sets)):
+        around = np.vstack([rest.positions, np.delete(places, i, axis=0)]) - places[i]
+        psi, hits = best_heading(around, own, noise, q)
+        if choice is None or hits > choice[2]:
+            choice = (i, psi, hits)
+    assert choice is not None
+    i, heading, lands = choice
+    place = places[i]
+    by_id = {r.robot_id: r for r in records}
+    seen = tuple(
+        PoseMeasurement(found[j].owner, robot, found[j].vector.copy(),
+                        orientation=mask_orientation(by_id[found[j].owner], found[j].index, mine))
+        for j in sets[i]
+    )  # fmt: skip
     lost = len(own) - lands
     p_pos = tail_at_least([float(p) for p in noise.p_alone(np.hypot(*own.T))], lost)
     ids = tuple(sorted((*rest.ids, robot)))
@@ -232,32 +205,11 @@ def alone_test(
     offset, p_h = mask_test(deltas, noise)
     timed = mine.stances is not None and len(mine.stances) > 0
     p_h = max(p_h, noise.rho if timed else noise.rho_untimed) if deltas else p_h
-    fit = bias_fit(joint, robot, noise, noise.bias_scale, own)
+    # its sightings of the other NAOs without a record land there, in its bias test too
+    fit = bias_fit(joint, robot, noise, noise.bias_scale, own, np.delete(places, i, axis=0))
     test = RobotTest(robot, len(seen), 0, len(own), lost, p_pos, len(deltas), offset, p_h,
                      fit.statistic, fit.p)  # fmt: skip
     return Alone(test, place, heading)
-
-
-def _heading(rel: np.ndarray, own: np.ndarray, noise: SightingNoise, q: float) -> tuple[float, int]:
-    """(ψ, how many of ``own`` land) of step 2: ``rel`` (n, 2) the rest's robots from the
-    place, common frame; ``own`` (k, 2) the sightings, in the robot's fixed frame."""
-    if not len(own) or not len(rel):
-        return 0.0, 0
-    c, s = np.cos(HEADING_GRID), np.sin(HEADING_GRID)
-    # every robot of the rest as seen from the place at every heading: (h, n, 2)
-    seen = np.stack([c[:, None] * rel[None, :, 0] + s[:, None] * rel[None, :, 1],
-                     -s[:, None] * rel[None, :, 0] + c[:, None] * rel[None, :, 1]], axis=2)  # fmt: skip
-    best = np.full((len(HEADING_GRID), len(own)), np.inf)
-    for j, v in enumerate(own):
-        err = (seen - v).reshape(-1, 2)
-        x2 = 0.5 * noise.chi2(np.repeat(v[None], len(err), 0), err)
-        best[:, j] = x2.reshape(len(HEADING_GRID), -1).min(axis=1)
-    lands = (best <= q).sum(axis=1)
-    cost = np.minimum(best, q).sum(axis=1)
-    order = np.lexsort((np.arange(len(HEADING_GRID)), cost, -lands))
-    h = int(order[0])
-    psi = float(HEADING_GRID[h])
-    return math.atan2(math.sin(psi), math.cos(psi)), int(lands[h])
 
 
 def absorbed(
@@ -280,7 +232,7 @@ def absorbed(
     Where the others saw robot r is the median, per axis, of their sightings that land on r
     and on no other robot (the halved gate of step 1), the first of each owner: a faulty
     owner's sighting that lands on r by chance does not drag it; fewer than
-    :data:`MIN_WITNESSES` owners, and r is not screened.
+    :data:`outsiders.WITNESSES` owners, and r is not screened.
 
     Raises
     ------
@@ -299,6 +251,8 @@ def absorbed(
         return []
     q = _gate()
     by_id = {r.robot_id: r for r in records}
+    bare = evaluate_poses(ids, (), pos, psi, ids[0])
+    extra = outsider_places(bare, records, noise, q)  # NAOs without a record
     seen: dict[int, dict[int, np.ndarray]] = {}  # target -> owner -> where it saw it
     masks: list[PoseMeasurement] = []  # those sightings, for the others' masks of each
     for k, rid in enumerate(ids):
@@ -306,9 +260,9 @@ def absorbed(
         if rec is None or not len(rec.neighbours):
             continue
         own = np.asarray(rec.neighbours, dtype=np.float64).reshape(-1, 2)
-        lands = _lands(_turn(float(psi[k]), pos - pos[k]), own, noise, q)
+        lands = _lands(turn(float(psi[k]), pos - pos[k]), own, noise, q)
         lands[:, k] = False
-        at = pos[k] + _turn(-float(psi[k]), own)
+        at = pos[k] + turn(-float(psi[k]), own)
         for a in np.flatnonzero(lands.sum(axis=1) == 1):
             target = ids[int(np.argmax(lands[a]))]
             if rid in seen.setdefault(target, {}):
@@ -319,12 +273,12 @@ def absorbed(
     out = []
     for k, rid in enumerate(ids):
         rec, witnesses = by_id.get(rid), seen.get(rid, {})
-        if rec is None or len(witnesses) < MIN_WITNESSES:
+        if rec is None or len(witnesses) < WITNESSES:
             continue
         own = np.asarray(rec.neighbours, dtype=np.float64).reshape(-1, 2)
         place = np.median(np.array([witnesses[o] for o in sorted(witnesses)]), axis=0)
-        others = np.delete(pos, k, axis=0) - place
-        lost = int((~_lands(_turn(float(psi[k]), others), own, noise, q).any(axis=1)).sum())
+        others = np.vstack([np.delete(pos, k, axis=0), extra]) - place
+        lost = int((~_lands(turn(float(psi[k]), others), own, noise, q).any(axis=1)).sum())
         p_pos = tail_at_least([float(x) for x in noise.p_alone(np.hypot(*own.T))], lost)
         deltas = mask_deltas_of(ids, psi, masks, rid)
         p_head = mask_test(deltas, noise)[1] if deltas else 1.0

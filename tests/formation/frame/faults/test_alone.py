@@ -1,4 +1,4 @@
-"""A robot tested alone against the others' frame (agent/core/formation/frame/alone.py):
+"""A robot tested alone against the others' frame (agent/core/formation/frame/faults/alone.py):
 where a robot without a record stands, its record against the rest, and the last resort
 of the fleet's frame that names it."""
 
@@ -10,13 +10,15 @@ from dataclasses import dataclass
 
 import numpy as np
 import pytest
+from scipy.special import chdtri
 
-from agent.core.formation.frame import alone as al
-from agent.core.formation.frame import fault_test as ft
-from agent.core.formation.frame.fault_test import ALPHA, FaultVerdict, RobotTest
+from agent.core.formation.frame.faults import alone as al
+from agent.core.formation.frame.faults import fault_test as ft
+from agent.core.formation.frame.faults.fault_test import ALPHA, FaultVerdict, RobotTest
+from agent.core.formation.frame.faults.outsiders import outsider_places
 from agent.core.formation.frame.poses import PoseFrame, build_poses, evaluate_poses
 from agent.core.formation.frame.records import NeighborRecord
-from tests.formation.frame.test_fault_test import NOISE
+from tests.formation.frame.faults.test_fault_test import NOISE
 from tests.formation.pose_fleets import fault, sim_layout, unaligned_records
 
 
@@ -228,10 +230,14 @@ def test_the_rest_is_not_blamed_for_seeing_the_robot_set_aside() -> None:
     place, _ = al.unrecorded_place(poses, rest, NOISE)
     assert place is not None
     seeing = ft.fault_test(poses, NOISE, rest, search=False, elsewhere=place.reshape(1, 2))
-    lost = sum(t.lost for t in blind.tests)
-    assert lost >= 2 and sum(t.lost for t in seeing.tests) == 0
+    # its place given, or found where the rest's loose sightings agree (outsiders.py)
+    assert sum(t.lost for t in blind.tests) == 0 and sum(t.lost for t in seeing.tests) == 0
     assert seeing.fleet is not None and blind.fleet is not None
-    assert seeing.fleet.p > blind.fleet.p
+    assert seeing.fleet.p == blind.fleet.p == 1.0
+    # found once: a place given is not found again
+    gate = float(chdtri(2, ft.ALPHA_SIGHTING))
+    assert len(outsider_places(poses, rest, NOISE, gate)) == 1
+    assert len(outsider_places(poses, rest, NOISE, gate, place.reshape(1, 2))) == 0
 
 
 def test_a_place_elsewhere_holds_only_for_the_frame_as_tested() -> None:

@@ -1,4 +1,4 @@
-"""The per-robot fault test of the common frame (agent/core/formation/frame/fault_test.py) and
+"""The per-robot fault test of the common frame (agent/core/formation/frame/faults/fault_test.py) and
 the sighting noise model it rests on (agent/core/perception/sighting_noise.py)."""
 
 from __future__ import annotations
@@ -13,7 +13,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import binom, chi2
 
-from agent.core.formation.frame import fault_test as ft
+from agent.core.formation.frame.faults import fault_test as ft
+from agent.core.formation.frame.faults import heading_test as ht
 from agent.core.formation.frame.poses import PoseFrame, build_poses
 from agent.core.perception.sighting_noise import P_MIN, SightingNoise, view_bin
 from tests.formation.pose_fleets import fault, sim_layout, unaligned_records
@@ -121,10 +122,10 @@ def test_tail_is_the_binomial_for_equal_rates(n: int, p: float, k: int) -> None:
 
 
 def test_mask_test_finds_a_common_offset() -> None:
-    assert ft.mask_test([], NOISE) == (0.0, 1.0)
-    off, p = ft.mask_test([math.radians(a) for a in (39, 41, 40, 42)], NOISE)
+    assert ht.mask_test([], NOISE) == (0.0, 1.0)
+    off, p = ht.mask_test([math.radians(a) for a in (39, 41, 40, 42)], NOISE)
     assert math.degrees(off) == pytest.approx(40.0, abs=2.0) and p < 1e-6
-    off, p = ft.mask_test([math.radians(a) for a in (1, -2, 3, 88)], NOISE)
+    off, p = ht.mask_test([math.radians(a) for a in (1, -2, 3, 88)], NOISE)
     assert p > 0.05  # one side/front confusion among correct masks: nothing
 
 
@@ -144,8 +145,8 @@ def test_the_faulty_robot_is_named(kind: str) -> None:
 
 def test_the_mask_scale_divides_wilks_statistic() -> None:
     deltas = [math.radians(a) for a in (9, 11, 10, 12)]
-    _, p1 = ft.mask_test(deltas, NOISE)
-    _, p2 = ft.mask_test(deltas, replace(NOISE, mask_scale=2.0))
+    _, p1 = ht.mask_test(deltas, NOISE)
+    _, p2 = ht.mask_test(deltas, replace(NOISE, mask_scale=2.0))
     stat = float(chi2.isf(p1, 1))
     assert p2 == pytest.approx(float(chi2.sf(stat / 2.0, 1)), rel=1e-6) and p2 > p1
 
