@@ -251,8 +251,9 @@ def absorbed(
         return []
     q = _gate()
     by_id = {r.robot_id: r for r in records}
-    bare = evaluate_poses(ids, (), pos, psi, ids[0])
-    extra = outsider_places(bare, records, noise, q)  # NAOs without a record
+    # NAOs without a record, where its sightings also land; found only once some robot is
+    # rejected without them (they only ever excuse lost sightings), the screen's usual case
+    extra: np.ndarray | None = None
     seen: dict[int, dict[int, np.ndarray]] = {}  # target -> owner -> where it saw it
     masks: list[PoseMeasurement] = []  # those sightings, for the others' masks of each
     for k, rid in enumerate(ids):
@@ -277,9 +278,19 @@ def absorbed(
             continue
         own = np.asarray(rec.neighbours, dtype=np.float64).reshape(-1, 2)
         place = np.median(np.array([witnesses[o] for o in sorted(witnesses)]), axis=0)
-        others = np.vstack([np.delete(pos, k, axis=0), extra]) - place
+        rates = [float(x) for x in noise.p_alone(np.hypot(*own.T))]
+        others = np.delete(pos, k, axis=0) - place
         lost = int((~_lands(turn(float(psi[k]), others), own, noise, q).any(axis=1)).sum())
-        p_pos = tail_at_least([float(x) for x in noise.p_alone(np.hypot(*own.T))], lost)
+        p_pos = tail_at_least(rates, lost)
+        if p_pos < ALPHA and lost:
+            if extra is None:
+                extra = outsider_places(
+                    evaluate_poses(ids, (), pos, psi, ids[0]), records, noise, q
+                )
+            if len(extra):
+                others = np.vstack([np.delete(pos, k, axis=0), extra]) - place
+                lands = _lands(turn(float(psi[k]), others), own, noise, q)
+                p_pos = tail_at_least(rates, int((~lands.any(axis=1)).sum()))
         deltas = mask_deltas_of(ids, psi, masks, rid)
         p_head = mask_test(deltas, noise)[1] if deltas else 1.0
         timed = rec.stances is not None and len(rec.stances) > 0

@@ -221,25 +221,39 @@ def unseen(
 
 
 def best_heading(
-    rel: np.ndarray, own: np.ndarray, noise: SightingNoise, q: float
+    rel: np.ndarray,
+    own: np.ndarray,
+    noise: SightingNoise,
+    q: float,
+    pairs: np.ndarray | None = None,
 ) -> tuple[float, int]:
     """(ψ, how many of ``own`` land) for a robot standing at a place, its heading free:
     ``rel`` (n, 2) the robots and places it may see, from the place, common frame; ``own``
     (k, 2) its sightings, in its fixed frame. A sighting lands within the halved gate
     ``q`` (the place carries the others' errors); the heading on :data:`HEADING_GRID` under
     which most land, tie: the smaller sum of their χ² (each capped at the gate), then the
-    smaller angle."""
+    smaller angle. ``pairs`` (n, k), optional: the robots each sighting can land on at
+    some heading (a sighting's χ² on any other is beyond the gate, so capped: the same
+    answer, computed on fewer pairs)."""
     if not len(own) or not len(rel):
         return 0.0, 0
     c, s = np.cos(HEADING_GRID), np.sin(HEADING_GRID)
     # every robot as seen from the place at every heading: (h, n, 2)
     seen = np.stack([c[:, None] * rel[None, :, 0] + s[:, None] * rel[None, :, 1],
                      -s[:, None] * rel[None, :, 0] + c[:, None] * rel[None, :, 1]], axis=2)  # fmt: skip
-    best = np.full((len(HEADING_GRID), len(own)), np.inf)
-    for j, v in enumerate(own):
-        err = (seen - v).reshape(-1, 2)
-        x2 = 0.5 * noise.chi2(np.repeat(v[None], len(err), 0), err)
-        best[:, j] = x2.reshape(len(HEADING_GRID), -1).min(axis=1)
+    h, n, k = len(HEADING_GRID), len(rel), len(own)
+    if pairs is None:
+        t, j = np.divmod(np.arange(n * k), k)
+    else:  # only the (robot, sighting) pairs that can land: the others are capped anyway
+        t, j = np.nonzero(np.asarray(pairs, dtype=bool).reshape(n, k))
+    err = seen[:, t, :] - own[None, j, :]  # (h, m, 2)
+    vec = np.broadcast_to(own[None, j, :], err.shape).reshape(-1, 2)
+    x2 = 0.5 * noise.chi2(vec, err.reshape(-1, 2)).reshape(h, len(t))
+    best = np.full((h, k), np.inf)  # (h, k): each sighting's nearest robot at each heading
+    for col in range(k):
+        hit = j == col
+        if hit.any():
+            best[:, col] = x2[:, hit].min(axis=1)
     lands = (best <= q).sum(axis=1)
     cost = np.minimum(best, q).sum(axis=1)
     order = np.lexsort((np.arange(len(HEADING_GRID)), cost, -lands))
@@ -269,13 +283,25 @@ def member_fits_there(
     x2[np.arange(len(rows)), [row for _, row, _ in rows]] = np.inf  # not on its owner
     lands = (0.5 * x2).min(axis=1) <= gate
     owners = np.array([rid for rid, _, _ in rows])
+    # whatever the heading, a sighting lands only on a robot whose distance from the
+    # place differs from the sighting's by at most its misfit, which the halved gate
+    # bounds by √(2q)·max(σ_r, σ_t): a bound without the heading search
+    radius = np.hypot(*np.vstack([poses.positions, extra]).T - place[:, None])
+    dist = np.hypot(*vectors.T)
+    sigma = np.maximum(noise.sigma_radial(dist), noise.sigma_tangential(dist))
+    slack = math.sqrt(2.0 * gate) * sigma
+    near = np.abs(radius[None, :] - dist[:, None]) <= slack[:, None]  # (k, targets)
     for k, rid in enumerate(poses.ids):
         mine = owners == rid
         here = int(lands[mine].sum())
-        if here == int(mine.sum()):
-            continue  # every sighting lands already
-        others = np.vstack([np.delete(poses.positions, k, axis=0), extra])
-        _, there = best_heading(others - place, vectors[mine], noise, gate)
+        reach = near[mine]
+        reach[:, k] = False  # not on itself
+        if here == int(mine.sum()) or int(reach.any(axis=1).sum()) <= here:
+            continue  # it cannot land more there, whatever its heading
+        # only the robots some sighting of it can reach: the others land nowhere anyway
+        cols = reach.any(axis=0)
+        targets = np.vstack([poses.positions, extra])[cols]
+        _, there = best_heading(targets - place, vectors[mine], noise, gate, reach[:, cols].T)
         if there > here:
             return rid
     return None
