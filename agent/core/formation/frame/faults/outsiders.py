@@ -13,7 +13,8 @@ fitted robot nor on a place already known, within the sighting gate of step 1) i
 a ghost, which each sighting is independently with the measured rate ``p_stray(d)`` and
 which lands anywhere, or a sighting of a NAO without a record. Two ghosts of different
 owners landing within the gate of each other is an event of the product of both rates
-times the gate's share of the room (below 10⁻⁴ per pair of sightings here), so a place
+times the gate's share of the room (here 0.56 % each, a halved gate ~0.1 m across at
+1.5 m in a room of ~25 m²: ~10⁻⁷ per pair of sightings), so a place
 where loose sightings of at least :data:`WITNESSES` different owners agree (each within
 the gate halved for the two noisy sightings, as :func:`fault_test.seen_by_others`) is
 taken as a NAO standing there: an *outsider*. Its sightings are not lost strays; a
