@@ -194,7 +194,7 @@ def test_the_corpus_gate(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> 
                            "--jobs", "2"])  # fmt: skip
     out = capsys.readouterr().out
     assert rc == 0, out
-    assert "without a fault: 0 with a sound robot left out" in out
+    assert "; 0 with a sound robot left out" in out
 
 
 @pytest.mark.slow

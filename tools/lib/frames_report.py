@@ -116,13 +116,13 @@ def summary(rows: list[FrameRow], pos_tol: float, psi_tol: float) -> str:
         for k in kinds
     )
     return (
-        f"{s['runs']} runs; without a fault: {s['sound_left_out']} with a sound robot left out"
+        f"{s['runs']} runs; {s['sound_left_out']} with a sound robot left out"
         + (
             f" ({s['record_wrong']} more whose own record the truth rejects)"
             if s["record_wrong"]
             else ""
         )
-        + ", "
+        + "; without a fault: "
         f"{s['refused']}/{s['clean_runs']} refused; with one: named {s['named']}/{s['fault_runs']}"
         f"{f' ({per})' if per else ''}, {s['fault_stopped']} stopped; every planned start within "
         f"{pos_tol} m and {psi_tol:g}° in {s['accurate']}/{s['planned']}"
