@@ -70,7 +70,7 @@ def test_the_fleet_plans_with_every_member_beside_a_bystander() -> None:
 
 def test_one_owners_ghost_is_no_bystander() -> None:
     recs, frame, _ = with_bystander(2, n=8)
-    members = [r for r in recs]
+    members = list(recs)
     o = members[0]
     ghost = np.array([[0.2, 1.7]])  # nobody else saw anything there
     members[0] = NeighborRecord(o.robot_id, np.vstack([o.neighbours, ghost]),
@@ -140,15 +140,17 @@ def test_a_place_a_members_record_fits_better_is_that_member() -> None:
     moved[2] += [0.0, 2.0]  # robot 3 fitted 2 m from where it stands
     frame = evaluate_poses(tuple(range(1, 9)), (), moved, psi, 1)
     none = np.zeros((0, 2))
-    assert out.member_fits_there(frame, recs, NOISE, GATE, pos[2], none) == 3
+    assert out.member_fits_there(frame, recs, NOISE, GATE, pos[2:3], none) == [3]
     right = evaluate_poses(tuple(range(1, 9)), (), pos, psi, 1)
-    assert out.member_fits_there(right, recs, NOISE, GATE, pos[2] + [0.0, 2.0], none) is None
+    away = pos[2:3] + np.array([0.0, 2.0])
+    assert out.member_fits_there(right, recs, NOISE, GATE, away, none) == [None]
+    assert out.member_fits_there(frame, recs, NOISE, GATE, none, none) == []
 
 
 def test_no_members_record_fits_where_a_bystander_stands() -> None:
     for seed in (1, 2, 3):
         recs, frame, at = with_bystander(seed)
-        assert out.member_fits_there(frame, recs, NOISE, GATE, at, np.zeros((0, 2))) is None
+        assert out.member_fits_there(frame, recs, NOISE, GATE, at, np.zeros((0, 2))) == [None]
 
 
 def test_the_best_heading_of_a_robot_at_its_true_place_is_its_own() -> None:

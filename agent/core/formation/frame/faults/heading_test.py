@@ -21,7 +21,7 @@ from scipy.special import chdtrc
 from agent.core.formation.frame.poses import PoseFrame, PoseMeasurement
 from agent.core.perception.sighting_noise import SightingNoise
 
-#: Mask offsets tried by the heading test (step 3): every degree of the half circle.
+#: The mask offsets Δ the heading test weighs (step 3): every degree of the half circle.
 MASK_GRID = np.radians(np.arange(0.0, 180.0, 1.0))
 
 

@@ -268,44 +268,50 @@ def member_fits_there(
     records: Sequence[NeighborRecord],
     noise: SightingNoise,
     gate: float,
-    place: np.ndarray,
+    places: np.ndarray,
     elsewhere: np.ndarray,
-) -> int | None:
-    """The first robot of ``poses`` (ascending id) whose own record, standing at ``place``
-    at its best heading, lands more of its sightings than where the fit puts it (both
-    within the halved gate, on the fitted robots and ``elsewhere``, the places known): the fit holds that
-    robot in the wrong place, and ``place`` is where it stands; None for none. Only a
-    robot some of whose sightings land nowhere where the fit puts it can gain."""
+) -> list[int | None]:
+    """For each of ``places`` (m, 2), common frame: the first robot of ``poses`` (ascending
+    id) whose own record, standing there at its best heading, lands more of its
+    sightings than where the fit puts it, or None. Both counts within the halved gate, on
+    the fitted robots and ``elsewhere`` (the places known). Such a robot is held in the
+    wrong place by the fit, and the place is where it stands. Only a robot some of whose
+    sightings land nowhere where the fit puts it can gain."""
+    at = np.asarray(places, dtype=np.float64).reshape(-1, 2)
     rows, vectors = _sightings(poses, records)
     if not rows:
-        return None
-    extra = np.asarray(elsewhere, dtype=np.float64).reshape(-1, 2)
-    x2 = _landing(poses, rows, vectors, np.vstack([poses.positions, extra]), noise)
+        return [None] * len(at)
+    targets = np.vstack([poses.positions, np.asarray(elsewhere, dtype=np.float64).reshape(-1, 2)])
+    x2 = _landing(poses, rows, vectors, targets, noise)
     x2[np.arange(len(rows)), [row for _, row, _ in rows]] = np.inf  # not on its owner
     lands = (0.5 * x2).min(axis=1) <= gate
     owners = np.array([rid for rid, _, _ in rows])
+    dist = np.hypot(*vectors.T)
     # whatever the heading, a sighting lands only on a robot whose distance from the
     # place differs from the sighting's by at most its misfit, which the halved gate
     # bounds by √(2q)·max(σ_r, σ_t): a bound without the heading search
-    radius = np.hypot(*np.vstack([poses.positions, extra]).T - place[:, None])
-    dist = np.hypot(*vectors.T)
-    sigma = np.maximum(noise.sigma_radial(dist), noise.sigma_tangential(dist))
-    slack = math.sqrt(2.0 * gate) * sigma
-    near = np.abs(radius[None, :] - dist[:, None]) <= slack[:, None]  # (k, targets)
-    for k, rid in enumerate(poses.ids):
-        mine = owners == rid
-        here = int(lands[mine].sum())
-        reach = near[mine]
-        reach[:, k] = False  # not on itself
-        if here == int(mine.sum()) or int(reach.any(axis=1).sum()) <= here:
-            continue  # it cannot land more there, whatever its heading
-        # only the robots some sighting of it can reach: the others land nowhere anyway
-        cols = reach.any(axis=0)
-        targets = np.vstack([poses.positions, extra])[cols]
-        _, there = best_heading(targets - place, vectors[mine], noise, gate, reach[:, cols].T)
-        if there > here:
-            return rid
-    return None
+    slack = math.sqrt(2.0 * gate) * np.maximum(
+        noise.sigma_radial(dist), noise.sigma_tangential(dist)
+    )
+    out: list[int | None] = []
+    for place in at:
+        radius = np.hypot(*(targets - place).T)
+        near = np.abs(radius[None, :] - dist[:, None]) <= slack[:, None]  # (k, targets)
+        out.append(None)
+        for k, rid in enumerate(poses.ids):
+            mine = owners == rid
+            here = int(lands[mine].sum())
+            reach = near[mine]
+            reach[:, k] = False  # not on itself
+            if here == int(mine.sum()) or int(reach.any(axis=1).sum()) <= here:
+                continue  # it cannot land more there, whatever its heading
+            # only the robots some sighting of it can reach: the others land nowhere anyway
+            cols = reach.any(axis=0)
+            rel = targets[cols] - place
+            if best_heading(rel, vectors[mine], noise, gate, reach[:, cols].T)[1] > here:
+                out[-1] = rid
+                break
+    return out
 
 
 def outsider_places(
@@ -316,8 +322,9 @@ def outsider_places(
     places: np.ndarray | None = None,
 ) -> np.ndarray:
     """(k, 2), common frame: where NAOs without a record stand in ``poses`` beyond
-    ``places`` (module docstring: each member nobody sees cancels the nearest), in the
-    order found; (0, 2) for none."""
+    ``places`` (module docstring: each member nobody sees cancels the nearest, and a place
+    some member's record fits better than its own is that member), in the order found;
+    (0, 2) for none."""
     found = loose_sightings(poses, records, noise, gate, places)
     sets = agreeing_sets(found, noise, gate)
     if not sets:
@@ -333,5 +340,6 @@ def outsider_places(
     # member, misplaced (a wrong frame), not a NAO without a record; both on the fitted
     # robots and the places known, never on the places in question (a wrong frame's
     # places are where its members' loose sightings land)
-    kept = [p for p in at if member_fits_there(poses, records, noise, gate, p, known) is None]
+    fits = member_fits_there(poses, records, noise, gate, np.array(at).reshape(-1, 2), known)
+    kept = [p for p, rid in zip(at, fits, strict=True) if rid is None]
     return np.array(kept) if kept else np.zeros((0, 2))
